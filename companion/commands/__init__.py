@@ -1,0 +1,1 @@
+"""Subcommands of ``companion``; each module defines ``register(subparsers)``."""

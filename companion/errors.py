@@ -1,0 +1,42 @@
+"""Error hierarchy: one ``CompanionError`` subclass per stage.
+
+Expected outcomes (no path in the budget, start inside an obstacle) are values, not exceptions.
+These are for wrong arguments and bad input; every message names the argument, key, field or
+line at fault, so the CLI can print it as one line.
+"""
+
+
+class CompanionError(Exception):
+    """Base class of every error the companion raises on purpose."""
+
+
+class ConfigError(CompanionError, ValueError):
+    """A settings file or value is wrong (the message names the dotted key)."""
+
+
+class WorldError(CompanionError, ValueError):
+    """A world, obstacle or world file is invalid."""
+
+
+class PlanningError(CompanionError, ValueError):
+    """Planner arguments are invalid (bad shapes, NaN, non-positive step, ...)."""
+
+
+class SmoothingError(CompanionError, ValueError):
+    """Smoother or timing arguments are invalid (fewer than 2 nodes, K_max <= 0, ...)."""
+
+
+class TrajectoryError(CompanionError, ValueError):
+    """A trajectory cannot be built or sampled as asked."""
+
+
+class MissionError(CompanionError, ValueError):
+    """A mission file or mission item is invalid or unsupported."""
+
+
+class ThreatPayloadError(CompanionError, ValueError):
+    """A threat payload is invalid; the message names the field."""
+
+
+class LinkError(CompanionError):
+    """The vehicle link failed (no autopilot, refused command, upload failed)."""
