@@ -1,0 +1,27 @@
+"""``companion report RECORD --out DIR``: render a flight record as PNG plots."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "report", help="render a flight record as plots",
+        description="Render a flight record (JSON Lines written by 'companion run --record') "
+        "as PNG plots: flown path over obstacles with trees and alternatives, tracking error, "
+        "actuator inputs; and a summary.json.",
+        epilog="Example: companion report out/flight.jsonl --out out/report",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("record", help="flight record file (.jsonl)")
+    p.add_argument("--out", required=True, help="output directory for the plots")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from companion.record import load_record
+    from companion.report import render_report
+
+    for path in render_report(load_record(args.record), args.out):
+        print(path)
+    return 0

@@ -1,0 +1,129 @@
+"""The companion's settings: one typed tree of frozen dataclasses, loaded from TOML.
+
+Every default lives in code (the stage that uses a setting owns its dataclass); a TOML file only
+overrides. A wrong key or value is a ``ConfigError`` that names it with its dotted key, e.g.
+``smoothing.limits.speed_m_s: must be a finite number > 0, got -1``.
+
+Tree (``companion run --config FILE``; ``companion run --print-config`` shows it whole)::
+
+    seed        random seed of every planner run (logged; any flight can be replayed)
+    link        vehicle connection, setpoint rate, time scale, timeouts
+    zenoh       session endpoints and the key prefix's system id
+    mission     mission -> local NED + world (margin, padding, ceiling)
+    flight      per-leg planning budget, planning slab, climb and descent
+    planning    GART (companion.planning.GartSettings)
+    alternatives  M-GART alternatives kept for switching (companion.planning.MgartSettings)
+    smoothing   G1/G2, K_max, speed/acceleration/jerk limits
+    feasibility closed-loop check on the helicopter model
+    threats     threat-manager policy (companion.threats.settings.ThreatSettings)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from companion.errors import ConfigError
+from companion.flight_plan import FlightPlanSettings
+from companion.mission.convert import ConversionSettings
+from companion.planning import GartSettings
+from companion.smoothing import FeasibilitySettings, SmoothingSettings
+from companion.threats.settings import ThreatSettings, ZenohSettings
+from sim_vehicle.typed_config import from_dict, load_toml
+
+
+def _positive(owner: str, **values: float) -> None:
+    for name, value in values.items():
+        if not (math.isfinite(value) and value > 0):
+            raise ConfigError(f"{owner}.{name}: must be a finite number > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class LinkSettings:
+    """The vehicle link and the flight's timing.
+
+    Parameters
+    ----------
+    connect : str
+        MAVSDK connection URL (udpin://, udpout://, tcpin://, tcpout://, serial://).
+    connect_timeout_s : float
+        How long to wait for an autopilot at start (wall-clock seconds).
+    setpoint_rate_hz : float
+        GUIDED setpoint stream rate (default 50 Hz).
+    time_scale : float
+        Simulated seconds per wall-clock second: set it to ``sim-vehicle --speedup`` so that the
+        reference advances at the vehicle's pace (1 for a real vehicle).
+    takeoff_alt_m : float
+        Takeoff altitude when the mission has no NAV_TAKEOFF item (m above home).
+    leg_timeout_margin_s : float
+        A leg not reached this long (mission time) after its trajectory ended is an error: the
+        vehicle is held and the flight ends.
+    on_interrupt : str
+        What SIGINT / SIGTERM do in flight: ``hold`` (LOITER where the vehicle is), ``land``
+        (LAND where it is) or ``rtl``.
+    record_rate_hz : float
+        Rate of ``sample`` lines in the flight record.
+    status_rate_hz : float
+        Rate of ``uav/<sysid>/status`` messages (also sent on every change).
+    """
+
+    connect: str = "udpin://0.0.0.0:14540"
+    connect_timeout_s: float = 30.0
+    setpoint_rate_hz: float = 50.0
+    time_scale: float = 1.0
+    takeoff_alt_m: float = 20.0
+    leg_timeout_margin_s: float = 30.0
+    on_interrupt: Literal["hold", "land", "rtl"] = "hold"
+    record_rate_hz: float = 10.0
+    status_rate_hz: float = 2.0
+
+    def __post_init__(self) -> None:
+        _positive("link", connect_timeout_s=self.connect_timeout_s,
+                  setpoint_rate_hz=self.setpoint_rate_hz, time_scale=self.time_scale,
+                  takeoff_alt_m=self.takeoff_alt_m, leg_timeout_margin_s=self.leg_timeout_margin_s,
+                  record_rate_hz=self.record_rate_hz, status_rate_hz=self.status_rate_hz)
+        if self.setpoint_rate_hz > 200:
+            raise ConfigError(f"link.setpoint_rate_hz: at most 200, got {self.setpoint_rate_hz}")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The whole companion settings tree (see the module docstring)."""
+
+    seed: int = 0
+    link: LinkSettings = LinkSettings()
+    zenoh: ZenohSettings = ZenohSettings()
+    mission: ConversionSettings = ConversionSettings()
+    flight: FlightPlanSettings = FlightPlanSettings()
+    planning: GartSettings = GartSettings()
+    smoothing: SmoothingSettings = SmoothingSettings()
+    feasibility: FeasibilitySettings = FeasibilitySettings()
+    threats: ThreatSettings = ThreatSettings()
+
+    def __post_init__(self) -> None:
+        if self.seed < 0:
+            raise ConfigError(f"seed: must be >= 0, got {self.seed}")
+
+
+def settings_from_dict(data: dict) -> Settings:
+    """Build the settings tree from a mapping (unknown keys and bad values: ``ConfigError``)."""
+    return from_dict(Settings, data, "", ConfigError)
+
+
+def load_settings(path: str | Path | None = None, overrides: dict | None = None) -> Settings:
+    """Defaults, then the TOML file ``path`` (if any), then ``overrides`` (nested mapping)."""
+    data = load_toml(path, ConfigError) if path is not None else {}
+    for key, value in (overrides or {}).items():
+        if isinstance(value, dict):
+            data.setdefault(key, {}).update(value)
+        else:
+            data[key] = value
+    return settings_from_dict(data)
+
+
+def settings_to_dict(settings) -> dict:
+    """The settings tree as plain data (for logs, the flight record and ``--print-config``)."""
+    return dataclasses.asdict(settings)

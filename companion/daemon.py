@@ -1,0 +1,509 @@
+"""The companion service: a mission in, a planned, smoothed and tracked flight out (DESIGN 1, 6, 7).
+
+``CompanionDaemon.run()`` is the whole flight:
+
+1. connect to the vehicle (MAVSDK), wait for telemetry and home;
+2. take the mission: the file given (validated, then uploaded so that every ground station shows
+   it) or the one stored on the vehicle (a mission uploaded by any ground station gets flown);
+3. convert it to local NED and a world (exclusion zones, inclusion fence, world file) and plan
+   every leg before takeoff (GART -> G2/G1 -> speed profile, ``companion.flight_plan``): an
+   unreachable waypoint is an error before anything moves;
+4. GUIDED, arm, take off; stream the reference at 50 Hz (``SetpointStreamer``) leg after leg,
+   each leg done when its trajectory has ended and the vehicle is within the acceptance radius,
+   then the hold time;
+5. land or RTL as the mission says (RTL is flown as a planned leg home, then LAND).
+
+Around it: zenoh status at 2 Hz and on change, the threat manager (``companion.threats``) whose
+decisions swap the active reference, the flight record, link-loss handling (keep streaming the
+hold, replan the leg from where the vehicle is when the link returns), a pilot taking over
+(mode changed away from GUIDED: the companion stops commanding and waits), and SIGINT/SIGTERM
+(hold, land or RTL per ``link.on_interrupt``, then exit).
+
+Only this module, ``companion.link`` and ``companion.threats.bus`` do I/O; planning runs in a
+worker thread with a short GIL switch interval so the setpoint stream keeps its period.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from companion.config import Settings, settings_to_dict
+from companion.errors import CompanionError, LinkError, MissionError
+from companion.flight_plan import LegPlan, TrajectoryChain, plan_leg, plan_mission
+from companion.link.setpoints import Setpoint, SetpointStreamer, hold_position
+from companion.link.vehicle import VehicleLink
+from companion.mission import load_mission_file
+from companion.mission.convert import mission_to_local
+from companion.record import FlightRecorder
+from companion.world import world_to_dict
+
+log = logging.getLogger(__name__)
+
+GUIDED = 4
+LOITER = 5
+
+
+class FlightAborted(CompanionError):
+    """The flight cannot go on (pilot took over, vehicle disarmed, leg not reached)."""
+
+
+class VehicleClock:
+    """Mission time in the vehicle's seconds, extrapolated between its timestamped messages.
+
+    The vehicle stamps LOCAL_POSITION_NED with ``time_boot_ms`` (simulated time in
+    ``sim-vehicle``). With ``scale`` vehicle seconds per wall-clock second, every message gives
+    a lower bound ``boot_s - scale * arrival`` of the offset between the two clocks (transport
+    only delays); the largest over the last ``window_s`` is the estimate. Without messages the
+    clock runs at ``scale`` from its creation. The output never goes backwards.
+    """
+
+    def __init__(self, scale: float, window_s: float = 2.0):
+        self.scale = float(scale)
+        self.window_s = window_s
+        self._t0 = time.monotonic()
+        self._offsets: deque[tuple[float, float]] = deque()
+        self._offset: float | None = None
+        self._last = -math.inf
+
+    def observe(self, boot_s: float, arrival_monotonic_s: float) -> None:
+        if self._offset is None:
+            self._last = -math.inf       # switch from the free-running clock to vehicle time
+        self._offsets.append((arrival_monotonic_s, boot_s - self.scale * arrival_monotonic_s))
+        while self._offsets and self._offsets[0][0] < arrival_monotonic_s - self.window_s:
+            self._offsets.popleft()
+        self._offset = max(o for _, o in self._offsets)
+
+    def now_s(self, monotonic_s: float | None = None) -> float:
+        mono = time.monotonic() if monotonic_s is None else monotonic_s
+        if self._offset is None:
+            t = self.scale * (mono - self._t0)
+        else:
+            t = self.scale * mono + self._offset
+        self._last = max(self._last, t)
+        return self._last
+
+    def at(self, boot_s: float) -> float:
+        """Mission time of a vehicle timestamp (identity: mission time is vehicle time)."""
+        return boot_s if self._offset is not None else self.now_s()
+
+
+class ActiveReference:
+    """A trajectory started at mission time ``t0_s``; after its end it holds the end point.
+
+    ``first_sent_monotonic_s`` is set when the stream first samples it (latency measurement).
+    """
+
+    def __init__(self, trajectory, t0_s: float, clock: VehicleClock, path_id: str,
+                 leg: LegPlan | None = None):
+        self.trajectory = trajectory
+        self.t0_s = t0_s
+        self.clock = clock
+        self.path_id = path_id
+        self.leg = leg
+        self.first_sent_monotonic_s: float | None = None
+        self.t_end_s = t0_s + trajectory.duration_s
+
+    def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """Reference position, velocity, acceleration (NED) and yaw at mission time ``t_s``."""
+        tau = min(max(t_s - self.t0_s, 0.0), self.trajectory.duration_s)
+        pos, vel, acc = self.trajectory.sample(np.array([tau]))
+        yaw = float(self.trajectory.yaw_rad(np.array([tau]))[0])
+        if t_s >= self.t_end_s:
+            return pos[0], np.zeros(3), np.zeros(3), yaw
+        return pos[0], vel[0], acc[0], yaw
+
+    def setpoint_at(self, monotonic_s: float) -> Setpoint:
+        if self.first_sent_monotonic_s is None:
+            self.first_sent_monotonic_s = monotonic_s
+        pos, vel, acc, yaw = self.state(self.clock.now_s(monotonic_s))
+        return Setpoint(pos, vel, acc, yaw)
+
+    def finished(self, t_s: float) -> bool:
+        return t_s >= self.t_end_s
+
+
+@dataclass
+class FlightSummary:
+    """What ``run`` returns and prints."""
+
+    legs_planned: int = 0
+    legs_reached: int = 0
+    landed: bool = False
+    rms_tracking_error_m: float = math.nan
+    max_tracking_error_m: float = math.nan
+    decisions: int = 0
+    min_threat_separation_m: float = math.inf
+    outcome: str = "not flown"
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+class CompanionDaemon:
+    """The companion service for one vehicle (see the module docstring).
+
+    Parameters
+    ----------
+    settings : Settings
+    mission_path : path, optional
+        A ``.plan`` or ``QGC WPL 110`` file to fly (uploaded to the vehicle first). Without it
+        the vehicle's stored mission and fence are flown.
+    world_path : path, optional
+        A world file whose obstacles are added to the mission's exclusion zones.
+    record_path : path, optional
+        Where to write the flight record (JSON Lines).
+    """
+
+    def __init__(self, settings: Settings, *, mission_path=None, world_path=None,
+                 record_path=None):
+        self.settings = settings
+        self.mission_path = mission_path
+        self.world_path = world_path
+        self.record_path = record_path
+        self.rng = np.random.default_rng(settings.seed)
+        self.link = VehicleLink("companion")
+        self.clock = VehicleClock(settings.link.time_scale)
+        self.streamer: SetpointStreamer | None = None
+        self.reference: ActiveReference | None = None
+        self.recorder: FlightRecorder | None = None
+        self.summary = FlightSummary()
+        self.local_mission = None
+        self.legs: list[LegPlan] = []
+        self.leg_index = -1
+        self.threats = None            # companion.threats reactor, when zenoh is enabled
+        self._errors_m: list[float] = []
+        self._servo_us: list[float] | None = None
+        self._tasks: list[asyncio.Task] = []
+        self._link_lost_at: float | None = None
+        self._resume_needed = False
+        self._ref_count = 0
+
+    # ------------------------------------------------------------------ recording and status
+    def record(self, kind: str, **fields) -> None:
+        if self.recorder is not None:
+            self.recorder.write(kind, **fields)
+
+    def event(self, name: str, **fields) -> None:
+        """Log and record one event (mode change, leg reached, link lost ...)."""
+        log.info("%s %s", name, " ".join(f"{k}={v}" for k, v in fields.items()))
+        self.record("event", name=name, t_s=self.clock.now_s(), **fields)
+
+    def status(self) -> dict:
+        """The status message of ``uav/<sysid>/status``."""
+        tele = self.link.telemetry
+        ref = self.reference
+        return {"t_s": round(self.clock.now_s(), 3), "mode": tele.mode_name, "armed": tele.armed,
+                "leg": self.leg_index, "legs": len(self.legs),
+                "path_id": ref.path_id if ref else None,
+                "pos_ned_m": None if tele.pos_ned_m is None else [round(float(v), 3) for v in tele.pos_ned_m],
+                "tracking_error_m": round(self._errors_m[-1], 3) if self._errors_m else None,
+                "link": tele.connected, "outcome": self.summary.outcome}
+
+    # ------------------------------------------------------------------ reference
+    def engage(self, trajectory, path_id: str, leg: LegPlan | None = None,
+               t0_s: float | None = None) -> ActiveReference:
+        """Make ``trajectory`` the active reference from mission time ``t0_s`` (default now)."""
+        self._ref_count += 1
+        ref = ActiveReference(trajectory, self.clock.now_s() if t0_s is None else t0_s,
+                              self.clock, path_id, leg if leg is not None else
+                              (self.reference.leg if self.reference else None))
+        self.reference = ref
+        if self.streamer is not None:
+            self.streamer.set_source(ref.setpoint_at)
+        return ref
+
+    def hold_here(self, pos_ned_m, reason: str) -> None:
+        """Hold ``pos_ned_m`` (a hover) as the active reference."""
+        yaw = self._current_yaw()
+        self.reference = None
+        if self.streamer is not None:
+            self.streamer.set_source(hold_position(pos_ned_m, yaw))
+        self.event("hold", reason=reason, pos_ned_m=np.asarray(pos_ned_m))
+
+    def reference_state(self, t_s: float | None = None):
+        """The active reference's (pos, vel, acc, yaw) at mission time ``t_s`` (default now)."""
+        t = self.clock.now_s() if t_s is None else t_s
+        if self.reference is None:
+            tele = self.link.telemetry
+            return tele.pos_ned_m, np.zeros(3), np.zeros(3), self._current_yaw()
+        return self.reference.state(t)
+
+    def _current_yaw(self) -> float:
+        att = self.link.telemetry.attitude_rad
+        return float(att[2]) if att is not None else 0.0
+
+    # ------------------------------------------------------------------ background tasks
+    async def _watch_local_position(self) -> None:
+        """LOCAL_POSITION_NED with its timestamp: drives the clock and the tracking error."""
+        async for fields in self.link.messages("LOCAL_POSITION_NED"):
+            boot_s = fields.get("time_boot_ms", 0) / 1000.0
+            self.clock.observe(boot_s, fields["_t_s"])
+            if self.reference is not None:
+                pos = np.array([fields["x"], fields["y"], fields["z"]], dtype=float)
+                ref_pos = self.reference.state(self.clock.at(boot_s))[0]
+                self._errors_m.append(float(np.linalg.norm(pos - ref_pos)))
+
+    async def _watch_servos(self) -> None:
+        async for fields in self.link.messages("SERVO_OUTPUT_RAW"):
+            self._servo_us = [fields.get(f"servo{i}_raw", 1500) for i in range(1, 5)]
+
+    async def _record_samples(self) -> None:
+        period = 1.0 / self.settings.link.record_rate_hz
+        while True:
+            await asyncio.sleep(period)
+            tele = self.link.telemetry
+            if tele.pos_ned_m is None or self.reference is None:
+                continue
+            t = self.clock.now_s()
+            ref_pos, ref_vel, _, _ = self.reference.state(t)
+            self.record("sample", t_s=t, ref_pos_ned_m=ref_pos, ref_vel_ned_m_s=ref_vel,
+                        pos_ned_m=tele.pos_ned_m, vel_ned_m_s=tele.vel_ned_m_s,
+                        servo_us=self._servo_us,
+                        tracking_error_m=self._errors_m[-1] if self._errors_m else None,
+                        leg=self.leg_index, path_id=self.reference.path_id)
+
+    async def _publish_status(self) -> None:
+        period = 1.0 / self.settings.link.status_rate_hz
+        while True:
+            await asyncio.sleep(period)
+            if self.threats is not None:
+                self.threats.publish_status(self.status())
+
+    def _on_link_change(self, connected: bool) -> None:
+        if not connected:
+            self._link_lost_at = self.clock.now_s()
+            self.event("link_lost")
+        else:
+            lost_s = self.clock.now_s() - (self._link_lost_at or self.clock.now_s())
+            self.event("link_back", lost_s=round(lost_s, 2))
+            self._resume_needed = True
+
+    def _start_background(self) -> None:
+        loop = asyncio.get_running_loop()
+        for coro in (self._watch_local_position(), self._watch_servos(), self._record_samples(),
+                     self._publish_status()):
+            self._tasks.append(loop.create_task(coro, name=coro.__name__))
+        self.link.on_link_change(self._on_link_change)
+
+    # ------------------------------------------------------------------ mission
+    async def take_mission(self):
+        """The mission to fly: the file given (validated, then uploaded) or the vehicle's."""
+        if self.mission_path is not None:
+            plan = load_mission_file(self.mission_path)
+            await self.link.upload_plan(plan)
+            self.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
+            return plan
+        plan = await self.link.download_plan()
+        if not plan.items:
+            raise MissionError("the vehicle has no mission: upload one (companion upload FILE, "
+                               "QGroundControl, MAVProxy) or pass --mission FILE")
+        self.event("mission_downloaded", items=len(plan.items))
+        return plan
+
+    async def plan_flight(self, plan, home_lla, start_ned_m: np.ndarray, takeoff_alt_m: float):
+        """Convert and plan every leg (in a worker thread); errors name the mission item."""
+        s = self.settings
+        self.local_mission = mission_to_local(plan, home_lla, settings=s.mission,
+                                              world_file=self.world_path, dim=3)
+        first = np.array([start_ned_m[0], start_ned_m[1], -takeoff_alt_m])
+        t0 = time.perf_counter()
+        self.legs = await asyncio.to_thread(
+            plan_mission, self.local_mission, first, gart_settings=s.planning,
+            smoothing=s.smoothing, settings=s.flight, rng=self.rng)
+        self.summary.legs_planned = len(self.legs)
+        self.record("world", **world_to_dict(self.local_mission.world))
+        for leg in self.legs:
+            self.record_plan(leg)
+        self.event("planned", legs=len(self.legs), seconds=round(time.perf_counter() - t0, 3),
+                   seed=s.seed)
+
+    def record_plan(self, leg: LegPlan, alternatives=(), path_id: str | None = None) -> None:
+        t = np.linspace(0.0, leg.trajectory.duration_s, max(2, int(leg.trajectory.duration_s * 5)))
+        ref = leg.trajectory.sample(t)[0]
+        tree = leg.plan.tree if leg.plan is not None else None
+        self.record("plan", leg=leg.index, seq=leg.waypoint.seq, path_id=path_id or f"leg{leg.index}",
+                    path_ned_m=leg.path_ned_m, reference_ne=ref[:, :2],
+                    tree={"nodes": tree.nodes, "parents": tree.parents} if tree is not None else None,
+                    alternatives=[np.asarray(a)[:, :2] for a in alternatives],
+                    summary=leg.plan.summary() if leg.plan is not None else None)
+
+    # ------------------------------------------------------------------ flight phases
+    async def takeoff(self, alt_m: float) -> None:
+        tele = self.link.telemetry
+        if tele.armed and tele.in_air:
+            self.event("already_flying", alt_m=round(-float(tele.pos_ned_m[2]), 2))
+            await self.link.set_mode("GUIDED")
+            return
+        await self.link.set_mode("GUIDED")
+        await self.link.arm()
+        self.event("armed")
+        await self.link.takeoff(alt_m)
+        self.event("takeoff", alt_m=alt_m)
+        timeout = 30.0 + alt_m / self.settings.flight.climb_speed_m_s * 3 / self.settings.link.time_scale
+        await self.link.wait_for(lambda t: t.pos_ned_m is not None and -t.pos_ned_m[2] >= alt_m - 0.5,
+                                 timeout, f"the takeoff to {alt_m:.1f} m")
+
+    def check_guided(self) -> None:
+        tele = self.link.telemetry
+        if not tele.connected:
+            return              # keep streaming the reference; decided when the link is back
+        if tele.armed is False:
+            raise FlightAborted("the vehicle disarmed in flight")
+        if tele.mode is not None and tele.mode != GUIDED:
+            raise FlightAborted(f"the vehicle left GUIDED (now {tele.mode_name}): a pilot or "
+                                f"the autopilot took over; the companion stops commanding")
+
+    async def resume_leg(self, leg: LegPlan) -> None:
+        """Replan the rest of ``leg`` from where the vehicle is (after a link loss)."""
+        self._resume_needed = False
+        pos = self.link.telemetry.pos_ned_m
+        s = self.settings
+        new = await asyncio.to_thread(plan_leg, leg.index, leg.waypoint, pos,
+                                      self.local_mission.world, gart_settings=s.planning,
+                                      smoothing=s.smoothing, settings=s.flight, rng=self.rng)
+        if new is not None:
+            self.engage(new.trajectory, f"leg{leg.index}-resume", new)
+        self.event("resumed", leg=leg.index, from_ned_m=pos)
+
+    async def fly_leg(self, leg: LegPlan) -> None:
+        """Fly one leg: until its reference has ended and the vehicle is within the radius."""
+        self.leg_index = leg.index
+        self.engage(leg.trajectory, f"leg{leg.index}", leg)
+        if self.threats is not None:
+            self.threats.on_leg_started(leg)
+        margin = self.settings.link.leg_timeout_margin_s
+        radius = leg.waypoint.acceptance_radius_m
+        while True:
+            await asyncio.sleep(0.05)
+            self.check_guided()
+            if self._resume_needed and self.link.connected:
+                await self.resume_leg(leg)
+            t = self.clock.now_s()
+            ref = self.reference
+            pos = self.link.telemetry.pos_ned_m
+            if ref is not None and ref.finished(t):
+                dist = float(np.linalg.norm(pos - leg.goal_ned_m))
+                if dist <= radius:
+                    break
+                if t > ref.t_end_s + margin:
+                    raise FlightAborted(f"item {leg.waypoint.seq} not reached: {dist:.1f} m away "
+                                        f"{margin:.0f} s after the reference arrived")
+        self.summary.legs_reached += 1
+        self.event("reached", leg=leg.index, seq=leg.waypoint.seq,
+                   error_m=round(float(np.linalg.norm(self.link.telemetry.pos_ned_m - leg.goal_ned_m)), 3))
+        if leg.waypoint.hold_s > 0:
+            await asyncio.sleep(leg.waypoint.hold_s / self.settings.link.time_scale)
+
+    async def finish(self, end_action: str) -> None:
+        """Land (LAND or RTL missions) and wait for the disarm, or hover in LOITER."""
+        if end_action in ("land", "rtl"):
+            await self.link.land()
+            self.event("landing")
+            await self.link.wait_for(lambda t: t.armed is False, 60.0 + 120.0 / self.settings.link.time_scale,
+                                     "the landing and disarm")
+            self.summary.landed = True
+            self.event("landed")
+        else:
+            await self.link.set_mode("LOITER")
+            self.event("loiter", reason="the mission ends without LAND or RTL")
+
+    async def safe_stop(self, reason: str) -> None:
+        """Bring the vehicle to a hold, landing or RTL (per settings) when the flight stops."""
+        tele = self.link.telemetry
+        if not (tele.connected and tele.armed):
+            return
+        action = self.settings.link.on_interrupt
+        try:
+            if action == "land":
+                await self.link.land()
+            elif action == "rtl":
+                await self.link.return_to_launch()
+            else:
+                await self.link.set_mode("LOITER")
+            self.event("safe_stop", action=action, reason=reason)
+        except CompanionError as exc:
+            log.error("safe stop (%s) failed: %s", action, exc)
+
+    # ------------------------------------------------------------------ the whole flight
+    async def run(self) -> FlightSummary:
+        """Fly the mission (see the module docstring); returns the summary."""
+        s = self.settings
+        sys.setswitchinterval(0.0005)        # planning threads yield the GIL to the stream often
+        if self.record_path is not None:
+            self.recorder = FlightRecorder(self.record_path)
+            self.record("header", settings=settings_to_dict(s), seed=s.seed,
+                        mission=str(self.mission_path) if self.mission_path else None)
+        await self.link.connect(s.link.connect, s.link.connect_timeout_s)
+        try:
+            return await self._fly()
+        except asyncio.CancelledError:
+            self.summary.outcome = "interrupted"
+            await asyncio.shield(self.safe_stop("interrupted (SIGINT/SIGTERM)"))
+            raise
+        except FlightAborted as exc:
+            self.summary.outcome = f"aborted: {exc}"
+            log.error("flight aborted: %s", exc)
+            if self.link.telemetry.mode == GUIDED:
+                await self.safe_stop(str(exc))
+            raise
+        finally:
+            await self.shutdown()
+
+    async def _fly(self) -> FlightSummary:
+        s = self.settings
+        tele = await self.link.wait_ready(s.link.connect_timeout_s)
+        home = await self.link.wait_home(s.link.connect_timeout_s)
+        plan = await self.take_mission()
+        takeoff = next((w for w in mission_to_local(plan, home, settings=s.mission, dim=3).waypoints
+                        if w.kind == "takeoff"), None)
+        alt = -float(takeoff.pos_ned_m[2]) if takeoff is not None else s.link.takeoff_alt_m
+        start = tele.pos_ned_m
+        if tele.in_air:
+            alt = -float(start[2])
+        await self.plan_flight(plan, home, start, alt)
+        self.record("header", settings=settings_to_dict(s), seed=s.seed, home_lla=home,
+                    waypoints_ned_m=[w.pos_ned_m for w in self.local_mission.waypoints])
+        self._start_background()
+        if self.threats is not None:
+            await self.threats.start(self)
+        self.summary.outcome = "flying"
+        await self.takeoff(alt)
+        self.streamer = SetpointStreamer(self.link.send_setpoint, rate_hz=s.link.setpoint_rate_hz)
+        self.hold_here(self.link.telemetry.pos_ned_m, "takeoff complete")
+        self.streamer.start()
+        for leg in self.legs:
+            await self.fly_leg(leg)
+        self.hold_here(self.link.telemetry.pos_ned_m, "mission legs done")
+        await self.streamer.stop()
+        await self.finish(self.local_mission.end_action)
+        self.summary.outcome = "completed"
+        return self.summary
+
+    async def shutdown(self) -> None:
+        """Stop streaming and background tasks, write the summary, close the link."""
+        if self.streamer is not None:
+            await self.streamer.stop()
+            jitter = self.streamer.stats()
+            self.record("event", name="setpoint_jitter", **jitter.as_dict())
+        if self.threats is not None:
+            await self.threats.stop()
+        for task in self._tasks:
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self._errors_m:
+            err = np.asarray(self._errors_m)
+            self.summary.rms_tracking_error_m = float(np.sqrt(np.mean(err**2)))
+            self.summary.max_tracking_error_m = float(err.max())
+        self.record("summary", **self.summary.as_dict())
+        if self.recorder is not None:
+            self.recorder.close()
+        self.link.close()

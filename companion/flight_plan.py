@@ -1,0 +1,275 @@
+"""Mission -> legs -> planned, smoothed, time-parameterised trajectories (paper sections 3.1-3.2).
+
+The three stages are kept apart as in Nav2 (planner, smoother, timing) and called in sequence
+for every leg of a local mission:
+
+1. ``plan``: GART from the leg's start to its goal in the leg's *slab*: the mission world with
+   its down bounds narrowed to the leg's altitudes plus ``slab_margin_m`` (exclusion zones are
+   full-height, so the search is almost planar and the path stays level);
+2. ``smooth``: G2 (default, curvature bounded by K_max), G1 or none, with the collision re-check
+   against the world;
+3. ``time``: the speed profile under the leg's speed and the vehicle's acceleration, lateral
+   acceleration and jerk limits; the leg starts and ends at rest at its waypoints.
+
+A leg whose altitude changes starts with a vertical climb or descent (its own straight
+trajectory), then flies level: what flight-test engineers expect, and what keeps the planner in
+a thin slab. ``TrajectoryChain`` strings the pieces of a leg into one time-sampled reference.
+
+Everything here is pure: no I/O, the randomness comes from ``rng``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from companion.errors import MissionError
+from companion.planning import GartSettings, PlanResult, gart
+from companion.smoothing import SmoothingSettings, TrajectoryLimits, smooth_g1, smooth_g2, time_parameterize
+from companion.world import World
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FlightPlanSettings:
+    """How each leg of a mission is planned.
+
+    Parameters
+    ----------
+    planning_budget_s : float
+        GART wall-clock budget per leg (anytime: the best path found in the budget). Default 0.3.
+    slab_margin_m : float
+        Half-thickness added above and below the leg's altitudes for its planning slab (m).
+    climb_speed_m_s, descent_speed_m_s : float
+        Vertical speeds of climbs and descents between legs (m/s).
+    vertical_accel_m_s2 : float
+        Vertical acceleration limit of those climbs and descents (m/s^2).
+    min_vertical_change_m : float
+        Altitude changes smaller than this are flown within the level leg's tolerance, without a
+        vertical segment (m).
+    """
+
+    planning_budget_s: float = 0.3
+    slab_margin_m: float = 2.0
+    climb_speed_m_s: float = 2.5
+    descent_speed_m_s: float = 1.5
+    vertical_accel_m_s2: float = 1.0
+    min_vertical_change_m: float = 0.3
+
+    def __post_init__(self) -> None:
+        for name in ("planning_budget_s", "slab_margin_m", "climb_speed_m_s", "descent_speed_m_s",
+                     "vertical_accel_m_s2", "min_vertical_change_m"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise MissionError(f"flight.{name}: must be a finite number > 0, got {value!r}")
+
+
+class TrajectoryChain:
+    """Trajectories flown one after the other, sampled by time like one ``Trajectory``.
+
+    Parameters
+    ----------
+    pieces : sequence of Trajectory
+        Each 3D (NED); each piece starts where the previous one ends, at rest.
+    """
+
+    def __init__(self, pieces):
+        self.pieces = tuple(pieces)
+        if not self.pieces:
+            raise MissionError("a trajectory chain needs at least one piece")
+        durations = np.array([p.duration_s for p in self.pieces], dtype=float)
+        self.t_start_s = np.concatenate([[0.0], np.cumsum(durations)[:-1]])
+        self.duration_s = float(durations.sum())
+        self.length_m = float(sum(p.length_m for p in self.pieces))
+
+    def _split(self, t_s) -> tuple[np.ndarray, np.ndarray]:
+        t = np.clip(np.atleast_1d(np.asarray(t_s, dtype=float)), 0.0, self.duration_s)
+        idx = np.clip(np.searchsorted(self.t_start_s, t, side="right") - 1, 0, len(self.pieces) - 1)
+        return t, idx
+
+    def sample(self, t_s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position, velocity, acceleration (NED) at times ``t_s`` (K,) -> three (K, 3) arrays."""
+        t, idx = self._split(t_s)
+        pos = np.empty((t.size, 3))
+        vel = np.empty((t.size, 3))
+        acc = np.empty((t.size, 3))
+        for k in np.unique(idx):
+            sel = idx == k
+            p, v, a = self.pieces[k].sample(t[sel] - self.t_start_s[k])
+            pos[sel], vel[sel], acc[sel] = p, v, a
+        return pos, vel, acc
+
+    def yaw_rad(self, t_s) -> np.ndarray:
+        """Yaw reference (rad) at times ``t_s`` (K,) -> (K,)."""
+        t, idx = self._split(t_s)
+        out = np.empty(t.size)
+        for k in np.unique(idx):
+            sel = idx == k
+            out[sel] = self.pieces[k].yaw_rad(t[sel] - self.t_start_s[k])
+        return out
+
+    @property
+    def end_pos_ned_m(self) -> np.ndarray:
+        return self.pieces[-1].end_pos_ned_m
+
+
+@dataclass
+class LegPlan:
+    """One planned leg.
+
+    Attributes
+    ----------
+    index : int
+        Position of the leg in the mission (0-based).
+    waypoint : LocalWaypoint
+        The goal (its ``seq`` names the mission item in messages).
+    start_ned_m, goal_ned_m : ndarray (3,)
+    plan : PlanResult or None
+        GART's result for the level part; None for a purely vertical leg.
+    path_ned_m : ndarray (M, 3)
+        The polyline flown (vertical segment and planner path), for plots and checks.
+    trajectory : TrajectoryChain
+    world : World
+        The slab the level part was planned in.
+    notes : list of str
+        What the smoother or the timing could not honour.
+    """
+
+    index: int
+    waypoint: object
+    start_ned_m: np.ndarray
+    goal_ned_m: np.ndarray
+    plan: PlanResult | None
+    path_ned_m: np.ndarray
+    trajectory: TrajectoryChain
+    world: World
+    notes: list = field(default_factory=list)
+
+
+def leg_slab(world: World, down_values_m, margin_m: float) -> World:
+    """The mission world with its down bounds narrowed to ``down_values_m`` +/- ``margin_m``."""
+    lo = np.array(world.bounds_min, dtype=float)
+    hi = np.array(world.bounds_max, dtype=float)
+    lo[2] = max(lo[2], min(down_values_m) - margin_m)
+    hi[2] = min(hi[2], max(down_values_m) + margin_m)
+    if hi[2] <= lo[2]:
+        raise MissionError(f"altitudes {[-d for d in down_values_m]} m are outside the world's "
+                           f"altitude bounds")
+    return World(world.obstacles, lo, hi, world.margin_m)
+
+
+def vertical_trajectory(start_ned_m: np.ndarray, down_m: float, settings: FlightPlanSettings,
+                        yaw_rad: float):
+    """A straight climb or descent from ``start_ned_m`` to ``down_m`` at rest at both ends."""
+    end = np.array([start_ned_m[0], start_ned_m[1], down_m])
+    climbing = down_m < start_ned_m[2]
+    speed = settings.climb_speed_m_s if climbing else settings.descent_speed_m_s
+    accel = settings.vertical_accel_m_s2
+    limits = TrajectoryLimits(speed_m_s=speed, accel_m_s2=accel, lat_accel_m_s2=accel,
+                              jerk_m_s3=4.0 * accel)
+    return time_parameterize(np.vstack([start_ned_m, end]), limits, yaw_mode="hold",
+                             yaw_hold_rad=yaw_rad)
+
+
+def smooth(path: np.ndarray, settings: SmoothingSettings, world: World):
+    """Stage 2: the planner polyline as a flyable curve (or the polyline itself for 'none')."""
+    if settings.method == "g2":
+        return smooth_g2(path, settings.kappa_max_1_m, world=world,
+                         max_halvings=settings.repair_max_halvings)
+    if settings.method == "g1":
+        return smooth_g1(path)
+    return path
+
+
+def level(path: np.ndarray, down_m: float, world: World) -> np.ndarray:
+    """The path flown at ``down_m`` throughout, if that is collision-free; else unchanged.
+
+    GART searches the whole slab; where the obstacles are vertical extrusions (fence zones) the
+    level path is as safe and saves the climbs and descents.
+    """
+    flat = np.array(path, dtype=float)
+    flat[:, 2] = down_m
+    return flat if world.path_free(flat) else path
+
+
+def leg_limits(waypoint, limits: TrajectoryLimits) -> TrajectoryLimits:
+    """The vehicle's limits with the leg's cruise speed (a DO_CHANGE_SPEED or item speed)."""
+    speed = waypoint.speed_m_s
+    if speed is None or speed <= 0:
+        return limits
+    return replace(limits, speed_m_s=min(float(speed), limits.speed_m_s))
+
+
+def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: GartSettings,
+             smoothing: SmoothingSettings, settings: FlightPlanSettings,
+             rng: np.random.Generator, yaw_rad: float = 0.0) -> LegPlan | None:
+    """Plan, smooth and time one leg from ``start_ned_m`` to ``waypoint``.
+
+    Returns None when the goal is where the leg starts (e.g. a LAND item right below the last
+    waypoint): there is nothing to fly.
+
+    Raises
+    ------
+    MissionError
+        The goal is unreachable (inside an obstacle, or no path within the budget), naming the
+        mission item.
+    """
+    start = np.asarray(start_ned_m, dtype=float).reshape(3)
+    goal = np.array(waypoint.pos_ned_m, dtype=float)
+    if waypoint.kind in ("land", "rtl"):
+        goal[2] = start[2]          # fly there level; the vehicle's LAND descends
+    where = f"item {waypoint.seq} ({waypoint.kind})"
+    pieces, polyline, notes, result = [], [start], [], None
+    level_start = start
+    if abs(goal[2] - start[2]) >= settings.min_vertical_change_m:
+        pieces.append(vertical_trajectory(start, goal[2], settings, yaw_rad))
+        level_start = np.array([start[0], start[1], goal[2]])
+        polyline.append(level_start)
+    slab = leg_slab(world, [goal[2]], settings.slab_margin_m)
+    if np.hypot(*(goal[:2] - level_start[:2])) > 1e-3:
+        result = gart(slab, level_start, goal, rng=rng, max_time_s=settings.planning_budget_s,
+                      settings=gart_settings)
+        if result.status != "exact":
+            reason = {"invalid_start": "the leg starts inside an obstacle or outside the bounds",
+                      "invalid_goal": "the goal is inside an obstacle (with the safety margin)",
+                      "timeout": f"no path found within {settings.planning_budget_s} s"}[result.status]
+            raise MissionError(f"{where}: unreachable: {reason}")
+        path = level(result.path, goal[2], slab)
+        curve = smooth(path, smoothing, slab)
+        notes += list(getattr(curve, "notes", []))
+        trajectory = time_parameterize(curve, leg_limits(waypoint, smoothing.limits))
+        notes += trajectory.notes
+        pieces.append(trajectory)
+        polyline.extend(path[1:])
+    if not pieces:
+        return None
+    log.info("leg %d to %s: %s, %.1f m, %.1f s%s", index, where,
+             result.status if result else "vertical", sum(p.length_m for p in pieces),
+             sum(p.duration_s for p in pieces), f" ({'; '.join(notes)})" if notes else "")
+    return LegPlan(index, waypoint, start, goal, result, np.vstack(polyline),
+                   TrajectoryChain(pieces), slab, notes)
+
+
+def plan_mission(local_mission, start_ned_m, *, gart_settings: GartSettings,
+                 smoothing: SmoothingSettings, settings: FlightPlanSettings,
+                 rng: np.random.Generator) -> list[LegPlan]:
+    """Plan every leg after the takeoff, in flight order; the first leg starts at ``start_ned_m``.
+
+    The takeoff itself is the vehicle's (MAV_CMD_NAV_TAKEOFF); legs start at its altitude.
+    Raises ``MissionError`` naming the first unreachable item; nothing is flown then.
+    """
+    legs: list[LegPlan] = []
+    start = np.asarray(start_ned_m, dtype=float)
+    for waypoint in local_mission.waypoints:
+        if waypoint.kind == "takeoff":
+            continue
+        leg = plan_leg(len(legs), waypoint, start, local_mission.world, gart_settings=gart_settings,
+                       smoothing=smoothing, settings=settings, rng=rng)
+        if leg is not None:
+            legs.append(leg)
+            start = leg.goal_ned_m
+    return legs

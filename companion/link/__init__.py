@@ -1,0 +1,14 @@
+"""The vehicle link: MAVSDK 4.x connection, telemetry, missions, commands and the 50 Hz
+GUIDED setpoint stream (DESIGN.md section 5).
+
+MAVSDK is imported lazily (inside ``VehicleLink.connect``), so importing this package is cheap.
+"""
+
+from companion.link.setpoints import (JitterStats, Setpoint, SetpointStreamer, hold_position,
+                                      jitter_stats)
+from companion.link.vehicle import (COPTER_MODES, DEFAULT_URL, Telemetry, VehicleLink, check_url,
+                                    setpoint_fields, setpoint_type_mask)
+
+__all__ = ["COPTER_MODES", "DEFAULT_URL", "JitterStats", "Setpoint", "SetpointStreamer",
+           "Telemetry", "VehicleLink", "check_url", "hold_position", "jitter_stats",
+           "setpoint_fields", "setpoint_type_mask"]

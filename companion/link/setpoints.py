@@ -1,0 +1,307 @@
+"""The 50 Hz GUIDED setpoint stream (DESIGN.md sections 1 and 5; paper section 2.2).
+
+The vehicle's LQI tracks position/velocity/acceleration/yaw references; the companion must
+deliver them at a steady rate whatever else it is doing (planning, smoothing, threat handling).
+``SetpointStreamer`` is an asyncio task that sends one setpoint per period on absolute
+deadlines of the monotonic clock (``t_k = t_0 + k * period``: no drift, a late wake-up does not
+delay the next one; a deadline missed by more than a period is skipped, never sent in a burst).
+
+The setpoint comes from a callable ``setpoint_at(t_monotonic_s) -> Setpoint`` that the daemon
+replaces atomically with ``set_source`` (a single attribute store) when a new trajectory is
+ready, so a splice takes effect at the next tick. If the callable raises, the previous setpoint
+is repeated and the error logged (once per source).
+
+Planning must not hold the GIL for long stretches: run it in a ``ProcessPoolExecutor`` whose
+worker is niced, and give the streaming thread priority with ``raise_stream_priority`` (see
+``docs/benchmarks/setpoint_jitter.md`` for the measurements behind this recommendation).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import logging
+import math
+import time
+from array import array
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+
+def raise_stream_priority(fifo_priority: int = 10, nice_increment: int = -5) -> str:
+    """Give the calling thread (the event loop streaming setpoints) scheduling priority.
+
+    Tries ``SCHED_FIFO`` at ``fifo_priority`` (Linux, needs root or CAP_SYS_NICE), else lowers
+    the process niceness by ``nice_increment``; logs and carries on if neither is allowed.
+    Safe for the stream (about 0.1 ms of work per 20 ms period); do not call it from a thread
+    that runs long computations.
+
+    Returns
+    -------
+    str
+        ``"fifo"``, ``"nice"`` or ``"normal"``: what was obtained.
+    """
+    import os
+
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(fifo_priority)))
+        log.info("setpoint stream thread runs SCHED_FIFO priority %d", fifo_priority)
+        return "fifo"
+    except (AttributeError, OSError, PermissionError):
+        pass
+    try:
+        os.nice(int(nice_increment))
+        log.info("setpoint stream process niceness lowered by %d", -nice_increment)
+        return "nice"
+    except (AttributeError, OSError, PermissionError):
+        log.warning("cannot raise the setpoint stream's scheduling priority; jitter will "
+                    "follow the machine's load")
+        return "normal"
+
+
+def restore_normal_priority() -> None:
+    """Undo ``raise_stream_priority``'s SCHED_FIFO for the calling thread (SCHED_OTHER)."""
+    import os
+
+    try:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except (AttributeError, OSError, PermissionError):
+        pass
+
+
+class Setpoint(NamedTuple):
+    """One GUIDED setpoint (None = not commanded; masked out in type_mask).
+
+    Attributes
+    ----------
+    pos_ned_m, vel_ned_m_s, acc_ned_m_s2 : ndarray (3,) or None
+    yaw_rad : float or None
+    """
+
+    pos_ned_m: np.ndarray | None
+    vel_ned_m_s: np.ndarray | None = None
+    acc_ned_m_s2: np.ndarray | None = None
+    yaw_rad: float | None = None
+
+
+SetpointSource = Callable[[float], Setpoint]
+SetpointSender = Callable[..., None]
+
+
+def hold_position(pos_ned_m, yaw_rad: float | None = None) -> SetpointSource:
+    """A source that holds ``pos_ned_m`` with zero velocity and acceleration (a hover)."""
+    pos = np.asarray(pos_ned_m, dtype=np.float64).reshape(3).copy()
+    zero = np.zeros(3)
+
+    def setpoint_at(t_monotonic_s: float) -> Setpoint:
+        return Setpoint(pos, zero, zero, yaw_rad)
+
+    return setpoint_at
+
+
+@dataclasses.dataclass(frozen=True)
+class JitterStats:
+    """Period jitter of a setpoint stream: statistics of ``|period - nominal|`` in ms."""
+
+    count: int
+    nominal_period_ms: float
+    mean_period_ms: float
+    p50_ms: float
+    p99_ms: float
+    max_ms: float
+    missed: int
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def jitter_stats(send_times_s, nominal_period_s: float, missed: int = 0) -> JitterStats:
+    """Jitter of send times.
+
+    Parameters
+    ----------
+    send_times_s : array_like, shape (K,)
+        Monotonic send times in seconds, increasing.
+    nominal_period_s : float
+
+    Returns
+    -------
+    JitterStats
+        NaN statistics when fewer than 2 sends.
+    """
+    t = np.asarray(send_times_s, dtype=np.float64)
+    if t.size < 2:
+        nan = math.nan
+        return JitterStats(int(t.size), nominal_period_s * 1e3, nan, nan, nan, nan, missed)
+    periods = np.diff(t)
+    dev_ms = np.abs(periods - nominal_period_s) * 1e3
+    return JitterStats(int(t.size), nominal_period_s * 1e3, float(periods.mean() * 1e3),
+                       float(np.percentile(dev_ms, 50)), float(np.percentile(dev_ms, 99)),
+                       float(dev_ms.max()), missed)
+
+
+class SetpointStreamer:
+    """Send setpoints at a fixed rate on absolute monotonic deadlines.
+
+    Parameters
+    ----------
+    send : callable
+        ``send(pos_ned_m=..., vel_ned_m_s=..., acc_ned_m_s2=..., yaw_rad=...)``, non-blocking,
+        e.g. ``VehicleLink.send_setpoint``.
+    source : callable, optional
+        Initial ``setpoint_at(t_monotonic_s) -> Setpoint``; nothing is sent until one is set.
+    rate_hz : float
+        Stream rate (default 50 Hz).
+    on_sent : callable, optional
+        ``on_sent(t_monotonic_s, setpoint)`` after each send (flight record); must be quick.
+    spin_s : float
+        The last ``spin_s`` before a deadline are waited by yielding to the loop in a tight
+        loop instead of a timed sleep (the loop's timer resolution is ~1 ms). 0 disables.
+    max_records : int
+        Send times kept for ``stats()`` (a ring; default one hour at 50 Hz).
+
+    Examples
+    --------
+    >>> streamer = SetpointStreamer(link.send_setpoint, hold_position([0, 0, -10]))  # doctest: +SKIP
+    >>> task = streamer.start()
+    >>> streamer.set_source(lambda t: trajectory_setpoint(t - t_start))   # atomic swap
+    >>> await streamer.stop(); streamer.stats().p99_ms
+    """
+
+    def __init__(self, send: SetpointSender, source: SetpointSource | None = None, *,
+                 rate_hz: float = 50.0,
+                 on_sent: Callable[[float, Setpoint], None] | None = None,
+                 spin_s: float = 0.0, max_records: int = 180_000) -> None:
+        if not (math.isfinite(rate_hz) and 0.0 < rate_hz <= 1000.0):
+            raise ValueError(f"rate_hz must be in (0, 1000], got {rate_hz}")
+        if not (0.0 <= spin_s < 1.0 / rate_hz):
+            raise ValueError(f"spin_s must be in [0, period), got {spin_s}")
+        self._send = send
+        self._source = source
+        self._source_failed = False
+        self.period_s = 1.0 / rate_hz
+        self._on_sent = on_sent
+        self._spin_s = spin_s
+        self._max_records = int(max_records)
+        self._times = array("d")
+        self._last: Setpoint | None = None
+        self._task: asyncio.Task | None = None
+        self.missed = 0
+        self.sent = 0
+        self.send_errors = 0
+
+    # ---------------------------------------------------------------- control
+
+    def set_source(self, source: SetpointSource | None) -> None:
+        """Replace the setpoint source; effective at the next tick (None pauses sending)."""
+        self._source = source
+        self._source_failed = False
+
+    @property
+    def source(self) -> SetpointSource | None:
+        return self._source
+
+    @property
+    def last_setpoint(self) -> Setpoint | None:
+        """The setpoint sent last (None before the first send)."""
+        return self._last
+
+    def start(self) -> asyncio.Task:
+        """Start streaming on the running loop; returns the task."""
+        if self._task is None or self._task.done():
+            self._task = asyncio.get_running_loop().create_task(self.run(), name="setpoints")
+        return self._task
+
+    async def stop(self) -> None:
+        """Stop streaming (idempotent)."""
+        if self._task is not None:
+            self._task.cancel()
+            try:
+                await self._task
+            except asyncio.CancelledError:
+                pass
+            self._task = None
+
+    @property
+    def running(self) -> bool:
+        return self._task is not None and not self._task.done()
+
+    # ---------------------------------------------------------------- loop
+
+    async def run(self) -> None:
+        """Stream until cancelled."""
+        t0 = time.monotonic()
+        k = 0
+        while True:
+            deadline = t0 + k * self.period_s
+            await self.wait_until(deadline)
+            now = time.monotonic()
+            self.tick(now)
+            k += 1
+            # skip deadlines already missed by more than one period (no bursts)
+            behind = int((time.monotonic() - (t0 + k * self.period_s)) // self.period_s)
+            if behind > 0:
+                self.missed += behind
+                k += behind
+
+    async def wait_until(self, deadline_s: float) -> None:
+        """Sleep to ``deadline_s - spin_s`` on the loop timer, then yield until the deadline."""
+        remaining = deadline_s - time.monotonic() - self._spin_s
+        if remaining > 0:
+            await asyncio.sleep(remaining)
+        while time.monotonic() < deadline_s:
+            await asyncio.sleep(0)
+
+    def tick(self, now_s: float) -> None:
+        """Evaluate the source at ``now_s`` and send (one period's work)."""
+        source = self._source
+        if source is None:
+            return
+        setpoint = self._evaluate(source, now_s)
+        if setpoint is None:
+            return
+        try:
+            self._send(pos_ned_m=setpoint.pos_ned_m, vel_ned_m_s=setpoint.vel_ned_m_s,
+                       acc_ned_m_s2=setpoint.acc_ned_m_s2, yaw_rad=setpoint.yaw_rad)
+        except Exception:  # noqa: BLE001 - the stream must go on
+            self.send_errors += 1
+            if self.send_errors == 1 or self.send_errors % 500 == 0:
+                log.exception("setpoint send failed (%d so far)", self.send_errors)
+            return
+        self._last = setpoint
+        self.sent += 1
+        if len(self._times) >= self._max_records:
+            del self._times[: self._max_records // 10]
+        self._times.append(now_s)
+        if self._on_sent is not None:
+            self._on_sent(now_s, setpoint)
+
+    def _evaluate(self, source: SetpointSource, now_s: float) -> Setpoint | None:
+        try:
+            setpoint = source(now_s)
+        except Exception:  # noqa: BLE001 - repeat the last setpoint
+            if not self._source_failed:
+                log.exception("setpoint source failed; repeating the last setpoint")
+                self._source_failed = True
+            return self._last
+        if not isinstance(setpoint, Setpoint):
+            setpoint = Setpoint(*setpoint)
+        return setpoint
+
+    # ---------------------------------------------------------------- statistics
+
+    @property
+    def send_times_s(self) -> np.ndarray:
+        """Monotonic send times kept so far, shape (K,)."""
+        return np.frombuffer(self._times, dtype=np.float64).copy()
+
+    def stats(self) -> JitterStats:
+        """Period jitter of the sends so far."""
+        return jitter_stats(self.send_times_s, self.period_s, self.missed)
+
+    def reset_stats(self) -> None:
+        self._times = array("d")
+        self.missed = 0

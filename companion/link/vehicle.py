@@ -1,0 +1,762 @@
+"""The vehicle link: MAVSDK 4.x (ctypes ``mavsdk.asyncio``) to an ArduPilot-like helicopter.
+
+Implements the companion side of the MAVLink contract of DESIGN.md section 5:
+
+- connection by MAVSDK URL (``udpin://``, ``udpout://``, ``tcpin://``, ``tcpout://``,
+  ``serial://``), waiting for the first autopilot;
+- telemetry as an always-fresh snapshot (``VehicleLink.telemetry``) kept up to date by
+  background subscriptions (MAVSDK Telemetry plugin for position/velocity NED, attitude, armed,
+  in-air, home, global position; raw HEARTBEAT through MavlinkDirect for the exact ArduCopter
+  custom mode and for link-loss detection);
+- mission, fence and rally upload and download with MissionRaw (MISSION_ITEM_INT, ArduPilot's
+  home at mission seq 0), with rollback so a failed upload leaves the vehicle's lists as they
+  were;
+- commands (COMMAND_LONG through MavlinkDirect.send_command, each checked against its
+  COMMAND_ACK): DO_SET_MODE with ArduCopter custom modes (GUIDED 4 ...), arm/disarm, takeoff,
+  land, RTL, mission start;
+- GUIDED setpoints: SET_POSITION_TARGET_LOCAL_NED (position + velocity + acceleration + yaw,
+  type_mask from what is given) sent without blocking the event loop
+  (``MavlinkDirect.send_message`` of the synchronous plugin: a ~20 us ctypes call).
+
+MAVSDK 4.x note: ``Configuration`` is built with ``Configuration.create_with_component_type``
+(its constructor takes a raw handle).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import json
+import logging
+import math
+import time
+from typing import AsyncIterator, Callable
+
+import numpy as np
+
+from companion.errors import LinkError, MissionError
+from companion.mission.model import MissionPlan
+from companion.mission.raw import (RawItem, fence_to_raw, mission_to_raw, rally_to_raw,
+                                   raw_to_plan)
+
+log = logging.getLogger(__name__)
+
+DEFAULT_URL = "udpin://0.0.0.0:14540"
+URL_SCHEMES = ("udpin://", "udpout://", "udp://", "tcpin://", "tcpout://", "tcp://", "serial://")
+
+# ArduCopter flight modes (custom_mode of HEARTBEAT)
+COPTER_MODES = {"STABILIZE": 0, "ACRO": 1, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "LOITER": 5,
+                "RTL": 6, "CIRCLE": 7, "LAND": 9, "POSHOLD": 16, "BRAKE": 17, "SMART_RTL": 21}
+COPTER_MODE_NAMES = {v: k for k, v in COPTER_MODES.items()}
+
+MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
+MAV_CMD_NAV_LAND = 21
+MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_MISSION_START = 300
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_REQUEST_MESSAGE = 512
+MAVLINK_MSG_ID_HOME_POSITION = 242
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
+MAV_MODE_FLAG_SAFETY_ARMED = 128
+FORCE_DISARM_MAGIC = 21196.0
+MAV_RESULT_NAMES = {0: "ACCEPTED", 1: "TEMPORARILY_REJECTED", 2: "DENIED", 3: "UNSUPPORTED",
+                    4: "FAILED", 5: "IN_PROGRESS", 6: "CANCELLED"}
+
+MAV_FRAME_LOCAL_NED = 1
+# SET_POSITION_TARGET type_mask bits (POSITION_TARGET_TYPEMASK)
+IGNORE_POS = 0b111
+IGNORE_VEL = 0b111 << 3
+IGNORE_ACC = 0b111 << 6
+IGNORE_YAW = 1 << 10
+IGNORE_YAW_RATE = 1 << 11
+
+HEARTBEAT_TIMEOUT_S = 3.0
+
+
+def setpoint_type_mask(pos, vel, acc, yaw, yaw_rate=None) -> int:
+    """SET_POSITION_TARGET type_mask: a field group is ignored when it is None."""
+    mask = 0
+    if pos is None:
+        mask |= IGNORE_POS
+    if vel is None:
+        mask |= IGNORE_VEL
+    if acc is None:
+        mask |= IGNORE_ACC
+    if yaw is None:
+        mask |= IGNORE_YAW
+    if yaw_rate is None:
+        mask |= IGNORE_YAW_RATE
+    return mask
+
+
+def setpoint_fields(time_boot_ms: int, target_system: int, target_component: int,
+                    pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
+                    yaw_rate_rad_s=None) -> dict:
+    """Fields of a SET_POSITION_TARGET_LOCAL_NED message (frame LOCAL_NED).
+
+    Parameters
+    ----------
+    pos_ned_m, vel_ned_m_s, acc_ned_m_s2 : (3,) array_like or None
+    yaw_rad, yaw_rate_rad_s : float or None
+
+    Raises
+    ------
+    LinkError
+        A given vector is not 3 finite numbers, or yaw is not finite.
+    """
+    fields = {"time_boot_ms": int(time_boot_ms) & 0xFFFFFFFF, "target_system": target_system,
+              "target_component": target_component, "coordinate_frame": MAV_FRAME_LOCAL_NED,
+              "type_mask": setpoint_type_mask(pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad,
+                                              yaw_rate_rad_s)}
+    for name, value, keys in (("pos_ned_m", pos_ned_m, ("x", "y", "z")),
+                              ("vel_ned_m_s", vel_ned_m_s, ("vx", "vy", "vz")),
+                              ("acc_ned_m_s2", acc_ned_m_s2, ("afx", "afy", "afz"))):
+        if value is None:
+            fields.update({k: 0.0 for k in keys})
+            continue
+        vec = np.asarray(value, dtype=np.float64).reshape(-1)
+        if vec.shape != (3,) or not np.all(np.isfinite(vec)):
+            raise LinkError(f"setpoint {name} must be 3 finite numbers, got {value!r}")
+        fields.update({k: float(v) for k, v in zip(keys, vec)})
+    for name, value, key in (("yaw_rad", yaw_rad, "yaw"),
+                             ("yaw_rate_rad_s", yaw_rate_rad_s, "yaw_rate")):
+        if value is None:
+            fields[key] = 0.0
+        elif not math.isfinite(float(value)):
+            raise LinkError(f"setpoint {name} must be finite, got {value!r}")
+        else:
+            fields[key] = float(value)
+    return fields
+
+
+def check_url(url: str) -> str:
+    """Raise ``LinkError`` naming ``url`` unless it is a MAVSDK connection URL."""
+    if not isinstance(url, str) or not url.startswith(URL_SCHEMES):
+        raise LinkError(f"--connect {url!r}: not a MAVSDK URL; use e.g. udpin://0.0.0.0:14540, "
+                        f"udpout://127.0.0.1:14555, tcpout://127.0.0.1:5760 or "
+                        f"serial:///dev/ttyUSB0:57600")
+    return url
+
+
+def mode_number(mode) -> int:
+    """ArduCopter mode number from a name (``"GUIDED"``) or a number."""
+    if isinstance(mode, str):
+        try:
+            return COPTER_MODES[mode.upper()]
+        except KeyError:
+            raise LinkError(f"unknown flight mode {mode!r}; known: "
+                            f"{', '.join(COPTER_MODES)}") from None
+    return int(mode)
+
+
+@dataclasses.dataclass(frozen=True)
+class Telemetry:
+    """A snapshot of the vehicle state (None: not received yet).
+
+    Attributes
+    ----------
+    pos_ned_m, vel_ned_m_s : ndarray (3,) or None
+        LOCAL_POSITION_NED about the vehicle's EKF origin (home in sim-vehicle).
+    attitude_rad : ndarray (3,) or None
+        Roll, pitch, yaw.
+    lat_deg, lon_deg, alt_amsl_m, rel_alt_m : float or None
+        GLOBAL_POSITION_INT.
+    home_lla : (lat_deg, lon_deg, alt_m AMSL) or None
+    mode : int or None
+        ArduCopter custom mode (``COPTER_MODES``); ``mode_name`` its name.
+    armed, in_air : bool or None
+    connected : bool
+        A heartbeat arrived in the last ``HEARTBEAT_TIMEOUT_S``.
+    heartbeat_age_s, position_age_s : float
+        Seconds since the last HEARTBEAT / position update (inf if never).
+    """
+
+    pos_ned_m: np.ndarray | None = None
+    vel_ned_m_s: np.ndarray | None = None
+    attitude_rad: np.ndarray | None = None
+    lat_deg: float | None = None
+    lon_deg: float | None = None
+    alt_amsl_m: float | None = None
+    rel_alt_m: float | None = None
+    home_lla: tuple[float, float, float] | None = None
+    mode: int | None = None
+    armed: bool | None = None
+    in_air: bool | None = None
+    connected: bool = False
+    heartbeat_age_s: float = math.inf
+    position_age_s: float = math.inf
+
+    @property
+    def mode_name(self) -> str:
+        if self.mode is None:
+            return "UNKNOWN"
+        return COPTER_MODE_NAMES.get(self.mode, f"MODE{self.mode}")
+
+
+class TelemetryState:
+    """The mutable state behind ``Telemetry`` snapshots (owned by the link's event loop)."""
+
+    def __init__(self) -> None:
+        self.values: dict = {}
+        self.heartbeat_t = -math.inf
+        self.position_t = -math.inf
+
+    def snapshot(self, now: float) -> Telemetry:
+        hb_age = now - self.heartbeat_t
+        return Telemetry(**self.values, connected=hb_age < HEARTBEAT_TIMEOUT_S,
+                         heartbeat_age_s=hb_age, position_age_s=now - self.position_t)
+
+
+class VehicleLink:
+    """MAVLink link to one autopilot through MAVSDK 4.x (asyncio).
+
+    Parameters
+    ----------
+    role : str
+        ``"companion"`` (MAVSDK ComponentType.COMPANION_COMPUTER) or ``"gcs"``
+        (GROUND_STATION, as ``companion upload/download``).
+
+    Examples
+    --------
+    >>> link = VehicleLink()                                    # doctest: +SKIP
+    >>> await link.connect("udpin://0.0.0.0:14540", timeout_s=10)
+    >>> await link.wait_position(5.0); link.telemetry.pos_ned_m
+    >>> await link.set_mode("GUIDED"); await link.arm(); await link.takeoff(10.0)
+    >>> link.send_setpoint(pos_ned_m=[0, 0, -10], vel_ned_m_s=[0, 0, 0], yaw_rad=0.0)
+    """
+
+    def __init__(self, role: str = "companion") -> None:
+        if role not in ("companion", "gcs"):
+            raise LinkError(f"role must be 'companion' or 'gcs', got {role!r}")
+        self.role = role
+        self.url: str | None = None
+        self.target_system = 1
+        self.target_component = 1
+        self._mavsdk = None
+        self._system = None
+        self._direct = None        # MavlinkDirectAsync (commands, subscriptions)
+        self._direct_sync = None   # MavlinkDirect (non-blocking sends from the loop)
+        self._mission = None
+        self._telemetry_plugin = None
+        self._state = TelemetryState()
+        self._tasks: list[asyncio.Task] = []
+        self._t0 = time.monotonic()
+        self._link_listeners: list[Callable[[bool], None]] = []
+        self._was_connected = False
+        self._command_lock: asyncio.Lock | None = None
+        self._mission_lock: asyncio.Lock | None = None
+
+    # ----------------------------------------------------------------- connection
+
+    async def connect(self, url: str = DEFAULT_URL, timeout_s: float = 10.0) -> None:
+        """Open ``url`` and wait up to ``timeout_s`` for an autopilot, then start telemetry.
+
+        Raises
+        ------
+        LinkError
+            Bad URL, the URL cannot be opened, or no autopilot within ``timeout_s``.
+        """
+        from mavsdk.asyncio import ComponentType, Configuration, Mavsdk, MavsdkConnectionError
+        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+        from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
+        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+        from mavsdk.plugins.mavlink_direct import MavlinkDirect
+
+        check_url(url)
+        route_mavsdk_logs()
+        kind = (ComponentType.COMPANION_COMPUTER if self.role == "companion"
+                else ComponentType.GROUND_STATION)
+        self._mavsdk = Mavsdk(Configuration.create_with_component_type(kind))
+        self._command_lock = asyncio.Lock()
+        self._mission_lock = asyncio.Lock()
+        try:
+            await self._mavsdk.add_any_connection(url)
+        except MavsdkConnectionError as exc:
+            self.close()
+            raise LinkError(f"cannot open {url}: {exc}") from None
+        system = await self._mavsdk.first_autopilot(timeout_s=float(timeout_s))
+        if system is None:
+            self.close()
+            raise LinkError(f"no autopilot heard on {url} within {timeout_s:g} s (is the vehicle "
+                            f"running and sending to this address?)")
+        self.url = url
+        self._system = system
+        self.target_system = await system.get_system_id()
+        self._direct = MavlinkDirectAsync(system)
+        self._direct_sync = MavlinkDirect(system._system)
+        self._mission = MissionRawAsync(system)
+        self._telemetry_plugin = TelemetryAsync(system)
+        self._state.heartbeat_t = time.monotonic()
+        self._was_connected = True
+        self._start_subscriptions()
+        log.info("connected to system %d on %s", self.target_system, url)
+
+    def close(self) -> None:
+        """Stop the subscriptions and release MAVSDK (idempotent)."""
+        for task in self._tasks:
+            task.cancel()
+        self._tasks.clear()
+        if self._mavsdk is not None:
+            with contextlib.suppress(Exception):
+                self._mavsdk.destroy()
+        self._mavsdk = None
+
+    async def __aenter__(self) -> "VehicleLink":
+        return self
+
+    async def __aexit__(self, *exc) -> None:
+        self.close()
+        await asyncio.sleep(0)
+
+    def on_link_change(self, callback: Callable[[bool], None]) -> None:
+        """Call ``callback(connected)`` on the loop when the heartbeat is lost or is back."""
+        self._link_listeners.append(callback)
+
+    @property
+    def connected(self) -> bool:
+        """True while heartbeats arrive (within ``HEARTBEAT_TIMEOUT_S``)."""
+        return time.monotonic() - self._state.heartbeat_t < HEARTBEAT_TIMEOUT_S
+
+    async def wait_connected(self, timeout_s: float | None = None) -> bool:
+        """Wait until heartbeats arrive again (MAVSDK keeps the connection open meanwhile)."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while not self.connected:
+            if deadline is not None and time.monotonic() > deadline:
+                return False
+            await asyncio.sleep(0.05)
+        return True
+
+    # ----------------------------------------------------------------- telemetry
+
+    @property
+    def telemetry(self) -> Telemetry:
+        """The latest vehicle state (a new immutable snapshot on every access)."""
+        return self._state.snapshot(time.monotonic())
+
+    async def wait_position(self, timeout_s: float = 10.0) -> Telemetry:
+        """Wait for a fresh position; raises ``LinkError`` on timeout."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            snap = self.telemetry
+            if snap.pos_ned_m is not None and snap.position_age_s < 1.0:
+                return snap
+            if time.monotonic() > deadline:
+                raise LinkError(f"no position telemetry within {timeout_s:g} s")
+            await asyncio.sleep(0.02)
+
+    async def wait_home(self, timeout_s: float = 10.0) -> tuple[float, float, float]:
+        """Request and wait for the vehicle's home position (lat_deg, lon_deg, alt_m AMSL)."""
+        deadline = time.monotonic() + timeout_s
+        next_request = 0.0
+        while self._state.values.get("home_lla") is None:
+            now = time.monotonic()
+            if now > deadline:
+                raise LinkError(f"the vehicle reported no home position within {timeout_s:g} s")
+            if now >= next_request:
+                next_request = now + 1.0
+                try:
+                    await self.request_home()
+                except LinkError as exc:
+                    log.debug("home request: %s", exc)
+            await asyncio.sleep(0.05)
+        return self._state.values["home_lla"]
+
+    async def wait_ready(self, timeout_s: float = 10.0) -> Telemetry:
+        """Wait until position, flight mode and armed state are known."""
+        return await self.wait_for(lambda t: t.pos_ned_m is not None and t.mode is not None
+                                   and t.armed is not None, timeout_s, "telemetry")
+
+    async def wait_for(self, predicate: Callable[[Telemetry], bool], timeout_s: float,
+                       what: str = "condition") -> Telemetry:
+        """Wait until ``predicate(telemetry)`` holds; ``LinkError`` naming ``what`` on timeout."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            snap = self.telemetry
+            if predicate(snap):
+                return snap
+            if time.monotonic() > deadline:
+                raise LinkError(f"timed out after {timeout_s:g} s waiting for {what}")
+            await asyncio.sleep(0.02)
+
+    async def messages(self, name: str) -> AsyncIterator[dict]:
+        """Raw MAVLink messages named ``name`` (e.g. ``"SERVO_OUTPUT_RAW"``) as field dicts.
+
+        Each dict has the message fields plus ``"_sysid"``, ``"_compid"`` and ``"_t_s"``
+        (monotonic arrival time).
+        """
+        self._require_connected()
+        async for msg in self._direct.subscribe_message(name):
+            try:
+                fields = json.loads(msg.fields_json)
+            except json.JSONDecodeError:
+                continue
+            fields["_sysid"] = msg.system_id
+            fields["_compid"] = msg.component_id
+            fields["_t_s"] = time.monotonic()
+            yield fields
+
+    def _start_subscriptions(self) -> None:
+        loop = asyncio.get_running_loop()
+        self._tasks = [loop.create_task(coro, name=f"link-{coro.__name__}") for coro in (
+            self._watch_heartbeat(), self._watch_link(), self._watch_position_velocity(),
+            self._watch_attitude(), self._watch_armed(), self._watch_in_air(),
+            self._watch_home(), self._watch_global_position())]
+
+    async def _guarded(self, what: str, agen, apply: Callable) -> None:
+        """Run one subscription forever; a failure is logged and the subscription restarted."""
+        while True:
+            try:
+                async for value in agen():
+                    apply(value)
+            except asyncio.CancelledError:
+                raise
+            except Exception:  # noqa: BLE001 - a telemetry glitch must not stop the link
+                log.exception("telemetry subscription %s failed; restarting", what)
+                await asyncio.sleep(0.5)
+
+    async def _watch_heartbeat(self) -> None:
+        def apply(fields: dict) -> None:
+            if fields.get("_sysid") != self.target_system or fields.get("_compid") != \
+                    self.target_component:
+                return
+            self._state.heartbeat_t = time.monotonic()
+            if int(fields.get("base_mode", 0)) & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+                self._state.values["mode"] = int(fields.get("custom_mode", 0))
+            self._state.values["armed"] = bool(int(fields.get("base_mode", 0))
+                                               & MAV_MODE_FLAG_SAFETY_ARMED)
+        await self._guarded("HEARTBEAT", lambda: self.messages("HEARTBEAT"), apply)
+
+    async def _watch_link(self) -> None:
+        """Detect heartbeat loss and return; tell the listeners."""
+        while True:
+            await asyncio.sleep(0.2)
+            now_connected = self.connected
+            if now_connected != self._was_connected:
+                self._was_connected = now_connected
+                if now_connected:
+                    log.warning("link to system %d is back", self.target_system)
+                else:
+                    log.warning("link to system %d lost: no heartbeat for %.1f s; still "
+                                "listening on %s", self.target_system, HEARTBEAT_TIMEOUT_S,
+                                self.url)
+                for callback in list(self._link_listeners):
+                    try:
+                        callback(now_connected)
+                    except Exception:  # noqa: BLE001
+                        log.exception("link listener failed")
+
+    async def _watch_position_velocity(self) -> None:
+        def apply(pv) -> None:
+            self._state.values["pos_ned_m"] = np.array(
+                [pv.position.north_m, pv.position.east_m, pv.position.down_m])
+            self._state.values["vel_ned_m_s"] = np.array(
+                [pv.velocity.north_m_s, pv.velocity.east_m_s, pv.velocity.down_m_s])
+            self._state.position_t = time.monotonic()
+        await self._guarded("position_velocity_ned",
+                            self._telemetry_plugin.subscribe_position_velocity_ned, apply)
+
+    async def _watch_attitude(self) -> None:
+        def apply(att) -> None:
+            self._state.values["attitude_rad"] = np.radians(
+                [att.roll_deg, att.pitch_deg, att.yaw_deg])
+        await self._guarded("attitude", self._telemetry_plugin.subscribe_attitude_euler, apply)
+
+    async def _watch_armed(self) -> None:
+        def apply(armed) -> None:
+            self._state.values["armed"] = bool(armed)
+        await self._guarded("armed", self._telemetry_plugin.subscribe_armed, apply)
+
+    async def _watch_in_air(self) -> None:
+        def apply(in_air) -> None:
+            self._state.values["in_air"] = bool(in_air)
+        await self._guarded("in_air", self._telemetry_plugin.subscribe_in_air, apply)
+
+    async def _watch_home(self) -> None:
+        def apply(fields: dict) -> None:
+            if fields.get("_sysid") != self.target_system:
+                return
+            lat = fields.get("latitude", 0) / 1e7
+            lon = fields.get("longitude", 0) / 1e7
+            if (lat, lon) != (0.0, 0.0) and abs(lat) <= 90.0 and abs(lon) <= 180.0:
+                self._state.values["home_lla"] = (lat, lon, fields.get("altitude", 0) / 1e3)
+        await self._guarded("HOME_POSITION", lambda: self.messages("HOME_POSITION"), apply)
+
+    async def request_home(self) -> None:
+        """Ask for HOME_POSITION (REQUEST_MESSAGE 242); the answer updates the telemetry."""
+        await self.command_long(MAV_CMD_REQUEST_MESSAGE, (MAVLINK_MSG_ID_HOME_POSITION,),
+                                what="request HOME_POSITION", timeout_s=3.0)
+
+    async def _watch_global_position(self) -> None:
+        def apply(pos) -> None:
+            self._state.values.update(lat_deg=float(pos.latitude_deg),
+                                      lon_deg=float(pos.longitude_deg),
+                                      alt_amsl_m=float(pos.absolute_altitude_m),
+                                      rel_alt_m=float(pos.relative_altitude_m))
+        await self._guarded("position", self._telemetry_plugin.subscribe_position, apply)
+
+    # ----------------------------------------------------------------- commands
+
+    def _require_connected(self) -> None:
+        if self._system is None or self._mavsdk is None:
+            raise LinkError("the link is not connected (call connect() first)")
+
+    async def command_long(self, command: int, params=(), *, what: str | None = None,
+                           timeout_s: float = 10.0) -> None:
+        """Send COMMAND_LONG and check its COMMAND_ACK.
+
+        Parameters
+        ----------
+        command : int
+            MAV_CMD.
+        params : sequence of up to 7 floats
+            param1..param7 (missing ones are 0).
+
+        Raises
+        ------
+        LinkError
+            No final ack (naming ``what``), or the vehicle answered anything but ACCEPTED
+            (naming the MAV_RESULT).
+        """
+        from mavsdk.plugins.mavlink_direct import MavlinkDirectError, MavlinkMessage
+
+        self._require_connected()
+        # MavlinkDirect takes strict JSON, which has no NaN: unset parameters travel as 0
+        values = [float(p) if math.isfinite(float(p)) else 0.0 for p in params]
+        values += [0.0] * (7 - len(values))
+        fields = {"target_system": self.target_system, "target_component": self.target_component,
+                  "command": int(command), "confirmation": 0}
+        fields.update({f"param{k + 1}": v for k, v in enumerate(values)})
+        message = MavlinkMessage("COMMAND_LONG", 0, 0, self.target_system, self.target_component,
+                                 json.dumps(fields))
+        label = what or f"command {command}"
+        async with self._command_lock:
+            try:
+                ack = await asyncio.wait_for(self._direct.send_command(message), timeout_s)
+            except asyncio.TimeoutError:
+                raise LinkError(f"{label}: no COMMAND_ACK within {timeout_s:g} s") from None
+            except MavlinkDirectError as exc:
+                raise LinkError(f"{label}: no COMMAND_ACK ({exc.result.name})") from None
+        try:
+            result = int(json.loads(ack.fields_json).get("result", -1))
+        except (json.JSONDecodeError, TypeError, ValueError, AttributeError):
+            raise LinkError(f"{label}: unreadable COMMAND_ACK") from None
+        if result != 0:
+            raise LinkError(f"{label} refused by the vehicle: "
+                            f"{MAV_RESULT_NAMES.get(result, result)}")
+        log.info("%s accepted", label)
+
+    async def set_mode(self, mode) -> None:
+        """Switch to an ArduCopter mode (name or number) with DO_SET_MODE and wait to see it."""
+        number = mode_number(mode)
+        name = COPTER_MODE_NAMES.get(number, str(number))
+        await self.command_long(MAV_CMD_DO_SET_MODE,
+                                (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number),
+                                what=f"set mode {name}")
+        await self.wait_for(lambda t: t.mode == number, 5.0, f"mode {name} in the heartbeat")
+
+    async def arm(self) -> None:
+        """Arm (COMPONENT_ARM_DISARM 1); ``LinkError`` if the vehicle refuses."""
+        await self.command_long(MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), what="arm")
+        await self.wait_for(lambda t: bool(t.armed), 5.0, "armed state")
+
+    async def disarm(self, force: bool = False) -> None:
+        """Disarm (``force``: even in the air, ArduPilot's 21196 magic)."""
+        await self.command_long(MAV_CMD_COMPONENT_ARM_DISARM,
+                                (0.0, FORCE_DISARM_MAGIC if force else 0.0), what="disarm")
+
+    async def takeoff(self, alt_m: float) -> None:
+        """GUIDED takeoff to ``alt_m`` above home (NAV_TAKEOFF param7); vehicle must be armed."""
+        if not (math.isfinite(alt_m) and alt_m > 0.0):
+            raise LinkError(f"takeoff altitude alt_m must be > 0, got {alt_m}")
+        await self.command_long(MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, float(alt_m)),
+                                what=f"takeoff to {alt_m:g} m")
+
+    async def land(self) -> None:
+        """Land here (NAV_LAND)."""
+        await self.command_long(MAV_CMD_NAV_LAND, (), what="land")
+
+    async def return_to_launch(self) -> None:
+        """Return to launch (NAV_RETURN_TO_LAUNCH)."""
+        await self.command_long(MAV_CMD_NAV_RETURN_TO_LAUNCH, (), what="return to launch")
+
+    async def start_mission(self) -> None:
+        """AUTO: fly the stored mission (mode AUTO, then MISSION_START)."""
+        await self.set_mode("AUTO")
+        await self.command_long(MAV_CMD_MISSION_START, (0, 0), what="mission start")
+
+    async def set_message_interval(self, message_id: int, rate_hz: float) -> None:
+        """SET_MESSAGE_INTERVAL for one message id (rate 0 = stop)."""
+        interval_us = -1.0 if rate_hz <= 0 else 1e6 / rate_hz
+        await self.command_long(MAV_CMD_SET_MESSAGE_INTERVAL, (message_id, interval_us),
+                                what=f"message interval of {message_id}")
+
+    # ----------------------------------------------------------------- setpoints
+
+    def send_setpoint(self, pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
+                      yaw_rate_rad_s=None) -> None:
+        """Send one SET_POSITION_TARGET_LOCAL_NED now (non-blocking; call from the loop thread).
+
+        ``None`` fields are masked out in ``type_mask``. Raises ``LinkError`` for non-finite
+        values (nothing is sent then).
+        """
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        self._require_connected()
+        time_boot_ms = int((time.monotonic() - self._t0) * 1000.0)
+        fields = setpoint_fields(time_boot_ms, self.target_system, self.target_component,
+                                 pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s)
+        message = MavlinkMessage("SET_POSITION_TARGET_LOCAL_NED", 0, 0, self.target_system,
+                                 self.target_component, json.dumps(fields))
+        self._direct_sync.send_message(message)
+
+    # ----------------------------------------------------------------- missions
+
+    async def download_raw(self) -> tuple[list[RawItem], list[RawItem], list[RawItem]]:
+        """Download the mission, fence and rally lists as ``RawItem`` lists."""
+        from mavsdk.plugins.mission_raw import MissionRawError, MissionRawResult
+
+        self._require_connected()
+        lists = []
+        for name, fetch in (("mission", self._mission.download_mission),
+                            ("fence", self._mission.download_geofence),
+                            ("rally", self._mission.download_rallypoints)):
+            try:
+                items = await fetch()
+            except MissionRawError as exc:
+                if exc.result == MissionRawResult.NO_MISSION_AVAILABLE:
+                    items = []
+                else:
+                    raise LinkError(f"{name} download failed: {exc.result.name}") from None
+            lists.append([from_mavsdk_item(i) for i in (items or [])])
+        return lists[0], lists[1], lists[2]
+
+    async def download_plan(self) -> MissionPlan:
+        """Download mission + fence + rally as a ``MissionPlan`` (seq 0 = home, ArduPilot)."""
+        async with self._mission_lock:
+            mission, fence, rally = await self.download_raw()
+        try:
+            return raw_to_plan(mission, fence, rally)
+        except MissionError as exc:
+            raise LinkError(f"the vehicle's lists cannot be read: {exc}") from None
+
+    async def upload_plan(self, plan: MissionPlan, home_lla=None) -> None:
+        """Upload mission, fence and rally like a ground station; all or nothing.
+
+        The plan is validated first (a bad plan uploads nothing). The vehicle replaces each
+        list only when its transfer completes; if a later list fails, the lists already replaced
+        are restored from a download taken before the upload.
+
+        Raises
+        ------
+        MissionError
+            The plan is invalid (nothing sent).
+        LinkError
+            A transfer failed (the previous lists are restored when possible).
+        """
+        plan.validate()
+        lists = (("mission", mission_to_raw(plan, home_lla)), ("fence", fence_to_raw(plan)),
+                 ("rally", rally_to_raw(plan)))
+        async with self._mission_lock:
+            backup = await self.download_raw()
+            done: list[int] = []
+            for k, (name, raw) in enumerate(lists):
+                try:
+                    await self._upload_list(name, raw)
+                except LinkError as exc:
+                    await self._restore(backup, done)
+                    outcome = ("the lists already replaced were restored" if done
+                               else "nothing was changed")
+                    raise LinkError(f"{exc}; {outcome}") from None
+                done.append(k)
+        log.info("uploaded %d mission items, %d fence items, %d rally points",
+                 len(plan.items), len(lists[1][1]), len(plan.rally))
+
+    async def _upload_list(self, name: str, raw: list[RawItem]) -> None:
+        from mavsdk.plugins.mission_raw import MissionRawError
+
+        upload = {"mission": self._mission.upload_mission,
+                  "fence": self._mission.upload_geofence,
+                  "rally": self._mission.upload_rally_points}[name]
+        try:
+            if raw:
+                await upload([to_mavsdk_item(r) for r in raw])
+            else:
+                await self._clear_list(name)
+        except MissionRawError as exc:
+            raise LinkError(f"{name} upload failed: {exc.result.name}") from None
+
+    async def _clear_list(self, name: str, attempts: int = 3, timeout_s: float = 1.5) -> None:
+        """Clear one list: MISSION_CLEAR_ALL for its mission type, confirmed by MISSION_ACK.
+
+        (MAVSDK's MissionRaw refuses to upload an empty list, so clearing is done directly.)
+        """
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        mission_type = {"mission": 0, "fence": 1, "rally": 2}[name]
+        fields = {"target_system": self.target_system, "target_component": self.target_component,
+                  "mission_type": mission_type}
+        message = MavlinkMessage("MISSION_CLEAR_ALL", 0, 0, self.target_system,
+                                 self.target_component, json.dumps(fields))
+
+        async def wait_ack() -> int:
+            async for ack in self.messages("MISSION_ACK"):
+                if ack.get("_sysid") == self.target_system and \
+                        int(ack.get("mission_type", 0)) == mission_type:
+                    return int(ack.get("type", -1))
+            return -1
+
+        for _ in range(attempts):
+            waiter = asyncio.ensure_future(wait_ack())
+            await asyncio.sleep(0)               # subscribed before the request goes out
+            self._direct_sync.send_message(message)
+            try:
+                result = await asyncio.wait_for(waiter, timeout_s)
+            except asyncio.TimeoutError:
+                continue
+            if result != 0:
+                raise LinkError(f"{name} clear refused: MAV_MISSION_RESULT {result}")
+            return
+        raise LinkError(f"{name} clear: no MISSION_ACK after {attempts} attempts")
+
+    async def _restore(self, backup, done: list[int]) -> None:
+        names = ("mission", "fence", "rally")
+        for k in done:
+            try:
+                await self._upload_list(names[k], backup[k])
+            except LinkError as exc:
+                log.error("could not restore the previous %s: %s", names[k], exc)
+
+
+def to_mavsdk_item(raw: RawItem):
+    """``RawItem`` -> ``mavsdk.plugins.mission_raw.MissionItem``."""
+    from mavsdk.plugins.mission_raw import MissionItem
+
+    return MissionItem(raw.seq, raw.frame, raw.command, raw.current, raw.autocontinue,
+                       raw.param1, raw.param2, raw.param3, raw.param4, raw.x, raw.y, raw.z,
+                       raw.mission_type)
+
+
+def from_mavsdk_item(item) -> RawItem:
+    """``mavsdk.plugins.mission_raw.MissionItem`` -> ``RawItem``."""
+    return RawItem(int(item.seq), int(item.frame), int(item.command), int(item.current),
+                   int(item.autocontinue), float(item.param1), float(item.param2),
+                   float(item.param3), float(item.param4), int(item.x), int(item.y),
+                   float(item.z), int(item.mission_type))
+
+
+def route_mavsdk_logs() -> None:
+    """Send MAVSDK's C++ log lines to Python logging (logger ``mavsdk``) instead of stderr."""
+    from mavsdk import logging as mavsdk_logging
+
+    mav_log = logging.getLogger("mavsdk")
+    # MAVSDK info chatter (version, discovery) is debug for us; warnings and errors stay
+    levels = {0: logging.DEBUG, 1: logging.DEBUG, 2: logging.WARNING, 3: logging.ERROR}
+
+    def forward(level, message, file, line) -> bool:
+        mav_log.log(levels.get(int(level), logging.INFO), "%s", message)
+        return True
+
+    mavsdk_logging.log_subscribe(forward)

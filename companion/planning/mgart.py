@@ -1,0 +1,138 @@
+"""M-GART: several distinct paths from one GART tree by *Extending Forbidden* (paper 3.3, Fig. 7).
+
+The GART tree grows as usual. Whenever a branch reaches the goal, the path is shortcut, and
+kept if it is *distinct* from every path kept so far; in every case the branch's nodes are then
+forbidden (``forbid_branch``): removed from the nearest-neighbour structure, so they are neither
+extended nor rewired any more, except those within ``keep_near_root_m`` of the start (and of the
+goal), which stay available so new branches can leave the start and still reach the goal. With
+``forbid_tube_m > 0`` the nodes within that distance of the branch are forbidden too, which
+steers the next branches away from the same corridor (a speed-up over the paper, where only the
+branch itself is forbidden; ``forbid_tube_m = 0`` gives the paper's rule). The tree keeps growing until ``k`` paths exist or the
+budget is spent. The threat manager uses the paths as pre-planned alternatives.
+
+Distinctness measure: the discrete Hausdorff distance between the two paths, each resampled every
+``separation_sample_m``, must be at least ``min_separation_m``. Paths are returned sorted by cost
+(paper eq. 3).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+
+import numpy as np
+
+from companion.errors import PlanningError
+from companion.planning.gart import GartSearch, finish_path, validate_problem
+from companion.planning.result import PlanResult
+from companion.planning.settings import MgartSettings
+
+__all__ = ["mgart", "hausdorff_m", "resample_path"]
+
+log = logging.getLogger(__name__)
+
+
+def resample_path(path: np.ndarray, step_m: float) -> np.ndarray:
+    """Points along ``path`` (M, d) every ``step_m`` or closer, ends included: (K, d)."""
+    pts = [path[0]]
+    for a, b in zip(path[:-1], path[1:]):
+        n = max(1, int(math.ceil(np.linalg.norm(b - a) / step_m)))
+        t = np.arange(1, n + 1)[:, None] / n
+        pts.extend(a + t * (b - a))
+    return np.asarray(pts)
+
+
+def hausdorff_m(path_a: np.ndarray, path_b: np.ndarray, step_m: float = 1.0) -> float:
+    """Discrete Hausdorff distance (m) between two polylines resampled every ``step_m``."""
+    a = resample_path(np.asarray(path_a, dtype=float), step_m)
+    b = resample_path(np.asarray(path_b, dtype=float), step_m)
+    d = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
+    return float(max(d.min(axis=1).max(), d.min(axis=0).max()))
+
+
+def forbid_branch(search: GartSearch, node: int, keep_near_root_m: float, tube_m: float) -> int:
+    """Forbid extension of the branch root -> ``node`` and of the nodes within ``tube_m`` of it.
+
+    Nodes within ``keep_near_root_m`` of the start or the goal stay extendable. Returns the
+    number of nodes forbidden.
+    """
+    count = 0
+    pts, start, goal = search.pts, search.start, search.goal
+    for b in search.branch(node):
+        around = [(b, 0.0)] + (search.nn.within(pts[b], tube_m) if tube_m > 0 else [])
+        for i, _ in around:
+            if i == 0 or search.forbidden[i]:
+                continue
+            if math.dist(pts[i], start) <= keep_near_root_m or (
+                    i != node and math.dist(pts[i], goal) <= keep_near_root_m):
+                continue
+            search.forbidden[i] = True
+            search.nn.remove(i)
+            count += 1
+    return count
+
+
+def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: float | None = None,
+          settings: MgartSettings | None = None) -> list[PlanResult]:
+    """Up to ``k`` distinct collision-free paths from ``start`` to ``goal``, cheapest first.
+
+    Parameters
+    ----------
+    world : World
+    start, goal : (d,) array_like
+    k : int
+        Number of paths wanted, >= 1.
+    rng : numpy.random.Generator
+    max_time_s : float, optional
+        Wall-clock budget (default ``settings.time_budget_s``).
+    settings : MgartSettings, optional
+
+    Returns
+    -------
+    list of PlanResult
+        The paths found (status 'exact'), sorted by cost; fewer than ``k`` when the budget ran
+        out. When none was found: one result with status 'timeout', 'invalid_start' or
+        'invalid_goal'. All results share the final tree (with ``forbidden`` nodes marked).
+    """
+    t0 = time.perf_counter()
+    settings = settings or MgartSettings()
+    if not isinstance(settings, MgartSettings):
+        raise PlanningError(f"settings: expected MgartSettings, got {type(settings).__name__}")
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise PlanningError(f"k: must be a positive integer, got {k!r}")
+    start_t, goal_t = validate_problem(world, start, goal, rng, max_time_s, None)
+    gs = settings.gart
+    if not world.point_free(start_t) or not world.point_free(goal_t):
+        status = "invalid_start" if not world.point_free(start_t) else "invalid_goal"
+        return [PlanResult(status=status, path=None, cost=math.inf, length_m=math.inf, iterations=0,
+                           elapsed_s=time.perf_counter() - t0, time_to_first_s=None, tree=None)]
+    deadline = t0 + (max_time_s if max_time_s is not None else settings.time_budget_s)
+    search = GartSearch(world, start_t, goal_t, gs, rng)
+    found: list[tuple[np.ndarray, float, float, float]] = []  # path, cost, length, t_found
+    clock = time.perf_counter
+
+    def consider(path: np.ndarray) -> None:
+        path, cost, length = finish_path(world, path, gs)
+        if all(hausdorff_m(path, other[0], settings.separation_sample_m) >= settings.min_separation_m
+               for other in found):
+            found.append((path, cost, length, clock() - t0))
+            log.debug("mgart: path %d after %d iterations, cost %.2f", len(found), search.iterations, cost)
+
+    if world.segment_free(start_t, goal_t):
+        consider(np.array([start_t, goal_t]))
+    while len(found) < k and clock() < deadline:
+        node = search.iterate()
+        if node < 0 or node not in search.goal_links:
+            continue
+        consider(search.path_to_goal(node))
+        forbid_branch(search, node, settings.keep_near_root_m, settings.forbid_tube_m)
+        del search.goal_links[node]
+    tree = search.tree()
+    elapsed = clock() - t0
+    if not found:
+        return [PlanResult(status="timeout", path=None, cost=math.inf, length_m=math.inf,
+                           iterations=search.iterations, elapsed_s=elapsed, time_to_first_s=None, tree=tree)]
+    found.sort(key=lambda f: f[1])
+    return [PlanResult(status="exact", path=p, cost=c, length_m=L, iterations=search.iterations,
+                       elapsed_s=elapsed, time_to_first_s=t, tree=tree) for p, c, L, t in found]

@@ -1,0 +1,116 @@
+"""Path shortcutting, kept apart from the planner (as OMPL's ``PathSimplifier``).
+
+Greedy shortcutting: from each waypoint, join the farthest later waypoint that can be reached by
+a free straight edge when that lowers the cost (paper eq. 3) and keeps every corner within the
+heading limit of :class:`~companion.planning.settings.GartSettings` (so the G2 smoother can still
+honour K_max). Exact collision checks; no random choices.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from companion.planning.cost import EdgeCost
+from companion.planning.settings import G2_CORNER_COEFF, GartSettings
+from companion.world import World
+
+__all__ = ["CornerRule", "shortcut_path"]
+
+
+class CornerRule:
+    """The heading-change limit at a corner between two edges (see ``GartSettings``).
+
+    With ``kappa_max_1_m`` set and a ``world`` given, the G2 corner must also be clear: its two
+    spirals lie inside the triangle of the tangent points ``W - d u_in``, ``W + d u_out`` and the
+    corner ``W`` (convex hull of their control points), so the chord between the tangent points
+    and the segment from ``W`` to the chord's midpoint must be free (the two legs are parts of
+    the path's own, already free, edges).
+    """
+
+    def __init__(self, settings: GartSettings, world: World | None = None):
+        self.cos_max = math.cos(settings.max_heading_change_rad)
+        self.kappa = settings.kappa_max_1_m
+        self.fraction = settings.corner_fraction
+        self.world = world if settings.kappa_max_1_m is not None else None
+
+    def ok(self, u_in: tuple | None, len_in: float, u_out: tuple, len_out: float,
+           corner: tuple | None = None) -> bool:
+        """True when the corner from unit direction ``u_in`` to ``u_out`` (at ``corner``) is allowed."""
+        if u_in is None:
+            return True
+        c = 0.0
+        for a, b in zip(u_in, u_out):
+            c += a * b
+        if c < self.cos_max:
+            return False
+        if self.kappa is None or c >= 1.0 - 1e-12:
+            return True
+        sin_beta = math.sqrt(0.5 * (1.0 - c))
+        cos2_beta = 0.5 * (1.0 + c)
+        need = G2_CORNER_COEFF * sin_beta / (self.kappa * cos2_beta)
+        if need > self.fraction * (len_in if len_in < len_out else len_out):
+            return False
+        if corner is None or self.world is None:
+            return True
+        b0 = tuple(w - need * u for w, u in zip(corner, u_in))
+        e0 = tuple(w + need * u for w, u in zip(corner, u_out))
+        mid = tuple(0.5 * (x + y) for x, y in zip(b0, e0))
+        free = self.world.segment_free
+        return free(b0, e0) and free(corner, mid)
+
+
+def _edge(a: tuple, b: tuple) -> tuple[tuple, float]:
+    length = math.dist(a, b)
+    return tuple((y - x) / length for x, y in zip(a, b)), length
+
+
+def _section_cost(points: list, ec: EdgeCost, u_before: tuple | None) -> float:
+    """Cost of the polyline ``points`` including corners, the first against ``u_before``."""
+    total = 0.0
+    u_prev = u_before
+    for a, b in zip(points[:-1], points[1:]):
+        u, length = _edge(a, b)
+        total += ec.edge(a, b, length) + ec.corner(u_prev, u)
+        u_prev = u
+    return total
+
+
+def shortcut_path(world: World, path, settings: GartSettings | None = None) -> np.ndarray:
+    """Shortcut ``path`` (M, d) in ``world``; returns a new (M', d) path, M' <= M.
+
+    The result is collision-free when the input is, never costs more, and keeps the first
+    and last waypoints.
+    """
+    settings = settings or GartSettings()
+    rule = CornerRule(settings, world)
+    ec = EdgeCost(world, settings.cost)
+    pts = [tuple(float(v) for v in row) for row in np.asarray(path, dtype=float)]
+    pts = [p for k, p in enumerate(pts) if k == 0 or math.dist(p, pts[k - 1]) > 1e-9]
+    for _ in range(settings.simplify.max_rounds):
+        changed = False
+        i = 0
+        while i < len(pts) - 2:
+            u_before, len_before = (None, 0.0) if i == 0 else _edge(pts[i - 1], pts[i])
+            for j in range(len(pts) - 1, i + 1, -1):
+                u_new, len_new = _edge(pts[i], pts[j])
+                if not rule.ok(u_before, len_before, u_new, len_new, pts[i]):
+                    continue
+                if j < len(pts) - 1:
+                    u_after, len_after = _edge(pts[j], pts[j + 1])
+                    if not rule.ok(u_new, len_new, u_after, len_after, pts[j]):
+                        continue
+                    old = _section_cost(pts[i:j + 2], ec, u_before)
+                    new = _section_cost([pts[i], pts[j], pts[j + 1]], ec, u_before)
+                else:
+                    old = _section_cost(pts[i:j + 1], ec, u_before)
+                    new = _section_cost([pts[i], pts[j]], ec, u_before)
+                if new < old - 1e-9 and world.segment_free(pts[i], pts[j]):
+                    pts = pts[:i + 1] + pts[j:]
+                    changed = True
+                    break
+            i += 1
+        if not changed:
+            break
+    return np.array(pts, dtype=float)

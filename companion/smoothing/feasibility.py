@@ -1,0 +1,225 @@
+"""Dynamic feasibility: the trajectory flown by the vehicle model in closed loop (paper 3.2).
+
+The paper treats the vehicle's dynamics as a constraint on the smoothed path and "adjusts the
+duration" until the helicopter can follow it. Here the check is done on the same model and
+flight controller that ``sim-vehicle`` flies: the trajectory is sampled at the setpoint rate
+(position, velocity, acceleration, yaw and, by default, yaw rate, as the companion streams
+them) and ``sim_vehicle.control.simulate_closed_loop`` predicts the vehicle's response with
+the LQI of paper section 2.2 (eqs. 5-7) on the 13-state hover model.
+
+A trajectory is *feasible* when no rotor input would clip (|delta| <= 1), the largest input
+stays below ``max_abs_delta`` (a reserve for gusts and model error) and the tracking error
+below ``max_tracking_error_m``. Otherwise every duration is stretched by ``stretch_step``
+(``Trajectory.time_scaled``: speeds / k, accelerations / k^2, jerk / k^3, exact) until it is,
+up to ``max_stretch``. The report gives the margin of the result.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.errors import SmoothingError
+from companion.smoothing.settings import FeasibilitySettings
+from companion.trajectory import Trajectory
+
+__all__ = ["FeasibilityReport", "FeasibilityChecker", "check", "check_and_stretch"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FeasibilityReport:
+    """Outcome of the closed-loop check.
+
+    Attributes
+    ----------
+    feasible : bool
+        The returned trajectory passes every criterion.
+    trajectory : Trajectory
+        The trajectory to fly: the input, or the input stretched by ``stretch``.
+    stretch : float
+        Factor applied to every duration (1: unchanged).
+    max_abs_delta : float
+        Largest normalised rotor input of the returned trajectory (1 is full travel).
+    max_tracking_error_m : float
+        Largest predicted distance from the reference (m).
+    saturated : bool
+        Some input would clip (|delta| > 1).
+    delta_margin : float
+        ``max_abs_delta`` setting minus the largest input (>= 0 when feasible).
+    error_margin_m : float
+        ``max_tracking_error_m`` setting minus the largest error.
+    attempts : int
+        Closed-loop simulations run.
+    initial_max_abs_delta, initial_max_tracking_error_m : float
+        The same figures for the input trajectory.
+    reason : str
+        Why the last simulated trajectory failed ('' when feasible).
+    elapsed_s : float
+        Wall-clock time of the whole check.
+    """
+
+    feasible: bool
+    trajectory: Trajectory
+    stretch: float
+    max_abs_delta: float
+    max_tracking_error_m: float
+    saturated: bool
+    delta_margin: float
+    error_margin_m: float
+    attempts: int
+    initial_max_abs_delta: float
+    initial_max_tracking_error_m: float
+    reason: str
+    elapsed_s: float
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    max_abs_delta: float
+    max_tracking_error_m: float
+    saturated: bool
+
+
+class FeasibilityChecker:
+    """Closed-loop checker bound to one vehicle model (its LQI design is cached on the model).
+
+    Parameters
+    ----------
+    model : sim_vehicle.model.HeliModel, optional
+        Default: ``HeliModel.default()`` (the R-50-class hover model).
+    settings : FeasibilitySettings, optional
+    controller_settings : sim_vehicle.control.ControllerSettings, optional
+        The flight controller's settings (default: the vehicle's defaults).
+    """
+
+    def __init__(self, model=None, settings: FeasibilitySettings | None = None, controller_settings=None) -> None:
+        if model is None:
+            from sim_vehicle.model import HeliModel
+
+            model = HeliModel.default()
+        self.model = model
+        self.settings = settings if settings is not None else FeasibilitySettings()
+        if not isinstance(self.settings, FeasibilitySettings):
+            raise SmoothingError(f"settings: expected a FeasibilitySettings, got {type(self.settings).__name__}")
+        self.controller_settings = controller_settings
+
+    def reference(self, trajectory: Trajectory) -> tuple[np.ndarray, ...]:
+        """Setpoint stream of ``trajectory`` at the setpoint rate, then a hover at its end.
+
+        Returns
+        -------
+        t_s (K,), pos_ned_m (K, 3), vel_ned_m_s (K, 3), acc_ned_m_s2 (K, 3), yaw_rad (K,),
+        yaw_rate_rad_s (K,)
+        """
+        traj = trajectory
+        if traj.d == 2:
+            traj = traj.to_ned(self.settings.down_m)
+        if traj.d != 3:
+            raise SmoothingError(f"trajectory: expected a 2D or 3D trajectory, got {traj.d}D")
+        dt = 1.0 / self.settings.sample_rate_hz
+        n = max(2, int(math.ceil(traj.duration_s / dt)) + 1)
+        t_traj = np.minimum(np.arange(n) * dt, traj.duration_s)
+        t_traj[-1] = traj.duration_s
+        pos, vel, acc = traj.sample(t_traj)
+        yaw = traj.yaw_rad(t_traj)
+        rate = traj.yaw_rate_rad_s(t_traj)
+        n_hold = int(math.ceil(self.settings.hold_after_s / dt))
+        if n_hold:
+            t_hold = traj.duration_s + dt * np.arange(1, n_hold + 1)
+            t_traj = np.concatenate([t_traj, t_hold])
+            pos = np.vstack([pos, np.repeat(pos[-1:], n_hold, axis=0)])
+            vel = np.vstack([vel, np.zeros((n_hold, 3))])
+            acc = np.vstack([acc, np.zeros((n_hold, 3))])
+            yaw = np.concatenate([yaw, np.full(n_hold, yaw[-1])])
+            rate = np.concatenate([rate, np.zeros(n_hold)])
+        keep = np.concatenate([[True], np.diff(t_traj) > 1e-9])
+        return t_traj[keep], pos[keep], vel[keep], acc[keep], yaw[keep], rate[keep]
+
+    def simulate(self, trajectory: Trajectory):
+        """Closed-loop prediction of ``trajectory``: a ``sim_vehicle.control.ClosedLoopResult``."""
+        from sim_vehicle.control import simulate_closed_loop
+
+        t, pos, vel, acc, yaw, rate = self.reference(trajectory)
+        return simulate_closed_loop(self.model, t, pos, vel, acc, yaw, self.controller_settings,
+                                    yaw_rate_rad_s=rate if self.settings.yaw_rate_feedforward else None)
+
+    def _outcome(self, trajectory: Trajectory) -> _Outcome:
+        result = self.simulate(trajectory)
+        return _Outcome(float(result.max_abs_delta), float(np.max(result.tracking_error_m)), bool(result.saturated))
+
+    def _failure(self, out: _Outcome) -> str:
+        s = self.settings
+        reasons = []
+        if out.saturated:
+            reasons.append(f"rotor inputs saturate (max |delta| {out.max_abs_delta:.3f})")
+        elif out.max_abs_delta > s.max_abs_delta:
+            reasons.append(f"max |delta| {out.max_abs_delta:.3f} > {s.max_abs_delta}")
+        if out.max_tracking_error_m > s.max_tracking_error_m:
+            reasons.append(f"tracking error {out.max_tracking_error_m:.3f} m > {s.max_tracking_error_m} m")
+        return "; ".join(reasons)
+
+    def check(self, trajectory: Trajectory) -> FeasibilityReport:
+        """Closed-loop check of ``trajectory`` without stretching it."""
+        return self._run(trajectory, stretch_allowed=False)
+
+    def check_and_stretch(self, trajectory: Trajectory) -> FeasibilityReport:
+        """Check ``trajectory`` and stretch its durations until it is feasible (or give up)."""
+        return self._run(trajectory, stretch_allowed=True)
+
+    def _run(self, trajectory: Trajectory, stretch_allowed: bool) -> FeasibilityReport:
+        if not isinstance(trajectory, Trajectory):
+            raise SmoothingError(f"trajectory: expected a Trajectory, got {type(trajectory).__name__}")
+        start = time.perf_counter()
+        s = self.settings
+        first = self._outcome(trajectory)
+        out, reason, factor, candidate, attempts = first, self._failure(first), 1.0, trajectory, 1
+        while reason and stretch_allowed and factor * s.stretch_step <= s.max_stretch * (1 + 1e-9):
+            factor *= s.stretch_step
+            candidate = trajectory.time_scaled(factor)
+            out = self._outcome(candidate)
+            reason = self._failure(out)
+            attempts += 1
+        if reason and stretch_allowed:
+            logger.warning("feasibility: still infeasible after stretching x%.3g: %s", factor, reason)
+        elif factor > 1.0:
+            logger.info("feasibility: stretched durations x%.3g (%.1f s -> %.1f s)", factor,
+                        trajectory.duration_s, candidate.duration_s)
+        return FeasibilityReport(
+            feasible=not reason, trajectory=candidate, stretch=factor, max_abs_delta=out.max_abs_delta,
+            max_tracking_error_m=out.max_tracking_error_m, saturated=out.saturated,
+            delta_margin=s.max_abs_delta - out.max_abs_delta,
+            error_margin_m=s.max_tracking_error_m - out.max_tracking_error_m, attempts=attempts,
+            initial_max_abs_delta=first.max_abs_delta,
+            initial_max_tracking_error_m=first.max_tracking_error_m, reason=reason,
+            elapsed_s=time.perf_counter() - start)
+
+
+def check(trajectory: Trajectory, model=None, settings: FeasibilitySettings | None = None) -> FeasibilityReport:
+    """Closed-loop check of ``trajectory`` on ``model`` (default: the R-50-class model), no stretch."""
+    return FeasibilityChecker(model, settings).check(trajectory)
+
+
+def check_and_stretch(trajectory: Trajectory, model=None,
+                      settings: FeasibilitySettings | None = None) -> FeasibilityReport:
+    """Closed-loop check of ``trajectory``, stretching its durations until it is feasible.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        2D (flown at ``settings.down_m``) or 3D NED.
+    model : sim_vehicle.model.HeliModel, optional
+        Pass the same model object on every call: its LQI design is cached on it (the first
+        design costs about a second).
+    settings : FeasibilitySettings, optional
+
+    Returns
+    -------
+    FeasibilityReport
+    """
+    return FeasibilityChecker(model, settings).check_and_stretch(trajectory)

@@ -1,0 +1,157 @@
+"""Polyline preparation shared by the G1 and G2 smoothers (paper section 3.2).
+
+A planner's path is validated (shape, finite values), repeated nodes are dropped, and the
+corner geometry at every interior node is computed: the unit vectors towards both neighbours,
+the adjacent segment lengths and the heading change. Corners are then classified as
+``straight`` (heading change below 1e-7 rad: nothing to smooth), ``reversal`` (the path turns
+back on itself, heading change within 1e-3 rad of pi: no smooth curve exists, the vehicle must
+stop) or ``turn``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.smoothing.bezier import elevate_lines
+
+from companion.errors import SmoothingError
+
+__all__ = ["Corners", "clean_path", "corner_geometry", "assemble_stacked"]
+
+STRAIGHT_RAD = 1e-7
+REVERSAL_RAD = 1e-3
+
+
+def clean_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
+    """Validate a polyline and drop repeated consecutive nodes.
+
+    Parameters
+    ----------
+    path : array_like, shape (M, d)
+        Nodes, d = 2 (north-east) or 3 (NED), M >= 2.
+    name : str
+        Argument name used in error messages.
+
+    Returns
+    -------
+    nodes : ndarray, shape (M', d)
+        Nodes without consecutive repeats (M' >= 2).
+    index : ndarray of int, shape (M',)
+        Index of every kept node in the input.
+
+    Raises
+    ------
+    SmoothingError
+        Wrong shape, fewer than 2 nodes, NaN/inf, or every node at the same place.
+    """
+    try:
+        arr = np.asarray(path, dtype=float)
+    except (TypeError, ValueError):
+        raise SmoothingError(f"{name}: expected an (M, d) array of numbers") from None
+    if arr.ndim != 2 or arr.shape[1] not in (2, 3):
+        raise SmoothingError(f"{name}: expected shape (M, 2) or (M, 3), got {arr.shape}")
+    if arr.shape[0] < 2:
+        raise SmoothingError(f"{name}: needs at least 2 nodes, got {arr.shape[0]}")
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.nonzero(~np.all(np.isfinite(arr), axis=1))[0][0])
+        raise SmoothingError(f"{name}: node {bad} is not finite (NaN or inf)")
+    scale = max(1.0, float(np.max(np.abs(arr))))
+    step = np.linalg.norm(np.diff(arr, axis=0), axis=1)
+    keep = np.concatenate([[True], step > 1e-9 * scale])
+    index = np.nonzero(keep)[0]
+    if index.size < 2:
+        raise SmoothingError(f"{name}: all {arr.shape[0]} nodes are at the same place; nothing to smooth")
+    return arr[index], index
+
+
+@dataclass(frozen=True)
+class Corners:
+    """Geometry of the interior nodes 1..M-2 of a cleaned polyline (C = M - 2 corners).
+
+    Attributes
+    ----------
+    point : ndarray, shape (C, d)
+        Corner nodes.
+    u_in : ndarray, shape (C, d)
+        Unit vector from the corner towards the previous node.
+    u_out : ndarray, shape (C, d)
+        Unit vector from the corner towards the next node.
+    len_in, len_out : ndarray, shape (C,)
+        Lengths of the incoming and outgoing segments (m).
+    turn_rad : ndarray, shape (C,)
+        Heading change at the corner, in [0, pi].
+    kind : ndarray of str, shape (C,)
+        ``"straight"``, ``"turn"`` or ``"reversal"``.
+    """
+
+    point: np.ndarray
+    u_in: np.ndarray
+    u_out: np.ndarray
+    len_in: np.ndarray
+    len_out: np.ndarray
+    turn_rad: np.ndarray
+    kind: np.ndarray
+
+
+def corner_geometry(nodes: np.ndarray) -> Corners:
+    """Corner geometry of a cleaned polyline ``nodes`` (M, d)."""
+    seg = np.diff(nodes, axis=0)
+    seg_len = np.linalg.norm(seg, axis=1)
+    unit = seg / seg_len[:, None]
+    t_in = unit[:-1]
+    t_out = unit[1:]
+    cos_turn = np.clip(np.sum(t_in * t_out, axis=1), -1.0, 1.0)
+    # atan2(|a x b|, a.b) is accurate at both ends of [0, pi], unlike arccos
+    cross = np.sqrt(np.maximum(np.sum(t_in * t_in, 1) * np.sum(t_out * t_out, 1) - cos_turn**2, 0.0))
+    if nodes.shape[1] == 2:
+        cross = np.abs(t_in[:, 0] * t_out[:, 1] - t_in[:, 1] * t_out[:, 0])
+    elif nodes.shape[1] == 3:
+        cross = np.linalg.norm(np.cross(t_in, t_out), axis=1)
+    turn = np.arctan2(cross, cos_turn)
+    kind = np.where(turn < STRAIGHT_RAD, "straight", np.where(turn > np.pi - REVERSAL_RAD, "reversal", "turn"))
+    return Corners(point=nodes[1:-1], u_in=-t_in, u_out=t_out, len_in=seg_len[:-1],
+                   len_out=seg_len[1:], turn_rad=turn, kind=kind)
+
+
+def assemble_stacked(nodes: np.ndarray, corner_kind: np.ndarray, curves: np.ndarray):
+    """Chain corner curves with straight pieces, all as one stacked array.
+
+    Parameters
+    ----------
+    nodes : ndarray, shape (M, d)
+    corner_kind : ndarray of int, shape (M-2,)
+        For every interior node: 0 = no curve (the straight line runs through it), 1 = kept
+        sharp (the lines meet at the node; the trajectory stops there), 2 = curved.
+    curves : ndarray, shape (M-2, m, N+1, d)
+        The m Bezier pieces of degree N of every corner (used where ``corner_kind == 2``),
+        starting on the incoming segment and ending on the outgoing one.
+
+    Returns
+    -------
+    ctrl : ndarray, shape (P, N+1, d)
+        Every piece elevated to degree N, in order from ``nodes[0]`` to ``nodes[-1]``.
+    degrees : ndarray of int, shape (P,)
+        1 for the straight pieces, N for the corner curves.
+    """
+    degree = curves.shape[2] - 1
+    m = curves.shape[1]
+    used = np.nonzero(corner_kind > 0)[0]
+    curved = corner_kind[used] == 2
+    entry = np.where(curved[:, None], curves[used, 0, 0], nodes[used + 1])      # (K, d)
+    exit_ = np.where(curved[:, None], curves[used, -1, -1], nodes[used + 1])
+    line_a = np.vstack([nodes[:1], exit_])
+    line_b = np.vstack([entry, nodes[-1:]])
+    lines = elevate_lines(line_a, line_b, degree)                              # (K+1, N+1, d)
+    count = 1 + m * curved.astype(int)                                         # pieces per corner + line
+    first = np.concatenate([[0], np.cumsum(count)])                            # line index of each block
+    total = int(first[-1]) + 1
+    ctrl = np.empty((total, degree + 1, nodes.shape[1]))
+    degrees = np.full(total, degree)
+    ctrl[first] = lines
+    degrees[first] = 1
+    rows = first[:-1][curved]
+    for j in range(m):
+        ctrl[rows + 1 + j] = curves[used[curved], j]
+    return ctrl, degrees

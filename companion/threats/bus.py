@@ -1,0 +1,466 @@
+"""The zenoh side of threat management (DESIGN section 6): threats in; status, events, path out.
+
+``ThreatBus`` owns one zenoh session (zenoh-python 1.x) in peer mode with multicast scouting
+off and explicit endpoints (listen and/or connect; a zenoh router is reached by connecting to
+it, in ``peer`` or ``client`` mode). Keys, with prefix ``uav/<sysid>``:
+
+- ``threats/<id>``: subscribed (PUT: a version-1 JSON threat, DELETE: remove it). Every sample
+  is decoded and validated *on the zenoh thread* and handed on as a ``ThreatUpdate`` with action
+  ``put``, ``delete`` or ``rejected`` (with the ``ThreatPayloadError`` naming the field).
+  zenoh-python has no asyncio API: with ``loop`` given the handler runs on that loop through
+  ``loop.call_soon_threadsafe``; without, it runs on the zenoh thread; with no handler the
+  updates go to an unbounded queue (``get_update`` / ``drain_updates``). Nothing is ever
+  dropped: there is no bounded queue, and every sample is counted (``stats``).
+- ``threats/**`` queryable (``serve_threats``): answers ``companion threat list`` with the threats
+  the companion currently holds, predicted to the time of the query.
+- ``status``, ``events``, ``path``: JSON objects published by the companion.
+
+The client side (``put_threat``, ``delete_threat``, ``list_threats``) is what
+``companion threat`` uses. This is an I/O module: nothing numeric happens here.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import queue
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from companion.errors import CompanionError, ThreatPayloadError
+from companion.threats import codec
+from companion.threats.model import Threat, payload_error
+from companion.threats.settings import check_endpoint
+
+__all__ = ["ThreatBus", "ThreatUpdate", "ThreatBusError", "session_config", "to_json_bytes"]
+
+log = logging.getLogger(__name__)
+
+
+class ThreatBusError(CompanionError):
+    """The zenoh session cannot be opened or used (bad endpoint, port in use, closed)."""
+
+
+@dataclass(frozen=True)
+class ThreatUpdate:
+    """One threat sample as received.
+
+    Attributes
+    ----------
+    action : str
+        ``"put"``, ``"delete"`` or ``"rejected"`` (invalid payload or key).
+    threat_id : str or None
+        From the key (None if the key itself is invalid).
+    threat : Threat or None
+        The decoded threat of a ``put`` (stamped ``received_t_s``), else None.
+    error : ThreatPayloadError or None
+        Why a ``rejected`` sample was rejected; ``error.field`` names the field.
+    key : str
+        The zenoh key the sample arrived on.
+    received_t_s : float
+        Receive time on the bus clock (``clock`` argument of ``ThreatBus``).
+    received_mono_s : float
+        ``time.monotonic()`` at receipt (for latency measurements).
+    seq : int
+        Receive order, from 1.
+    """
+
+    action: str
+    threat_id: str | None
+    threat: Threat | None
+    error: ThreatPayloadError | None
+    key: str
+    received_t_s: float
+    received_mono_s: float
+    seq: int
+
+
+def _json_default(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    if isinstance(value, (set, tuple)):
+        return list(value)
+    if hasattr(value, "as_dict"):
+        return value.as_dict()
+    return str(value)
+
+
+def _finite(value):
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {str(k): _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _finite(value.tolist())
+    if isinstance(value, np.floating):
+        return _finite(float(value))
+    return value
+
+
+def to_json_bytes(message: dict) -> bytes:
+    """Compact JSON of ``message``; numpy arrays become lists, NaN/inf become null."""
+    return json.dumps(_finite(message), separators=(",", ":"), default=_json_default,
+                      allow_nan=False).encode("utf-8")
+
+
+def session_config(*, mode: str = "peer", listen=(), connect=()):
+    """A ``zenoh.Config``: ``mode``, multicast scouting off, explicit endpoints.
+
+    Parameters
+    ----------
+    mode : str
+        ``peer``, ``client`` or ``router``.
+    listen, connect : sequence of str
+        zenoh endpoints such as ``tcp/127.0.0.1:7447``.
+    """
+    import zenoh
+
+    if mode not in ("peer", "client", "router"):
+        raise ThreatBusError(f"mode: expected peer, client or router, got {mode!r}")
+    listen = [check_endpoint(ep, f"listen[{i}]") for i, ep in enumerate(listen)]
+    connect = [check_endpoint(ep, f"connect[{i}]") for i, ep in enumerate(connect)]
+    if not listen and not connect:
+        raise ThreatBusError("give at least one listen or connect endpoint")
+    if mode == "client" and not connect:
+        raise ThreatBusError("connect: client mode needs a router endpoint to connect to")
+    cfg = zenoh.Config()
+    cfg.insert_json5("mode", json.dumps(mode))
+    cfg.insert_json5("scouting/multicast/enabled", "false")
+    cfg.insert_json5("listen/endpoints", json.dumps(listen))
+    cfg.insert_json5("connect/endpoints", json.dumps(connect))
+    return cfg
+
+
+class ThreatBus:
+    """One zenoh session for the threats of vehicle ``sysid`` (see the module docstring).
+
+    Parameters
+    ----------
+    sysid : int
+        Key prefix ``uav/<sysid>``.
+    listen, connect : sequence of str
+        zenoh endpoints (default: listen on ``tcp/127.0.0.1:7447``, connect to none).
+    mode : str
+        ``peer`` (default), ``client`` (through a router) or ``router``.
+    clock : callable, optional
+        Time source (s) stamped on received threats, e.g. the daemon's mission clock; default
+        ``time.monotonic``. Called on the zenoh thread.
+
+    Examples
+    --------
+    >>> bus = ThreatBus(1, listen=["tcp/127.0.0.1:7448"]).open()       # doctest: +SKIP
+    >>> bus.subscribe(lambda u: print(u.action, u.threat_id), loop=asyncio.get_running_loop())
+    >>> bus.publish_event({"event": "replan", "reason": "...", "latency_ms": 12.0})
+    >>> bus.close()
+    """
+
+    def __init__(self, sysid: int = 1, *, listen=("tcp/127.0.0.1:7447",), connect=(),
+                 mode: str = "peer", clock: Callable[[], float] | None = None) -> None:
+        if isinstance(sysid, bool) or not isinstance(sysid, int) or not 1 <= sysid <= 255:
+            raise ThreatBusError(f"sysid: must be an integer in 1..255, got {sysid!r}")
+        self.sysid = sysid
+        self.prefix = f"uav/{sysid}"
+        self.listen = tuple(listen)
+        self.connect = tuple(connect)
+        self.mode = mode
+        self.clock = clock or time.monotonic
+        self._config = session_config(mode=mode, listen=self.listen, connect=self.connect)
+        self._session = None
+        self._subscriber = None
+        self._queryable = None
+        self._publishers: dict = {}
+        self._handler = None
+        self._loop = None
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._seq = 0
+        self._counts = {"received": 0, "put": 0, "delete": 0, "rejected": 0, "delivered": 0,
+                        "handler_errors": 0, "undeliverable": 0, "queries": 0}
+
+    @classmethod
+    def from_settings(cls, settings, *, clock=None) -> "ThreatBus":
+        """Build from ``companion.threats.settings.ZenohSettings`` (not opened yet)."""
+        return cls(settings.sysid, listen=settings.listen, connect=settings.connect,
+                   mode=settings.mode, clock=clock)
+
+    # ------------------------------------------------------------------ session
+    def open(self) -> "ThreatBus":
+        """Open the zenoh session (returns self). Raises ``ThreatBusError`` on failure."""
+        import zenoh
+
+        if self._session is not None:
+            return self
+        try:
+            self._session = zenoh.open(self._config)
+        except Exception as exc:       # zenoh.ZError: port in use, unreachable router ...
+            raise ThreatBusError(f"zenoh session ({self.mode}, listen {list(self.listen)}, connect "
+                                 f"{list(self.connect)}): {exc}") from None
+        log.info("zenoh %s session %s: listen %s connect %s, prefix %s", self.mode,
+                 self._session.zid(), list(self.listen), list(self.connect), self.prefix)
+        return self
+
+    def close(self) -> None:
+        """Undeclare everything and close the session (idempotent)."""
+        session, self._session = self._session, None
+        if session is None:
+            return
+        for ent in [self._subscriber, self._queryable, *self._publishers.values()]:
+            if ent is not None:
+                try:
+                    ent.undeclare()
+                except Exception as exc:   # already closed by the session: nothing to do
+                    log.debug("undeclare: %s", exc)
+        self._subscriber = self._queryable = None
+        self._publishers.clear()
+        session.close()
+
+    def __enter__(self) -> "ThreatBus":
+        return self.open()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def session(self):
+        if self._session is None:
+            raise ThreatBusError("the zenoh session is not open (call open())")
+        return self._session
+
+    def connected_peers(self) -> int:
+        """Number of zenoh peers and routers this session is connected to."""
+        info = self.session.info
+        return len(list(info.peers_zid())) + len(list(info.routers_zid()))
+
+    def key(self, leaf: str) -> str:
+        """``uav/<sysid>/<leaf>``."""
+        return f"{self.prefix}/{leaf}"
+
+    # ------------------------------------------------------------------ threats in
+    def subscribe(self, handler: Callable[[ThreatUpdate], None] | None = None, *, loop=None) -> None:
+        """Subscribe to ``uav/<sysid>/threats/**``.
+
+        Parameters
+        ----------
+        handler : callable(ThreatUpdate), optional
+            Called for every sample (put, delete, rejected). Without a handler the updates go to
+            the queue read by ``get_update`` / ``drain_updates``.
+        loop : asyncio event loop, optional
+            Run ``handler`` on this loop (``call_soon_threadsafe``); otherwise on the zenoh
+            thread (keep it short and thread-safe).
+        """
+        if self._subscriber is not None:
+            raise ThreatBusError("already subscribed")
+        self._handler = handler
+        self._loop = loop
+        self._subscriber = self.session.declare_subscriber(self.key("threats/**"), self._on_sample)
+
+    def _on_sample(self, sample) -> None:
+        """zenoh thread: decode, count, hand on. Never raises (zenoh would log and go on)."""
+        try:
+            update = self._decode_sample(sample)
+            self._deliver(update)
+        except Exception:          # a bug here must not kill the zenoh callback thread
+            log.exception("threat sample handling failed")
+            with self._lock:
+                self._counts["handler_errors"] += 1
+
+    def _decode_sample(self, sample) -> ThreatUpdate:
+        import zenoh
+
+        mono = time.monotonic()
+        t_s = float(self.clock())
+        key = str(sample.key_expr)
+        with self._lock:
+            self._seq += 1
+            seq = self._seq
+            self._counts["received"] += 1
+        head = self.key("threats/")
+        threat_id, threat, error = None, None, None
+        try:
+            leaf = key[len(head):] if key.startswith(head) else ""
+            threat_id = codec.check_id(leaf, "key")
+            if sample.kind == zenoh.SampleKind.DELETE:
+                action = "delete"
+            else:
+                action = "put"
+                threat = codec.decode(sample.payload.to_bytes(), received_t_s=t_s, key_id=threat_id)
+        except ThreatPayloadError as exc:
+            action, error, threat = "rejected", exc, None
+            if getattr(exc, "field", None) == "key":
+                threat_id = None
+        with self._lock:
+            self._counts[action] += 1
+        return ThreatUpdate(action, threat_id, threat, error, key, t_s, mono, seq)
+
+    def _deliver(self, update: ThreatUpdate) -> None:
+        handler = self._handler
+        if handler is None:
+            self._queue.put(update)
+            self._count("delivered")
+            return
+        if self._loop is not None:
+            try:
+                self._loop.call_soon_threadsafe(self._run_handler, handler, update)
+            except RuntimeError:       # the loop is closed: the service is shutting down
+                self._count("undeliverable")
+            return
+        self._run_handler(handler, update)
+
+    def _run_handler(self, handler, update: ThreatUpdate) -> None:
+        try:
+            handler(update)
+            self._count("delivered")
+        except Exception:
+            log.exception("threat update handler failed on %s", update.key)
+            self._count("handler_errors")
+
+    def _count(self, name: str) -> None:
+        with self._lock:
+            self._counts[name] += 1
+
+    def get_update(self, timeout_s: float | None = None) -> ThreatUpdate | None:
+        """Next queued update (queue mode), or None after ``timeout_s``."""
+        try:
+            return self._queue.get(timeout=timeout_s)
+        except queue.Empty:
+            return None
+
+    def drain_updates(self) -> list[ThreatUpdate]:
+        """All queued updates (queue mode), oldest first, without waiting."""
+        out = []
+        while True:
+            try:
+                out.append(self._queue.get_nowait())
+            except queue.Empty:
+                return out
+
+    def stats(self) -> dict:
+        """Counters: received, put, delete, rejected, delivered, handler_errors, undeliverable, queries."""
+        with self._lock:
+            return dict(self._counts)
+
+    def serve_threats(self, snapshot: Callable[[], list]) -> None:
+        """Answer queries on ``uav/<sysid>/threats/**`` (``companion threat list``).
+
+        Parameters
+        ----------
+        snapshot : callable() -> list of (Threat, now_t_s)
+            Called on the zenoh thread; returns the threats held, each with the current time
+            on the threat's clock (positions are predicted to it and ttl shortened).
+        """
+        def on_query(query) -> None:
+            self._count("queries")
+            try:
+                for threat, now_t_s in snapshot():
+                    pos = threat.position_at(now_t_s) if threat.frame == "local_ned" else threat.position
+                    ttl = None if threat.ttl_s is None else max(threat.expires_t_s - now_t_s, 1e-3)
+                    current = Threat(threat.id, threat.kind, threat.frame, tuple(float(x) for x in pos),
+                                     threat.velocity_ned_m_s, threat.radius_m, ttl, now_t_s)
+                    query.reply(self.key(f"threats/{threat.id}"), codec.encode(current))
+            except Exception:
+                log.exception("answering a threat list query failed")
+
+        self._queryable = self.session.declare_queryable(self.key("threats/**"), on_query)
+
+    # ------------------------------------------------------------------ companion out
+    def _publisher(self, leaf: str, block: bool):
+        import zenoh
+
+        pub = self._publishers.get(leaf)
+        if pub is None:
+            cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
+            pub = self.session.declare_publisher(self.key(leaf), congestion_control=cc)
+            self._publishers[leaf] = pub
+        return pub
+
+    def publish_status(self, status: dict) -> None:
+        """PUT ``status`` (a JSON object) on ``uav/<sysid>/status``."""
+        self._publisher("status", block=False).put(to_json_bytes(status))
+
+    def publish_event(self, event: dict) -> None:
+        """PUT ``event`` on ``uav/<sysid>/events`` (reliable: never dropped for congestion)."""
+        self._publisher("events", block=True).put(to_json_bytes(event))
+
+    def publish_path(self, path: dict) -> None:
+        """PUT ``path`` (active path and alternatives) on ``uav/<sysid>/path``."""
+        self._publisher("path", block=True).put(to_json_bytes(path))
+
+    def subscribe_json(self, leaf: str, handler: Callable[[str, dict | None], None]):
+        """Subscribe to ``uav/<sysid>/<leaf>`` and call ``handler(key, message)`` (zenoh thread).
+
+        For tools and tests that watch ``status``, ``events`` or ``path``; ``message`` is None
+        for a payload that is not JSON. Returns the zenoh subscriber (closed with the session).
+        """
+        def on_sample(sample) -> None:
+            try:
+                msg = json.loads(sample.payload.to_bytes())
+            except ValueError:
+                msg = None
+            try:
+                handler(str(sample.key_expr), msg)
+            except Exception:
+                log.exception("handler of %s failed", leaf)
+
+        sub = self.session.declare_subscriber(self.key(leaf), on_sample)
+        self._publishers[f"sub:{leaf}:{id(sub)}"] = sub
+        return sub
+
+    # ------------------------------------------------------------------ client side
+    def wait_for_subscriber(self, timeout_s: float, threat_id: str = "probe") -> bool:
+        """Wait until a subscriber of ``uav/<sysid>/threats/<threat_id>`` is known (True) or timeout."""
+        pub = self._publisher(f"threats/{codec.check_id(threat_id)}", block=True)
+        deadline = time.monotonic() + timeout_s
+        while True:
+            if pub.matching_status.matching:
+                return True
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.01)
+
+    def put_threat(self, threat: Threat) -> None:
+        """PUT ``threat`` (encoded, validated) on ``uav/<sysid>/threats/<id>``."""
+        payload = codec.encode(threat)
+        self._publisher(f"threats/{threat.id}", block=True).put(payload)
+
+    def put_raw(self, threat_id: str, payload: bytes) -> None:
+        """PUT an arbitrary payload on ``uav/<sysid>/threats/<threat_id>`` (tests, fault injection)."""
+        self.session.put(self.key(f"threats/{threat_id}"), payload)
+
+    def delete_threat(self, threat_id: str) -> None:
+        """DELETE ``uav/<sysid>/threats/<threat_id>``."""
+        self._publisher(f"threats/{codec.check_id(threat_id)}", block=True).delete()
+
+    def list_threats(self, timeout_s: float = 2.0) -> list[Threat]:
+        """Ask the companion(s) for the threats they hold (``serve_threats``), sorted by id.
+
+        Invalid replies are logged and skipped.
+        """
+        out: dict[str, Threat] = {}
+        replies = self.session.get(self.key("threats/**"), timeout=timeout_s)
+        for reply in replies:
+            sample = reply.ok
+            if sample is None:
+                continue
+            try:
+                threat = codec.decode(sample.payload.to_bytes(), received_t_s=time.monotonic())
+            except ThreatPayloadError as exc:
+                log.warning("invalid threat in a list reply on %s: %s", sample.key_expr, exc)
+                continue
+            out[threat.id] = threat
+        return [out[k] for k in sorted(out)]
+
+
+def rejected_event(update: ThreatUpdate) -> dict:
+    """The ``rejected`` event the companion publishes for an invalid sample (DESIGN 6)."""
+    err = update.error or payload_error("payload", "rejected")
+    return {"event": "rejected", "threat_id": update.threat_id, "key": update.key,
+            "field": getattr(err, "field", "payload"), "reason": str(err), "t_s": update.received_t_s}

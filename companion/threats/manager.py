@@ -1,0 +1,840 @@
+"""Emergency threat manager: replan when there is time, switch when there is not, else hold.
+
+Paper section 3.3 (Fig. 5: switching to a pre-planned M-GART path inside the switching range;
+Fig. 8: a moving obstacle met at close range) made precise by DESIGN section 7:
+
+1. ``predict``: threats move at constant velocity (``Threat.position_at``); each is inflated by
+   ``inflation_m``.
+2. ``first_conflict``: the remaining reference (the active trajectory, then a hover at its end)
+   is checked in space *and time* against the predicted threats over ``horizon_s``.
+3. ``decide``: time to the first conflict > replanning estimate + margin -> ``replan``: GART
+   from the current reference state on ``world.with_threats(...)`` (a moving threat is replaced
+   by the volume it sweeps), G2 smoothing, speed profile starting at the current speed.
+   Otherwise ``switch``: among the M-GART alternatives, the entry node within ``switch_range_m``
+   with the lowest remaining cost whose spliced trajectory stays clear of the predicted threats.
+   A replan that fails falls back to a switch; when nothing is safe -> ``hold`` (brake to a
+   hover along the current velocity), and the next call replans from the hold.
+4. ``join``: every new trajectory leaves the current reference position along the current
+   velocity at the current speed (a straight lead long enough to slow down for the first
+   corner), so neither the position nor the velocity setpoint jumps.
+
+The measured replanning time feeds a running estimate (mean + 3 mean absolute deviations),
+which is the replanning budget of step 3.
+
+Pure: no asyncio, no zenoh, no clock of its own (times are arguments; the wall clock only
+measures the decision's own duration). The daemon calls ``on_threats`` from a worker thread.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from companion.errors import CompanionError
+from companion.planning import GartSettings, MgartSettings, gart, mgart
+from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
+from companion.smoothing.g2 import spiral_distance_m
+from companion.threats.model import Threat
+from companion.threats.settings import ThreatSettings
+from companion.world import Sphere, World
+
+__all__ = ["ThreatManager", "Decision", "Conflict", "Alternative", "ReferenceState",
+           "first_conflict", "min_separation_m", "lead_length_m", "entry_index", "threat_obstacles", "join_trajectory", "hold_trajectory",
+           "ThreatManagerError"]
+
+log = logging.getLogger(__name__)
+
+#: Smallest speed (m/s) with a meaningful direction; below it the vehicle counts as hovering.
+HOVER_SPEED_M_S = 0.3
+
+
+class ThreatManagerError(CompanionError, ValueError):
+    """Bad arguments to the threat manager (naming them)."""
+
+
+@dataclass(frozen=True)
+class ReferenceState:
+    """The reference (setpoint) at time ``t_s``: where a new trajectory must start.
+
+    Attributes
+    ----------
+    t_s : float
+        Time on the manager's clock (s).
+    pos_ned_m, vel_ned_m_s, acc_ned_m_s2 : ndarray, shape (d,)
+    """
+
+    t_s: float
+    pos_ned_m: np.ndarray
+    vel_ned_m_s: np.ndarray
+    acc_ned_m_s2: np.ndarray
+
+
+@dataclass(frozen=True)
+class Conflict:
+    """The first predicted intrusion of the reference into an inflated threat.
+
+    Attributes
+    ----------
+    threat_id : str
+    t_s : float
+        Time of the first sample in conflict (manager clock, s).
+    time_to_conflict_s : float
+        ``t_s`` minus the time of the check.
+    distance_m : float
+        Distance between the reference and the threat centre then (horizontal in 2D).
+    limit_m : float
+        Inflated radius of the threat.
+    """
+
+    threat_id: str
+    t_s: float
+    time_to_conflict_s: float
+    distance_m: float
+    limit_m: float
+
+
+@dataclass(frozen=True)
+class Alternative:
+    """One pre-planned M-GART path to the goal, a switching target.
+
+    Attributes
+    ----------
+    path_id : str
+    path_ned_m : ndarray, shape (M, d)
+    remaining_m : ndarray, shape (M,)
+        Length of the path from each node to its end (the remaining cost of an entry node).
+    """
+
+    path_id: str
+    path_ned_m: np.ndarray
+    remaining_m: np.ndarray
+
+    @classmethod
+    def from_path(cls, path_id: str, path_ned_m, spacing_m: float = 2.0) -> "Alternative":
+        """Build from a polyline (M, d), M >= 2, resampled so that nodes are at most
+        ``spacing_m`` apart (any point of a pre-planned path is a possible entry node)."""
+        path = np.asarray(path_ned_m, dtype=float)
+        if path.ndim != 2 or path.shape[0] < 2 or path.shape[1] not in (2, 3) \
+                or not np.all(np.isfinite(path)):
+            raise ThreatManagerError(f"alternative {path_id!r}: path_ned_m must be a finite (M, 2|3) "
+                                     f"array with M >= 2, got shape {path.shape}")
+        if not (math.isfinite(spacing_m) and spacing_m > 0):
+            raise ThreatManagerError(f"spacing_m: must be a finite number > 0, got {spacing_m!r}")
+        dense = [path[:1]]
+        for a, b in zip(path[:-1], path[1:]):
+            n = max(1, int(math.ceil(float(np.linalg.norm(b - a)) / spacing_m)))
+            f = np.arange(1, n + 1)[:, None] / n
+            dense.append(a[None, :] + f * (b - a)[None, :])
+        path = np.vstack(dense)
+        seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+        remaining = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])
+        return cls(str(path_id), path, remaining)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What the manager decided on a threat update.
+
+    Attributes
+    ----------
+    kind : str
+        ``none`` (no conflict), ``replan``, ``switch``, ``hold`` or ``rejected``.
+    reason : str
+        Why, in words (logged and published in the ``events`` message).
+    trajectory : Trajectory or None
+        The new reference for ``replan``, ``switch`` and ``hold``: engage it so that its time 0
+        is ``start_t_s`` on the manager's clock (the reference state it was built from), which
+        keeps the setpoint continuous whatever the decision latency.
+    start_t_s : float or None
+    path_id : str or None
+        ``replan-<n>``, the alternative's id, or ``hold-<n>``.
+    path_ned_m : ndarray (M, d) or None
+        The polyline of the new reference (for ``uav/<sysid>/path``).
+    conflict : Conflict or None
+        The conflict that triggered the decision.
+    decide_ms : float
+        Wall-clock duration of the whole decision (ms).
+    plan_ms : float
+        Part of it spent planning, smoothing and timing the new trajectory (ms).
+    resume : bool
+        True after a ``hold``: call ``on_threats`` (or ``resume``) again to replan from the hold.
+    """
+
+    kind: str
+    reason: str
+    trajectory: object = None
+    start_t_s: float | None = None
+    path_id: str | None = None
+    path_ned_m: np.ndarray | None = None
+    conflict: Conflict | None = None
+    decide_ms: float = 0.0
+    plan_ms: float = 0.0
+    resume: bool = False
+
+    def as_event(self) -> dict:
+        """The ``uav/<sysid>/events`` message of this decision (without the transport latency)."""
+        out = {"event": self.kind, "reason": self.reason, "path_id": self.path_id,
+               "decide_ms": round(self.decide_ms, 3), "plan_ms": round(self.plan_ms, 3)}
+        if self.conflict is not None:
+            out["threat_id"] = self.conflict.threat_id
+            out["time_to_conflict_s"] = round(self.conflict.time_to_conflict_s, 3)
+        return out
+
+
+# ---------------------------------------------------------------------------- pure steps
+def _positions(trajectory, t_rel_s: np.ndarray) -> np.ndarray:
+    pos = trajectory.sample(t_rel_s)[0]
+    return np.atleast_2d(pos)
+
+
+def check_step_s(threats, step_s: float, inflation_m: float, vehicle_speed_m_s: float) -> float:
+    """Time step of the conflict check: relative motion per step <= 1/4 of the smallest radius."""
+    if not threats:
+        return step_s
+    r_min = min(t.radius_m for t in threats) + inflation_m
+    v_rel = vehicle_speed_m_s + max(float(np.linalg.norm(t.velocity_ned_m_s)) for t in threats)
+    return min(step_s, 0.25 * r_min / max(v_rel, 1e-3))
+
+
+def first_conflict(trajectory, start_t_s: float, t_from_s: float, t_to_s: float, threats,
+                   *, inflation_m: float, dim: int, step_s: float = 0.1,
+                   speed_bound_m_s: float = 10.0) -> Conflict | None:
+    """First time in [t_from_s, t_to_s] the reference enters an inflated, predicted threat.
+
+    Parameters
+    ----------
+    trajectory : Trajectory-like
+        ``sample(t) -> (pos (K, d'), vel, acc)``, ``duration_s``; after its end the vehicle
+        hovers at the end position (sampling clips the time).
+    start_t_s : float
+        Clock time of the trajectory's t = 0.
+    t_from_s, t_to_s : float
+        Checked window (clock time, s).
+    threats : sequence of Threat
+        Local-frame threats with ``received_t_s`` on the same clock.
+    inflation_m : float
+        Added to every radius.
+    dim : int
+        2: horizontal distance only (a threat is the column above its footprint); 3: 3D.
+    step_s : float
+        Largest time step; refined by ``check_step_s``.
+    speed_bound_m_s : float
+        Upper bound of the reference speed (for the step refinement).
+
+    Returns
+    -------
+    Conflict or None
+    """
+    if not threats or t_to_s <= t_from_s:
+        return None
+    dt = check_step_s(threats, step_s, inflation_m, speed_bound_m_s)
+    t = np.arange(t_from_s, t_to_s + 0.5 * dt, dt)
+    pos = _positions(trajectory, np.clip(t - start_t_s, 0.0, None))
+    best: Conflict | None = None
+    for threat in threats:
+        centers = threat.position_at(t)
+        diff = pos[:, :dim] - centers[:, :dim]
+        dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+        limit = threat.radius_m + inflation_m
+        hit = np.flatnonzero(dist < limit)
+        if hit.size and (best is None or t[hit[0]] < best.t_s):
+            k = hit[0]
+            best = Conflict(threat.id, float(t[k]), float(t[k] - t_from_s), float(dist[k]), limit)
+    return best
+
+
+def min_separation_m(trajectory, start_t_s: float, t_from_s: float, t_to_s: float, threats,
+                     *, dim: int, step_s: float = 0.05) -> float:
+    """Smallest distance from the reference to any threat's *surface* (m) over the window."""
+    if not threats:
+        return math.inf
+    t = np.arange(t_from_s, t_to_s + 0.5 * step_s, step_s)
+    pos = _positions(trajectory, np.clip(t - start_t_s, 0.0, None))
+    out = math.inf
+    for threat in threats:
+        diff = pos[:, :dim] - threat.position_at(t)[:, :dim]
+        out = min(out, float(np.min(np.linalg.norm(diff, axis=1))) - threat.radius_m)
+    return out
+
+
+def threat_obstacles(threats, t_s: float, *, inflation_m: float, sweep_s: float, dim: int,
+                     keep_free=()) -> list:
+    """Static obstacles standing for the threats in a replan (spheres, discs in a 2D world).
+
+    A static threat is one sphere of radius r + inflation at its position; a moving threat is a
+    chain of such spheres along its predicted track over [t_s, t_s + sweep_s], spaced by half
+    the radius (its swept volume). A sphere containing one of ``keep_free`` (the start, the
+    goal: points the plan must be able to use) is left out: the space-time check of the
+    resulting trajectory decides about it.
+
+    Returns
+    -------
+    list of companion.world.Sphere
+    """
+    out = []
+    keep = [np.asarray(p, dtype=float) for p in keep_free]
+    for threat in threats:
+        radius = threat.radius_m + inflation_m
+        speed = float(np.linalg.norm(threat.velocity_ned_m_s))
+        if speed * sweep_s > 1e-6:
+            n = int(math.ceil(speed * sweep_s / (0.5 * radius))) + 1
+            times = t_s + np.linspace(0.0, sweep_s, n)
+        else:
+            times = np.array([t_s])
+        for c in threat.position_at(times):
+            if any(np.linalg.norm(p[:dim] - c[:dim]) <= radius for p in keep):
+                continue
+            out.append(Sphere(tuple(float(x) for x in c), radius))
+    return out
+
+
+def lead_length_m(speed_m_s: float, turn_rad: float, limits: TrajectoryLimits,
+                  kappa_max_1_m: float) -> float:
+    """Straight lead along the current velocity before the first corner of a join (m).
+
+    Long enough to keep the current speed for half the jerk window (the profile's start), slow
+    down to the speed the corner allows (K_max at the lateral acceleration limit) outside the
+    window over which the profile spreads a corner's speed limit (``speed_m_s * window``), and
+    fit the corner's spirals.
+    """
+    if speed_m_s < HOVER_SPEED_M_S:
+        return 0.0
+    window_s = 2.0 * limits.accel_m_s2 / limits.jerk_m_s3
+    v_turn = min(speed_m_s, math.sqrt(limits.lat_accel_m_s2 / kappa_max_1_m))
+    turn = min(abs(turn_rad), 0.95 * math.pi)
+    if turn < 1e-3:
+        return speed_m_s * window_s / 2.0 + 0.5
+    slow_m = max(speed_m_s**2 - v_turn**2, 0.0) / (2.0 * limits.accel_m_s2)
+    corner_m = float(spiral_distance_m(turn, kappa_max_1_m))
+    return speed_m_s * window_s / 2.0 + limits.speed_m_s * window_s + slow_m + corner_m + 0.5
+
+
+def _turn_rad(u: np.ndarray, w: np.ndarray) -> float:
+    nu, nw = np.linalg.norm(u), np.linalg.norm(w)
+    if nu < 1e-9 or nw < 1e-9:
+        return 0.0
+    return float(math.acos(max(-1.0, min(1.0, float(np.dot(u, w) / (nu * nw))))))
+
+
+def _clean_nodes(nodes: np.ndarray, tol_m: float = 0.05) -> np.ndarray:
+    keep = [nodes[0]]
+    for p in nodes[1:]:
+        if np.linalg.norm(p - keep[-1]) > tol_m:
+            keep.append(p)
+    return np.asarray(keep)
+
+
+def join_trajectory(ref: ReferenceState, nodes, *, world: World | None, limits: TrajectoryLimits,
+                    kappa_max_1_m: float, lift_down_m: float | None = None):
+    """A trajectory from the reference state through ``nodes`` without a setpoint jump.
+
+    The polyline is [current position, lead point, nodes...]: the lead leaves along the current
+    velocity (``lead_length_m``), the corners are G2-smoothed (with collision repair when
+    ``world`` is given) and the profile starts at the current speed and ends at rest.
+
+    Parameters
+    ----------
+    ref : ReferenceState
+        pos and vel of dimension d (the planning dimension).
+    nodes : array_like, shape (M, d)
+        Where to go (the first node is the entry node; the last the goal).
+    world : World or None
+        Static obstacles: the lead and the first leg must be free, corners are repaired.
+    lift_down_m : float, optional
+        Lift a 2D result to NED at this down coordinate.
+
+    Returns
+    -------
+    (Trajectory, polyline (K, d)) or (None, reason str)
+    """
+    p0 = np.asarray(ref.pos_ned_m, dtype=float)
+    v0 = np.asarray(ref.vel_ned_m_s, dtype=float)
+    nodes = np.atleast_2d(np.asarray(nodes, dtype=float))
+    speed = min(float(np.linalg.norm(v0)), limits.speed_m_s)
+    if speed < HOVER_SPEED_M_S:
+        return _timed_join(np.vstack([p0[None, :], nodes]), 0.0, world=world, limits=limits,
+                           kappa_max_1_m=kappa_max_1_m, lift_down_m=lift_down_m)
+    u = v0 / np.linalg.norm(v0)
+    lead = lead_length_m(speed, _turn_rad(u, nodes[0] - p0), limits, kappa_max_1_m)
+    reason = "no join"
+    for _ in range(2):
+        p_lead = p0 + u * lead
+        k = entry_index(p_lead, u, nodes, kappa_max_1_m)
+        if k is None:
+            return None, "no node far enough beyond the stopping distance"
+        traj, poly = _timed_join(np.vstack([p0, p_lead, nodes[k:]]), speed, world=world,
+                                 limits=limits, kappa_max_1_m=kappa_max_1_m, lift_down_m=lift_down_m)
+        if traj is None:
+            return traj, poly
+        start_speed = float(np.linalg.norm(traj.sample(np.array([0.0]))[1][0]))
+        if abs(start_speed - speed) <= 0.02 * speed + 0.05:
+            return traj, poly
+        reason = f"the join cannot start at {speed:.2f} m/s (only {start_speed:.2f})"
+        lead *= 1.5
+    return None, reason
+
+
+def _angles_rad(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    na = np.linalg.norm(a, axis=-1)
+    nb = np.linalg.norm(b, axis=-1)
+    cos = np.einsum("...i,...i->...", a, b) / np.maximum(na * nb, 1e-12)
+    return np.where((na > 1e-9) & (nb > 1e-9), np.arccos(np.clip(cos, -1.0, 1.0)), 0.0)
+
+
+def entry_index(p_lead: np.ndarray, u: np.ndarray, nodes: np.ndarray, kappa_max_1_m: float) -> int | None:
+    """First node ahead of the lead point with room for the two G2 corners around it.
+
+    The corner at the lead point (turning from ``u`` towards the node) and the corner at the
+    node (turning onto the path) each need their spiral distance (eq. 19) on the segment between
+    them; nodes closer than that are skipped.
+
+    Returns
+    -------
+    int or None
+    """
+    rel = nodes - p_lead[None, :]
+    dist = np.linalg.norm(rel, axis=1)
+    turn1 = np.minimum(_angles_rad(np.broadcast_to(u, rel.shape), rel), 0.95 * np.pi)
+    nxt = np.vstack([np.diff(nodes, axis=0), np.zeros((1, nodes.shape[1]))])
+    turn2 = np.minimum(_angles_rad(rel, nxt), 0.95 * np.pi)
+    need = spiral_distance_m(turn1, kappa_max_1_m) + spiral_distance_m(turn2, kappa_max_1_m) + 0.5
+    ok = np.flatnonzero((rel @ u > 1e-6) & (dist >= need))
+    return int(ok[0]) if ok.size else None
+
+
+def _timed_join(points: np.ndarray, speed_m_s: float, *, world, limits, kappa_max_1_m, lift_down_m):
+    poly = _clean_nodes(points)
+    if poly.shape[0] < 2:
+        return None, "nothing to fly"
+    if world is not None:
+        for a, b in zip(poly[:-1], poly[1:]):
+            if not world.segment_free(a, b):
+                return None, "the join crosses a static obstacle"
+    curve = smooth_g2(poly, kappa_max_1_m, world=world)
+    traj = time_parameterize(curve, limits, start_speed_m_s=speed_m_s)
+    if lift_down_m is not None:
+        traj = traj.to_ned(lift_down_m)
+    return traj, poly
+
+
+def hold_trajectory(ref: ReferenceState, *, limits: TrajectoryLimits, decel_m_s2: float,
+                    lift_down_m: float | None = None):
+    """Brake to a hover along the current velocity (straight line, at rest at the end).
+
+    Returns
+    -------
+    (Trajectory, polyline (2, d))
+    """
+    p0 = np.asarray(ref.pos_ned_m, dtype=float)
+    v0 = np.asarray(ref.vel_ned_m_s, dtype=float)
+    hold_limits = replace(limits, accel_m_s2=max(limits.accel_m_s2, decel_m_s2),
+                          jerk_m_s3=max(limits.jerk_m_s3, decel_m_s2 * limits.jerk_m_s3 / limits.accel_m_s2))
+    speed = min(float(np.linalg.norm(v0)), hold_limits.speed_m_s)
+    if speed < 1e-3:
+        u = np.zeros_like(p0)
+        u[0] = 1.0
+        end = p0 + 0.01 * u
+        traj = time_parameterize(np.vstack([p0, end]), hold_limits, yaw_mode="hold")
+    else:
+        u = v0 / np.linalg.norm(v0)
+        window_s = 2.0 * hold_limits.accel_m_s2 / hold_limits.jerk_m_s3
+        stop_m = speed * window_s / 2.0 + speed**2 / (2.0 * hold_limits.accel_m_s2)
+        end = p0 + u * max(stop_m, 0.01)
+        traj = time_parameterize(np.vstack([p0, end]), hold_limits, start_speed_m_s=speed)
+    if lift_down_m is not None:
+        traj = traj.to_ned(lift_down_m)
+    return traj, np.vstack([p0, end])
+
+
+# ---------------------------------------------------------------------------- the manager
+@dataclass
+class _ReplanEstimate:
+    """Running estimate of the replanning time: mean and mean absolute deviation (s)."""
+
+    mean_s: float
+    dev_s: float = 0.0
+    samples: int = 0
+
+    def update(self, measured_s: float, gain: float) -> None:
+        if self.samples == 0:
+            self.mean_s, self.dev_s = measured_s, 0.25 * measured_s
+        else:
+            err = measured_s - self.mean_s
+            self.mean_s += gain * err
+            self.dev_s += gain * (abs(err) - self.dev_s)
+        self.samples += 1
+
+    @property
+    def high_s(self) -> float:
+        return self.mean_s + 3.0 * self.dev_s
+
+
+@dataclass
+class _Active:
+    trajectory: object
+    start_t_s: float
+    path_id: str
+    holding: bool = False
+
+
+class ThreatManager:
+    """The replan / switch / hold policy (see the module docstring). Not thread-safe by itself:
+    call it from one worker thread at a time (``set_alternatives`` may come from another).
+
+    Parameters
+    ----------
+    world : World
+        Static world of the current leg (2D or 3D, local NED).
+    goal_ned_m : array_like, shape (d,)
+        Goal of the current leg.
+    settings : ThreatSettings, optional
+    limits : TrajectoryLimits, optional
+        Limits of new trajectories (default ``TrajectoryLimits()``).
+    kappa_max_1_m : float
+        K_max of the G2 smoothing (default 0.1).
+    gart_settings : GartSettings, optional
+        Settings of the replanning GART (its time budget comes from ``settings``).
+    rng : numpy.random.Generator, optional
+        Default: ``numpy.random.default_rng(settings.seed)``.
+    mode : str
+        ``hybrid`` (DESIGN section 7, default), ``replan`` (replan only) or ``switch`` (switch
+        only): the single strategies exist for the benchmark.
+    """
+
+    MODES = ("hybrid", "replan", "switch")
+
+    def __init__(self, world: World, goal_ned_m, *, settings: ThreatSettings | None = None,
+                 limits: TrajectoryLimits | None = None, kappa_max_1_m: float = 0.1,
+                 gart_settings: GartSettings | None = None, rng: np.random.Generator | None = None,
+                 mode: str = "hybrid") -> None:
+        self.settings = settings or ThreatSettings()
+        if not isinstance(self.settings, ThreatSettings):
+            raise ThreatManagerError(f"settings: expected ThreatSettings, got {type(settings).__name__}")
+        if mode not in self.MODES:
+            raise ThreatManagerError(f"mode: expected one of {', '.join(self.MODES)}, got {mode!r}")
+        self.mode = mode
+        self.limits = limits or TrajectoryLimits()
+        if not (isinstance(kappa_max_1_m, (int, float)) and math.isfinite(kappa_max_1_m) and kappa_max_1_m > 0):
+            raise ThreatManagerError(f"kappa_max_1_m: must be a finite number > 0, got {kappa_max_1_m!r}")
+        self.kappa_max_1_m = float(kappa_max_1_m)
+        self.gart_settings = gart_settings or GartSettings(kappa_max_1_m=self.kappa_max_1_m)
+        self.rng = rng if rng is not None else np.random.default_rng(self.settings.seed)
+        self.world = world
+        self.goal_ned_m = np.zeros(world.dim)
+        self.set_leg(world, goal_ned_m)
+        self._active: _Active | None = None
+        self._alternatives: tuple[Alternative, ...] = ()
+        self._estimate = _ReplanEstimate(self.settings.replan_budget_s)
+        self._counter = 0
+
+    # ------------------------------------------------------------------ inputs
+    def set_leg(self, world: World, goal_ned_m) -> None:
+        """A new leg: its static world and goal (clears nothing else)."""
+        if not isinstance(world, World):
+            raise ThreatManagerError(f"world: expected a World, got {type(world).__name__}")
+        goal = np.asarray(goal_ned_m, dtype=float).reshape(-1)
+        if goal.shape != (world.dim,) or not np.all(np.isfinite(goal)):
+            raise ThreatManagerError(f"goal_ned_m: expected {world.dim} finite numbers, got {goal_ned_m!r}")
+        self.world = world
+        self.goal_ned_m = goal
+
+    def set_active(self, trajectory, start_t_s: float, path_id: str = "active") -> None:
+        """The reference being flown: ``trajectory`` with its t = 0 at clock time ``start_t_s``.
+
+        Call it whenever the daemon engages a reference (the manager's own decisions included).
+        """
+        if not hasattr(trajectory, "sample") or not hasattr(trajectory, "duration_s"):
+            raise ThreatManagerError("trajectory: expected an object with sample(t_s) and duration_s")
+        if not math.isfinite(start_t_s):
+            raise ThreatManagerError(f"start_t_s: must be finite, got {start_t_s!r}")
+        self._active = _Active(trajectory, float(start_t_s), str(path_id))
+
+    def set_alternatives(self, alternatives) -> None:
+        """Replace the switching targets (a list of ``Alternative`` or of (M, d) paths).
+
+        Thread-safe (one reference swap): the daemon refreshes them in the background.
+        """
+        alts = []
+        for i, alt in enumerate(alternatives):
+            if not isinstance(alt, Alternative):
+                alt = Alternative.from_path(f"alt{i}", alt, self.settings.entry_spacing_m)
+            if alt.path_ned_m.shape[1] != self.world.dim:
+                raise ThreatManagerError(f"alternatives[{i}]: dimension {alt.path_ned_m.shape[1]} "
+                                         f"does not match the world's {self.world.dim}")
+            alts.append(alt)
+        self._alternatives = tuple(alts)
+
+    @property
+    def alternatives(self) -> tuple[Alternative, ...]:
+        return self._alternatives
+
+    @property
+    def active_path_id(self) -> str | None:
+        return None if self._active is None else self._active.path_id
+
+    @property
+    def replan_estimate_s(self) -> float:
+        """Current replanning budget: running mean + 3 mean absolute deviations (s)."""
+        return self._estimate.high_s
+
+    def compute_alternatives(self, threats, t_s: float, k: int = 4, *, rng: np.random.Generator,
+                             max_time_s: float = 2.0, settings: MgartSettings | None = None,
+                             start_ned_m=None) -> list[Alternative]:
+        """M-GART alternatives from the current reference (or ``start_ned_m``) to the goal.
+
+        Slow (``max_time_s``): run it in the background after every change, then give the
+        result to ``set_alternatives``. Threats known now are avoided (swept volumes).
+
+        Returns
+        -------
+        list of Alternative
+            Cheapest first, ids ``alt<i>-<n>``; empty when M-GART finds nothing.
+        """
+        if start_ned_m is None:
+            ref = self.reference_state(t_s)
+            if ref is None:
+                raise ThreatManagerError("start_ned_m: needed when no trajectory is active")
+            start_ned_m = ref.pos_ned_m
+        start = np.asarray(start_ned_m, dtype=float)[: self.world.dim]
+        world = self._threat_world(self._relevant(threats, t_s, start), t_s, keep_free=[start, self.goal_ned_m])
+        settings = settings or MgartSettings(gart=self.gart_settings)
+        results = mgart(world, start, self.goal_ned_m, k, rng=rng, max_time_s=max_time_s, settings=settings)
+        self._counter += 1
+        return [Alternative.from_path(f"alt{i}-{self._counter}", r.path, self.settings.entry_spacing_m)
+                for i, r in enumerate(results) if r.status == "exact" and r.path is not None]
+
+    # ------------------------------------------------------------------ state
+    def reference_state(self, t_s: float) -> ReferenceState | None:
+        """Reference of the active trajectory at clock time ``t_s`` (planning dimension)."""
+        if self._active is None:
+            return None
+        t_rel = min(max(t_s - self._active.start_t_s, 0.0), self._active.trajectory.duration_s)
+        pos, vel, acc = self._active.trajectory.sample(np.array([t_rel]))
+        d = self.world.dim
+        return ReferenceState(float(t_s), np.asarray(pos[0][:d], float), np.asarray(vel[0][:d], float),
+                              np.asarray(acc[0][:d], float))
+
+    def _lift_down_m(self, t_s: float) -> float | None:
+        """Down coordinate to lift 2D trajectories to, when the active one is 3D in a 2D world."""
+        if self.world.dim == 3 or self._active is None:
+            return None
+        t_rel = min(max(t_s - self._active.start_t_s, 0.0), self._active.trajectory.duration_s)
+        pos = np.atleast_2d(self._active.trajectory.sample(np.array([t_rel]))[0])[0]
+        return float(pos[2]) if pos.shape[0] == 3 else None
+
+    def _relevant(self, threats, t_s: float, pos: np.ndarray) -> list[Threat]:
+        """Local, unexpired threats within the sensor range of ``pos`` now."""
+        d = self.world.dim
+        out = []
+        for th in threats:
+            if th.frame != "local_ned":
+                raise ThreatManagerError(f"threat {th.id!r}: convert global threats to local NED "
+                                         f"first (ThreatTable(home=...))")
+            if th.expires_t_s <= t_s:
+                continue
+            dist = float(np.linalg.norm(th.position_at(t_s)[:d] - pos[:d])) - th.radius_m
+            if dist <= self.settings.sensor_range_m:
+                out.append(th)
+        return out
+
+    def _threat_world(self, threats, t_s: float, keep_free) -> World:
+        obstacles = threat_obstacles(threats, t_s, inflation_m=self.settings.inflation_m,
+                                     sweep_s=self.settings.sweep_horizon_s, dim=self.world.dim,
+                                     keep_free=keep_free)
+        return self.world.with_threats(obstacles) if obstacles else self.world
+
+    def _speed_bound(self) -> float:
+        return self.limits.speed_m_s
+
+    def _conflict_of(self, trajectory, start_t_s: float, t_s: float, threats) -> Conflict | None:
+        return first_conflict(trajectory, start_t_s, t_s, t_s + self.settings.horizon_s, threats,
+                              inflation_m=self.settings.inflation_m, dim=self.world.dim,
+                              step_s=self.settings.check_step_s, speed_bound_m_s=self._speed_bound())
+
+    def check(self, threats, t_s: float) -> Conflict | None:
+        """Space-time conflict of the active reference with ``threats`` over the horizon."""
+        ref = self.reference_state(t_s)
+        if ref is None:
+            return None
+        relevant = self._relevant(threats, t_s, ref.pos_ned_m)
+        return self._conflict_of(self._active.trajectory, self._active.start_t_s, t_s, relevant)
+
+    # ------------------------------------------------------------------ the decision
+    def on_threats(self, threats, t_s: float) -> Decision:
+        """Decide what to do about ``threats`` at clock time ``t_s`` (DESIGN section 7).
+
+        Parameters
+        ----------
+        threats : sequence of Threat
+            Every threat known now (``ThreatTable.snapshot(t_s)``), local frame, stamped on the
+            same clock as ``t_s``.
+        t_s : float
+            Now (the reference state is the active trajectory's at ``t_s``).
+
+        Returns
+        -------
+        Decision
+            For ``replan``, ``switch`` and ``hold`` the manager has already made the new
+            trajectory its active one (with ``start_t_s``); the caller engages it too.
+        """
+        t0 = time.perf_counter()
+        ref = self.reference_state(t_s)
+        if ref is None:
+            return Decision("none", "no active trajectory", decide_ms=_ms_since(t0))
+        relevant = self._relevant(threats, t_s, ref.pos_ned_m)
+        if self._active.holding:
+            return self._finish(self._resume(ref, relevant, "resume after hold", None), t0)
+        conflict = self._conflict_of(self._active.trajectory, self._active.start_t_s, t_s, relevant)
+        if conflict is None:
+            return Decision("none", "the remaining reference is clear of every threat",
+                            decide_ms=_ms_since(t0))
+        ttc = conflict.time_to_conflict_s
+        budget = self._estimate.high_s + self.settings.replan_margin_s
+        what = (f"threat {conflict.threat_id} in {ttc:.2f} s "
+                f"({'>' if ttc > budget else '<='} replan budget {budget:.2f} s)")
+        if self.mode == "replan" or (self.mode == "hybrid" and ttc > budget):
+            decision = self._replan(ref, relevant, what, conflict)
+            if decision is None and self.mode == "hybrid":
+                decision = self._switch(ref, relevant, what + "; replan found no clear path", conflict)
+        else:
+            decision = self._switch(ref, relevant, what, conflict)
+        if decision is None:
+            decision = self._hold(ref, what + "; no clear path or alternative", conflict)
+        return self._finish(decision, t0)
+
+    def resume(self, threats, t_s: float) -> Decision:
+        """Replan from the current reference (after a ``hold``); ``hold`` again if impossible."""
+        t0 = time.perf_counter()
+        ref = self.reference_state(t_s)
+        if ref is None:
+            return Decision("none", "no active trajectory", decide_ms=_ms_since(t0))
+        relevant = self._relevant(threats, t_s, ref.pos_ned_m)
+        return self._finish(self._resume(ref, relevant, "resume", None), t0)
+
+    def reject(self, error: Exception) -> Decision:
+        """The ``rejected`` decision for an invalid threat sample (the flight goes on)."""
+        return Decision("rejected", str(error))
+
+    def _resume(self, ref: ReferenceState, threats, what: str, conflict) -> Decision:
+        if self.mode == "switch":
+            decision = self._switch(ref, threats, what, conflict)
+        else:
+            decision = self._replan(ref, threats, what, conflict)
+        if decision is not None:
+            return decision
+        self._active.holding = True
+        return Decision("hold", what + "; still no clear path: keep holding", path_id=self._active.path_id,
+                        conflict=conflict, resume=True)
+
+    def _finish(self, decision: Decision, t0: float) -> Decision:
+        decision = replace(decision, decide_ms=_ms_since(t0))
+        if decision.trajectory is not None:
+            self._active = _Active(decision.trajectory, decision.start_t_s, decision.path_id,
+                                   holding=decision.kind == "hold")
+        log.info("threat decision %s (%s) path %s: decide %.1f ms, plan %.1f ms", decision.kind,
+                 decision.reason, decision.path_id, decision.decide_ms, decision.plan_ms)
+        return decision
+
+    # ------------------------------------------------------------------ replan
+    def _replan(self, ref: ReferenceState, threats, what: str, conflict) -> Decision | None:
+        t0 = time.perf_counter()
+        try:
+            return self._replan_inner(ref, threats, what, conflict, t0)
+        finally:
+            self._estimate.update(time.perf_counter() - t0, self.settings.estimate_gain)
+
+    def _replan_inner(self, ref, threats, what, conflict, t0) -> Decision | None:
+        s = self.settings
+        speed = float(np.linalg.norm(ref.vel_ned_m_s))
+        start = ref.pos_ned_m
+        if speed >= HOVER_SPEED_M_S:
+            u = ref.vel_ned_m_s / speed
+            turn = _turn_rad(u, self.goal_ned_m - start)
+            start = start + u * lead_length_m(min(speed, self.limits.speed_m_s), turn, self.limits,
+                                              self.kappa_max_1_m)
+            if not self.world.in_bounds(start) or not self.world.segment_free(ref.pos_ned_m, start):
+                log.info("replan: the stopping lead leaves the free space")
+                return None
+        world = self._threat_world(threats, ref.t_s, keep_free=[ref.pos_ned_m, start, self.goal_ned_m])
+        result = gart(world, start, self.goal_ned_m, rng=self.rng, max_time_s=s.gart_budget_s,
+                      settings=self.gart_settings)
+        if result.status == "timeout":
+            result = gart(world, start, self.goal_ned_m, rng=self.rng, max_time_s=s.gart_first_budget_s,
+                          stop_at_first=True, settings=self.gart_settings)
+        if result.status != "exact":
+            log.info("replan: GART %s", result.status)
+            return None
+        nodes = result.path[1:] if speed >= HOVER_SPEED_M_S else result.path
+        traj, poly = join_trajectory(ref, nodes, world=world, limits=self.limits,
+                                     kappa_max_1_m=self.kappa_max_1_m, lift_down_m=self._lift_down_m(ref.t_s))
+        if traj is None:
+            log.info("replan: %s", poly)
+            return None
+        if self._conflict_of(traj, ref.t_s, ref.t_s, threats) is not None:
+            log.info("replan: the new trajectory still meets a predicted threat")
+            return None
+        self._counter += 1
+        return Decision("replan", what, traj, ref.t_s, f"replan-{self._counter}", poly, conflict,
+                        plan_ms=_ms_since(t0))
+
+    # ------------------------------------------------------------------ switch
+    def switch_candidates(self, ref: ReferenceState) -> list[tuple[float, Alternative, int]]:
+        """Entry nodes within the switching range, cheapest remaining cost first.
+
+        Returns
+        -------
+        list of (cost_m, alternative, node index)
+            cost = distance to the node + the alternative's length from it to the goal.
+        """
+        out = []
+        for alt in self._alternatives:
+            dist = np.linalg.norm(alt.path_ned_m - ref.pos_ned_m[None, :], axis=1)
+            for i in np.flatnonzero(dist <= self.settings.switch_range_m):
+                if i == alt.path_ned_m.shape[0] - 1 and dist[i] < 1e-6:
+                    continue
+                out.append((float(dist[i] + alt.remaining_m[i]), alt, int(i)))
+        out.sort(key=lambda c: (c[0], -c[2]))
+        picked: list[tuple[float, Alternative, int]] = []
+        spacing = 2.5 * self.settings.entry_spacing_m
+        for cand in out:
+            if all(p[1] is not cand[1] or np.linalg.norm(p[1].path_ned_m[p[2]] - cand[1].path_ned_m[cand[2]])
+                   >= spacing for p in picked):
+                picked.append(cand)
+        return picked
+
+    def _switch(self, ref: ReferenceState, threats, what: str, conflict) -> Decision | None:
+        t0 = time.perf_counter()
+        tried = 0
+        lift = self._lift_down_m(ref.t_s)
+        for cost, alt, i in self.switch_candidates(ref):
+            if tried >= self.settings.max_candidates:
+                break
+            tried += 1
+            traj, poly = join_trajectory(ref, alt.path_ned_m[i:], world=self.world, limits=self.limits,
+                                         kappa_max_1_m=self.kappa_max_1_m, lift_down_m=lift)
+            if traj is None:
+                continue
+            if self._conflict_of(traj, ref.t_s, ref.t_s, threats) is not None:
+                continue
+            return Decision("switch", f"{what}; entry node {i} of {alt.path_id} "
+                            f"({cost:.1f} m to go)", traj, ref.t_s, alt.path_id, poly, conflict,
+                            plan_ms=_ms_since(t0))
+        log.info("switch: no safe entry among %d candidates tried", tried)
+        return None
+
+    # ------------------------------------------------------------------ hold
+    def _hold(self, ref: ReferenceState, what: str, conflict) -> Decision:
+        t0 = time.perf_counter()
+        traj, poly = hold_trajectory(ref, limits=self.limits, decel_m_s2=self.settings.hold_decel_m_s2,
+                                     lift_down_m=self._lift_down_m(ref.t_s))
+        self._counter += 1
+        return Decision("hold", what, traj, ref.t_s, f"hold-{self._counter}", poly, conflict,
+                        plan_ms=_ms_since(t0), resume=self.mode != "switch")
+
+
+def _ms_since(t0: float) -> float:
+    return (time.perf_counter() - t0) * 1e3

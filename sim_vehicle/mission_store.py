@@ -1,0 +1,282 @@
+"""Mission, fence and rally lists of the SITL vehicle, each replaced atomically.
+
+Implements the storage side of the MAVLink mission protocol
+(https://mavlink.io/en/services/mission.html): an upload starts with ``MISSION_COUNT``, the
+vehicle requests items ``0 .. count-1`` in order, and the new list replaces the stored one
+*only* when the last item has arrived. An upload that fails (wrong sequence, bad item), is
+cancelled, replaced by another upload or times out leaves the previous list intact, so a
+vehicle never flies half a mission.
+
+Items are kept as the fields of ``MISSION_ITEM_INT`` (latitude and longitude as integers in
+1e-7 degrees), so a download returns exactly what was uploaded. Pure bookkeeping: no I/O.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import logging
+import math
+
+log = logging.getLogger(__name__)
+
+MISSION_TYPE_MISSION = 0
+MISSION_TYPE_FENCE = 1
+MISSION_TYPE_RALLY = 2
+MISSION_TYPE_ALL = 255
+MISSION_TYPES = (MISSION_TYPE_MISSION, MISSION_TYPE_FENCE, MISSION_TYPE_RALLY)
+MISSION_TYPE_NAMES = {MISSION_TYPE_MISSION: "mission", MISSION_TYPE_FENCE: "fence", MISSION_TYPE_RALLY: "rally"}
+
+MAX_ITEMS = 700
+
+
+class MissionResult(enum.IntEnum):
+    """``MAV_MISSION_RESULT`` values used by the store (numbers from the MAVLink standard)."""
+
+    ACCEPTED = 0
+    ERROR = 1
+    UNSUPPORTED_FRAME = 2
+    UNSUPPORTED = 3
+    NO_SPACE = 4
+    INVALID = 5
+    INVALID_PARAM1 = 6
+    INVALID_PARAM2 = 7
+    INVALID_PARAM3 = 8
+    INVALID_PARAM4 = 9
+    INVALID_PARAM5_X = 10
+    INVALID_PARAM6_Y = 11
+    INVALID_PARAM7 = 12
+    INVALID_SEQUENCE = 13
+    DENIED = 14
+    OPERATION_CANCELLED = 15
+
+
+# frames the vehicle can fly (MAV_FRAME numbers)
+FRAME_GLOBAL = 0
+FRAME_LOCAL_NED = 1
+FRAME_MISSION = 2
+FRAME_GLOBAL_RELATIVE_ALT = 3
+FRAME_GLOBAL_INT = 5
+FRAME_GLOBAL_RELATIVE_ALT_INT = 6
+FRAME_GLOBAL_TERRAIN_ALT = 10
+FRAME_GLOBAL_TERRAIN_ALT_INT = 11
+SUPPORTED_FRAMES = frozenset({FRAME_GLOBAL, FRAME_LOCAL_NED, FRAME_MISSION, FRAME_GLOBAL_RELATIVE_ALT,
+                              FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT_INT, FRAME_GLOBAL_TERRAIN_ALT,
+                              FRAME_GLOBAL_TERRAIN_ALT_INT})
+
+
+@dataclasses.dataclass(frozen=True)
+class MissionItem:
+    """One stored item with the fields of ``MISSION_ITEM_INT``.
+
+    Attributes
+    ----------
+    seq : int
+        Index in its list.
+    frame : int
+        ``MAV_FRAME``.
+    command : int
+        ``MAV_CMD``.
+    current, autocontinue : int
+        As sent (0/1).
+    param1 .. param4 : float
+        Command parameters.
+    x, y : int
+        Latitude and longitude in 1e-7 degrees (global frames) or local x/y * 1e4 (local frames).
+    z : float
+        Altitude, m (frame-dependent reference).
+    mission_type : int
+        0 mission, 1 fence, 2 rally.
+    """
+
+    seq: int
+    frame: int
+    command: int
+    current: int
+    autocontinue: int
+    param1: float
+    param2: float
+    param3: float
+    param4: float
+    x: int
+    y: int
+    z: float
+    mission_type: int = MISSION_TYPE_MISSION
+
+    @property
+    def lat_deg(self) -> float:
+        """Latitude, degrees (global frames)."""
+        return self.x * 1e-7
+
+    @property
+    def lon_deg(self) -> float:
+        """Longitude, degrees (global frames)."""
+        return self.y * 1e-7
+
+
+def validate_item(item: MissionItem) -> MissionResult:
+    """Check one item; returns ``ACCEPTED`` or the ``MAV_MISSION_RESULT`` that names the fault."""
+    if item.frame not in SUPPORTED_FRAMES:
+        return MissionResult.UNSUPPORTED_FRAME
+    for index, value in enumerate((item.param1, item.param2, item.param3, item.param4)):
+        if math.isinf(value):  # NaN is allowed by the standard ("unused"), infinity is not
+            return MissionResult(MissionResult.INVALID_PARAM1 + index)
+    if not math.isfinite(item.z):
+        return MissionResult.INVALID_PARAM7
+    if item.frame in (FRAME_GLOBAL, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT_INT,
+                      FRAME_GLOBAL_TERRAIN_ALT, FRAME_GLOBAL_TERRAIN_ALT_INT):
+        if not (item.x == 0 and item.y == 0):  # (0, 0) = "no position" (e.g. DO commands, RTL)
+            if abs(item.x) > 900_000_000:
+                return MissionResult.INVALID_PARAM5_X
+            if abs(item.y) > 1_800_000_000:
+                return MissionResult.INVALID_PARAM6_Y
+    return MissionResult.ACCEPTED
+
+
+@dataclasses.dataclass
+class Upload:
+    """An upload in progress for one mission type."""
+
+    mission_type: int
+    count: int
+    started_s: float
+    last_activity_s: float
+    items: list[MissionItem] = dataclasses.field(default_factory=list)
+    retries: int = 0
+
+    @property
+    def next_seq(self) -> int:
+        """The sequence number the vehicle waits for."""
+        return len(self.items)
+
+
+class MissionStore:
+    """The three lists (mission, fence, rally) and at most one upload per list.
+
+    Parameters
+    ----------
+    upload_timeout_s : float
+        An upload with no item for this long (wall-clock seconds passed in by the caller) is
+        abandoned; the old list stays.
+
+    Notes
+    -----
+    ``begin_upload`` / ``receive_item`` / ``expire_uploads`` are the upload protocol;
+    ``items(mission_type)`` is the stored list (a tuple, never mutated in place).
+    """
+
+    def __init__(self, upload_timeout_s: float = 5.0) -> None:
+        self.upload_timeout_s = float(upload_timeout_s)
+        self._lists: dict[int, tuple[MissionItem, ...]] = {t: () for t in MISSION_TYPES}
+        self._uploads: dict[int, Upload] = {}
+        self._generation: dict[int, int] = {t: 0 for t in MISSION_TYPES}
+
+    # ---- stored lists -------------------------------------------------------------------------
+
+    def items(self, mission_type: int = MISSION_TYPE_MISSION) -> tuple[MissionItem, ...]:
+        """The stored list of ``mission_type`` (empty tuple if none)."""
+        return self._lists.get(mission_type, ())
+
+    def generation(self, mission_type: int = MISSION_TYPE_MISSION) -> int:
+        """Counter increased each time the list of ``mission_type`` is replaced or cleared."""
+        return self._generation.get(mission_type, 0)
+
+    def clear(self, mission_type: int) -> MissionResult:
+        """``MISSION_CLEAR_ALL``: empty one list (or all three with ``MISSION_TYPE_ALL``)."""
+        types = MISSION_TYPES if mission_type == MISSION_TYPE_ALL else (mission_type,)
+        if any(t not in MISSION_TYPES for t in types):
+            return MissionResult.UNSUPPORTED
+        for t in types:
+            self._uploads.pop(t, None)
+            self._lists[t] = ()
+            self._generation[t] += 1
+            log.info("%s list cleared", MISSION_TYPE_NAMES[t])
+        return MissionResult.ACCEPTED
+
+    # ---- upload protocol ----------------------------------------------------------------------
+
+    def upload_in_progress(self, mission_type: int) -> Upload | None:
+        """The upload of ``mission_type`` in progress, if any."""
+        return self._uploads.get(mission_type)
+
+    def begin_upload(self, mission_type: int, count: int, now_s: float) -> MissionResult:
+        """``MISSION_COUNT``: start receiving ``count`` items; a previous upload is abandoned.
+
+        A count of 0 clears the list at once (as ArduPilot does). Returns ``ACCEPTED`` when the
+        caller should request item 0 (or has nothing more to do for ``count == 0``).
+        """
+        if mission_type not in MISSION_TYPES:
+            return MissionResult.UNSUPPORTED
+        if count < 0:
+            return MissionResult.INVALID
+        if count > MAX_ITEMS:
+            log.warning("%s upload refused: %d items > %d", MISSION_TYPE_NAMES[mission_type], count, MAX_ITEMS)
+            return MissionResult.NO_SPACE
+        if mission_type in self._uploads:
+            log.warning("%s upload restarted before it completed; the partial upload is dropped",
+                        MISSION_TYPE_NAMES[mission_type])
+            del self._uploads[mission_type]
+        if count == 0:
+            self._lists[mission_type] = ()
+            self._generation[mission_type] += 1
+            return MissionResult.ACCEPTED
+        self._uploads[mission_type] = Upload(mission_type, count, now_s, now_s)
+        return MissionResult.ACCEPTED
+
+    def receive_item(self, item: MissionItem, now_s: float) -> tuple[MissionResult, bool]:
+        """One item of an upload.
+
+        Returns
+        -------
+        result : MissionResult
+            ``ACCEPTED`` if the item was stored (or was a harmless duplicate of the previous
+            one), otherwise the fault; ``INVALID_SEQUENCE`` for an out-of-order or past-the-count
+            item (the upload stays open so the sender can resend the requested one);
+            any other fault aborts the upload (the old list stays).
+        complete : bool
+            True when this item completed the upload and the list was replaced.
+        """
+        upload = self._uploads.get(item.mission_type)
+        if upload is None:
+            return MissionResult.DENIED, False
+        if upload.items and item.seq == upload.next_seq - 1:  # resent because our request was lost
+            upload.last_activity_s = now_s
+            return MissionResult.ACCEPTED, False
+        if item.seq != upload.next_seq:
+            log.warning("%s upload: got item %d, expected %d of %d: refused (INVALID_SEQUENCE)",
+                        MISSION_TYPE_NAMES[item.mission_type], item.seq, upload.next_seq, upload.count)
+            return MissionResult.INVALID_SEQUENCE, False
+        result = validate_item(item)
+        if result != MissionResult.ACCEPTED:
+            log.warning("%s upload aborted at item %d (command %d, frame %d): %s; previous list kept",
+                        MISSION_TYPE_NAMES[item.mission_type], item.seq, item.command, item.frame, result.name)
+            del self._uploads[item.mission_type]
+            return result, False
+        upload.items.append(item)
+        upload.last_activity_s = now_s
+        if len(upload.items) == upload.count:
+            self._commit(upload)
+            return MissionResult.ACCEPTED, True
+        return MissionResult.ACCEPTED, False
+
+    def cancel_upload(self, mission_type: int, reason: str) -> bool:
+        """Drop the upload of ``mission_type`` (the stored list stays); True if there was one."""
+        upload = self._uploads.pop(mission_type, None)
+        if upload is not None:
+            log.warning("%s upload cancelled after %d of %d items (%s); previous list kept",
+                        MISSION_TYPE_NAMES[mission_type], len(upload.items), upload.count, reason)
+        return upload is not None
+
+    def expire_uploads(self, now_s: float) -> list[Upload]:
+        """Abandon uploads idle for longer than ``upload_timeout_s``; returns them."""
+        expired = [u for u in self._uploads.values() if now_s - u.last_activity_s > self.upload_timeout_s]
+        for upload in expired:
+            self.cancel_upload(upload.mission_type, f"no item for {self.upload_timeout_s:g} s")
+        return expired
+
+    def _commit(self, upload: Upload) -> None:
+        items = tuple(upload.items)
+        self._lists[upload.mission_type] = items
+        self._generation[upload.mission_type] += 1
+        del self._uploads[upload.mission_type]
+        log.info("%s list replaced: %d items", MISSION_TYPE_NAMES[upload.mission_type], len(items))

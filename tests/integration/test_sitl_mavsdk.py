@@ -1,0 +1,209 @@
+"""A real ``sim-vehicle`` process flown by real MAVSDK 4.x (and pymavlink for GUIDED setpoints).
+
+Issue 2, "What it must show": MAVSDK discovers the vehicle, uploads a 5-item mission with
+mission_raw and downloads it identical, imports a ``.plan`` with a fence and rally points and
+uploads them, arms, takes off to 10 m (within 0.5 m), flies in GUIDED by position setpoints to
+a point 30 m away and holds there within 0.5 m.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import socket
+import time
+from pathlib import Path
+
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from tests.support import free_udp_port, start_sim_vehicle
+
+pytestmark = pytest.mark.integration
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+SPEEDUP = 5.0
+
+
+def five_items():
+    from mavsdk.plugins.mission_raw import MissionItem
+
+    # seq 0 is home (ArduPilot convention), then takeoff, two waypoints, RTL
+    rows = [
+        (0, 0, 16, 1, 0.0, 0.0, 0.0, 0.0, 473977420, 85455940, 488.0),
+        (1, 3, 22, 0, 0.0, 0.0, 0.0, 0.0, 0, 0, 10.0),
+        (2, 3, 16, 0, 0.0, 2.0, 0.0, 0.0, 473978320, 85455940, 10.0),
+        (3, 3, 16, 0, 1.5, 2.0, 0.0, 0.0, 473978320, 85457270, 12.5),
+        (4, 3, 20, 0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0.0),
+    ]
+    return [MissionItem(seq, frame, cmd, cur, 1, p1, p2, p3, p4, x, y, z, 0)
+            for seq, frame, cmd, cur, p1, p2, p3, p4, x, y, z in rows]
+
+
+def fields(item) -> tuple:
+    return (item.seq, item.frame, item.command, item.current, item.autocontinue, item.param1, item.param2,
+            item.param3, item.param4, item.x, item.y, round(item.z, 3), item.mission_type)
+
+
+async def connect(port: int):
+    from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
+
+    mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    await mavsdk.add_any_connection(f"udpin://127.0.0.1:{port}")
+    system = await mavsdk.first_autopilot(20.0)
+    return mavsdk, system
+
+
+class GuidedLink:
+    """A pymavlink peer of the vehicle: sends setpoints, reads LOCAL_POSITION_NED."""
+
+    def __init__(self, vehicle_port: int, sysid: int) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.setblocking(False)
+        self.address = ("127.0.0.1", vehicle_port)
+        self.sysid = sysid
+        self.mav = mavlink.MAVLink(None, srcSystem=250, srcComponent=191)
+        self.mav.robust_parsing = True
+        self.local = None
+        self.time_boot_ms = 0
+
+    def send(self, msg) -> None:
+        self.sock.sendto(msg.pack(self.mav), self.address)
+
+    def position_target(self, north: float, east: float, down: float) -> None:
+        mask = 0b110111111000  # position only
+        self.send(self.mav.set_position_target_local_ned_encode(0, self.sysid, 1, mavlink.MAV_FRAME_LOCAL_NED, mask,
+                                                                north, east, down, 0, 0, 0, 0, 0, 0, 0, 0))
+
+    def poll(self) -> None:
+        while True:
+            try:
+                data = self.sock.recv(65535)
+            except BlockingIOError:
+                return
+            for msg in self.mav.parse_buffer(data) or []:
+                if msg.get_type() == "LOCAL_POSITION_NED" and msg.get_srcSystem() == self.sysid:
+                    self.local = (msg.x, msg.y, msg.z)
+                    self.time_boot_ms = msg.time_boot_ms
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+async def wait_for(predicate, timeout_s: float, what: str, poll_s: float = 0.05):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        value = await predicate()
+        if value:
+            return value
+        await asyncio.sleep(poll_s)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_mavsdk_missions_and_guided_flight():
+    asyncio.run(_missions_and_guided_flight())
+
+
+async def _missions_and_guided_flight():
+    from mavsdk.asyncio.plugins.action import ActionAsync
+    from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
+    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+    gcs_port = free_udp_port()
+    with start_sim_vehicle(out=[f"127.0.0.1:{gcs_port}"], speedup=SPEEDUP) as sim:
+        mavsdk, system = await connect(gcs_port)
+        try:
+            assert system is not None, f"MAVSDK found no autopilot\n{sim.log_tail()}"
+            assert await system.get_system_id() == sim.sysid
+
+            # ---- 5-item mission: upload, download identical
+            mission_raw = MissionRawAsync(system)
+            items = five_items()
+            await mission_raw.upload_mission(items)
+            downloaded = await mission_raw.download_mission()
+            assert [fields(i) for i in downloaded] == [fields(i) for i in items]
+
+            # ---- .plan with fence and rally points
+            imported = await mission_raw.import_qgroundcontrol_mission(str(DATA / "fence_rally.plan"))
+            assert len(imported.geofence_items) == 4
+            assert len(imported.rally_items) == 2
+            await mission_raw.upload_geofence(imported.geofence_items)
+            await mission_raw.upload_rally_points(imported.rally_items)
+            fence = await mission_raw.download_geofence()
+            rally = await mission_raw.download_rallypoints()
+            assert [fields(i)[1:] for i in fence] == [fields(i)[1:] for i in imported.geofence_items]
+            assert [fields(i)[1:] for i in rally] == [fields(i)[1:] for i in imported.rally_items]
+            # the mission list was not touched by the fence and rally uploads
+            assert [fields(i) for i in await mission_raw.download_mission()] == [fields(i) for i in items]
+
+            # ---- arm, take off to 10 m
+            action = ActionAsync(system)
+            telemetry = TelemetryAsync(system)
+            await action.set_takeoff_altitude(10.0)
+            await action.arm()
+            await action.takeoff()
+
+            async def relative_alt():
+                return (await telemetry.position()).relative_altitude_m
+
+            await wait_for(lambda: _near(relative_alt, 10.0, 0.3), 60.0, "takeoff to 10 m")
+            await asyncio.sleep(2.0 / SPEEDUP * 3)
+            alt = await relative_alt()
+            assert abs(alt - 10.0) <= 0.5, f"altitude {alt:.2f} m after takeoff"
+
+            # ---- GUIDED: position setpoints to a point 30 m away, then hold
+            link = GuidedLink(sim.port, sim.sysid)
+            try:
+                target = (30.0, 0.0, -10.0)
+                deadline = time.monotonic() + 60.0
+                arrived_ms = None
+                while time.monotonic() < deadline:
+                    link.position_target(*target)
+                    link.poll()
+                    if link.local is not None and _dist(link.local, target) < 0.5:
+                        arrived_ms = link.time_boot_ms
+                        break
+                    await asyncio.sleep(0.05)
+                assert arrived_ms is not None, f"never reached {target}: at {link.local}\n{sim.log_tail()}"
+                worst = 0.0
+                while link.time_boot_ms - arrived_ms < 5000:  # 5 s of simulated time holding
+                    link.position_target(*target)
+                    await asyncio.sleep(0.05)
+                    link.poll()
+                    worst = max(worst, _dist(link.local, target))
+                assert worst <= 0.5, f"hold error {worst:.2f} m"
+
+                # MAVSDK goto_location (MAV_CMD_DO_REPOSITION): 10 m east of there, 488 + 12 m AMSL
+                lat = 47.397742 + 30.0 / 111_132.95
+                lon = 8.545594 + 10.0 / (111_319.49 * math.cos(math.radians(47.397742)))
+                await action.goto_location(lat, lon, 500.0, 0.0)
+                deadline = time.monotonic() + 30.0
+                while time.monotonic() < deadline:
+                    await asyncio.sleep(0.1)
+                    link.poll()
+                    if _dist(link.local, (30.0, 10.0, -12.0)) < 0.5:
+                        break
+                assert _dist(link.local, (30.0, 10.0, -12.0)) < 0.5, f"goto_location: at {link.local}"
+            finally:
+                link.close()
+
+            # ---- land: disarms on touchdown
+            await action.land()
+
+            async def disarmed():
+                return not await telemetry.armed()
+
+            await wait_for(disarmed, 60.0, "disarm after landing")
+            assert sim.is_running()
+        finally:
+            mavsdk.destroy()
+
+
+async def _near(getter, target: float, tol: float) -> bool:
+    value = await getter()
+    return value is not None and abs(value - target) <= tol
+
+
+def _dist(a, b) -> float:
+    return math.sqrt(sum((x - y) ** 2 for x, y in zip(a, b)))

@@ -1,0 +1,215 @@
+"""Bad input against a real, flying ``sim-vehicle``; two instances side by side; CLI and tlog.
+
+Issue 2: random bytes, truncated frames, wrong CRC, unknown messages, commands with NaN or
+out-of-range parameters, mission items out of order or past the count, absurd parameters: each
+is dropped or refused with the right MAV_RESULT / MAV_MISSION_RESULT and a log line; the vehicle
+keeps flying and loses nothing stored.
+"""
+
+from __future__ import annotations
+
+import struct
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from tests.support import MavlinkPeer, REPO_ROOT, free_udp_port, start_sim_vehicle
+
+pytestmark = pytest.mark.integration
+
+GUIDED, AUTO = 4, 3
+NAN = float("nan")
+MISSION = [  # frame, command, p1..p4, x, y, z
+    (0, 16, 0.0, 0.0, 0.0, 0.0, 473977420, 85455940, 488.0),
+    (3, 22, 0.0, 0.0, 0.0, 0.0, 0, 0, 10.0),
+    (3, 16, 0.0, 2.0, 0.0, 0.0, 473978320, 85455940, 10.0),
+]
+
+
+def take_off(gcs: MavlinkPeer, alt_m: float, timeout_s: float = 30.0) -> None:
+    assert gcs.set_mode(GUIDED).result == mavlink.MAV_RESULT_ACCEPTED
+    assert gcs.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0).result == mavlink.MAV_RESULT_ACCEPTED
+    assert gcs.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, alt_m).result == mavlink.MAV_RESULT_ACCEPTED
+    reached = gcs.wait("GLOBAL_POSITION_INT", timeout_s, lambda m: abs(m.relative_alt / 1000.0 - alt_m) < 0.2)
+    assert reached is not None
+
+
+def v2_frame(msgid: int, payload: bytes, seq: int = 0, sysid: int = 250, compid: int = 190) -> bytes:
+    """A MAVLink 2 frame with an arbitrary message id and a (meaningless) checksum."""
+    header = struct.pack("<BBBBBBBHB", 0xFD, len(payload), 0, 0, seq, sysid, compid, msgid & 0xFFFF, msgid >> 16)
+    return header + payload + b"\x12\x34"
+
+
+def stored_mission(gcs: MavlinkPeer) -> list[tuple]:
+    items = gcs.download()
+    assert items is not None
+    return [(i.frame, i.command, i.param1, i.param2, i.param3, i.param4, i.x, i.y, i.z) for i in items]
+
+
+def test_bad_input_is_refused_and_the_vehicle_keeps_flying():
+    with start_sim_vehicle(speedup=5.0) as sim, MavlinkPeer(sim.port, sim.sysid) as gcs:
+        assert gcs.upload(MISSION) == mavlink.MAV_MISSION_ACCEPTED
+        take_off(gcs, 10.0)
+        gcs.send(gcs.mav.param_set_encode(sim.sysid, 1, b"WPNAV_SPEED", 600.0, mavlink.MAV_PARAM_TYPE_REAL32))
+        assert gcs.wait("PARAM_VALUE", 3.0, lambda m: m.param_id == "WPNAV_SPEED").param_value == 600.0
+
+        # ---- malformed packets
+        rng = np.random.default_rng(7)
+        good = gcs.mav.heartbeat_encode(6, 8, 0, 0, 0).pack(gcs.mav)
+        wrong_crc = bytearray(gcs.mav.command_long_encode(sim.sysid, 1, 400, 0, 0, 0, 0, 0, 0, 0, 0).pack(gcs.mav))
+        wrong_crc[-1] ^= 0xFF  # would disarm in flight if it were accepted
+        for _ in range(20):
+            gcs.send_raw(rng.integers(0, 256, int(rng.integers(1, 300)), dtype=np.uint8).tobytes())
+        gcs.send_raw(good[: len(good) // 2])            # truncated
+        gcs.send_raw(bytes(wrong_crc))                  # wrong CRC
+        gcs.send_raw(v2_frame(0xABCDE, b"\x01\x02\x03"))  # unknown message id
+        gcs.send_raw(b"")                               # empty datagram
+
+        # ---- commands with NaN or out-of-range parameters, unknown commands
+        M = mavlink
+        cases = [
+            (M.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, NAN), M.MAV_RESULT_DENIED, False),
+            (M.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, -50.0), M.MAV_RESULT_DENIED, False),
+            (M.MAV_CMD_COMPONENT_ARM_DISARM, (NAN,), M.MAV_RESULT_DENIED, False),
+            (M.MAV_CMD_COMPONENT_ARM_DISARM, (0.0,), M.MAV_RESULT_FAILED, False),   # disarm in flight
+            (M.MAV_CMD_DO_SET_MODE, (1, 99), M.MAV_RESULT_DENIED, False),
+            (M.MAV_CMD_DO_SET_MODE, (1, NAN), M.MAV_RESULT_DENIED, False),
+            (M.MAV_CMD_SET_MESSAGE_INTERVAL, (NAN, 1000), M.MAV_RESULT_DENIED, False),
+            (M.MAV_CMD_SET_MESSAGE_INTERVAL, (33, -7), M.MAV_RESULT_DENIED, False),
+            (M.MAV_CMD_MISSION_START, (1e9,), M.MAV_RESULT_DENIED, False),
+            (M.MAV_CMD_DO_CHANGE_SPEED, (1, 1e6), M.MAV_RESULT_DENIED, False),
+            (31999, (), M.MAV_RESULT_UNSUPPORTED, False),
+            (M.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, NAN), M.MAV_RESULT_DENIED, True),
+            (31999, (), M.MAV_RESULT_UNSUPPORTED, True),
+        ]
+        for command, params, expected, use_int in cases:
+            ack = gcs.command(command, *params, use_int=use_int)
+            assert ack is not None, f"no COMMAND_ACK for {command} {params}"
+            assert ack.result == expected, f"command {command} {params}: {ack.result} != {expected}"
+
+        # ---- mission items out of order and past the count: refused, old mission intact
+        gcs.send(gcs.mav.mission_count_encode(sim.sysid, 1, 2, 0))
+        assert gcs.wait("MISSION_REQUEST_INT", 3.0, lambda m: m.seq == 0) is not None
+        for seq in (1, 5):
+            frame, cmd, p1, p2, p3, p4, x, y, z = MISSION[2]
+            gcs.send(gcs.mav.mission_item_int_encode(sim.sysid, 1, seq, frame, cmd, 0, 1, p1, p2, p3, p4, x, y, 50.0))
+            ack = gcs.wait("MISSION_ACK", 3.0)
+            assert ack is not None and ack.type == mavlink.MAV_MISSION_INVALID_SEQUENCE
+        # abandon that upload; an item belonging to no upload is refused as well
+        cancelled = gcs.wait("MISSION_ACK", 10.0)  # the upload timeout is 5 s of wall-clock time
+        assert cancelled is not None and cancelled.type == mavlink.MAV_MISSION_OPERATION_CANCELLED
+        gcs.send(gcs.mav.mission_item_int_encode(sim.sysid, 1, 0, 3, 16, 0, 1, 0, 0, 0, 0, 1, 1, 5.0))
+        ack = gcs.wait("MISSION_ACK", 3.0)
+        assert ack is not None and ack.type == mavlink.MAV_MISSION_DENIED
+        assert stored_mission(gcs) == [tuple(float(v) if i < 6 or i == 8 else v for i, v in enumerate(row))
+                                       for row in MISSION]
+
+        # ---- absurd parameters: refused, PARAM_VALUE echoes the unchanged value
+        for value in (NAN, 1e9, -3.0):
+            gcs.send(gcs.mav.param_set_encode(sim.sysid, 1, b"WPNAV_SPEED", value, mavlink.MAV_PARAM_TYPE_REAL32))
+            echo = gcs.wait("PARAM_VALUE", 3.0, lambda m: m.param_id == "WPNAV_SPEED")
+            assert echo is not None and echo.param_value == 600.0
+
+        # ---- still flying, still armed, in GUIDED at 10 m; every refusal was logged
+        heartbeat = gcs.wait("HEARTBEAT", 3.0)
+        assert heartbeat.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED and heartbeat.custom_mode == GUIDED
+        position = gcs.wait("GLOBAL_POSITION_INT", 3.0)
+        assert abs(position.relative_alt / 1000.0 - 10.0) < 0.5
+        assert sim.is_running()
+        log = sim.log_text()
+        for kind in ("bad_crc", "unknown_id", "truncated"):
+            assert f"({kind}:" in log, f"no log line for {kind}"
+        assert "MAV_CMD_NAV_TAKEOFF refused" in log and "UNSUPPORTED" in log
+        assert "INVALID_SEQUENCE" in log and "PARAM_SET refused" in log
+
+
+def test_two_instances_side_by_side_and_tlog(tmp_path):
+    tlog = tmp_path / "flight.tlog"
+    with start_sim_vehicle(instance=0, speedup=5.0, extra_args=["--tlog", str(tlog)]) as sim0, \
+            start_sim_vehicle(instance=1, speedup=5.0) as sim1, \
+            MavlinkPeer(sim0.port, sim0.sysid) as gcs0, MavlinkPeer(sim1.port, sim1.sysid) as gcs1:
+        assert (sim0.sysid, sim1.sysid) == (1, 2)
+        assert gcs0.wait("HEARTBEAT", 3.0).get_srcSystem() == 1
+        assert gcs1.wait("HEARTBEAT", 3.0).get_srcSystem() == 2
+        assert gcs0.upload(MISSION) == mavlink.MAV_MISSION_ACCEPTED
+        take_off(gcs1, 5.0)
+        # instance 0 did not move and got no mission from instance 1; instance 1 has no mission
+        assert gcs0.wait("GLOBAL_POSITION_INT", 3.0).relative_alt == 0
+        assert not gcs0.wait("HEARTBEAT", 3.0).base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        assert len(stored_mission(gcs0)) == 3 and stored_mission(gcs1) == []
+        assert abs(gcs1.wait("GLOBAL_POSITION_INT", 3.0).relative_alt / 1000.0 - 5.0) < 0.5
+    # the tlog opens with pymavlink (as MAVProxy / MAVExplorer do) and holds both directions
+    log = mavutil.mavlink_connection(str(tlog))
+    types = set()
+    while (msg := log.recv_match()) is not None:
+        types.add((msg.get_type(), msg.get_srcSystem()))
+    assert ("HEARTBEAT", 1) in types and ("GLOBAL_POSITION_INT", 1) in types
+    assert ("MISSION_COUNT", 250) in types  # received traffic is recorded too
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--speedup", "-3"], "--speedup"),
+    (["--home", "95,8,400"], "--home"),
+    (["--out", "localhost"], "--out"),
+    (["--profile", "/no/such/profile.toml"], "--profile"),
+    (["--config", "/no/such/settings.toml"], "settings.toml"),
+])
+def test_cli_errors_are_one_line_without_traceback(args, fragment):
+    port = free_udp_port()
+    proc = subprocess.run([sys.executable, "-m", "sim_vehicle.cli", "--port", str(port), *args],
+                          capture_output=True, text=True, timeout=60, cwd=str(REPO_ROOT))
+    assert proc.returncode == 2
+    lines = [line for line in proc.stderr.splitlines() if line.strip() and " INFO " not in line]
+    assert len(lines) == 1 and lines[0].startswith("sim-vehicle: error:") and fragment in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_port_in_use_is_a_clear_error():
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
+        busy.bind(("0.0.0.0", 0))
+        port = busy.getsockname()[1]
+        proc = subprocess.run([sys.executable, "-m", "sim_vehicle.cli", "--port", str(port), "--no-default-out"],
+                              capture_output=True, text=True, timeout=60, cwd=str(REPO_ROOT))
+    assert proc.returncode == 2 and f"UDP port {port}" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_guided_global_int_velocity_and_yaw_setpoints():
+    with start_sim_vehicle(speedup=10.0) as sim, MavlinkPeer(sim.port, sim.sysid) as gcs:
+        take_off(gcs, 8.0)
+        # SET_POSITION_TARGET_GLOBAL_INT: 15 m north of home at 12 m relative altitude, yaw 90 deg
+        lat = int(round((47.397742 + 15.0 / 111_132.95) * 1e7))
+        mask = 0b100111111000  # position + yaw
+        target = None
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline:
+            gcs.send(gcs.mav.set_position_target_global_int_encode(
+                0, sim.sysid, 1, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mask, lat, 85455940, 12.0,
+                0, 0, 0, 0, 0, 0, 1.5707963, 0))
+            local = gcs.wait("LOCAL_POSITION_NED", 0.2)
+            if local is not None and abs(local.x - 15.0) < 0.3 and abs(local.z + 12.0) < 0.3 and abs(local.y) < 0.3:
+                target = local
+                break
+        assert target is not None, sim.log_tail()
+        attitude = gcs.wait("ATTITUDE", 10.0, lambda m: abs(m.yaw - 1.5707963) < 0.05)
+        assert attitude is not None
+        # velocity-only setpoints (type_mask ignores position, acceleration, yaw): fly east at 2 m/s
+        mask = 0b110111000111
+        moving = None
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline and moving is None:
+            gcs.send(gcs.mav.set_position_target_local_ned_encode(0, sim.sysid, 1, mavlink.MAV_FRAME_LOCAL_NED, mask,
+                                                                  0, 0, 0, 0.0, 2.0, 0.0, 0, 0, 0, 0, 0))
+            moving = gcs.wait("LOCAL_POSITION_NED", 0.2, lambda m: abs(m.vy - 2.0) < 0.1 and abs(m.vx) < 0.1)
+        assert moving is not None
+        # then silence: GUID_TIMEOUT brakes the vehicle to a hover
+        stopped = gcs.wait("LOCAL_POSITION_NED", 15.0,
+                           lambda m: abs(m.vx) < 0.05 and abs(m.vy) < 0.05 and m.y > moving.y + 1.0)
+        assert stopped is not None and abs(stopped.z + 12.0) < 0.5
+        assert "GUID_TIMEOUT" in sim.log_text()

@@ -1,0 +1,318 @@
+"""Helpers for integration tests: free ports and a real ``sim-vehicle`` process.
+
+Integration tests start real processes on loopback and must never bind default ports (other
+flights run at the same time), so every port comes from the OS (bind to port 0).
+
+Example
+-------
+>>> with start_sim_vehicle(out=[f"127.0.0.1:{gcs_port}"], speedup=5) as sim:  # doctest: +SKIP
+...     print(sim.port, sim.sysid)          # the vehicle's UDP port and MAVLink system id
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Iterator, Sequence
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that is free right now (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def free_tcp_port() -> int:
+    """A TCP port on 127.0.0.1 that is free right now (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@dataclasses.dataclass
+class SimVehicle:
+    """A running ``sim-vehicle`` process.
+
+    Attributes
+    ----------
+    port : int
+        UDP port the vehicle listens on (send MAVLink to ``127.0.0.1:port``; it answers to
+        every peer it heard in the last 10 s).
+    sysid : int
+        MAVLink system id (``1 + instance``); the autopilot is component 1.
+    instance : int
+        The ``--instance`` number.
+    proc : subprocess.Popen
+        The process.
+    log_path : pathlib.Path
+        File with the process's stdout and stderr (its log).
+    out : list of str
+        The ``--out HOST:PORT`` addresses telemetry is sent to.
+    """
+
+    port: int
+    sysid: int
+    instance: int
+    proc: subprocess.Popen
+    log_path: Path
+    out: list[str]
+
+    @property
+    def address(self) -> str:
+        """``127.0.0.1:<port>``, e.g. for MAVProxy ``--master=udpout:<address>``."""
+        return f"127.0.0.1:{self.port}"
+
+    def log_text(self) -> str:
+        """The process log so far (for assertion messages)."""
+        try:
+            return self.log_path.read_text(errors="replace")
+        except OSError:
+            return ""
+
+    def log_tail(self, lines: int = 60) -> str:
+        """The last ``lines`` lines of the log."""
+        return "\n".join(self.log_text().splitlines()[-lines:])
+
+    def is_running(self) -> bool:
+        """True while the process has not exited."""
+        return self.proc.poll() is None
+
+
+def sim_vehicle_command(port: int, out: Sequence[str] = (), speedup: float = 1.0, instance: int = 0,
+                        extra_args: Sequence[str] = ()) -> list[str]:
+    """The command line that starts ``sim-vehicle`` with this interpreter."""
+    cmd = [sys.executable, "-m", "sim_vehicle.cli", "--instance", str(instance), "--port", str(port),
+           "--speedup", repr(float(speedup))]
+    if not out:
+        cmd += ["--no-default-out"]
+    for address in out:
+        cmd += ["--out", address]
+    return cmd + list(extra_args)
+
+
+def wait_for_heartbeat(port: int, sysid: int, timeout_s: float, proc: subprocess.Popen | None = None) -> bool:
+    """Send GCS heartbeats to ``127.0.0.1:port`` until the vehicle ``sysid`` answers with one.
+
+    The probe is a peer for 10 s only; it does not use any of the ``--out`` ports.
+    """
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        sock.settimeout(0.2)
+        mav = mavlink2.MAVLink(None, srcSystem=254, srcComponent=190)
+        mav.robust_parsing = True
+        hb = mav.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(mav)
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if proc is not None and proc.poll() is not None:
+                return False
+            sock.sendto(hb, ("127.0.0.1", port))
+            try:
+                data = sock.recv(65535)
+            except (socket.timeout, ConnectionRefusedError):
+                continue
+            for msg in mav.parse_buffer(data) or []:
+                if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == sysid:
+                    return True
+    return False
+
+
+def stop_process(proc: subprocess.Popen, timeout_s: float = 10.0) -> int | None:
+    """SIGINT, then SIGKILL after ``timeout_s``; returns the exit status."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=timeout_s)
+    return proc.returncode
+
+
+@contextlib.contextmanager
+def start_sim_vehicle(port: int | None = None, out: Sequence[str] = (), speedup: float = 1.0,
+                      instance: int = 0, extra_args: Sequence[str] = (), ready_timeout_s: float = 20.0,
+                      log_dir: str | os.PathLike | None = None) -> Iterator[SimVehicle]:
+    """Start a real ``sim-vehicle`` process and wait until it sends heartbeats.
+
+    Parameters
+    ----------
+    port : int, optional
+        UDP port to bind (default: a free one).
+    out : sequence of str
+        ``HOST:PORT`` telemetry destinations (``--out``); empty means none besides peers
+        (the default ``--out`` addresses 14550/14540 are never used by tests).
+    speedup : float
+        ``--speedup``.
+    instance : int
+        ``--instance`` (system id ``1 + instance``).
+    extra_args : sequence of str
+        More command-line arguments, e.g. ``["--home", "47.39,8.54,488,0", "-v"]``.
+    ready_timeout_s : float
+        How long to wait for the first heartbeat.
+    log_dir : path, optional
+        Where the log file goes (default: a temporary directory).
+
+    Yields
+    ------
+    SimVehicle
+        With ``.port``, ``.sysid``, ``.proc``, ``.log_text()``. On exit the process gets
+        SIGINT and is killed if it has not stopped after 10 s.
+    """
+    port = free_udp_port() if port is None else int(port)
+    directory = Path(log_dir) if log_dir is not None else Path(tempfile.mkdtemp(prefix="sim_vehicle_"))
+    directory.mkdir(parents=True, exist_ok=True)
+    log_path = directory / f"sim_vehicle_{instance}_{port}.log"
+    cmd = sim_vehicle_command(port, out, speedup, instance, extra_args)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO_ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    with open(log_path, "wb") as log_file:
+        proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, cwd=str(REPO_ROOT), env=env)
+    sim = SimVehicle(port=port, sysid=1 + instance, instance=instance, proc=proc, log_path=log_path,
+                     out=list(out))
+    try:
+        if not wait_for_heartbeat(port, sim.sysid, ready_timeout_s, proc):
+            raise RuntimeError(f"sim-vehicle on port {port} did not become ready "
+                               f"(exit status {proc.poll()}); log:\n{sim.log_tail()}")
+        yield sim
+    finally:
+        stop_process(proc)
+
+
+class MavlinkPeer:
+    """A minimal pymavlink ground station on loopback for tests (blocking, no threads).
+
+    It sends a GCS heartbeat at least once a second while it waits, so the vehicle keeps it as a
+    peer and streams telemetry to it.
+
+    Parameters
+    ----------
+    port : int
+        The vehicle's UDP port.
+    sysid : int
+        The vehicle's system id (commands target it).
+    source_system, source_component : int
+        Our own ids.
+    """
+
+    def __init__(self, port: int, sysid: int = 1, source_system: int = 250, source_component: int = 190) -> None:
+        from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+        self.mavlink = mavlink2
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.05)
+        self.address = ("127.0.0.1", int(port))
+        self.sysid = int(sysid)
+        self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
+        self.mav.robust_parsing = True
+        self.last = {}
+        self._last_heartbeat = 0.0
+        self.heartbeat()
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> "MavlinkPeer":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def send(self, msg) -> None:
+        """Encode and send one message to the vehicle."""
+        self.sock.sendto(msg.pack(self.mav), self.address)
+
+    def send_raw(self, data: bytes) -> None:
+        """Send raw bytes (for malformed-input tests)."""
+        self.sock.sendto(data, self.address)
+
+    def heartbeat(self) -> None:
+        m = self.mavlink
+        self.send(self.mav.heartbeat_encode(m.MAV_TYPE_GCS, m.MAV_AUTOPILOT_INVALID, 0, 0, 0))
+        self._last_heartbeat = time.monotonic()
+
+    def receive(self, timeout_s: float = 0.05) -> list:
+        """Messages from the vehicle that arrive within ``timeout_s`` (one datagram)."""
+        if time.monotonic() - self._last_heartbeat > 1.0:
+            self.heartbeat()
+        self.sock.settimeout(timeout_s)
+        try:
+            data = self.sock.recv(65535)
+        except (socket.timeout, ConnectionRefusedError):
+            return []
+        out = []
+        for msg in self.mav.parse_buffer(data) or []:
+            if msg.get_type() == "BAD_DATA" or msg.get_srcSystem() != self.sysid:
+                continue
+            self.last[msg.get_type()] = msg
+            out.append(msg)
+        return out
+
+    def wait(self, kind: str, timeout_s: float = 5.0, condition=None):
+        """The next message of type ``kind`` (satisfying ``condition``), or None on timeout."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            for msg in self.receive(min(0.1, max(0.0, deadline - time.monotonic()))):
+                if msg.get_type() == kind and (condition is None or condition(msg)):
+                    return msg
+        return None
+
+    def command(self, command: int, *params: float, timeout_s: float = 3.0, use_int: bool = False):
+        """Send COMMAND_LONG (or COMMAND_INT) and return its COMMAND_ACK (None if none came)."""
+        p = list(params) + [0.0] * (7 - len(params))
+        if use_int:
+            self.send(self.mav.command_int_encode(self.sysid, 1, 0, command, 0, 0, p[0], p[1], p[2], p[3],
+                                                  int(p[4]), int(p[5]), p[6]))
+        else:
+            self.send(self.mav.command_long_encode(self.sysid, 1, command, 0, *p))
+        return self.wait("COMMAND_ACK", timeout_s, lambda m: m.command == command)
+
+    def set_mode(self, custom_mode: int):
+        """DO_SET_MODE with an ArduCopter mode number; returns the COMMAND_ACK."""
+        return self.command(self.mavlink.MAV_CMD_DO_SET_MODE, self.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                            custom_mode)
+
+    def download(self, mission_type: int = 0, timeout_s: float = 5.0) -> list | None:
+        """The vehicle's list of ``mission_type`` with MISSION_ITEM_INT (None on a protocol failure)."""
+        self.send(self.mav.mission_request_list_encode(self.sysid, 1, mission_type))
+        count = self.wait("MISSION_COUNT", timeout_s, lambda m: m.mission_type == mission_type)
+        if count is None:
+            return None
+        items = []
+        for seq in range(count.count):
+            self.send(self.mav.mission_request_int_encode(self.sysid, 1, seq, mission_type))
+            item = self.wait("MISSION_ITEM_INT", timeout_s, lambda m: m.seq == seq)
+            if item is None:
+                return None
+            items.append(item)
+        self.send(self.mav.mission_ack_encode(self.sysid, 1, 0, mission_type))
+        return items
+
+    def upload(self, items: Sequence[tuple], mission_type: int = 0, timeout_s: float = 5.0) -> int | None:
+        """Upload ``(frame, command, p1, p2, p3, p4, x_int, y_int, z)`` rows; returns the MISSION_ACK type."""
+        self.send(self.mav.mission_count_encode(self.sysid, 1, len(items), mission_type))
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            for msg in self.receive(0.1):
+                kind = msg.get_type()
+                if kind == "MISSION_ACK":
+                    return msg.type
+                if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST") and msg.seq < len(items):
+                    frame, cmd, p1, p2, p3, p4, x, y, z = items[msg.seq]
+                    self.send(self.mav.mission_item_int_encode(self.sysid, 1, msg.seq, frame, cmd, 0, 1, p1, p2, p3,
+                                                               p4, x, y, z, mission_type))
+        return None

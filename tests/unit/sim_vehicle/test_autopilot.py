@@ -1,0 +1,300 @@
+"""Autopilot behaviour (modes, arming, takeoff, landing, RTL, AUTO, GUIDED timeout) and pacing."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sim_vehicle import autopilot as ap
+from sim_vehicle.autopilot import Autopilot, Leg
+from sim_vehicle.clock import SimClock, WallTimer
+from sim_vehicle.config import VehicleSettings, replace_path
+from sim_vehicle.control import Setpoint
+from sim_vehicle.mission_store import MissionItem
+from sim_vehicle.model import HeliModel
+
+HOME = (47.397742, 8.545594, 488.0, 0.0)
+
+
+@pytest.fixture(scope="module")
+def model() -> HeliModel:
+    return HeliModel.default()
+
+
+def make_vehicle(model: HeliModel, vehicle_settings: VehicleSettings | None = None) -> Autopilot:
+    return Autopilot(model, vehicle_settings or VehicleSettings(), HOME, np.random.default_rng(0))
+
+
+def fly(vehicle: Autopilot, seconds: float) -> list[tuple]:
+    events = []
+    for _ in range(int(round(seconds / 0.5))):
+        events += vehicle.step(0.5)
+    return events
+
+
+def airborne_at_10m(model: HeliModel) -> Autopilot:
+    vehicle = make_vehicle(model)
+    assert vehicle.set_mode(ap.GUIDED)[0]
+    assert vehicle.arm()[0]
+    assert vehicle.takeoff(10.0)[0]
+    fly(vehicle, 12.0)
+    return vehicle
+
+
+def item(seq: int, command: int, lat: float = 0.0, lon: float = 0.0, z: float = 0.0, p1: float = 0.0,
+         p2: float = 0.0, frame: int = 3) -> MissionItem:
+    return MissionItem(seq, frame, command, 0, 1, p1, p2, 0.0, 0.0, int(round(lat * 1e7)), int(round(lon * 1e7)),
+                       z)
+
+
+def north_east_deg(north_m: float, east_m: float) -> tuple[float, float]:
+    lat = HOME[0] + north_m / 111_132.95
+    lon = HOME[1] + east_m / (111_319.49 * math.cos(math.radians(HOME[0])))
+    return lat, lon
+
+
+# ---------------------------------------------------------------- legs
+@settings(deadline=None, max_examples=40)
+@given(st.lists(st.floats(-200, 200), min_size=6, max_size=6), st.floats(1.0, 12.0), st.floats(0.5, 5.0))
+def test_leg_profile_starts_and_ends_at_rest_within_limits(coords, speed, accel):
+    start, end = np.array(coords[:3]), np.array(coords[3:])
+    leg = Leg(start, end, speed, 2.5, 1.5, accel, t0_s=3.0)
+    p0, v0, _ = leg.sample(3.0)
+    p1, v1, _ = leg.sample(3.0 + leg.duration_s + 1e-9)
+    assert np.allclose(p0, start) and np.allclose(v0, 0.0)
+    assert np.allclose(p1, end, atol=1e-6) and np.allclose(v1, 0.0)
+    for t in np.linspace(3.0, 3.0 + leg.duration_s, 25):
+        _, v, a = leg.sample(t)
+        assert math.hypot(v[0], v[1]) <= speed + 1e-9
+        assert -2.5 - 1e-9 <= v[2] <= 1.5 + 1e-9
+        assert np.linalg.norm(a) <= accel + 1e-9
+
+
+# ---------------------------------------------------------------- arming and modes
+def test_prearm_checks(model):
+    vehicle = make_vehicle(model)
+    assert vehicle.set_mode(ap.AUTO)[0]  # allowed while disarmed
+    ok, reason = vehicle.arm()
+    assert not ok and "mission" in reason
+    assert vehicle.set_mode(ap.LAND)[0]
+    assert not vehicle.arm()[0]
+    assert not vehicle.set_mode(99)[0]
+    assert vehicle.mode == ap.LAND
+
+
+def test_takeoff_reaches_altitude_and_disarm_is_refused_in_flight(model):
+    vehicle = make_vehicle(model)
+    assert not vehicle.takeoff(10.0)[0]  # not armed
+    vehicle.arm()
+    assert not vehicle.takeoff(10.0)[0]  # not GUIDED
+    vehicle.set_mode(ap.GUIDED)
+    assert not vehicle.takeoff(float("nan"))[0]
+    assert vehicle.takeoff(10.0)[0]
+    fly(vehicle, 12.0)
+    assert not vehicle.landed
+    assert abs(-vehicle.pos_ned_m[2] - 10.0) < 0.1
+    assert np.linalg.norm(vehicle.pos_ned_m[:2]) < 0.1
+    assert not vehicle.disarm()[0]
+    assert vehicle.armed
+
+
+def test_guided_position_target_30m_is_reached_and_held(model):
+    vehicle = airborne_at_10m(model)
+    assert vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(30.0, 0.0, -10.0)))[0]
+    fly(vehicle, 15.0)
+    errors = []
+    for _ in range(10):
+        vehicle.step(0.5)
+        errors.append(np.linalg.norm(vehicle.pos_ned_m - (30.0, 0.0, -10.0)))
+    assert max(errors) < 0.5
+    assert float(np.max(np.abs(vehicle.delta))) < 1.0
+
+
+def test_guided_setpoint_refused_outside_guided_or_invalid(model):
+    vehicle = airborne_at_10m(model)
+    assert not vehicle.set_guided_setpoint(Setpoint(vel_ned_m_s=(float("inf"), 0.0, 0.0)))[0]
+    assert not vehicle.set_guided_setpoint(Setpoint(vel_ned_m_s=(500.0, 0.0, 0.0)))[0]
+    vehicle.set_mode(ap.LOITER)
+    assert not vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(1.0, 0.0, -10.0)))[0]
+
+
+def test_guided_velocity_timeout_brakes_to_hover(model):
+    vehicle = airborne_at_10m(model)
+    assert vehicle.set_guided_setpoint(Setpoint(vel_ned_m_s=(3.0, 0.0, 0.0)))[0]
+    fly(vehicle, 2.0)
+    assert vehicle.vel_ned_m_s[0] > 2.0  # following the velocity setpoint
+    events = fly(vehicle, 10.0)  # no new setpoint: GUID_TIMEOUT (3 s) then brake
+    assert any(e[0] == "text" and "timeout" in e[2] for e in events)
+    assert np.linalg.norm(vehicle.vel_ned_m_s) < 0.1
+    assert abs(-vehicle.pos_ned_m[2] - 10.0) < 0.3
+    assert vehicle.mode == ap.GUIDED
+
+
+def test_land_disarms_on_touchdown_and_never_goes_below_ground(model):
+    vehicle = airborne_at_10m(model)
+    assert vehicle.land()[0]
+    lowest = 0.0
+    events = []
+    for _ in range(60):
+        events += vehicle.step(0.5)
+        lowest = max(lowest, vehicle.pos_ned_m[2])
+    assert ("disarmed", "landed") in events
+    assert vehicle.landed and not vehicle.armed
+    assert lowest <= 0.0
+
+
+def test_rtl_climbs_returns_and_lands_at_home(model):
+    vehicle = airborne_at_10m(model)
+    vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(25.0, -20.0, -10.0)))
+    fly(vehicle, 15.0)
+    assert vehicle.rtl()[0]
+    highest = 0.0
+    for _ in range(120):
+        vehicle.step(0.5)
+        highest = max(highest, -vehicle.pos_ned_m[2])
+        if not vehicle.armed:
+            break
+    assert not vehicle.armed
+    assert highest > 14.0  # climbed to RTL_ALT (15 m) before returning
+    assert np.linalg.norm(vehicle.pos_ned_m[:2]) < 1.0
+
+
+def test_auto_mission_reaches_items_in_order_and_lands(model):
+    lat1, lon1 = north_east_deg(20.0, 0.0)
+    lat2, lon2 = north_east_deg(20.0, 20.0)
+    mission = [
+        item(0, 16, HOME[0], HOME[1], HOME[2], frame=0),
+        item(1, 22, z=8.0),
+        item(2, 16, lat1, lon1, 8.0, p1=1.0, p2=1.0),
+        item(3, 178, p1=1.0, p2=8.0),
+        item(4, 16, lat2, lon2, 12.0),
+        item(5, 21, lat2, lon2, 0.0),
+    ]
+    vehicle = make_vehicle(model)
+    vehicle.set_mission(mission)
+    assert vehicle.set_mode(ap.AUTO)[0]
+    assert vehicle.arm()[0]
+    events = []
+    for _ in range(200):
+        events += vehicle.step(0.5)
+        if not vehicle.armed:
+            break
+    reached = [e[1] for e in events if e[0] == "mission_item_reached"]
+    assert reached == [1, 2, 4, 5]
+    assert not vehicle.armed and vehicle.landed
+    assert np.allclose(vehicle.pos_ned_m, (20.0, 20.0, 0.0), atol=1.0)
+    assert vehicle._speed_override_m_s == 8.0
+
+
+def test_idle_on_ground_disarms_after_delay(model):
+    vehicle = make_vehicle(model, replace_path(VehicleSettings(), "flight.disarm_delay_s", 4.0))
+    vehicle.set_mode(ap.GUIDED)
+    vehicle.arm()
+    fly(vehicle, 3.0)
+    assert vehicle.armed
+    events = fly(vehicle, 2.0)
+    assert not vehicle.armed and any(e[0] == "disarmed" for e in events)
+    assert np.allclose(vehicle.pos_ned_m, 0.0)
+
+
+def test_new_mission_does_not_disturb_disarmed_vehicle(model):
+    vehicle = make_vehicle(model)
+    vehicle.set_mission([item(0, 16, HOME[0], HOME[1], HOME[2], frame=0), item(1, 22, z=5.0)])
+    assert vehicle.has_mission and vehicle.mission_current == 1
+    fly(vehicle, 2.0)
+    assert vehicle.landed and np.allclose(vehicle.pos_ned_m, 0.0)
+    assert not vehicle.set_current(7)[0]
+
+
+# ---------------------------------------------------------------- pacing (clock.py)
+class FakeWall:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_sim_clock_runs_speedup_times_faster():
+    wall = FakeWall()
+    clock = SimClock(0.0025, speedup=10.0, max_lag_s=0.5, wall_s=wall)
+    wall.t += 0.1  # 0.1 s wall at 10x = 1 s simulated = 400 steps
+    due = clock.steps_due()
+    assert due == 400
+    clock.advance(due)
+    assert clock.time_s == pytest.approx(1.0)
+    assert clock.steps_due() == 0
+    assert clock.wall_until_step_s(40) == pytest.approx(0.01)
+
+
+def test_sim_clock_slips_instead_of_bursting_and_changes_speed_without_jump():
+    wall = FakeWall()
+    clock = SimClock(0.0025, speedup=1.0, max_lag_s=0.5, wall_s=wall)
+    wall.t += 5.0  # the process was stopped for 5 s
+    due = clock.steps_due()
+    assert due == 200  # only max_lag_s (0.5 s) is caught up
+    assert clock.slipped_wall_s == pytest.approx(4.5)
+    clock.advance(due)
+    clock.set_speedup(4.0)
+    wall.t += 0.25
+    assert clock.steps_due() == 400
+
+
+def test_wall_timer_fires_once_per_period():
+    wall = FakeWall()
+    timer = WallTimer(1.0, wall)
+    assert timer.due()
+    assert not timer.due()
+    wall.t += 0.99
+    assert not timer.due()
+    wall.t += 0.02
+    assert timer.due()
+    wall.t += 10.0  # missed many: fires once, not ten times
+    assert timer.due() and not timer.due()
+
+
+def test_direct_setpoints_right_after_takeoff_command_lift_off(model):
+    vehicle = make_vehicle(model)
+    vehicle.set_mode(ap.GUIDED)
+    vehicle.arm()
+    vehicle.takeoff(5.0)
+    vehicle.step(0.02)  # still on the ground
+    assert vehicle.landed
+    for k in range(300):  # a companion streaming a climbing trajectory at 20 Hz
+        t = k * 0.05
+        down = -min(5.0, 1.0 * t)
+        vel = -1.0 if t < 5.0 else 0.0
+        assert vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(0.0, 0.0, down), vel_ned_m_s=(0.0, 0.0, vel)))[0]
+        vehicle.step(0.05)
+    assert not vehicle.landed
+    assert abs(-vehicle.pos_ned_m[2] - 5.0) < 0.2
+
+
+def test_recover_after_internal_error_holds_position(model):
+    vehicle = airborne_at_10m(model)
+    vehicle.set_guided_setpoint(Setpoint(vel_ned_m_s=(1.0, 0.0, 0.0)))
+    vehicle.step(1.0)
+    vehicle.recover("test")
+    events = fly(vehicle, 8.0)
+    assert any(e[0] == "text" and "internal error" in e[2] for e in events)
+    assert np.linalg.norm(vehicle.vel_ned_m_s) < 0.1 and vehicle.armed and not vehicle.landed
+
+
+def test_rtl_goes_to_the_nearest_rally_point(model):
+    vehicle = airborne_at_10m(model)
+    lat, lon = north_east_deg(40.0, 0.0)
+    far_lat, far_lon = north_east_deg(-80.0, 0.0)
+    vehicle.set_rally([item(0, 5100, lat, lon, 20.0), item(1, 5100, far_lat, far_lon, 20.0)])
+    vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(30.0, 0.0, -10.0)))
+    fly(vehicle, 12.0)
+    vehicle.rtl()
+    for _ in range(120):
+        vehicle.step(0.5)
+        if not vehicle.armed:
+            break
+    assert not vehicle.armed
+    assert np.allclose(vehicle.pos_ned_m[:2], (40.0, 0.0), atol=1.0)
