@@ -50,11 +50,13 @@ MGART_TIMEOUT_S = 5.0
 # ---------------------------------------------------------------------- GART / M-GART
 def run_gart(bw: BenchWorld, budgets: tuple, settings: GartSettings, anytime: bool = True) -> dict:
     """First-path and anytime runs of GART on one world."""
+    cpu0 = time.process_time()
     first = gart(bw.world, bw.start, bw.goal, rng=np.random.default_rng(bw.seed), stop_at_first=True,
                  max_time_s=FIRST_TIMEOUT_S, settings=settings)
+    cpu_ms = 1e3 * (time.process_time() - cpu0)
     out = {"solved": first.solved, "exact_valid": first.solved and bw.world.path_free(first.path)}
     if first.solved:
-        out.update(first_ms=1e3 * first.time_to_first_s, iterations_first=first.iterations,
+        out.update(first_ms=1e3 * first.time_to_first_s, first_cpu_ms=cpu_ms, iterations_first=first.iterations,
                    first_cost=first.cost_history[0][1], first_cost_shortcut=first.cost)
     if anytime:
         for t in budgets:
@@ -122,16 +124,18 @@ class OmplProblem:
         objective.setCostThreshold(ob.Cost(math.inf if first_only else 0.0))
         self.ss.setOptimizationObjective(objective)
         self.ss.setup()
+        cpu0 = time.process_time()
         t0 = time.perf_counter()
         self.ss.solve(budget_s)
         elapsed = time.perf_counter() - t0
+        cpu_s = time.process_time() - cpu0
         if not self.ss.haveExactSolutionPath():
-            return {"solved": False, "elapsed_s": elapsed}
+            return {"solved": False, "elapsed_s": elapsed, "cpu_s": cpu_s}
         path = self.ss.getSolutionPath()
         pts = np.array([[path.getState(i)[k] for k in range(self.bw.world.dim)]
                         for i in range(path.getStateCount())])
         iterations = planner.numIterations() if hasattr(planner, "numIterations") else None
-        return {"solved": True, "elapsed_s": elapsed, "cost": float(path.length()), "iterations": iterations,
+        return {"solved": True, "elapsed_s": elapsed, "cpu_s": cpu_s, "cost": float(path.length()), "iterations": iterations,
                 "exact_valid": self.bw.world.path_free(pts)}
 
 
@@ -139,7 +143,8 @@ def run_ompl(problem: OmplProblem, name: str, budgets: tuple) -> dict:
     first = problem.solve(name, FIRST_TIMEOUT_S, first_only=True)
     out = {"solved": first["solved"], "exact_valid": first.get("exact_valid", False)}
     if first["solved"]:
-        out.update(first_ms=1e3 * first["elapsed_s"], iterations_first=first["iterations"], first_cost=first["cost"])
+        out.update(first_ms=1e3 * first["elapsed_s"], first_cpu_ms=1e3 * first["cpu_s"],
+                   iterations_first=first["iterations"], first_cost=first["cost"])
     if name != "RRTConnect":
         for t in budgets:
             r = problem.solve(name, t, first_only=False)
@@ -151,6 +156,48 @@ def run_ompl(problem: OmplProblem, name: str, budgets: tuple) -> dict:
     return out
 
 
+# ---------------------------------------------------------------------- world queries
+def world_query_costs(quick: bool) -> list[dict]:
+    """CPU microseconds per query with 30 and 1000 obstacles (same covered fraction), 2D and 3D."""
+    from companion.world import World
+
+    rows = []
+    n_q = 3000 if quick else 20000
+    for d in (2, 3):
+        for n, r_lo, r_hi in ((30, 3.0, 8.0), (1000, 3.0 * (30 / 1000) ** (1 / d), 8.0 * (30 / 1000) ** (1 / d))):
+            rs = np.random.RandomState(0)
+            world = World.from_spheres(rs.uniform(0, 100, (n, d)), rs.uniform(r_lo, r_hi, n), [0] * d, [100] * d, 0.5)
+            pts = [tuple(p) for p in rs.uniform(0, 100, (n_q, d)).tolist()]
+            dirs = rs.normal(size=(n_q, d))
+            ends = np.clip(np.array(pts) + 10.0 * dirs / np.linalg.norm(dirs, axis=1, keepdims=True), 0, 100)
+            ends = [tuple(p) for p in ends.tolist()]
+            free, seg = world.point_free, world.segment_free
+            t = time.process_time()
+            for p in pts:
+                free(p)
+            t_point = (time.process_time() - t) / n_q
+            t = time.process_time()
+            for a, b in zip(pts, ends):
+                seg(a, b)
+            t_seg = (time.process_time() - t) / n_q
+            arr = np.array(pts)
+            t = time.process_time()
+            world.clearance_m(arr)
+            t_clear = (time.process_time() - t) / n_q
+            rows.append({"dim": d, "obstacles": n, "point_us": 1e6 * t_point, "segment_10m_us": 1e6 * t_seg,
+                         "clearance_batch_us": 1e6 * t_clear})
+    return rows
+
+
+def world_table(rows: list[dict]) -> str:
+    lines = ["| d | obstacles | point_free (us) | exact segment_free, 10 m (us) | clearance_m batch (us/point) |",
+             "|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['dim']} | {r['obstacles']} | {r['point_us']:.2f} | {r['segment_10m_us']:.2f} | "
+                     f"{r['clearance_batch_us']:.2f} |")
+    return "\n".join(lines)
+
+
 # ---------------------------------------------------------------------- summary
 def median_of(runs: list, key: str):
     vals = [r[key] for r in runs if r.get(key) is not None]
@@ -160,7 +207,8 @@ def median_of(runs: list, key: str):
 def summarise(runs: list, budgets: tuple, best: float) -> dict:
     s = {"solved": sum(bool(r["solved"]) for r in runs), "runs": len(runs),
          "exact_valid": sum(bool(r.get("exact_valid")) for r in runs),
-         "first_ms": median_of(runs, "first_ms"), "iterations_first": median_of(runs, "iterations_first"),
+         "first_ms": median_of(runs, "first_ms"), "first_cpu_ms": median_of(runs, "first_cpu_ms"),
+         "iterations_first": median_of(runs, "iterations_first"),
          "first_cost": median_of(runs, "first_cost")}
     for t in budgets:
         c = median_of(runs, f"cost_{t}")
@@ -175,12 +223,13 @@ def fmt(v, spec: str = ".1f", none: str = "-") -> str:
 
 
 def table(world: str, summary: dict, budgets: tuple, best: float) -> str:
-    head = ["planner", "solved", "first path (ms)", "iters at first", "first cost"]
+    head = ["planner", "solved", "first path (ms)", "first path CPU (ms)", "iters at first", "first cost"]
     head += [f"cost @{t} s (% above {best})" for t in budgets] + ["iterations/s", "exact-valid"]
     lines = [f"### {world} (best known {best})", "", "| " + " | ".join(head) + " |",
              "|" + "---|" * len(head)]
     for name, s in summary.items():
-        row = [name, f"{s['solved']}/{s['runs']}", fmt(s["first_ms"], ".2f"), fmt(s["iterations_first"], ".0f"),
+        row = [name, f"{s['solved']}/{s['runs']}", fmt(s["first_ms"], ".2f"), fmt(s["first_cpu_ms"], ".2f"),
+               fmt(s["iterations_first"], ".0f"),
                fmt(s["first_cost"])]
         for t in budgets:
             c, p = s.get(f"cost_{t}"), s.get(f"pct_{t}")
@@ -252,7 +301,8 @@ def main(argv=None) -> int:
         summaries[world] = {name: summarise(r, budgets, best) for name, r in runs.items()}
     text = [f"## Planning: GART / M-GART vs OMPL ({n_seeds} seeds, medians)", "",
             f"Machine: {platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores, "
-            f"shared with other jobs while measured (absolute times are noisy; compare within a row set). "
+            f"shared with other jobs while measured (absolute times are noisy; compare within a table; "
+            f"'first path CPU' is the process CPU time of the whole call, less sensitive to load). "
             f"Run: `python benchmarks/planning.py{' --quick' if args.quick else ''}`. Costs are path lengths "
             "(m); GART's cost at a budget is its returned (shortcut) path, its first cost the raw tree path. "
             "OMPL checks motions by sampling (1 % resolution); 'exact-valid' counts seeds whose paths pass "
@@ -260,11 +310,14 @@ def main(argv=None) -> int:
     for world in worlds:
         text += [table(world, summaries[world], budgets, BEST_KNOWN_COST[world]), ""]
     text += ["### M-GART: eight distinct paths (Hausdorff distance >= 4 m), cheapest first", "", mgart_table(mg), ""]
+    wq = world_query_costs(args.quick)
+    text += ["### World queries: 30 vs 1000 obstacles (same covered fraction, margin 0.5 m), CPU time", "",
+             world_table(wq), ""]
     markdown = "\n".join(text)
     print(markdown)
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps({"seeds": n_seeds, "budgets_s": budgets, "summary": summaries,
-                                           "mgart": mg, "runs": raw}, indent=1, default=float))
+                                           "mgart": mg, "world_queries": wq, "runs": raw}, indent=1, default=float))
     Path(args.markdown).parent.mkdir(parents=True, exist_ok=True)
     Path(args.markdown).write_text(markdown + "\n")
     if use_ompl:

@@ -47,7 +47,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from companion.link.setpoints import (SetpointStreamer, hold_position, jitter_stats,  # noqa: E402
-                                      raise_stream_priority, restore_normal_priority)
+                                      planning_worker_init, raise_stream_priority,
+                                      restore_normal_priority)
 
 GOAL_P99_MS = 2.0
 
@@ -130,20 +131,33 @@ class UdpSender:
         self.sink.close()
 
 
-@contextlib.asynccontextmanager
-async def sitl_sender():
-    """A real sim-vehicle and a real VehicleLink; yields ``link.send_setpoint``."""
-    from companion.link import VehicleLink
+@contextlib.contextmanager
+def sim_vehicle():
+    """A real sim-vehicle process (tests/support.py)."""
     sys.path.insert(0, str(REPO / "tests"))
-    from support import free_udp_port, start_sim_vehicle
+    from support import start_sim_vehicle
     with start_sim_vehicle(speedup=1.0) as sim:
-        link = VehicleLink()
-        await link.connect(f"udpout://127.0.0.1:{sim.port}", timeout_s=20)
-        try:
-            yield link.send_setpoint
-        finally:
-            link.close()
-    del free_udp_port
+        yield sim
+
+
+@contextlib.asynccontextmanager
+async def link_sender(port: int):
+    """A real VehicleLink to the sim-vehicle on ``port``; yields ``link.send_setpoint``."""
+    from companion.link import VehicleLink
+    link = VehicleLink()
+    await link.connect(f"udpout://127.0.0.1:{port}", timeout_s=20)
+    try:
+        await link.wait_ready(10)
+        yield link.send_setpoint
+    finally:
+        link.close()
+
+
+def current_priority() -> str:
+    try:
+        return "fifo" if os.sched_getscheduler(0) == os.SCHED_FIFO else "normal"
+    except (AttributeError, OSError):
+        return "normal"
 
 
 # ----------------------------------------------------------------------------- scenarios
@@ -158,10 +172,10 @@ async def run_scenario(name: str, send, seconds: float) -> dict:
             sys.setswitchinterval(0.001)
     elif name in ("process", "process_nice", "process_nice_fifo"):
         niceness = 0 if name == "process" else 10
-        executor = concurrent.futures.ProcessPoolExecutor(max_workers=1, initializer=os.nice,
-                                                          initargs=(niceness,))
+        executor = concurrent.futures.ProcessPoolExecutor(
+            max_workers=1, initializer=planning_worker_init, initargs=(niceness,))
         await asyncio.get_running_loop().run_in_executor(executor, replan_workload, 10_000)  # warm-up
-    priority = raise_stream_priority() if name == "process_nice_fifo" else "normal"
+    priority = current_priority()
     streamer = SetpointStreamer(send, hold_position([0.0, 0.0, -10.0], 0.0), rate_hz=50.0)
     replans = []
     stop_at = time.monotonic() + seconds
@@ -184,8 +198,6 @@ async def run_scenario(name: str, send, seconds: float) -> dict:
     finally:
         await streamer.stop()
         sys.setswitchinterval(old_switch)
-        if priority == "fifo":
-            restore_normal_priority()
         if executor is not None:
             executor.shutdown(wait=True)
     stats = jitter_stats(streamer.send_times_s, streamer.period_s, streamer.missed)
@@ -196,17 +208,24 @@ async def run_scenario(name: str, send, seconds: float) -> dict:
 async def run_all(seconds: float, sitl: bool) -> list[dict]:
     scenarios = ("idle", "thread", "thread_1ms", "process", "process_nice", "process_nice_fifo")
     results = []
-    if sitl:
-        async with sitl_sender() as send:
-            for name in scenarios:
-                results.append(await run_scenario(name, send, seconds))
-    else:
-        sender = UdpSender()
-        try:
-            for name in scenarios:
-                results.append(await run_scenario(name, sender, seconds))
-        finally:
-            sender.close()
+    with contextlib.ExitStack() as stack:
+        sim = stack.enter_context(sim_vehicle()) if sitl else None
+        for name in scenarios:
+            # priority first: threads created afterwards (MAVSDK's) inherit it
+            if name == "process_nice_fifo":
+                raise_stream_priority()
+            try:
+                if sitl:
+                    async with link_sender(sim.port) as send:
+                        results.append(await run_scenario(name, send, seconds))
+                else:
+                    sender = UdpSender()
+                    try:
+                        results.append(await run_scenario(name, sender, seconds))
+                    finally:
+                        sender.close()
+            finally:
+                restore_normal_priority()
     return results
 
 
@@ -239,12 +258,14 @@ def markdown(results: list[dict], meta: dict) -> str:
         "`process` replanning in a `ProcessPoolExecutor`; `process_nice` the same with the "
         "worker at `os.nice(10)` (pool `initializer`), so the scheduler prefers the streaming "
         "process when the cores are busy; `process_nice_fifo` adds `raise_stream_priority()` "
-        "(SCHED_FIFO priority 10 for the event-loop thread, else niceness -5; column "
+        "(SCHED_FIFO priority 10 for the event-loop thread and, with `--sitl`, the MAVSDK "
+        "threads created after it; else niceness -5; column "
         "`priority` says what was obtained).",
         "",
         "Recommendation: run planning (GART/M-GART, smoothing, feasibility) in a "
-        "`ProcessPoolExecutor(max_workers=1, initializer=os.nice, initargs=(10,))` and call "
-        "`companion.link.setpoints.raise_stream_priority()` in the event-loop thread at start-up. "
+        "`ProcessPoolExecutor(max_workers=1, initializer=planning_worker_init)` and call "
+        "`raise_stream_priority()` in the event-loop thread at start-up, before "
+        "`VehicleLink.connect` (both in `companion.link.setpoints`). "
         "A thread holding the GIL delays the stream by up to the switch interval; an "
         "equal-priority worker process, or any other busy process on a 2-core machine, takes "
         "the core from the streaming process for a scheduler tick (4 ms) at a time.",

@@ -296,12 +296,10 @@ class CompanionDaemon:
 
     # ------------------------------------------------------------------ mission
     async def take_mission(self):
-        """The mission to fly: the file given (validated, then uploaded) or the vehicle's."""
+        """The mission to fly: the file given (validated here, uploaded after planning) or the
+        vehicle's own mission and fence."""
         if self.mission_path is not None:
-            plan = load_mission_file(self.mission_path)
-            await self.link.upload_plan(plan)
-            self.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
-            return plan
+            return load_mission_file(self.mission_path)
         plan = await self.link.download_plan()
         if not plan.items:
             raise MissionError("the vehicle has no mission: upload one (companion upload FILE, "
@@ -470,6 +468,9 @@ class CompanionDaemon:
         if tele.in_air:
             alt = -float(start[2])
         await self.plan_flight(plan, home, start, alt)
+        if self.mission_path is not None:          # planned: every item is reachable
+            await self.link.upload_plan(plan)
+            self.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
         self.record("header", settings=settings_to_dict(s), seed=s.seed, home_lla=home,
                     waypoints_ned_m=[w.pos_ned_m for w in self.local_mission.waypoints])
         self._start_background()

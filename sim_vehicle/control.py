@@ -63,8 +63,8 @@ without saturation (``tests/unit/sim_vehicle/test_sim_control.py``,
 Fast prediction
 ---------------
 :func:`simulate_closed_loop` predicts how the vehicle tracks a reference trajectory without
-stepping :class:`FlightController` and RK4: the closed loop (plant ZOH-discretised at the
-control rate, LQI, PID, feed-forward) is one linear system in the *reference heading frame*
+stepping :class:`FlightController` and RK4: the closed loop (plant, with its servo lag if any,
+ZOH-discretised at the control rate, LQI, PID, feed-forward) is one linear system in the *reference heading frame*
 (position error and PID integrator expressed in axes turned by the reference heading). Its
 time-invariant part is diagonalised once per design and every mode is run through a C-level
 first-order filter (``scipy.signal.lfilter``); the small rotation of those axes by the change
@@ -414,7 +414,7 @@ def wrap_pi(angle_rad: float) -> float:
 
 
 def _control_law(gains: LqiGains) -> np.ndarray:
-    """``delta = L @ [ref8, x14_err, z]``, (4, 30); ref8 as ``ff_map``'s input with psi_ref = 0."""
+    """``delta = L @ [ref8, x14_err, z]``, (4, 26); ref8 as ``ff_map``'s input with psi_ref = 0."""
     F = gains.ff_map
     Nx, Nd = F[:N_LQI_STATES], F[N_LQI_STATES:]
     G = Nd + gains.Kx @ Nx
@@ -435,7 +435,22 @@ class FlightController:
     -----
     Call :meth:`reset` with the current state when the controller takes over (arming, mode
     change), then :meth:`update` once per control period. The LQI is designed for
-    ``settings.control_dt_s``; :meth:`update` integrates with the ``dt_s`` it is given.
+    ``settings.control_dt_s``; :meth:`update` integrates with the ``dt_s`` it is given. The
+    design uses the paper's 14-state model; a profile's servo lag is not part of it (the
+    vehicle flies with it all the same, see the tests).
+
+    Attributes
+    ----------
+    delta : ndarray, shape (4,)
+        Last output, clipped to [-1, 1].
+    delta_unclipped : ndarray, shape (4,)
+        Last output before clipping (``|.| > 1`` where the rotor saturated).
+    saturated : bool
+        Whether the last output was clipped.
+    vel_cmd_ned_m_s : ndarray, shape (3,)
+        Last velocity command of the position loop (after its limits).
+    yaw_ref_rad : float
+        Heading reference the LQI tracks.
     """
 
     def __init__(self, model: HeliModel, settings: ControllerSettings | None = None) -> None:
@@ -451,6 +466,7 @@ class FlightController:
         self.yaw_ref_rad = 0.0
         self.saturated = False
         self.delta = np.zeros(N_INPUTS)
+        self.delta_unclipped = np.zeros(N_INPUTS)
         self.vel_cmd_ned_m_s = np.zeros(3)
         self._cmd_prev = [0.0, 0.0, 0.0]
 
@@ -461,6 +477,7 @@ class FlightController:
         self.yaw_ref_rad = float(x[IDX_PSI])
         self.saturated = False
         self.delta = np.zeros(N_INPUTS)
+        self.delta_unclipped = np.zeros(N_INPUTS)
         c, s = math.cos(self.yaw_ref_rad), math.sin(self.yaw_ref_rad)
         u, v, w = float(x[0]), float(x[1]), float(x[2])
         self._cmd_prev = [c * u - s * v, s * u + c * v, w]
@@ -663,6 +680,7 @@ class FlightController:
                     new = max(-cap, min(cap, new))
                 self.pos_integral_m[i] = new
         self.delta = np.array(delta)
+        self.delta_unclipped = np.array(raw)
         return self.delta
 
 

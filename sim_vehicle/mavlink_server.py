@@ -149,6 +149,7 @@ class MavlinkServer:
         self._completed_upload: dict[int, tuple[int, float]] = {}
         self._bad_logged = collections.Counter()
         self._refused_requests: set[int] = set()
+        self._after_ack: list[tuple[Any, Address | None]] = []
         self._tlog = open(tlog_path, "ab") if tlog_path else None
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 0)
@@ -474,6 +475,7 @@ class MavlinkServer:
 
     def _command(self, msg: Any, address: Address, command: int, params: list[float], frame: int | None) -> None:
         self.stats.commands += 1
+        self._after_ack = []
         handler = self._COMMANDS.get(command)
         if handler is None:
             name = mavlink.enums["MAV_CMD"].get(command)
@@ -490,6 +492,9 @@ class MavlinkServer:
             log.warning("command %s refused (%s): %s", name.name if name else command,
                         mavlink.enums["MAV_RESULT"][result].name, reason)
         self._ack(msg, address, command, result)
+        replies, self._after_ack = self._after_ack, []
+        for reply, to in replies:  # requested messages follow the ACK, as in ArduPilot
+            self._send(reply, to)
         if result != mavlink.MAV_RESULT_ACCEPTED and reason and result == mavlink.MAV_RESULT_FAILED:
             self._statustext(mavlink.MAV_SEVERITY_WARNING, reason)
 
@@ -609,7 +614,7 @@ class MavlinkServer:
         else:
             hz = self.stream_hz.get(name, 0.0)
             interval = int(1e6 / hz) if hz > 0 else -1
-        self._send(self.mav.message_interval_encode(int(p[0]), interval), address)
+        self._after_ack.append((self.mav.message_interval_encode(int(p[0]), interval), address))
         return mavlink.MAV_RESULT_ACCEPTED, ""
 
     def _cmd_request_message(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
@@ -621,15 +626,16 @@ class MavlinkServer:
                 self._refused_requests.add(int(p[0]))
                 log.info("REQUEST_MESSAGE %d: not available", int(p[0]))
             return mavlink.MAV_RESULT_UNSUPPORTED, ""
-        self._send_stream(name, None if name == "HOME_POSITION" else address)
+        build = getattr(self, f"_msg_{name.lower()}")
+        self._after_ack.append((build(), None if name == "HOME_POSITION" else address))
         return mavlink.MAV_RESULT_ACCEPTED, ""
 
     def _cmd_autopilot_capabilities(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
-        self._send(self._msg_autopilot_version(), address)
+        self._after_ack.append((self._msg_autopilot_version(), address))
         return mavlink.MAV_RESULT_ACCEPTED, ""
 
     def _cmd_get_home(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
-        self._send(self._msg_home_position(), address)
+        self._after_ack.append((self._msg_home_position(), address))
         return mavlink.MAV_RESULT_ACCEPTED, ""
 
     _COMMANDS: dict[int, Callable] = {

@@ -40,7 +40,8 @@ def register(subparsers) -> None:
                    help="vehicle K_max in 1/m: limits corners in the planner and bounds G2 (default 0.1 with g2)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--budget", type=float, default=None,
-                   help="planning time budget in s (default: 1.0 for gart, 0.5 for mgart)")
+                   help="planning time budget in s (default: 1.0 for gart; 3.0 for mgart, which stops "
+                   "as soon as it has k paths)")
     p.add_argument("--step", type=float, default=None, help="steering step in m (default 12)")
     p.add_argument("--json", dest="json_out", help="write the result as JSON to this file")
     p.add_argument("--plot", help="draw tree, obstacles and paths to this PNG file")
@@ -112,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
     if args.planner == "gart":
         results = [gart(world, start, goal, rng=rng, max_time_s=args.budget, settings=gs)]
     else:
-        results = mgart(world, start, goal, args.k, rng=rng, max_time_s=args.budget, settings=ms)
+        budget = args.budget if args.budget is not None else 3.0
+        results = mgart(world, start, goal, args.k, rng=rng, max_time_s=budget, settings=ms)
     smoothed = []
     if args.smooth != "none":
         smoothed = [smooth_path(r.path, args.smooth, kappa, world) if r.solved else None for r in results]

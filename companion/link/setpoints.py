@@ -36,8 +36,11 @@ def raise_stream_priority(fifo_priority: int = 10, nice_increment: int = -5) -> 
 
     Tries ``SCHED_FIFO`` at ``fifo_priority`` (Linux, needs root or CAP_SYS_NICE), else lowers
     the process niceness by ``nice_increment``; logs and carries on if neither is allowed.
-    Safe for the stream (about 0.1 ms of work per 20 ms period); do not call it from a thread
-    that runs long computations.
+    Call it in the event-loop thread *before* ``VehicleLink.connect``: threads created later
+    (MAVSDK's I/O and callback threads, executor threads) inherit the policy, so a callback
+    holding the GIL is not preempted by other processes while the stream waits for it. Safe
+    for the stream (about 0.1 ms of work per 20 ms period); never call it from a thread that
+    runs long computations, and start planning workers with ``planning_worker_init``.
 
     Returns
     -------
@@ -60,6 +63,21 @@ def raise_stream_priority(fifo_priority: int = 10, nice_increment: int = -5) -> 
         log.warning("cannot raise the setpoint stream's scheduling priority; jitter will "
                     "follow the machine's load")
         return "normal"
+
+
+def planning_worker_init(niceness: int = 10) -> None:
+    """``ProcessPoolExecutor`` initializer for planning workers: normal policy, then niced.
+
+    A forked worker inherits SCHED_FIFO from a parent that called ``raise_stream_priority``;
+    planning must never run at real-time priority.
+    """
+    import os
+
+    restore_normal_priority()
+    try:
+        os.nice(int(niceness))
+    except OSError:
+        pass
 
 
 def restore_normal_priority() -> None:

@@ -101,22 +101,31 @@ class Conflict:
 class Alternative:
     """One pre-planned M-GART path to the goal, a switching target.
 
+    Any point of the path is a possible entry node: the path is sampled every ``spacing_m``
+    (the *entries*); a switch flies to an entry, then on along the path's own nodes.
+
     Attributes
     ----------
     path_id : str
     path_ned_m : ndarray, shape (M, d)
-    remaining_m : ndarray, shape (M,)
-        Length of the path from each node to its end (the remaining cost of an entry node).
+        The path's nodes (as planned: its corners fit the G2 smoothing).
+    entry_pos_ned_m : ndarray, shape (E, d)
+        Entry points along the path.
+    entry_next : ndarray of int, shape (E,)
+        Index of the path node that follows each entry.
+    entry_remaining_m : ndarray, shape (E,)
+        Length of the path from each entry to its end (the entry's remaining cost).
     """
 
     path_id: str
     path_ned_m: np.ndarray
-    remaining_m: np.ndarray
+    entry_pos_ned_m: np.ndarray
+    entry_next: np.ndarray
+    entry_remaining_m: np.ndarray
 
     @classmethod
     def from_path(cls, path_id: str, path_ned_m, spacing_m: float = 2.0) -> "Alternative":
-        """Build from a polyline (M, d), M >= 2, resampled so that nodes are at most
-        ``spacing_m`` apart (any point of a pre-planned path is a possible entry node)."""
+        """Build from a polyline (M, d), M >= 2, with entries at most ``spacing_m`` apart."""
         path = np.asarray(path_ned_m, dtype=float)
         if path.ndim != 2 or path.shape[0] < 2 or path.shape[1] not in (2, 3) \
                 or not np.all(np.isfinite(path)):
@@ -124,15 +133,20 @@ class Alternative:
                                      f"array with M >= 2, got shape {path.shape}")
         if not (math.isfinite(spacing_m) and spacing_m > 0):
             raise ThreatManagerError(f"spacing_m: must be a finite number > 0, got {spacing_m!r}")
-        dense = [path[:1]]
-        for a, b in zip(path[:-1], path[1:]):
-            n = max(1, int(math.ceil(float(np.linalg.norm(b - a)) / spacing_m)))
-            f = np.arange(1, n + 1)[:, None] / n
-            dense.append(a[None, :] + f * (b - a)[None, :])
-        path = np.vstack(dense)
         seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
-        remaining = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])
-        return cls(str(path_id), path, remaining)
+        tail = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])     # from node i to the end
+        pos, nxt, rem = [], [], []
+        for i, (a, b) in enumerate(zip(path[:-1], path[1:])):
+            n = max(1, int(math.ceil(seg[i] / spacing_m)))
+            f = np.arange(0, n)[:, None] / n
+            pos.append(a[None, :] + f * (b - a)[None, :])
+            nxt.append(np.full(n, i + 1))
+            rem.append(tail[i + 1] + (1.0 - f[:, 0]) * seg[i])
+        return cls(str(path_id), path, np.vstack(pos), np.concatenate(nxt), np.concatenate(rem))
+
+    def nodes_from(self, entry: int) -> np.ndarray:
+        """The polyline (K, d) flown after switching at ``entry``: the entry, then the path's nodes."""
+        return np.vstack([self.entry_pos_ned_m[entry], self.path_ned_m[self.entry_next[entry]:]])
 
 
 @dataclass(frozen=True)
@@ -296,10 +310,10 @@ def lead_length_m(speed_m_s: float, turn_rad: float, limits: TrajectoryLimits,
                   kappa_max_1_m: float) -> float:
     """Straight lead along the current velocity before the first corner of a join (m).
 
-    Long enough to keep the current speed for half the jerk window (the profile's start), slow
-    down to the speed the corner allows (K_max at the lateral acceleration limit) outside the
-    window over which the profile spreads a corner's speed limit (``speed_m_s * window``), and
-    fit the corner's spirals.
+    Long enough to keep the current speed for half the jerk window (the profile's start) and fit
+    the corner's spirals (eq. 19); when the current speed is above the speed the corner allows
+    (K_max at the lateral acceleration limit), also to slow down to it outside the window over
+    which the profile spreads a corner's speed limit (``speed_m_s * window``).
     """
     if speed_m_s < HOVER_SPEED_M_S:
         return 0.0
@@ -308,8 +322,10 @@ def lead_length_m(speed_m_s: float, turn_rad: float, limits: TrajectoryLimits,
     turn = min(abs(turn_rad), 0.95 * math.pi)
     if turn < 1e-3:
         return speed_m_s * window_s / 2.0 + 0.5
-    slow_m = max(speed_m_s**2 - v_turn**2, 0.0) / (2.0 * limits.accel_m_s2)
     corner_m = float(spiral_distance_m(turn, kappa_max_1_m))
+    if speed_m_s <= v_turn:
+        return speed_m_s * window_s / 2.0 + corner_m + 0.5
+    slow_m = (speed_m_s**2 - v_turn**2) / (2.0 * limits.accel_m_s2)
     return speed_m_s * window_s / 2.0 + limits.speed_m_s * window_s + slow_m + corner_m + 0.5
 
 
@@ -329,23 +345,30 @@ def _clean_nodes(nodes: np.ndarray, tol_m: float = 0.05) -> np.ndarray:
 
 
 def join_trajectory(ref: ReferenceState, nodes, *, world: World | None, limits: TrajectoryLimits,
-                    kappa_max_1_m: float, lift_down_m: float | None = None):
+                    kappa_max_1_m: float, lift_down_m: float | None = None, lead_m: float | None = None):
     """A trajectory from the reference state through ``nodes`` without a setpoint jump.
 
     The polyline is [current position, lead point, nodes...]: the lead leaves along the current
-    velocity (``lead_length_m``), the corners are G2-smoothed (with collision repair when
-    ``world`` is given) and the profile starts at the current speed and ends at rest.
+    velocity, the corners are G2-smoothed (with collision repair when ``world`` is given) and
+    the profile starts at the current speed (checked) and ends at rest at the last node.
 
     Parameters
     ----------
     ref : ReferenceState
         pos and vel of dimension d (the planning dimension).
     nodes : array_like, shape (M, d)
-        Where to go (the first node is the entry node; the last the goal).
+        Where to go (the first is the entry node; the last the goal).
     world : World or None
-        Static obstacles: the lead and the first leg must be free, corners are repaired.
+        Static obstacles: every segment must be free; corners are repaired.
+    limits : TrajectoryLimits
+    kappa_max_1_m : float
     lift_down_m : float, optional
         Lift a 2D result to NED at this down coordinate.
+    lead_m : float, optional
+        Fixed lead length (the nodes are then used as given, e.g. a path planned from the
+        lead point; the caller has checked the lead segment). Default: ``lead_length_m`` for the turn to the first node, entry nodes too
+        close to the lead point skipped (``entry_index``), one retry with a 1.5 times longer lead
+        if the profile cannot start at the current speed.
 
     Returns
     -------
@@ -359,15 +382,17 @@ def join_trajectory(ref: ReferenceState, nodes, *, world: World | None, limits: 
         return _timed_join(np.vstack([p0[None, :], nodes]), 0.0, world=world, limits=limits,
                            kappa_max_1_m=kappa_max_1_m, lift_down_m=lift_down_m)
     u = v0 / np.linalg.norm(v0)
-    lead = lead_length_m(speed, _turn_rad(u, nodes[0] - p0), limits, kappa_max_1_m)
+    fixed = lead_m is not None
+    lead = float(lead_m) if fixed else lead_length_m(speed, _turn_rad(u, nodes[0] - p0), limits, kappa_max_1_m)
     reason = "no join"
-    for _ in range(2):
+    for _ in range(1 if fixed else 2):
         p_lead = p0 + u * lead
-        k = entry_index(p_lead, u, nodes, kappa_max_1_m)
+        k = 0 if fixed else entry_index(p_lead, u, nodes, kappa_max_1_m)
         if k is None:
             return None, "no node far enough beyond the stopping distance"
         traj, poly = _timed_join(np.vstack([p0, p_lead, nodes[k:]]), speed, world=world,
-                                 limits=limits, kappa_max_1_m=kappa_max_1_m, lift_down_m=lift_down_m)
+                                 limits=limits, kappa_max_1_m=kappa_max_1_m, lift_down_m=lift_down_m,
+                                 first_checked=1 if fixed else 0)
         if traj is None:
             return traj, poly
         start_speed = float(np.linalg.norm(traj.sample(np.array([0.0]))[1][0]))
@@ -406,12 +431,13 @@ def entry_index(p_lead: np.ndarray, u: np.ndarray, nodes: np.ndarray, kappa_max_
     return int(ok[0]) if ok.size else None
 
 
-def _timed_join(points: np.ndarray, speed_m_s: float, *, world, limits, kappa_max_1_m, lift_down_m):
+def _timed_join(points: np.ndarray, speed_m_s: float, *, world, limits, kappa_max_1_m, lift_down_m,
+                first_checked: int = 0):
     poly = _clean_nodes(points)
     if poly.shape[0] < 2:
         return None, "nothing to fly"
     if world is not None:
-        for a, b in zip(poly[:-1], poly[1:]):
+        for a, b in zip(poly[first_checked:-1], poly[first_checked + 1:]):
             if not world.segment_free(a, b):
                 return None, "the join crosses a static obstacle"
     curve = smooth_g2(poly, kappa_max_1_m, world=world)
@@ -751,11 +777,12 @@ class ThreatManager:
         s = self.settings
         speed = float(np.linalg.norm(ref.vel_ned_m_s))
         start = ref.pos_ned_m
+        lead = None
         if speed >= HOVER_SPEED_M_S:
             u = ref.vel_ned_m_s / speed
-            turn = _turn_rad(u, self.goal_ned_m - start)
-            start = start + u * lead_length_m(min(speed, self.limits.speed_m_s), turn, self.limits,
-                                              self.kappa_max_1_m)
+            turn = max(_turn_rad(u, self.goal_ned_m - start), s.replan_turn_rad)
+            lead = lead_length_m(min(speed, self.limits.speed_m_s), turn, self.limits, self.kappa_max_1_m)
+            start = start + u * lead
             if not self.world.in_bounds(start) or not self.world.segment_free(ref.pos_ned_m, start):
                 log.info("replan: the stopping lead leaves the free space")
                 return None
@@ -770,7 +797,8 @@ class ThreatManager:
             return None
         nodes = result.path[1:] if speed >= HOVER_SPEED_M_S else result.path
         traj, poly = join_trajectory(ref, nodes, world=world, limits=self.limits,
-                                     kappa_max_1_m=self.kappa_max_1_m, lift_down_m=self._lift_down_m(ref.t_s))
+                                     kappa_max_1_m=self.kappa_max_1_m, lift_down_m=self._lift_down_m(ref.t_s),
+                                     lead_m=lead)
         if traj is None:
             log.info("replan: %s", poly)
             return None
@@ -785,25 +813,34 @@ class ThreatManager:
     def switch_candidates(self, ref: ReferenceState) -> list[tuple[float, Alternative, int]]:
         """Entry nodes within the switching range, cheapest remaining cost first.
 
+        Entries of one alternative closer than 2.5 entry spacings to a cheaper one are left out
+        (they would give nearly the same trajectory); the order is round robin over the
+        alternatives: the cheapest entry of each (cheapest first), then the second ...
+
         Returns
         -------
-        list of (cost_m, alternative, node index)
-            cost = distance to the node + the alternative's length from it to the goal.
+        list of (cost_m, alternative, entry index)
+            cost = distance to the entry + the alternative's length from it to the goal.
         """
         out = []
         for alt in self._alternatives:
-            dist = np.linalg.norm(alt.path_ned_m - ref.pos_ned_m[None, :], axis=1)
-            for i in np.flatnonzero(dist <= self.settings.switch_range_m):
-                if i == alt.path_ned_m.shape[0] - 1 and dist[i] < 1e-6:
-                    continue
-                out.append((float(dist[i] + alt.remaining_m[i]), alt, int(i)))
+            dist = np.linalg.norm(alt.entry_pos_ned_m - ref.pos_ned_m[None, :], axis=1)
+            for e in np.flatnonzero(dist <= self.settings.switch_range_m):
+                out.append((float(dist[e] + alt.entry_remaining_m[e]), alt, int(e)))
         out.sort(key=lambda c: (c[0], -c[2]))
-        picked: list[tuple[float, Alternative, int]] = []
+        per_alt: dict[str, list[tuple[float, Alternative, int]]] = {}
         spacing = 2.5 * self.settings.entry_spacing_m
         for cand in out:
-            if all(p[1] is not cand[1] or np.linalg.norm(p[1].path_ned_m[p[2]] - cand[1].path_ned_m[cand[2]])
-                   >= spacing for p in picked):
-                picked.append(cand)
+            mine = per_alt.setdefault(cand[1].path_id, [])
+            pos = cand[1].entry_pos_ned_m[cand[2]]
+            if all(np.linalg.norm(p[1].entry_pos_ned_m[p[2]] - pos) >= spacing for p in mine):
+                mine.append(cand)
+        # round robin over the alternatives (cheapest first in each round): a threat that blocks
+        # one alternative usually blocks all its entries, so diversity comes first
+        rounds = max((len(v) for v in per_alt.values()), default=0)
+        picked = []
+        for r in range(rounds):
+            picked += sorted((v[r] for v in per_alt.values() if len(v) > r), key=lambda c: c[0])
         return picked
 
     def _switch(self, ref: ReferenceState, threats, what: str, conflict) -> Decision | None:
@@ -814,7 +851,7 @@ class ThreatManager:
             if tried >= self.settings.max_candidates:
                 break
             tried += 1
-            traj, poly = join_trajectory(ref, alt.path_ned_m[i:], world=self.world, limits=self.limits,
+            traj, poly = join_trajectory(ref, alt.nodes_from(i), world=self.world, limits=self.limits,
                                          kappa_max_1_m=self.kappa_max_1_m, lift_down_m=lift)
             if traj is None:
                 continue

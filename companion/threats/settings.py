@@ -128,6 +128,9 @@ class ThreatSettings:
     sweep_horizon_s : float
         For a replan, a moving threat is replaced by the volume it sweeps over this time (s).
         Default 12.
+    replan_turn_rad : float
+        The replan's lead (straight along the current velocity, before GART's path starts) is
+        long enough for a first corner of at least this turn (rad). Default 1.0 (57 deg).
     gart_budget_s : float
         Wall-clock budget of the replanning GART after its first solution (s). Default 0.08.
     gart_first_budget_s : float
@@ -153,6 +156,7 @@ class ThreatSettings:
     inflation_m: float = 2.0
     sensor_range_m: float = 1000.0
     sweep_horizon_s: float = 12.0
+    replan_turn_rad: float = 1.0
     gart_budget_s: float = 0.08
     gart_first_budget_s: float = 0.15
     entry_spacing_m: float = 2.0
@@ -168,7 +172,10 @@ class ThreatSettings:
                         gart_budget_s=self.gart_budget_s, entry_spacing_m=self.entry_spacing_m,
                         gart_first_budget_s=self.gart_first_budget_s,
                         hold_decel_m_s2=self.hold_decel_m_s2, estimate_gain=self.estimate_gain)
-        _check_non_negative("threats", replan_margin_s=self.replan_margin_s, inflation_m=self.inflation_m)
+        _check_non_negative("threats", replan_margin_s=self.replan_margin_s, inflation_m=self.inflation_m,
+                            replan_turn_rad=self.replan_turn_rad)
+        if self.replan_turn_rad >= math.pi:
+            raise ConfigError(f"threats.replan_turn_rad: must be < pi, got {self.replan_turn_rad!r}")
         if self.estimate_gain > 1:
             raise ConfigError(f"threats.estimate_gain: must be in (0, 1], got {self.estimate_gain!r}")
         if isinstance(self.max_candidates, bool) or not isinstance(self.max_candidates, int) \

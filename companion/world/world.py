@@ -30,6 +30,7 @@ from companion.world.obstacles import Box, Cylinder, Disc, Obstacle, Prism, Sphe
 __all__ = ["World"]
 
 _BATCH_ROWS = 4096
+_KDTREE_FROM = 64  # balls: above this count clearance_m uses a KD-tree of the centres
 
 
 def _bounds_vector(value, name: str) -> tuple:
@@ -394,6 +395,31 @@ class World:
         return best
 
     # ------------------------------------------------------------------ vectorised queries
+    def _ball_clearance_kdtree(self, pts: np.ndarray, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """Exact min over balls of ``|p - c| - r`` using a KD-tree of the centres (memoised).
+
+        The k nearest centres give a candidate minimum; a ball further than the k-th centre can
+        only beat it when ``|p - c_k| - r_max`` is below it, and those points fall back to a full
+        scan, so the result is exact.
+        """
+        tree = self._memo.get("kdtree")
+        if tree is None:
+            from scipy.spatial import cKDTree
+
+            tree = cKDTree(centers)
+            self._memo["kdtree"] = tree
+        k = min(16, len(radii))
+        dist, idx = tree.query(pts, k=k)
+        dist = dist.reshape(len(pts), k)
+        idx = idx.reshape(len(pts), k)
+        best = (dist - radii[idx]).min(axis=1)
+        unsure = dist[:, -1] - radii.max() < best
+        if k < len(radii) and np.any(unsure):
+            sub = pts[unsure]
+            full = np.linalg.norm(sub[:, None, :] - centers[None, :, :], axis=2) - radii[None, :]
+            best[unsure] = full.min(axis=1)
+        return best
+
     def _points(self, points, name: str = "points") -> np.ndarray:
         arr = np.asarray(points, dtype=float)
         if arr.ndim == 1 and arr.shape[0] == self._dim:
@@ -423,6 +449,21 @@ class World:
         out = np.full(arr.shape[0], np.inf)
         if not self._obstacles:
             return out
+        balls = np.asarray(self._balls, dtype=float).reshape(-1, self._dim + 2)
+        centers, radii = balls[:, : self._dim], balls[:, -1]
+        others = list(self._other_ids.values())
+        for start in range(0, arr.shape[0], _BATCH_ROWS):
+            chunk = arr[start:start + _BATCH_ROWS]
+            best = np.full(chunk.shape[0], np.inf)
+            if len(radii) > _KDTREE_FROM:
+                best = self._ball_clearance_kdtree(chunk, centers, radii)
+            elif len(radii):
+                dist = np.linalg.norm(chunk[:, None, :] - centers[None, :, :], axis=2) - radii[None, :]
+                best = np.minimum(best, dist.min(axis=1))
+            for ob in others:
+                best = np.minimum(best, ob.sdf_batch(chunk) - self._margin)
+            out[start:start + _BATCH_ROWS] = best
+        return out
         balls = np.asarray(self._balls, dtype=float).reshape(-1, self._dim + 2)
         centers, radii = balls[:, : self._dim], balls[:, -1]
         others = list(self._other_ids.values())

@@ -26,18 +26,20 @@ SPEEDUP = 5.0
 
 
 def five_items():
+    """The 5 items of ``tests/data/five_items.waypoints`` (QGC WPL 110) as MAVSDK raw items."""
     from mavsdk.plugins.mission_raw import MissionItem
 
-    # seq 0 is home (ArduPilot convention), then takeoff, two waypoints, RTL
-    rows = [
-        (0, 0, 16, 1, 0.0, 0.0, 0.0, 0.0, 473977420, 85455940, 488.0),
-        (1, 3, 22, 0, 0.0, 0.0, 0.0, 0.0, 0, 0, 10.0),
-        (2, 3, 16, 0, 0.0, 2.0, 0.0, 0.0, 473978320, 85455940, 10.0),
-        (3, 3, 16, 0, 1.5, 2.0, 0.0, 0.0, 473978320, 85457270, 12.5),
-        (4, 3, 20, 0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0.0),
-    ]
-    return [MissionItem(seq, frame, cmd, cur, 1, p1, p2, p3, p4, x, y, z, 0)
-            for seq, frame, cmd, cur, p1, p2, p3, p4, x, y, z in rows]
+    lines = (DATA / "five_items.waypoints").read_text().splitlines()
+    assert lines[0].startswith("QGC WPL 110")
+    items = []
+    for line in lines[1:]:
+        c = line.split("\t")
+        seq, current, frame, command = (int(v) for v in c[:4])
+        p1, p2, p3, p4 = (float(v) for v in c[4:8])
+        x, y, z = round(float(c[8]) * 1e7), round(float(c[9]) * 1e7), float(c[10])
+        items.append(MissionItem(seq, frame, command, current, int(c[11]), p1, p2, p3, p4, x, y, z, 0))
+    assert len(items) == 5
+    return items
 
 
 def fields(item) -> tuple:

@@ -213,3 +213,59 @@ def test_guided_global_int_velocity_and_yaw_setpoints():
                            lambda m: abs(m.vx) < 0.05 and abs(m.vy) < 0.05 and m.y > moving.y + 1.0)
         assert stopped is not None and abs(stopped.z + 12.0) < 0.5
         assert "GUID_TIMEOUT" in sim.log_text()
+
+
+def test_requests_streams_timesync_and_wall_clock_heartbeats():
+    M = mavlink
+    with start_sim_vehicle(speedup=5.0) as sim, MavlinkPeer(sim.port, sim.sysid) as gcs:
+        # AUTOPILOT_VERSION on request, with the capabilities MAVSDK and QGC need
+        for command, params in ((M.MAV_CMD_REQUEST_MESSAGE, (M.MAVLINK_MSG_ID_AUTOPILOT_VERSION,)),
+                                (M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, (1,))):
+            gcs.last.pop("AUTOPILOT_VERSION", None)
+            assert gcs.command(command, *params).result == M.MAV_RESULT_ACCEPTED
+            version = gcs.last.get("AUTOPILOT_VERSION") or gcs.wait("AUTOPILOT_VERSION", 3.0)
+            assert version is not None
+            for bit in (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT, M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT,
+                        M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED, M.MAV_PROTOCOL_CAPABILITY_MAVLINK2,
+                        M.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE, M.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY):
+                assert version.capabilities & bit
+        # HOME_POSITION on request (both ways)
+        assert gcs.command(M.MAV_CMD_GET_HOME_POSITION).result == M.MAV_RESULT_ACCEPTED
+        home = gcs.last.get("HOME_POSITION") or gcs.wait("HOME_POSITION", 3.0)
+        assert (home.latitude, home.longitude, home.altitude) == (473977420, 85455940, 488000)
+        gcs.last.pop("HOME_POSITION")
+        assert gcs.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION).result == M.MAV_RESULT_ACCEPTED
+        assert gcs.last.get("HOME_POSITION") or gcs.wait("HOME_POSITION", 3.0)
+        assert gcs.command(M.MAV_CMD_REQUEST_MESSAGE, 12345).result == M.MAV_RESULT_UNSUPPORTED
+        # TIMESYNC answered
+        gcs.send(gcs.mav.timesync_encode(0, 123456789))
+        sync = gcs.wait("TIMESYNC", 3.0, lambda m: m.ts1 == 123456789)
+        assert sync is not None and sync.tc1 > 0
+        # SET_MESSAGE_INTERVAL: ATTITUDE at 5 Hz of simulated time, then off
+        assert gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE, 200000).result == 0
+        first = gcs.wait("ATTITUDE", 3.0)
+        stamps = [first.time_boot_ms]
+        while stamps[-1] - stamps[0] < 4000:
+            stamps.append(gcs.wait("ATTITUDE", 3.0).time_boot_ms)
+        assert 19 <= len(stamps) <= 23  # 5 Hz over 4 s, plus the end points
+        assert gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE, -1).result == 0
+        gcs.wait("SYSTEM_TIME", 2.0)
+        assert gcs.wait("ATTITUDE", 2.0) is None
+        # heartbeats at 1 Hz of wall-clock time: far fewer than one per simulated second at 5x
+        start = gcs.wait("SYSTEM_TIME", 3.0)
+        beats = 0
+        while True:
+            msg = gcs.wait("HEARTBEAT", 3.0)
+            beats += 1
+            now = gcs.last.get("SYSTEM_TIME", start)
+            if now.time_boot_ms - start.time_boot_ms >= 15000:
+                break
+        sim_s = (now.time_boot_ms - start.time_boot_ms) / 1000.0
+        wall_s = (now.time_unix_usec - start.time_unix_usec) / 1e6
+        assert beats <= 0.5 * sim_s and abs(beats - wall_s) <= 2.0
+        # streamed without being asked, SERVO_OUTPUT_RAW in 1000..2000 us
+        assert gcs.wait("GLOBAL_POSITION_INT", 3.0) is not None
+        servo = gcs.wait("SERVO_OUTPUT_RAW", 3.0)
+        assert all(1000 <= getattr(servo, f"servo{i}_raw") <= 2000 for i in range(1, 5))
+        for kind in ("SYS_STATUS", "LOCAL_POSITION_NED", "VFR_HUD", "EXTENDED_SYS_STATE", "MISSION_CURRENT"):
+            assert gcs.wait(kind, 3.0) is not None, kind

@@ -203,3 +203,17 @@ def test_hausdorff_of_offset_lines():
     a = np.array([[0.0, 0.0], [10.0, 0.0]])
     assert hausdorff_m(a, a + [0.0, 3.0]) == pytest.approx(3.0)
     assert hausdorff_m(a, a) == 0.0
+
+
+@pytest.mark.parametrize("seed", [0, 4])
+def test_g2_smoother_honours_kappa_max_on_paths_planned_with_it(seed):
+    smoothing = pytest.importorskip("companion.smoothing")
+    world = World([Disc(c, r) for c, r in [((30, 30), 8), ((60, 55), 10), ((35, 75), 7), ((75, 20), 6)]],
+                  (0, 0), (100, 100), margin_m=1.0)
+    settings = GartSettings(kappa_max_1_m=0.15)
+    r = gart(world, (2, 2), (98, 98), rng=np.random.default_rng(seed), max_iterations=800, settings=settings)
+    assert r.solved
+    curve = smoothing.smooth_g2(r.path, 0.15, world=world)
+    assert curve.kappa_ok and curve.max_curvature_1_m <= 0.15 * 1.001
+    s = np.linspace(0, curve.length_m, 2000)
+    assert world.is_free(curve.evaluate(s)).all()

@@ -51,7 +51,7 @@ def fly(controller, x, setpoint_at, t_end_s, wind=None):
     saturated = False
     for k in range(n):
         delta = controller.update(x, setpoint_at(k), CONTROL_DT)
-        max_raw = max(max_raw, float(np.max(np.abs(controller._law @ controller._vec))))
+        max_raw = max(max_raw, float(np.max(np.abs(controller.delta_unclipped))))
         saturated |= controller.saturated
         for _ in range(4):
             x = D.step_rk4(controller.model, x, delta, PHYSICS_DT, wind)
@@ -360,9 +360,10 @@ def test_wrap_pi_keeps_the_direction(angle):
 
 
 def test_fast_prediction_models_the_servo_lag():
-    model = MODEL.replace(servo_tau_s=0.05)
+    """With a (long) servo lag the prediction that models it is the closer one."""
+    model = MODEL.replace(servo_tau_s=0.1)
     t = np.arange(0.0, 30.0 + CONTROL_DT / 2, CONTROL_DT)
-    pos, vel, acc, yaw = circle_reference(t, radius_m=20.0, speed_m_s=6.0)
+    pos, vel, acc, yaw = circle_reference(t, radius_m=20.0, speed_m_s=6.0, heading="fixed")
     fc = FlightController(model)
     x = D.hover_state(model, pos[0], yaw[0])
     fc.reset(x)
@@ -371,5 +372,5 @@ def test_fast_prediction_models_the_servo_lag():
     ideal = simulate_closed_loop(MODEL, t, pos, vel, acc, yaw)
     gap_lagged = np.max(np.linalg.norm(lagged.pos_ned_m - states[:, 14:17], axis=1))
     gap_ideal = np.max(np.linalg.norm(ideal.pos_ned_m - states[:, 14:17], axis=1))
-    assert gap_lagged < 0.03
+    assert gap_lagged < 0.01
     assert gap_lagged < gap_ideal

@@ -1,0 +1,115 @@
+"""Helpers for companion flight tests: a telemetry listener and the companion process.
+
+``TrackListener`` is an independent pymavlink listener on its own UDP port (give its address to
+``sim-vehicle --out``): the flown track and the armed state come from the vehicle itself, not
+from the companion under test.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from support import REPO_ROOT, free_udp_port
+
+MAV_MODE_FLAG_SAFETY_ARMED = 128
+
+
+class TrackListener:
+    """Collects LOCAL_POSITION_NED and HEARTBEAT from the vehicle on a UDP port of its own."""
+
+    def __init__(self) -> None:
+        from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+        self.port = free_udp_port()
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind(("127.0.0.1", self.port))
+        self._sock.settimeout(0.2)
+        self._mav = mavlink2.MAVLink(None)
+        self._mav.robust_parsing = True
+        self.track: list[tuple[float, float, float, float]] = []   # (time_boot_s, n, e, d)
+        self.armed: bool | None = None
+        self.mode: int | None = None
+        self.reached: list[int] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    @property
+    def address(self) -> str:
+        return f"127.0.0.1:{self.port}"
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self._sock.recv(65535)
+            except (socket.timeout, OSError):
+                continue
+            for msg in self._mav.parse_buffer(data) or []:
+                kind = msg.get_type()
+                if kind == "LOCAL_POSITION_NED":
+                    self.track.append((msg.time_boot_ms / 1000.0, msg.x, msg.y, msg.z))
+                elif kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
+                    self.armed = bool(msg.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
+                    self.mode = msg.custom_mode
+                elif kind == "MISSION_ITEM_REACHED":
+                    self.reached.append(msg.seq)
+
+    def positions(self) -> np.ndarray:
+        """The track so far as (K, 3) NED positions."""
+        return np.array([p[1:] for p in self.track], dtype=float).reshape(-1, 3)
+
+    def __enter__(self) -> "TrackListener":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self._sock.close()
+
+
+def companion_command(*args: str) -> list[str]:
+    return [sys.executable, "-m", "companion.cli", *args]
+
+
+def run_companion(*args: str, timeout_s: float = 240.0) -> subprocess.CompletedProcess:
+    """Run ``companion ARGS`` to completion (stdout, stderr captured as text)."""
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
+    return subprocess.run(companion_command(*args), cwd=str(REPO_ROOT), capture_output=True,
+                          text=True, timeout=timeout_s, env=env)
+
+
+@contextlib.contextmanager
+def companion_process(*args: str, log_path: Path) -> Iterator[subprocess.Popen]:
+    """Start ``companion ARGS`` in the background (log to ``log_path``); stopped on exit."""
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
+    with open(log_path, "wb") as log:
+        proc = subprocess.Popen(companion_command(*args), cwd=str(REPO_ROOT), stdout=log,
+                                stderr=subprocess.STDOUT, env=env)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def wait_until(predicate, timeout_s: float, what: str, poll_s: float = 0.1) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(poll_s)
