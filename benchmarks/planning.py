@@ -159,6 +159,8 @@ def run_ompl(problem: OmplProblem, name: str, budgets: tuple) -> dict:
 # ---------------------------------------------------------------------- world queries
 def world_query_costs(quick: bool) -> list[dict]:
     """CPU microseconds per query with 30 and 1000 obstacles (same covered fraction), 2D and 3D."""
+    import scipy.spatial  # noqa: F401  (imported before timing: clearance_m uses it lazily)
+
     from companion.world import World
 
     rows = []

@@ -31,7 +31,7 @@ import math
 import sys
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +43,11 @@ from companion.link.setpoints import Setpoint, SetpointStreamer, hold_position
 from companion.link.vehicle import VehicleLink
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
+from companion.geo import LocalFrame
 from companion.record import FlightRecorder
+from companion.threats.bus import ThreatBus, ThreatUpdate, rejected_event
+from companion.threats.manager import Decision, ThreatManager
+from companion.threats.model import ThreatTable
 from companion.world import world_to_dict
 
 log = logging.getLogger(__name__)
@@ -131,6 +135,213 @@ class ActiveReference:
         return t_s >= self.t_end_s
 
 
+class ThreatReactor:
+    """The daemon's side of threat management (DESIGN sections 6 and 7).
+
+    zenoh samples arrive on the event loop (``ThreatBus.subscribe(loop=...)``); every PUT or
+    DELETE updates the ``ThreatTable`` and asks the ``ThreatManager`` (in a worker thread, one
+    decision at a time; updates that arrive meanwhile are folded into the next decision, the
+    newest state always wins) whether the remaining reference conflicts. A decision's trajectory
+    becomes the active reference from the manager's start time, so the setpoint does not jump;
+    its latency is measured from the threat's receipt on the zenoh thread to the first setpoint
+    of the new trajectory handed to the vehicle link. M-GART alternatives are refreshed in the
+    background at every leg start and after every decision.
+    """
+
+    def __init__(self, daemon: "CompanionDaemon"):
+        self.daemon = daemon
+        s = daemon.settings
+        self.bus = ThreatBus.from_settings(s.zenoh, clock=daemon.clock.now_s)
+        self.table = ThreatTable()
+        self.manager: ThreatManager | None = None
+        self.leg: LegPlan | None = None
+        self._busy = False
+        self._pending_receipt: float | None = None
+        self._alt_busy = False
+        self._alt_dirty = False
+        self.latencies_ms: dict[str, list[float]] = {}
+
+    async def start(self, home_lla) -> None:
+        self.table.set_home(LocalFrame(*home_lla))
+        self.bus.open()
+        self.bus.subscribe(self.on_update, loop=asyncio.get_running_loop())
+        self.bus.serve_threats(lambda: self.table.snapshot(self.daemon.clock.now_s()))
+
+    async def stop(self) -> None:
+        self.bus.close()
+
+    def publish_status(self, status: dict) -> None:
+        self.table.expire(self.daemon.clock.now_s())
+        status["threats"] = len(self.table)
+        self.bus.publish_status(status)
+
+    # ------------------------------------------------------------------ threats in
+    def on_update(self, update: ThreatUpdate) -> None:
+        """One zenoh sample (on the loop): store it, then decide."""
+        d = self.daemon
+        if update.action == "rejected":
+            self.reject(rejected_event(update))
+            return
+        if update.action == "delete":
+            known = self.table.delete(update.threat_id)
+            d.record("threat", id=update.threat_id, removed=True, known=known, t_s=update.received_t_s)
+            log.info("threat %s removed%s", update.threat_id, "" if known else " (was not known)")
+        else:
+            try:
+                self.table.put(update.threat)
+            except CompanionError as exc:           # e.g. a global threat before home
+                self.reject({"event": "rejected", "threat_id": update.threat_id,
+                             "field": getattr(exc, "field", "payload"), "reason": str(exc)})
+                return
+            th = self.table.get(update.threat_id)
+            d.record("threat", id=th.id, kind=th.kind, position_ned_m=th.pos_ned_m,
+                     velocity_ned_m_s=th.velocity_ned_m_s, radius_m=th.radius_m,
+                     t_s=update.received_t_s)
+        self.schedule(update.received_mono_s)
+
+    def reject(self, event: dict) -> None:
+        d = self.daemon
+        event = {**event, "t_s": d.clock.now_s()}
+        log.warning("threat rejected: %s", event.get("reason"))
+        self.bus.publish_event(event)
+        d.record("decision", kind="rejected", reason=event.get("reason"), t_s=event["t_s"],
+                 field=event.get("field"), threat_id=event.get("threat_id"))
+
+    def schedule(self, receipt_mono_s: float) -> None:
+        """Decide now, or right after the decision under way (with the newest threats)."""
+        if self.manager is None:
+            return                      # not in a leg: checked when the next leg starts
+        if self._busy:
+            if self._pending_receipt is None:
+                self._pending_receipt = receipt_mono_s
+            return
+        self._busy = True
+        asyncio.get_running_loop().create_task(self._decide_loop(receipt_mono_s), name="threat-decision")
+
+    async def _decide_loop(self, receipt_mono_s: float) -> None:
+        try:
+            while True:
+                leg = self.leg
+                t = self.daemon.clock.now_s()
+                self.table.expire(t)
+                decision = await asyncio.to_thread(self.manager.on_threats, self.table.snapshot(t), t)
+                if leg is self.leg:
+                    await self.apply(decision, receipt_mono_s)
+                if self._pending_receipt is not None:
+                    receipt_mono_s, self._pending_receipt = self._pending_receipt, None
+                elif decision.resume:
+                    await asyncio.sleep(max(0.1, 0.5 / self.daemon.settings.link.time_scale))
+                    receipt_mono_s = time.monotonic()
+                else:
+                    break
+        except Exception:  # noqa: BLE001 - a failed decision must not stop the flight
+            log.exception("threat decision failed; the current reference is kept")
+        finally:
+            self._busy = False
+
+    async def apply(self, decision: Decision, receipt_mono_s: float) -> None:
+        """Engage the decision's trajectory, measure its latency, publish and record it."""
+        if decision.kind == "none":
+            log.debug("threat check: %s (%.1f ms)", decision.reason, decision.decide_ms)
+            return
+        d = self.daemon
+        latency_ms = None
+        if decision.trajectory is not None:
+            ref = d.engage(decision.trajectory, decision.path_id, t0_s=decision.start_t_s)
+            deadline = time.monotonic() + 1.0
+            while ref.first_sent_monotonic_s is None and time.monotonic() < deadline:
+                await asyncio.sleep(0.001)
+            if ref.first_sent_monotonic_s is not None:
+                latency_ms = (ref.first_sent_monotonic_s - receipt_mono_s) * 1000.0
+                self.latencies_ms.setdefault(decision.kind, []).append(latency_ms)
+        pos = d.link.telemetry.pos_ned_m
+        event = {**decision.as_event(), "latency_ms": latency_ms, "t_s": d.clock.now_s(),
+                 "pos_ned_m": pos, "leg": d.leg_index}
+        d.summary.decisions += 1
+        log.warning("decision %s: %s (latency %s ms, decide %.1f ms, plan %.1f ms, seed %d)",
+                    decision.kind, decision.reason,
+                    "n/a" if latency_ms is None else f"{latency_ms:.1f}", decision.decide_ms,
+                    decision.plan_ms, d.settings.seed)
+        self.bus.publish_event(event)
+        d.record("decision", kind=decision.kind, **event)
+        self.publish_path()
+        self.refresh_alternatives()
+
+    # ------------------------------------------------------------------ legs and alternatives
+    def on_leg_started(self, leg: LegPlan, ref: ActiveReference) -> None:
+        s = self.daemon.settings
+        if self.manager is None:
+            self.manager = ThreatManager(leg.world, leg.goal_ned_m, settings=s.threats,
+                                         limits=s.smoothing.limits,
+                                         kappa_max_1_m=s.smoothing.kappa_max_1_m,
+                                         gart_settings=s.planning, rng=self.daemon.rng)
+        self.manager.set_leg(leg.world, leg.goal_ned_m)
+        self.manager.set_active(leg.trajectory, ref.t0_s, ref.path_id)
+        self.manager.set_alternatives([])
+        self.leg = leg
+        self.publish_path()
+        self.refresh_alternatives()
+        if len(self.table):
+            self.schedule(time.monotonic())
+
+    def on_leg_ended(self) -> None:
+        self.leg = None
+        if self.manager is not None:
+            self.manager.set_alternatives([])
+
+    def refresh_alternatives(self) -> None:
+        """Recompute the M-GART alternatives from the current reference in the background."""
+        if self.manager is None or self.leg is None or self.daemon.settings.flight.alternatives_k == 0:
+            return
+        if self._alt_busy:
+            self._alt_dirty = True
+            return
+        self._alt_busy = True
+        asyncio.get_running_loop().create_task(self._alternatives_loop(), name="alternatives")
+
+    async def _alternatives_loop(self) -> None:
+        f = self.daemon.settings.flight
+        try:
+            while True:
+                self._alt_dirty = False
+                leg, t = self.leg, self.daemon.clock.now_s()
+                if leg is None:
+                    break
+                threats = self.table.snapshot(t)
+                rng = np.random.default_rng(self.daemon.rng.integers(2**63))
+                alternatives = await asyncio.to_thread(
+                    self.manager.compute_alternatives, threats, t, f.alternatives_k, rng=rng,
+                    max_time_s=f.alternatives_budget_s)
+                if leg is self.leg:
+                    self.manager.set_alternatives(alternatives)
+                    self.publish_path()
+                if not self._alt_dirty:
+                    break
+        except Exception:  # noqa: BLE001 - without alternatives the manager replans or holds
+            log.exception("refreshing the alternatives failed")
+        finally:
+            self._alt_busy = False
+
+    def publish_path(self) -> None:
+        ref = self.daemon.reference
+        if ref is None or self.manager is None:
+            return
+        t = np.linspace(0.0, ref.trajectory.duration_s, max(2, int(ref.trajectory.duration_s * 2)))
+        self.bus.publish_path({
+            "t_s": self.daemon.clock.now_s(), "leg": self.daemon.leg_index, "path_id": ref.path_id,
+            "t0_s": ref.t0_s, "duration_s": ref.trajectory.duration_s,
+            "reference_ned_m": ref.trajectory.sample(t)[0],
+            "alternatives": [{"path_id": a.path_id, "path_ned_m": a.path_ned_m}
+                             for a in self.manager.alternatives]})
+
+    def min_separation_m(self, pos_ned_m: np.ndarray, t_s: float) -> float:
+        """Distance from ``pos_ned_m`` to the surface of the nearest threat now (inf if none)."""
+        best = math.inf
+        for th in self.table.snapshot(t_s):
+            best = min(best, float(np.linalg.norm(th.position_at(t_s) - pos_ned_m)) - th.radius_m)
+        return best
+
+
 @dataclass
 class FlightSummary:
     """What ``run`` returns and prints."""
@@ -142,10 +353,15 @@ class FlightSummary:
     max_tracking_error_m: float = math.nan
     decisions: int = 0
     min_threat_separation_m: float = math.inf
+    latency_ms: dict = field(default_factory=dict)
     outcome: str = "not flown"
 
     def as_dict(self) -> dict:
-        return dict(self.__dict__)
+        """Plain data; an infinite separation (no threat met) is None."""
+        out = dict(self.__dict__)
+        if not math.isfinite(out["min_threat_separation_m"]):
+            out["min_threat_separation_m"] = None
+        return out
 
 
 class CompanionDaemon:
@@ -179,7 +395,7 @@ class CompanionDaemon:
         self.local_mission = None
         self.legs: list[LegPlan] = []
         self.leg_index = -1
-        self.threats = None            # companion.threats reactor, when zenoh is enabled
+        self.threats: ThreatReactor | None = None      # when zenoh is enabled
         self._errors_m: list[float] = []
         self._servo_us: list[float] | None = None
         self._tasks: list[asyncio.Task] = []
@@ -188,9 +404,9 @@ class CompanionDaemon:
         self._ref_count = 0
 
     # ------------------------------------------------------------------ recording and status
-    def record(self, kind: str, **fields) -> None:
+    def record(self, line_type: str, /, **fields) -> None:
         if self.recorder is not None:
-            self.recorder.write(kind, **fields)
+            self.recorder.write(line_type, **fields)
 
     def event(self, name: str, **fields) -> None:
         """Log and record one event (mode change, leg reached, link lost ...)."""
@@ -219,6 +435,8 @@ class CompanionDaemon:
         self.reference = ref
         if self.streamer is not None:
             self.streamer.set_source(ref.setpoint_at)
+        if self.threats is not None and self.threats.manager is not None:
+            self.threats.manager.set_active(trajectory, ref.t0_s, path_id)
         return ref
 
     def hold_here(self, pos_ned_m, reason: str) -> None:
@@ -265,6 +483,9 @@ class CompanionDaemon:
                 continue
             t = self.clock.now_s()
             ref_pos, ref_vel, _, _ = self.reference.state(t)
+            if self.threats is not None:
+                self.summary.min_threat_separation_m = min(
+                    self.summary.min_threat_separation_m, self.threats.min_separation_m(tele.pos_ned_m, t))
             self.record("sample", t_s=t, ref_pos_ned_m=ref_pos, ref_vel_ned_m_s=ref_vel,
                         pos_ned_m=tele.pos_ned_m, vel_ned_m_s=tele.vel_ned_m_s,
                         servo_us=self._servo_us,
@@ -375,9 +596,9 @@ class CompanionDaemon:
     async def fly_leg(self, leg: LegPlan) -> None:
         """Fly one leg: until its reference has ended and the vehicle is within the radius."""
         self.leg_index = leg.index
-        self.engage(leg.trajectory, f"leg{leg.index}", leg)
+        ref = self.engage(leg.trajectory, f"leg{leg.index}", leg)
         if self.threats is not None:
-            self.threats.on_leg_started(leg)
+            self.threats.on_leg_started(leg, ref)
         margin = self.settings.link.leg_timeout_margin_s
         radius = leg.waypoint.acceptance_radius_m
         while True:
@@ -395,6 +616,8 @@ class CompanionDaemon:
                 if t > ref.t_end_s + margin:
                     raise FlightAborted(f"item {leg.waypoint.seq} not reached: {dist:.1f} m away "
                                         f"{margin:.0f} s after the reference arrived")
+        if self.threats is not None:
+            self.threats.on_leg_ended()
         self.summary.legs_reached += 1
         self.event("reached", leg=leg.index, seq=leg.waypoint.seq,
                    error_m=round(float(np.linalg.norm(self.link.telemetry.pos_ned_m - leg.goal_ned_m)), 3))
@@ -473,9 +696,10 @@ class CompanionDaemon:
             self.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
         self.record("header", settings=settings_to_dict(s), seed=s.seed, home_lla=home,
                     waypoints_ned_m=[w.pos_ned_m for w in self.local_mission.waypoints])
+        if s.zenoh.enabled:
+            self.threats = ThreatReactor(self)
+            await self.threats.start(home)
         self._start_background()
-        if self.threats is not None:
-            await self.threats.start(self)
         self.summary.outcome = "flying"
         await self.takeoff(alt)
         self.streamer = SetpointStreamer(self.link.send_setpoint, rate_hz=s.link.setpoint_rate_hz)
@@ -500,6 +724,11 @@ class CompanionDaemon:
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self.threats is not None:
+            for kind, values in self.threats.latencies_ms.items():
+                self.summary.latency_ms[kind] = {"n": len(values), "p50": float(np.percentile(values, 50)),
+                                                 "p99": float(np.percentile(values, 99)),
+                                                 "max": float(np.max(values))}
         if self._errors_m:
             err = np.asarray(self._errors_m)
             self.summary.rms_tracking_error_m = float(np.sqrt(np.mean(err**2)))

@@ -51,6 +51,10 @@ class FlightPlanSettings:
     min_vertical_change_m : float
         Altitude changes smaller than this are flown within the level leg's tolerance, without a
         vertical segment (m).
+    alternatives_k : int
+        M-GART alternatives kept per leg for the threat manager to switch to (0: none).
+    alternatives_budget_s : float
+        Wall-clock budget of one M-GART refresh (s), run in the background.
     """
 
     planning_budget_s: float = 0.3
@@ -59,10 +63,15 @@ class FlightPlanSettings:
     descent_speed_m_s: float = 1.5
     vertical_accel_m_s2: float = 1.0
     min_vertical_change_m: float = 0.3
+    alternatives_k: int = 4
+    alternatives_budget_s: float = 0.5
 
     def __post_init__(self) -> None:
+        if isinstance(self.alternatives_k, bool) or not isinstance(self.alternatives_k, int) \
+                or not 0 <= self.alternatives_k <= 16:
+            raise MissionError(f"flight.alternatives_k: an integer in 0..16, got {self.alternatives_k!r}")
         for name in ("planning_budget_s", "slab_margin_m", "climb_speed_m_s", "descent_speed_m_s",
-                     "vertical_accel_m_s2", "min_vertical_change_m"):
+                     "vertical_accel_m_s2", "min_vertical_change_m", "alternatives_budget_s"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise MissionError(f"flight.{name}: must be a finite number > 0, got {value!r}")

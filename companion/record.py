@@ -51,10 +51,10 @@ class FlightRecorder:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._fh: IO[str] | None = open(self.path, "w", encoding="utf-8")
 
-    def write(self, kind: str, **fields: Any) -> None:
+    def write(self, line_type: str, /, **fields: Any) -> None:
         if self._fh is None:
             return
-        self._fh.write(json.dumps({"type": kind, **_jsonable(fields)}, separators=(",", ":")))
+        self._fh.write(json.dumps({"type": line_type, **_jsonable(fields)}, separators=(",", ":")))
         self._fh.write("\n")
         self._fh.flush()
 

@@ -117,8 +117,8 @@ def _plot_flight_path(plt, record: FlightRecord, path: Path) -> None:
     for d in record.decisions:
         if d.get("pos_ned_m") is not None:
             n, e = d["pos_ned_m"][:2]
-            ax.plot(e, n, "o", color=DECISION_COLOURS.get(d["kind"], "k"), ms=7, zorder=6)
-            ax.annotate(d["kind"], (e, n), textcoords="offset points", xytext=(5, 5), fontsize=8)
+            ax.plot(e, n, "o", color=DECISION_COLOURS.get(d.get("kind"), "k"), ms=7, zorder=6)
+            ax.annotate(d.get("kind"), (e, n), textcoords="offset points", xytext=(5, 5), fontsize=8)
     for wp in (record.header.get("waypoints_ned_m") or []):
         ax.plot(wp[1], wp[0], "k^", ms=6, zorder=6)
     ax.set_aspect("equal", adjustable="datalim")
@@ -135,7 +135,7 @@ def _plot_flight_path(plt, record: FlightRecord, path: Path) -> None:
 def _mark_decisions(ax, record: FlightRecord) -> None:
     for d in record.decisions:
         if d.get("t_s") is not None:
-            ax.axvline(d["t_s"], color=DECISION_COLOURS.get(d["kind"], "k"), lw=0.8, ls="--")
+            ax.axvline(d["t_s"], color=DECISION_COLOURS.get(d.get("kind"), "k"), lw=0.8, ls="--")
 
 
 def _plot_tracking(plt, record: FlightRecord, path: Path) -> None:

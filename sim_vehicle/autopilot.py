@@ -418,6 +418,28 @@ class Autopilot:
         if self.mode == AUTO and self.armed:
             self._start_mission(self.mission_current)
 
+    def change_speed(self, speed_m_s: float | None) -> tuple[bool, str]:
+        """MAV_CMD_DO_CHANGE_SPEED: horizontal leg speed from now on (None = back to WPNAV_SPEED)."""
+        if speed_m_s is None:
+            self._speed_override_m_s = None
+            return True, ""
+        limit = self.settings.flight.max_speed_m_s
+        if not math.isfinite(speed_m_s) or not 0.1 <= speed_m_s <= limit:
+            return False, f"speed {speed_m_s!r} outside 0.1..{limit:g} m/s"
+        self._speed_override_m_s = float(speed_m_s)
+        log.info("speed set to %.1f m/s", speed_m_s)
+        return True, ""
+
+    @property
+    def speed_m_s(self) -> float:
+        """Current horizontal leg speed (DO_CHANGE_SPEED or WPNAV_SPEED), m/s."""
+        return self._speed_override_m_s if self._speed_override_m_s is not None else self.settings.flight.wp_speed_m_s
+
+    @property
+    def landing(self) -> bool:
+        """True while descending to land (LAND, the end of RTL, a NAV_LAND item)."""
+        return bool(self._stages) and self._stages[0].kind == "land"
+
     def set_rally(self, items: Sequence[MissionItem]) -> None:
         """New rally points: RTL returns to the nearest of home and these (ArduPilot's rally)."""
         points = []

@@ -1024,24 +1024,14 @@ def _tall_matmul(a: np.ndarray, b: np.ndarray, rows: int = 256) -> np.ndarray:
     return out
 
 
-def _rotation_correction(out: np.ndarray, dpsi: np.ndarray, n_s: int) -> np.ndarray:
-    """What the turning of the reference-heading axes adds to the non-rotating recursion.
+def _filter_modes(h_r: np.ndarray, h_c: np.ndarray, real_lam, cplx_lam) -> None:
+    """Run every mode's first-order recursion ``q[k] = lam q[k-1] + h[k]`` in place."""
+    from scipy.signal import lfilter
 
-    ``out`` (n, n_s + 3) holds ``Ms s_k + G_k``; returns (n, 4): the corrections of the error
-    ``(Rz(-dpsi) - I)(e + dp) - (Rz(-dpsi/2) - I) I`` (x, y) and of the PID integrator
-    ``(Rz(-dpsi) - I) zeta`` (x, y).
-    """
-    corr = np.empty((out.shape[0], 4))
-    cf, sf = np.cos(dpsi) - 1.0, np.sin(dpsi)
-    ch, sh = np.cos(0.5 * dpsi) - 1.0, np.sin(0.5 * dpsi)
-    ix, iy = out[:, n_s], out[:, n_s + 1]
-    ex, ey = out[:, 14] + ix, out[:, 15] + iy
-    corr[:, 0] = cf * ex + sf * ey - (ch * ix + sh * iy)
-    corr[:, 1] = -sf * ex + cf * ey - (-sh * ix + ch * iy)
-    zx, zy = out[:, 21], out[:, 22]
-    corr[:, 2] = cf * zx + sf * zy
-    corr[:, 3] = -sf * zx + cf * zy
-    return corr
+    for j, lam in enumerate(real_lam):
+        h_r[j] = lfilter([1.0], [1.0, -lam], h_r[j])
+    for j, lam in enumerate(cplx_lam):
+        h_c[j] = lfilter([1.0], [1.0, -lam], h_c[j])
 
 
 def _run_modal(cl: _ClosedLoop, G: np.ndarray, dpsi: np.ndarray, s0: np.ndarray,
@@ -1051,55 +1041,75 @@ def _run_modal(cl: _ClosedLoop, G: np.ndarray, dpsi: np.ndarray, s0: np.ndarray,
     The non-rotating part is linear time-invariant, ``s+ = Phi s + g``; with
     ``Phi = V diag(lam) V^-1`` every mode is a first-order recursion (a conjugate pair is
     filtered once). The small rotations of the reference-heading axes enter as a correction
-    input, iterated to a fixed point: the error dynamics forget in about a second, during which
-    the axes turn by a fraction of a radian, so each iteration shrinks the correction's change
-    several times. Returns None (use :func:`_run_recursion`) if the modal form is unavailable,
-    the PID integrators are active on a turning trajectory (their slow modes make the
-    iteration converge too slowly), the heading reference jumps, or the iteration does not
-    reach ``tol_m``.
+    input on the two horizontal error states, iterated to a fixed point: the error dynamics
+    forget in about a second, during which the axes turn by a fraction of a radian, so each
+    iteration shrinks the correction's change several times. By linearity an iteration only
+    filters the correction's own response and evaluates the four outputs the correction
+    needs. Returns None (use :func:`_run_recursion`) if the modal form is unavailable, the PID
+    integrators are active on a turning trajectory (their slow modes make the iteration
+    converge too slowly), the heading reference jumps, or the iteration does not reach
+    ``tol_m``.
     """
-    from scipy.signal import lfilter
-
     turning = bool(np.any(dpsi != 0.0))
     if cl.modal is None or (turning and (cl.pid_integral or float(np.max(np.abs(dpsi))) > 0.05)):
         return None
-    real_idx, real_lam, W_r, V_r, cplx_lam, W_c, V_c = cl.modal
+    _real_idx, real_lam, W_r, V_r, cplx_lam, W_c, V_c = cl.modal
     n = G.shape[0]
     n_s = cl.n_s
-    Phi_rows = cl.Ms
-    corr = np.zeros((n, 4))                                   # columns 14, 15, 21, 22
     drive = np.empty((n, n_s))
     drive[0] = s0
     drive[1:] = G[:-1, :n_s]
-    base = drive.copy()
     # only real matrix products (a real-by-complex product is many times slower in numpy)
-    W_re, W_im = np.ascontiguousarray(W_c.real.T), np.ascontiguousarray(W_c.imag.T)
-    V_re, V_im = np.ascontiguousarray(2.0 * V_c.real.T), np.ascontiguousarray(-2.0 * V_c.imag.T)
-    W_r_t, V_r_t = np.ascontiguousarray(W_r.T), np.ascontiguousarray(V_r.T)
-    Phi_t = np.ascontiguousarray(Phi_rows.T)
-    for _ in range(max_iterations if turning else 1):
-        h_r = np.ascontiguousarray(_tall_matmul(drive, W_r_t).T)          # (n_real, n)
-        h_c = np.ascontiguousarray(_tall_matmul(drive, W_re).T + 1j * _tall_matmul(drive, W_im).T)
-        for j, lam in enumerate(real_lam):
-            h_r[j] = lfilter([1.0], [1.0, -lam], h_r[j])
-        for j, lam in enumerate(cplx_lam):
-            h_c[j] = lfilter([1.0], [1.0, -lam], h_c[j])
-        states = (_tall_matmul(np.ascontiguousarray(h_r.T), V_r_t)
-                  + _tall_matmul(np.ascontiguousarray(h_c.real.T), V_re)
-                  + _tall_matmul(np.ascontiguousarray(h_c.imag.T), V_im))
-        if not turning:
-            return states
-        out = _tall_matmul(states, Phi_t) + G
-        new = _rotation_correction(out, dpsi, n_s)
-        # the PID integrator columns are inert here (Ki = 0 on this path): only the error counts
-        change = float(np.max(np.abs(new[:, :2] - corr[:, :2])))
-        corr = new
-        if change < tol_m:
-            return states
-        drive[1:, 14] = base[1:, 14] + corr[:-1, 0]
-        drive[1:, 15] = base[1:, 15] + corr[:-1, 1]
-    log.debug("modal prediction did not converge (last change %.3g m); stepping the recursion", change)
-    return None
+    h_r = np.ascontiguousarray(_tall_matmul(drive, np.ascontiguousarray(W_r.T)).T)       # (n_real, n)
+    h_c = np.ascontiguousarray(_tall_matmul(drive, np.ascontiguousarray(W_c.real.T)).T
+                               + 1j * _tall_matmul(drive, np.ascontiguousarray(W_c.imag.T)).T)
+    _filter_modes(h_r, h_c, real_lam, cplx_lam)
+    q_r, q_c = h_r, h_c
+    if turning:
+        # outputs the correction needs: e_x, e_y (rows 14, 15) and I_x, I_y (rows n_s, n_s + 1)
+        cols = [14, 15, n_s, n_s + 1]
+        Phi4 = cl.Ms[cols].T                                                 # (n_s, 4)
+        out_r = V_r.T @ Phi4                                                 # (n_real, 4)
+        out_re, out_im = 2.0 * V_c.real.T @ Phi4, -2.0 * V_c.imag.T @ Phi4   # (n_pairs, 4)
+        in_r, in_c = W_r[:, 14:16], W_c[:, 14:16]                            # response to e_x, e_y
+        G4 = G[:, cols]
+        corr = np.zeros((n, 2))
+        dq_r = np.zeros_like(q_r)
+        dq_c = np.zeros_like(q_c)
+        converged = False
+        for _ in range(max_iterations):
+            tq_r, tq_c = q_r + dq_r, q_c + dq_c
+            out = tq_r.T @ out_r + tq_c.real.T @ out_re + tq_c.imag.T @ out_im + G4
+            new = _rotation_correction_xy(out, dpsi)
+            change = float(np.max(np.abs(new - corr)))
+            corr = new
+            if change < tol_m:
+                converged = True
+                q_r, q_c = tq_r, tq_c
+                break
+            shifted = np.zeros((2, n))
+            shifted[:, 1:] = corr[:-1].T
+            dq_r = in_r @ shifted
+            dq_c = in_c @ shifted
+            _filter_modes(dq_r, dq_c, real_lam, cplx_lam)
+        if not converged:
+            log.debug("modal prediction did not converge (last change %.3g m); stepping the recursion", change)
+            return None
+    return (_tall_matmul(np.ascontiguousarray(q_r.T), np.ascontiguousarray(V_r.T))
+            + _tall_matmul(np.ascontiguousarray(q_c.real.T), np.ascontiguousarray(2.0 * V_c.real.T))
+            + _tall_matmul(np.ascontiguousarray(q_c.imag.T), np.ascontiguousarray(-2.0 * V_c.imag.T)))
+
+
+def _rotation_correction_xy(out4: np.ndarray, dpsi: np.ndarray) -> np.ndarray:
+    """Correction of the horizontal error, (n, 2), from ``[e + dp - I (x, y), I (x, y)]`` (n, 4)."""
+    corr = np.empty((out4.shape[0], 2))
+    cf, sf = np.cos(dpsi) - 1.0, np.sin(dpsi)
+    ch, sh = np.cos(0.5 * dpsi) - 1.0, np.sin(0.5 * dpsi)
+    ix, iy = out4[:, 2], out4[:, 3]
+    ex, ey = out4[:, 0] + ix, out4[:, 1] + iy
+    corr[:, 0] = cf * ex + sf * ey - (ch * ix + sh * iy)
+    corr[:, 1] = -sf * ex + cf * ey - (-sh * ix + ch * iy)
+    return corr
 
 
 def _run_recursion(Ms: np.ndarray, G: np.ndarray, dpsi: np.ndarray, s0: np.ndarray) -> np.ndarray:

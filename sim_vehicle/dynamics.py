@@ -39,7 +39,8 @@ kinematics, are fixed linear maps of ``[x, delta, w_b]``: one matrix per ``(mode
 precomputed (cached on the model) and a step costs one small matrix-vector product plus a few
 dozen float operations for the heading and position, whose RK4 stages then use exactly the
 same stage states a textbook RK4 of the full 17-state system would use. :func:`step_rk4` is
-therefore bit-for-bit a classical RK4 step of the whole nonlinear system (up to rounding).
+therefore a classical RK4 step of the whole nonlinear system, equal to one of
+:func:`derivative` up to rounding (with the body-axes wind of the step's start heading).
 """
 
 from __future__ import annotations

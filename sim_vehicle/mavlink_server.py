@@ -271,7 +271,13 @@ class MavlinkServer:
                 continue
             period = max(1.0 / hz, min_period)
             self._stream_next_s[name] = next_s + period if now - next_s < period else now + period
-            self._send_stream(name)
+            try:
+                self._send_stream(name)
+            except Exception as exc:  # e.g. a value out of the field's range: skip it, keep flying
+                key = f"stream:{name}"
+                n = self._bad_logged[key] = self._bad_logged[key] + 1
+                if n <= 3 or n % 1000 == 0:
+                    log.error("cannot send %s: %s: %s", name, type(exc).__name__, exc)
 
     def _send_stream(self, name: str, to: Address | None = None) -> bool:
         build = getattr(self, f"_msg_{name.lower()}", None)
@@ -322,7 +328,7 @@ class MavlinkServer:
             state = mavlink.MAV_LANDED_STATE_TAKEOFF
         elif a.landed:
             state = mavlink.MAV_LANDED_STATE_ON_GROUND
-        elif a._stages and a._stages[0].kind == "land":
+        elif a.landing:
             state = mavlink.MAV_LANDED_STATE_LANDING
         else:
             state = mavlink.MAV_LANDED_STATE_IN_AIR
@@ -551,15 +557,10 @@ class MavlinkServer:
 
     def _cmd_change_speed(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
         speed = p[1]
-        limit = self.settings.flight.max_speed_m_s
         if speed == -1.0:
-            self.autopilot._speed_override_m_s = None
-            return mavlink.MAV_RESULT_ACCEPTED, ""
-        if not math.isfinite(speed) or not 0.1 <= speed <= limit:
-            return mavlink.MAV_RESULT_DENIED, f"speed (param2) {speed!r} outside 0.1..{limit:g} m/s"
-        self.autopilot._speed_override_m_s = float(speed)
-        log.info("speed set to %.1f m/s (DO_CHANGE_SPEED)", speed)
-        return mavlink.MAV_RESULT_ACCEPTED, ""
+            return self._outcome(self.autopilot.change_speed(None))
+        ok, reason = self.autopilot.change_speed(speed)
+        return (mavlink.MAV_RESULT_ACCEPTED if ok else mavlink.MAV_RESULT_DENIED), reason
 
     def _cmd_reposition(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
         """MAV_CMD_DO_REPOSITION (MAVSDK goto_location): a GUIDED position target."""

@@ -138,8 +138,9 @@ def print_summary(args, wf, results, smoothed, start, goal) -> None:
     print(f"status: exact  paths {len(results)}  iterations {first.iterations}  "
           f"tree {tree.size} nodes  elapsed {first.elapsed_s * 1e3:.1f} ms")
     for i, r in enumerate(results):
+        when = "first path after" if args.planner == "gart" else "found after"
         line = (f"  path {i}: cost {r.cost:.2f}  length {r.length_m:.2f} m  waypoints {len(r.path)}  "
-                f"found at {r.time_to_first_s * 1e3:.1f} ms")
+                f"{when} {r.time_to_first_s * 1e3:.1f} ms")
         if smoothed and smoothed[i] is not None:
             s = smoothed[i]
             line += f"  smoothed {s.length_m:.2f} m, max curvature {s.max_curvature_1_m:.3f} 1/m"
@@ -289,7 +290,7 @@ def plot_plan(filename, world, results, smoothed, start, goal, kappa, title: str
         ax.set_xlabel("east (m)")
         ax.set_ylabel("north (m)")
     ax.set_title(title or "plan")
-    ax.legend(loc="upper left", fontsize=7)
+    ax.legend(loc="upper left" if three_d else "best", fontsize=7)
     if has_smooth:
         ax2 = fig.add_subplot(1, 2, 2)
         for i, sm in enumerate(smoothed):

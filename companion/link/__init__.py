@@ -5,10 +5,12 @@ MAVSDK is imported lazily (inside ``VehicleLink.connect``), so importing this pa
 """
 
 from companion.link.setpoints import (JitterStats, Setpoint, SetpointStreamer, hold_position,
-                                      jitter_stats)
+                                      jitter_stats, planning_worker_init, raise_stream_priority,
+                                      restore_normal_priority)
 from companion.link.vehicle import (COPTER_MODES, DEFAULT_URL, Telemetry, VehicleLink, check_url,
                                     setpoint_fields, setpoint_type_mask)
 
 __all__ = ["COPTER_MODES", "DEFAULT_URL", "JitterStats", "Setpoint", "SetpointStreamer",
            "Telemetry", "VehicleLink", "check_url", "hold_position", "jitter_stats",
+           "planning_worker_init", "raise_stream_priority", "restore_normal_priority",
            "setpoint_fields", "setpoint_type_mask"]

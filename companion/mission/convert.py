@@ -153,8 +153,8 @@ def items_to_waypoints(plan: MissionPlan, frame: LocalFrame, settings: Conversio
     for index, item in enumerate(plan.items):
         seq = index + 1
         if end_action != "hover":
-            log.warning("item %d (%s) follows the mission's %s and is not flown", seq,
-                        item.describe(seq), end_action.upper())
+            log.warning("%s follows the mission's %s and is not flown", item.describe(seq),
+                        end_action.upper())
             continue
         if item.command == MAV_CMD_DO_CHANGE_SPEED:
             if item.speed_m_s is not None:

@@ -49,7 +49,7 @@ __all__ = ["ThreatManager", "Decision", "Conflict", "Alternative", "ReferenceSta
 log = logging.getLogger(__name__)
 
 #: Smallest speed (m/s) with a meaningful direction; below it the vehicle counts as hovering.
-HOVER_SPEED_M_S = 0.3
+HOVER_SPEED_M_S = 0.05
 
 
 class ThreatManagerError(CompanionError, ValueError):

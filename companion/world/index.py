@@ -85,83 +85,76 @@ class UniformGrid:
         Both ends must be inside the grid. Together with closed cell lists this finds every
         item whose box the segment meets.
         """
-        lo, inv, cell, shape, strides = self.lo, self.inv_cell, self.cell_m, self.shape, self.strides
-        idx = []
-        end = []
-        step = []
-        t_max = []
-        t_delta = []
-        for k in range(self.dim):
-            n = shape[k]
-            ak = a[k]
-            i = int((ak - lo[k]) * inv)
-            i = 0 if i < 0 else (n - 1 if i >= n else i)
-            j = int((b[k] - lo[k]) * inv)
-            j = 0 if j < 0 else (n - 1 if j >= n else j)
-            idx.append(i)
-            end.append(j)
-            d = b[k] - ak
-            if i == j:
-                step.append(0)
-                t_max.append(math.inf)
-                t_delta.append(math.inf)
-            elif d > 0.0:
-                step.append(1)
-                t_max.append((lo[k] + (i + 1) * cell - ak) / d)
-                t_delta.append(cell / d)
-            else:
-                step.append(-1)
-                t_max.append((lo[k] + i * cell - ak) / d)
-                t_delta.append(-cell / d)
         if self.dim == 2:
-            i, j = idx
-            s0, s1 = strides
-            out = [i * s0 + j]
-            ei, ej = end
-            si, sj = step
-            ti, tj = t_max
-            di, dj = t_delta
-            n0, n1 = shape
-            while i != ei or j != ej:
-                if ti <= tj:
-                    i += si
-                    if not 0 <= i < n0 or ti > 1.0 + 1e-12:
-                        break
-                    ti += di
-                else:
-                    j += sj
-                    if not 0 <= j < n1 or tj > 1.0 + 1e-12:
-                        break
-                    tj += dj
-                out.append(i * s0 + j)
-            end_flat = ei * s0 + ej
-        else:
-            i, j, k = idx
-            s0, s1, _ = strides
-            out = [i * s0 + j * s1 + k]
-            ei, ej, ek = end
-            si, sj, sk = step
-            ti, tj, tk = t_max
-            di, dj, dk = t_delta
-            n0, n1, n2 = shape
-            while i != ei or j != ej or k != ek:
-                if ti <= tj and ti <= tk:
-                    i += si
-                    if not 0 <= i < n0 or ti > 1.0 + 1e-12:
-                        break
-                    ti += di
-                elif tj <= tk:
-                    j += sj
-                    if not 0 <= j < n1 or tj > 1.0 + 1e-12:
-                        break
-                    tj += dj
-                else:
-                    k += sk
-                    if not 0 <= k < n2 or tk > 1.0 + 1e-12:
-                        break
-                    tk += dk
-                out.append(i * s0 + j * s1 + k)
-            end_flat = ei * s0 + ej * s1 + ek
+            return self._traverse_2d(a, b)
+        return self._traverse_3d(a, b)
+
+    def _axis_setup(self, k: int, ak: float, bk: float) -> tuple:
+        """(start index, end index, step, t_max, t_delta) of the DDA along axis ``k``."""
+        lo, n = self.lo[k], self.shape[k]
+        i = int((ak - lo) * self.inv_cell)
+        i = 0 if i < 0 else (n - 1 if i >= n else i)
+        j = int((bk - lo) * self.inv_cell)
+        j = 0 if j < 0 else (n - 1 if j >= n else j)
+        if i == j:
+            return i, j, 0, math.inf, math.inf
+        d = bk - ak
+        if d > 0.0:
+            return i, j, 1, (lo + (i + 1) * self.cell_m - ak) / d, self.cell_m / d
+        return i, j, -1, (lo + i * self.cell_m - ak) / d, -self.cell_m / d
+
+    def _traverse_2d(self, a: tuple, b: tuple) -> list[int]:
+        i, ei, si, ti, di = self._axis_setup(0, a[0], b[0])
+        j, ej, sj, tj, dj = self._axis_setup(1, a[1], b[1])
+        s0 = self.strides[0]
+        out = [i * s0 + j]
+        if si == 0 and sj == 0:
+            return out
+        n0, n1 = self.shape
+        while i != ei or j != ej:
+            if ti <= tj:
+                i += si
+                if not 0 <= i < n0 or ti > 1.0 + 1e-12:
+                    break
+                ti += di
+            else:
+                j += sj
+                if not 0 <= j < n1 or tj > 1.0 + 1e-12:
+                    break
+                tj += dj
+            out.append(i * s0 + j)
+        end_flat = ei * s0 + ej
+        if out[-1] != end_flat:  # rounding at the very end: the last cell is always crossed
+            out.append(end_flat)
+        return out
+
+    def _traverse_3d(self, a: tuple, b: tuple) -> list[int]:
+        i, ei, si, ti, di = self._axis_setup(0, a[0], b[0])
+        j, ej, sj, tj, dj = self._axis_setup(1, a[1], b[1])
+        k, ek, sk, tk, dk = self._axis_setup(2, a[2], b[2])
+        s0, s1, _ = self.strides
+        out = [i * s0 + j * s1 + k]
+        if si == 0 and sj == 0 and sk == 0:
+            return out
+        n0, n1, n2 = self.shape
+        while i != ei or j != ej or k != ek:
+            if ti <= tj and ti <= tk:
+                i += si
+                if not 0 <= i < n0 or ti > 1.0 + 1e-12:
+                    break
+                ti += di
+            elif tj <= tk:
+                j += sj
+                if not 0 <= j < n1 or tj > 1.0 + 1e-12:
+                    break
+                tj += dj
+            else:
+                k += sk
+                if not 0 <= k < n2 or tk > 1.0 + 1e-12:
+                    break
+                tk += dk
+            out.append(i * s0 + j * s1 + k)
+        end_flat = ei * s0 + ej * s1 + ek
         if out[-1] != end_flat:  # rounding at the very end: the last cell is always crossed
             out.append(end_flat)
         return out

@@ -64,6 +64,13 @@ class World:
     WorldError
         Bounds empty, of the wrong size or not finite; margin negative; an obstacle of the wrong
         dimension. The message names the argument.
+
+    Notes
+    -----
+    ``point_free(p) -> bool`` is the planner's scalar point test (``p`` a tuple of d floats;
+    bound to a 2D or 3D specialisation at construction). A World caches derived lookups
+    (a KD-tree of sphere centres, the obstacles acting within a distance of each grid cell);
+    the caches never change the answers, and the obstacles, bounds and margin cannot change.
     """
 
     __slots__ = ("_dim", "_lo", "_hi", "_margin", "_obstacles", "_grid", "_balls", "_ball_ids",

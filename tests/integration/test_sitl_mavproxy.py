@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.support import MavlinkPeer, start_sim_vehicle
+from support import MavlinkPeer, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from tests.support import free_udp_port, start_sim_vehicle
+from support import free_udp_port, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 

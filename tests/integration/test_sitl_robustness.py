@@ -18,7 +18,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from tests.support import MavlinkPeer, REPO_ROOT, free_udp_port, start_sim_vehicle
+from support import MavlinkPeer, REPO_ROOT, free_udp_port, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 

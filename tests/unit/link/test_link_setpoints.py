@@ -127,3 +127,17 @@ def test_send_errors_do_not_stop_the_stream():
     streamer = SetpointStreamer(flaky, hold_position([0, 0, -1]))
     run_streamer(streamer, 0.2)
     assert len(calls) >= 6 and streamer.send_errors >= 3 and streamer.sent >= 3
+
+
+def test_priority_helpers_report_what_they_got():
+    import os
+    from companion.link import raise_stream_priority, restore_normal_priority
+    got = raise_stream_priority()
+    try:
+        assert got in ("fifo", "nice", "normal")
+        if got == "fifo":
+            assert os.sched_getscheduler(0) == os.SCHED_FIFO
+    finally:
+        restore_normal_priority()
+    if hasattr(os, "sched_getscheduler"):
+        assert os.sched_getscheduler(0) == os.SCHED_OTHER

@@ -47,7 +47,7 @@ def test_threat_term_grows_with_proximity_and_vanishes_beyond_range():
 def test_planner_reports_the_cost_of_its_path_with_every_term_on():
     world = World([Disc((40, 40), 10), Disc((70, 65), 8)], (0, 0), (100, 100), margin_m=1)
     weights = CostWeights(threat=2.0, threat_range_m=6.0, tracking_m_per_rad=4.0)
-    r = gart(world, (5, 5), (95, 95), rng=np.random.default_rng(2), max_iterations=1200,
+    r = gart(world, (5, 5), (95, 95), rng=np.random.default_rng(2), max_iterations=500,
              settings=GartSettings(cost=weights))
     assert r.solved
     assert r.cost == pytest.approx(path_cost(world, r.path, weights))

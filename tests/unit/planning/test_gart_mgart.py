@@ -57,9 +57,9 @@ def test_gart_paths_are_collision_free_and_end_at_start_and_goal(name, seed):
 def test_anytime_improvement_does_not_make_the_path_worse():
     b = make_world("2d", 2)
     first = gart(b.world, b.start, b.goal, rng=np.random.default_rng(5), stop_at_first=True, settings=LENGTH)
-    later = gart(b.world, b.start, b.goal, rng=np.random.default_rng(5), max_iterations=3000, settings=LENGTH)
+    later = gart(b.world, b.start, b.goal, rng=np.random.default_rng(5), max_iterations=1500, settings=LENGTH)
     assert later.cost <= first.cost_history[0][1] + 1e-9
-    assert later.iterations == 3000 and first.iterations < 3000
+    assert later.iterations == 1500 and first.iterations < 1500
 
 
 def test_fixed_seed_gives_the_same_path():

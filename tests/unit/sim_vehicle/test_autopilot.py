@@ -187,7 +187,7 @@ def test_auto_mission_reaches_items_in_order_and_lands(model):
     assert reached == [1, 2, 4, 5]
     assert not vehicle.armed and vehicle.landed
     assert np.allclose(vehicle.pos_ned_m, (20.0, 20.0, 0.0), atol=1.0)
-    assert vehicle._speed_override_m_s == 8.0
+    assert vehicle.speed_m_s == 8.0
 
 
 def test_idle_on_ground_disarms_after_delay(model):

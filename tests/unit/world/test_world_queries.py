@@ -180,6 +180,8 @@ def test_grid_index_gives_the_same_answers_as_a_linear_scan(seed, d):
     pts = rs.uniform(0, 100, (200, d))
     ref = np.all(np.linalg.norm(pts[:, None] - centers[None], axis=2) > radii, axis=1)
     assert np.array_equal(world.is_free(pts), ref)
+    ref_clear = (np.linalg.norm(pts[:, None] - centers[None], axis=2) - radii).min(axis=1)
+    assert np.allclose(world.clearance_m(pts), ref_clear, atol=1e-9)
     for n, (a, b) in enumerate(zip(pts[:100], pts[100:200])):
         if n % 2:
             b = a + (b - a) * 0.1
