@@ -150,7 +150,7 @@ async def link_sender(port: int):
         await link.wait_ready(10)
         yield link.send_setpoint
     finally:
-        link.close()
+        await link.aclose()
 
 
 def current_priority() -> str:

@@ -19,18 +19,23 @@ hold, replan the leg from where the vehicle is when the link returns), a pilot t
 (mode changed away from GUIDED: the companion stops commanding and waits), and SIGINT/SIGTERM
 (hold, land or RTL per ``link.on_interrupt``, then exit).
 
-Only this module, ``companion.link`` and ``companion.threats.bus`` do I/O; planning runs in a
-worker thread with a short GIL switch interval so the setpoint stream keeps its period.
+Only this module, ``companion.link`` and ``companion.threats.bus`` do I/O. The event-loop
+thread that streams setpoints runs at real-time priority when allowed
+(``raise_stream_priority``); planning, threat decisions and M-GART refreshes run in worker
+threads at normal priority, and a short GIL switch interval hands the GIL back to the stream
+within half a millisecond, so the 50 Hz period holds while a replan runs.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import math
 import sys
 import time
 from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -39,7 +44,8 @@ import numpy as np
 from companion.config import Settings, settings_to_dict
 from companion.errors import CompanionError, LinkError, MissionError
 from companion.flight_plan import LegPlan, TrajectoryChain, plan_leg, plan_mission
-from companion.link.setpoints import Setpoint, SetpointStreamer, hold_position
+from companion.link.setpoints import (Setpoint, SetpointStreamer, hold_position,
+                                      raise_stream_priority, restore_normal_priority)
 from companion.link.vehicle import VehicleLink
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
@@ -224,7 +230,7 @@ class ThreatReactor:
                 leg = self.leg
                 t = self.daemon.clock.now_s()
                 self.table.expire(t)
-                decision = await asyncio.to_thread(self.manager.on_threats, self.table.snapshot(t), t)
+                decision = await self.daemon.in_worker(self.manager.on_threats, self.table.snapshot(t), t)
                 if leg is self.leg:
                     await self.apply(decision, receipt_mono_s)
                 if self._pending_receipt is not None:
@@ -309,7 +315,7 @@ class ThreatReactor:
                     break
                 threats = self.table.snapshot(t)
                 rng = np.random.default_rng(self.daemon.rng.integers(2**63))
-                alternatives = await asyncio.to_thread(
+                alternatives = await self.daemon.in_worker(
                     self.manager.compute_alternatives, threats, t, f.alternatives_k, rng=rng,
                     max_time_s=f.alternatives_budget_s)
                 if leg is self.leg:
@@ -402,6 +408,13 @@ class CompanionDaemon:
         self._link_lost_at: float | None = None
         self._resume_needed = False
         self._ref_count = 0
+        self._executor = ThreadPoolExecutor(2, thread_name_prefix="planning",
+                                            initializer=restore_normal_priority)
+
+    async def in_worker(self, fn, /, *args, **kwargs):
+        """Run ``fn(*args, **kwargs)`` in a planning thread (normal priority)."""
+        loop = asyncio.get_running_loop()
+        return await loop.run_in_executor(self._executor, functools.partial(fn, *args, **kwargs))
 
     # ------------------------------------------------------------------ recording and status
     def record(self, line_type: str, /, **fields) -> None:
@@ -535,7 +548,7 @@ class CompanionDaemon:
                                               world_file=self.world_path, dim=3)
         first = np.array([start_ned_m[0], start_ned_m[1], -takeoff_alt_m])
         t0 = time.perf_counter()
-        self.legs = await asyncio.to_thread(
+        self.legs = await self.in_worker(
             plan_mission, self.local_mission, first, gart_settings=s.planning,
             smoothing=s.smoothing, settings=s.flight, rng=self.rng)
         self.summary.legs_planned = len(self.legs)
@@ -554,6 +567,17 @@ class CompanionDaemon:
                     tree={"nodes": tree.nodes, "parents": tree.parents} if tree is not None else None,
                     alternatives=[np.asarray(a)[:, :2] for a in alternatives],
                     summary=leg.plan.summary() if leg.plan is not None else None)
+
+    async def restore_mission(self, previous) -> None:
+        """Put the vehicle's previous lists back (the flight did not start)."""
+        try:
+            if previous.items:
+                await self.link.upload_plan(previous)
+            else:
+                await self.link.clear_plan()
+            self.event("mission_restored", reason="the flight did not start")
+        except CompanionError as exc:
+            log.error("could not restore the vehicle's previous mission: %s", exc)
 
     # ------------------------------------------------------------------ flight phases
     async def takeoff(self, alt_m: float) -> None:
@@ -586,7 +610,7 @@ class CompanionDaemon:
         self._resume_needed = False
         pos = self.link.telemetry.pos_ned_m
         s = self.settings
-        new = await asyncio.to_thread(plan_leg, leg.index, leg.waypoint, pos,
+        new = await self.in_worker(plan_leg, leg.index, leg.waypoint, pos,
                                       self.local_mission.world, gart_settings=s.planning,
                                       smoothing=s.smoothing, settings=s.flight, rng=self.rng)
         if new is not None:
@@ -659,6 +683,7 @@ class CompanionDaemon:
         """Fly the mission (see the module docstring); returns the summary."""
         s = self.settings
         sys.setswitchinterval(0.0005)        # planning threads yield the GIL to the stream often
+        raise_stream_priority()              # before connect: MAVSDK's threads inherit it
         if self.record_path is not None:
             self.recorder = FlightRecorder(self.record_path)
             self.record("header", settings=settings_to_dict(s), seed=s.seed,
@@ -691,7 +716,9 @@ class CompanionDaemon:
         if tele.in_air:
             alt = -float(start[2])
         await self.plan_flight(plan, home, start, alt)
+        previous = None
         if self.mission_path is not None:          # planned: every item is reachable
+            previous = await self.link.download_plan()
             await self.link.upload_plan(plan)
             self.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
         self.record("header", settings=settings_to_dict(s), seed=s.seed, home_lla=home,
@@ -701,7 +728,12 @@ class CompanionDaemon:
             await self.threats.start(home)
         self._start_background()
         self.summary.outcome = "flying"
-        await self.takeoff(alt)
+        try:
+            await self.takeoff(alt)
+        except LinkError:
+            if previous is not None and not self.link.telemetry.in_air:
+                await self.restore_mission(previous)
+            raise
         self.streamer = SetpointStreamer(self.link.send_setpoint, rate_hz=s.link.setpoint_rate_hz)
         self.hold_here(self.link.telemetry.pos_ned_m, "takeoff complete")
         self.streamer.start()
@@ -736,4 +768,5 @@ class CompanionDaemon:
         self.record("summary", **self.summary.as_dict())
         if self.recorder is not None:
             self.recorder.close()
-        self.link.close()
+        self._executor.shutdown(wait=False, cancel_futures=True)
+        await self.link.aclose()

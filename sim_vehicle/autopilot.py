@@ -67,6 +67,10 @@ CMD_NAV_LAND = 21
 CMD_NAV_TAKEOFF = 22
 CMD_DO_CHANGE_SPEED = 178
 CMD_NAV_RALLY_POINT = 5100
+CMD_FENCE_POLYGON_INCLUSION = 5001
+CMD_FENCE_POLYGON_EXCLUSION = 5002
+CMD_FENCE_CIRCLE_INCLUSION = 5003
+CMD_FENCE_CIRCLE_EXCLUSION = 5004
 NAV_COMMANDS = frozenset({CMD_NAV_WAYPOINT, CMD_NAV_LOITER_UNLIM, CMD_NAV_LOITER_TIME, CMD_NAV_RETURN_TO_LAUNCH,
                           CMD_NAV_LAND, CMD_NAV_TAKEOFF})
 
@@ -80,6 +84,66 @@ MAX_TAKEOFF_ALT_M = 1000.0
 def mode_name(mode: int) -> str:
     """ArduCopter mode name of ``mode`` (or ``MODE_<n>``)."""
     return MODE_NAMES.get(mode, f"MODE_{mode}")
+
+
+# ============================================================================ geofence
+@dataclasses.dataclass(frozen=True)
+class Fence:
+    """A geofence in the local frame (ArduPilot's polygon and circle fences).
+
+    Attributes
+    ----------
+    inclusion_polygons, exclusion_polygons : list of ndarray, shape (K, 2)
+        North-east vertices, m.
+    inclusion_circles, exclusion_circles : list of (ndarray (2,), float)
+        Centre north-east (m) and radius (m).
+    """
+
+    inclusion_polygons: tuple = ()
+    exclusion_polygons: tuple = ()
+    inclusion_circles: tuple = ()
+    exclusion_circles: tuple = ()
+
+    @property
+    def empty(self) -> bool:
+        """True when no polygon or circle is defined."""
+        return not (self.inclusion_polygons or self.exclusion_polygons or self.inclusion_circles
+                    or self.exclusion_circles)
+
+
+def point_in_polygon(point_ne_m: np.ndarray, polygon_ne_m: np.ndarray) -> bool:
+    """Even-odd ray casting: is the (2,) point inside the (K, 2) polygon?"""
+    x, y = float(point_ne_m[0]), float(point_ne_m[1])
+    inside = False
+    k = len(polygon_ne_m)
+    for i in range(k):
+        x1, y1 = polygon_ne_m[i]
+        x2, y2 = polygon_ne_m[(i + 1) % k]
+        if (y1 > y) != (y2 > y):
+            x_cross = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+            if x < x_cross:
+                inside = not inside
+    return inside
+
+
+def fence_breach(fence: Fence, pos_ned_m: np.ndarray, alt_max_m: float) -> str | None:
+    """Why ``pos_ned_m`` violates the fence (or the ceiling), or None if it does not."""
+    if -pos_ned_m[2] > alt_max_m:
+        return f"above FENCE_ALT_MAX {alt_max_m:g} m"
+    ne = pos_ned_m[:2]
+    for poly in fence.inclusion_polygons:
+        if not point_in_polygon(ne, poly):
+            return "outside an inclusion polygon"
+    for poly in fence.exclusion_polygons:
+        if point_in_polygon(ne, poly):
+            return "inside an exclusion polygon"
+    for centre, radius in fence.inclusion_circles:
+        if math.hypot(ne[0] - centre[0], ne[1] - centre[1]) > radius:
+            return "outside an inclusion circle"
+    for centre, radius in fence.exclusion_circles:
+        if math.hypot(ne[0] - centre[0], ne[1] - centre[1]) < radius:
+            return "inside an exclusion circle"
+    return None
 
 
 # ============================================================================ speed profiles
@@ -219,6 +283,8 @@ class Autopilot:
         self._steps = 0
         self.mission_items: tuple[MissionItem, ...] = ()
         self.rally_ned_m: list[np.ndarray] = []
+        self.fence = Fence()
+        self.fence_breached: str | None = None
         self.mission_current = 0
         self.mission_finished = False
         self._stages: list[Stage] = []
@@ -313,7 +379,7 @@ class Autopilot:
         self._events.append(("armed", ""))
         log.info("armed in %s", mode_name(self.mode))
         if self.mode == AUTO:
-            self._start_mission(self.mission_current if self.mission_current >= 1 else 1)
+            self._start_mission(self._resume_seq())
         return True, ""
 
     def disarm(self, force: bool = False, reason: str = "commanded") -> tuple[bool, str]:
@@ -325,6 +391,7 @@ class Autopilot:
         self.armed = False
         self._stages = []
         self._guided = None
+        self._item_active = False
         self._settle_on_ground()
         self._events.append(("disarmed", reason))
         log.info("disarmed (%s)", reason)
@@ -343,6 +410,7 @@ class Autopilot:
         previous = self.mode
         self.mode = mode
         self._guided = None
+        self._item_active = False
         self._events.append(("mode", mode))
         log.info("mode %s -> %s", mode_name(previous), mode_name(mode))
         self._enter_mode(mode)
@@ -358,7 +426,7 @@ class Autopilot:
             self._stages = []
             return
         if mode == AUTO:
-            self._start_mission(self.mission_current if self.mission_current >= 1 else 1)
+            self._start_mission(self._resume_seq())
         elif mode == RTL:
             self._stages = self._rtl_stages()
         elif mode == LAND:
@@ -439,6 +507,53 @@ class Autopilot:
     def landing(self) -> bool:
         """True while descending to land (LAND, the end of RTL, a NAV_LAND item)."""
         return bool(self._stages) and self._stages[0].kind == "land"
+
+    def set_fence(self, items: Sequence[MissionItem]) -> None:
+        """New fence list (polygon vertices grouped by their vertex count, circles)."""
+        polygons: dict[int, list] = {CMD_FENCE_POLYGON_INCLUSION: [], CMD_FENCE_POLYGON_EXCLUSION: []}
+        circles: dict[int, list] = {CMD_FENCE_CIRCLE_INCLUSION: [], CMD_FENCE_CIRCLE_EXCLUSION: []}
+        current: list = []
+        current_cmd = None
+        for it in items:
+            if it.command in polygons:
+                count = int(it.param1) if math.isfinite(it.param1) and 3 <= it.param1 <= 1000 else 1000
+                if current_cmd != it.command or not current or len(current) >= count:
+                    current = []
+                    current_cmd = it.command
+                    polygons[it.command].append(current)
+                current.append(self.item_target_ned_m(it)[:2])
+            elif it.command in circles and math.isfinite(it.param1) and it.param1 > 0:
+                circles[it.command].append((self.item_target_ned_m(it)[:2], float(it.param1)))
+                current_cmd = None
+        self.fence = Fence(
+            tuple(np.array(p) for p in polygons[CMD_FENCE_POLYGON_INCLUSION] if len(p) >= 3),
+            tuple(np.array(p) for p in polygons[CMD_FENCE_POLYGON_EXCLUSION] if len(p) >= 3),
+            tuple(circles[CMD_FENCE_CIRCLE_INCLUSION]), tuple(circles[CMD_FENCE_CIRCLE_EXCLUSION]))
+        self.fence_breached = None
+        log.info("fence: %d inclusion / %d exclusion polygons, %d / %d circles", len(self.fence.inclusion_polygons),
+                 len(self.fence.exclusion_polygons), len(self.fence.inclusion_circles),
+                 len(self.fence.exclusion_circles))
+
+    def _check_fence(self) -> None:
+        f = self.settings.flight
+        if not f.fence_enable or self.landed:
+            return
+        reason = fence_breach(self.fence, self.pos_ned_m, f.fence_alt_max_m)
+        if reason is None:
+            if self.fence_breached is not None:
+                log.info("fence: back inside")
+            self.fence_breached = None
+            return
+        if self.fence_breached is not None:
+            return  # already acting on this breach
+        self.fence_breached = reason
+        log.warning("fence breached (%s): action %d", reason, f.fence_action)
+        self._events.append(("text", 2, f"Fence breach: {reason}"[:50]))
+        action = {1: RTL, 2: LAND, 4: BRAKE}.get(f.fence_action)
+        if action is not None and self.mode not in (RTL, LAND):
+            ok, why = self.set_mode(action)
+            if not ok and action == RTL:
+                self.set_mode(LAND)
 
     def set_rally(self, items: Sequence[MissionItem]) -> None:
         """New rally points: RTL returns to the nearest of home and these (ArduPilot's rally)."""
@@ -524,6 +639,7 @@ class Autopilot:
         t = self.time_s
         if not self.armed:
             return
+        self._check_fence()
         if self.mode == AUTO:
             self._advance_mission(t)
         self._advance_stages(t)
@@ -660,7 +776,7 @@ class Autopilot:
             self._stages.pop(0)
             if stage.kind in ("leg", "hold") and stage.target is not None:
                 self._ref_pos = stage.target.copy()
-            if not self._stages and self._item_active:
+            if not self._stages and self._item_active and self.mode == AUTO:
                 self._complete_item()
                 return
 
@@ -770,6 +886,12 @@ class Autopilot:
         return best
 
     # ------------------------------------------------------------------ mission
+    def _resume_seq(self) -> int:
+        """Where AUTO (re)starts: the current item, or item 1 after a completed mission."""
+        if self.mission_finished or not 1 <= self.mission_current < len(self.mission_items):
+            return 1
+        return self.mission_current
+
     def _start_mission(self, seq: int) -> None:
         self.mission_finished = False
         self._item_active = False

@@ -13,6 +13,7 @@ The wall clock is injected (``wall_s`` callable), so the pacing is tested withou
 from __future__ import annotations
 
 import logging
+import math
 import time
 from typing import Callable
 
@@ -44,6 +45,8 @@ class SimClock:
         self._speedup = 1.0
         self.steps = 0
         self.slipped_wall_s = 0.0
+        self.slips = 0
+        self._last_slip_log_s = -math.inf
         self._anchor_wall_s = wall_s()
         self._anchor_steps = 0
         self.set_speedup(speedup)
@@ -81,9 +84,13 @@ class SimClock:
         if lag_wall_s > self.max_lag_s:
             slip = lag_wall_s - self.max_lag_s
             self.slipped_wall_s += slip
+            self.slips += 1
             self._anchor_wall_s += slip
-            log.warning("simulation %.3f s (wall) behind: slipping (real-time factor below %.3g)",
-                        lag_wall_s, self._speedup)
+            if now - self._last_slip_log_s >= 10.0:  # at most one line per 10 s
+                self._last_slip_log_s = now
+                log.warning("simulation %.3f s (wall) behind: slipping; the host cannot run %.3g x real time "
+                            "(%d slips, %.1f s lost so far)", lag_wall_s, self._speedup, self.slips,
+                            self.slipped_wall_s)
             behind = self._target_steps(now) - self.steps
         return max(0, int(behind + 1e-6))  # tolerate float rounding of the wall clock
 

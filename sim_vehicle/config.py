@@ -113,6 +113,13 @@ class FlightSettings:
         Deceleration assumed when braking to a hover (BRAKE, LOITER entry, GUIDED timeout).
     max_speed_m_s : float
         Largest commanded horizontal speed accepted from any source.
+    fence_enable : int
+        1: enforce the uploaded fence (polygons, circles) and ``fence_alt_max_m`` [FENCE_ENABLE];
+        0 (default, as in ArduPilot): the fence is stored but not enforced.
+    fence_action : int
+        On a breach: 0 report only, 1 RTL, 2 LAND, 4 BRAKE [FENCE_ACTION].
+    fence_alt_max_m : float
+        Maximum height above home while the fence is enabled [FENCE_ALT_MAX].
     """
 
     guided_timeout_s: float = 3.0
@@ -129,8 +136,15 @@ class FlightSettings:
     disarm_delay_s: float = 10.0
     brake_accel_m_s2: float = 2.5
     max_speed_m_s: float = 15.0
+    fence_enable: int = 0
+    fence_action: int = 1
+    fence_alt_max_m: float = 100.0
 
     def __post_init__(self) -> None:
+        _require(self.fence_enable in (0, 1), f"fence_enable: expected 0 or 1, got {self.fence_enable!r}")
+        _require(self.fence_action in (0, 1, 2, 4), f"fence_action: expected 0, 1, 2 or 4, got {self.fence_action!r}")
+        _require(10.0 <= self.fence_alt_max_m <= 1000.0,
+                 f"fence_alt_max_m: expected 10..1000 m, got {self.fence_alt_max_m!r}")
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             _require(math.isfinite(value), f"{f.name}: expected a finite number, got {value!r}")

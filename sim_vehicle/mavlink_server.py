@@ -39,7 +39,7 @@ from sim_vehicle.control import Setpoint
 from sim_vehicle.mission_store import (
     FRAME_GLOBAL, FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT,
     FRAME_GLOBAL_TERRAIN_ALT, FRAME_GLOBAL_TERRAIN_ALT_INT, FRAME_LOCAL_NED, MISSION_TYPE_MISSION,
-    MISSION_TYPE_NAMES, MISSION_TYPE_RALLY, MISSION_TYPES, MissionItem, MissionResult, MissionStore,
+    MISSION_TYPE_FENCE, MISSION_TYPE_NAMES, MISSION_TYPE_RALLY, MISSION_TYPES, MissionItem, MissionResult, MissionStore,
 )
 from sim_vehicle.params import ParameterTable
 
@@ -852,6 +852,8 @@ class MavlinkServer:
             self._send(self._msg_mission_current())
         elif mission_type == MISSION_TYPE_RALLY:
             self.autopilot.set_rally(self.store.items(MISSION_TYPE_RALLY))
+        else:
+            self.autopilot.set_fence(self.store.items(MISSION_TYPE_FENCE))
 
     def _on_mission_request_list(self, msg: Any, address: Address) -> None:
         mission_type = self._mission_type(msg)

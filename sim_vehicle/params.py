@@ -80,6 +80,11 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("RTL_ALT", "flight.rtl_alt_m", 100.0, 200.0, 30000.0, description="RTL return height, cm"),
     ParamSpec("DISARM_DELAY", "flight.disarm_delay_s", 1.0, 0.0, 127.0, MAV_PARAM_TYPE_INT8,
               description="disarm after landed this long, s (0 = never)"),
+    ParamSpec("FENCE_ENABLE", "flight.fence_enable", 1.0, 0.0, 1.0, MAV_PARAM_TYPE_INT8,
+              description="enforce the uploaded fence (0/1)"),
+    ParamSpec("FENCE_ACTION", "flight.fence_action", 1.0, 0.0, 4.0, MAV_PARAM_TYPE_INT8,
+              description="fence breach: 0 report, 1 RTL, 2 LAND, 4 BRAKE"),
+    ParamSpec("FENCE_ALT_MAX", "flight.fence_alt_max_m", 1.0, 10.0, 1000.0, description="fence ceiling, m"),
     ParamSpec("SIM_WIND_SPD", "wind.speed_m_s", 1.0, 0.0, 40.0, description="steady wind, m/s"),
     ParamSpec("SIM_WIND_DIR", "wind.from_deg", 1.0, 0.0, 360.0, description="wind from, degrees"),
     ParamSpec("SIM_WIND_TURB", "wind.gust_m_s", 1.0, 0.0, 20.0, description="gust std per axis, m/s"),
@@ -147,6 +152,8 @@ class ParameterTable:
         if spec.is_integer:
             value = float(round(value))
         setting = value / spec.scale
+        if spec.is_integer and isinstance(get_path(self.settings, spec.path), int):
+            setting = int(round(setting))
         try:
             new_settings = replace_path(self.settings, spec.path, setting)
             if spec.path.startswith("wind."):

@@ -112,7 +112,7 @@ async def upload_plan(plan, url: str, timeout_s: float) -> None:
         raise LinkError("the upload did not finish in time; the vehicle keeps its previous "
                         "lists") from None
     finally:
-        link.close()
+        await link.aclose()
 
 
 async def download_plan(url: str, timeout_s: float):
@@ -125,7 +125,7 @@ async def download_plan(url: str, timeout_s: float):
     except asyncio.TimeoutError:
         raise LinkError("the download did not finish in time") from None
     finally:
-        link.close()
+        await link.aclose()
 
 
 async def home_or_none(link, timeout_s: float = 2.0):

@@ -304,12 +304,20 @@ class VehicleLink:
                 self._mavsdk.destroy()
         self._mavsdk = None
 
+    async def aclose(self) -> None:
+        """Cancel the subscriptions, let them unsubscribe, then release MAVSDK (idempotent)."""
+        tasks, self._tasks = self._tasks, []
+        for task in tasks:
+            task.cancel()
+        if tasks:
+            await asyncio.gather(*tasks, return_exceptions=True)
+        self.close()
+
     async def __aenter__(self) -> "VehicleLink":
         return self
 
     async def __aexit__(self, *exc) -> None:
-        self.close()
-        await asyncio.sleep(0)
+        await self.aclose()
 
     def on_link_change(self, callback: Callable[[bool], None]) -> None:
         """Call ``callback(connected)`` on the loop when the heartbeat is lost or is back."""
@@ -415,7 +423,7 @@ class VehicleLink:
                 raise
             except Exception:  # noqa: BLE001 - a telemetry glitch must not stop the link
                 log.exception("telemetry subscription %s failed; restarting", what)
-                await asyncio.sleep(0.5)
+            await asyncio.sleep(0.5)
 
     async def _watch_heartbeat(self) -> None:
         def apply(fields: dict) -> None:

@@ -41,7 +41,7 @@ from companion.planning.nearest import NodeGrid
 from companion.planning.result import PlanResult, Tree
 from companion.planning.settings import GartSettings
 from companion.planning.simplify import CornerRule, shortcut_path
-from companion.world import World
+from companion.world import Disc, Sphere, World
 
 __all__ = ["gart", "GartSearch", "validate_problem"]
 
@@ -109,7 +109,6 @@ class GartSearch:
         self.ec = EdgeCost(world, settings.cost)
         # cost = energy weight * length: the inner loop skips the general cost terms
         self.simple_cost = not (self.ec.uses_threat or self.ec.uses_climb or self.ec.uses_tracking)
-        self._acting = world.obstacles_within_of_cells(settings.influence_m) if settings.guidance else ()
         self.step = settings.step_m
         self.goal_radius = settings.goal_radius_m or settings.step_m
         self.r_max = settings.max_rewire_radius_m or 2.0 * settings.step_m
@@ -215,17 +214,28 @@ class GartSearch:
         margin = self.margin
         influence = s.influence_m
         gain = s.obstacle_gain_m2
-        for ob in self._acting[self.world.cell_of(p)]:
-            c = ob.sdf(p) - margin
-            if c >= influence:
-                continue
-            g = ob.gradient(p)
+        repel = s.repel_offset_m
+        dim = self.dim
+        for ob in self.world.obstacles_acting_on_cell(self.world.cell_of(p), influence + margin):
+            if type(ob) is Sphere or type(ob) is Disc:   # inline: the common case
+                c0 = ob.center_m
+                diff = [x - y for x, y in zip(p, c0)]
+                n = math.sqrt(sum(v * v for v in diff))
+                c = n - ob.radius_m - margin
+                if c >= influence:
+                    continue
+                g = [v / n for v in diff] if n > 1e-12 else [1.0] + [0.0] * (dim - 1)
+            else:
+                c = ob.sdf(p) - margin
+                if c >= influence:
+                    continue
+                g = ob.gradient(p)
             if c <= 0.0:
-                mag = -c + s.repel_offset_m          # repel: out of the inflated obstacle
+                mag = -c + repel                      # repel: out of the inflated obstacle
             else:
                 k_over_c = gain / c
                 mag = -(k_over_c if k_over_c < 0.5 * c else 0.5 * c)   # attract towards the surface
-            for i in range(self.dim):
+            for i in range(dim):
                 force[i] += mag * g[i]
         to_goal = [g - x for g, x in zip(self.goal, p)]
         dist_goal = math.sqrt(sum(v * v for v in to_goal))

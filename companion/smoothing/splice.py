@@ -50,7 +50,8 @@ def _vector(value, name: str, d: int) -> np.ndarray:
     return arr
 
 
-def lead_in_length(speed_m_s: float, turn_rad: float, kappa_max_1_m: float, limits: TrajectoryLimits) -> float:
+def lead_in_length(speed_m_s: float, turn_rad: float, kappa_max_1_m: float, limits: TrajectoryLimits,
+                   max_corner_m: float = math.inf) -> float:
     """Length (m) of the straight lead-in before the first corner of a splice.
 
     Parameters
@@ -61,19 +62,22 @@ def lead_in_length(speed_m_s: float, turn_rad: float, kappa_max_1_m: float, limi
         Heading change at the end of the lead-in.
     kappa_max_1_m : float
     limits : TrajectoryLimits
+    max_corner_m : float
+        Cap on the corner size (a sharp turn needs a corner larger than the distance to the
+        target, which the smoother shrinks to fit anyway).
 
     Returns
     -------
     float
-        Corner size d (eq. 19) + braking distance to the corner speed + the speed hold
-        v T / 2 + the filter reach v_max T, T = 2 a / j.
+        Corner size d (eq. 19, capped) + braking distance to the corner speed + the speed
+        hold v T / 2 + the filter reach v_max T, T = 2 a / j.
     """
     window = 2.0 * limits.accel_m_s2 / limits.jerk_m_s3
     v_corner_sq = limits.lat_accel_m_s2 / kappa_max_1_m
     braking = max(0.0, speed_m_s**2 - v_corner_sq) / (2.0 * limits.accel_m_s2)
     turn = min(float(turn_rad), math.pi - 1e-3)
-    return float(spiral_distance_m(turn, kappa_max_1_m)) + braking + 0.5 * speed_m_s * window \
-        + limits.speed_m_s * window + 1.0
+    corner = min(float(spiral_distance_m(turn, kappa_max_1_m)), max_corner_m)
+    return corner + braking + 0.5 * speed_m_s * window + limits.speed_m_s * window + 1.0
 
 
 def _turn(a: np.ndarray, b: np.ndarray) -> float:
@@ -139,10 +143,12 @@ def join_from_state(pos, vel, path, *, kappa_max_1_m: float = 0.1, limits: Traje
         return time_parameterize(curve, limits, end_speed_m_s=end_speed_m_s)
     heading = v0 / speed
     target = arr[0]
-    length = lead_in_length(speed, _turn(heading, target - p0), kappa, limits)
+    reach = max(float(np.linalg.norm(target - p0)), 1.0)
+    length = lead_in_length(speed, _turn(heading, target - p0), kappa, limits, reach)
     lead = p0 + length * heading
     for _ in range(3):           # the turn at the lead-in end depends on its length
-        length = lead_in_length(speed, _turn(heading, target - lead), kappa, limits)
+        reach = max(float(np.linalg.norm(target - lead)), 1.0)
+        length = lead_in_length(speed, _turn(heading, target - lead), kappa, limits, reach)
         lead = p0 + length * heading
     if world is not None:
         for _ in range(max_halvings):

@@ -13,7 +13,7 @@ Fig. 8: a moving obstacle met at close range) made precise by DESIGN section 7:
    Otherwise ``switch``: among the M-GART alternatives, the entry node within ``switch_range_m``
    with the lowest remaining cost whose spliced trajectory stays clear of the predicted threats.
    A replan that fails falls back to a switch; when nothing is safe -> ``hold`` (brake to a
-   hover along the current velocity), and the next call replans from the hold.
+   hover along the current path, ``BrakeAlongPath``), and the next call replans from the hold.
 4. ``join``: every new trajectory leaves the current reference position along the current
    velocity at the current speed (a straight lead long enough to slow down for the first
    corner), so neither the position nor the velocity setpoint jumps.
@@ -43,7 +43,7 @@ from companion.threats.settings import ThreatSettings
 from companion.world import Sphere, World
 
 __all__ = ["ThreatManager", "Decision", "Conflict", "Alternative", "ReferenceState",
-           "first_conflict", "min_separation_m", "lead_length_m", "entry_index", "threat_obstacles", "join_trajectory", "hold_trajectory",
+           "first_conflict", "min_separation_m", "lead_length_m", "entry_index", "threat_obstacles", "join_trajectory", "BrakeAlongPath",
            "ThreatManagerError"]
 
 log = logging.getLogger(__name__)
@@ -145,8 +145,9 @@ class Alternative:
         return cls(str(path_id), path, np.vstack(pos), np.concatenate(nxt), np.concatenate(rem))
 
     def nodes_from(self, entry: int) -> np.ndarray:
-        """The polyline (K, d) flown after switching at ``entry``: the entry, then the path's nodes."""
-        return np.vstack([self.entry_pos_ned_m[entry], self.path_ned_m[self.entry_next[entry]:]])
+        """The polyline (K, d) flown after switching at ``entry``: the entries from it on, the last
+        node (collinear points are dropped before smoothing, so the corners keep their room)."""
+        return np.vstack([self.entry_pos_ned_m[entry:], self.path_ned_m[-1:]])
 
 
 @dataclass(frozen=True)
@@ -216,7 +217,7 @@ def check_step_s(threats, step_s: float, inflation_m: float, vehicle_speed_m_s: 
 
 def first_conflict(trajectory, start_t_s: float, t_from_s: float, t_to_s: float, threats,
                    *, inflation_m: float, dim: int, step_s: float = 0.1,
-                   speed_bound_m_s: float = 10.0) -> Conflict | None:
+                   speed_bound_m_s: float = 10.0, escape: bool = False) -> Conflict | None:
     """First time in [t_from_s, t_to_s] the reference enters an inflated, predicted threat.
 
     Parameters
@@ -238,6 +239,10 @@ def first_conflict(trajectory, start_t_s: float, t_from_s: float, t_to_s: float,
         Largest time step; refined by ``check_step_s``.
     speed_bound_m_s : float
         Upper bound of the reference speed (for the step refinement).
+    escape : bool
+        When the reference already lies within a threat's inflated radius at ``t_from_s`` (the
+        vehicle braked into the margin), only getting closer than it is now (or than the bare
+        radius) counts as a conflict, so that a way out can be found.
 
     Returns
     -------
@@ -254,6 +259,8 @@ def first_conflict(trajectory, start_t_s: float, t_from_s: float, t_to_s: float,
         diff = pos[:, :dim] - centers[:, :dim]
         dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
         limit = threat.radius_m + inflation_m
+        if escape and dist[0] < limit:
+            limit = max(threat.radius_m, dist[0] - 0.05)
         hit = np.flatnonzero(dist < limit)
         if hit.size and (best is None or t[hit[0]] < best.t_s):
             k = hit[0]
@@ -336,12 +343,19 @@ def _turn_rad(u: np.ndarray, w: np.ndarray) -> float:
     return float(math.acos(max(-1.0, min(1.0, float(np.dot(u, w) / (nu * nw))))))
 
 
-def _clean_nodes(nodes: np.ndarray, tol_m: float = 0.05) -> np.ndarray:
+def _clean_nodes(nodes: np.ndarray, tol_m: float = 0.05, tol_rad: float = 1e-6) -> np.ndarray:
+    """Drop repeated nodes and nodes in the middle of a straight line."""
     keep = [nodes[0]]
     for p in nodes[1:]:
         if np.linalg.norm(p - keep[-1]) > tol_m:
             keep.append(p)
-    return np.asarray(keep)
+    out = [keep[0]]
+    for i in range(1, len(keep) - 1):
+        if _turn_rad(keep[i] - out[-1], keep[i + 1] - keep[i]) > tol_rad:
+            out.append(keep[i])
+    if len(keep) > 1:
+        out.append(keep[-1])
+    return np.asarray(out)
 
 
 def join_trajectory(ref: ReferenceState, nodes, *, world: World | None, limits: TrajectoryLimits,
@@ -385,7 +399,7 @@ def join_trajectory(ref: ReferenceState, nodes, *, world: World | None, limits: 
     fixed = lead_m is not None
     lead = float(lead_m) if fixed else lead_length_m(speed, _turn_rad(u, nodes[0] - p0), limits, kappa_max_1_m)
     reason = "no join"
-    for _ in range(1 if fixed else 2):
+    for attempt in range(1 if fixed else 2):
         p_lead = p0 + u * lead
         k = 0 if fixed else entry_index(p_lead, u, nodes, kappa_max_1_m)
         if k is None:
@@ -394,7 +408,11 @@ def join_trajectory(ref: ReferenceState, nodes, *, world: World | None, limits: 
                                  limits=limits, kappa_max_1_m=kappa_max_1_m, lift_down_m=lift_down_m,
                                  first_checked=1 if fixed else 0)
         if traj is None:
-            return traj, poly
+            if fixed or attempt == 1:
+                return traj, poly
+            lead *= 0.6          # blocked: a shorter lead with a gentler first corner may fit
+            reason = poly
+            continue
         start_speed = float(np.linalg.norm(traj.sample(np.array([0.0]))[1][0]))
         if abs(start_speed - speed) <= 0.02 * speed + 0.05:
             return traj, poly
@@ -447,33 +465,121 @@ def _timed_join(points: np.ndarray, speed_m_s: float, *, world, limits, kappa_ma
     return traj, poly
 
 
-def hold_trajectory(ref: ReferenceState, *, limits: TrajectoryLimits, decel_m_s2: float,
-                    lift_down_m: float | None = None):
-    """Brake to a hover along the current velocity (straight line, at rest at the end).
+class BrakeAlongPath:
+    """Brake to a hover *along the active reference's path* (the hold of DESIGN section 7).
 
-    Returns
-    -------
-    (Trajectory, polyline (2, d))
+    The vehicle keeps to the geometric path it was flying (so a hold never leaves the free
+    space the path was planned in) with a raised-cosine speed profile
+    ``v(t) = v0 (1 + cos(pi t / T)) / 2``, ``T = pi v0 / (2 decel)``: the along-track
+    acceleration is zero at both ends, at most ``decel`` in between, and the vehicle stops after
+    ``v0 T / 2``. Position, velocity (tangent times speed) and acceleration (along-track plus
+    the path's centripetal ``kappa v^2``) are interpolated by arc length from a dense sampling
+    of the active reference. If the active reference ends (at rest) before that distance, it is
+    followed to its end unchanged.
+
+    Parameters
+    ----------
+    active : Trajectory-like
+        ``sample(t_s)`` and ``duration_s``; samples of dimension d (2 or 3).
+    active_start_t_s : float
+        Clock time of the active reference's t = 0.
+    t_s : float
+        Clock time at which the hold starts (the reference state there is kept).
+    decel_m_s2 : float
+        Largest along-track deceleration (m/s^2), > 0.
+
+    Attributes
+    ----------
+    duration_s, length_m : float
+    end_pos_ned_m : ndarray, shape (d,)
     """
-    p0 = np.asarray(ref.pos_ned_m, dtype=float)
-    v0 = np.asarray(ref.vel_ned_m_s, dtype=float)
-    hold_limits = replace(limits, accel_m_s2=max(limits.accel_m_s2, decel_m_s2),
-                          jerk_m_s3=max(limits.jerk_m_s3, decel_m_s2 * limits.jerk_m_s3 / limits.accel_m_s2))
-    speed = min(float(np.linalg.norm(v0)), hold_limits.speed_m_s)
-    if speed < 1e-3:
-        u = np.zeros_like(p0)
-        u[0] = 1.0
-        end = p0 + 0.01 * u
-        traj = time_parameterize(np.vstack([p0, end]), hold_limits, yaw_mode="hold")
-    else:
-        u = v0 / np.linalg.norm(v0)
-        window_s = 2.0 * hold_limits.accel_m_s2 / hold_limits.jerk_m_s3
-        stop_m = speed * window_s / 2.0 + speed**2 / (2.0 * hold_limits.accel_m_s2)
-        end = p0 + u * max(stop_m, 0.01)
-        traj = time_parameterize(np.vstack([p0, end]), hold_limits, start_speed_m_s=speed)
-    if lift_down_m is not None:
-        traj = traj.to_ned(lift_down_m)
-    return traj, np.vstack([p0, end])
+
+    def __init__(self, active, active_start_t_s: float, t_s: float, decel_m_s2: float) -> None:
+        self.t_rel0_s = min(max(t_s - active_start_t_s, 0.0), active.duration_s)
+        p0, v0, _ = active.sample(np.array([self.t_rel0_s]))
+        self.v0_m_s = float(np.linalg.norm(v0[0]))
+        self.duration_s = math.pi * self.v0_m_s / (2.0 * decel_m_s2)
+        self.length_m = self.v0_m_s * self.duration_s / 2.0
+        remaining_s = active.duration_s - self.t_rel0_s
+        self._follow = None
+        if self.v0_m_s < 1e-3:
+            self._table(active, np.array([self.t_rel0_s]))
+            self.duration_s, self.length_m = 0.0, 0.0
+        else:
+            scan_s = min(remaining_s, 2.0 * self.length_m / self.v0_m_s + 10.0)
+            t = self.t_rel0_s + np.arange(0.0, scan_s + 0.02, 0.02)
+            self._table(active, np.minimum(t, active.duration_s))
+            if self._s[-1] < self.length_m:          # the active reference stops first
+                self._follow = (active, self.t_rel0_s)
+                self.duration_s = remaining_s
+                self.length_m = float(self._s[-1])
+        self.end_pos_ned_m = self.sample(np.array([self.duration_s]))[0][0]
+
+    def _table(self, active, t: np.ndarray) -> None:
+        pos, vel, acc = active.sample(t)
+        pos, vel, acc = np.atleast_2d(pos), np.atleast_2d(vel), np.atleast_2d(acc)
+        speed = np.linalg.norm(vel, axis=1)
+        seg = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+        self._s = np.concatenate([[0.0], np.cumsum(seg)])
+        moving = speed > 1e-6
+        tangent = np.where(moving[:, None], vel / np.maximum(speed, 1e-6)[:, None], 0.0)
+        if not np.any(moving):
+            tangent[:, 0] = 1.0
+        else:   # carry the last known direction over stops
+            idx = np.maximum.accumulate(np.where(moving, np.arange(len(t)), -1))
+            idx[idx < 0] = int(np.argmax(moving))
+            tangent = tangent[idx]
+        along = np.einsum("ij,ij->i", acc, tangent)
+        normal = acc - along[:, None] * tangent
+        self._curv = np.where(moving[:, None], normal / np.maximum(speed, 1e-6)[:, None] ** 2, 0.0)
+        self._pos, self._tangent = pos, tangent
+        self._yaw = np.unwrap(np.arctan2(tangent[:, 1], tangent[:, 0]))
+        self.d = pos.shape[1]
+
+    def _interp(self, s: np.ndarray, table: np.ndarray) -> np.ndarray:
+        if self._s.size == 1:
+            return np.repeat(table[:1], s.size, axis=0)
+        return np.stack([np.interp(s, self._s, table[:, j]) for j in range(table.shape[1])], axis=1)
+
+    def profile(self, t_s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Arc length (m), speed (m/s) and along-track acceleration (m/s^2) at ``t_s`` (K,)."""
+        t = np.clip(np.atleast_1d(np.asarray(t_s, dtype=float)), 0.0, self.duration_s)
+        if self.duration_s <= 0.0:
+            return np.zeros_like(t), np.zeros_like(t), np.zeros_like(t)
+        w = math.pi / self.duration_s
+        v0 = self.v0_m_s
+        return (0.5 * v0 * (t + np.sin(w * t) / w), 0.5 * v0 * (1.0 + np.cos(w * t)),
+                -0.5 * v0 * w * np.sin(w * t))
+
+    def sample(self, t_s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position, velocity, acceleration (K, d) at times ``t_s`` (K,) since the hold began."""
+        if self._follow is not None:
+            active, t0 = self._follow
+            t = np.clip(np.atleast_1d(np.asarray(t_s, dtype=float)), 0.0, self.duration_s)
+            pos, vel, acc = active.sample(t0 + t)
+            return np.atleast_2d(pos), np.atleast_2d(vel), np.atleast_2d(acc)
+        s, v, a = self.profile(t_s)
+        tangent = self._interp(s, self._tangent)
+        tangent /= np.maximum(np.linalg.norm(tangent, axis=1), 1e-12)[:, None]
+        pos = self._interp(s, self._pos)
+        vel = tangent * v[:, None]
+        acc = tangent * a[:, None] + self._interp(s, self._curv) * (v * v)[:, None]
+        return pos, vel, acc
+
+    def yaw_rad(self, t_s) -> np.ndarray:
+        """Heading of the path (rad, in (-pi, pi]) at times ``t_s`` (K,)."""
+        if self._follow is not None:
+            active, t0 = self._follow
+            t = np.clip(np.atleast_1d(np.asarray(t_s, dtype=float)), 0.0, self.duration_s)
+            return active.yaw_rad(t0 + t)
+        s = self.profile(t_s)[0]
+        yaw = np.interp(s, self._s, self._yaw) if self._s.size > 1 else np.full(s.shape, self._yaw[0])
+        return np.angle(np.exp(1j * yaw))
+
+    def path_ned_m(self, step_m: float = 2.0) -> np.ndarray:
+        """The hold's path as a polyline (K, d), for ``uav/<sysid>/path``."""
+        n = max(2, int(math.ceil(self.length_m / step_m)) + 1)
+        return self.sample(np.linspace(0.0, self.duration_s, n) if self.duration_s > 0 else np.zeros(2))[0]
 
 
 # ---------------------------------------------------------------------------- the manager
@@ -679,7 +785,8 @@ class ThreatManager:
     def _conflict_of(self, trajectory, start_t_s: float, t_s: float, threats) -> Conflict | None:
         return first_conflict(trajectory, start_t_s, t_s, t_s + self.settings.horizon_s, threats,
                               inflation_m=self.settings.inflation_m, dim=self.world.dim,
-                              step_s=self.settings.check_step_s, speed_bound_m_s=self._speed_bound())
+                              step_s=self.settings.check_step_s, speed_bound_m_s=self._speed_bound(),
+                              escape=True)
 
     def check(self, threats, t_s: float) -> Conflict | None:
         """Space-time conflict of the active reference with ``threats`` over the horizon."""
@@ -866,8 +973,9 @@ class ThreatManager:
     # ------------------------------------------------------------------ hold
     def _hold(self, ref: ReferenceState, what: str, conflict) -> Decision:
         t0 = time.perf_counter()
-        traj, poly = hold_trajectory(ref, limits=self.limits, decel_m_s2=self.settings.hold_decel_m_s2,
-                                     lift_down_m=self._lift_down_m(ref.t_s))
+        traj = BrakeAlongPath(self._active.trajectory, self._active.start_t_s, ref.t_s,
+                              self.settings.hold_decel_m_s2)
+        poly = traj.path_ned_m()[:, : self.world.dim]
         self._counter += 1
         return Decision("hold", what, traj, ref.t_s, f"hold-{self._counter}", poly, conflict,
                         plan_ms=_ms_since(t0), resume=self.mode != "switch")

@@ -141,7 +141,8 @@ class ThreatSettings:
     max_candidates : int
         Most switch candidates (entry nodes) smoothed and checked per decision. Default 8.
     hold_decel_m_s2 : float
-        Deceleration of the hold (brake to hover) (m/s^2). Default 2.
+        Largest deceleration of the hold (brake to a hover along the path) (m/s^2). Default 2.5,
+        the lateral acceleration limit of the smoothing settings.
     estimate_gain : float
         Weight of a new measurement in the running estimate of the replanning time. Default 0.2.
     seed : int
@@ -161,7 +162,7 @@ class ThreatSettings:
     gart_first_budget_s: float = 0.15
     entry_spacing_m: float = 2.0
     max_candidates: int = 8
-    hold_decel_m_s2: float = 2.0
+    hold_decel_m_s2: float = 2.5
     estimate_gain: float = 0.2
     seed: int = 0
 

@@ -104,7 +104,7 @@ class World:
         self._margin = margin
         self._obstacles = obs
         self._build_index()
-        self._memo: dict = {}  # memoised derived lookups (see obstacles_within_of_cells)
+        self._memo: dict = {}  # memoised derived lookups (obstacles_acting_on_cell, KD-tree)
         self.point_free = self._point_free_2d if dim == 2 else self._point_free_3d
         self._frozen = True
 
@@ -353,25 +353,47 @@ class World:
         """Flat index of the index-grid cell containing ``p`` (clamped to the bounds)."""
         return self._grid.cell_of(p)
 
-    def obstacles_within_of_cells(self, reach_m: float) -> tuple:
-        """Per index-grid cell: the obstacles whose inflated surface may lie within ``reach_m``.
+    def obstacles_acting_on_cell(self, flat: int, reach_m: float) -> tuple:
+        """Obstacles whose inflated surface may come within ``reach_m`` of grid cell ``flat``.
 
-        Returns a tuple indexed by :meth:`cell_of`; memoised per ``reach_m`` (the planner's
-        guidance asks for the obstacles acting on a sample with a fixed influence distance).
+        A superset (bounding boxes, whole cells), memoised per cell and distance: the planner's
+        guidance asks for the obstacles acting on a sample (``flat`` from :meth:`cell_of`).
         """
-        key = ("within", float(reach_m))
+        key = (flat, reach_m)
         found = self._memo.get(key)
         if found is None:
             g = self._grid
-            per_cell: list[list[int]] = [[] for _ in g.cells]
-            pad = reach_m + 1e-9
-            for i, ob in enumerate(self._obstacles):
-                blo, bhi = ob.aabb(self._dim)
-                blo = tuple(x - self._margin - pad for x in blo)
-                bhi = tuple(x + self._margin + pad for x in bhi)
-                for flat in g.cells_overlapping(blo, bhi):
-                    per_cell[flat].append(i)
-            found = tuple(tuple(self._obstacles[i] for i in ids) for ids in per_cell)
+            rings = int(math.ceil(reach_m * g.inv_cell))
+            ranges = []
+            for axis in range(self._dim):
+                i = g._cell_lo_index(flat, axis)
+                ranges.append(range(max(0, i - rings), min(g.shape[axis], i + rings + 1)))
+            ids: set[int] = set()
+            cells = g.cells
+            if self._dim == 2:
+                n1 = g.shape[1]
+                for i in ranges[0]:
+                    for j in ranges[1]:
+                        ids.update(cells[i * n1 + j])
+            else:
+                n1, n2 = g.shape[1], g.shape[2]
+                for i in ranges[0]:
+                    for j in ranges[1]:
+                        base = (i * n1 + j) * n2
+                        for k in ranges[2]:
+                            ids.update(cells[base + k])
+            cell_lo = [g.lo[a] + g._cell_lo_index(flat, a) * g.cell_m for a in range(self._dim)]
+            keep = []
+            for i in sorted(ids):  # exact box-to-box gap against the cell
+                blo, bhi = self._obstacles[i].aabb(self._dim)
+                gap2 = 0.0
+                for a in range(self._dim):
+                    lo_a, hi_a = cell_lo[a], cell_lo[a] + g.cell_m
+                    d = max(blo[a] - self._margin - hi_a, lo_a - bhi[a] - self._margin, 0.0)
+                    gap2 += d * d
+                if gap2 <= reach_m * reach_m:
+                    keep.append(self._obstacles[i])
+            found = tuple(keep)
             self._memo[key] = found
         return found
 

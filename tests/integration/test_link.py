@@ -39,7 +39,7 @@ def test_connect_and_telemetry():
             assert t.lat_deg == pytest.approx(47.397742, abs=1e-4)
             assert link.target_system == sim.sysid
         finally:
-            link.close()
+            await link.aclose()
 
     with start_sim_vehicle(speedup=1.0) as sim:
         asyncio.run(main(sim))
@@ -76,7 +76,7 @@ def test_guided_takeoff_and_setpoints_move_the_vehicle():
             assert streamer.sent > 10 and streamer.send_errors == 0
         finally:
             await streamer.stop()
-            link.close()
+            await link.aclose()
 
     with start_sim_vehicle(speedup=4.0) as sim:
         asyncio.run(main(sim))
@@ -99,7 +99,7 @@ def test_link_loss_is_detected_and_recovered():
             assert changes[:2] == [False, True]
             await link.wait_position(5)
         finally:
-            link.close()
+            await link.aclose()
 
     with start_sim_vehicle(speedup=1.0) as sim:
         asyncio.run(main(sim))

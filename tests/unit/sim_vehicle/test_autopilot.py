@@ -298,3 +298,86 @@ def test_rtl_goes_to_the_nearest_rally_point(model):
             break
     assert not vehicle.armed
     assert np.allclose(vehicle.pos_ned_m[:2], (40.0, 0.0), atol=1.0)
+
+
+# ---------------------------------------------------------------- geofence
+@settings(deadline=None, max_examples=60)
+@given(st.floats(-50, 50), st.floats(-50, 50), st.floats(1, 40), st.floats(1, 40), st.floats(-100, 100),
+       st.floats(-100, 100))
+def test_point_in_rectangle_polygon_matches_the_box(cn, ce, hn, he, pn, pe):
+    poly = np.array([[cn - hn, ce - he], [cn + hn, ce - he], [cn + hn, ce + he], [cn - hn, ce + he]])
+    inside = abs(pn - cn) < hn and abs(pe - ce) < he
+    on_edge = abs(abs(pn - cn) - hn) < 1e-9 or abs(abs(pe - ce) - he) < 1e-9
+    if not on_edge:
+        assert ap.point_in_polygon(np.array([pn, pe]), poly) == inside
+
+
+def test_fence_breach_switches_to_rtl_when_enabled(model):
+    fence_settings = replace_path(VehicleSettings(), "flight.fence_enable", 1)
+    vehicle = make_vehicle(model, fence_settings)
+    corners = [north_east_deg(n, e) for n, e in ((-20, -20), (20, -20), (20, 20), (-20, 20))]
+    vehicle.set_fence([item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0) for i, (lat, lon) in enumerate(corners)]
+                      + [item(4, ap.CMD_FENCE_CIRCLE_EXCLUSION, *north_east_deg(-10.0, 0.0), p1=3.0)])
+    assert len(vehicle.fence.inclusion_polygons) == 1 and len(vehicle.fence.exclusion_circles) == 1
+    vehicle.set_mode(ap.GUIDED)
+    vehicle.arm()
+    vehicle.takeoff(10.0)
+    fly(vehicle, 12.0)
+    assert vehicle.fence_breached is None
+    vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(40.0, 0.0, -10.0)))  # leaves the polygon at 20 m
+    events = []
+    for _ in range(40):
+        events += vehicle.step(0.5)
+        if vehicle.mode == ap.RTL:
+            break
+    assert vehicle.mode == ap.RTL and "outside an inclusion polygon" in vehicle.fence_breached
+    assert 19.0 < vehicle.pos_ned_m[0] < 26.0
+    assert any(e[0] == "text" and "Fence" in e[2] for e in events)
+
+
+def test_fence_is_not_enforced_by_default(model):
+    vehicle = airborne_at_10m(model)
+    corners = [north_east_deg(n, e) for n, e in ((-5, -5), (5, -5), (5, 5), (-5, 5))]
+    vehicle.set_fence([item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0) for i, (lat, lon) in enumerate(corners)])
+    vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(20.0, 0.0, -10.0)))
+    fly(vehicle, 10.0)
+    assert vehicle.mode == ap.GUIDED and vehicle.fence_breached is None
+
+
+def test_completed_mission_restarts_from_item_1(model):
+    mission = [item(0, 16, HOME[0], HOME[1], HOME[2], frame=0), item(1, 22, z=3.0), item(2, 21)]
+    vehicle = make_vehicle(model)
+    vehicle.set_mission(mission)
+    vehicle.set_mode(ap.AUTO)
+    for flight in range(2):
+        assert vehicle.arm()[0]
+        events = []
+        for _ in range(100):
+            events += vehicle.step(0.5)
+            if not vehicle.armed:
+                break
+        assert [e[1] for e in events if e[0] == "mission_item_reached"] == [1, 2], f"flight {flight}"
+        assert vehicle.mission_finished
+
+
+def test_leaving_auto_mid_item_reports_nothing_and_resumes_later(model):
+    lat, lon = north_east_deg(40.0, 0.0)
+    mission = [item(0, 16, HOME[0], HOME[1], HOME[2], frame=0), item(1, 22, z=5.0), item(2, 16, lat, lon, 5.0),
+               item(3, 21)]
+    vehicle = make_vehicle(model)
+    vehicle.set_mission(mission)
+    vehicle.set_mode(ap.AUTO)
+    vehicle.arm()
+    events = fly(vehicle, 8.0)
+    assert vehicle.mission_current == 2
+    vehicle.set_mode(ap.GUIDED)
+    vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(0.0, 10.0, -5.0)))
+    events = fly(vehicle, 10.0)
+    assert not any(e[0] == "mission_item_reached" for e in events)
+    vehicle.set_mode(ap.AUTO)
+    for _ in range(120):
+        events += vehicle.step(0.5)
+        if not vehicle.armed:
+            break
+    assert [e[1] for e in events if e[0] == "mission_item_reached"] == [2, 3]
+    assert np.allclose(vehicle.pos_ned_m[:2], (40.0, 0.0), atol=1.0)

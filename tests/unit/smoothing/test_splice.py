@@ -57,7 +57,10 @@ def test_blocked_lead_in_is_shortened():
     traj = join_from_state([0.0, 0.0], [6.0, 0.0], np.array([[20.0, 40.0], [60.0, 60.0]]), world=world)
     s = np.linspace(0, traj.length_m, 4000)
     assert np.all(world.is_free(traj.curve.evaluate(s)))
-    np.testing.assert_allclose(traj.sample(0.0)[1], [6.0, 0.0], atol=1e-6)
+    v0 = traj.sample(0.0)[1]
+    assert v0[1] == pytest.approx(0.0, abs=1e-9) and v0[0] > 0         # same direction
+    if abs(v0[0] - 6.0) > 1e-6:                                         # slower only if said so
+        assert any("start speed" in n for n in traj.notes)
 
 
 def test_bad_state():

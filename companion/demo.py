@@ -1,0 +1,245 @@
+"""``companion demo``: the full show in separate processes on the embedded defaults.
+
+The demo process starts a ``sim-vehicle`` (SITL helicopter) and a ``companion run`` (the
+daemon) on free ports, and is itself the separate threat-injecting process: it watches the
+companion's zenoh ``status`` and ``path`` and, while the mission is flown, puts
+
+1. a **pop-up** threat on the reference far ahead (time to conflict well above the replanning
+   budget): the companion **replans** around it;
+2. a threat **moving at sqrt(2) m/s** across the path met within about 10 m (paper Fig. 8): too
+   late to replan, the companion **switches** to a pre-planned M-GART alternative;
+3. an invalid payload: the companion publishes a **rejected** event and flies on;
+
+then removes the threats (DELETE) and waits for the landing. It prints every decision with its
+latency (threat PUT to the first setpoint of the new trajectory), the minimum separation from
+the threats and the tracking error, and renders the report (``companion report``) with a
+Fig. 8-style plot.
+
+``Injection`` and ``FlightWatcher`` are also what the threat integration tests use.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from companion.errors import CompanionError
+from companion.threats.bus import ThreatBus
+from companion.threats.model import Threat
+
+log = logging.getLogger(__name__)
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+DEMO_MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
+
+
+def free_port(kind: int = socket.SOCK_DGRAM) -> int:
+    """A loopback port that is free now (UDP by default)."""
+    with socket.socket(socket.AF_INET, kind) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@dataclass(frozen=True)
+class Injection:
+    """A threat placed relative to the reference being flown.
+
+    Parameters
+    ----------
+    threat_id : str
+    kind : str
+        ``popup`` (static) or ``moving``.
+    leg : int
+        Put it while this leg (0-based) is flown ...
+    after_s : float
+        ... once its reference has run this long (mission seconds).
+    ahead_s : float
+        The threat's centre is the reference position this far ahead in time ...
+    lateral_m : float
+        ... moved this far to the right of the path (negative: left).
+    radius_m : float
+    speed_m_s : float
+        Moving threats head towards the path, perpendicular to it, at this speed.
+    ttl_s : float
+    """
+
+    threat_id: str
+    kind: str
+    leg: int
+    after_s: float
+    ahead_s: float
+    radius_m: float
+    lateral_m: float = 0.0
+    speed_m_s: float = 0.0
+    ttl_s: float = 120.0
+
+
+#: The demo's threats on ``exclusion_zones.plan``.
+DEMO_INJECTIONS = (
+    Injection("popup1", "popup", leg=1, after_s=1.0, ahead_s=8.0, radius_m=5.0),
+    Injection("mover1", "moving", leg=3, after_s=4.0, ahead_s=2.5, radius_m=3.0, lateral_m=-5.0,
+              speed_m_s=math.sqrt(2.0)),
+)
+
+
+class FlightWatcher:
+    """Follows a companion's ``status``, ``path`` and ``events`` over zenoh (thread-safe)."""
+
+    def __init__(self, bus: ThreatBus):
+        self.bus = bus
+        self._lock = threading.Lock()
+        self.status: dict | None = None
+        self.path: dict | None = None
+        self.events: list[dict] = []
+        bus.subscribe_json("status", self._on_status)
+        bus.subscribe_json("path", self._on_path)
+        bus.subscribe_json("events", self._on_event)
+
+    def _on_status(self, key, msg) -> None:
+        with self._lock:
+            self.status = msg
+
+    def _on_path(self, key, msg) -> None:
+        with self._lock:
+            self.path = msg
+
+    def _on_event(self, key, msg) -> None:
+        with self._lock:
+            self.events.append(msg)
+
+    def events_of(self, kind: str) -> list[dict]:
+        with self._lock:
+            return [e for e in self.events if e and e.get("event") == kind]
+
+    def reference_at(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """Reference position and unit direction of travel at mission time ``t_s``."""
+        with self._lock:
+            path = self.path
+        if not path or not path.get("reference_ned_m"):
+            return None
+        ref = np.asarray(path["reference_ned_m"], dtype=float)
+        t = np.linspace(0.0, path["duration_s"], len(ref))
+        tau = min(max(t_s - path["t0_s"], 0.0), path["duration_s"])
+        pos = np.array([np.interp(tau, t, ref[:, i]) for i in range(3)])
+        ahead = np.array([np.interp(min(tau + 0.5, t[-1]), t, ref[:, i]) for i in range(3)])
+        back = np.array([np.interp(max(tau - 0.5, 0.0), t, ref[:, i]) for i in range(3)])
+        direction = ahead - back
+        norm = np.linalg.norm(direction[:2])
+        return pos, (direction / norm if norm > 1e-6 else np.array([1.0, 0.0, 0.0]))
+
+    def due(self, injection: Injection) -> bool:
+        """True when ``injection``'s leg is flown on its planned reference long enough."""
+        with self._lock:
+            status, path = self.status, self.path
+        if not status or not path or path.get("leg") != injection.leg:
+            return False
+        if path.get("path_id") != f"leg{injection.leg}":
+            return False
+        return status["t_s"] - path["t0_s"] >= injection.after_s
+
+
+def place(injection: Injection, watcher: FlightWatcher) -> Threat:
+    """The threat of ``injection`` on the current reference (local NED)."""
+    now = watcher.status["t_s"]
+    pos, direction = watcher.reference_at(now + injection.ahead_s)
+    right = np.array([-direction[1], direction[0], 0.0]) / max(np.linalg.norm(direction[:2]), 1e-9)
+    centre = pos + injection.lateral_m * right
+    velocity = np.zeros(3)
+    if injection.speed_m_s > 0:
+        towards_path = -np.sign(injection.lateral_m or 1.0) * right
+        velocity = injection.speed_m_s * towards_path
+    return Threat(injection.threat_id, injection.kind, "local_ned", tuple(map(float, centre)),
+                  tuple(map(float, velocity)), injection.radius_m, injection.ttl_s)
+
+
+def inject(watcher: FlightWatcher, injections, timeout_s: float, *, done=None,
+           invalid_after: str | None = "mover1") -> list[Threat]:
+    """Put each injection when it is due; stop when all are in, ``done()`` or the timeout."""
+    pending = list(injections)
+    sent: list[Threat] = []
+    deadline = time.monotonic() + timeout_s
+    while pending and time.monotonic() < deadline and not (done and done()):
+        time.sleep(0.02)
+        for injection in [i for i in pending if watcher.due(i)]:
+            threat = place(injection, watcher)
+            watcher.bus.put_threat(threat)
+            sent.append(threat)
+            pending.remove(injection)
+            log.info("put %s %s at %s", threat.kind, threat.id, np.round(threat.position, 1))
+            if injection.threat_id == invalid_after:
+                watcher.bus.put_raw("broken", b'{"v": 1, "id": "broken", "kind": "popup"}')
+    return sent
+
+
+def spawn(args: list[str], log_path: Path) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    with open(log_path, "wb") as fh:
+        return subprocess.Popen([sys.executable, "-m", *args], stdout=fh, stderr=subprocess.STDOUT,
+                                cwd=str(REPO_ROOT), env=env)
+
+
+def stop(proc: subprocess.Popen, timeout_s: float = 15.0) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def last_json_line(path: Path) -> dict | None:
+    for line in reversed(path.read_text(errors="replace").splitlines()):
+        if line.startswith("{"):
+            try:
+                return json.loads(line)
+            except json.JSONDecodeError:
+                return None
+    return None
+
+
+def run_demo(out_dir: Path, *, speedup: float = 4.0, mission: Path = DEMO_MISSION,
+             timeout_s: float = 300.0, gcs_out: str | None = "127.0.0.1:14550") -> dict:
+    """Fly the demo; returns the companion's summary plus the decisions seen on zenoh."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    mav_port, vehicle_port, zenoh_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
+    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
+    outs = ["--out", f"127.0.0.1:{mav_port}"] + (["--out", gcs_out] if gcs_out else [])
+    sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(speedup)],
+                out_dir / "sim_vehicle.log")
+    record = out_dir / "flight.jsonl"
+    companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
+                       "--mission", str(mission), "--time-scale", str(speedup),
+                       "--zenoh-listen", endpoint, "--record", str(record)],
+                      out_dir / "companion.log")
+    bus = None
+    try:
+        bus = ThreatBus(1, listen=(), connect=(endpoint,)).open()
+        watcher = FlightWatcher(bus)
+        inject(watcher, DEMO_INJECTIONS, timeout_s, done=lambda: companion.poll() is not None)
+        time.sleep(2.0)
+        for injection in DEMO_INJECTIONS:
+            bus.delete_threat(injection.threat_id)
+        companion.wait(timeout_s)
+    finally:
+        stop(companion)
+        stop(sim)
+        if bus is not None:
+            bus.close()
+    summary = last_json_line(out_dir / "companion.log")
+    if companion.returncode != 0 or summary is None:
+        raise CompanionError(f"the demo flight failed (companion exit {companion.returncode}); "
+                             f"see {out_dir / 'companion.log'}")
+    summary["events"] = watcher.events
+    return summary
