@@ -209,9 +209,14 @@ def last_json_line(path: Path) -> dict | None:
     return None
 
 
-def run_demo(out_dir: Path, *, speedup: float = 4.0, mission: Path = DEMO_MISSION,
-             timeout_s: float = 300.0, gcs_out: str | None = "127.0.0.1:14550") -> dict:
-    """Fly the demo; returns the companion's summary plus the decisions seen on zenoh."""
+def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
+        timeout_s: float = 300.0, gcs_out: str | None = None, extra_args=()) -> dict:
+    """Fly ``mission`` with a fresh ``sim-vehicle`` and ``companion run`` (separate processes).
+
+    This process watches the flight over zenoh and puts the ``injections`` when they are due,
+    then removes them. Returns the companion's summary plus ``events`` (seen on zenoh) and
+    ``record`` (the flight record's path).
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
     mav_port, vehicle_port, zenoh_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
@@ -221,16 +226,18 @@ def run_demo(out_dir: Path, *, speedup: float = 4.0, mission: Path = DEMO_MISSIO
     record = out_dir / "flight.jsonl"
     companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
                        "--mission", str(mission), "--time-scale", str(speedup),
-                       "--zenoh-listen", endpoint, "--record", str(record)],
+                       "--zenoh-listen", endpoint, "--record", str(record), *extra_args],
                       out_dir / "companion.log")
     bus = None
+    watcher = None
     try:
         bus = ThreatBus(1, listen=(), connect=(endpoint,)).open()
         watcher = FlightWatcher(bus)
-        inject(watcher, DEMO_INJECTIONS, timeout_s, done=lambda: companion.poll() is not None)
-        time.sleep(2.0)
-        for injection in DEMO_INJECTIONS:
-            bus.delete_threat(injection.threat_id)
+        if injections:
+            inject(watcher, injections, timeout_s, done=lambda: companion.poll() is not None)
+            time.sleep(2.0)
+            for injection in injections:
+                bus.delete_threat(injection.threat_id)
         companion.wait(timeout_s)
     finally:
         stop(companion)
@@ -239,7 +246,13 @@ def run_demo(out_dir: Path, *, speedup: float = 4.0, mission: Path = DEMO_MISSIO
             bus.close()
     summary = last_json_line(out_dir / "companion.log")
     if companion.returncode != 0 or summary is None:
-        raise CompanionError(f"the demo flight failed (companion exit {companion.returncode}); "
-                             f"see {out_dir / 'companion.log'}")
-    summary["events"] = watcher.events
+        raise CompanionError(f"the flight of {mission.name} failed (companion exit "
+                             f"{companion.returncode}); see {out_dir / 'companion.log'}")
+    summary["events"] = watcher.events if watcher is not None else []
+    summary["record"] = str(record)
     return summary
+
+
+def run_demo(out_dir: Path, *, speedup: float = 4.0, gcs_out: str | None = "127.0.0.1:14550") -> dict:
+    """The demo flight: ``DEMO_MISSION`` with ``DEMO_INJECTIONS``."""
+    return fly(out_dir, DEMO_MISSION, speedup=speedup, injections=DEMO_INJECTIONS, gcs_out=gcs_out)

@@ -41,7 +41,10 @@ class FlightPlanSettings:
     Parameters
     ----------
     planning_budget_s : float
-        GART wall-clock budget per leg (anytime: the best path found in the budget). Default 0.3.
+        GART wall-clock budget per leg (anytime: the best path found in the budget). Default 0.5.
+    planning_attempts : int
+        A leg without a path in the budget is tried again with twice the budget, this many
+        times in all (default 4: up to 0.5 + 1 + 2 + 4 s) before it is declared unreachable.
     slab_margin_m : float
         Half-thickness added above and below the leg's altitudes for its planning slab (m).
     climb_speed_m_s, descent_speed_m_s : float
@@ -57,7 +60,8 @@ class FlightPlanSettings:
         Wall-clock budget of one M-GART refresh (s), run in the background.
     """
 
-    planning_budget_s: float = 0.3
+    planning_budget_s: float = 0.5
+    planning_attempts: int = 4
     slab_margin_m: float = 2.0
     climb_speed_m_s: float = 2.5
     descent_speed_m_s: float = 1.5
@@ -67,6 +71,9 @@ class FlightPlanSettings:
     alternatives_budget_s: float = 0.5
 
     def __post_init__(self) -> None:
+        if isinstance(self.planning_attempts, bool) or not isinstance(self.planning_attempts, int) \
+                or not 1 <= self.planning_attempts <= 10:
+            raise MissionError(f"flight.planning_attempts: an integer in 1..10, got {self.planning_attempts!r}")
         if isinstance(self.alternatives_k, bool) or not isinstance(self.alternatives_k, int) \
                 or not 0 <= self.alternatives_k <= 16:
             raise MissionError(f"flight.alternatives_k: an integer in 0..16, got {self.alternatives_k!r}")
@@ -213,6 +220,20 @@ def leg_limits(waypoint, limits: TrajectoryLimits) -> TrajectoryLimits:
     return replace(limits, speed_m_s=min(float(speed), limits.speed_m_s))
 
 
+def search(world: World, start, goal, gart_settings: GartSettings, settings: FlightPlanSettings,
+           rng: np.random.Generator) -> PlanResult:
+    """Stage 1: GART in the budget, doubled at every attempt until a path is found."""
+    budget = settings.planning_budget_s
+    for attempt in range(settings.planning_attempts):
+        result = gart(world, start, goal, rng=rng, max_time_s=budget, settings=gart_settings)
+        if result.status != "timeout":
+            return result
+        log.info("no path in %.2f s (attempt %d); searching again for %.2f s", budget,
+                 attempt + 1, 2 * budget)
+        budget *= 2
+    return result
+
+
 def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: GartSettings,
              smoothing: SmoothingSettings, settings: FlightPlanSettings,
              rng: np.random.Generator, yaw_rad: float = 0.0) -> LegPlan | None:
@@ -240,12 +261,12 @@ def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: 
         polyline.append(level_start)
     slab = leg_slab(world, [goal[2]], settings.slab_margin_m)
     if np.hypot(*(goal[:2] - level_start[:2])) > 1e-3:
-        result = gart(slab, level_start, goal, rng=rng, max_time_s=settings.planning_budget_s,
-                      settings=gart_settings)
+        result = search(slab, level_start, goal, gart_settings, settings, rng)
         if result.status != "exact":
+            total_s = settings.planning_budget_s * (2 ** settings.planning_attempts - 1)
             reason = {"invalid_start": "the leg starts inside an obstacle or outside the bounds",
                       "invalid_goal": "the goal is inside an obstacle (with the safety margin)",
-                      "timeout": f"no path found within {settings.planning_budget_s} s"}[result.status]
+                      "timeout": f"no path found in {total_s:g} s of search"}[result.status]
             raise MissionError(f"{where}: unreachable: {reason}")
         path = level(result.path, goal[2], slab)
         curve = smooth(path, smoothing, slab)

@@ -273,8 +273,8 @@ class Trajectory:
     # ------------------------------------------------------------------ derived trajectories
     def to_ned(self, down_m: float) -> "Trajectory":
         """A 2D (north-east) trajectory flown at fixed ``down_m`` (NED, m): samples become (K, 3)."""
-        if self.curve.d != 2:
-            raise TrajectoryError(f"to_ned: only a 2D trajectory can be lifted, this one is {self.curve.d}D")
+        if self.curve.d != 2 or self.down_m is not None:
+            raise TrajectoryError(f"to_ned: only a 2D trajectory can be lifted, this one is {self.d}D")
         if not math.isfinite(float(down_m)):
             raise TrajectoryError(f"down_m: must be finite, got {down_m!r}")
         return Trajectory(self.curve, self.profile, self.limits, self._tau_start,

@@ -195,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
         log.info("signal %d: shutting down", signum)
         server.stop()
 
-    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGINT, on_signal)  # from now on a signal ends the main loop cleanly
     signal.signal(signal.SIGTERM, on_signal)
     log.info("vehicle '%s', home %.6f,%.6f,%.1f m, heading %.0f deg, seed %d, physics %g Hz, control %g Hz",
              model.name, home[0], home[1], home[2], home[3], settings.seed, settings.timing.physics_rate_hz,
@@ -208,7 +208,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stop_during_startup(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt  # SIGTERM before the vehicle runs: leave as quietly as SIGINT does
+
+
 def main(argv: list[str] | None = None) -> int:
+    signal.signal(signal.SIGTERM, _stop_during_startup)
     parser = build_parser()
     args = parser.parse_args(argv)
     _configure_logging(args)
@@ -220,6 +225,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sim-vehicle: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        log.info("stopped during startup")
         return 0
 
 

@@ -34,7 +34,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from sim_vehicle import autopilot as ap
 from sim_vehicle.autopilot import Autopilot
 from sim_vehicle.clock import SimClock, WallTimer
-from sim_vehicle.config import StreamRates, VehicleSettings, parse_host_port
+from sim_vehicle.config import VehicleSettings, parse_host_port
 from sim_vehicle.control import Setpoint
 from sim_vehicle.mission_store import (
     FRAME_GLOBAL, FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT,
@@ -1019,4 +1019,4 @@ def _i16(value: float) -> int:
     return int(max(-32768, min(32767, round(value))))
 
 
-__all__ = ["MavlinkServer", "LinkStats", "CAPABILITIES", "StreamRates"]
+__all__ = ["MavlinkServer", "LinkStats", "CAPABILITIES"]

@@ -42,7 +42,7 @@ def register(subparsers) -> None:
     p.add_argument("--budget", type=float, default=None,
                    help="planning time budget in s (default: 1.0 for gart; 3.0 for mgart, which stops "
                    "as soon as it has k paths)")
-    p.add_argument("--step", type=float, default=None, help="steering step in m (default 12)")
+    p.add_argument("--step", type=float, default=None, help="steering step in m (default 20)")
     p.add_argument("--json", dest="json_out", help="write the result as JSON to this file")
     p.add_argument("--plot", help="draw tree, obstacles and paths to this PNG file")
     p.set_defaults(func=run)
@@ -280,6 +280,11 @@ def plot_plan(filename, world, results, smoothed, start, goal, kappa, title: str
         ax.set_xlabel("east (m)")
         ax.set_ylabel("north (m)")
         ax.set_zlabel("altitude (m)")
+        lo, hi = world.bounds_min, world.bounds_max
+        ax.set_xlim(lo[1], hi[1])
+        ax.set_ylim(lo[0], hi[0])
+        ax.set_zlim(-hi[2], -lo[2])
+        ax.set_box_aspect((hi[1] - lo[1], hi[0] - lo[0], max(hi[2] - lo[2], 0.2 * (hi[0] - lo[0]))))
     else:
         ax.plot(s[1], s[0], "o", color="green", markersize=8, label="start", zorder=6)
         ax.plot(g[1], g[0], "*", color="red", markersize=12, label="goal", zorder=6)
@@ -305,6 +310,8 @@ def plot_plan(filename, world, results, smoothed, start, goal, kappa, title: str
         ax2.set_title("curvature of the smoothed path(s)")
         ax2.legend(fontsize=7)
     fig.tight_layout()
+    if three_d and has_smooth:
+        fig.subplots_adjust(wspace=0.3)
     Path(filename).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(filename, dpi=110)
     plt.close(fig)

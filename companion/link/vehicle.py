@@ -696,6 +696,13 @@ class VehicleLink:
         except MissionRawError as exc:
             raise LinkError(f"{name} upload failed: {exc.result.name}") from None
 
+    async def clear_plan(self) -> None:
+        """Clear the vehicle's mission, fence and rally lists (each confirmed by MISSION_ACK)."""
+        self._require_connected()
+        async with self._mission_lock:
+            for name in ("mission", "fence", "rally"):
+                await self._clear_list(name)
+
     async def _clear_list(self, name: str, attempts: int = 3, timeout_s: float = 1.5) -> None:
         """Clear one list: MISSION_CLEAR_ALL for its mission type, confirmed by MISSION_ACK.
 

@@ -9,12 +9,15 @@ Each iteration
    it is repelled to just outside the surface; outside, each obstacle within ``influence_m``
    attracts it towards its surface with a force ``k / c`` inversely proportional to the clearance
    ``c`` (capped at ``c / 2`` so it never crosses the surface); the goal always attracts it by
-   ``goal_gain_m``. The total displacement is capped at ``max_guidance_m``;
+   ``goal_gain_m``. The total displacement is capped at ``max_guidance_m`` (below 128 obstacles
+   every obstacle is scanned with plain floats; with more, only those listed for the sample's
+   grid cell);
 3. ``steer``: from the nearest tree node, at most ``step_m`` along the combined direction
    towards the guided sample;
 4. ``choose_parent``: among the nodes within the shrinking RRT* radius
-   ``min(gamma* (log n / n)^(1/d), r_max)`` the parent of least cost-to-come whose edge is free
-   and whose corner respects the heading limit (:class:`~companion.planning.simplify.CornerRule`);
+   ``min(gamma* (log n / n)^(1/d), r_max)`` (``r_max`` default ``2 * step_m``) the parent of
+   least cost-to-come whose edge is free and whose corner respects the heading limit and, with
+   K_max, leaves room for a collision-free G2 corner (:class:`~companion.planning.simplify.CornerRule`);
 5. ``rewire``: neighbours that become cheaper through the new node change parent, provided every
    corner touched (at the new node, at the neighbour towards each of its children) stays within
    the heading limit; costs are propagated to the descendants;
@@ -41,13 +44,14 @@ from companion.planning.nearest import NodeGrid
 from companion.planning.result import PlanResult, Tree
 from companion.planning.settings import GartSettings
 from companion.planning.simplify import CornerRule, shortcut_path
-from companion.world import Disc, Sphere, World
+from companion.world import World
 
 __all__ = ["gart", "GartSearch", "validate_problem"]
 
 log = logging.getLogger(__name__)
 
 _RANDOM_BATCH = 8192
+_SCAN_ALL_OBSTACLES_BELOW = 128  # guidance scans every obstacle below this count, else grid cells
 
 
 def validate_problem(world, start, goal, rng, max_time_s, max_iterations) -> tuple[tuple, tuple]:
@@ -108,6 +112,10 @@ class GartSearch:
         self.rule = CornerRule(settings, world)
         self.ec = EdgeCost(world, settings.cost)
         # cost = energy weight * length: the inner loop skips the general cost terms
+        n_obstacles = len(world.obstacles)
+        self._guide_all = n_obstacles <= _SCAN_ALL_OBSTACLES_BELOW
+        self._balls = world.inflated_balls
+        self._others = world.non_ball_obstacles
         self.simple_cost = not (self.ec.uses_threat or self.ec.uses_climb or self.ec.uses_tracking)
         self.step = settings.step_m
         self.goal_radius = settings.goal_radius_m or settings.step_m
@@ -216,25 +224,19 @@ class GartSearch:
         gain = s.obstacle_gain_m2
         repel = s.repel_offset_m
         dim = self.dim
-        for ob in self.world.obstacles_acting_on_cell(self.world.cell_of(p), influence + margin):
-            if type(ob) is Sphere or type(ob) is Disc:   # inline: the common case
-                c0 = ob.center_m
-                diff = [x - y for x, y in zip(p, c0)]
-                n = math.sqrt(sum(v * v for v in diff))
-                c = n - ob.radius_m - margin
-                if c >= influence:
-                    continue
-                g = [v / n for v in diff] if n > 1e-12 else [1.0] + [0.0] * (dim - 1)
-            else:
-                c = ob.sdf(p) - margin
-                if c >= influence:
-                    continue
-                g = ob.gradient(p)
-            if c <= 0.0:
-                mag = -c + repel                      # repel: out of the inflated obstacle
-            else:
-                k_over_c = gain / c
-                mag = -(k_over_c if k_over_c < 0.5 * c else 0.5 * c)   # attract towards the surface
+        if self._guide_all:
+            balls, others = self._balls, self._others   # few obstacles: a plain scan is cheapest
+        else:
+            balls, others = (), self.world.obstacles_acting_on_cell(self.world.cell_of(p), influence + margin)
+        if balls:
+            self._attract_balls(p, balls, force)
+        for ob in others:
+            c = ob.sdf(p) - margin
+            if c >= influence:
+                continue
+            g = ob.gradient(p)
+            # inside: repel out of the inflated obstacle; outside: attract towards its surface
+            mag = -c + repel if c <= 0.0 else -min(gain / c, 0.5 * c)
             for i in range(dim):
                 force[i] += mag * g[i]
         to_goal = [g - x for g, x in zip(self.goal, p)]
@@ -248,6 +250,43 @@ class GartSearch:
             scale = s.max_guidance_m / norm
             force = [f * scale for f in force]
         return tuple(min(max(x + f, l), h) for x, f, l, h in zip(p, force, self.lo, self.hi))
+
+    def _attract_balls(self, p: tuple, balls: tuple, force: list) -> None:
+        """Add the potential of the discs/spheres ``balls`` (world records) at ``p`` to ``force``."""
+        s = self.s
+        influence, gain, repel = s.influence_m, s.obstacle_gain_m2, s.repel_offset_m
+        if self.dim == 2:
+            x, y = p
+            for cx, cy, _, r in balls:
+                dx, dy = x - cx, y - cy
+                reach = r + influence
+                if dx * dx + dy * dy >= reach * reach:
+                    continue
+                n = math.sqrt(dx * dx + dy * dy)
+                c = n - r
+                mag = -c + repel if c <= 0.0 else -min(gain / c, 0.5 * c)
+                if n > 1e-12:
+                    force[0] += mag * dx / n
+                    force[1] += mag * dy / n
+                else:
+                    force[0] += mag
+            return
+        x, y, z = p
+        for cx, cy, cz, _, r in balls:
+            dx, dy, dz = x - cx, y - cy, z - cz
+            reach = r + influence
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 >= reach * reach:
+                continue
+            n = math.sqrt(d2)
+            c = n - r
+            mag = -c + repel if c <= 0.0 else -min(gain / c, 0.5 * c)
+            if n > 1e-12:
+                force[0] += mag * dx / n
+                force[1] += mag * dy / n
+                force[2] += mag * dz / n
+            else:
+                force[0] += mag
 
     # ------------------------------------------------------------------ tree growth
     def steer(self, x_from: tuple, x_to: tuple) -> tuple | None:

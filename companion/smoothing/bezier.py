@@ -263,6 +263,25 @@ def elevate_lines(a: np.ndarray, b: np.ndarray, degree: int) -> np.ndarray:
     return a[:, None, :] * (1.0 - w) + b[:, None, :] * w
 
 
+def power_basis_matrix(n: int) -> np.ndarray:
+    """M (n+1, n+1) with power coefficients a = M b of a degree-n Bernstein polynomial b."""
+    m = np.zeros((n + 1, n + 1))
+    for j in range(n + 1):
+        for i in range(j + 1):
+            m[j, i] = math.comb(n, j) * math.comb(j, i) * (-1) ** (j - i)
+    return m
+
+
+def _horner(coeffs: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Evaluate power-basis polynomials ``coeffs`` (K, n+1, d) at ``u`` (K,) -> (K, d)."""
+    out = coeffs[:, -1].copy()
+    uu = u[:, None]
+    for j in range(coeffs.shape[1] - 2, -1, -1):
+        out *= uu
+        out += coeffs[:, j]
+    return out
+
+
 def _hermite_quintic(x: np.ndarray, m0: np.ndarray, m1: np.ndarray, c0: np.ndarray,
                      c1: np.ndarray) -> np.ndarray:
     """Quintic Hermite on [0, 1] from 0 to 1 with end slopes m0, m1 and second derivatives c0, c1."""
@@ -421,6 +440,9 @@ class BezierPath:
             d1_knots[curved] = d1c
             sig_c = np.maximum(np.linalg.norm(d1c, axis=2), 1e-300)
             u_ss_knots[curved] = -np.sum(d1c * d2c, axis=2) / sig_c**4
+            self._knot_kappa_curved = curvature_from_derivatives(d1c, d2c)          # (Pc, g+1)
+        else:
+            self._knot_kappa_curved = np.zeros((0, g + 1))
         piece_len = seg_len.sum(axis=1)
         self.piece_start_s = np.concatenate([[0.0], np.cumsum(piece_len)])
         self.length_m = float(self.piece_start_s[-1])
@@ -443,7 +465,7 @@ class BezierPath:
     def arc_length_at(self, piece: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Arc length (m) that ``locate`` maps to (piece (K,), u (K,)): its exact inverse.
 
-        Found by bisection (50 steps) within the table interval, so ``locate(arc_length_at(p,
+        Found by bisection (32 steps) within the table interval, so ``locate(arc_length_at(p,
         u))`` returns (p, u) to 1e-12 of the parameter.
         """
         g = _TABLE_INTERVALS
@@ -453,7 +475,7 @@ class BezierPath:
         lo = np.zeros_like(target)
         hi = np.ones_like(target)
         args = (self._tab_m0[j], self._tab_m1[j], self._tab_c0[j], self._tab_c1[j])
-        for _ in range(50):
+        for _ in range(32):
             mid = 0.5 * (lo + hi)
             below = np.clip(_hermite_quintic(mid, *args), 0.0, 1.0) < target
             lo = np.where(below, mid, lo)
@@ -466,7 +488,7 @@ class BezierPath:
 
         Each curved piece is sampled at 65 parameters; where the largest sample is not at an
         end (a G1 corner; G2 spirals peak at their ends, which are joints), the maximum is
-        refined by golden-section search to 1e-7 of the parameter. A speed-profile grid that
+        refined by golden-section search to 1e-7 of the parameter (28 steps). A speed-profile grid that
         includes these points resolves even the narrow curvature peak of a sharp G1 corner.
         """
         curved = np.nonzero(self._degrees >= 2)[0]
@@ -484,16 +506,19 @@ class BezierPath:
         piece = curved[interior]
         lo = u[i[interior] - 1]
         hi = u[i[interior] + 1]
+        h1 = self._hodographs[1][piece]
+        h2 = self._hodographs[2][piece]
+        c1 = power_basis_matrix(h1.shape[1] - 1)[None] @ h1
+        c2 = power_basis_matrix(h2.shape[1] - 1)[None] @ h2
 
         def kappa_at(x: np.ndarray) -> np.ndarray:
-            return curvature_from_derivatives(self._piece_derivative(piece, x, 1),
-                                              self._piece_derivative(piece, x, 2))
+            return curvature_from_derivatives(_horner(c1, x), _horner(c2, x))
 
         ratio = 0.5 * (math.sqrt(5.0) - 1.0)
         x1 = hi - ratio * (hi - lo)
         x2 = lo + ratio * (hi - lo)
         f1, f2 = kappa_at(x1), kappa_at(x2)
-        for _ in range(34):
+        for _ in range(28):
             left = f1 >= f2                      # the maximum lies in [lo, x2]
             hi = np.where(left, x2, hi)
             lo = np.where(left, lo, x1)
@@ -507,6 +532,22 @@ class BezierPath:
     def table_s(self) -> np.ndarray:
         """Arc lengths of the table knots of the curved pieces (16 per piece, uniform in u)."""
         return self._tab_s_lo[self._degrees[self._tab_piece] >= 2]
+
+    def knots_with_curvature(self) -> tuple[np.ndarray, np.ndarray]:
+        """Arc lengths and curvatures of the table knots of the curved pieces, both ends included.
+
+        Returns
+        -------
+        s_m : ndarray, shape (17 P',)
+        kappa_1_m : ndarray, shape (17 P',)
+        """
+        g = _TABLE_INTERVALS
+        curved = np.nonzero(self._degrees >= 2)[0]
+        if curved.size == 0:
+            return np.zeros(0), np.zeros(0)
+        s_lo = self._tab_s_lo.reshape(-1, g)[curved]
+        s_all = np.hstack([s_lo, self.piece_start_s[curved + 1][:, None]])
+        return s_all.ravel(), self._knot_kappa_curved.ravel()
 
     @property
     def curved_piece(self) -> np.ndarray:

@@ -59,47 +59,47 @@ def _check_speed(name: str, value: float, limit: float) -> float:
     return min(v, limit)
 
 
-def arc_grid(curve: BezierPath, step_m: float) -> np.ndarray:
-    """Arc-length grid, shape (N+1,).
+def arc_grid(curve: BezierPath, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Arc-length grid of the speed profile and the curvature at its points.
 
-    The union of: points every ``step_m``, every piece joint (a G2 spiral peaks there), every
-    stop, the curve's arc-length table knots (16 per piece, uniform in the Bezier parameter,
-    hence dense where the curve is slow) and five points around every piece's curvature peak.
+    The grid holds: points at most ``step_m`` apart on the straight pieces (zero curvature),
+    the arc-length table knots of every curved piece (16 per piece, uniform in the Bezier
+    parameter, ends included; their curvature comes with the table), every stop, and the
+    interior curvature peaks (G1 corners). G2 spirals have monotone curvature and G1 corners
+    a single peak, so no curvature between two grid points exceeds the larger of the two.
+
+    Returns
+    -------
+    s_m : ndarray, shape (N+1,)
+        Increasing arc lengths from 0 to ``curve.length_m``.
+    kappa_1_m : ndarray, shape (N+1,)
+        Curvature at each (the larger one where two pieces meet).
     """
-    n = max(1, int(math.ceil(curve.length_m / step_m)))
-    uniform = np.linspace(0.0, curve.length_m, n + 1)
-    grid = np.union1d(uniform, np.concatenate([curve.piece_start_s, curve.stop_s, curve.table_s,
-                                                   curve.curvature_peaks_s]))
-    keep = np.concatenate([[True], np.diff(grid) > 1e-9])
-    grid = grid[keep]
-    grid[-1] = curve.length_m
-    return grid
-
-
-def speed_limit_sq(curve: BezierPath, s_m: np.ndarray, limits: TrajectoryLimits) -> np.ndarray:
-    """Squared speed limit min(v_max^2, a_lat / kappa) at arc lengths ``s_m`` (N,) -> (N,).
-
-    Only points on curved pieces are evaluated (straight pieces have zero curvature); a point
-    on a joint takes the larger curvature of the two pieces.
-    """
-    out = np.full(s_m.shape, limits.speed_m_s**2)
     starts = curve.piece_start_s
-    piece = np.clip(np.searchsorted(starts, s_m, side="right") - 1, 0, starts.size - 2)
-    curved = curve.curved_piece
-    prev_curved = np.concatenate([[False], curved[:-1]])
-    on_joint = np.abs(s_m - starts[piece]) <= 1e-9
-    need = curved[piece] | (on_joint & prev_curved[piece])
-    if np.any(need):
-        idx = np.nonzero(need)[0]
-        kappa = curve.curvature(s_m[idx])
-        joint_prev = idx[on_joint[idx] & prev_curved[piece[idx]]]
-        if joint_prev.size:
-            before = curve.piece_curvature_at_end(piece[joint_prev] - 1)
-            kappa[np.searchsorted(idx, joint_prev)] = np.maximum(kappa[np.searchsorted(idx, joint_prev)], before)
-        with np.errstate(divide="ignore"):
-            lateral = np.where(kappa > 0.0, limits.lat_accel_m_s2 / np.maximum(kappa, 1e-300), np.inf)
-        out[idx] = np.minimum(out[idx], lateral)
-    return out
+    lines = np.nonzero(~curve.curved_piece)[0]
+    line_len = starts[lines + 1] - starts[lines]
+    counts = np.maximum(1, np.ceil(line_len / step_m).astype(int))
+    owner = np.repeat(np.arange(lines.size), counts + 1)
+    offset = np.arange(owner.size) - np.repeat(np.cumsum(counts + 1) - (counts + 1), counts + 1)
+    line_s = starts[lines][owner] + line_len[owner] * offset / counts[owner]
+    knot_s, knot_kappa = curve.knots_with_curvature()
+    peak_s = curve.curvature_peaks_s
+    peak_kappa = curve.curvature(peak_s) if peak_s.size else np.zeros(0)
+    s_all = np.concatenate([[0.0, curve.length_m], line_s, knot_s, peak_s, curve.stop_s])
+    k_all = np.concatenate([np.zeros(2 + line_s.size), knot_kappa, peak_kappa, np.zeros(curve.stop_s.size)])
+    order = np.argsort(s_all, kind="stable")
+    s_sorted = np.clip(s_all[order], 0.0, curve.length_m)
+    k_sorted = k_all[order]
+    new = np.concatenate([[True], np.diff(s_sorted) > 1e-9])
+    first = np.nonzero(new)[0]
+    return s_sorted[first], np.maximum.reduceat(k_sorted, first)
+
+
+def speed_limit_sq(kappa_1_m: np.ndarray, limits: TrajectoryLimits) -> np.ndarray:
+    """Squared speed limit min(v_max^2, a_lat / kappa) from curvatures (N,) -> (N,)."""
+    with np.errstate(divide="ignore"):
+        lateral = np.where(kappa_1_m > 0.0, limits.lat_accel_m_s2 / np.maximum(kappa_1_m, 1e-300), np.inf)
+    return np.minimum(limits.speed_m_s**2, lateral)
 
 
 def erode(values: np.ndarray, s_m: np.ndarray, radius_m: float) -> np.ndarray:
@@ -118,20 +118,16 @@ def erode(values: np.ndarray, s_m: np.ndarray, radius_m: float) -> np.ndarray:
     n = values.size
     lo = np.searchsorted(s_m, s_m - radius_m, side="left")
     hi = np.searchsorted(s_m, s_m + radius_m, side="right") - 1
-    table = [values]
-    span = 1
-    while 2 * span <= n:
-        prev = table[-1]
-        table.append(np.minimum(prev[:-span], prev[span:]))
-        span *= 2
     length = hi - lo + 1
+    levels = max(1, int(np.max(length)).bit_length())
+    table = np.full((levels, n), np.inf)
+    table[0] = values
+    span = 1
+    for k in range(1, levels):
+        table[k, : n - span] = np.minimum(table[k - 1, : n - span], table[k - 1, span:])
+        span *= 2
     level = np.floor(np.log2(np.maximum(length, 1))).astype(int)
-    out = np.empty(n)
-    for k in np.unique(level):
-        sel = level == k
-        width = 1 << int(k)
-        out[sel] = np.minimum(table[k][lo[sel]], table[k][hi[sel] - width + 1])
-    return out
+    return np.minimum(table[level, lo], table[level, hi - (1 << level) + 1])
 
 
 def forward_backward(w_max: np.ndarray, s_m: np.ndarray, accel_m_s2: float) -> np.ndarray:
@@ -213,8 +209,8 @@ def time_parameterize(curve, limits: TrajectoryLimits | None = None, *, start_sp
     path = _as_curve(curve)
     window = 2.0 * limits.accel_m_s2 / limits.jerk_m_s3
     step = min(float(grid_step_m), max(path.length_m / 4.0, 1e-6))
-    s = arc_grid(path, step)
-    w_max = speed_limit_sq(path, s, limits)
+    s, kappa = arc_grid(path, step)
+    w_max = speed_limit_sq(kappa, limits)
     stop_idx = np.searchsorted(s, path.stop_s)
     w_max[stop_idx] = limits.speed_m_s**2
     max_gap = float(np.max(np.diff(s)))

@@ -353,14 +353,16 @@ class ThreatBus:
 
         Parameters
         ----------
-        snapshot : callable() -> list of (Threat, now_t_s)
-            Called on the zenoh thread; returns the threats held, each with the current time
-            on the threat's clock (positions are predicted to it and ttl shortened).
+        snapshot : callable() -> iterable of Threat (or of (Threat, now_t_s))
+            Called on the zenoh thread; returns the threats held (e.g. ``table.snapshot``).
+            Positions are predicted to now (the bus clock, or the ``now_t_s`` given with each
+            threat) and the ttl shortened accordingly.
         """
         def on_query(query) -> None:
             self._count("queries")
             try:
-                for threat, now_t_s in snapshot():
+                for item in snapshot():
+                    threat, now_t_s = item if isinstance(item, tuple) else (item, float(self.clock()))
                     pos = threat.position_at(now_t_s) if threat.frame == "local_ned" else threat.position
                     ttl = None if threat.ttl_s is None else max(threat.expires_t_s - now_t_s, 1e-3)
                     current = Threat(threat.id, threat.kind, threat.frame, tuple(float(x) for x in pos),

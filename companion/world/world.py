@@ -212,6 +212,16 @@ class World:
         return np.array(self._hi)
 
     @property
+    def inflated_balls(self) -> tuple:
+        """Discs/spheres as plain tuples ``(c_0, .., c_{d-1}, r_inflated^2, r_inflated)`` (m)."""
+        return self._balls
+
+    @property
+    def non_ball_obstacles(self) -> tuple:
+        """The obstacles that are neither Disc nor Sphere (Cylinder, Box, Prism)."""
+        return tuple(self._other_ids.values())
+
+    @property
     def margin_m(self) -> float:
         """Safety margin (m) by which every obstacle is inflated."""
         return self._margin

@@ -46,7 +46,7 @@ def listener():
     updates: list = []
     bus.subscribe(updates.append)
     table = ThreatTable()
-    bus.serve_threats(lambda: [(t, time.monotonic()) for t in table.snapshot()])
+    bus.serve_threats(table.snapshot)
     yield endpoint, bus, updates, table
     bus.close()
 

@@ -217,3 +217,34 @@ def test_g2_smoother_honours_kappa_max_on_paths_planned_with_it(seed):
     assert curve.kappa_ok and curve.max_curvature_1_m <= 0.15 * 1.001
     s = np.linspace(0, curve.length_m, 2000)
     assert world.is_free(curve.evaluate(s)).all()
+
+
+@pytest.mark.parametrize("n_extra", [0, 200])  # 200: guidance looks obstacles up per grid cell
+def test_attract_repels_from_inside_attracts_outside_and_pulls_to_goal(n_extra):
+    from companion.planning.gart import GartSearch
+
+    rs = np.random.RandomState(0)
+    extra = [Disc(c, 0.3) for c in rs.uniform(0, 20, (n_extra, 2))]  # far corner, out of reach
+    world = World([Disc((50, 50), 10)] + extra, (0, 0), (100, 100), margin_m=1.0)
+    s = GartSettings(goal_gain_m=0.0, repel_offset_m=0.5, obstacle_gain_m2=4.0, influence_m=6.0, max_guidance_m=20.0)
+    search = GartSearch(world, (90.0, 90.0), (95.0, 95.0), s, np.random.default_rng(0))
+    inside = search.attract((50.0, 55.0))           # 5 m from the centre: clearance -6 m
+    assert inside == pytest.approx((50.0, 50.0 + 11.5))
+    near = search.attract((50.0, 65.0))             # clearance 4 m: moves 4/4 = 1 m towards it
+    assert near == pytest.approx((50.0, 64.0))
+    close = search.attract((50.0, 62.0))            # clearance 1 m: k/c = 4 capped at c/2
+    assert close == pytest.approx((50.0, 61.5))
+    far = search.attract((80.0, 50.0))              # beyond the influence distance
+    assert far == pytest.approx((80.0, 50.0))
+    s_goal = GartSettings(goal_gain_m=2.0)
+    pulled = GartSearch(world, (90.0, 90.0), (80.0, 90.0), s_goal, np.random.default_rng(0)).attract((80.0, 80.0))
+    assert pulled == pytest.approx((80.0, 82.0))
+
+
+def test_many_obstacles_are_planned_through():
+    rs = np.random.RandomState(1)
+    centers = rs.uniform(5, 95, (400, 2))
+    keep = [c for c in centers if np.linalg.norm(c) > 5 and np.linalg.norm(c - 99) > 5]
+    world = World([Disc(c, 1.0) for c in keep], (0, 0), (100, 100), margin_m=0.5)
+    r = gart(world, (0, 0), (99, 99), rng=np.random.default_rng(0), max_iterations=1500, settings=LENGTH)
+    assert r.solved and exact_path_free(world, r.path)

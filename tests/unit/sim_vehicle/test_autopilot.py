@@ -381,3 +381,68 @@ def test_leaving_auto_mid_item_reports_nothing_and_resumes_later(model):
             break
     assert [e[1] for e in events if e[0] == "mission_item_reached"] == [2, 3]
     assert np.allclose(vehicle.pos_ned_m[:2], (40.0, 0.0), atol=1.0)
+
+
+# ---------------------------------------------------------------- MAVLink server fed with fuzzed messages
+FUZZ_TYPES = ("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "REQUEST_DATA_STREAM", "TIMESYNC",
+              "SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT", "MISSION_COUNT", "MISSION_ITEM_INT",
+              "MISSION_ITEM", "MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_CLEAR_ALL",
+              "MISSION_SET_CURRENT", "MISSION_ACK", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET")
+FUZZ_FLOATS = (0.0, 1.0, -1.0, 4.0, 10.0, float("nan"), float("inf"), -float("inf"), 1e30, -1e30, 0.5, 1e9)
+FUZZ_INTS = (0, 1, 1, 2, 3, 4, 5, 6, 9, 16, 17, 20, 21, 22, 176, 178, 192, 300, 400, 410, 511, 512, 520, 5001, 5100,
+             255)
+
+
+def fuzz_message(mavlink, rng: np.random.Generator, gcs) -> bytes | None:
+    kind = FUZZ_TYPES[int(rng.integers(len(FUZZ_TYPES)))]
+    cls = mavlink.mavlink_map[getattr(mavlink, f"MAVLINK_MSG_ID_{kind}")]
+    args = []
+    for name, ftype, length in zip(cls.fieldnames, cls.fieldtypes, cls.array_lengths):
+        if ftype == "char":
+            args.append([b"WPNAV_SPEED", b"SIM_SPEEDUP", b"LQI_R_COL", b"FENCE_ENABLE", b"X", b""][int(rng.integers(6))])
+        elif length:
+            args.append([int(v) for v in rng.integers(0, 2, length)])
+        elif ftype in ("float", "double"):
+            args.append(float(rng.uniform(-1000, 1000)) if rng.random() < 0.2 else FUZZ_FLOATS[int(rng.integers(12))])
+        elif name == "target_system":
+            args.append(int(rng.choice([0, 1, 1, 2])))
+        elif name == "target_component":
+            args.append(int(rng.choice([0, 1, 1])))
+        else:
+            args.append(FUZZ_INTS[int(rng.integers(len(FUZZ_INTS)))])
+    try:
+        return cls(*args).pack(gcs)
+    except Exception:  # a value the field cannot hold: the sender could not send it either
+        return None
+
+
+def test_server_survives_fuzzed_messages_while_flying(model, caplog):
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    from sim_vehicle.mavlink_server import MavlinkServer
+
+    link_settings = replace_path(VehicleSettings(), "link.out", ())
+    vehicle = make_vehicle(model, link_settings)
+    server = MavlinkServer(vehicle, link_settings, 1, 0)
+    try:
+        vehicle.set_mode(ap.GUIDED)
+        vehicle.arm()
+        vehicle.takeoff(10.0)
+        vehicle.run_steps(4000)
+        rng = np.random.default_rng(3)
+        gcs = mavlink.MAVLink(None, 255, 190)
+        sent = 0
+        for k in range(3000):
+            buf = fuzz_message(mavlink, rng, gcs)
+            if buf is not None:
+                server._handle_datagram(buf, ("127.0.0.1", 9))
+                sent += 1
+            if k % 50 == 0:
+                server._handle_events(vehicle.run_steps(40))
+                server._send_due_streams()
+        assert sent > 1000
+        assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL")]
+        assert np.all(np.isfinite(vehicle.x))
+        assert vehicle.pos_ned_m[2] <= 0.0
+    finally:
+        server.close()
