@@ -92,6 +92,9 @@ def run(seeds: int, repeat: int) -> dict:
             curves = [smooth_g2(path, KAPPA_MAX_1_M) for _ in range(repeat + 1)]
             it = iter(curves)
             samples.setdefault(f"timing_{dim}d", []).extend(timed(lambda: time_parameterize(next(it)), repeat))
+            g1_curves = [smooth_g1(path) for _ in range(repeat + 1)]
+            it1 = iter(g1_curves)
+            samples.setdefault(f"timing_g1_{dim}d", []).extend(timed(lambda: time_parameterize(next(it1)), repeat))
             traj = time_parameterize(curves[0])
             extra["pieces_g2"].append(len(curves[0].pieces))
             extra["length_m"].append(curves[0].length_m)
@@ -130,6 +133,7 @@ LABELS = [
     ("g2_3d", "G2, 100 nodes, 3D", "g2"),
     ("timing_2d", "time_parameterize, 100-node G2 curve, 2D", "timing"),
     ("timing_3d", "time_parameterize, 100-node G2 curve, 3D", "timing"),
+    ("timing_g1_2d", "time_parameterize, 100-node G1 curve, 2D (peak search)", None),
     ("feasibility_60s", "feasibility check, 60 s trajectory (50 Hz, default model)", "feasibility_60s"),
     ("sample1_2d", "Trajectory.sample, 1 time (the 50 Hz setpoint)", None),
     ("sample3000_2d", "Trajectory.sample, 3000 times", None),

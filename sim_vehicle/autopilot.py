@@ -371,6 +371,8 @@ class Autopilot:
             return False, "AUTO: no mission (upload one with a NAV item after item 0)"
         if not np.all(np.isfinite(self.x)):
             return False, "state estimate not healthy"
+        if self.settings.flight.prearm_fail:
+            return False, "PreArm: simulated sensor failure (SIM_PREARM_FAIL)"
         self.armed = True
         self._landed_since_s = self.time_s
         self._yaw_hold_rad = float(self.x[dynamics.IDX_PSI])
@@ -496,6 +498,18 @@ class Autopilot:
             return False, f"speed {speed_m_s!r} outside 0.1..{limit:g} m/s"
         self._speed_override_m_s = float(speed_m_s)
         log.info("speed set to %.1f m/s", speed_m_s)
+        return True, ""
+
+    def set_yaw(self, yaw_rad: float) -> tuple[bool, str]:
+        """MAV_CMD_CONDITION_YAW: hold this heading (GUIDED, AUTO, LOITER, BRAKE; in flight)."""
+        if not math.isfinite(yaw_rad):
+            return False, f"heading {yaw_rad!r} is not finite"
+        if not self.armed or self.landed:
+            return False, "not flying"
+        if self.mode not in (GUIDED, AUTO, LOITER, BRAKE):
+            return False, f"not in {mode_name(self.mode)}"
+        self._yaw_hold_rad = math.remainder(float(yaw_rad), 2.0 * math.pi)  # direct setpoints with a yaw win
+        log.info("heading %.1f deg (CONDITION_YAW)", math.degrees(self._yaw_hold_rad))
         return True, ""
 
     @property
@@ -819,7 +833,7 @@ class Autopilot:
         if stage.kind == "land":
             return self._land_setpoint(stage)
         if stage.kind == "direct" and self._guided is not None:
-            sp = self._guided.setpoint
+            sp = _integrate_target(self._guided.setpoint, t - self._guided.received_s)
             if sp.yaw_rad is None and sp.yaw_rate_rad_s is None:
                 sp = dataclasses.replace(sp, yaw_rad=self._yaw_hold_rad)
             if sp.pos_ned_m is not None:
@@ -992,6 +1006,30 @@ class Autopilot:
         elif cmd == CMD_NAV_LOITER_UNLIM:
             stages.append(Stage("hold", target=target, duration_s=None))
         return stages
+
+
+#: Longest time a GUIDED target is integrated forward (simulated s); beyond it the target stays.
+TARGET_INTEGRATION_MAX_S = 0.5
+
+
+def _integrate_target(sp: Setpoint, age_s: float) -> Setpoint:
+    """The target ``age_s`` after it was received, moved by its velocity and acceleration.
+
+    As ArduCopter's GUIDED does with position-velocity-acceleration targets: between two
+    setpoints (a companion at 50 Hz of wall clock feeds a sped-up simulation more slowly) the
+    position target advances along ``vel * dt + acc * dt^2 / 2`` and the velocity target along
+    ``acc * dt``, for at most ``TARGET_INTEGRATION_MAX_S``. Axes that are not commanded (None
+    or NaN) are left as they are.
+    """
+    dt = min(max(age_s, 0.0), TARGET_INTEGRATION_MAX_S)
+    if dt == 0.0 or sp.vel_ned_m_s is None:
+        return sp
+    vel = np.nan_to_num(np.asarray(sp.vel_ned_m_s, dtype=float))
+    acc = np.zeros(3) if sp.acc_ned_m_s2 is None else np.nan_to_num(np.asarray(sp.acc_ned_m_s2, dtype=float))
+    changes = {"vel_ned_m_s": np.asarray(sp.vel_ned_m_s, dtype=float) + acc * dt}
+    if sp.pos_ned_m is not None:
+        changes["pos_ned_m"] = np.asarray(sp.pos_ned_m, dtype=float) + vel * dt + 0.5 * acc * dt * dt
+    return dataclasses.replace(sp, **changes)
 
 
 def _check_setpoint(sp: Setpoint, max_speed_m_s: float) -> Setpoint | str:

@@ -120,6 +120,10 @@ class FlightSettings:
         On a breach: 0 report only, 1 RTL, 2 LAND, 4 BRAKE [FENCE_ACTION].
     fence_alt_max_m : float
         Maximum height above home while the fence is enabled [FENCE_ALT_MAX].
+    prearm_fail : int
+        1: every arming attempt fails its pre-arm check, as a real vehicle with a failing
+        sensor would (fault injection for tests, like ArduPilot SITL's SIM_* failures)
+        [SIM_PREARM_FAIL].
     """
 
     guided_timeout_s: float = 3.0
@@ -139,8 +143,10 @@ class FlightSettings:
     fence_enable: int = 0
     fence_action: int = 1
     fence_alt_max_m: float = 100.0
+    prearm_fail: int = 0
 
     def __post_init__(self) -> None:
+        _require(self.prearm_fail in (0, 1), f"prearm_fail: expected 0 or 1, got {self.prearm_fail!r}")
         _require(self.fence_enable in (0, 1), f"fence_enable: expected 0 or 1, got {self.fence_enable!r}")
         _require(self.fence_action in (0, 1, 2, 4), f"fence_action: expected 0, 1, 2 or 4, got {self.fence_action!r}")
         _require(10.0 <= self.fence_alt_max_m <= 1000.0,

@@ -562,6 +562,15 @@ class MavlinkServer:
         ok, reason = self.autopilot.change_speed(speed)
         return (mavlink.MAV_RESULT_ACCEPTED if ok else mavlink.MAV_RESULT_DENIED), reason
 
+    def _cmd_condition_yaw(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
+        angle_deg, direction, relative = p[0], p[2], p[3]
+        if not all(math.isfinite(v) for v in (angle_deg, direction, relative)) or not 0.0 <= angle_deg <= 360.0:
+            return mavlink.MAV_RESULT_DENIED, f"angle (param1) {angle_deg!r} outside 0..360 degrees"
+        yaw = math.radians(angle_deg)
+        if relative:
+            yaw = float(self.autopilot.euler_rad[2]) + (-yaw if direction < 0 else yaw)
+        return self._outcome(self.autopilot.set_yaw(yaw))
+
     def _cmd_reposition(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
         """MAV_CMD_DO_REPOSITION (MAVSDK goto_location): a GUIDED position target."""
         if frame is None:  # COMMAND_LONG: degrees, altitude AMSL
@@ -649,6 +658,7 @@ class MavlinkServer:
         mavlink.MAV_CMD_DO_SET_MISSION_CURRENT: _cmd_set_mission_current,
         mavlink.MAV_CMD_DO_CHANGE_SPEED: _cmd_change_speed,
         mavlink.MAV_CMD_DO_REPOSITION: _cmd_reposition,
+        mavlink.MAV_CMD_CONDITION_YAW: _cmd_condition_yaw,
         mavlink.MAV_CMD_SET_MESSAGE_INTERVAL: _cmd_set_message_interval,
         mavlink.MAV_CMD_GET_MESSAGE_INTERVAL: _cmd_get_message_interval,
         mavlink.MAV_CMD_REQUEST_MESSAGE: _cmd_request_message,

@@ -85,6 +85,8 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("FENCE_ACTION", "flight.fence_action", 1.0, 0.0, 4.0, MAV_PARAM_TYPE_INT8,
               description="fence breach: 0 report, 1 RTL, 2 LAND, 4 BRAKE"),
     ParamSpec("FENCE_ALT_MAX", "flight.fence_alt_max_m", 1.0, 10.0, 1000.0, description="fence ceiling, m"),
+    ParamSpec("SIM_PREARM_FAIL", "flight.prearm_fail", 1.0, 0.0, 1.0, MAV_PARAM_TYPE_INT8,
+              description="fault injection: pre-arm checks fail (0/1)"),
     ParamSpec("SIM_WIND_SPD", "wind.speed_m_s", 1.0, 0.0, 40.0, description="steady wind, m/s"),
     ParamSpec("SIM_WIND_DIR", "wind.from_deg", 1.0, 0.0, 360.0, description="wind from, degrees"),
     ParamSpec("SIM_WIND_TURB", "wind.gust_m_s", 1.0, 0.0, 20.0, description="gust std per axis, m/s"),

@@ -19,7 +19,7 @@ from companion.errors import ThreatPayloadError
 log = logging.getLogger(__name__)
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
-NEGATIVE_VECTOR = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,[-+]?[\d.eE+-]*)*$")
+NEGATIVE_VECTOR = re.compile(r"^-\.?\d")    # -1,1,0 or -.5,2,3: a value, not an option
 
 EPILOG = """\
 Examples:

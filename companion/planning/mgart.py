@@ -1,7 +1,8 @@
 """M-GART: several distinct paths from one GART tree by *Extending Forbidden* (paper 3.3, Fig. 7).
 
 The GART tree grows as usual. Whenever a branch reaches the goal, the path is shortcut, and
-kept if it is *distinct* from every path kept so far; in every case the branch's nodes are then
+kept if it is *distinct* from every path kept so far (if only the unshortcut branch is
+distinct, that one is kept); in every case the branch's nodes are then
 forbidden (``forbid_branch``): removed from the nearest-neighbour structure, so they are neither
 extended nor rewired any more, except those within ``keep_near_root_m`` of the start (and of the
 goal), which stay available so new branches can leave the start and still reach the goal. With
@@ -24,6 +25,7 @@ import time
 import numpy as np
 
 from companion.errors import PlanningError
+from companion.planning.cost import path_cost, path_length_m
 from companion.planning.gart import GartSearch, finish_path, validate_problem
 from companion.planning.result import PlanResult
 from companion.planning.settings import MgartSettings
@@ -112,12 +114,21 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
     found: list[tuple[np.ndarray, float, float, float]] = []  # path, cost, length, t_found
     clock = time.perf_counter
 
-    def consider(path: np.ndarray) -> None:
-        path, cost, length = finish_path(world, path, gs)
-        if all(hausdorff_m(path, other[0], settings.separation_sample_m) >= settings.min_separation_m
-               for other in found):
-            found.append((path, cost, length, clock() - t0))
-            log.debug("mgart: path %d after %d iterations, cost %.2f", len(found), search.iterations, cost)
+    def distinct(path: np.ndarray) -> bool:
+        return all(hausdorff_m(path, other[0], settings.separation_sample_m) >= settings.min_separation_m
+                   for other in found)
+
+    def consider(raw: np.ndarray) -> None:
+        # the shortcut path if it is distinct; else the branch as grown (shortcutting can pull
+        # a new branch back onto an earlier path, e.g. onto a free straight line)
+        for path, cost, length in (finish_path(world, raw, gs), raw_costed(raw)):
+            if distinct(path):
+                found.append((path, cost, length, clock() - t0))
+                log.debug("mgart: path %d after %d iterations, cost %.2f", len(found), search.iterations, cost)
+                return
+
+    def raw_costed(raw: np.ndarray) -> tuple[np.ndarray, float, float]:
+        return raw, path_cost(world, raw, gs.cost), path_length_m(raw)
 
     if world.segment_free(start_t, goal_t):
         consider(np.array([start_t, goal_t]))

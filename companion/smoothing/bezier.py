@@ -147,13 +147,18 @@ def derivative(ctrl: np.ndarray, u: np.ndarray, order: int = 1) -> np.ndarray:
     return bernstein(dctrl.shape[0] - 1, u) @ dctrl
 
 
+def _norm(a: np.ndarray) -> np.ndarray:
+    """Euclidean norm along the last axis (faster than numpy.linalg.norm for small d)."""
+    return np.sqrt(np.einsum("...i,...i->...", a, a))
+
+
 def _cross_norm(d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
     """|a x b| for rows of (K, d) arrays, exact formulas for d = 2 and 3."""
     dim = d1.shape[-1]
     if dim == 2:
         return np.abs(d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0])
     if dim == 3:
-        return np.linalg.norm(np.cross(d1, d2), axis=-1)
+        return _norm(np.cross(d1, d2))
     gram = np.sum(d1 * d1, -1) * np.sum(d2 * d2, -1) - np.sum(d1 * d2, -1) ** 2
     return np.sqrt(np.maximum(gram, 0.0))
 
@@ -171,7 +176,7 @@ def curvature_from_derivatives(d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
     ndarray, shape (K,)
         Curvature (1/m); 0 where the speed |r'| vanishes.
     """
-    speed = np.linalg.norm(d1, axis=-1)
+    speed = _norm(d1)
     num = _cross_norm(d1, d2)
     with np.errstate(divide="ignore", invalid="ignore"):
         kappa = np.where(speed > 0.0, num / np.maximum(speed, 1e-300) ** 3, 0.0)
@@ -185,8 +190,22 @@ def curvature(ctrl: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 
 def _gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Legendre nodes and weights on [0, 1] (read-only constants for the default order)."""
+    if n == _GAUSS_ORDER:
+        return _GL_NODES, _GL_WEIGHTS
     x, w = np.polynomial.legendre.leggauss(n)
     return 0.5 * (x + 1.0), 0.5 * w
+
+
+def _frozen_gauss_legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
+    x, w = np.polynomial.legendre.leggauss(n)
+    x, w = 0.5 * (x + 1.0), 0.5 * w
+    x.setflags(write=False)
+    w.setflags(write=False)
+    return x, w
+
+
+_GL_NODES, _GL_WEIGHTS = _frozen_gauss_legendre(_GAUSS_ORDER)
 
 
 def arc_length(ctrl: np.ndarray, u0: float = 0.0, u1: float = 1.0, intervals: int = 8) -> float:
@@ -200,7 +219,7 @@ def arc_length(ctrl: np.ndarray, u0: float = 0.0, u1: float = 1.0, intervals: in
     edges = np.linspace(u0, u1, intervals + 1)
     h = np.diff(edges)
     nodes = (edges[:-1, None] + h[:, None] * x[None, :]).ravel()
-    speed = np.linalg.norm(derivative(ctrl, nodes, 1), axis=1).reshape(intervals, -1)
+    speed = _norm(derivative(ctrl, nodes, 1)).reshape(intervals, -1)
     return float(np.sum(h * (speed @ w)))
 
 
@@ -250,8 +269,7 @@ def elevate(ctrl: np.ndarray, degree: int) -> np.ndarray:
 
 
 def _lower(ctrl: np.ndarray, degree: int) -> np.ndarray:
-    """Exact degree reduction of a curve that was elevated from ``degree`` (least squares)."""
-    n = ctrl.shape[0] - 1
+    """Exact degree reduction of a curve that was elevated from ``degree`` (interpolation)."""
     u = np.linspace(0.0, 1.0, degree + 1)
     pts = evaluate(ctrl, u)
     return np.linalg.solve(bernstein(degree, u), pts)
@@ -261,6 +279,19 @@ def elevate_lines(a: np.ndarray, b: np.ndarray, degree: int) -> np.ndarray:
     """Straight lines from ``a`` to ``b`` (K, d) as degree-``degree`` curves, shape (K, N+1, d)."""
     w = np.linspace(0.0, 1.0, degree + 1)[None, :, None]
     return a[:, None, :] * (1.0 - w) + b[:, None, :] * w
+
+
+def _hermite_quintic_dx(x: np.ndarray, m0: np.ndarray, m1: np.ndarray, c0: np.ndarray,
+                        c1: np.ndarray) -> np.ndarray:
+    """Derivative with respect to x of ``_hermite_quintic``."""
+    x2 = x * x
+    x3 = x2 * x
+    x4 = x3 * x
+    return ((1 - 18 * x2 + 32 * x3 - 15 * x4) * m0
+            + (x - 4.5 * x2 + 6 * x3 - 2.5 * x4) * c0
+            + (1.5 * x2 - 4 * x3 + 2.5 * x4) * c1
+            + (-12 * x2 + 28 * x3 - 15 * x4) * m1
+            + (30 * x2 - 60 * x3 + 30 * x4))
 
 
 def power_basis_matrix(n: int) -> np.ndarray:
@@ -279,6 +310,16 @@ def _horner(coeffs: np.ndarray, u: np.ndarray) -> np.ndarray:
     for j in range(coeffs.shape[1] - 2, -1, -1):
         out *= uu
         out += coeffs[:, j]
+    return out
+
+
+def _horner_grid(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Evaluate power-basis polynomials ``coeffs`` (K, n+1, d) at ``x`` (K, S) -> (K, S, d)."""
+    xx = x[:, :, None]
+    out = np.broadcast_to(coeffs[:, None, -1], xx.shape[:2] + coeffs.shape[2:]).copy()
+    for j in range(coeffs.shape[1] - 2, -1, -1):
+        out *= xx
+        out += coeffs[:, None, j]
     return out
 
 
@@ -365,7 +406,7 @@ class BezierPath:
     def _init_arrays(self, ctrl, degrees, kappa_ok, notes, tight_corners, kappa_max_1_m,
                      peaks_at_joints) -> None:
         scale = max(1.0, float(np.max(np.abs(ctrl))))
-        extent = np.max(np.linalg.norm(ctrl - ctrl[:, :1], axis=2), axis=1)
+        extent = np.max(_norm(ctrl - ctrl[:, :1]), axis=1)
         keep = extent > 1e-10 * scale
         if not np.any(keep):
             raise SmoothingError("pieces: every piece has zero length")
@@ -426,19 +467,19 @@ class BezierPath:
         seg_len = np.empty((n_pieces, g))
         d1_knots = np.empty((n_pieces, g + 1, self.d))
         u_ss_knots = np.zeros((n_pieces, g + 1))
-        line_len = np.linalg.norm(self._ctrl[~curved, -1] - self._ctrl[~curved, 0], axis=1)
+        line_len = _norm(self._ctrl[~curved, -1] - self._ctrl[~curved, 0])
         seg_len[~curved] = line_len[:, None] * h
         d1_knots[~curved] = hod1[~curved, :1]
         if np.any(curved):
             x, w = _gauss_legendre(_GAUSS_ORDER)
             nodes = (u_knots[:-1, None] + h * x[None, :]).ravel()
             hc1 = hod1[curved]
-            speed_nodes = np.linalg.norm(bernstein(hc1.shape[1] - 1, nodes)[None] @ hc1, axis=2)
+            speed_nodes = _norm(bernstein(hc1.shape[1] - 1, nodes)[None] @ hc1)
             seg_len[curved] = h * (speed_nodes.reshape(hc1.shape[0], g, -1) @ w)
             d1c = bernstein(hc1.shape[1] - 1, u_knots)[None] @ hc1
             d2c = bernstein(hod2.shape[1] - 1, u_knots)[None] @ hod2[curved]
             d1_knots[curved] = d1c
-            sig_c = np.maximum(np.linalg.norm(d1c, axis=2), 1e-300)
+            sig_c = np.maximum(_norm(d1c), 1e-300)
             u_ss_knots[curved] = -np.sum(d1c * d2c, axis=2) / sig_c**4
             self._knot_kappa_curved = curvature_from_derivatives(d1c, d2c)          # (Pc, g+1)
         else:
@@ -453,7 +494,7 @@ class BezierPath:
         self._tab_piece = np.repeat(np.arange(n_pieces), g)
         self._tab_u_lo = np.tile(u_knots[:-1], n_pieces)
         floor = 1e-9 * max(self.length_m, 1.0)
-        sig = np.maximum(np.linalg.norm(d1_knots, axis=2), floor)
+        sig = np.maximum(_norm(d1_knots), floor)
         u_s = 1.0 / sig                                              # du/ds
         hh = seg_len
         self._tab_m0 = (hh * u_s[:, :-1] / h).ravel()
@@ -465,22 +506,30 @@ class BezierPath:
     def arc_length_at(self, piece: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Arc length (m) that ``locate`` maps to (piece (K,), u (K,)): its exact inverse.
 
-        Found by bisection (32 steps) within the table interval, so ``locate(arc_length_at(p,
-        u))`` returns (p, u) to 1e-12 of the parameter.
+        Found by Newton's method within the table interval (bisection where it does not
+        converge), so ``locate(arc_length_at(p, u))`` returns (p, u) to about 1e-12.
         """
         g = _TABLE_INTERVALS
         k = np.clip((np.asarray(u) * g).astype(int), 0, g - 1)
         j = np.asarray(piece) * g + k
         target = (np.asarray(u, dtype=float) - self._tab_u_lo[j]) / self._tab_du
-        lo = np.zeros_like(target)
-        hi = np.ones_like(target)
         args = (self._tab_m0[j], self._tab_m1[j], self._tab_c0[j], self._tab_c1[j])
-        for _ in range(32):
-            mid = 0.5 * (lo + hi)
-            below = np.clip(_hermite_quintic(mid, *args), 0.0, 1.0) < target
-            lo = np.where(below, mid, lo)
-            hi = np.where(below, hi, mid)
-        return self._tab_s_lo[j] + self._tab_h[j] * 0.5 * (lo + hi)
+        x = target.copy()
+        for _ in range(8):                                   # Newton, then bisection where needed
+            x = np.clip(x - (_hermite_quintic(x, *args) - target) / np.maximum(_hermite_quintic_dx(x, *args),
+                                                                              1e-12), 0.0, 1.0)
+        bad = np.abs(_hermite_quintic(x, *args) - target) > 1e-12
+        if np.any(bad):
+            lo = np.zeros(int(bad.sum()))
+            hi = np.ones_like(lo)
+            sub = tuple(a[bad] for a in args)
+            for _ in range(48):
+                mid = 0.5 * (lo + hi)
+                below = np.clip(_hermite_quintic(mid, *sub), 0.0, 1.0) < target[bad]
+                lo = np.where(below, mid, lo)
+                hi = np.where(below, hi, mid)
+            x[bad] = 0.5 * (lo + hi)
+        return self._tab_s_lo[j] + self._tab_h[j] * x
 
     @cached_property
     def curvature_peaks_s(self) -> np.ndarray:
@@ -488,17 +537,17 @@ class BezierPath:
 
         Each curved piece is sampled at 65 parameters; where the largest sample is not at an
         end (a G1 corner; G2 spirals peak at their ends, which are joints), the maximum is
-        refined by golden-section search to 1e-7 of the parameter (28 steps). A speed-profile grid that
+        refined by six rounds of 17 samples in the bracket around the best sample (the bracket
+        shrinks 8 times per round, to about 1e-7 of the parameter). A speed-profile grid that
         includes these points resolves even the narrow curvature peak of a sharp G1 corner.
         """
         curved = np.nonzero(self._degrees >= 2)[0]
         if curved.size == 0 or self._peaks_at_joints:
             return np.zeros(0)
         u = np.linspace(0.0, 1.0, 65)
-        piece = np.repeat(curved, u.size)
-        uu = np.tile(u, curved.size)
-        kappa = curvature_from_derivatives(self._piece_derivative(piece, uu, 1),
-                                           self._piece_derivative(piece, uu, 2)).reshape(curved.size, -1)
+        d1 = bernstein(self.degree - 1, u)[None] @ self._hodographs[1][curved]
+        d2 = bernstein(self.degree - 2, u)[None] @ self._hodographs[2][curved]
+        kappa = curvature_from_derivatives(d1, d2)                                  # (P', 65)
         i = np.argmax(kappa, axis=1)
         interior = (i > 0) & (i < u.size - 1)
         if not np.any(interior):
@@ -511,27 +560,14 @@ class BezierPath:
         c1 = power_basis_matrix(h1.shape[1] - 1)[None] @ h1
         c2 = power_basis_matrix(h2.shape[1] - 1)[None] @ h2
 
-        def kappa_at(x: np.ndarray) -> np.ndarray:
-            return curvature_from_derivatives(_horner(c1, x), _horner(c2, x))
-
-        ratio = 0.5 * (math.sqrt(5.0) - 1.0)
-        x1 = hi - ratio * (hi - lo)
-        x2 = lo + ratio * (hi - lo)
-        f1, f2 = kappa_at(x1), kappa_at(x2)
-        for _ in range(28):
-            left = f1 >= f2                      # the maximum lies in [lo, x2]
-            hi = np.where(left, x2, hi)
-            lo = np.where(left, lo, x1)
-            x_new = np.where(left, hi - ratio * (hi - lo), lo + ratio * (hi - lo))
-            f_new = kappa_at(x_new)
-            x1, f1, x2, f2 = (np.where(left, x_new, x2), np.where(left, f_new, f2),
-                              np.where(left, x1, x_new), np.where(left, f1, f_new))
+        rows = np.arange(piece.size)
+        grid = np.linspace(0.0, 1.0, 17)
+        for _ in range(6):                       # each round narrows the bracket 8 times
+            x = lo[:, None] + (hi - lo)[:, None] * grid[None, :]                   # (P', 17)
+            k = curvature_from_derivatives(_horner_grid(c1, x), _horner_grid(c2, x))
+            best = np.clip(np.argmax(k, axis=1), 1, grid.size - 2)
+            lo, hi = x[rows, best - 1], x[rows, best + 1]
         return self.arc_length_at(piece, 0.5 * (lo + hi))
-
-    @property
-    def table_s(self) -> np.ndarray:
-        """Arc lengths of the table knots of the curved pieces (16 per piece, uniform in u)."""
-        return self._tab_s_lo[self._degrees[self._tab_piece] >= 2]
 
     def knots_with_curvature(self) -> tuple[np.ndarray, np.ndarray]:
         """Arc lengths and curvatures of the table knots of the curved pieces, both ends included.
@@ -577,7 +613,7 @@ class BezierPath:
     def _first_distinct(ctrl: np.ndarray) -> np.ndarray:
         """For each piece (P, N+1, d), the first control point that differs from the start."""
         scale = 1e-12 * np.maximum(1.0, np.abs(ctrl).max(axis=(1, 2)))
-        differs = np.linalg.norm(ctrl - ctrl[:, :1], axis=2) > scale[:, None]
+        differs = _norm(ctrl - ctrl[:, :1]) > scale[:, None]
         differs[:, 0] = False
         idx = np.argmax(differs, axis=1)
         return ctrl[np.arange(ctrl.shape[0]), idx]

@@ -32,6 +32,11 @@ __all__ = ["smooth_g1", "midpoint_quartics"]
 logger = logging.getLogger(__name__)
 
 
+def _fmt_point(p: np.ndarray) -> str:
+    """A node as ``[n, e(, d)]`` with 3 decimals (for notes)."""
+    return "[" + ", ".join(f"{float(x):.3f}" for x in p) + "]"
+
+
 def midpoint_quartics(corner: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
     """Quartic corner curves from ``start`` (on the incoming segment) to ``end``.
 
@@ -101,13 +106,13 @@ def smooth_g1(path, *, world=None, kappa_max_1_m: float | None = None, max_halvi
         for i in turn_ids[sharp]:
             kind[i] = 1
             tight.append(int(index[i + 1]))
-            notes.append(f"corner {index[i + 1]} at {np.round(corners.point[i], 3).tolist()}: every smooth "
+            notes.append(f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: every smooth "
                          f"corner clips an obstacle; kept the polyline corner (the vehicle stops there)")
     elif turn_ids.size:
         curves[turn_ids] = build(turn_ids, np.ones(turn_ids.size))
     for i in np.nonzero(corners.kind == "reversal")[0]:
         tight.append(int(index[i + 1]))
-        notes.append(f"corner {index[i + 1]} at {np.round(corners.point[i], 3).tolist()}: the path reverses "
+        notes.append(f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: the path reverses "
                      f"(heading change {math.degrees(corners.turn_rad[i]):.2f} deg); the vehicle stops there")
     if kappa is not None:
         smooth_ids = turn_ids[kind[turn_ids] == 2]

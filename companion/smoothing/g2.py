@@ -50,6 +50,11 @@ C4 = 1.1228
 _C_JOINT = (2.0 / 3.0) * C3 / (1.0 - C3 * (1.0 + C2)) ** 2
 
 
+def _fmt_point(p: np.ndarray) -> str:
+    """A node as ``[n, e(, d)]`` with 3 decimals (for notes)."""
+    return "[" + ", ".join(f"{float(x):.3f}" for x in p) + "]"
+
+
 def check_kappa(kappa_max_1_m) -> float:
     """Validate K_max (1/m): a finite number > 0."""
     if isinstance(kappa_max_1_m, bool) or not isinstance(kappa_max_1_m, (int, float, np.floating, np.integer)):
@@ -199,11 +204,11 @@ def smooth_g2(path, kappa_max_1_m: float, *, world=None, max_halvings: int = 12)
     tight: list[int] = []
     for i in sharp_ids:
         tight.append(int(index[i + 1]))
-        notes.append(f"corner {index[i + 1]} at {np.round(corners.point[i], 3).tolist()}: every smooth "
+        notes.append(f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: every smooth "
                      f"corner clips an obstacle; kept the polyline corner (the vehicle stops there)")
     for i in np.nonzero(corners.kind == "reversal")[0]:
         tight.append(int(index[i + 1]))
-        notes.append(f"corner {index[i + 1]} at {np.round(corners.point[i], 3).tolist()}: the path "
+        notes.append(f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: the path "
                      f"reverses (heading change {math.degrees(corners.turn_rad[i]):.2f} deg); the "
                      f"vehicle stops and turns there")
     smooth_ids = turn_ids[kind[turn_ids] == 2]
@@ -211,7 +216,7 @@ def smooth_g2(path, kappa_max_1_m: float, *, world=None, max_halvings: int = 12)
     for i, k in zip(smooth_ids[true_kappa > kappa * (1.0 + 1e-9)], true_kappa[true_kappa > kappa * (1.0 + 1e-9)]):
         tight.append(int(index[i + 1]))
         reason = "the adjacent segments are too short" if sizes[i] == d_fit[i] else "obstacles"
-        notes.append(f"corner {index[i + 1]} at {np.round(corners.point[i], 3).tolist()}: heading "
+        notes.append(f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: heading "
                      f"change {math.degrees(corners.turn_rad[i]):.1f} deg needs d = {d_need[i]:.3f} m, "
                      f"got {sizes[i]:.3f} m ({reason}); curvature {k:.4g} 1/m > K_max {kappa:.4g} 1/m")
     tight = sorted(set(tight))

@@ -111,3 +111,26 @@ def test_wrong_command_line_arguments_exit_2_with_usage():
     result = run_companion("run", "--time-scale", "fast")
     assert result.returncode == 2
     assert "--time-scale" in result.stderr and "Traceback" not in result.stderr
+
+
+def set_param(sim, name: str, value: float) -> None:
+    from support import MavlinkPeer
+
+    with MavlinkPeer(sim.port, sim.sysid) as gcs:
+        m = gcs.mavlink
+        gcs.send(gcs.mav.param_set_encode(sim.sysid, 1, name.encode(), value, m.MAV_PARAM_TYPE_INT8))
+        echo = gcs.wait("PARAM_VALUE", 5.0, lambda msg: msg.param_id == name)
+        assert echo is not None and echo.param_value == value
+
+
+def test_a_vehicle_that_refuses_to_arm_is_left_with_its_mission(vehicle, tmp_path):
+    sim, track, url = vehicle
+    before = stored_items(url, tmp_path)
+    set_param(sim, "SIM_PREARM_FAIL", 1.0)
+    try:
+        result = run_bad(url, "--mission", str(MISSION))
+    finally:
+        set_param(sim, "SIM_PREARM_FAIL", 0.0)
+    assert_one_line_error(result, "arm")
+    assert "PreArm" in result.stderr or "DENIED" in result.stderr or "FAILED" in result.stderr
+    check_untouched(vehicle, before, tmp_path)

@@ -446,3 +446,12 @@ def test_server_survives_fuzzed_messages_while_flying(model, caplog):
         assert vehicle.pos_ned_m[2] <= 0.0
     finally:
         server.close()
+
+
+def test_condition_yaw_turns_the_hovering_vehicle(model):
+    vehicle = airborne_at_10m(model)
+    assert not vehicle.set_yaw(float("nan"))[0]
+    assert vehicle.set_yaw(math.radians(90.0))[0]
+    fly(vehicle, 8.0)
+    assert abs(vehicle.euler_rad[2] - math.pi / 2) < 0.05
+    assert np.linalg.norm(vehicle.pos_ned_m - (0.0, 0.0, -10.0)) < 0.5

@@ -128,3 +128,14 @@ def test_bad_arc_length_query_raises():
     path = BezierPath([np.array([[0.0, 0.0], [5.0, 0.0]])])
     with pytest.raises(SmoothingError, match="s_m"):
         path.evaluate([np.nan])
+
+
+def test_mixed_degrees_round_trip_and_evaluate():
+    cubic = np.array([[0.0, 0.0], [1.0, 2.0], [3.0, 2.0], [4.0, 0.0]])
+    quartic = np.array([[4.0, 0.0], [5.0, -2.0], [6.0, -1.0], [7.0, 1.0], [8.0, 0.0]])
+    line = np.array([[8.0, 0.0], [10.0, -1.0]])
+    path = BezierPath([cubic, quartic, line])
+    for given_piece, stored in zip([cubic, quartic, line], path.pieces):
+        np.testing.assert_allclose(stored, given_piece, atol=1e-12)
+    np.testing.assert_allclose(path.piece_start_s[1], bezier.arc_length(cubic, intervals=64), rtol=1e-10)
+    np.testing.assert_allclose(path.evaluate(path.piece_start_s[1:3]), [quartic[0], line[0]], atol=1e-9)

@@ -1,7 +1,6 @@
 """Collision re-check and repair: the smoothed path is never less safe than the polyline."""
 
 import numpy as np
-import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from smoothing_strategies import polylines

@@ -1,0 +1,124 @@
+"""Issue 6 end to end: threats injected over real zenoh into a real flight.
+
+``sim-vehicle`` and ``companion run`` are separate processes; this test process is the third,
+threat-injecting one (zenoh peer connected to the companion's endpoint). One flight of
+``mission_files/exclusion_zones.plan`` carries the whole sequence:
+
+- leg 1: a pop-up threat on the reference far ahead -> ``replan``;
+- leg 2: an invalid payload -> ``rejected``; a harmless threat put then DELETEd -> the
+  companion holds it, then no longer;
+- leg 3: a threat moving at sqrt(2) m/s across the path, met within about 10 m -> ``switch``;
+
+and the flight completes with no intrusion into any threat.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import socket
+import time
+
+import numpy as np
+import pytest
+
+from companion.demo import FlightWatcher, Injection, inject, last_json_line, place, spawn, stop
+from companion.record import load_record
+from companion.threats.bus import ThreatBus
+from companion.threats.model import Threat
+from flight_support import wait_until
+from support import REPO_ROOT, free_tcp_port, free_udp_port
+
+pytestmark = pytest.mark.integration
+
+SPEEDUP = 4.0
+MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
+POPUP = Injection("popup1", "popup", leg=1, after_s=1.0, ahead_s=8.0, radius_m=5.0)
+MOVER = Injection("mover1", "moving", leg=3, after_s=4.0, ahead_s=2.5, radius_m=3.0,
+                  lateral_m=-5.0, speed_m_s=math.sqrt(2.0))
+HARMLESS = Threat("far1", "popup", "local_ned", (300.0, 300.0, -15.0), (0.0, 0.0, 0.0), 2.0, 60.0)
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("threat_flight")
+    mav_port, vehicle_port, zenoh_port = free_udp_port(), free_udp_port(), free_tcp_port()
+    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
+    sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), "--out", f"127.0.0.1:{mav_port}",
+                 "--speedup", str(SPEEDUP)], tmp / "sim_vehicle.log")
+    companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
+                       "--mission", str(MISSION), "--time-scale", str(SPEEDUP),
+                       "--zenoh-listen", endpoint, "--record", str(tmp / "flight.jsonl")],
+                      tmp / "companion.log")
+    seen = {}
+    try:
+        with ThreatBus(1, listen=(), connect=(endpoint,)) as bus:
+            watcher = FlightWatcher(bus)
+            running = lambda: companion.poll() is not None   # noqa: E731
+            inject(watcher, [POPUP], 240, done=running, invalid_after=None)
+            wait_until(lambda: watcher.status and watcher.status["leg"] == 2, 120, "leg 2")
+            bus.put_raw("broken", b'{"v": 1, "id": "broken", "kind": "popup", "radius_m": -1}')
+            bus.put_threat(HARMLESS)
+            wait_until(lambda: (watcher.status or {}).get("threats") == 2, 20, "two threats held")
+            seen["listed"] = sorted(t.id for t in bus.list_threats(5.0))
+            bus.delete_threat(HARMLESS.id)
+            wait_until(lambda: (watcher.status or {}).get("threats") == 1, 20, "the DELETE")
+            seen["listed_after_delete"] = sorted(t.id for t in bus.list_threats(5.0))
+            seen["threats"] = inject(watcher, [MOVER], 240, done=running, invalid_after=None)
+            companion.wait(240)
+            seen["events"] = list(watcher.events)
+    finally:
+        stop(companion)
+        stop(sim)
+    summary = last_json_line(tmp / "companion.log")
+    yield {"rc": companion.returncode, "summary": summary, "seen": seen,
+           "record": load_record(tmp / "flight.jsonl"), "log": (tmp / "companion.log").read_text()}
+
+
+def events_of(flight, kind):
+    return [e for e in flight["seen"]["events"] if e.get("event") == kind]
+
+
+def test_the_flight_completes_despite_the_threats(flight):
+    assert flight["rc"] == 0, flight["log"][-3000:]
+    assert flight["summary"]["outcome"] == "completed"
+    assert flight["summary"]["landed"] is True
+
+
+def test_a_popup_far_ahead_is_answered_by_a_replan(flight):
+    replans = [e for e in events_of(flight, "replan") if e.get("threat_id") == "popup1"]
+    assert replans, flight["seen"]["events"]
+    assert replans[0]["time_to_conflict_s"] > 3.0
+    assert replans[0]["latency_ms"] is not None and replans[0]["latency_ms"] > 0
+
+
+def test_a_close_moving_threat_is_answered_by_a_switch(flight):
+    switches = [e for e in events_of(flight, "switch") if e.get("threat_id") == "mover1"]
+    assert switches, [e for e in flight["seen"]["events"] if e.get("threat_id") == "mover1"]
+
+
+def test_an_invalid_payload_is_rejected_naming_the_field(flight):
+    rejected = events_of(flight, "rejected")
+    assert rejected and rejected[0]["threat_id"] == "broken"
+    assert rejected[0]["field"]
+
+
+def test_delete_removes_a_threat(flight):
+    assert "far1" in flight["seen"]["listed"]
+    assert "far1" not in flight["seen"]["listed_after_delete"]
+
+
+def test_no_intrusion_into_any_threat(flight):
+    """From the flight record: every sample against every threat's predicted position."""
+    record = flight["record"]
+    s = record.samples
+    assert len(s["t_s"]) > 100
+    for th in record.threats:
+        if th.get("removed") or th["id"] == "far1":
+            continue
+        centre = np.asarray(th["position_ned_m"]) + np.outer(
+            s["t_s"] - th["t_s"], np.asarray(th["velocity_ned_m_s"]))
+        after = s["t_s"] >= th["t_s"]
+        separation = np.linalg.norm(s["pos_ned_m"] - centre, axis=1)[after] - th["radius_m"]
+        assert separation.min() > 0.0, f"{th['id']}: intrusion of {-separation.min():.2f} m"
+    assert flight["summary"]["min_threat_separation_m"] > 0.0
