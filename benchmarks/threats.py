@@ -71,7 +71,7 @@ def prepare_world(seed: int) -> dict | None:
     bw = make_world("2d", seed)
     world = World(bw.world.obstacles, bw.world.bounds_min, bw.world.bounds_max, margin_m=MARGIN_M)
     gs = GartSettings(kappa_max_1_m=KAPPA)
-    res = gart(world, bw.start, bw.goal, rng=np.random.default_rng(seed), max_time_s=0.5, settings=gs)
+    res = gart(world, bw.start, bw.goal, rng=np.random.default_rng(seed), max_time_s=3.0, settings=gs)
     if res.status != "exact":
         return None
     traj = time_parameterize(smooth_g2(res.path, KAPPA, world=world), LIMITS)
@@ -207,7 +207,7 @@ def run_encounters(n: int, settings: ThreatSettings, log_every: int = 25) -> lis
                                   kappa_max_1_m=KAPPA, gart_settings=prep["gart"])
         refresher.set_active(traj0, 0.0)
         alts = refresher.compute_alternatives([], max(t_enc - 1.0, 0.0), 4, rng=np.random.default_rng(i),
-                                              max_time_s=0.5, settings=MgartSettings(gart=prep["gart"]))
+                                              max_time_s=1.0, settings=MgartSettings(gart=prep["gart"]))
         row = {"index": i, "world": seed, "kind": kind, "t_enc_s": t_enc, "alternatives": len(alts),
                "threat": {"pos": list(threat.position[:2]), "vel": list(threat.velocity_ned_m_s[:2]),
                           "radius_m": threat.radius_m}}

@@ -60,6 +60,8 @@ log = logging.getLogger(__name__)
 
 GUIDED = 4
 LOITER = 5
+#: A reference that stopped short of its leg's goal (a hold) is continued after this long (s).
+RESUME_AFTER_S = 2.0
 
 
 class FlightAborted(CompanionError):
@@ -132,10 +134,14 @@ class ActiveReference:
         return pos[0], vel[0], acc[0], yaw
 
     def setpoint_at(self, monotonic_s: float) -> Setpoint:
+        """The setpoint streamed at ``monotonic_s``, with the yaw rate as feed-forward."""
         if self.first_sent_monotonic_s is None:
             self.first_sent_monotonic_s = monotonic_s
-        pos, vel, acc, yaw = self.state(self.clock.now_s(monotonic_s))
-        return Setpoint(pos, vel, acc, yaw)
+        t = self.clock.now_s(monotonic_s)
+        pos, vel, acc, yaw = self.state(t)
+        tau = min(max(t - self.t0_s, 0.0), self.trajectory.duration_s)
+        rate = float(self.trajectory.yaw_rate_rad_s(np.array([tau]))[0]) if t < self.t_end_s else 0.0
+        return Setpoint(pos, vel, acc, yaw, rate)
 
     def finished(self, t_s: float) -> bool:
         return t_s >= self.t_end_s
@@ -213,6 +219,14 @@ class ThreatReactor:
         d.record("decision", kind="rejected", reason=event.get("reason"), t_s=event["t_s"],
                  field=event.get("field"), threat_id=event.get("threat_id"))
 
+    async def resume(self) -> None:
+        """Ask the manager to plan on from a hold (unless a decision is under way)."""
+        if self.manager is None or self._busy:
+            await asyncio.sleep(0.05)
+            return
+        self._busy = True
+        await self._decide_loop(time.monotonic(), resume=True)
+
     def schedule(self, receipt_mono_s: float) -> None:
         """Decide now, or right after the decision under way (with the newest threats)."""
         if self.manager is None:
@@ -224,13 +238,15 @@ class ThreatReactor:
         self._busy = True
         asyncio.get_running_loop().create_task(self._decide_loop(receipt_mono_s), name="threat-decision")
 
-    async def _decide_loop(self, receipt_mono_s: float) -> None:
+    async def _decide_loop(self, receipt_mono_s: float, resume: bool = False) -> None:
         try:
             while True:
                 leg = self.leg
                 t = self.daemon.clock.now_s()
                 self.table.expire(t)
-                decision = await self.daemon.in_worker(self.manager.on_threats, self.table.snapshot(t), t)
+                decide = self.manager.resume if resume else self.manager.on_threats
+                resume = False
+                decision = await self.daemon.in_worker(decide, self.table.snapshot(t), t)
                 if leg is self.leg:
                     await self.apply(decision, receipt_mono_s)
                 if self._pending_receipt is not None:
@@ -407,7 +423,7 @@ class CompanionDaemon:
         self._tasks: list[asyncio.Task] = []
         self._link_lost_at: float | None = None
         self._resume_needed = False
-        self._ref_count = 0
+        self._last_resume_t_s = -math.inf
         self._executor = ThreadPoolExecutor(2, thread_name_prefix="planning",
                                             initializer=restore_normal_priority)
 
@@ -441,7 +457,6 @@ class CompanionDaemon:
     def engage(self, trajectory, path_id: str, leg: LegPlan | None = None,
                t0_s: float | None = None) -> ActiveReference:
         """Make ``trajectory`` the active reference from mission time ``t0_s`` (default now)."""
-        self._ref_count += 1
         ref = ActiveReference(trajectory, self.clock.now_s() if t0_s is None else t0_s,
                               self.clock, path_id, leg if leg is not None else
                               (self.reference.leg if self.reference else None))
@@ -617,6 +632,24 @@ class CompanionDaemon:
             self.engage(new.trajectory, f"leg{leg.index}-resume", new)
         self.event("resumed", leg=leg.index, from_ned_m=pos)
 
+    def stopped_short(self, ref: ActiveReference, leg: LegPlan, t_s: float) -> bool:
+        """True when ``ref`` (e.g. a threat hold) ended away from the leg's goal a while ago."""
+        end_gap_m = float(np.linalg.norm(ref.trajectory.end_pos_ned_m[:3] - leg.goal_ned_m))
+        return end_gap_m > leg.waypoint.acceptance_radius_m and t_s > ref.t_end_s + RESUME_AFTER_S
+
+    async def continue_leg(self, leg: LegPlan) -> None:
+        """Plan on to the leg's goal from the current reference (after a hold), at most once
+        every ``RESUME_AFTER_S``."""
+        t = self.clock.now_s()
+        if t < self._last_resume_t_s + RESUME_AFTER_S:
+            return
+        self._last_resume_t_s = t
+        self.event("continue", leg=leg.index, reason="the reference stopped short of the goal")
+        if self.threats is not None:
+            await self.threats.resume()
+        else:
+            await self.resume_leg(leg)
+
     async def fly_leg(self, leg: LegPlan) -> None:
         """Fly one leg: until its reference has ended and the vehicle is within the radius."""
         self.leg_index = leg.index
@@ -637,6 +670,9 @@ class CompanionDaemon:
                 dist = float(np.linalg.norm(pos - leg.goal_ned_m))
                 if dist <= radius:
                     break
+                if self.stopped_short(ref, leg, t):
+                    await self.continue_leg(leg)
+                    continue
                 if t > ref.t_end_s + margin:
                     raise FlightAborted(f"item {leg.waypoint.seq} not reached: {dist:.1f} m away "
                                         f"{margin:.0f} s after the reference arrived")

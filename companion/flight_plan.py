@@ -119,14 +119,21 @@ class TrajectoryChain:
             pos[sel], vel[sel], acc[sel] = p, v, a
         return pos, vel, acc
 
-    def yaw_rad(self, t_s) -> np.ndarray:
-        """Yaw reference (rad) at times ``t_s`` (K,) -> (K,)."""
+    def _per_piece(self, name: str, t_s) -> np.ndarray:
         t, idx = self._split(t_s)
         out = np.empty(t.size)
         for k in np.unique(idx):
             sel = idx == k
-            out[sel] = self.pieces[k].yaw_rad(t[sel] - self.t_start_s[k])
+            out[sel] = getattr(self.pieces[k], name)(t[sel] - self.t_start_s[k])
         return out
+
+    def yaw_rad(self, t_s) -> np.ndarray:
+        """Yaw reference (rad) at times ``t_s`` (K,) -> (K,)."""
+        return self._per_piece("yaw_rad", t_s)
+
+    def yaw_rate_rad_s(self, t_s) -> np.ndarray:
+        """Yaw-rate reference (rad/s) at times ``t_s`` (K,) -> (K,)."""
+        return self._per_piece("yaw_rate_rad_s", t_s)
 
     @property
     def end_pos_ned_m(self) -> np.ndarray:

@@ -1017,8 +1017,9 @@ def _integrate_target(sp: Setpoint, age_s: float) -> Setpoint:
 
     As ArduCopter's GUIDED does with position-velocity-acceleration targets: between two
     setpoints (a companion at 50 Hz of wall clock feeds a sped-up simulation more slowly) the
-    position target advances along ``vel * dt + acc * dt^2 / 2`` and the velocity target along
-    ``acc * dt``, for at most ``TARGET_INTEGRATION_MAX_S``. Axes that are not commanded (None
+    position target advances along ``vel * dt + acc * dt^2 / 2``, the velocity target along
+    ``acc * dt`` and a heading given with a rate along ``yaw_rate * dt``, for at most
+    ``TARGET_INTEGRATION_MAX_S``. Axes that are not commanded (None
     or NaN) are left as they are.
     """
     dt = min(max(age_s, 0.0), TARGET_INTEGRATION_MAX_S)
@@ -1027,6 +1028,8 @@ def _integrate_target(sp: Setpoint, age_s: float) -> Setpoint:
     vel = np.nan_to_num(np.asarray(sp.vel_ned_m_s, dtype=float))
     acc = np.zeros(3) if sp.acc_ned_m_s2 is None else np.nan_to_num(np.asarray(sp.acc_ned_m_s2, dtype=float))
     changes = {"vel_ned_m_s": np.asarray(sp.vel_ned_m_s, dtype=float) + acc * dt}
+    if sp.yaw_rad is not None and sp.yaw_rate_rad_s is not None:
+        changes["yaw_rad"] = float(sp.yaw_rad) + float(sp.yaw_rate_rad_s) * dt
     if sp.pos_ned_m is not None:
         changes["pos_ned_m"] = np.asarray(sp.pos_ned_m, dtype=float) + vel * dt + 0.5 * acc * dt * dt
     return dataclasses.replace(sp, **changes)

@@ -97,12 +97,15 @@ class Setpoint(NamedTuple):
     ----------
     pos_ned_m, vel_ned_m_s, acc_ned_m_s2 : ndarray (3,) or None
     yaw_rad : float or None
+    yaw_rate_rad_s : float or None
+        With ``yaw_rad``: the heading's rate of change, a feed-forward for the yaw loop.
     """
 
     pos_ned_m: np.ndarray | None
     vel_ned_m_s: np.ndarray | None = None
     acc_ned_m_s2: np.ndarray | None = None
     yaw_rad: float | None = None
+    yaw_rate_rad_s: float | None = None
 
 
 SetpointSource = Callable[[float], Setpoint]
@@ -283,7 +286,8 @@ class SetpointStreamer:
             return
         try:
             self._send(pos_ned_m=setpoint.pos_ned_m, vel_ned_m_s=setpoint.vel_ned_m_s,
-                       acc_ned_m_s2=setpoint.acc_ned_m_s2, yaw_rad=setpoint.yaw_rad)
+                       acc_ned_m_s2=setpoint.acc_ned_m_s2, yaw_rad=setpoint.yaw_rad,
+                       yaw_rate_rad_s=setpoint.yaw_rate_rad_s)
         except Exception:  # noqa: BLE001 - the stream must go on
             self.send_errors += 1
             if self.send_errors == 1 or self.send_errors % 500 == 0:

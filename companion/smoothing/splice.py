@@ -96,7 +96,8 @@ def join_from_state(pos, vel, path, *, kappa_max_1_m: float = 0.1, limits: Traje
     pos : array_like, shape (d,)
         Current reference position (m), d = path dimension.
     vel : array_like, shape (d,)
-        Current reference velocity (m/s); its speed must not exceed ``limits.speed_m_s``.
+        Current reference velocity (m/s). Above ``limits.speed_m_s`` the trajectory starts at
+        the limit (a velocity step, reported in ``notes``).
     path : array_like, shape (M, d)
         The path to join, from its entry node (``path[0]``) to its end, M >= 1.
     kappa_max_1_m : float
@@ -134,8 +135,6 @@ def join_from_state(pos, vel, path, *, kappa_max_1_m: float = 0.1, limits: Traje
         a0 = _vector(acc, "acc", d)
         logger.debug("join_from_state: dropping along-track acceleration %s", a0)
     speed = float(np.linalg.norm(v0))
-    if speed > limits.speed_m_s * (1 + 1e-9):
-        raise SmoothingError(f"vel: speed {speed:.3f} m/s exceeds limits.speed_m_s {limits.speed_m_s}")
     notes: list[str] = []
     if speed < _REST_M_S:
         nodes, _ = clean_path(np.vstack([p0, arr]), "path")

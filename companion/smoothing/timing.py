@@ -48,14 +48,18 @@ def _as_curve(curve) -> BezierPath:
     return BezierPath([nodes[i:i + 2] for i in range(nodes.shape[0] - 1)])
 
 
-def _check_speed(name: str, value: float, limit: float) -> float:
+def _check_speed(name: str, value: float, limit: float, notes: list[str] | None = None) -> float:
+    """Validate a boundary speed; above ``limit`` it is an error, or (with ``notes``) clamped."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise SmoothingError(f"{name}: expected a number, got {value!r}")
     v = float(value)
     if not math.isfinite(v) or v < 0.0:
         raise SmoothingError(f"{name}: must be a finite number >= 0, got {value!r}")
-    if v > limit * (1.0 + 1e-9):
-        raise SmoothingError(f"{name}: {v} m/s exceeds the speed limit {limit} m/s")
+    if v > limit * (1.0 + 1e-6):
+        if notes is None:
+            raise SmoothingError(f"{name}: {v} m/s exceeds the speed limit {limit} m/s")
+        notes.append(f"{name} {v:.3f} m/s is above the speed limit {limit} m/s; the profile starts at "
+                     f"the limit")
     return min(v, limit)
 
 
@@ -174,10 +178,11 @@ def time_parameterize(curve, limits: TrajectoryLimits | None = None, *, start_sp
     curve : BezierPath or array_like, shape (M, d)
         The geometry. A polyline is flown as straight lines, stopping at every corner.
     limits : TrajectoryLimits, optional
-        Defaults to ``TrajectoryLimits()`` (8 m/s, 2 m/s^2, 2.5 m/s^2 lateral, 5 m/s^3).
+        Defaults to ``TrajectoryLimits()`` (8 m/s, 2 m/s^2, 2.5 m/s^2 lateral, 3 m/s^3).
     start_speed_m_s, end_speed_m_s : float
         Speed along the tangent at the start and the end (default 0: from and to rest); the
-        acceleration there is zero.
+        acceleration there is zero. A start speed above the limits (the vehicle is already
+        faster) is lowered to what they allow, with a note: a velocity step, never an error.
     grid_step_m : float
         Largest arc-length step of the profile grid (m); curved pieces are sampled more
         densely anyway (16 knots per piece plus their curvature peaks). Default 1.
@@ -196,7 +201,8 @@ def time_parameterize(curve, limits: TrajectoryLimits | None = None, *, start_sp
     Raises
     ------
     SmoothingError
-        Bad limits, negative or excessive boundary speeds, a non-positive grid step.
+        Bad limits, a negative boundary speed, an end speed above the speed limit, a
+        non-positive grid step.
     """
     limits = TrajectoryLimits() if limits is None else limits
     if not isinstance(limits, TrajectoryLimits):
@@ -204,7 +210,8 @@ def time_parameterize(curve, limits: TrajectoryLimits | None = None, *, start_sp
     if isinstance(grid_step_m, bool) or not isinstance(grid_step_m, (int, float)) \
             or not math.isfinite(grid_step_m) or grid_step_m <= 0:
         raise SmoothingError(f"grid_step_m: must be a finite number > 0, got {grid_step_m!r}")
-    v0 = _check_speed("start_speed_m_s", start_speed_m_s, limits.speed_m_s)
+    notes: list[str] = []
+    v0 = _check_speed("start_speed_m_s", start_speed_m_s, limits.speed_m_s, notes)
     v1 = _check_speed("end_speed_m_s", end_speed_m_s, limits.speed_m_s)
     path = _as_curve(curve)
     window = 2.0 * limits.accel_m_s2 / limits.jerk_m_s3
@@ -216,7 +223,6 @@ def time_parameterize(curve, limits: TrajectoryLimits | None = None, *, start_sp
     max_gap = float(np.max(np.diff(s)))
     w_max = erode(w_max, s, limits.speed_m_s * window + max_gap)
     w_max[stop_idx] = 0.0
-    notes: list[str] = []
     hold_start = s <= v0 * window / 2.0 + max_gap + 1e-9
     hold_end = s >= path.length_m - v1 * window / 2.0 - max_gap - 1e-9
     w_max[0] = min(w_max[0], v0**2)

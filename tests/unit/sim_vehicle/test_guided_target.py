@@ -27,6 +27,11 @@ def test_target_moves_by_velocity_and_acceleration(values, age_s):
     assert np.allclose(out.vel_ned_m_s, vel + acc * dt)
 
 
+def test_heading_given_with_a_rate_advances():
+    sp = Setpoint(pos_ned_m=(0.0, 0.0, -10.0), vel_ned_m_s=(1.0, 0.0, 0.0), yaw_rad=0.5, yaw_rate_rad_s=0.2)
+    assert _integrate_target(sp, 0.25).yaw_rad == pytest.approx(0.55)
+
+
 def test_uncommanded_axes_stay_uncommanded():
     sp = Setpoint(pos_ned_m=(1.0, 2.0, float("nan")), vel_ned_m_s=(1.0, 0.0, 0.0))
     out = _integrate_target(sp, 0.2)

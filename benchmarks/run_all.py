@@ -1,0 +1,91 @@
+"""Run every benchmark, one after the other, and rebuild ``docs/BENCHMARKS.md``.
+
+Each benchmark prints its table, writes ``out/bench/<name>.json`` and its markdown table to
+``docs/benchmarks/<name>.md``; this script runs them in sequence (never in parallel: they
+measure time) and concatenates the tables, with the machine they ran on, into
+``docs/BENCHMARKS.md``.
+
+Usage::
+
+    make bench                                    # everything (tens of minutes)
+    .venv/bin/python benchmarks/run_all.py --quick
+    .venv/bin/python benchmarks/run_all.py --only planning smoothing
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+#: name -> extra arguments; the order is the order of docs/BENCHMARKS.md.
+BENCHMARKS = {
+    "planning": [],
+    "smoothing": [],
+    "sitl_realtime": [],
+    "setpoint_jitter": ["--sitl"],
+    "flight_tracking": [],
+    "threats": [],
+}
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def run(name: str, quick: bool) -> bool:
+    cmd = [sys.executable, str(REPO / "benchmarks" / f"{name}.py"), *BENCHMARKS[name]]
+    if quick:
+        cmd.append("--quick")
+    print(f"\n=== {name}: {' '.join(cmd[1:])}", flush=True)
+    return subprocess.run(cmd, cwd=str(REPO)).returncode == 0
+
+
+def assemble() -> str:
+    parts = ["# Benchmarks", "",
+             f"Latest run: {datetime.date.today().isoformat()} on {machine()}. Every table compares "
+             "side by side in one run; absolute times drift between machines. Regenerate with "
+             "`make bench` (or `.venv/bin/python benchmarks/run_all.py`).", ""]
+    for name in BENCHMARKS:
+        path = REPO / "docs" / "benchmarks" / f"{name}.md"
+        if path.exists():
+            text = path.read_text().strip()
+            if text.startswith("# "):
+                text = "#" + text            # one level down
+            parts += [text, ""]
+    return "\n".join(parts)
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description="Run the benchmarks and rebuild docs/BENCHMARKS.md")
+    parser.add_argument("--quick", action="store_true", help="the fast version of each benchmark")
+    parser.add_argument("--only", nargs="+", choices=sorted(BENCHMARKS), help="run only these")
+    parser.add_argument("--assemble-only", action="store_true",
+                        help="only rebuild docs/BENCHMARKS.md from docs/benchmarks/*.md")
+    args = parser.parse_args()
+    failed = []
+    if not args.assemble_only:
+        for name in args.only or BENCHMARKS:
+            if not run(name, args.quick):
+                failed.append(name)
+    (REPO / "docs" / "BENCHMARKS.md").write_text(assemble())
+    print(f"\nwrote docs/BENCHMARKS.md{'; failed: ' + ', '.join(failed) if failed else ''}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
