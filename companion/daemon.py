@@ -296,7 +296,7 @@ class ThreatReactor:
             self.manager = ThreatManager(leg.world, leg.goal_ned_m, settings=s.threats,
                                          limits=s.smoothing.limits,
                                          kappa_max_1_m=s.smoothing.kappa_max_1_m,
-                                         gart_settings=s.planning, rng=self.daemon.rng)
+                                         gart_settings=s.gart, rng=self.daemon.rng)
         self.manager.set_leg(leg.world, leg.goal_ned_m)
         self.manager.set_active(leg.trajectory, ref.t0_s, ref.path_id)
         self.manager.set_alternatives([])
@@ -564,7 +564,7 @@ class CompanionDaemon:
         first = np.array([start_ned_m[0], start_ned_m[1], -takeoff_alt_m])
         t0 = time.perf_counter()
         self.legs = await self.in_worker(
-            plan_mission, self.local_mission, first, gart_settings=s.planning,
+            plan_mission, self.local_mission, first, gart_settings=s.gart,
             smoothing=s.smoothing, settings=s.flight, rng=self.rng)
         self.summary.legs_planned = len(self.legs)
         self.record("world", **world_to_dict(self.local_mission.world))
@@ -626,7 +626,7 @@ class CompanionDaemon:
         pos = self.link.telemetry.pos_ned_m
         s = self.settings
         new = await self.in_worker(plan_leg, leg.index, leg.waypoint, pos,
-                                      self.local_mission.world, gart_settings=s.planning,
+                                      self.local_mission.world, gart_settings=s.gart,
                                       smoothing=s.smoothing, settings=s.flight, rng=self.rng)
         if new is not None:
             self.engage(new.trajectory, f"leg{leg.index}-resume", new)

@@ -29,7 +29,7 @@ import numpy as np
 from companion.errors import MissionError
 from companion.planning import GartSettings, PlanResult, gart
 from companion.smoothing import SmoothingSettings, TrajectoryLimits, smooth_g1, smooth_g2, time_parameterize
-from companion.world import World
+from companion.world import Cylinder, Prism, World
 
 log = logging.getLogger(__name__)
 
@@ -208,6 +208,19 @@ def smooth(path: np.ndarray, settings: SmoothingSettings, world: World):
     return path
 
 
+def footprint(world: World) -> World | None:
+    """The 2D (north-east) world of a slab whose obstacles all span its whole height, else None.
+
+    Fence zones are vertical extrusions: in such a slab the search is planar, and a 2D search
+    is several times faster than the same search in 3D.
+    """
+    lo, hi = world.bounds_min, world.bounds_max
+    for ob in world.obstacles:
+        if not isinstance(ob, (Cylinder, Prism)) or ob.down_min_m > lo[2] or ob.down_max_m < hi[2]:
+            return None
+    return World(world.obstacles, lo[:2], hi[:2], world.margin_m)
+
+
 def level(path: np.ndarray, down_m: float, world: World) -> np.ndarray:
     """The path flown at ``down_m`` throughout, if that is collision-free; else unchanged.
 
@@ -268,7 +281,13 @@ def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: 
         polyline.append(level_start)
     slab = leg_slab(world, [goal[2]], settings.slab_margin_m)
     if np.hypot(*(goal[:2] - level_start[:2])) > 1e-3:
-        result = search(slab, level_start, goal, gart_settings, settings, rng)
+        plane = footprint(slab)
+        if plane is not None:
+            result = search(plane, level_start[:2], goal[:2], gart_settings, settings, rng)
+            if result.path is not None:
+                result = replace(result, path=np.column_stack([result.path, np.full(len(result.path), goal[2])]))
+        else:
+            result = search(slab, level_start, goal, gart_settings, settings, rng)
         if result.status != "exact":
             total_s = settings.planning_budget_s * (2 ** settings.planning_attempts - 1)
             reason = {"invalid_start": "the leg starts inside an obstacle or outside the bounds",

@@ -480,8 +480,8 @@ class GartSearch:
     def path_to_goal(self, node: int) -> np.ndarray:
         """(M, d) path root -> ``node`` -> goal."""
         pts = [self.pts[i] for i in self.branch(node)]
-        if math.dist(pts[-1], self.goal) > 1e-9:
-            pts.append(self.goal)
+        if len(pts) == 1 or math.dist(pts[-1], self.goal) > 1e-9:
+            pts.append(self.goal)  # a path always has both ends, even when start == goal
         return np.array(pts, dtype=float)
 
     def tree(self) -> Tree:

@@ -248,3 +248,9 @@ def test_many_obstacles_are_planned_through():
     world = World([Disc(c, 1.0) for c in keep], (0, 0), (100, 100), margin_m=0.5)
     r = gart(world, (0, 0), (99, 99), rng=np.random.default_rng(0), max_iterations=1500, settings=LENGTH)
     assert r.solved and exact_path_free(world, r.path)
+
+
+def test_start_equal_to_goal_gives_a_two_point_path():
+    world = World([Disc((50, 50), 5)], (0, 0), (100, 100))
+    r = gart(world, (10, 10), (10, 10), rng=np.random.default_rng(0), stop_at_first=True)
+    assert r.solved and r.path.shape == (2, 2) and r.length_m == 0.0
