@@ -109,42 +109,59 @@ class VehicleClock:
 
 
 class ActiveReference:
-    """A trajectory started at mission time ``t0_s``; after its end it holds the end point.
+    """A trajectory flown from mission time ``t0_s``; after its end it holds the end point.
 
+    With ``turn_from_yaw_rad`` the vehicle first turns on the spot at the trajectory's start,
+    from that heading to the trajectory's initial heading at ``turn_rate_rad_s``, and the
+    trajectory starts when the turn is done (a leg that starts at rest in a new direction).
     ``first_sent_monotonic_s`` is set when the stream first samples it (latency measurement).
     """
 
     def __init__(self, trajectory, t0_s: float, clock: VehicleClock, path_id: str,
-                 leg: LegPlan | None = None):
+                 leg: LegPlan | None = None, *, turn_from_yaw_rad: float | None = None,
+                 turn_rate_rad_s: float = 0.6):
         self.trajectory = trajectory
-        self.t0_s = t0_s
         self.clock = clock
         self.path_id = path_id
         self.leg = leg
         self.first_sent_monotonic_s: float | None = None
-        self.t_end_s = t0_s + trajectory.duration_s
+        self.turn_from_yaw_rad = turn_from_yaw_rad
+        self.turn_rate_rad_s = 0.0
+        turn_s = 0.0
+        if turn_from_yaw_rad is not None:
+            turn = wrap_pi(float(trajectory.yaw_rad(np.array([0.0]))[0]) - turn_from_yaw_rad)
+            turn_s = abs(turn) / turn_rate_rad_s
+            self.turn_rate_rad_s = math.copysign(turn_rate_rad_s, turn)
+        self.turn_start_s = t0_s
+        self.t0_s = t0_s + turn_s
+        self.t_end_s = self.t0_s + trajectory.duration_s
 
-    def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        """Reference position, velocity, acceleration (NED) and yaw at mission time ``t_s``."""
+    def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+        """Position, velocity, acceleration (NED), yaw and yaw rate at mission time ``t_s``."""
         tau = min(max(t_s - self.t0_s, 0.0), self.trajectory.duration_s)
-        pos, vel, acc = self.trajectory.sample(np.array([tau]))
-        yaw = float(self.trajectory.yaw_rad(np.array([tau]))[0])
+        at = np.array([tau])
+        pos, vel, acc = (v[0] for v in self.trajectory.sample(at))
+        if t_s < self.t0_s and self.turn_from_yaw_rad is not None:
+            yaw = self.turn_from_yaw_rad + self.turn_rate_rad_s * max(t_s - self.turn_start_s, 0.0)
+            return pos, np.zeros(3), np.zeros(3), wrap_pi(yaw), self.turn_rate_rad_s
+        yaw = float(self.trajectory.yaw_rad(at)[0])
         if t_s >= self.t_end_s:
-            return pos[0], np.zeros(3), np.zeros(3), yaw
-        return pos[0], vel[0], acc[0], yaw
+            return pos, np.zeros(3), np.zeros(3), yaw, 0.0
+        return pos, vel, acc, yaw, float(self.trajectory.yaw_rate_rad_s(at)[0])
 
     def setpoint_at(self, monotonic_s: float) -> Setpoint:
-        """The setpoint streamed at ``monotonic_s``, with the yaw rate as feed-forward."""
+        """The setpoint streamed at ``monotonic_s`` (the yaw rate as feed-forward)."""
         if self.first_sent_monotonic_s is None:
             self.first_sent_monotonic_s = monotonic_s
-        t = self.clock.now_s(monotonic_s)
-        pos, vel, acc, yaw = self.state(t)
-        tau = min(max(t - self.t0_s, 0.0), self.trajectory.duration_s)
-        rate = float(self.trajectory.yaw_rate_rad_s(np.array([tau]))[0]) if t < self.t_end_s else 0.0
-        return Setpoint(pos, vel, acc, yaw, rate)
+        return Setpoint(*self.state(self.clock.now_s(monotonic_s)))
 
     def finished(self, t_s: float) -> bool:
         return t_s >= self.t_end_s
+
+
+def wrap_pi(angle_rad: float) -> float:
+    """``angle_rad`` wrapped to [-pi, pi)."""
+    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class ThreatReactor:
@@ -455,11 +472,14 @@ class CompanionDaemon:
 
     # ------------------------------------------------------------------ reference
     def engage(self, trajectory, path_id: str, leg: LegPlan | None = None,
-               t0_s: float | None = None) -> ActiveReference:
-        """Make ``trajectory`` the active reference from mission time ``t0_s`` (default now)."""
+               t0_s: float | None = None, turn: bool = False) -> ActiveReference:
+        """Make ``trajectory`` the active reference from mission time ``t0_s`` (default now),
+        first turning on the spot to its heading if ``turn`` (a leg that starts at rest)."""
         ref = ActiveReference(trajectory, self.clock.now_s() if t0_s is None else t0_s,
                               self.clock, path_id, leg if leg is not None else
-                              (self.reference.leg if self.reference else None))
+                              (self.reference.leg if self.reference else None),
+                              turn_from_yaw_rad=self._current_yaw() if turn else None,
+                              turn_rate_rad_s=self.settings.flight.turn_rate_rad_s)
         self.reference = ref
         if self.streamer is not None:
             self.streamer.set_source(ref.setpoint_at)
@@ -474,14 +494,6 @@ class CompanionDaemon:
         if self.streamer is not None:
             self.streamer.set_source(hold_position(pos_ned_m, yaw))
         self.event("hold", reason=reason, pos_ned_m=np.asarray(pos_ned_m))
-
-    def reference_state(self, t_s: float | None = None):
-        """The active reference's (pos, vel, acc, yaw) at mission time ``t_s`` (default now)."""
-        t = self.clock.now_s() if t_s is None else t_s
-        if self.reference is None:
-            tele = self.link.telemetry
-            return tele.pos_ned_m, np.zeros(3), np.zeros(3), self._current_yaw()
-        return self.reference.state(t)
 
     def _current_yaw(self) -> float:
         att = self.link.telemetry.attitude_rad
@@ -510,7 +522,7 @@ class CompanionDaemon:
             if tele.pos_ned_m is None or self.reference is None:
                 continue
             t = self.clock.now_s()
-            ref_pos, ref_vel, _, _ = self.reference.state(t)
+            ref_pos, ref_vel = self.reference.state(t)[:2]
             if self.threats is not None:
                 self.summary.min_threat_separation_m = min(
                     self.summary.min_threat_separation_m, self.threats.min_separation_m(tele.pos_ned_m, t))
@@ -629,7 +641,7 @@ class CompanionDaemon:
                                       self.local_mission.world, gart_settings=s.gart,
                                       smoothing=s.smoothing, settings=s.flight, rng=self.rng)
         if new is not None:
-            self.engage(new.trajectory, f"leg{leg.index}-resume", new)
+            self.engage(new.trajectory, f"leg{leg.index}-resume", new, turn=True)
         self.event("resumed", leg=leg.index, from_ned_m=pos)
 
     def stopped_short(self, ref: ActiveReference, leg: LegPlan, t_s: float) -> bool:
@@ -653,7 +665,7 @@ class CompanionDaemon:
     async def fly_leg(self, leg: LegPlan) -> None:
         """Fly one leg: until its reference has ended and the vehicle is within the radius."""
         self.leg_index = leg.index
-        ref = self.engage(leg.trajectory, f"leg{leg.index}", leg)
+        ref = self.engage(leg.trajectory, f"leg{leg.index}", leg, turn=True)
         if self.threats is not None:
             self.threats.on_leg_started(leg, ref)
         margin = self.settings.link.leg_timeout_margin_s

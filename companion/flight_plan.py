@@ -58,6 +58,9 @@ class FlightPlanSettings:
         M-GART alternatives kept per leg for the threat manager to switch to (0: none).
     alternatives_budget_s : float
         Wall-clock budget of one M-GART refresh (s), run in the background.
+    turn_rate_rad_s : float
+        A leg starts at rest: the vehicle first turns on the spot to the leg's heading at this
+        rate (rad/s), so it never accelerates while turning hard.
     """
 
     planning_budget_s: float = 0.5
@@ -69,6 +72,7 @@ class FlightPlanSettings:
     min_vertical_change_m: float = 0.3
     alternatives_k: int = 4
     alternatives_budget_s: float = 0.5
+    turn_rate_rad_s: float = 0.6
 
     def __post_init__(self) -> None:
         if isinstance(self.planning_attempts, bool) or not isinstance(self.planning_attempts, int) \
@@ -78,7 +82,8 @@ class FlightPlanSettings:
                 or not 0 <= self.alternatives_k <= 16:
             raise MissionError(f"flight.alternatives_k: an integer in 0..16, got {self.alternatives_k!r}")
         for name in ("planning_budget_s", "slab_margin_m", "climb_speed_m_s", "descent_speed_m_s",
-                     "vertical_accel_m_s2", "min_vertical_change_m", "alternatives_budget_s"):
+                     "vertical_accel_m_s2", "min_vertical_change_m", "alternatives_budget_s",
+                     "turn_rate_rad_s"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise MissionError(f"flight.{name}: must be a finite number > 0, got {value!r}")
@@ -254,13 +259,38 @@ def search(world: World, start, goal, gart_settings: GartSettings, settings: Fli
     return result
 
 
+def plan_level(level_start: np.ndarray, goal: np.ndarray, slab: World, waypoint, *,
+               gart_settings: GartSettings, smoothing: SmoothingSettings,
+               settings: FlightPlanSettings, rng: np.random.Generator, where: str):
+    """Plan, smooth and time the level part of a leg; returns (PlanResult, path, Trajectory)."""
+    plane = footprint(slab)
+    if plane is not None:
+        result = search(plane, level_start[:2], goal[:2], gart_settings, settings, rng)
+        if result.path is not None:
+            result = replace(result, path=np.column_stack([result.path, np.full(len(result.path), goal[2])]))
+    else:
+        result = search(slab, level_start, goal, gart_settings, settings, rng)
+    if result.status != "exact":
+        total_s = settings.planning_budget_s * (2 ** settings.planning_attempts - 1)
+        reason = {"invalid_start": "the leg starts inside an obstacle or outside the bounds",
+                  "invalid_goal": "the goal is inside an obstacle (with the safety margin)",
+                  "timeout": f"no path found in {total_s:g} s of search"}[result.status]
+        raise MissionError(f"{where}: unreachable: {reason}")
+    path = level(result.path, goal[2], slab)
+    curve = smooth(path, smoothing, slab)
+    trajectory = time_parameterize(curve, leg_limits(waypoint, smoothing.limits))
+    trajectory.notes[:0] = list(getattr(curve, "notes", []))
+    return result, path, trajectory
+
+
 def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: GartSettings,
              smoothing: SmoothingSettings, settings: FlightPlanSettings,
              rng: np.random.Generator, yaw_rad: float = 0.0) -> LegPlan | None:
     """Plan, smooth and time one leg from ``start_ned_m`` to ``waypoint``.
 
-    Returns None when the goal is where the leg starts (e.g. a LAND item right below the last
-    waypoint): there is nothing to fly.
+    The level part is planned first; a climb or descent before it holds the level part's
+    initial heading (``yaw_rad`` when there is no level part). Returns None when the goal is
+    where the leg starts (e.g. a LAND item right below the last waypoint): nothing to fly.
 
     Raises
     ------
@@ -273,40 +303,26 @@ def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: 
     if waypoint.kind in ("land", "rtl"):
         goal[2] = start[2]          # fly there level; the vehicle's LAND descends
     where = f"item {waypoint.seq} ({waypoint.kind})"
-    pieces, polyline, notes, result = [], [start], [], None
-    level_start = start
+    level_start = np.array([start[0], start[1], goal[2]])
+    slab = leg_slab(world, [goal[2]], settings.slab_margin_m)
+    result, path, level_part = None, level_start[None, :], None
+    if np.hypot(*(goal[:2] - level_start[:2])) > 1e-3:
+        result, path, level_part = plan_level(level_start, goal, slab, waypoint,
+                                              gart_settings=gart_settings, smoothing=smoothing,
+                                              settings=settings, rng=rng, where=where)
+        yaw_rad = float(level_part.yaw_rad(np.array([0.0]))[0])
+    pieces = []
     if abs(goal[2] - start[2]) >= settings.min_vertical_change_m:
         pieces.append(vertical_trajectory(start, goal[2], settings, yaw_rad))
-        level_start = np.array([start[0], start[1], goal[2]])
-        polyline.append(level_start)
-    slab = leg_slab(world, [goal[2]], settings.slab_margin_m)
-    if np.hypot(*(goal[:2] - level_start[:2])) > 1e-3:
-        plane = footprint(slab)
-        if plane is not None:
-            result = search(plane, level_start[:2], goal[:2], gart_settings, settings, rng)
-            if result.path is not None:
-                result = replace(result, path=np.column_stack([result.path, np.full(len(result.path), goal[2])]))
-        else:
-            result = search(slab, level_start, goal, gart_settings, settings, rng)
-        if result.status != "exact":
-            total_s = settings.planning_budget_s * (2 ** settings.planning_attempts - 1)
-            reason = {"invalid_start": "the leg starts inside an obstacle or outside the bounds",
-                      "invalid_goal": "the goal is inside an obstacle (with the safety margin)",
-                      "timeout": f"no path found in {total_s:g} s of search"}[result.status]
-            raise MissionError(f"{where}: unreachable: {reason}")
-        path = level(result.path, goal[2], slab)
-        curve = smooth(path, smoothing, slab)
-        notes += list(getattr(curve, "notes", []))
-        trajectory = time_parameterize(curve, leg_limits(waypoint, smoothing.limits))
-        notes += trajectory.notes
-        pieces.append(trajectory)
-        polyline.extend(path[1:])
+    if level_part is not None:
+        pieces.append(level_part)
     if not pieces:
         return None
+    notes = [n for p in pieces for n in p.notes]
     log.info("leg %d to %s: %s, %.1f m, %.1f s%s", index, where,
              result.status if result else "vertical", sum(p.length_m for p in pieces),
              sum(p.duration_s for p in pieces), f" ({'; '.join(notes)})" if notes else "")
-    return LegPlan(index, waypoint, start, goal, result, np.vstack(polyline),
+    return LegPlan(index, waypoint, start, goal, result, np.vstack([start[None, :], path]),
                    TrajectoryChain(pieces), slab, notes)
 
 

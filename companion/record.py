@@ -134,6 +134,16 @@ def load_record(path: str | Path) -> FlightRecord:
             record.events.append(item)
     if columns["t_s"]:
         for key, values in columns.items():
-            if all(v is not None for v in values):
-                record.samples[key] = np.asarray(values, dtype=float)
+            column = _column(values)
+            if column is not None:
+                record.samples[key] = column
     return record
+
+
+def _column(values: list) -> np.ndarray | None:
+    """Sample values as one float array; missing values (None) become NaN rows."""
+    first = next((v for v in values if v is not None), None)
+    if first is None:
+        return None
+    blank = np.full(np.shape(first), np.nan)
+    return np.asarray([blank if v is None else v for v in values], dtype=float)

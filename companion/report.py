@@ -42,6 +42,7 @@ def tracking_statistics(record: FlightRecord) -> dict:
     if not record.has_samples or "tracking_error_m" not in record.samples:
         return {}
     err = record.samples["tracking_error_m"]
+    err = err[np.isfinite(err)]
     return {"samples": int(err.size), "rms_tracking_error_m": float(np.sqrt(np.mean(err**2))),
             "max_tracking_error_m": float(np.max(err)),
             "duration_s": float(record.samples["t_s"][-1] - record.samples["t_s"][0])}
