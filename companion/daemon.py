@@ -174,7 +174,8 @@ class ThreatReactor:
     becomes the active reference from the manager's start time, so the setpoint does not jump;
     its latency is measured from the threat's receipt on the zenoh thread to the first setpoint
     of the new trajectory handed to the vehicle link. M-GART alternatives are refreshed in the
-    background at every leg start and after every decision.
+    background at every leg start, after every decision and every ``alternatives_period_s``,
+    from the reference ``alternatives_lead_s`` ahead (entry nodes the vehicle can still reach).
     """
 
     def __init__(self, daemon: "CompanionDaemon"):
@@ -302,7 +303,7 @@ class ThreatReactor:
                     "n/a" if latency_ms is None else f"{latency_ms:.1f}", decision.decide_ms,
                     decision.plan_ms, d.settings.seed)
         self.bus.publish_event(event)
-        d.record("decision", kind=decision.kind, **event)
+        d.record("decision", kind=decision.kind, path_ned_m=decision.path_ned_m, **event)
         self.publish_path()
         self.refresh_alternatives()
 
@@ -348,12 +349,16 @@ class ThreatReactor:
                     break
                 threats = self.table.snapshot(t)
                 rng = np.random.default_rng(self.daemon.rng.integers(2**63))
+                ref = self.daemon.reference
+                start = None if ref is None else ref.state(t + f.alternatives_lead_s)[0]
                 alternatives = await self.daemon.in_worker(
                     self.manager.compute_alternatives, threats, t, f.alternatives_k, rng=rng,
-                    max_time_s=f.alternatives_budget_s)
-                if leg is self.leg:
+                    max_time_s=f.alternatives_budget_s, start_ned_m=start)
+                if leg is self.leg and alternatives:     # none found: keep the previous ones
                     self.manager.set_alternatives(alternatives)
                     self.publish_path()
+                    self.daemon.record("alternatives", leg=leg.index, t_s=t,
+                                       paths=[a.path_ned_m for a in alternatives])
                 if not self._alt_dirty:
                     break
         except Exception:  # noqa: BLE001 - without alternatives the manager replans or holds
@@ -539,6 +544,14 @@ class CompanionDaemon:
             if self.threats is not None:
                 self.threats.publish_status(self.status())
 
+    async def _refresh_alternatives(self) -> None:
+        """Keep the M-GART alternatives starting just ahead of the vehicle."""
+        period_s = self.settings.flight.alternatives_period_s / self.settings.link.time_scale
+        while True:
+            await asyncio.sleep(period_s)
+            if self.threats is not None:
+                self.threats.refresh_alternatives()
+
     def _on_link_change(self, connected: bool) -> None:
         if not connected:
             self._link_lost_at = self.clock.now_s()
@@ -551,7 +564,7 @@ class CompanionDaemon:
     def _start_background(self) -> None:
         loop = asyncio.get_running_loop()
         for coro in (self._watch_local_position(), self._watch_servos(), self._record_samples(),
-                     self._publish_status()):
+                     self._publish_status(), self._refresh_alternatives()):
             self._tasks.append(loop.create_task(coro, name=coro.__name__))
         self.link.on_link_change(self._on_link_change)
 
@@ -585,14 +598,13 @@ class CompanionDaemon:
         self.event("planned", legs=len(self.legs), seconds=round(time.perf_counter() - t0, 3),
                    seed=s.seed)
 
-    def record_plan(self, leg: LegPlan, alternatives=(), path_id: str | None = None) -> None:
+    def record_plan(self, leg: LegPlan) -> None:
         t = np.linspace(0.0, leg.trajectory.duration_s, max(2, int(leg.trajectory.duration_s * 5)))
         ref = leg.trajectory.sample(t)[0]
         tree = leg.plan.tree if leg.plan is not None else None
-        self.record("plan", leg=leg.index, seq=leg.waypoint.seq, path_id=path_id or f"leg{leg.index}",
+        self.record("plan", leg=leg.index, seq=leg.waypoint.seq, path_id=f"leg{leg.index}",
                     path_ned_m=leg.path_ned_m, reference_ne=ref[:, :2],
                     tree={"nodes": tree.nodes, "parents": tree.parents} if tree is not None else None,
-                    alternatives=[np.asarray(a)[:, :2] for a in alternatives],
                     summary=leg.plan.summary() if leg.plan is not None else None)
 
     async def restore_mission(self, previous) -> None:

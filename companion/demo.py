@@ -88,7 +88,7 @@ class Injection:
 #: The demo's threats on ``exclusion_zones.plan``.
 DEMO_INJECTIONS = (
     Injection("popup1", "popup", leg=1, after_s=1.0, ahead_s=8.0, radius_m=5.0),
-    Injection("mover1", "moving", leg=3, after_s=4.0, ahead_s=2.5, radius_m=3.0, lateral_m=-5.0,
+    Injection("mover1", "moving", leg=3, after_s=3.0, ahead_s=4.0, radius_m=3.0, lateral_m=-4.0,
               speed_m_s=math.sqrt(2.0)),
 )
 

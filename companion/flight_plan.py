@@ -58,6 +58,12 @@ class FlightPlanSettings:
         M-GART alternatives kept per leg for the threat manager to switch to (0: none).
     alternatives_budget_s : float
         Wall-clock budget of one M-GART refresh (s), run in the background.
+    alternatives_period_s : float
+        The alternatives are refreshed this often (mission s), besides leg starts and
+        decisions.
+    alternatives_lead_s : float
+        They start from the reference this far ahead in time (mission s), so that their entry
+        nodes lie ahead, where the vehicle can still turn onto them.
     turn_rate_rad_s : float
         A leg starts at rest: the vehicle first turns on the spot to the leg's heading at this
         rate (rad/s), so it never accelerates while turning hard.
@@ -72,6 +78,8 @@ class FlightPlanSettings:
     min_vertical_change_m: float = 0.3
     alternatives_k: int = 4
     alternatives_budget_s: float = 0.5
+    alternatives_period_s: float = 1.0
+    alternatives_lead_s: float = 1.0
     turn_rate_rad_s: float = 0.6
 
     def __post_init__(self) -> None:
@@ -83,7 +91,7 @@ class FlightPlanSettings:
             raise MissionError(f"flight.alternatives_k: an integer in 0..16, got {self.alternatives_k!r}")
         for name in ("planning_budget_s", "slab_margin_m", "climb_speed_m_s", "descent_speed_m_s",
                      "vertical_accel_m_s2", "min_vertical_change_m", "alternatives_budget_s",
-                     "turn_rate_rad_s"):
+                     "alternatives_period_s", "alternatives_lead_s", "turn_rate_rad_s"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise MissionError(f"flight.{name}: must be a finite number > 0, got {value!r}")

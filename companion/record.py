@@ -6,7 +6,8 @@ A record survives a crash up to its last line and can be read while it is writte
 ``world``     obstacles (as ``World.to_dict()``), bounds, margin
 ``plan``      one leg: planner polyline, smoothed samples, tree (nodes, parents), alternatives
 ``sample``    time, reference pos/vel (NED), actual pos/vel (NED), attitude, actuator inputs
-``decision``  a threat-manager decision: kind, reason, latency, path id
+``decision``  a threat-manager decision: kind, reason, latency, path id, new path
+``alternatives`` the M-GART alternatives of a leg, as refreshed
 ``threat``    a threat as received (id, kind, position, velocity, radius) or its removal
 ``event``     anything else worth a line (mode change, leg reached, link lost / back)
 ``summary``   end of flight: tracking error statistics, legs reached, minimum separation
@@ -78,6 +79,7 @@ class FlightRecord:
     world: dict | None = None
     plans: list[dict] = field(default_factory=list)
     decisions: list[dict] = field(default_factory=list)
+    alternatives: list[dict] = field(default_factory=list)
     threats: list[dict] = field(default_factory=list)
     events: list[dict] = field(default_factory=list)
     summary: dict | None = None
@@ -126,6 +128,8 @@ def load_record(path: str | Path) -> FlightRecord:
             record.plans.append(item)
         elif kind == "decision":
             record.decisions.append(item)
+        elif kind == "alternatives":
+            record.alternatives.append(item)
         elif kind == "threat":
             record.threats.append(item)
         elif kind == "summary":

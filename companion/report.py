@@ -80,13 +80,26 @@ def _draw_plans(ax, plans: list[dict]) -> None:
             from matplotlib.collections import LineCollection
 
             ax.add_collection(LineCollection(segs, colors="0.8", linewidths=0.4, zorder=0))
-        for alt in plan.get("alternatives", []):
-            p = np.asarray(alt, dtype=float)
-            ax.plot(p[:, 1], p[:, 0], "--", color="tab:purple", lw=0.8, alpha=0.7, zorder=2)
         if plan.get("reference_ne") is not None:
             ref = np.asarray(plan["reference_ne"], dtype=float)
             ax.plot(ref[:, 1], ref[:, 0], color="tab:blue", lw=1.2, zorder=3,
                     label="reference" if plan is plans[0] else None)
+
+
+def _draw_alternatives(ax, record: FlightRecord) -> None:
+    """The last M-GART alternatives of every leg (dashed) and the decisions' new paths."""
+    last = {}
+    for alt in record.alternatives:
+        last[alt["leg"]] = alt
+    for alt in last.values():
+        for path in alt["paths"]:
+            p = np.asarray(path, dtype=float)
+            ax.plot(p[:, 1], p[:, 0], "--", color="tab:purple", lw=0.8, alpha=0.6, zorder=2)
+    for d in record.decisions:
+        if d.get("path_ned_m") is not None:
+            p = np.asarray(d["path_ned_m"], dtype=float)
+            ax.plot(p[:, 1], p[:, 0], "-.", color=DECISION_COLOURS.get(d.get("kind"), "k"), lw=1.0,
+                    zorder=3)
 
 
 def _draw_threats(ax, threats: list[dict]) -> None:
@@ -111,6 +124,7 @@ def _plot_flight_path(plt, record: FlightRecord, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(8, 8))
     _draw_obstacles(ax, record.world)
     _draw_plans(ax, record.plans)
+    _draw_alternatives(ax, record)
     _draw_threats(ax, record.threats)
     if record.has_samples:
         pos = record.samples["pos_ned_m"]

@@ -50,6 +50,9 @@ log = logging.getLogger(__name__)
 
 #: Smallest speed (m/s) with a meaningful direction; below it the vehicle counts as hovering.
 HOVER_SPEED_M_S = 0.05
+#: Leads tried by a join: the first from ``lead_length_m``, then shorter when blocked or
+#: longer when the profile cannot start at the current speed.
+JOIN_ATTEMPTS = 4
 
 
 class ThreatManagerError(CompanionError, ValueError):
@@ -381,8 +384,8 @@ def join_trajectory(ref: ReferenceState, nodes, *, world: World | None, limits: 
     lead_m : float, optional
         Fixed lead length (the nodes are then used as given, e.g. a path planned from the
         lead point; the caller has checked the lead segment). Default: ``lead_length_m`` for the turn to the first node, entry nodes too
-        close to the lead point skipped (``entry_index``), one retry with a 1.5 times longer lead
-        if the profile cannot start at the current speed.
+        close to the lead point skipped (``entry_index``), up to ``JOIN_ATTEMPTS`` leads (1.5
+        times longer each when the profile cannot start at the current speed).
 
     Returns
     -------
@@ -399,7 +402,8 @@ def join_trajectory(ref: ReferenceState, nodes, *, world: World | None, limits: 
     fixed = lead_m is not None
     lead = float(lead_m) if fixed else lead_length_m(speed, _turn_rad(u, nodes[0] - p0), limits, kappa_max_1_m)
     reason = "no join"
-    for attempt in range(1 if fixed else 2):
+    attempts = 1 if fixed else JOIN_ATTEMPTS
+    for attempt in range(attempts):
         p_lead = p0 + u * lead
         k = 0 if fixed else entry_index(p_lead, u, nodes, kappa_max_1_m)
         if k is None:
@@ -408,7 +412,7 @@ def join_trajectory(ref: ReferenceState, nodes, *, world: World | None, limits: 
                                  limits=limits, kappa_max_1_m=kappa_max_1_m, lift_down_m=lift_down_m,
                                  first_checked=1 if fixed else 0)
         if traj is None:
-            if fixed or attempt == 1:
+            if fixed or attempt == attempts - 1:
                 return traj, poly
             lead *= 0.6          # blocked: a shorter lead with a gentler first corner may fit
             reason = poly
@@ -575,6 +579,19 @@ class BrakeAlongPath:
         s = self.profile(t_s)[0]
         yaw = np.interp(s, self._s, self._yaw) if self._s.size > 1 else np.full(s.shape, self._yaw[0])
         return np.angle(np.exp(1j * yaw))
+
+    def yaw_rate_rad_s(self, t_s) -> np.ndarray:
+        """Rate of the path heading (rad/s) at times ``t_s`` (K,): d(yaw)/ds times speed."""
+        if self._follow is not None:
+            active, t0 = self._follow
+            t = np.clip(np.atleast_1d(np.asarray(t_s, dtype=float)), 0.0, self.duration_s)
+            return active.yaw_rate_rad_s(t0 + t)
+        s, v, _ = self.profile(t_s)
+        if self._s.size < 2:
+            return np.zeros_like(s)
+        slope = np.diff(self._yaw) / np.maximum(np.diff(self._s), 1e-9)
+        middle = 0.5 * (self._s[1:] + self._s[:-1])
+        return np.interp(s, middle, slope) * v
 
     def path_ned_m(self, step_m: float = 2.0) -> np.ndarray:
         """The hold's path as a polyline (K, d), for ``uav/<sysid>/path``."""
@@ -954,6 +971,8 @@ class ThreatManager:
         t0 = time.perf_counter()
         tried = 0
         lift = self._lift_down_m(ref.t_s)
+        why: dict[str, int] = {}
+        alternatives = len(self._alternatives)
         for cost, alt, i in self.switch_candidates(ref):
             if tried >= self.settings.max_candidates:
                 break
@@ -961,13 +980,16 @@ class ThreatManager:
             traj, poly = join_trajectory(ref, alt.nodes_from(i), world=self.world, limits=self.limits,
                                          kappa_max_1_m=self.kappa_max_1_m, lift_down_m=lift)
             if traj is None:
+                why[poly.split(" (")[0]] = why.get(poly.split(" (")[0], 0) + 1
                 continue
             if self._conflict_of(traj, ref.t_s, ref.t_s, threats) is not None:
+                why["meets a predicted threat"] = why.get("meets a predicted threat", 0) + 1
                 continue
             return Decision("switch", f"{what}; entry node {i} of {alt.path_id} "
                             f"({cost:.1f} m to go)", traj, ref.t_s, alt.path_id, poly, conflict,
                             plan_ms=_ms_since(t0))
-        log.info("switch: no safe entry among %d candidates tried", tried)
+        log.info("switch: no safe entry among %d candidates tried of %d alternatives (%s)", tried,
+                 alternatives, "; ".join(f"{k}: {n}" for k, n in why.items()))
         return None
 
     # ------------------------------------------------------------------ hold

@@ -139,7 +139,7 @@ class ThreatSettings:
         Alternatives are resampled so that their entry nodes are at most this far apart (m).
         Default 2.
     max_candidates : int
-        Most switch candidates (entry nodes) smoothed and checked per decision. Default 8.
+        Most switch candidates (entry nodes) smoothed and checked per decision. Default 16.
     hold_decel_m_s2 : float
         Largest deceleration of the hold (brake to a hover along the path) (m/s^2). Default 2.5,
         the lateral acceleration limit of the smoothing settings.
@@ -161,7 +161,7 @@ class ThreatSettings:
     gart_budget_s: float = 0.08
     gart_first_budget_s: float = 0.15
     entry_spacing_m: float = 2.0
-    max_candidates: int = 8
+    max_candidates: int = 16
     hold_decel_m_s2: float = 2.5
     estimate_gain: float = 0.2
     seed: int = 0
