@@ -32,6 +32,7 @@ BENCHMARKS = {
     "setpoint_jitter": ["--sitl"],
     "flight_tracking": [],
     "threats": [],
+    "threat_storm": [],
 }
 
 

@@ -398,6 +398,7 @@ class FlightSummary:
     decisions: int = 0
     min_threat_separation_m: float = math.inf
     latency_ms: dict = field(default_factory=dict)
+    threat_updates: int = 0
     outcome: str = "not flown"
 
     def as_dict(self) -> dict:
@@ -812,6 +813,9 @@ class CompanionDaemon:
             jitter = self.streamer.stats()
             self.record("event", name="setpoint_jitter", **jitter.as_dict())
         if self.threats is not None:
+            counts = self.threats.bus.stats()
+            self.summary.threat_updates = counts["received"]
+            self.record("event", name="threat_bus", **counts)
             await self.threats.stop()
         for task in self._tasks:
             task.cancel()

@@ -10,6 +10,8 @@ stop) or ``turn``.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,7 +65,27 @@ def clean_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
     index = np.nonzero(keep)[0]
     if index.size < 2:
         raise SmoothingError(f"{name}: all {arr.shape[0]} nodes are at the same place; nothing to smooth")
+    index = drop_straight_nodes(arr, index)
     return arr[index], index
+
+
+def drop_straight_nodes(arr: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """Leave out interior nodes where the heading changes by less than ``STRAIGHT_RAD``.
+
+    Two straight pieces meeting there would carry that (numerically tiny) tangent jump; one
+    straight piece through them has none and stays within ``STRAIGHT_RAD`` times its length
+    of the node.
+    """
+    keep = list(index[:1])
+    for i, j in zip(index[1:-1], index[2:]):
+        a, b = arr[i] - arr[keep[-1]], arr[j] - arr[i]
+        cos = float(np.dot(a, b)) / (np.linalg.norm(a) * np.linalg.norm(b))
+        sin = float(np.linalg.norm(np.cross(a, b) if a.size == 3 else a[0] * b[1] - a[1] * b[0]))
+        sin /= np.linalg.norm(a) * np.linalg.norm(b)
+        if math.atan2(sin, cos) >= STRAIGHT_RAD:
+            keep.append(i)
+    keep.append(index[-1])
+    return np.asarray(keep)
 
 
 @dataclass(frozen=True)

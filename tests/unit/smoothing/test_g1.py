@@ -62,3 +62,9 @@ def test_bad_input(path, match):
         smooth_g1(path)
     with pytest.raises(SmoothingError, match="kappa_max_1_m"):
         smooth_g1(np.array([[0.0, 0.0], [1.0, 1.0]]), kappa_max_1_m=-1.0)
+
+
+def test_nearly_straight_node_leaves_no_tangent_jump():
+    """A heading change of about 1e-8 rad (found by hypothesis) is one straight piece."""
+    path = np.array([[0.0, 0.0], [-5.0, 5.96046448e-08], [-18.0, 0.0], [0.0, 1.0]])
+    assert np.all(joint_angles(smooth_g1(path).pieces) < 1e-9)
