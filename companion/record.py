@@ -1,6 +1,7 @@
 """Flight record: one JSON object per line (JSON Lines), written as the flight goes.
 
-A record survives a crash up to its last line and can be read while it is written. Line types:
+A record survives a crash up to its last flushed line (every half second) and can be read
+while it is written. Line types:
 
 ``header``    settings, seed, home (lat, lon, alt), command line
 ``world``     obstacles (as ``World.to_dict()``), bounds, margin
@@ -18,6 +19,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, IO
@@ -45,19 +47,28 @@ def _jsonable(value: Any) -> Any:
 
 
 class FlightRecorder:
-    """Append-only JSON Lines writer; each ``write`` is one flushed line."""
+    """Append-only JSON Lines writer.
 
-    def __init__(self, path: str | Path):
+    Lines are buffered and flushed at most every ``flush_period_s`` (and on ``close``), so a
+    threat storm does not cost one system call per update; a crash loses at most that period.
+    """
+
+    def __init__(self, path: str | Path, flush_period_s: float = 0.5):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._fh: IO[str] | None = open(self.path, "w", encoding="utf-8")
+        self.flush_period_s = flush_period_s
+        self._flushed_at = time.monotonic()
 
     def write(self, line_type: str, /, **fields: Any) -> None:
         if self._fh is None:
             return
         self._fh.write(json.dumps({"type": line_type, **_jsonable(fields)}, separators=(",", ":")))
         self._fh.write("\n")
-        self._fh.flush()
+        now = time.monotonic()
+        if now - self._flushed_at >= self.flush_period_s:
+            self._fh.flush()
+            self._flushed_at = now
 
     def close(self) -> None:
         if self._fh is not None:
