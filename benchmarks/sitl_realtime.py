@@ -50,22 +50,7 @@ GOAL_MAX_M = 0.6
 GOAL_PREDICT_MS = 100.0
 
 
-def circle_reference(t_s, radius_m=30.0, speed_m_s=5.0, ramp_s=5.0, down_m=-20.0, heading="path"):
-    """Counter-clockwise circle with a smooth (smoothstep) speed ramp; pos, vel, acc, yaw."""
-    t = np.asarray(t_s, dtype=float)
-    tau = np.clip(t / ramp_s, 0.0, 1.0)
-    speed = speed_m_s * (3 * tau**2 - 2 * tau**3)
-    dspeed = np.where(t < ramp_s, speed_m_s * (6 * tau - 6 * tau**2) / ramp_s, 0.0)
-    arc = np.where(t < ramp_s, speed_m_s * ramp_s * (tau**3 - tau**4 / 2),
-                   speed_m_s * ramp_s / 2 + speed_m_s * (t - ramp_s))
-    th = arc / radius_m
-    tangent = np.stack([-np.sin(th), np.cos(th), 0 * th], axis=-1)
-    normal = np.stack([-np.cos(th), -np.sin(th), 0 * th], axis=-1)
-    pos = np.stack([radius_m * np.cos(th), radius_m * np.sin(th), down_m + 0 * th], axis=-1)
-    vel = speed[:, None] * tangent
-    acc = dspeed[:, None] * tangent + (speed**2 / radius_m)[:, None] * normal
-    yaw = np.arctan2(tangent[:, 1], tangent[:, 0]) if heading == "path" else np.zeros(t.shape)
-    return pos, vel, acc, yaw
+from sim_vehicle.references import circle_reference  # noqa: E402
 
 
 def measure_realtime(model: HeliModel, sim_s: float, gusts: bool, repeats: int = 3) -> dict:

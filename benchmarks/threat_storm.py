@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import sys
 import tempfile
 import time
@@ -27,7 +26,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from companion.demo import DEMO_MISSION, FlightWatcher, free_port, last_json_line, spawn, stop  # noqa: E402
+from companion.demo import DEMO_MISSION, FlightWatcher, flight_processes, last_json_line  # noqa: E402
 from companion.record import load_record  # noqa: E402
 from companion.threats.bus import ThreatBus  # noqa: E402
 from companion.threats.model import Threat  # noqa: E402
@@ -52,17 +51,8 @@ def storm(bus: ThreatBus, rate_hz: float, seconds: float) -> int:
 
 def run(rate_hz: float, seconds: float) -> dict:
     with tempfile.TemporaryDirectory(prefix="threat_storm_") as tmp:
-        out = Path(tmp)
-        mav_port, vehicle_port, zenoh_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
-        endpoint = f"tcp/127.0.0.1:{zenoh_port}"
-        sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), "--out", f"127.0.0.1:{mav_port}",
-                     "--speedup", str(SPEEDUP)], out / "sim.log")
-        companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
-                           "--mission", str(DEMO_MISSION), "--time-scale", str(SPEEDUP),
-                           "--zenoh-listen", endpoint, "--record", str(out / "flight.jsonl")],
-                          out / "companion.log")
-        try:
-            with ThreatBus(1, listen=(), connect=(endpoint,)) as bus:
+        with flight_processes(Path(tmp), DEMO_MISSION, speedup=SPEEDUP) as flight:
+            with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
                 watcher = FlightWatcher(bus)
                 deadline = time.monotonic() + 180
                 while not (watcher.status and watcher.status["leg"] >= 1) and time.monotonic() < deadline:
@@ -70,12 +60,9 @@ def run(rate_hz: float, seconds: float) -> dict:
                 t_start = time.monotonic()
                 sent = storm(bus, rate_hz, seconds)
                 achieved_hz = sent / (time.monotonic() - t_start)
-                companion.wait(300)
-        finally:
-            stop(companion)
-            stop(sim)
-        summary = last_json_line(out / "companion.log") or {}
-        jitter = next((e for e in load_record(out / "flight.jsonl").events
+                flight.companion.wait(300)
+        summary = last_json_line(flight.log) or {}
+        jitter = next((e for e in load_record(flight.record).events
                        if e.get("name") == "setpoint_jitter"), {})
         return {"sent": sent, "rate_hz": round(achieved_hz, 1), "received": summary.get("threat_updates"),
                 "lost": sent - (summary.get("threat_updates") or 0), "outcome": summary.get("outcome"),

@@ -37,13 +37,12 @@ import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from companion.config import Settings, settings_to_dict
 from companion.errors import CompanionError, LinkError, MissionError
-from companion.flight_plan import LegPlan, TrajectoryChain, plan_leg, plan_mission
+from companion.flight_plan import LegPlan, plan_leg, plan_mission
 from companion.link.setpoints import (Setpoint, SetpointStreamer, hold_position,
                                       raise_stream_priority, restore_normal_priority)
 from companion.link.vehicle import VehicleLink
@@ -288,6 +287,7 @@ class ThreatReactor:
         latency_ms = None
         if decision.trajectory is not None:
             ref = d.engage(decision.trajectory, decision.path_id, t0_s=decision.start_t_s)
+            d.streamer.send_now()
             deadline = time.monotonic() + 1.0
             while ref.first_sent_monotonic_s is None and time.monotonic() < deadline:
                 await asyncio.sleep(0.001)
@@ -560,7 +560,9 @@ class CompanionDaemon:
         else:
             lost_s = self.clock.now_s() - (self._link_lost_at or self.clock.now_s())
             self.event("link_back", lost_s=round(lost_s, 2))
-            self._resume_needed = True
+            if self.reference is not None and self.link.telemetry.pos_ned_m is not None:
+                self.hold_here(self.link.telemetry.pos_ned_m, "link back: hold, then replan the leg")
+                self._resume_needed = True
 
     def _start_background(self) -> None:
         loop = asyncio.get_running_loop()

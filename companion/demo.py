@@ -20,6 +20,7 @@ Fig. 8-style plot.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -209,6 +210,42 @@ def last_json_line(path: Path) -> dict | None:
     return None
 
 
+@dataclass
+class FlightProcesses:
+    """A ``sim-vehicle`` and a ``companion run`` flying together (see ``flight_processes``)."""
+
+    sim: subprocess.Popen
+    companion: subprocess.Popen
+    vehicle_port: int      # the vehicle's UDP port (another ground station can talk to it)
+    endpoint: str          # the companion's zenoh listen endpoint
+    record: Path           # its flight record
+    log: Path              # its log (stdout and stderr; the last line is the JSON summary)
+
+
+@contextlib.contextmanager
+def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
+                     gcs_out: str | None = None, extra_args=()):
+    """Start ``sim-vehicle`` and ``companion run --mission`` on free loopback ports.
+
+    Yields ``FlightProcesses``; both processes are stopped on exit (SIGTERM, then SIGKILL).
+    """
+    out_dir.mkdir(parents=True, exist_ok=True)
+    mav_port, vehicle_port, zenoh_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
+    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
+    outs = ["--out", f"127.0.0.1:{mav_port}"] + (["--out", gcs_out] if gcs_out else [])
+    sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(speedup)],
+                out_dir / "sim_vehicle.log")
+    record, log_path = out_dir / "flight.jsonl", out_dir / "companion.log"
+    companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
+                       "--mission", str(mission), "--time-scale", str(speedup),
+                       "--zenoh-listen", endpoint, "--record", str(record), *extra_args], log_path)
+    try:
+        yield FlightProcesses(sim, companion, vehicle_port, endpoint, record, log_path)
+    finally:
+        stop(companion)
+        stop(sim)
+
+
 def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
         timeout_s: float = 300.0, gcs_out: str | None = None, extra_args=()) -> dict:
     """Fly ``mission`` with a fresh ``sim-vehicle`` and ``companion run`` (separate processes).
@@ -217,39 +254,22 @@ def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
     then removes them. Returns the companion's summary plus ``events`` (seen on zenoh) and
     ``record`` (the flight record's path).
     """
-    out_dir.mkdir(parents=True, exist_ok=True)
-    mav_port, vehicle_port, zenoh_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
-    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
-    outs = ["--out", f"127.0.0.1:{mav_port}"] + (["--out", gcs_out] if gcs_out else [])
-    sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(speedup)],
-                out_dir / "sim_vehicle.log")
-    record = out_dir / "flight.jsonl"
-    companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
-                       "--mission", str(mission), "--time-scale", str(speedup),
-                       "--zenoh-listen", endpoint, "--record", str(record), *extra_args],
-                      out_dir / "companion.log")
-    bus = None
-    watcher = None
-    try:
-        bus = ThreatBus(1, listen=(), connect=(endpoint,)).open()
-        watcher = FlightWatcher(bus)
-        if injections:
-            inject(watcher, injections, timeout_s, done=lambda: companion.poll() is not None)
-            time.sleep(2.0)
-            for injection in injections:
-                bus.delete_threat(injection.threat_id)
-        companion.wait(timeout_s)
-    finally:
-        stop(companion)
-        stop(sim)
-        if bus is not None:
-            bus.close()
-    summary = last_json_line(out_dir / "companion.log")
-    if companion.returncode != 0 or summary is None:
+    with flight_processes(out_dir, mission, speedup=speedup, gcs_out=gcs_out,
+                          extra_args=extra_args) as flight:
+        with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
+            watcher = FlightWatcher(bus)
+            if injections:
+                inject(watcher, injections, timeout_s, done=lambda: flight.companion.poll() is not None)
+                time.sleep(2.0)
+                for injection in injections:
+                    bus.delete_threat(injection.threat_id)
+            flight.companion.wait(timeout_s)
+    summary = last_json_line(flight.log)
+    if flight.companion.returncode != 0 or summary is None:
         raise CompanionError(f"the flight of {mission.name} failed (companion exit "
-                             f"{companion.returncode}); see {out_dir / 'companion.log'}")
-    summary["events"] = watcher.events if watcher is not None else []
-    summary["record"] = str(record)
+                             f"{flight.companion.returncode}); see {flight.log}")
+    summary["events"] = list(watcher.events)
+    summary["record"] = str(flight.record)
     return summary
 
 

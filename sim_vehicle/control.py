@@ -506,7 +506,6 @@ class FlightController:
             v_ff = vel[i] if vel is not None and vel[i] == vel[i] else None
             a_ff = acc[i] if acc is not None and acc[i] == acc[i] else 0.0
             if pos is not None and pos[i] == pos[i]:
-                e = pos[i] - float(x[14 + i])
                 vf = 0.0 if v_ff is None else v_ff
                 cmd[i] = vf + p_term[i] + ki * self.pos_integral_m[i] + kd * (vf - vel_now[i])
                 pid_active[i] = True

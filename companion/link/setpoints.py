@@ -276,7 +276,14 @@ class SetpointStreamer:
         while time.monotonic() < deadline_s:
             await asyncio.sleep(0)
 
-    def tick(self, now_s: float) -> None:
+    def send_now(self) -> None:
+        """Send the current source's setpoint at once, outside the schedule (a new trajectory
+        reaches the vehicle without waiting for the next tick; the jitter statistics count only
+        the scheduled sends)."""
+        if self.running:
+            self.tick(time.monotonic(), scheduled=False)
+
+    def tick(self, now_s: float, scheduled: bool = True) -> None:
         """Evaluate the source at ``now_s`` and send (one period's work)."""
         source = self._source
         if source is None:
@@ -295,9 +302,10 @@ class SetpointStreamer:
             return
         self._last = setpoint
         self.sent += 1
-        if len(self._times) >= self._max_records:
-            del self._times[: self._max_records // 10]
-        self._times.append(now_s)
+        if scheduled:
+            if len(self._times) >= self._max_records:
+                del self._times[: self._max_records // 10]
+            self._times.append(now_s)
         if self._on_sent is not None:
             self._on_sent(now_s, setpoint)
 

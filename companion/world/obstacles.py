@@ -423,7 +423,7 @@ class Prism(Obstacle):
         try:
             arr = np.asarray(self.vertices_ne_m, dtype=float)
         except (TypeError, ValueError):
-            raise WorldError(f"Prism.vertices_ne_m: expected a list of [north, east] pairs") from None
+            raise WorldError("Prism.vertices_ne_m: expected a list of [north, east] pairs") from None
         if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 3:
             raise WorldError(f"Prism.vertices_ne_m: expected at least 3 [north, east] pairs, got shape {arr.shape}")
         if not np.all(np.isfinite(arr)):

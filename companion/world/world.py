@@ -25,7 +25,7 @@ import numpy as np
 
 from companion.errors import WorldError
 from companion.world.index import UniformGrid
-from companion.world.obstacles import Box, Cylinder, Disc, Obstacle, Prism, Sphere
+from companion.world.obstacles import Disc, Obstacle, Sphere
 
 __all__ = ["World"]
 

@@ -11,9 +11,8 @@ import json
 
 import pytest
 
-from companion.geo import LocalFrame
 from flight_support import TrackListener, run_companion
-from support import REPO_ROOT, free_udp_port, start_sim_vehicle
+from support import REPO_ROOT, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 

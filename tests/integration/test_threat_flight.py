@@ -17,12 +17,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from companion.demo import DEMO_INJECTIONS, FlightWatcher, inject, last_json_line, spawn, stop
+from companion.demo import DEMO_INJECTIONS, FlightWatcher, flight_processes, inject, last_json_line
 from companion.record import load_record
 from companion.threats.bus import ThreatBus
 from companion.threats.model import Threat
 from flight_support import wait_until
-from support import REPO_ROOT, free_tcp_port, free_udp_port
+from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration
 
@@ -35,19 +35,11 @@ HARMLESS = Threat("far1", "popup", "local_ned", (300.0, 300.0, -15.0), (0.0, 0.0
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("threat_flight")
-    mav_port, vehicle_port, zenoh_port = free_udp_port(), free_udp_port(), free_tcp_port()
-    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
-    sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), "--out", f"127.0.0.1:{mav_port}",
-                 "--speedup", str(SPEEDUP)], tmp / "sim_vehicle.log")
-    companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
-                       "--mission", str(MISSION), "--time-scale", str(SPEEDUP),
-                       "--zenoh-listen", endpoint, "--record", str(tmp / "flight.jsonl")],
-                      tmp / "companion.log")
     seen = {}
-    try:
-        with ThreatBus(1, listen=(), connect=(endpoint,)) as bus:
+    with flight_processes(tmp, MISSION, speedup=SPEEDUP) as flight:
+        with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             watcher = FlightWatcher(bus)
-            running = lambda: companion.poll() is not None   # noqa: E731
+            running = lambda: flight.companion.poll() is not None   # noqa: E731
             inject(watcher, [POPUP], 240, done=running, invalid_after=None)
             wait_until(lambda: watcher.status and watcher.status["leg"] == 2, 120, "leg 2")
             bus.put_raw("broken", b'{"v": 1, "id": "broken", "kind": "popup", "radius_m": -1}')
@@ -58,14 +50,10 @@ def flight(tmp_path_factory):
             wait_until(lambda: (watcher.status or {}).get("threats") == 1, 20, "the DELETE")
             seen["listed_after_delete"] = sorted(t.id for t in bus.list_threats(5.0))
             seen["threats"] = inject(watcher, [MOVER], 240, done=running, invalid_after=None)
-            companion.wait(240)
+            flight.companion.wait(240)
             seen["events"] = list(watcher.events)
-    finally:
-        stop(companion)
-        stop(sim)
-    summary = last_json_line(tmp / "companion.log")
-    yield {"rc": companion.returncode, "summary": summary, "seen": seen,
-           "record": load_record(tmp / "flight.jsonl"), "log": (tmp / "companion.log").read_text()}
+    yield {"rc": flight.companion.returncode, "summary": last_json_line(flight.log), "seen": seen,
+           "record": load_record(flight.record), "log": flight.log.read_text()}
 
 
 def events_of(flight, kind):

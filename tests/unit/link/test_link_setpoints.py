@@ -141,3 +141,24 @@ def test_priority_helpers_report_what_they_got():
         restore_normal_priority()
     if hasattr(os, "sched_getscheduler"):
         assert os.sched_getscheduler(0) == os.SCHED_OTHER
+
+
+def test_send_now_goes_out_at_once_without_touching_the_jitter_statistics():
+    import asyncio
+
+    sent = []
+
+    async def scenario():
+        streamer = SetpointStreamer(lambda **kw: sent.append(kw), hold_position([1.0, 2.0, -3.0]),
+                                    rate_hz=50.0)
+        streamer.start()
+        await asyncio.sleep(0.11)
+        scheduled = len(streamer.send_times_s)
+        streamer.send_now()
+        after = len(streamer.send_times_s)
+        await streamer.stop()
+        return scheduled, after, streamer.sent
+
+    scheduled, after, total = asyncio.run(scenario())
+    assert scheduled >= 4 and after == scheduled
+    assert total == scheduled + 1 and len(sent) == total

@@ -12,7 +12,7 @@ from companion.geo import LocalFrame
 from companion.mission import (ConversionSettings, FenceCircle, FencePolygon, MissionItem,
                                MissionPlan, RallyPoint, load_mission_file, mission_to_local)
 from companion.mission.convert import point_in_polygon
-from companion.world import Cylinder, Prism
+from companion.world import Cylinder
 
 REPO = Path(__file__).resolve().parents[3]
 HOME = (47.397742, 8.545594, 488.0)
