@@ -2,7 +2,7 @@
 
 The companion streams GUIDED setpoints at 50 Hz from an asyncio task
 (``companion.link.SetpointStreamer``) while GART replans. This benchmark measures
-``|period - 20 ms|`` (p50 / p99 / max) of the *actual* send times in four set-ups:
+``|period - 20 ms|`` (p50 / p99 / max) of the *actual* send times in these set-ups:
 
 - ``idle``: the stream alone;
 - ``thread``: replanning in a worker thread (``loop.run_in_executor`` with a ThreadPool);
@@ -12,6 +12,8 @@ The companion streams GUIDED setpoints at 50 Hz from an asyncio task
 - ``process_nice``: the same with the worker at ``os.nice(10)``;
 - ``process_nice_fifo``: and the event-loop thread at SCHED_FIFO (``raise_stream_priority``) -
   the recommendation.
+- ``thread_fifo_daemon``: what ``companion run`` does: SCHED_FIFO stream thread, planning in a
+  thread pool at normal priority, ``sys.setswitchinterval(0.0005)``.
 
 The replan is ``companion.planning.gart`` on the ANCHORS "2d" world (seed 0, 1 s budget) when
 the planner is available, else a pure-Python RRT-style nearest-neighbour loop of similar size.
@@ -170,6 +172,11 @@ async def run_scenario(name: str, send, seconds: float) -> dict:
         executor = concurrent.futures.ThreadPoolExecutor(max_workers=1)
         if name == "thread_1ms":
             sys.setswitchinterval(0.001)
+    elif name == "thread_fifo_daemon":
+        # what companion.daemon does: planning threads at normal priority (the pool's
+        # initializer undoes the inherited SCHED_FIFO), GIL switch interval 0.5 ms
+        executor = concurrent.futures.ThreadPoolExecutor(max_workers=1, initializer=restore_normal_priority)
+        sys.setswitchinterval(0.0005)
     elif name in ("process", "process_nice", "process_nice_fifo"):
         niceness = 0 if name == "process" else 10
         executor = concurrent.futures.ProcessPoolExecutor(
@@ -206,13 +213,14 @@ async def run_scenario(name: str, send, seconds: float) -> dict:
 
 
 async def run_all(seconds: float, sitl: bool) -> list[dict]:
-    scenarios = ("idle", "thread", "thread_1ms", "process", "process_nice", "process_nice_fifo")
+    scenarios = ("idle", "thread", "thread_1ms", "process", "process_nice", "process_nice_fifo",
+                 "thread_fifo_daemon")
     results = []
     with contextlib.ExitStack() as stack:
         sim = stack.enter_context(sim_vehicle()) if sitl else None
         for name in scenarios:
             # priority first: threads created afterwards (MAVSDK's) inherit it
-            if name == "process_nice_fifo":
+            if name in ("process_nice_fifo", "thread_fifo_daemon"):
                 raise_stream_priority()
             try:
                 if sitl:
@@ -260,7 +268,9 @@ def markdown(results: list[dict], meta: dict) -> str:
         "process when the cores are busy; `process_nice_fifo` adds `raise_stream_priority()` "
         "(SCHED_FIFO priority 10 for the event-loop thread and, with `--sitl`, the MAVSDK "
         "threads created after it; else niceness -5; column "
-        "`priority` says what was obtained).",
+        "`priority` says what was obtained); `thread_fifo_daemon` is what `companion run` "
+        "does: the stream thread at SCHED_FIFO, planning in a thread pool whose threads go back "
+        "to normal priority, GIL switch interval 0.5 ms.",
         "",
         "Recommendation: run planning (GART/M-GART, smoothing, feasibility) in a "
         "`ProcessPoolExecutor(max_workers=1, initializer=planning_worker_init)` and call "
