@@ -3,8 +3,9 @@
 ``CompanionDaemon.run()`` is the whole flight:
 
 1. connect to the vehicle (MAVSDK), wait for telemetry and home;
-2. take the mission: the file given (validated, then uploaded so that every ground station shows
-   it) or the one stored on the vehicle (a mission uploaded by any ground station gets flown);
+2. take the mission: the file given (validated, planned, then uploaded so that every ground
+   station shows it) or the one stored on the vehicle (a mission uploaded by any ground station
+   gets flown);
 3. convert it to local NED and a world (exclusion zones, inclusion fence, world file) and plan
    every leg before takeoff (GART -> G2/G1 -> speed profile, ``companion.flight_plan``): an
    unreachable waypoint is an error before anything moves;
@@ -13,11 +14,11 @@
    then the hold time;
 5. land or RTL as the mission says (RTL is flown as a planned leg home, then LAND).
 
-Around it: zenoh status at 2 Hz and on change, the threat manager (``companion.threats``) whose
-decisions swap the active reference, the flight record, link-loss handling (keep streaming the
-hold, replan the leg from where the vehicle is when the link returns), a pilot taking over
-(mode changed away from GUIDED: the companion stops commanding and waits), and SIGINT/SIGTERM
-(hold, land or RTL per ``link.on_interrupt``, then exit).
+Around it: zenoh status at 2 Hz and on every event, the threat manager (``companion.threats``)
+whose decisions swap the active reference, the flight record, link-loss handling (keep
+streaming; when the link returns, hold and replan the leg from where the vehicle is), a pilot
+taking over (mode changed away from GUIDED: the companion stops commanding and ends the flight),
+and SIGINT/SIGTERM (hold, land or RTL per ``link.on_interrupt``, then exit).
 
 Only this module, ``companion.link`` and ``companion.threats.bus`` do I/O. The event-loop
 thread that streams setpoints runs at real-time priority when allowed
@@ -58,9 +59,10 @@ from companion.world import world_to_dict
 log = logging.getLogger(__name__)
 
 GUIDED = 4
-LOITER = 5
 #: A reference that stopped short of its leg's goal (a hold) is continued after this long (s).
 RESUME_AFTER_S = 2.0
+#: GIL switch interval (s): a planning thread hands the GIL to the setpoint stream this often.
+GIL_SWITCH_INTERVAL_S = 0.0005
 
 
 class FlightAborted(CompanionError):
@@ -461,9 +463,11 @@ class CompanionDaemon:
             self.recorder.write(line_type, **fields)
 
     def event(self, name: str, **fields) -> None:
-        """Log and record one event (mode change, leg reached, link lost ...)."""
+        """Log and record one event (leg reached, link lost ...) and publish the new status."""
         log.info("%s %s", name, " ".join(f"{k}={v}" for k, v in fields.items()))
         self.record("event", name=name, t_s=self.clock.now_s(), **fields)
+        if self.threats is not None:
+            self.threats.publish_status(self.status())
 
     def status(self) -> dict:
         """The status message of ``uav/<sysid>/status``."""
@@ -745,7 +749,7 @@ class CompanionDaemon:
     async def run(self) -> FlightSummary:
         """Fly the mission (see the module docstring); returns the summary."""
         s = self.settings
-        sys.setswitchinterval(0.0005)        # planning threads yield the GIL to the stream often
+        sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
         raise_stream_priority()              # before connect: MAVSDK's threads inherit it
         if self.record_path is not None:
             self.recorder = FlightRecorder(self.record_path)
