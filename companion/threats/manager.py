@@ -974,7 +974,8 @@ class ThreatManager:
         why: dict[str, int] = {}
         alternatives = len(self._alternatives)
         for cost, alt, i in self.switch_candidates(ref):
-            if tried >= self.settings.max_candidates:
+            if tried >= self.settings.max_candidates or \
+                    time.perf_counter() - t0 > self.settings.switch_budget_s:
                 break
             tried += 1
             traj, poly = join_trajectory(ref, alt.nodes_from(i), world=self.world, limits=self.limits,

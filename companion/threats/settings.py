@@ -139,7 +139,10 @@ class ThreatSettings:
         Alternatives are resampled so that their entry nodes are at most this far apart (m).
         Default 2.
     max_candidates : int
-        Most switch candidates (entry nodes) smoothed and checked per decision. Default 16.
+        Most switch candidates (entry nodes) smoothed and checked per decision. Default 8.
+    switch_budget_s : float
+        Wall-clock time after which no further switch candidate is tried (s), so a switch
+        decision stays bounded; the hold is the fallback. Default 0.15.
     hold_decel_m_s2 : float
         Largest deceleration of the hold (brake to a hover along the path) (m/s^2). Default 2.5,
         the lateral acceleration limit of the smoothing settings.
@@ -161,7 +164,8 @@ class ThreatSettings:
     gart_budget_s: float = 0.08
     gart_first_budget_s: float = 0.15
     entry_spacing_m: float = 2.0
-    max_candidates: int = 16
+    max_candidates: int = 8
+    switch_budget_s: float = 0.15
     hold_decel_m_s2: float = 2.5
     estimate_gain: float = 0.2
     seed: int = 0
@@ -169,7 +173,8 @@ class ThreatSettings:
     def __post_init__(self) -> None:
         _check_positive("threats", horizon_s=self.horizon_s, check_step_s=self.check_step_s,
                         replan_budget_s=self.replan_budget_s, switch_range_m=self.switch_range_m,
-                        sensor_range_m=self.sensor_range_m, sweep_horizon_s=self.sweep_horizon_s,
+                        sensor_range_m=self.sensor_range_m, switch_budget_s=self.switch_budget_s,
+                        sweep_horizon_s=self.sweep_horizon_s,
                         gart_budget_s=self.gart_budget_s, entry_spacing_m=self.entry_spacing_m,
                         gart_first_budget_s=self.gart_first_budget_s,
                         hold_decel_m_s2=self.hold_decel_m_s2, estimate_gain=self.estimate_gain)
