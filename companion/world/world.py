@@ -503,16 +503,3 @@ class World:
                 best = np.minimum(best, ob.sdf_batch(chunk) - self._margin)
             out[start:start + _BATCH_ROWS] = best
         return out
-        balls = np.asarray(self._balls, dtype=float).reshape(-1, self._dim + 2)
-        centers, radii = balls[:, : self._dim], balls[:, -1]
-        others = list(self._other_ids.values())
-        for start in range(0, arr.shape[0], _BATCH_ROWS):
-            chunk = arr[start:start + _BATCH_ROWS]
-            best = np.full(chunk.shape[0], np.inf)
-            if len(radii):
-                dist = np.linalg.norm(chunk[:, None, :] - centers[None, :, :], axis=2) - radii[None, :]
-                best = np.minimum(best, dist.min(axis=1))
-            for ob in others:
-                best = np.minimum(best, ob.sdf_batch(chunk) - self._margin)
-            out[start:start + _BATCH_ROWS] = best
-        return out
