@@ -10,9 +10,8 @@ Tree (``companion run --config FILE``; ``companion run --print-config`` shows it
     link        vehicle connection, setpoint rate, time scale, timeouts
     zenoh       session endpoints and the key prefix's system id
     mission     mission -> local NED + world (margin, padding, ceiling)
-    flight      per-leg planning budget, planning slab, climb and descent
+    flight      per-leg planning budget, planning slab, climb and descent, M-GART alternatives
     planning    GART (companion.planning.GartSettings)
-    alternatives  M-GART alternatives kept for switching (companion.planning.MgartSettings)
     smoothing   G1/G2, K_max, speed/acceleration/jerk limits
     feasibility closed-loop check on the helicopter model
     threats     threat-manager policy (companion.threats.settings.ThreatSettings)
@@ -21,7 +20,6 @@ Tree (``companion run --config FILE``; ``companion run --print-config`` shows it
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -32,13 +30,7 @@ from companion.mission.convert import ConversionSettings
 from companion.planning import GartSettings
 from companion.smoothing import FeasibilitySettings, SmoothingSettings
 from companion.threats.settings import ThreatSettings, ZenohSettings
-from sim_vehicle.typed_config import from_dict, load_toml
-
-
-def _positive(owner: str, **values: float) -> None:
-    for name, value in values.items():
-        if not (math.isfinite(value) and value > 0):
-            raise ConfigError(f"{owner}.{name}: must be a finite number > 0, got {value!r}")
+from sim_vehicle.typed_config import from_dict, load_toml, require_numbers
 
 
 @dataclass(frozen=True)
@@ -56,8 +48,6 @@ class LinkSettings:
     time_scale : float
         Simulated seconds per wall-clock second: set it to ``sim-vehicle --speedup`` so that the
         reference advances at the vehicle's pace (1 for a real vehicle).
-    takeoff_alt_m : float
-        Takeoff altitude when the mission has no NAV_TAKEOFF item (m above home).
     leg_timeout_margin_s : float
         A leg not reached this long (mission time) after its trajectory ended is an error: the
         vehicle is held and the flight ends.
@@ -74,17 +64,15 @@ class LinkSettings:
     connect_timeout_s: float = 30.0
     setpoint_rate_hz: float = 50.0
     time_scale: float = 1.0
-    takeoff_alt_m: float = 20.0
     leg_timeout_margin_s: float = 30.0
     on_interrupt: Literal["hold", "land", "rtl"] = "hold"
     record_rate_hz: float = 10.0
     status_rate_hz: float = 2.0
 
     def __post_init__(self) -> None:
-        _positive("link", connect_timeout_s=self.connect_timeout_s,
-                  setpoint_rate_hz=self.setpoint_rate_hz, time_scale=self.time_scale,
-                  takeoff_alt_m=self.takeoff_alt_m, leg_timeout_margin_s=self.leg_timeout_margin_s,
-                  record_rate_hz=self.record_rate_hz, status_rate_hz=self.status_rate_hz)
+        require_numbers(ConfigError, "link", self, positive=(
+            "connect_timeout_s", "setpoint_rate_hz", "time_scale",
+            "leg_timeout_margin_s", "record_rate_hz", "status_rate_hz"))
         if self.setpoint_rate_hz > 200:
             raise ConfigError(f"link.setpoint_rate_hz: at most 200, got {self.setpoint_rate_hz}")
 

@@ -104,10 +104,6 @@ class VehicleClock:
         self._last = max(self._last, t)
         return self._last
 
-    def at(self, boot_s: float) -> float:
-        """Mission time of a vehicle timestamp (identity: mission time is vehicle time)."""
-        return boot_s if self._offset is not None else self.now_s()
-
 
 class ActiveReference:
     """A trajectory flown from mission time ``t0_s``; after its end it holds the end point.
@@ -118,13 +114,11 @@ class ActiveReference:
     ``first_sent_monotonic_s`` is set when the stream first samples it (latency measurement).
     """
 
-    def __init__(self, trajectory, t0_s: float, clock: VehicleClock, path_id: str,
-                 leg: LegPlan | None = None, *, turn_from_yaw_rad: float | None = None,
-                 turn_rate_rad_s: float = 0.6):
+    def __init__(self, trajectory, t0_s: float, clock: VehicleClock, path_id: str, *,
+                 turn_from_yaw_rad: float | None = None, turn_rate_rad_s: float = 0.6):
         self.trajectory = trajectory
         self.clock = clock
         self.path_id = path_id
-        self.leg = leg
         self.first_sent_monotonic_s: float | None = None
         self.turn_from_yaw_rad = turn_from_yaw_rad
         self.turn_rate_rad_s = 0.0
@@ -481,14 +475,12 @@ class CompanionDaemon:
                 "link": tele.connected, "outcome": self.summary.outcome}
 
     # ------------------------------------------------------------------ reference
-    def engage(self, trajectory, path_id: str, leg: LegPlan | None = None,
-               t0_s: float | None = None, turn: bool = False) -> ActiveReference:
+    def engage(self, trajectory, path_id: str, t0_s: float | None = None,
+               turn: bool = False) -> ActiveReference:
         """Make ``trajectory`` the active reference from mission time ``t0_s`` (default now),
         first turning on the spot to its heading if ``turn`` (a leg that starts at rest)."""
         ref = ActiveReference(trajectory, self.clock.now_s() if t0_s is None else t0_s,
-                              self.clock, path_id, leg if leg is not None else
-                              (self.reference.leg if self.reference else None),
-                              turn_from_yaw_rad=self._current_yaw() if turn else None,
+                              self.clock, path_id, turn_from_yaw_rad=self._current_yaw() if turn else None,
                               turn_rate_rad_s=self.settings.flight.turn_rate_rad_s)
         self.reference = ref
         if self.streamer is not None:
@@ -517,7 +509,7 @@ class CompanionDaemon:
             self.clock.observe(boot_s, fields["_t_s"])
             if self.reference is not None:
                 pos = np.array([fields["x"], fields["y"], fields["z"]], dtype=float)
-                ref_pos = self.reference.state(self.clock.at(boot_s))[0]
+                ref_pos = self.reference.state(boot_s)[0]      # mission time is vehicle time
                 self._errors_m.append(float(np.linalg.norm(pos - ref_pos)))
 
     async def _watch_servos(self) -> None:
@@ -588,12 +580,22 @@ class CompanionDaemon:
         self.event("mission_downloaded", items=len(plan.items))
         return plan
 
-    async def plan_flight(self, plan, home_lla, start_ned_m: np.ndarray, takeoff_alt_m: float):
-        """Convert and plan every leg (in a worker thread); errors name the mission item."""
+    async def plan_flight(self, plan, home_lla, tele) -> float:
+        """Convert and plan every leg (in a worker thread); errors name the mission item.
+
+        Returns the takeoff altitude (m above home): the mission's takeoff item, or where the
+        vehicle already flies.
+        """
         s = self.settings
         self.local_mission = mission_to_local(plan, home_lla, settings=s.mission,
                                               world_file=self.world_path, dim=3)
-        first = np.array([start_ned_m[0], start_ned_m[1], -takeoff_alt_m])
+        self.record("header", settings=settings_to_dict(s), seed=s.seed, home_lla=home_lla,
+                    mission=str(self.mission_path) if self.mission_path else "from the vehicle",
+                    waypoints_ned_m=[w.pos_ned_m for w in self.local_mission.waypoints])
+        start = tele.pos_ned_m
+        takeoff = self.local_mission.waypoints[0]          # always the (possibly implied) takeoff
+        alt_m = -float(start[2]) if tele.in_air else -float(takeoff.pos_ned_m[2])
+        first = np.array([start[0], start[1], -alt_m])
         t0 = time.perf_counter()
         self.legs = await self.in_worker(
             plan_mission, self.local_mission, first, gart_settings=s.gart,
@@ -604,6 +606,7 @@ class CompanionDaemon:
             self.record_plan(leg)
         self.event("planned", legs=len(self.legs), seconds=round(time.perf_counter() - t0, 3),
                    seed=s.seed)
+        return alt_m
 
     def record_plan(self, leg: LegPlan) -> None:
         t = np.linspace(0.0, leg.trajectory.duration_s, max(2, int(leg.trajectory.duration_s * 5)))
@@ -660,7 +663,7 @@ class CompanionDaemon:
                                       self.local_mission.world, gart_settings=s.gart,
                                       smoothing=s.smoothing, settings=s.flight, rng=self.rng)
         if new is not None:
-            self.engage(new.trajectory, f"leg{leg.index}-resume", new, turn=True)
+            self.engage(new.trajectory, f"leg{leg.index}-resume", turn=True)
         self.event("resumed", leg=leg.index, from_ned_m=pos)
 
     def stopped_short(self, ref: ActiveReference, leg: LegPlan, t_s: float) -> bool:
@@ -684,7 +687,7 @@ class CompanionDaemon:
     async def fly_leg(self, leg: LegPlan) -> None:
         """Fly one leg: until its reference has ended and the vehicle is within the radius."""
         self.leg_index = leg.index
-        ref = self.engage(leg.trajectory, f"leg{leg.index}", leg, turn=True)
+        ref = self.engage(leg.trajectory, f"leg{leg.index}", turn=True)
         if self.threats is not None:
             self.threats.on_leg_started(leg, ref)
         margin = self.settings.link.leg_timeout_margin_s
@@ -753,8 +756,6 @@ class CompanionDaemon:
         raise_stream_priority()              # before connect: MAVSDK's threads inherit it
         if self.record_path is not None:
             self.recorder = FlightRecorder(self.record_path)
-            self.record("header", settings=settings_to_dict(s), seed=s.seed,
-                        mission=str(self.mission_path) if self.mission_path else None)
         await self.link.connect(s.link.connect, s.link.connect_timeout_s)
         try:
             return await self._fly()
@@ -776,20 +777,12 @@ class CompanionDaemon:
         tele = await self.link.wait_ready(s.link.connect_timeout_s)
         home = await self.link.wait_home(s.link.connect_timeout_s)
         plan = await self.take_mission()
-        takeoff = next((w for w in mission_to_local(plan, home, settings=s.mission, dim=3).waypoints
-                        if w.kind == "takeoff"), None)
-        alt = -float(takeoff.pos_ned_m[2]) if takeoff is not None else s.link.takeoff_alt_m
-        start = tele.pos_ned_m
-        if tele.in_air:
-            alt = -float(start[2])
-        await self.plan_flight(plan, home, start, alt)
+        alt = await self.plan_flight(plan, home, tele)
         previous = None
         if self.mission_path is not None:          # planned: every item is reachable
             previous = await self.link.download_plan()
             await self.link.upload_plan(plan)
             self.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
-        self.record("header", settings=settings_to_dict(s), seed=s.seed, home_lla=home,
-                    waypoints_ned_m=[w.pos_ned_m for w in self.local_mission.waypoints])
         if s.zenoh.enabled:
             self.threats = ThreatReactor(self)
             await self.threats.start(home)

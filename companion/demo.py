@@ -73,6 +73,8 @@ class Injection:
     speed_m_s : float
         Moving threats head towards the path, perpendicular to it, at this speed.
     ttl_s : float
+    raw_payload : bytes, optional
+        Put these bytes instead of a placed threat (an invalid payload, to be rejected).
     """
 
     threat_id: str
@@ -84,14 +86,17 @@ class Injection:
     lateral_m: float = 0.0
     speed_m_s: float = 0.0
     ttl_s: float = 120.0
+    raw_payload: bytes | None = None
 
 
-#: The demo's threats on ``exclusion_zones.plan``.
-DEMO_INJECTIONS = (
-    Injection("popup1", "popup", leg=1, after_s=1.0, ahead_s=8.0, radius_m=5.0),
-    Injection("mover1", "moving", leg=3, after_s=3.0, ahead_s=4.0, radius_m=3.0, lateral_m=-4.0,
-              speed_m_s=math.sqrt(2.0)),
-)
+#: The demo's threats on ``exclusion_zones.plan``: a pop-up far ahead (replan), a threat moving
+#: at sqrt(2) m/s across the path close ahead (switch), an invalid payload (rejected).
+DEMO_POPUP = Injection("popup1", "popup", leg=1, after_s=1.0, ahead_s=8.0, radius_m=5.0)
+DEMO_MOVER = Injection("mover1", "moving", leg=3, after_s=3.0, ahead_s=4.0, radius_m=3.0,
+                       lateral_m=-4.0, speed_m_s=math.sqrt(2.0))
+DEMO_INVALID = Injection("broken", "popup", leg=3, after_s=3.0, ahead_s=0.0, radius_m=1.0,
+                         raw_payload=b'{"v": 1, "id": "broken", "kind": "popup"}')
+DEMO_INJECTIONS = (DEMO_POPUP, DEMO_MOVER, DEMO_INVALID)
 
 
 class FlightWatcher:
@@ -164,22 +169,26 @@ def place(injection: Injection, watcher: FlightWatcher) -> Threat:
                   tuple(map(float, velocity)), injection.radius_m, injection.ttl_s)
 
 
-def inject(watcher: FlightWatcher, injections, timeout_s: float, *, done=None,
-           invalid_after: str | None = "mover1") -> list[Threat]:
-    """Put each injection when it is due; stop when all are in, ``done()`` or the timeout."""
+def inject(watcher: FlightWatcher, injections, timeout_s: float, *, done=None) -> list[Threat]:
+    """Put each injection when it is due; stop when all are in, ``done()`` or the timeout.
+
+    Returns the threats put (raw payloads are sent as they are and not returned).
+    """
     pending = list(injections)
     sent: list[Threat] = []
     deadline = time.monotonic() + timeout_s
     while pending and time.monotonic() < deadline and not (done and done()):
         time.sleep(0.02)
         for injection in [i for i in pending if watcher.due(i)]:
+            pending.remove(injection)
+            if injection.raw_payload is not None:
+                watcher.bus.put_raw(injection.threat_id, injection.raw_payload)
+                log.info("put a raw payload on %s", injection.threat_id)
+                continue
             threat = place(injection, watcher)
             watcher.bus.put_threat(threat)
             sent.append(threat)
-            pending.remove(injection)
             log.info("put %s %s at %s", threat.kind, threat.id, np.round(threat.position, 1))
-            if injection.threat_id == invalid_after:
-                watcher.bus.put_raw("broken", b'{"v": 1, "id": "broken", "kind": "popup"}')
     return sent
 
 
@@ -259,10 +268,10 @@ def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             watcher = FlightWatcher(bus)
             if injections:
-                inject(watcher, injections, timeout_s, done=lambda: flight.companion.poll() is not None)
+                sent = inject(watcher, injections, timeout_s, done=lambda: flight.companion.poll() is not None)
                 time.sleep(2.0)
-                for injection in injections:
-                    bus.delete_threat(injection.threat_id)
+                for threat in sent:
+                    bus.delete_threat(threat.id)
             flight.companion.wait(timeout_s)
     summary = last_json_line(flight.log)
     if flight.companion.returncode != 0 or summary is None:

@@ -21,7 +21,6 @@ Everything here is pure: no I/O, the randomness comes from ``rng``.
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -30,6 +29,7 @@ from companion.errors import MissionError
 from companion.planning import GartSettings, PlanResult, gart
 from companion.smoothing import SmoothingSettings, TrajectoryLimits, smooth_g1, smooth_g2, time_parameterize
 from companion.world import Cylinder, Prism, World
+from sim_vehicle.typed_config import require_int, require_numbers
 
 log = logging.getLogger(__name__)
 
@@ -83,18 +83,12 @@ class FlightPlanSettings:
     turn_rate_rad_s: float = 0.6
 
     def __post_init__(self) -> None:
-        if isinstance(self.planning_attempts, bool) or not isinstance(self.planning_attempts, int) \
-                or not 1 <= self.planning_attempts <= 10:
-            raise MissionError(f"flight.planning_attempts: an integer in 1..10, got {self.planning_attempts!r}")
-        if isinstance(self.alternatives_k, bool) or not isinstance(self.alternatives_k, int) \
-                or not 0 <= self.alternatives_k <= 16:
-            raise MissionError(f"flight.alternatives_k: an integer in 0..16, got {self.alternatives_k!r}")
-        for name in ("planning_budget_s", "slab_margin_m", "climb_speed_m_s", "descent_speed_m_s",
-                     "vertical_accel_m_s2", "min_vertical_change_m", "alternatives_budget_s",
-                     "alternatives_period_s", "alternatives_lead_s", "turn_rate_rad_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise MissionError(f"flight.{name}: must be a finite number > 0, got {value!r}")
+        require_int(MissionError, "flight", "planning_attempts", self.planning_attempts, 1, 10)
+        require_int(MissionError, "flight", "alternatives_k", self.alternatives_k, 0, 16)
+        require_numbers(MissionError, "flight", self, positive=(
+            "planning_budget_s", "slab_margin_m", "climb_speed_m_s", "descent_speed_m_s",
+            "vertical_accel_m_s2", "min_vertical_change_m", "alternatives_budget_s",
+            "alternatives_period_s", "alternatives_lead_s", "turn_rate_rad_s"))
 
 
 class TrajectoryChain:

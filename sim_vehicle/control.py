@@ -92,6 +92,7 @@ import scipy.linalg
 from sim_vehicle.dynamics import IDX_PSI
 from sim_vehicle.model import N_INPUTS, N_STATES, HeliModel
 from sim_vehicle.typed_config import from_dict as _typed_from_dict
+from sim_vehicle.typed_config import require_numbers
 
 log = logging.getLogger(__name__)
 
@@ -187,14 +188,7 @@ class ControllerSettings:
                     "max_accel_m_s2", "max_yaw_rate_rad_s", "cmd_accel_xy_m_s2", "cmd_accel_z_m_s2")
         non_negative = ("kp_xy_1_s", "ki_xy_1_s2", "kd_xy", "kp_z_1_s", "ki_z_1_s2", "kd_z",
                         "pos_integral_max_m_s")
-        for name in positive:
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ControlError(f"{name}: expected a number > 0, got {v!r}")
-        for name in non_negative:
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ControlError(f"{name}: expected a number >= 0, got {v!r}")
+        require_numbers(ControlError, "controller", self, positive=positive, non_negative=non_negative)
         _check_weights(self.q_weights, N_LQI_STATES + N_TRACKED, "q_weights", allow_zero=True)
         _check_weights(self.r_weights, N_INPUTS, "r_weights", allow_zero=False)
 

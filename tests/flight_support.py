@@ -7,15 +7,12 @@ from the companion under test.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import socket
 import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
@@ -39,7 +36,6 @@ class TrackListener:
         self.track: list[tuple[float, float, float, float]] = []   # (time_boot_s, n, e, d)
         self.armed: bool | None = None
         self.mode: int | None = None
-        self.reached: list[int] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -60,8 +56,6 @@ class TrackListener:
                 elif kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
                     self.armed = bool(msg.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
                     self.mode = msg.custom_mode
-                elif kind == "MISSION_ITEM_REACHED":
-                    self.reached.append(msg.seq)
 
     def positions(self) -> np.ndarray:
         """The track so far as (K, 3) NED positions."""
@@ -77,34 +71,11 @@ class TrackListener:
         self._sock.close()
 
 
-def companion_command(*args: str) -> list[str]:
-    return [sys.executable, "-m", "companion.cli", *args]
-
-
 def run_companion(*args: str, timeout_s: float = 240.0) -> subprocess.CompletedProcess:
     """Run ``companion ARGS`` to completion (stdout, stderr captured as text)."""
     env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
-    return subprocess.run(companion_command(*args), cwd=str(REPO_ROOT), capture_output=True,
+    return subprocess.run([sys.executable, "-m", "companion.cli", *args], cwd=str(REPO_ROOT), capture_output=True,
                           text=True, timeout=timeout_s, env=env)
-
-
-@contextlib.contextmanager
-def companion_process(*args: str, log_path: Path) -> Iterator[subprocess.Popen]:
-    """Start ``companion ARGS`` in the background (log to ``log_path``); stopped on exit."""
-    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
-    with open(log_path, "wb") as log:
-        proc = subprocess.Popen(companion_command(*args), cwd=str(REPO_ROOT), stdout=log,
-                                stderr=subprocess.STDOUT, env=env)
-    try:
-        yield proc
-    finally:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
 
 
 def wait_until(predicate, timeout_s: float, what: str, poll_s: float = 0.1) -> None:

@@ -85,15 +85,14 @@ def run(args: argparse.Namespace) -> int:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, task.cancel)
         try:
-            summary = await daemon.run()
+            await daemon.run()
+            status = 0
         except asyncio.CancelledError:
-            print(json.dumps({"outcome": "interrupted", **daemon.summary.as_dict()}))
-            return 130
+            status = 130
         except FlightAborted as exc:
-            print(json.dumps(daemon.summary.as_dict()))
             log.error("%s", exc)
-            return 1
-        print(json.dumps(summary.as_dict()))
-        return 0
+            status = 1
+        print(json.dumps(daemon.summary.as_dict()))      # the last line: the flight's summary
+        return status
 
     return asyncio.run(main())

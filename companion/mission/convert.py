@@ -19,13 +19,13 @@ ground) are a ``MissionError`` naming the item, raised before takeoff.
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from companion.errors import MissionError
 from companion.geo import LocalFrame
+from sim_vehicle.typed_config import require_numbers
 from companion.mission.model import (AMSL_FRAMES, MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LAND,
                                      MAV_CMD_NAV_RETURN_TO_LAUNCH, MAV_CMD_NAV_TAKEOFF,
                                      MAV_CMD_NAV_WAYPOINT, LocalMission, LocalWaypoint,
@@ -59,14 +59,9 @@ class ConversionSettings:
     floor_m: float = 0.5
 
     def __post_init__(self) -> None:
-        for name in ("margin_m", "default_acceptance_radius_m", "padding_m", "ceiling_m"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise MissionError(f"ConversionSettings.{name} must be a finite number >= 0, "
-                                   f"got {value}")
-        if self.default_acceptance_radius_m <= 0.0 or self.ceiling_m <= 0.0:
-            raise MissionError("ConversionSettings: default_acceptance_radius_m and ceiling_m "
-                               "must be > 0")
+        require_numbers(MissionError, "mission", self,
+                        positive=("default_acceptance_radius_m", "ceiling_m"),
+                        non_negative=("margin_m", "padding_m", "floor_m"))
 
 
 @dataclass(frozen=True)

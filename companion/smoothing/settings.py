@@ -28,16 +28,9 @@ import math
 from dataclasses import dataclass
 
 from companion.errors import SmoothingError
+from sim_vehicle.typed_config import require_numbers
 
 __all__ = ["TrajectoryLimits", "SmoothingSettings", "FeasibilitySettings"]
-
-
-def _check_positive(owner: str, name: str, value: float) -> None:
-    """Raise ``SmoothingError`` naming ``owner.name`` unless ``value`` is finite and > 0."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SmoothingError(f"{owner}.{name}: expected a number, got {value!r}")
-    if not math.isfinite(value) or value <= 0.0:
-        raise SmoothingError(f"{owner}.{name}: must be a finite number > 0, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -62,8 +55,8 @@ class TrajectoryLimits:
     jerk_m_s3: float = 3.0
 
     def __post_init__(self) -> None:
-        for name in ("speed_m_s", "accel_m_s2", "lat_accel_m_s2", "jerk_m_s3"):
-            _check_positive("limits", name, getattr(self, name))
+        require_numbers(SmoothingError, "limits", self,
+                        positive=("speed_m_s", "accel_m_s2", "lat_accel_m_s2", "jerk_m_s3"))
 
     def stretched(self, factor: float) -> "TrajectoryLimits":
         """Limits of the same trajectory flown ``factor`` times slower (time scaled by factor).
@@ -72,7 +65,7 @@ class TrajectoryLimits:
         ``1/factor**3``; the time-parameterisation of ``timing`` is exactly homogeneous under
         this scaling, so the new trajectory is the old one with every duration times ``factor``.
         """
-        _check_positive("stretched", "factor", factor)
+        require_numbers(SmoothingError, "stretched", factor=factor)
         return TrajectoryLimits(
             speed_m_s=self.speed_m_s / factor,
             accel_m_s2=self.accel_m_s2 / factor**2,
@@ -111,8 +104,7 @@ class SmoothingSettings:
     def __post_init__(self) -> None:
         if self.method not in ("g1", "g2", "none"):
             raise SmoothingError(f"smoothing.method: expected 'g1', 'g2' or 'none', got {self.method!r}")
-        _check_positive("smoothing", "kappa_max_1_m", self.kappa_max_1_m)
-        _check_positive("smoothing", "grid_step_m", self.grid_step_m)
+        require_numbers(SmoothingError, "smoothing", self, positive=("kappa_max_1_m", "grid_step_m"))
         if isinstance(self.repair_max_halvings, bool) or not isinstance(self.repair_max_halvings, int) \
                 or self.repair_max_halvings < 0:
             raise SmoothingError(
@@ -160,12 +152,8 @@ class FeasibilitySettings:
     hold_after_s: float = 2.0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.hold_after_s, (int, float)) or not math.isfinite(self.hold_after_s) \
-                or self.hold_after_s < 0:
-            raise SmoothingError(f"feasibility.hold_after_s: must be a finite number >= 0, got {self.hold_after_s!r}")
-        for name in ("max_abs_delta", "max_tracking_error_m", "sample_rate_hz", "max_stretch"):
-            _check_positive("feasibility", name, getattr(self, name))
-        _check_positive("feasibility", "stretch_step", self.stretch_step)
+        require_numbers(SmoothingError, "feasibility", self, non_negative=("hold_after_s",), positive=(
+            "max_abs_delta", "max_tracking_error_m", "sample_rate_hz", "max_stretch", "stretch_step"))
         if self.stretch_step <= 1.0:
             raise SmoothingError(f"feasibility.stretch_step: must be > 1, got {self.stretch_step!r}")
         if not math.isfinite(self.down_m):

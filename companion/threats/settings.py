@@ -24,24 +24,11 @@ import re
 from dataclasses import dataclass
 
 from companion.errors import ConfigError
+from sim_vehicle.typed_config import require_int, require_numbers
 
 __all__ = ["ThreatSettings", "ZenohSettings"]
 
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream)/\S+$")
-
-
-def _check_positive(owner: str, **values: float) -> None:
-    for name, value in values.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value) or value <= 0:
-            raise ConfigError(f"{owner}.{name}: must be a finite number > 0, got {value!r}")
-
-
-def _check_non_negative(owner: str, **values: float) -> None:
-    for name, value in values.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value) or value < 0:
-            raise ConfigError(f"{owner}.{name}: must be a finite number >= 0, got {value!r}")
 
 
 def check_endpoint(endpoint: str, name: str = "endpoint") -> str:
@@ -83,8 +70,7 @@ class ZenohSettings:
     connect: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        if isinstance(self.sysid, bool) or not isinstance(self.sysid, int) or not 1 <= self.sysid <= 255:
-            raise ConfigError(f"zenoh.sysid: must be an integer in 1..255, got {self.sysid!r}")
+        require_int(ConfigError, "zenoh", "sysid", self.sysid, 1, 255)
         if self.mode not in ("peer", "client"):
             raise ConfigError(f"zenoh.mode: expected 'peer' or 'client', got {self.mode!r}")
         object.__setattr__(self, "listen", tuple(self.listen))
@@ -171,21 +157,14 @@ class ThreatSettings:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _check_positive("threats", horizon_s=self.horizon_s, check_step_s=self.check_step_s,
-                        replan_budget_s=self.replan_budget_s, switch_range_m=self.switch_range_m,
-                        sensor_range_m=self.sensor_range_m, switch_budget_s=self.switch_budget_s,
-                        sweep_horizon_s=self.sweep_horizon_s,
-                        gart_budget_s=self.gart_budget_s, entry_spacing_m=self.entry_spacing_m,
-                        gart_first_budget_s=self.gart_first_budget_s,
-                        hold_decel_m_s2=self.hold_decel_m_s2, estimate_gain=self.estimate_gain)
-        _check_non_negative("threats", replan_margin_s=self.replan_margin_s, inflation_m=self.inflation_m,
-                            replan_turn_rad=self.replan_turn_rad)
+        require_numbers(ConfigError, "threats", self, positive=(
+            "horizon_s", "check_step_s", "replan_budget_s", "switch_range_m", "sensor_range_m",
+            "switch_budget_s", "sweep_horizon_s", "gart_budget_s", "entry_spacing_m",
+            "gart_first_budget_s", "hold_decel_m_s2", "estimate_gain"),
+            non_negative=("replan_margin_s", "inflation_m", "replan_turn_rad"))
         if self.replan_turn_rad >= math.pi:
             raise ConfigError(f"threats.replan_turn_rad: must be < pi, got {self.replan_turn_rad!r}")
         if self.estimate_gain > 1:
             raise ConfigError(f"threats.estimate_gain: must be in (0, 1], got {self.estimate_gain!r}")
-        if isinstance(self.max_candidates, bool) or not isinstance(self.max_candidates, int) \
-                or self.max_candidates < 1:
-            raise ConfigError(f"threats.max_candidates: must be an integer >= 1, got {self.max_candidates!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ConfigError(f"threats.seed: must be an integer >= 0, got {self.seed!r}")
+        require_int(ConfigError, "threats", "max_candidates", self.max_candidates, 1, 1000)
+        require_int(ConfigError, "threats", "seed", self.seed, 0, 2**63 - 1)

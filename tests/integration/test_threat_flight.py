@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from companion.demo import DEMO_INJECTIONS, FlightWatcher, flight_processes, inject, last_json_line
+from companion.demo import DEMO_MOVER as MOVER, DEMO_POPUP as POPUP, FlightWatcher, flight_processes, inject, last_json_line
 from companion.record import load_record
 from companion.threats.bus import ThreatBus
 from companion.threats.model import Threat
@@ -28,7 +28,6 @@ pytestmark = pytest.mark.integration
 
 SPEEDUP = 4.0
 MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
-POPUP, MOVER = DEMO_INJECTIONS
 HARMLESS = Threat("far1", "popup", "local_ned", (300.0, 300.0, -15.0), (0.0, 0.0, 0.0), 2.0, 60.0)
 
 
@@ -40,7 +39,7 @@ def flight(tmp_path_factory):
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             watcher = FlightWatcher(bus)
             running = lambda: flight.companion.poll() is not None   # noqa: E731
-            inject(watcher, [POPUP], 240, done=running, invalid_after=None)
+            inject(watcher, [POPUP], 240, done=running)
             wait_until(lambda: watcher.status and watcher.status["leg"] == 2, 120, "leg 2")
             bus.put_raw("broken", b'{"v": 1, "id": "broken", "kind": "popup", "radius_m": -1}')
             bus.put_threat(HARMLESS)
@@ -49,7 +48,7 @@ def flight(tmp_path_factory):
             bus.delete_threat(HARMLESS.id)
             wait_until(lambda: (watcher.status or {}).get("threats") == 1, 20, "the DELETE")
             seen["listed_after_delete"] = sorted(t.id for t in bus.list_threats(5.0))
-            seen["threats"] = inject(watcher, [MOVER], 240, done=running, invalid_after=None)
+            seen["threats"] = inject(watcher, [MOVER], 240, done=running)
             flight.companion.wait(240)
             seen["events"] = list(watcher.events)
     yield {"rc": flight.companion.returncode, "summary": last_json_line(flight.log), "seen": seen,
