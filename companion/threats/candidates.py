@@ -1,0 +1,304 @@
+"""The strategies' candidates: evade, hold, retime, switch, replan (DESIGN 7.4).
+
+Each generator turns one ``Situation`` (the reference state, the tubes, the airspace and the
+goal) into ``Candidate`` trajectories whose t = 0 is the situation's time, already judged by
+the one space-time check (``judge``). The policy (``policy.ThreatManager``) chooses among them
+with ``decision.choose``.
+
+- ``evade_candidates``: the whole escape library in one vectorised check; the brake is the
+  ``hold`` candidate (a hold is only chosen where its hover stays clear of every tube).
+- ``retime_candidates``: the active path slowed or paused so that a mover passes first.
+- ``switch_to_alternatives``: M-GART alternatives joined from the current setpoint.
+- ``replan_candidates``: GART in the airspace with the pop-ups as obstacles; a mover is placed
+  where the replanned trajectory would meet it (a short stretch of its track around that time,
+  never its whole sweep), for a few rounds; then the last replan retimed (wait, then go).
+
+Pure: no I/O; randomness from ``rng``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.planning import gart
+from companion.smoothing import TrajectoryLimits
+from companion.threats.alternatives import airspace_for, switch_candidates
+from companion.threats.decision import Candidate, ReferenceState
+from companion.threats.evasion import EscapeLimits, escape_library
+from companion.threats.join import HOVER_SPEED_M_S, join_trajectory, lead_length_m, turn_rad
+from companion.threats.retime import RetimedTrajectory, ramp_time_s
+from companion.threats.settings import ThreatSettings
+from companion.threats.spacetime import STATIC_ID, check_candidates, sample_times
+from companion.world import Sphere, World
+
+__all__ = ["Situation", "judge", "evade_candidates", "retime_candidates", "switch_to_alternatives",
+           "replan_candidates", "positions_at", "meeting_obstacles", "check_candidates"]
+
+log = logging.getLogger(__name__)
+
+#: Half-length (s) of the stretch of a mover's track placed where a replan would meet it.
+MEETING_HALF_S = 1.5
+
+
+@dataclass(frozen=True)
+class Situation:
+    """What every generator needs for one decision (immutable).
+
+    Attributes
+    ----------
+    ref : ReferenceState
+    tubes : list of Tube
+    world : World
+        The airspace (the leg's world widened to contain the reference).
+    goal_ned_m : ndarray, shape (d,)
+    settings : ThreatSettings
+    limits : TrajectoryLimits
+    kappa_max_1_m : float
+    lift_down_m : float or None
+        Down coordinate of 2D candidates in a 3D flight.
+    """
+
+    ref: ReferenceState
+    tubes: list
+    world: World
+    goal_ned_m: np.ndarray
+    settings: ThreatSettings
+    limits: TrajectoryLimits
+    kappa_max_1_m: float
+    lift_down_m: float | None = None
+
+    @property
+    def dim(self) -> int:
+        return self.world.dim
+
+    def times(self, step_s: float) -> np.ndarray:
+        return sample_times(self.ref.t_s, self.settings.horizon_s, step_s)
+
+    @property
+    def accel_bound_m_s2(self) -> float:
+        s = self.settings
+        return max(self.limits.accel_m_s2, self.limits.lat_accel_m_s2, s.evade_accel_m_s2,
+                   s.hold_decel_m_s2) * 1.5
+
+    def cruise_m_s(self) -> float:
+        return min(self.limits.speed_m_s, self.settings.evade_speed_m_s)
+
+
+def positions_at(trajectory, start_t_s: float, t_s: np.ndarray, dim: int) -> np.ndarray:
+    """Positions (K, dim) of ``trajectory`` (t = 0 at ``start_t_s``) at clock times (K,)."""
+    pos = trajectory.sample(np.clip(t_s - start_t_s, 0.0, None))[0]
+    return np.atleast_2d(pos)[:, :dim]
+
+
+def judge(sit: Situation, candidates: list[Candidate], step_s: float | None = None) -> list[Candidate]:
+    """Run the space-time check on every candidate (t = 0 at the situation's time)."""
+    if not candidates:
+        return candidates
+    t = sit.times(step_s or sit.settings.check_step_s)
+    pos = np.stack([positions_at(c.trajectory, sit.ref.t_s, t, sit.dim) for c in candidates])
+    res = check_candidates(t, pos, sit.tubes, sit.world, accel_bound_m_s2=sit.accel_bound_m_s2)
+    for i, c in enumerate(candidates):
+        c.judged(res.clear[i], res.min_clearance_m[i], res.intrusion_m2s[i], res.conflicts[i])
+    return candidates
+
+
+# ---------------------------------------------------------------------------- evade / hold
+def _nearest_threat(sit: Situation) -> np.ndarray | None:
+    if not sit.tubes:
+        return None
+    now = np.array([sit.ref.t_s])
+    centers = [tube.center_at(now)[0] for tube in sit.tubes]
+    d = [np.linalg.norm(c[:2] - sit.ref.pos_ned_m[:2]) for c in centers]
+    return centers[int(np.argmin(d))]
+
+
+def evade_candidates(sit: Situation, *, brake_only: bool = False) -> list[Candidate]:
+    """The best escape manoeuvre (and the brake, as ``hold``), judged in one vectorised pass."""
+    s = sit.settings
+    lim = EscapeLimits(sit.cruise_m_s(), s.evade_accel_m_s2, s.evade_climb_m_s, s.evade_descent_m_s,
+                       s.evade_vertical_accel_m_s2, s.evade_coasts_s)
+    lib = escape_library(sit.ref.pos_ned_m, sit.ref.vel_ned_m_s, lim, vertical=sit.dim == 3,
+                         away_from=_nearest_threat(sit))
+    t = sit.times(s.evade_step_s)
+    pos, duration = lib.positions(t - sit.ref.t_s)
+    if brake_only:
+        pos, duration = pos[:1], duration[:1]
+    res = check_candidates(t, pos[:, :, :sit.dim], sit.tubes, sit.world,
+                           accel_bound_m_s2=sit.accel_bound_m_s2)
+    end = pos[:, -1, :sit.dim]
+    to_goal = duration + np.linalg.norm(end - sit.goal_ned_m[None, :], axis=1) / sit.cruise_m_s() + s.restart_s
+    bonus = s.clearance_weight_s_m * np.clip(res.min_clearance_m, 0.0, s.clearance_cap_m)
+    picks = {0}                                             # the brake: the hold candidate
+    if res.clear.any():
+        picks.add(int(np.argmin(np.where(res.clear, to_goal - bonus, np.inf))))
+    else:
+        picks.add(min(range(len(duration)), key=lambda i: (-round(float(res.min_clearance_m[i]), 1),
+                                                            float(res.intrusion_m2s[i]))))
+    out = []
+    for i in sorted(picks):
+        kind = "hold" if i == 0 else "evade"
+        cand = Candidate(kind, "hold (brake to a hover)" if i == 0 else f"evade {lib.labels[i]}",
+                         lib.manoeuvre(i, sit.ref.yaw_rad), float(to_goal[i]), ends_short=True)
+        out.append(cand.judged(res.clear[i], res.min_clearance_m[i], res.intrusion_m2s[i],
+                               res.conflicts[i]))
+    for c in out:
+        c.path_ned_m = c.trajectory.sample(np.linspace(0.0, c.trajectory.duration_s, 12))[0][:, :sit.dim]
+    return out
+
+
+# ---------------------------------------------------------------------------- retime
+def retime_candidates(sit: Situation, active, active_start_t_s: float, remaining_to_goal_s: float,
+                      ends_short: bool) -> list[Candidate]:
+    """The active reference slowed (``retime_rates``) or paused for each of ``retime_waits_s``."""
+    s = sit.settings
+    tau0 = min(max(sit.ref.t_s - active_start_t_s, 0.0), active.duration_s)
+    remaining = active.duration_s - tau0
+    if remaining < 0.5:
+        return []
+    look = tau0 + np.linspace(0.0, min(remaining, 10.0), 40)
+    speed = float(np.max(np.linalg.norm(np.atleast_2d(active.sample(look)[1]), axis=1)))
+    out = []
+    for rate in s.retime_rates:
+        ramp = ramp_time_s(rate, max(speed, 0.1), s.hold_decel_m_s2)
+        for wait in s.retime_waits_s:
+            traj = RetimedTrajectory(active, tau0, rate, wait, ramp,
+                                     f"retime {'pause' if rate == 0 else f'x{rate:.1f}'} {wait:.1f} s")
+            out.append(Candidate("retime", traj.label, traj, remaining_to_goal_s + traj.delay_s,
+                                 ends_short=ends_short))
+    return judge(sit, out)
+
+
+# ---------------------------------------------------------------------------- switch
+def switch_to_alternatives(sit: Situation, alternatives) -> tuple[list[Candidate], dict]:
+    """Joins to the alternatives' entry nodes, cheapest first, until one is clear or the
+    budget (``max_candidates``, ``switch_budget_s``) is spent. Returns the candidates and why
+    the others were dropped (counts)."""
+    s = sit.settings
+    t0 = time.perf_counter()
+    d = sit.dim
+    why: dict[str, int] = {}
+    out = []
+    entries = switch_candidates(alternatives, sit.ref.pos_ned_m[:d], s.switch_range_m, s.entry_spacing_m)
+    for tried, (cost, alt, i) in enumerate(entries):
+        if tried >= s.max_candidates or time.perf_counter() - t0 > s.switch_budget_s:
+            break
+        traj, poly = join_trajectory(sit.ref.pos_ned_m[:d], sit.ref.vel_ned_m_s[:d], alt.nodes_from(i),
+                                     world=sit.world, limits=sit.limits, kappa_max_1_m=sit.kappa_max_1_m,
+                                     lift_down_m=sit.lift_down_m)
+        if traj is None:
+            key = poly.split(" (")[0]
+            why[key] = why.get(key, 0) + 1
+            continue
+        cand = judge(sit, [Candidate("switch", f"switch {alt.path_id}", traj, traj.duration_s,
+                                     alt.path_id, poly)])[0]
+        out.append(cand)
+        if cand.clear:
+            break
+        why["meets a predicted threat"] = why.get("meets a predicted threat", 0) + 1
+    return out, why
+
+
+# ---------------------------------------------------------------------------- replan
+def _keeps_free(center: np.ndarray, radius: float, points, dim: int) -> bool:
+    return all(np.linalg.norm(p[:dim] - center[:dim]) > radius for p in points)
+
+
+def static_spheres(sit: Situation, keep_free) -> list:
+    """The static tubes (pop-ups) as spheres, leaving out those around ``keep_free`` points."""
+    out = []
+    now = np.array([sit.ref.t_s])
+    for tube in sit.tubes:
+        if tube.speed_m_s > 0.05:
+            continue
+        c, r = tube.center_at(now)[0], float(tube.radius_at(now)[0])
+        if _keeps_free(c, r, keep_free, sit.dim):
+            out.append(Sphere(tuple(float(x) for x in c[:sit.dim]), r))
+    return out
+
+
+def meeting_spheres(sit: Situation, tube, t_meet_s: float, keep_free) -> list:
+    """The stretch of a mover's track around the time ``t_meet_s`` a candidate would meet it."""
+    times = t_meet_s + np.linspace(-MEETING_HALF_S, MEETING_HALF_S, 5)
+    radius = float(tube.radius_at(np.array([t_meet_s + MEETING_HALF_S]))[0]) + 0.5
+    return [Sphere(tuple(float(x) for x in c[:sit.dim]), radius) for c in tube.center_at(times)
+            if _keeps_free(c, radius, keep_free, sit.dim)]
+
+
+def meeting_obstacles(sit: Situation, active, active_start_t_s: float, keep_free) -> list:
+    """Pop-ups, and each mover's track around the time ``active`` comes closest to it (when
+    closer than its radius plus ``switch_range_m / 4``): obstacles for the alternatives."""
+    out = static_spheres(sit, keep_free)
+    t = sit.times(sit.settings.check_step_s)
+    pos = positions_at(active, active_start_t_s, t, sit.dim)
+    for tube in sit.tubes:
+        if tube.speed_m_s <= 0.05:
+            continue
+        dist = np.linalg.norm(pos - tube.center_at(t)[:, :sit.dim], axis=1) - tube.radius_at(t)
+        k = int(np.argmin(dist))
+        if dist[k] < sit.settings.switch_range_m / 4:
+            out += meeting_spheres(sit, tube, float(t[k]), keep_free)
+    return out
+
+
+def _replan_start(sit: Situation):
+    """Start of the replan: the current position at a hover, else a lead along the velocity."""
+    d = sit.dim
+    p, v = sit.ref.pos_ned_m[:d], sit.ref.vel_ned_m_s[:d]
+    speed = float(np.linalg.norm(v))
+    if speed < HOVER_SPEED_M_S:
+        return p, None
+    u = v / speed
+    turn = max(turn_rad(u, sit.goal_ned_m - p), sit.settings.replan_turn_rad)
+    lead = lead_length_m(min(speed, sit.limits.speed_m_s), turn, sit.limits, sit.kappa_max_1_m)
+    return p + u * lead, lead
+
+
+def replan_candidates(sit: Situation, *, rng: np.random.Generator, gart_settings, path_id: str) -> list[Candidate]:
+    """GART replans through time (see the module docstring), cheapest-first rounds."""
+    s = sit.settings
+    d = sit.dim
+    p, v = sit.ref.pos_ned_m[:d], sit.ref.vel_ned_m_s[:d]
+    start, lead = _replan_start(sit)
+    world = airspace_for(sit.world, [p, start])
+    if lead is not None and not world.segment_free(p, start):
+        log.info("replan: the stopping lead leaves the free space")
+        return []
+    keep = [p, start, sit.goal_ned_m]
+    obstacles = static_spheres(sit, keep)
+    out: list[Candidate] = []
+    for _ in range(s.replan_iterations):
+        planning = world.with_threats(obstacles) if obstacles else world
+        result = gart(planning, start, sit.goal_ned_m, rng=rng, max_time_s=s.gart_budget_s, settings=gart_settings)
+        if result.status == "timeout":
+            result = gart(planning, start, sit.goal_ned_m, rng=rng, max_time_s=s.gart_first_budget_s,
+                          stop_at_first=True, settings=gart_settings)
+        if result.status != "exact":
+            log.info("replan: GART %s", result.status)
+            break
+        nodes = result.path[1:] if lead is not None else result.path
+        traj, poly = join_trajectory(p, v, nodes, world=planning, limits=sit.limits,
+                                     kappa_max_1_m=sit.kappa_max_1_m, lift_down_m=sit.lift_down_m, lead_m=lead)
+        if traj is None:
+            log.info("replan: %s", poly)
+            break
+        cand = judge(sit, [Candidate("replan", "replan", traj, traj.duration_s, path_id, poly)])[0]
+        out.append(cand)
+        if cand.clear or cand.conflict.threat_id == STATIC_ID:
+            break
+        tube = next(t for t in sit.tubes if t.threat_id == cand.conflict.threat_id)
+        obstacles = obstacles + meeting_spheres(sit, tube, cand.conflict.t_s, keep)
+    if out and not any(c.clear for c in out) and lead is None:
+        out += retimed_starts(sit, out[-1])        # from a hover: wait for the mover, then go
+    return out
+
+
+def retimed_starts(sit: Situation, cand: Candidate) -> list[Candidate]:
+    """``cand`` (starting at rest) delayed by each wait of the settings: hover, then go."""
+    waits = [w for w in sit.settings.retime_waits_s if w > 0]
+    out = [Candidate("replan", f"replan after {w:.1f} s", RetimedTrajectory(cand.trajectory, 0.0, 0.0, w, 1e-3),
+                     cand.time_to_goal_s + w, cand.path_id, cand.path_ned_m) for w in waits]
+    return judge(sit, out)

@@ -1,0 +1,102 @@
+"""Predict: every threat becomes a tube in space-time (DESIGN 7.1, paper section 3.3).
+
+A threat reported at ``received_t_s`` moves on at constant velocity. Its *tube* at time t is
+the ball centred on the predicted position with radius
+
+    r(t) = radius_m + inflation_m + min(uncertainty_max_m, uncertainty_m_s * (t - received_t_s))
+
+where ``inflation_m`` stands for the rotor radius plus a margin and the last term grows with
+the prediction time of a *moving* threat (a static pop-up stays where it was reported). The
+radius never shrinks with t, so checking an interval against its later end is conservative.
+
+Pure: numpy only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Tube", "predict_tubes", "STATIC_SPEED_M_S"]
+
+#: A threat slower than this (m/s) counts as static: its tube does not grow.
+STATIC_SPEED_M_S = 0.05
+
+
+@dataclass(frozen=True)
+class Tube:
+    """One threat predicted in space-time.
+
+    Attributes
+    ----------
+    threat_id : str
+    center_ned_m : ndarray, shape (3,)
+        Position at ``t0_s``.
+    vel_ned_m_s : ndarray, shape (3,)
+    t0_s : float
+        Time of the threat's last update (clock s).
+    radius_m : float
+        Inflated radius at ``t0_s`` (m).
+    bare_radius_m : float
+        The threat's own radius (m), for reports of a real intrusion.
+    growth_m_s, growth_max_m : float
+        Uncertainty growth rate (m/s) and cap (m).
+    expires_t_s : float
+        After this time the tube is gone (inf without ttl).
+    """
+
+    threat_id: str
+    center_ned_m: np.ndarray
+    vel_ned_m_s: np.ndarray
+    t0_s: float
+    radius_m: float
+    bare_radius_m: float
+    growth_m_s: float = 0.0
+    growth_max_m: float = 0.0
+    expires_t_s: float = math.inf
+
+    def center_at(self, t_s: np.ndarray) -> np.ndarray:
+        """Predicted centre (K, 3) at clock times ``t_s`` (K,)."""
+        t = np.asarray(t_s, dtype=float).reshape(-1)
+        return self.center_ned_m[None, :] + (t - self.t0_s)[:, None] * self.vel_ned_m_s[None, :]
+
+    def radius_at(self, t_s: np.ndarray) -> np.ndarray:
+        """Inflated radius (K,) at clock times ``t_s`` (K,); infinite lifetime is not assumed:
+        after ``expires_t_s`` the radius is -inf (no tube)."""
+        t = np.asarray(t_s, dtype=float).reshape(-1)
+        grow = np.minimum(self.growth_max_m, self.growth_m_s * np.maximum(t - self.t0_s, 0.0))
+        return np.where(t <= self.expires_t_s, self.radius_m + grow, -np.inf)
+
+    @property
+    def speed_m_s(self) -> float:
+        return float(np.linalg.norm(self.vel_ned_m_s))
+
+
+def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
+                  uncertainty_max_m: float = 0.0) -> list[Tube]:
+    """Tubes of ``threats`` (local-frame ``Threat`` records) for the space-time check.
+
+    Parameters
+    ----------
+    threats : iterable of companion.threats.model.Threat
+        In the local NED frame, stamped on the checking clock.
+    inflation_m : float
+        Rotor radius plus margin, added to every radius (m).
+    uncertainty_m_s, uncertainty_max_m : float
+        Growth of a moving threat's radius per second since its last update, and its cap.
+
+    Returns
+    -------
+    list of Tube
+    """
+    out = []
+    for th in threats:
+        vel = np.asarray(th.velocity_ned_m_s, dtype=float)
+        moving = float(np.linalg.norm(vel)) > STATIC_SPEED_M_S
+        out.append(Tube(th.id, th.pos_ned_m, vel, float(th.received_t_s),
+                        float(th.radius_m) + inflation_m, float(th.radius_m),
+                        uncertainty_m_s if moving else 0.0, uncertainty_max_m if moving else 0.0,
+                        th.expires_t_s))
+    return out
