@@ -10,17 +10,20 @@
    every leg before takeoff (GART -> G2/G1 -> speed profile, ``companion.flight_plan``): an
    unreachable waypoint is an error before anything moves;
 4. GUIDED, arm, take off; stream the reference at 50 Hz (``SetpointStreamer``) leg after leg,
-   each leg done when its trajectory has ended and the vehicle is within the acceptance radius,
-   then the hold time;
+   each leg flown by the pure phase machine of ``companion.phases`` (observe, step, act): done
+   when its reference has ended and the vehicle is within the acceptance radius, then the hold
+   time; a reference that ended short of the goal (an evasion or a hold) is followed by a plan
+   back to the mission;
 5. land or RTL as the mission says (RTL is flown as a planned leg home, then LAND).
 
-Around it: zenoh status at 2 Hz and on every event, the threat manager (``companion.threats``)
-whose decisions swap the active reference, the flight record, link-loss handling (keep
+Around it: zenoh status at 2 Hz and on every event, the threat reactor
+(``companion.threats.reactor``: threats in, a >= 10 Hz monitor, decisions that swap the active
+reference, events, path and STATUSTEXT out), the flight record, link-loss handling (keep
 streaming; when the link returns, hold and replan the leg from where the vehicle is), a pilot
 taking over (mode changed away from GUIDED: the companion stops commanding and ends the flight),
 and SIGINT/SIGTERM (hold, land or RTL per ``link.on_interrupt``, then exit).
 
-Only this module, ``companion.link`` and ``companion.threats.bus`` do I/O. The event-loop
+Only this module, ``companion.link`` and ``companion.threats`` (bus, reactor) do I/O. The event-loop
 thread that streams setpoints runs at real-time priority when allowed
 (``raise_stream_priority``); planning, threat decisions and M-GART refreshes run in worker
 threads at normal priority, and a short GIL switch interval hands the GIL back to the stream
@@ -35,7 +38,6 @@ import logging
 import math
 import sys
 import time
-from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -44,342 +46,26 @@ import numpy as np
 from companion.config import Settings, settings_to_dict
 from companion.errors import CompanionError, LinkError, MissionError
 from companion.flight_plan import LegPlan, plan_leg, plan_mission
-from companion.link.setpoints import (Setpoint, SetpointStreamer, hold_position,
+from companion.reference import ActiveReference, VehicleClock
+from companion.link.setpoints import (SetpointStreamer, hold_position,
                                       raise_stream_priority, restore_normal_priority)
 from companion.link.vehicle import VehicleLink
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
-from companion.geo import LocalFrame
+from companion.phases import ActionKind, LegObservation, LegState, leg_step
 from companion.record import FlightRecorder
-from companion.threats.bus import ThreatBus, ThreatUpdate, rejected_event
-from companion.threats.manager import Decision, ThreatManager
-from companion.threats.model import ThreatTable
+from companion.threats.reactor import ThreatReactor
 from companion.world import world_to_dict
 
 log = logging.getLogger(__name__)
 
 GUIDED = 4
-#: A reference that stopped short of its leg's goal (a hold) is continued after this long (s).
-RESUME_AFTER_S = 2.0
 #: GIL switch interval (s): a planning thread hands the GIL to the setpoint stream this often.
 GIL_SWITCH_INTERVAL_S = 0.0005
 
 
 class FlightAborted(CompanionError):
     """The flight cannot go on (pilot took over, vehicle disarmed, leg not reached)."""
-
-
-class VehicleClock:
-    """Mission time in the vehicle's seconds, extrapolated between its timestamped messages.
-
-    The vehicle stamps LOCAL_POSITION_NED with ``time_boot_ms`` (simulated time in
-    ``sim-vehicle``). With ``scale`` vehicle seconds per wall-clock second, every message gives
-    a lower bound ``boot_s - scale * arrival`` of the offset between the two clocks (transport
-    only delays); the largest over the last ``window_s`` is the estimate. Without messages the
-    clock runs at ``scale`` from its creation. The output never goes backwards.
-    """
-
-    def __init__(self, scale: float, window_s: float = 2.0):
-        self.scale = float(scale)
-        self.window_s = window_s
-        self._t0 = time.monotonic()
-        self._offsets: deque[tuple[float, float]] = deque()
-        self._offset: float | None = None
-        self._last = -math.inf
-
-    def observe(self, boot_s: float, arrival_monotonic_s: float) -> None:
-        if self._offset is None:
-            self._last = -math.inf       # switch from the free-running clock to vehicle time
-        self._offsets.append((arrival_monotonic_s, boot_s - self.scale * arrival_monotonic_s))
-        while self._offsets and self._offsets[0][0] < arrival_monotonic_s - self.window_s:
-            self._offsets.popleft()
-        self._offset = max(o for _, o in self._offsets)
-
-    def now_s(self, monotonic_s: float | None = None) -> float:
-        mono = time.monotonic() if monotonic_s is None else monotonic_s
-        if self._offset is None:
-            t = self.scale * (mono - self._t0)
-        else:
-            t = self.scale * mono + self._offset
-        self._last = max(self._last, t)
-        return self._last
-
-
-class ActiveReference:
-    """A trajectory flown from mission time ``t0_s``; after its end it holds the end point.
-
-    With ``turn_from_yaw_rad`` the vehicle first turns on the spot at the trajectory's start,
-    from that heading to the trajectory's initial heading at ``turn_rate_rad_s``, and the
-    trajectory starts when the turn is done (a leg that starts at rest in a new direction).
-    ``first_sent_monotonic_s`` is set when the stream first samples it (latency measurement).
-    """
-
-    def __init__(self, trajectory, t0_s: float, clock: VehicleClock, path_id: str, *,
-                 turn_from_yaw_rad: float | None = None, turn_rate_rad_s: float = 0.6):
-        self.trajectory = trajectory
-        self.clock = clock
-        self.path_id = path_id
-        self.first_sent_monotonic_s: float | None = None
-        self.turn_from_yaw_rad = turn_from_yaw_rad
-        self.turn_rate_rad_s = 0.0
-        turn_s = 0.0
-        if turn_from_yaw_rad is not None:
-            turn = wrap_pi(float(trajectory.yaw_rad(np.array([0.0]))[0]) - turn_from_yaw_rad)
-            turn_s = abs(turn) / turn_rate_rad_s
-            self.turn_rate_rad_s = math.copysign(turn_rate_rad_s, turn)
-        self.turn_start_s = t0_s
-        self.t0_s = t0_s + turn_s
-        self.t_end_s = self.t0_s + trajectory.duration_s
-
-    def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
-        """Position, velocity, acceleration (NED), yaw and yaw rate at mission time ``t_s``."""
-        tau = min(max(t_s - self.t0_s, 0.0), self.trajectory.duration_s)
-        at = np.array([tau])
-        pos, vel, acc = (v[0] for v in self.trajectory.sample(at))
-        if t_s < self.t0_s and self.turn_from_yaw_rad is not None:
-            yaw = self.turn_from_yaw_rad + self.turn_rate_rad_s * max(t_s - self.turn_start_s, 0.0)
-            return pos, np.zeros(3), np.zeros(3), wrap_pi(yaw), self.turn_rate_rad_s
-        yaw = float(self.trajectory.yaw_rad(at)[0])
-        if t_s >= self.t_end_s:
-            return pos, np.zeros(3), np.zeros(3), yaw, 0.0
-        return pos, vel, acc, yaw, float(self.trajectory.yaw_rate_rad_s(at)[0])
-
-    def setpoint_at(self, monotonic_s: float) -> Setpoint:
-        """The setpoint streamed at ``monotonic_s`` (the yaw rate as feed-forward)."""
-        if self.first_sent_monotonic_s is None:
-            self.first_sent_monotonic_s = monotonic_s
-        return Setpoint(*self.state(self.clock.now_s(monotonic_s)))
-
-    def finished(self, t_s: float) -> bool:
-        return t_s >= self.t_end_s
-
-
-def wrap_pi(angle_rad: float) -> float:
-    """``angle_rad`` wrapped to [-pi, pi)."""
-    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
-
-
-class ThreatReactor:
-    """The daemon's side of threat management (DESIGN sections 6 and 7).
-
-    zenoh samples arrive on the event loop (``ThreatBus.subscribe(loop=...)``); every PUT or
-    DELETE updates the ``ThreatTable`` and asks the ``ThreatManager`` (in a worker thread, one
-    decision at a time; updates that arrive meanwhile are folded into the next decision, the
-    newest state always wins) whether the remaining reference conflicts. A decision's trajectory
-    becomes the active reference from the manager's start time, so the setpoint does not jump;
-    its latency is measured from the threat's receipt on the zenoh thread to the first setpoint
-    of the new trajectory handed to the vehicle link. M-GART alternatives are refreshed in the
-    background at every leg start, after every decision and every ``alternatives_period_s``,
-    from the reference ``alternatives_lead_s`` ahead (entry nodes the vehicle can still reach).
-    """
-
-    def __init__(self, daemon: "CompanionDaemon"):
-        self.daemon = daemon
-        s = daemon.settings
-        self.bus = ThreatBus.from_settings(s.zenoh, clock=daemon.clock.now_s)
-        self.table = ThreatTable()
-        self.manager: ThreatManager | None = None
-        self.leg: LegPlan | None = None
-        self._busy = False
-        self._pending_receipt: float | None = None
-        self._alt_busy = False
-        self._alt_dirty = False
-        self.latencies_ms: dict[str, list[float]] = {}
-
-    async def start(self, home_lla) -> None:
-        self.table.set_home(LocalFrame(*home_lla))
-        self.bus.open()
-        self.bus.subscribe(self.on_update, loop=asyncio.get_running_loop())
-        self.bus.serve_threats(lambda: self.table.snapshot(self.daemon.clock.now_s()))
-
-    async def stop(self) -> None:
-        self.bus.close()
-
-    def publish_status(self, status: dict) -> None:
-        self.table.expire(self.daemon.clock.now_s())
-        status["threats"] = len(self.table)
-        self.bus.publish_status(status)
-
-    # ------------------------------------------------------------------ threats in
-    def on_update(self, update: ThreatUpdate) -> None:
-        """One zenoh sample (on the loop): store it, then decide."""
-        d = self.daemon
-        if update.action == "rejected":
-            self.reject(rejected_event(update))
-            return
-        if update.action == "delete":
-            known = self.table.delete(update.threat_id)
-            d.record("threat", id=update.threat_id, removed=True, known=known, t_s=update.received_t_s)
-            log.info("threat %s removed%s", update.threat_id, "" if known else " (was not known)")
-        else:
-            try:
-                self.table.put(update.threat)
-            except CompanionError as exc:           # e.g. a global threat before home
-                self.reject({"event": "rejected", "threat_id": update.threat_id,
-                             "field": getattr(exc, "field", "payload"), "reason": str(exc)})
-                return
-            th = self.table.get(update.threat_id)
-            d.record("threat", id=th.id, kind=th.kind, position_ned_m=th.pos_ned_m,
-                     velocity_ned_m_s=th.velocity_ned_m_s, radius_m=th.radius_m,
-                     t_s=update.received_t_s)
-        self.schedule(update.received_mono_s)
-
-    def reject(self, event: dict) -> None:
-        d = self.daemon
-        event = {**event, "t_s": d.clock.now_s()}
-        log.warning("threat rejected: %s", event.get("reason"))
-        self.bus.publish_event(event)
-        d.record("decision", kind="rejected", reason=event.get("reason"), t_s=event["t_s"],
-                 field=event.get("field"), threat_id=event.get("threat_id"))
-
-    async def resume(self) -> None:
-        """Ask the manager to plan on from a hold (unless a decision is under way)."""
-        if self.manager is None or self._busy:
-            await asyncio.sleep(0.05)
-            return
-        self._busy = True
-        await self._decide_loop(time.monotonic(), resume=True)
-
-    def schedule(self, receipt_mono_s: float) -> None:
-        """Decide now, or right after the decision under way (with the newest threats)."""
-        if self.manager is None:
-            return                      # not in a leg: checked when the next leg starts
-        if self._busy:
-            if self._pending_receipt is None:
-                self._pending_receipt = receipt_mono_s
-            return
-        self._busy = True
-        asyncio.get_running_loop().create_task(self._decide_loop(receipt_mono_s), name="threat-decision")
-
-    async def _decide_loop(self, receipt_mono_s: float, resume: bool = False) -> None:
-        try:
-            while True:
-                leg = self.leg
-                t = self.daemon.clock.now_s()
-                self.table.expire(t)
-                decide = self.manager.resume if resume else self.manager.on_threats
-                resume = False
-                decision = await self.daemon.in_worker(decide, self.table.snapshot(t), t)
-                if leg is self.leg:
-                    await self.apply(decision, receipt_mono_s)
-                if self._pending_receipt is not None:
-                    receipt_mono_s, self._pending_receipt = self._pending_receipt, None
-                elif decision.resume:
-                    await asyncio.sleep(max(0.1, 0.5 / self.daemon.settings.link.time_scale))
-                    receipt_mono_s = time.monotonic()
-                else:
-                    break
-        except Exception:  # noqa: BLE001 - a failed decision must not stop the flight
-            log.exception("threat decision failed; the current reference is kept")
-        finally:
-            self._busy = False
-
-    async def apply(self, decision: Decision, receipt_mono_s: float) -> None:
-        """Engage the decision's trajectory, measure its latency, publish and record it."""
-        if decision.kind == "none":
-            log.debug("threat check: %s (%.1f ms)", decision.reason, decision.decide_ms)
-            return
-        d = self.daemon
-        latency_ms = None
-        if decision.trajectory is not None:
-            ref = d.engage(decision.trajectory, decision.path_id, t0_s=decision.start_t_s)
-            d.streamer.send_now()
-            deadline = time.monotonic() + 1.0
-            while ref.first_sent_monotonic_s is None and time.monotonic() < deadline:
-                await asyncio.sleep(0.001)
-            if ref.first_sent_monotonic_s is not None:
-                latency_ms = (ref.first_sent_monotonic_s - receipt_mono_s) * 1000.0
-                self.latencies_ms.setdefault(decision.kind, []).append(latency_ms)
-        pos = d.link.telemetry.pos_ned_m
-        event = {**decision.as_event(), "latency_ms": latency_ms, "t_s": d.clock.now_s(),
-                 "pos_ned_m": pos, "leg": d.leg_index}
-        d.summary.decisions += 1
-        log.warning("decision %s: %s (latency %s ms, decide %.1f ms, plan %.1f ms, seed %d)",
-                    decision.kind, decision.reason,
-                    "n/a" if latency_ms is None else f"{latency_ms:.1f}", decision.decide_ms,
-                    decision.plan_ms, d.settings.seed)
-        self.bus.publish_event(event)
-        d.record("decision", kind=decision.kind, path_ned_m=decision.path_ned_m, **event)
-        self.publish_path()
-        self.refresh_alternatives()
-
-    # ------------------------------------------------------------------ legs and alternatives
-    def on_leg_started(self, leg: LegPlan, ref: ActiveReference) -> None:
-        s = self.daemon.settings
-        if self.manager is None:
-            self.manager = ThreatManager(leg.world, leg.goal_ned_m, settings=s.threats,
-                                         limits=s.smoothing.limits,
-                                         kappa_max_1_m=s.smoothing.kappa_max_1_m,
-                                         gart_settings=s.gart, rng=self.daemon.rng)
-        self.manager.set_leg(leg.world, leg.goal_ned_m)
-        self.manager.set_active(leg.trajectory, ref.t0_s, ref.path_id)
-        self.manager.set_alternatives([])
-        self.leg = leg
-        self.publish_path()
-        self.refresh_alternatives()
-        if len(self.table):
-            self.schedule(time.monotonic())
-
-    def on_leg_ended(self) -> None:
-        self.leg = None
-        if self.manager is not None:
-            self.manager.set_alternatives([])
-
-    def refresh_alternatives(self) -> None:
-        """Recompute the M-GART alternatives from the current reference in the background."""
-        if self.manager is None or self.leg is None or self.daemon.settings.flight.alternatives_k == 0:
-            return
-        if self._alt_busy:
-            self._alt_dirty = True
-            return
-        self._alt_busy = True
-        asyncio.get_running_loop().create_task(self._alternatives_loop(), name="alternatives")
-
-    async def _alternatives_loop(self) -> None:
-        f = self.daemon.settings.flight
-        try:
-            while True:
-                self._alt_dirty = False
-                leg, t = self.leg, self.daemon.clock.now_s()
-                if leg is None:
-                    break
-                threats = self.table.snapshot(t)
-                rng = np.random.default_rng(self.daemon.rng.integers(2**63))
-                ref = self.daemon.reference
-                start = None if ref is None else ref.state(t + f.alternatives_lead_s)[0]
-                alternatives = await self.daemon.in_worker(
-                    self.manager.compute_alternatives, threats, t, f.alternatives_k, rng=rng,
-                    max_time_s=f.alternatives_budget_s, start_ned_m=start)
-                if leg is self.leg and alternatives:     # none found: keep the previous ones
-                    self.manager.set_alternatives(alternatives)
-                    self.publish_path()
-                    self.daemon.record("alternatives", leg=leg.index, t_s=t,
-                                       paths=[a.path_ned_m for a in alternatives])
-                if not self._alt_dirty:
-                    break
-        except Exception:  # noqa: BLE001 - without alternatives the manager replans or holds
-            log.exception("refreshing the alternatives failed")
-        finally:
-            self._alt_busy = False
-
-    def publish_path(self) -> None:
-        ref = self.daemon.reference
-        if ref is None or self.manager is None:
-            return
-        t = np.linspace(0.0, ref.trajectory.duration_s, max(2, int(ref.trajectory.duration_s * 2)))
-        self.bus.publish_path({
-            "t_s": self.daemon.clock.now_s(), "leg": self.daemon.leg_index, "path_id": ref.path_id,
-            "t0_s": ref.t0_s, "duration_s": ref.trajectory.duration_s,
-            "reference_ned_m": ref.trajectory.sample(t)[0],
-            "alternatives": [{"path_id": a.path_id, "path_ned_m": a.path_ned_m}
-                             for a in self.manager.alternatives]})
-
-    def min_separation_m(self, pos_ned_m: np.ndarray, t_s: float) -> float:
-        """Distance from ``pos_ned_m`` to the surface of the nearest threat now (inf if none)."""
-        best = math.inf
-        for th in self.table.snapshot(t_s):
-            best = min(best, float(np.linalg.norm(th.position_at(t_s) - pos_ned_m)) - th.radius_m)
-        return best
 
 
 @dataclass
@@ -442,7 +128,6 @@ class CompanionDaemon:
         self._tasks: list[asyncio.Task] = []
         self._link_lost_at: float | None = None
         self._resume_needed = False
-        self._last_resume_t_s = -math.inf
         self._executor = ThreadPoolExecutor(2, thread_name_prefix="planning",
                                             initializer=restore_normal_priority)
 
@@ -475,19 +160,32 @@ class CompanionDaemon:
                 "link": tele.connected, "outcome": self.summary.outcome}
 
     # ------------------------------------------------------------------ reference
-    def engage(self, trajectory, path_id: str, t0_s: float | None = None,
-               turn: bool = False) -> ActiveReference:
+    def engage(self, trajectory, path_id: str, t0_s: float | None = None, turn: bool = False,
+               resume: bool = False) -> ActiveReference:
         """Make ``trajectory`` the active reference from mission time ``t0_s`` (default now),
-        first turning on the spot to its heading if ``turn`` (a leg that starts at rest)."""
+        first turning on the spot to its heading if ``turn`` (a leg that starts at rest);
+        ``resume``: it stops short of the leg's goal on purpose (``ActiveReference``)."""
         ref = ActiveReference(trajectory, self.clock.now_s() if t0_s is None else t0_s,
                               self.clock, path_id, turn_from_yaw_rad=self._current_yaw() if turn else None,
-                              turn_rate_rad_s=self.settings.flight.turn_rate_rad_s)
+                              turn_rate_rad_s=self.settings.flight.turn_rate_rad_s, resume=resume)
         self.reference = ref
         if self.streamer is not None:
             self.streamer.set_source(ref.setpoint_at)
-        if self.threats is not None and self.threats.manager is not None:
-            self.threats.manager.set_active(trajectory, ref.t0_s, path_id)
+        if self.threats is not None:
+            self.threats.set_active(ref)
         return ref
+
+    def send_now(self) -> None:
+        """Send the current setpoint at once (a new reference's first setpoint)."""
+        if self.streamer is not None:
+            self.streamer.send_now()
+
+    def send_statustext(self, text: str, severity: str) -> None:
+        """Tell the ground stations (STATUSTEXT through the vehicle); logged if the link is down."""
+        if not self.link.connected:
+            log.info("STATUSTEXT %r not sent: the link is down", text)
+            return
+        self.link.send_statustext(text, severity=severity)
 
     def hold_here(self, pos_ned_m, reason: str) -> None:
         """Hold ``pos_ned_m`` (a hover) as the active reference."""
@@ -541,14 +239,6 @@ class CompanionDaemon:
             if self.threats is not None:
                 self.threats.publish_status(self.status())
 
-    async def _refresh_alternatives(self) -> None:
-        """Keep the M-GART alternatives starting just ahead of the vehicle."""
-        period_s = self.settings.flight.alternatives_period_s / self.settings.link.time_scale
-        while True:
-            await asyncio.sleep(period_s)
-            if self.threats is not None:
-                self.threats.refresh_alternatives()
-
     def _on_link_change(self, connected: bool) -> None:
         if not connected:
             self._link_lost_at = self.clock.now_s()
@@ -563,7 +253,7 @@ class CompanionDaemon:
     def _start_background(self) -> None:
         loop = asyncio.get_running_loop()
         for coro in (self._watch_local_position(), self._watch_servos(), self._record_samples(),
-                     self._publish_status(), self._refresh_alternatives()):
+                     self._publish_status()):
             self._tasks.append(loop.create_task(coro, name=coro.__name__))
         self.link.on_link_change(self._on_link_change)
 
@@ -644,72 +334,67 @@ class CompanionDaemon:
         await self.link.wait_for(lambda t: t.pos_ned_m is not None and -t.pos_ned_m[2] >= alt_m - 0.5,
                                  timeout, f"the takeoff to {alt_m:.1f} m")
 
-    def check_guided(self) -> None:
-        tele = self.link.telemetry
-        if not tele.connected:
-            return              # keep streaming the reference; decided when the link is back
-        if tele.armed is False:
-            raise FlightAborted("the vehicle disarmed in flight")
-        if tele.mode is not None and tele.mode != GUIDED:
-            raise FlightAborted(f"the vehicle left GUIDED (now {tele.mode_name}): a pilot or "
-                                f"the autopilot took over; the companion stops commanding")
-
     async def resume_leg(self, leg: LegPlan) -> None:
         """Replan the rest of ``leg`` from where the vehicle is (after a link loss)."""
         self._resume_needed = False
         pos = self.link.telemetry.pos_ned_m
         s = self.settings
         new = await self.in_worker(plan_leg, leg.index, leg.waypoint, pos,
-                                      self.local_mission.world, gart_settings=s.gart,
-                                      smoothing=s.smoothing, settings=s.flight, rng=self.rng)
+                                   self.local_mission.world, gart_settings=s.gart,
+                                   smoothing=s.smoothing, settings=s.flight, rng=self.rng)
         if new is not None:
             self.engage(new.trajectory, f"leg{leg.index}-resume", turn=True)
         self.event("resumed", leg=leg.index, from_ned_m=pos)
 
-    def stopped_short(self, ref: ActiveReference, leg: LegPlan, t_s: float) -> bool:
-        """True when ``ref`` (e.g. a threat hold) ended away from the leg's goal a while ago."""
-        end_gap_m = float(np.linalg.norm(ref.trajectory.end_pos_ned_m[:3] - leg.goal_ned_m))
-        return end_gap_m > leg.waypoint.acceptance_radius_m and t_s > ref.t_end_s + RESUME_AFTER_S
-
-    async def continue_leg(self, leg: LegPlan) -> None:
-        """Plan on to the leg's goal from the current reference (after a hold), at most once
-        every ``RESUME_AFTER_S``."""
-        t = self.clock.now_s()
-        if t < self._last_resume_t_s + RESUME_AFTER_S:
-            return
-        self._last_resume_t_s = t
-        self.event("continue", leg=leg.index, reason="the reference stopped short of the goal")
-        if self.threats is not None:
-            await self.threats.resume()
-        else:
+    async def continue_leg(self, leg: LegPlan, reason: str) -> None:
+        """Plan back to the leg's goal from a reference that ended short of it (an evasion or
+        a hold): the threat manager's way back, or a replan from the vehicle without threats."""
+        if self.threats is None:
+            self.event("continue", leg=leg.index, reason=reason)
             await self.resume_leg(leg)
+            return
+        decision = await self.threats.resume()
+        if decision is not None and decision.trajectory is not None:
+            self.event("continue", leg=leg.index, reason=reason, decision=decision.kind,
+                       path_id=decision.path_id)
+        else:
+            log.info("leg %d: no clear way back to the mission yet (%s)", leg.index,
+                     "no decision" if decision is None else decision.reason)
+
+    def observe(self, leg: LegPlan) -> LegObservation:
+        """What the leg's state machine (``companion.phases.leg_step``) sees now."""
+        tele, ref = self.link.telemetry, self.reference
+        radius = leg.waypoint.acceptance_radius_m
+        return LegObservation(
+            t_s=self.clock.now_s(), seq=leg.waypoint.seq, connected=tele.connected, armed=tele.armed,
+            guided=None if tele.mode is None else tele.mode == GUIDED, mode_name=tele.mode_name,
+            relink_pending=self._resume_needed,
+            dist_to_goal_m=math.inf if tele.pos_ned_m is None else
+            float(np.linalg.norm(tele.pos_ned_m - leg.goal_ned_m)),
+            acceptance_radius_m=radius, ref_end_t_s=None if ref is None else ref.t_end_s,
+            ref_ends_short=ref is not None and ref.end_gap_m(leg.goal_ned_m) > radius,
+            ref_resume=ref is not None and ref.resume,
+            timeout_margin_s=self.settings.link.leg_timeout_margin_s)
 
     async def fly_leg(self, leg: LegPlan) -> None:
-        """Fly one leg: until its reference has ended and the vehicle is within the radius."""
+        """Fly one leg: observe, step the phase machine (``companion.phases``), act; until the
+        reference has ended and the vehicle is within the acceptance radius."""
         self.leg_index = leg.index
         ref = self.engage(leg.trajectory, f"leg{leg.index}", turn=True)
         if self.threats is not None:
             self.threats.on_leg_started(leg, ref)
-        margin = self.settings.link.leg_timeout_margin_s
-        radius = leg.waypoint.acceptance_radius_m
+        state = LegState()
         while True:
             await asyncio.sleep(0.05)
-            self.check_guided()
-            if self._resume_needed and self.link.connected:
+            state, action = leg_step(state, self.observe(leg))
+            if action.kind is ActionKind.ABORT:
+                raise FlightAborted(action.reason)
+            if action.kind is ActionKind.REACHED:
+                break
+            if action.kind is ActionKind.REPLAN:
                 await self.resume_leg(leg)
-            t = self.clock.now_s()
-            ref = self.reference
-            pos = self.link.telemetry.pos_ned_m
-            if ref is not None and ref.finished(t):
-                dist = float(np.linalg.norm(pos - leg.goal_ned_m))
-                if dist <= radius:
-                    break
-                if self.stopped_short(ref, leg, t):
-                    await self.continue_leg(leg)
-                    continue
-                if t > ref.t_end_s + margin:
-                    raise FlightAborted(f"item {leg.waypoint.seq} not reached: {dist:.1f} m away "
-                                        f"{margin:.0f} s after the reference arrived")
+            elif action.kind is ActionKind.RESUME:
+                await self.continue_leg(leg, action.reason)
         if self.threats is not None:
             self.threats.on_leg_ended()
         self.summary.legs_reached += 1
@@ -784,7 +469,11 @@ class CompanionDaemon:
             await self.link.upload_plan(plan)
             self.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
         if s.zenoh.enabled:
-            self.threats = ThreatReactor(self)
+            self.threats = ThreatReactor(
+                s, clock_now_s=self.clock.now_s, in_worker=self.in_worker, rng=self.rng,
+                engage=self.engage, send_now=self.send_now, reference=lambda: self.reference,
+                position_ned_m=lambda: self.link.telemetry.pos_ned_m, record=self.record,
+                statustext=self.send_statustext)
             await self.threats.start(home)
         self._start_background()
         self.summary.outcome = "flying"
@@ -820,10 +509,8 @@ class CompanionDaemon:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         if self.threats is not None:
-            for kind, values in self.threats.latencies_ms.items():
-                self.summary.latency_ms[kind] = {"n": len(values), "p50": float(np.percentile(values, 50)),
-                                                 "p99": float(np.percentile(values, 99)),
-                                                 "max": float(np.max(values))}
+            self.summary.decisions = self.threats.decisions
+            self.summary.latency_ms = self.threats.latency_summary()
         if self._errors_m:
             err = np.asarray(self._errors_m)
             self.summary.rms_tracking_error_m = float(np.sqrt(np.mean(err**2)))

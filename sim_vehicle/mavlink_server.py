@@ -6,7 +6,8 @@ time, telemetry streams whose rates SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM c
 COMMAND_LONG / COMMAND_INT addressed to the vehicle answered with a COMMAND_ACK, the mission
 protocol (MISSION_INT and the legacy float items) for the mission, fence and rally lists with
 atomic replacement (:mod:`sim_vehicle.mission_store`), the parameter protocol
-(:mod:`sim_vehicle.params`), TIMESYNC, HOME_POSITION and AUTOPILOT_VERSION.
+(:mod:`sim_vehicle.params`), TIMESYNC, HOME_POSITION and AUTOPILOT_VERSION. A STATUSTEXT from
+another component (a companion) is forwarded to the other links, as ArduPilot's routing does.
 
 Everything runs in one thread and one process: :meth:`MavlinkServer.run` paces the
 simulation (:mod:`sim_vehicle.clock`), drains the socket, and sends what is due, sleeping in
@@ -436,6 +437,7 @@ class MavlinkServer:
                 self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + bytes(msg.get_msgbuf()))
             try:
                 self._dispatch(msg, address)
+                self._route(msg, address)
             except Exception:  # a handler bug must not stop the vehicle: log it loudly
                 log.exception("error handling %s from %s", msg.get_type(), address)
         if parser.buf_len() > 0:
@@ -449,6 +451,29 @@ class MavlinkServer:
         if n <= 10 or n % 100 == 0:
             log.warning("dropped malformed packet from %s:%d (%s: %s; %d so far)", address[0], address[1], kind,
                         reason, n)
+
+    def _route(self, msg: Any, address: Address) -> None:
+        """Forward a broadcast message of another component to every other destination.
+
+        ArduPilot's MAVLink routing (``GCS_MAVLink/MAVLink_routing.cpp``) forwards a message
+        without a target to all its links but the one it came in on, so a companion's
+        STATUSTEXT shows on every ground station. Only the types in ``ROUTED`` are forwarded
+        here (unchanged, with the sender's ids), never back to the sender, never our own.
+        """
+        if msg.get_type() not in self.ROUTED or (msg.get_srcSystem(), msg.get_srcComponent()) == \
+                (self.sysid, COMPONENT_ID):
+            return
+        buf = bytes(msg.get_msgbuf())
+        for dest in self._destinations():
+            if dest == address:
+                continue
+            try:
+                self.sock.sendto(buf, dest)
+                self.stats.packets_out += 1
+            except OSError as exc:  # unreachable peer, full buffer: never stop flying
+                log.debug("forward to %s failed: %s", dest, exc)
+        if self._tlog is not None:
+            self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + buf)
 
     def _for_us(self, msg: Any) -> bool:
         target = getattr(msg, "target_system", 0)
@@ -965,6 +990,9 @@ class MavlinkServer:
         if settings.timing.speedup != old.timing.speedup:
             self.clock.set_speedup(settings.timing.speedup)
             log.info("speed-up now %g", settings.timing.speedup)
+
+    #: Broadcast messages forwarded between links (``_route``), as ArduPilot does.
+    ROUTED = frozenset({"STATUSTEXT"})
 
     _HANDLERS: dict[str, Callable] = {
         "COMMAND_LONG": _on_command_long,

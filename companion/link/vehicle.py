@@ -16,7 +16,8 @@ Implements the companion side of the MAVLink contract of DESIGN.md section 5:
   land, RTL, mission start;
 - GUIDED setpoints: SET_POSITION_TARGET_LOCAL_NED (position + velocity + acceleration + yaw,
   type_mask from what is given) sent without blocking the event loop
-  (``MavlinkDirect.send_message`` of the synchronous plugin: a ~20 us ctypes call).
+  (``MavlinkDirect.send_message`` of the synchronous plugin: a ~20 us ctypes call);
+- STATUSTEXT to the ground stations (``send_statustext``, broadcast, routed by the autopilot).
 
 MAVSDK 4.x note: ``Configuration`` is built with ``Configuration.create_with_component_type``
 (its constructor takes a raw handle).
@@ -74,6 +75,11 @@ IGNORE_YAW = 1 << 10
 IGNORE_YAW_RATE = 1 << 11
 
 HEARTBEAT_TIMEOUT_S = 3.0
+
+#: MAV_SEVERITY names by value (MAVLink common.xml: pymavlink's ``mavutil.mavlink.MAV_SEVERITY_*``).
+MAV_SEVERITY_NAMES = ("EMERGENCY", "ALERT", "CRITICAL", "ERROR", "WARNING", "NOTICE", "INFO", "DEBUG")
+#: STATUSTEXT.text is char[50].
+STATUSTEXT_MAX_CHARS = 50
 
 
 def setpoint_type_mask(pos, vel, acc, yaw, yaw_rate=None) -> int:
@@ -619,6 +625,38 @@ class VehicleLink:
         message = MavlinkMessage("SET_POSITION_TARGET_LOCAL_NED", 0, 0, self.target_system,
                                  self.target_component, json.dumps(fields))
         self._direct_sync.send_message(message)
+
+    def send_statustext(self, text: str, severity: int | str = "NOTICE") -> None:
+        """Send one STATUSTEXT to the ground stations (non-blocking; call from the loop thread).
+
+        STATUSTEXT has no target: the autopilot forwards it to its other links (ArduPilot's
+        MAVLink routing; ``sim-vehicle`` does the same), so QGroundControl and MAVProxy show it.
+
+        Parameters
+        ----------
+        text : str
+            Cut to ``STATUSTEXT_MAX_CHARS`` (50) characters; non-ASCII characters become ``?``.
+        severity : int or str
+            A MAV_SEVERITY value (pymavlink's ``mavutil.mavlink.MAV_SEVERITY_NOTICE`` ...) or its
+            name with or without the prefix (``"NOTICE"``, ``"MAV_SEVERITY_WARNING"``).
+
+        Raises
+        ------
+        LinkError
+            Not connected, or an unknown severity (nothing is sent then).
+        """
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        self._require_connected()
+        name = severity.upper().removeprefix("MAV_SEVERITY_") if isinstance(severity, str) else None
+        level = MAV_SEVERITY_NAMES.index(name) if name in MAV_SEVERITY_NAMES else severity
+        if not (isinstance(level, int) and not isinstance(level, bool) and 0 <= level < len(MAV_SEVERITY_NAMES)):
+            raise LinkError(f"severity: expected a MAV_SEVERITY value 0..7 or one of "
+                            f"{', '.join(MAV_SEVERITY_NAMES)}, got {severity!r}")
+        body = str(text).encode("ascii", "replace").decode("ascii")[:STATUSTEXT_MAX_CHARS]
+        fields = {"severity": level, "text": body, "id": 0, "chunk_seq": 0}
+        self._direct_sync.send_message(MavlinkMessage("STATUSTEXT", 0, 0, 0, 0, json.dumps(fields)))
+        log.debug("STATUSTEXT %d %r sent", level, body)
 
     # ----------------------------------------------------------------- missions
 

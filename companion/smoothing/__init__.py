@@ -5,7 +5,6 @@
   curvature-continuous and bounded by K_max (``g2.py``).
 - ``time_parameterize(curve, limits)`` -> ``companion.trajectory.Trajectory`` (``timing.py``).
 - ``feasibility.check_and_stretch(trajectory)``: closed-loop check on the helicopter model.
-- ``splice.join_from_state(...)``: a trajectory from the current reference state onto a path.
 """
 
 from companion.smoothing.bezier import BezierPath

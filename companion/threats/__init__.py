@@ -4,7 +4,12 @@
   constant-velocity prediction).
 - ``codec``: the JSON payload of ``uav/<sysid>/threats/<id>``, version 1, validated strictly.
 - ``bus``: ``ThreatBus``, the zenoh session (imports zenoh; I/O edge).
-- ``manager``: ``ThreatManager``, the pure replan / switch / hold policy.
+- the policy, one module per step of DESIGN section 7 (all pure):
+  ``prediction`` (threats -> space-time tubes), ``spacetime`` (the one check),
+  ``evasion`` (escape library), ``retime`` (time warps of the active path), ``join`` (the one
+  splice), ``alternatives`` (M-GART switching targets), ``candidates`` (each strategy's
+  candidates), ``decision`` (the cost, ``Decision``) and ``policy`` (``ThreatManager``).
+- ``reactor``: ``ThreatReactor``, the daemon's side (zenoh in, decisions out; I/O edge).
 - ``scenario``: scripted threat sequences (``companion threat play``).
 - ``settings``: ``ThreatSettings`` and ``ZenohSettings``.
 

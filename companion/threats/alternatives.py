@@ -84,16 +84,20 @@ class Alternative:
         return np.vstack([self.entry_pos_ned_m[entry:], self.path_ned_m[-1:]])
 
 
-def airspace_for(world: World, points) -> World:
-    """``world`` with its down bounds widened to contain every point (a climb's start)."""
-    pts = np.atleast_2d(np.asarray(points, dtype=float))
+def airspace_for(world: World, points, room_m: float = 0.0, floor_down_m: float | None = None) -> World:
+    """``world`` with its down bounds widened to contain every point (a climb's start), plus
+    ``room_m`` above and below, never lower than ``floor_down_m`` (3D worlds; 2D unchanged)."""
     if world.dim != 3:
         return world
+    pts = np.atleast_2d(np.asarray(points, dtype=float))
     lo, hi = world.bounds_min, world.bounds_max
-    if np.all(pts[:, 2] >= lo[2]) and np.all(pts[:, 2] <= hi[2]):
+    new_lo = min(lo[2], float(pts[:, 2].min()) - 0.5) - room_m
+    new_hi = max(hi[2], float(pts[:, 2].max()) + 0.5) + room_m
+    if floor_down_m is not None:
+        new_hi = max(min(new_hi, floor_down_m), hi[2])
+    if new_lo == lo[2] and new_hi == hi[2]:
         return world
-    lo[2] = min(lo[2], float(pts[:, 2].min()) - 0.5)
-    hi[2] = max(hi[2], float(pts[:, 2].max()) + 0.5)
+    lo[2], hi[2] = new_lo, new_hi
     return World(world.obstacles, lo, hi, world.margin_m)
 
 
@@ -114,7 +118,8 @@ def vertical_variants(path: np.ndarray, world: World, offsets_m) -> list[np.ndar
 
 
 def plan_alternatives(world: World, start, goal, k: int, *, rng: np.random.Generator, max_time_s: float,
-                      settings: MgartSettings, spacing_m: float, vertical_offsets_m=(), tag: str = "") -> list:
+                      settings: MgartSettings, spacing_m: float, vertical_offsets_m=(), airspace=None,
+                      tag: str = "") -> list:
     """M-GART alternatives from ``start`` to ``goal`` (cheapest first) plus vertical variants.
 
     Parameters
@@ -126,6 +131,9 @@ def plan_alternatives(world: World, start, goal, k: int, *, rng: np.random.Gener
         Paths asked of M-GART.
     vertical_offsets_m : sequence of float
         Offsets of the cheapest path's above/below variants (3D only).
+    airspace : World, optional
+        Where the vertical variants must stay free (default ``world``): the leg's slab is
+        thin, the airspace around it is not.
 
     Returns
     -------
@@ -138,7 +146,7 @@ def plan_alternatives(world: World, start, goal, k: int, *, rng: np.random.Gener
                     settings=settings)
     paths = [r.path for r in results if r.status == "exact" and r.path is not None]
     if paths:
-        paths += vertical_variants(paths[0], world, vertical_offsets_m)
+        paths += vertical_variants(paths[0], airspace_for(airspace or world, [start]), vertical_offsets_m)
     return [Alternative.from_path(f"alt{i}{tag}", p, spacing_m) for i, p in enumerate(paths)]
 
 

@@ -33,7 +33,7 @@ from companion.threats.join import HOVER_SPEED_M_S, join_trajectory, lead_length
 from companion.threats.retime import RetimedTrajectory, ramp_time_s
 from companion.threats.settings import ThreatSettings
 from companion.threats.spacetime import STATIC_ID, check_candidates, sample_times
-from companion.world import Sphere, World
+from companion.world import Disc, Sphere, World
 
 __all__ = ["Situation", "judge", "evade_candidates", "retime_candidates", "switch_to_alternatives",
            "replan_candidates", "positions_at", "meeting_obstacles", "check_candidates"]
@@ -53,7 +53,10 @@ class Situation:
     ref : ReferenceState
     tubes : list of Tube
     world : World
-        The airspace (the leg's world widened to contain the reference).
+        The airspace: the leg's world widened to contain the reference, with room above and
+        below (checks, escapes, joins).
+    planning_world : World
+        The leg's thin slab widened to contain the reference (replans).
     goal_ned_m : ndarray, shape (d,)
     settings : ThreatSettings
     limits : TrajectoryLimits
@@ -65,6 +68,7 @@ class Situation:
     ref: ReferenceState
     tubes: list
     world: World
+    planning_world: World
     goal_ned_m: np.ndarray
     settings: ThreatSettings
     limits: TrajectoryLimits
@@ -100,7 +104,8 @@ def judge(sit: Situation, candidates: list[Candidate], step_s: float | None = No
         return candidates
     t = sit.times(step_s or sit.settings.check_step_s)
     pos = np.stack([positions_at(c.trajectory, sit.ref.t_s, t, sit.dim) for c in candidates])
-    res = check_candidates(t, pos, sit.tubes, sit.world, accel_bound_m_s2=sit.accel_bound_m_s2)
+    res = check_candidates(t, pos, sit.tubes, sit.world, accel_bound_m_s2=sit.accel_bound_m_s2,
+                           static_slack_m=sit.settings.static_slack_m)
     for i, c in enumerate(candidates):
         c.judged(res.clear[i], res.min_clearance_m[i], res.intrusion_m2s[i], res.conflicts[i])
     return candidates
@@ -128,7 +133,8 @@ def evade_candidates(sit: Situation, *, brake_only: bool = False) -> list[Candid
     if brake_only:
         pos, duration = pos[:1], duration[:1]
     res = check_candidates(t, pos[:, :, :sit.dim], sit.tubes, sit.world,
-                           accel_bound_m_s2=sit.accel_bound_m_s2)
+                           accel_bound_m_s2=sit.accel_bound_m_s2,
+                           static_slack_m=sit.settings.static_slack_m)
     end = pos[:, -1, :sit.dim]
     to_goal = duration + np.linalg.norm(end - sit.goal_ned_m[None, :], axis=1) / sit.cruise_m_s() + s.restart_s
     bonus = s.clearance_weight_s_m * np.clip(res.min_clearance_m, 0.0, s.clearance_cap_m)
@@ -169,7 +175,15 @@ def retime_candidates(sit: Situation, active, active_start_t_s: float, remaining
                                      f"retime {'pause' if rate == 0 else f'x{rate:.1f}'} {wait:.1f} s")
             out.append(Candidate("retime", traj.label, traj, remaining_to_goal_s + traj.delay_s,
                                  ends_short=ends_short))
-    return judge(sit, out)
+    # one vectorised sampling of the base for every warp
+    t = sit.times(s.check_step_s)
+    taus = np.concatenate([c.trajectory.tau_at(t - sit.ref.t_s) for c in out])
+    pos = np.atleast_2d(active.sample(taus)[0])[:, :sit.dim].reshape(len(out), t.size, sit.dim)
+    res = check_candidates(t, pos, sit.tubes, sit.world, accel_bound_m_s2=sit.accel_bound_m_s2,
+                           static_slack_m=sit.settings.static_slack_m)
+    for i, c in enumerate(out):
+        c.judged(res.clear[i], res.min_clearance_m[i], res.intrusion_m2s[i], res.conflicts[i])
+    return out
 
 
 # ---------------------------------------------------------------------------- switch
@@ -203,6 +217,12 @@ def switch_to_alternatives(sit: Situation, alternatives) -> tuple[list[Candidate
 
 
 # ---------------------------------------------------------------------------- replan
+def ball(center_ned_m, radius_m: float, dim: int):
+    """A Disc (2D world) or Sphere (3D) obstacle standing for a threat."""
+    center = tuple(float(x) for x in center_ned_m[:dim])
+    return Sphere(center, radius_m) if dim == 3 else Disc(center, radius_m)
+
+
 def _keeps_free(center: np.ndarray, radius: float, points, dim: int) -> bool:
     return all(np.linalg.norm(p[:dim] - center[:dim]) > radius for p in points)
 
@@ -216,7 +236,7 @@ def static_spheres(sit: Situation, keep_free) -> list:
             continue
         c, r = tube.center_at(now)[0], float(tube.radius_at(now)[0])
         if _keeps_free(c, r, keep_free, sit.dim):
-            out.append(Sphere(tuple(float(x) for x in c[:sit.dim]), r))
+            out.append(ball(c, r, sit.dim))
     return out
 
 
@@ -224,8 +244,7 @@ def meeting_spheres(sit: Situation, tube, t_meet_s: float, keep_free) -> list:
     """The stretch of a mover's track around the time ``t_meet_s`` a candidate would meet it."""
     times = t_meet_s + np.linspace(-MEETING_HALF_S, MEETING_HALF_S, 5)
     radius = float(tube.radius_at(np.array([t_meet_s + MEETING_HALF_S]))[0]) + 0.5
-    return [Sphere(tuple(float(x) for x in c[:sit.dim]), radius) for c in tube.center_at(times)
-            if _keeps_free(c, radius, keep_free, sit.dim)]
+    return [ball(c, radius, sit.dim) for c in tube.center_at(times) if _keeps_free(c, radius, keep_free, sit.dim)]
 
 
 def meeting_obstacles(sit: Situation, active, active_start_t_s: float, keep_free) -> list:
@@ -263,7 +282,7 @@ def replan_candidates(sit: Situation, *, rng: np.random.Generator, gart_settings
     d = sit.dim
     p, v = sit.ref.pos_ned_m[:d], sit.ref.vel_ned_m_s[:d]
     start, lead = _replan_start(sit)
-    world = airspace_for(sit.world, [p, start])
+    world = airspace_for(sit.planning_world, [p, start])
     if lead is not None and not world.segment_free(p, start):
         log.info("replan: the stopping lead leaves the free space")
         return []

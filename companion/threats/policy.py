@@ -193,7 +193,7 @@ class ThreatManager:
         self._counter += 1
         return plan_alternatives(world, start, self.goal_ned_m, k, rng=rng, max_time_s=max_time_s,
                                  settings=settings or MgartSettings(gart=self.gart_settings),
-                                 spacing_m=self.settings.entry_spacing_m,
+                                 spacing_m=self.settings.entry_spacing_m, airspace=self._airspace([start]),
                                  vertical_offsets_m=self.settings.vertical_offsets_m, tag=f"-{self._counter}")
 
     # ------------------------------------------------------------------ state
@@ -231,8 +231,14 @@ class ThreatManager:
         tubes = predict_tubes(self._relevant(threats, t_s, ref.pos_ned_m), inflation_m=s.inflation_m,
                               uncertainty_m_s=s.uncertainty_m_s, uncertainty_max_m=s.uncertainty_max_m)
         lift = float(ref.pos_ned_m[2]) if self.world.dim == 2 and ref.pos_ned_m.shape[0] == 3 else None
-        return gen.Situation(ref, tubes, airspace_for(self.world, [ref.pos_ned_m[: self.world.dim]]),
+        here = [ref.pos_ned_m[: self.world.dim]]
+        return gen.Situation(ref, tubes, self._airspace(here), airspace_for(self.world, here),
                              self.goal_ned_m, s, self.limits, self.kappa_max_1_m, lift)
+
+    def _airspace(self, points) -> World:
+        """The leg's world with room above and below for escapes and alternatives."""
+        s = self.settings
+        return airspace_for(self.world, points, s.vertical_room_m, -s.min_altitude_m)
 
     def check(self, threats, t_s: float) -> Conflict | None:
         """First conflict of the active reference with ``threats`` over the horizon (or None)."""
@@ -248,7 +254,8 @@ class ThreatManager:
         keep = Candidate("none", "keep", a.trajectory, remaining, a.path_id, ends_short=a.ends_short)
         t = sit.times(sit.settings.check_step_s)
         pos = gen.positions_at(a.trajectory, a.start_t_s, t, sit.dim)
-        res = check_candidates(t, pos, sit.tubes, sit.world, accel_bound_m_s2=sit.accel_bound_m_s2)
+        res = check_candidates(t, pos, sit.tubes, sit.world, accel_bound_m_s2=sit.accel_bound_m_s2,
+                               static_slack_m=sit.settings.static_slack_m)
         return keep.judged(res.clear[0], res.min_clearance_m[0], res.intrusion_m2s[0], res.conflicts[0])
 
     # ------------------------------------------------------------------ the decision

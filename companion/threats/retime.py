@@ -16,6 +16,7 @@ Pure: numpy only.
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 
@@ -72,7 +73,11 @@ class RetimedTrajectory:
                 lo, hi = (mid, hi) if self._integral(np.array([mid]))[0] < remaining else (lo, mid)
             self.duration_s = hi
         self.delay_s = self.duration_s - remaining
-        self.end_pos_ned_m = np.atleast_2d(base.sample(np.array([base.duration_s]))[0])[0]
+
+    @cached_property
+    def end_pos_ned_m(self) -> np.ndarray:
+        """Where the retimed reference ends (the base's end), (D,)."""
+        return np.atleast_2d(self.base.sample(np.array([self.base.duration_s]))[0])[0]
 
     def _rate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Progress rate r (K,) and its derivative r' (K,)."""
@@ -111,6 +116,10 @@ class RetimedTrajectory:
         ended = t >= self.duration_s
         r[ended], dr[ended] = 0.0, 0.0
         return np.minimum(self.tau0_s + self._integral(t), self.base.duration_s), r, dr
+
+    def tau_at(self, t_s) -> np.ndarray:
+        """Base time (K,) at times ``t_s`` (K,)."""
+        return self._tau(t_s)[0]
 
     def sample(self, t_s):
         """Position, velocity, acceleration (K, D) at times ``t_s`` (K,)."""

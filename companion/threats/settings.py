@@ -1,20 +1,22 @@
-"""Settings of the threat stage: the zenoh session and the threat-manager policy (DESIGN 6, 7).
+"""Settings of the threat stage: the zenoh session and the threat policy (DESIGN 6, 7).
 
 Every default lives here and is documented; ``companion/config.py`` composes these frozen
 dataclasses into the settings tree (tables ``[zenoh]`` and ``[threats]``).
 
-Why these defaults (paper section 3.3, Fig. 5 and Fig. 8; R-50-class helicopter at 8 m/s):
+Why these defaults (paper section 3.3, Fig. 5 and Fig. 8; R-50-class helicopter at 6-8 m/s):
 
-- ``horizon_s = 30``: the conflict check looks 30 s (240 m at 8 m/s) ahead, beyond the
-  distance a pop-up threat is usually reported at, so a far pop-up is answered by a replan.
-- ``replan_budget_s = 0.25``: the initial estimate of the replanning time (GART with a short
-  budget, G2 smoothing and the speed profile); the measured times update the estimate.
-- ``replan_margin_s = 3``: extra time kept on top of the budget; with the 2 m/s^2
-  deceleration limit, 3 s is the time to stop from 6 m/s, so a replan that comes late can still
-  be followed by a hold.
+- ``horizon_s = 20``: candidates are checked 20 s (120-160 m) ahead in space and time; a
+  conflict further away is met again by the 10 Hz monitor as it comes closer.
+- ``inflation_m = 2``: half the rotor span (1.8 m) plus a few tenths for tracking error, added to
+  every threat radius; ``uncertainty_m_s = 0.3`` grows a moving threat's tube with the time
+  since its last update (capped at ``uncertainty_max_m = 4``).
+- ``replan_budget_s = 0.25`` (first estimate of the replanning time, then measured) and
+  ``replan_margin_s = 3``: a replan is attempted only when the conflict is further away than
+  the estimate plus the margin; closer conflicts are answered by the fast candidates (evade,
+  retime, switch), whose decisions take milliseconds.
 - ``switch_range_m = 20``: the paper's switching range (Fig. 5).
-- ``inflation_m = 2``: added to every threat radius: half the rotor span (1.8 m) plus a
-  few tenths for tracking error.
+- escape manoeuvres at 2.5 m/s^2 horizontally and 1.5 m/s^2 vertically: the lateral limit of
+  the smoothing settings, which the LQI tracks within a few decimetres.
 """
 
 from __future__ import annotations
@@ -87,84 +89,135 @@ class ZenohSettings:
 
 @dataclass(frozen=True)
 class ThreatSettings:
-    """Policy of the emergency threat manager (DESIGN section 7, paper section 3.3).
+    """Policy of the threat manager (DESIGN section 7, paper section 3.3).
 
     Parameters
     ----------
     horizon_s : float
-        How far ahead in time the remaining trajectory is checked against the predicted
-        threats (s). Default 30.
+        How far ahead in time candidates are checked against the tubes (s). Default 20.
     check_step_s : float
-        Time step of the space-time conflict check (s); the check is exact for each sample and
-        the step is further refined so that neither the vehicle nor a threat moves more than a
-        quarter of the smallest inflated radius between samples. Default 0.1.
-    replan_budget_s : float
-        Initial estimate of the replanning time (s), refined by the measured times. Default 0.25.
-    replan_margin_s : float
-        Margin added to the replanning estimate (s): replan when the first conflict is further
-        away than estimate + margin, switch otherwise. Default 3.
-    switch_range_m : float
-        Entry nodes of the alternatives must be within this distance of the current reference
-        position (m). Default 20.
+        Sample step of the space-time check of planned references (s); the check is exact
+        between samples up to ``a dt^2 / 8``. Default 0.1.
+    evade_step_s : float
+        Sample step for the escape library (s). Default 0.2.
     inflation_m : float
-        Added to every threat radius (m): vehicle half-size plus tracking error. Default 2.
+        Added to every threat radius (m): rotor radius plus tracking error. Default 2.
+    static_slack_m : float
+        How far into the static world's safety margin a candidate may go (m, capped at the
+        margin): planned references keep all of it; an escape may use this much. Default 1.
+    uncertainty_m_s, uncertainty_max_m : float
+        Growth of a moving threat's radius per second since its last update (m/s), and its
+        cap (m). Defaults 0.3 and 4.
     sensor_range_m : float
-        Threats farther than this from the vehicle (now) are tracked but ignored by the decision
-        (m). Default 1000.
-    sweep_horizon_s : float
-        For a replan, a moving threat is replaced by the volume it sweeps over this time (s).
-        Default 12.
+        Threats farther than this from the vehicle (now) are ignored by the decision (m).
+    replan_budget_s : float
+        Initial estimate of the replanning time (s), refined by the measured times.
+    replan_margin_s : float
+        Replan only when the conflict is further away than the estimate plus this margin (s).
+    replan_iterations : int
+        Rounds of replan -> space-time check -> the mover placed where it would be met.
     replan_turn_rad : float
-        The replan's lead (straight along the current velocity, before GART's path starts) is
-        long enough for a first corner of at least this turn (rad). Default 1.0 (57 deg).
-    gart_budget_s : float
-        Wall-clock budget of the replanning GART after its first solution (s). Default 0.08.
-    gart_first_budget_s : float
-        Wall-clock budget to find the first solution (s). Default 0.15.
+        The replan's straight lead is long enough for a first corner of this turn (rad).
+    gart_budget_s, gart_first_budget_s : float
+        Wall-clock budgets of one replanning GART after / until its first solution (s).
+    switch_range_m : float
+        Entry nodes of the alternatives must be within this distance (m). Default 20.
     entry_spacing_m : float
-        Alternatives are resampled so that their entry nodes are at most this far apart (m).
-        Default 2.
+        Entry nodes of an alternative are at most this far apart (m). Default 2.
     max_candidates : int
-        Most switch candidates (entry nodes) smoothed and checked per decision. Default 8.
+        Most switch entries smoothed and checked per decision. Default 6.
     switch_budget_s : float
-        Wall-clock time after which no further switch candidate is tried (s), so a switch
-        decision stays bounded; the hold is the fallback. Default 0.15.
+        Wall-clock time after which no further switch entry is tried (s). Default 0.03.
+    vertical_room_m : float
+        Room above and below the leg's planning slab for escapes and alternatives (m).
+        Default 8.
+    min_altitude_m : float
+        Escapes and alternatives stay at least this high above home (m). Default 5.
+    vertical_offsets_m : tuple of float
+        Alternatives above and below the cheapest one, by these offsets (m, 3D only).
+    retime_rates : tuple of float
+        Progress rates of the retime candidates (0: pause on the path), each in [0, 1).
+    retime_waits_s : tuple of float
+        How long each retime candidate stays at its rate (s).
     hold_decel_m_s2 : float
-        Largest deceleration of the hold (brake to a hover along the path) (m/s^2). Default 2.5,
-        the lateral acceleration limit of the smoothing settings.
+        Along-track deceleration of retimes and pauses (m/s^2). Default 2.5.
+    evade_speed_m_s : float
+        Horizontal speed of the escape manoeuvres (m/s), capped by the trajectory limits.
+    evade_accel_m_s2, evade_vertical_accel_m_s2 : float
+        Acceleration limits of the escape manoeuvres (m/s^2).
+    evade_climb_m_s, evade_descent_m_s : float
+        Vertical speeds of the escape manoeuvres (m/s).
+    evade_coasts_s : tuple of float
+        Coast durations of the escape manoeuvres (s).
+    restart_s : float
+        Cost of coming back to the mission after a manoeuvre that ends in a hover (s).
+    clearance_weight_s_m, clearance_cap_m : float
+        Clearance bonus of the cost (s per m, up to the cap in m).
     estimate_gain : float
-        Weight of a new measurement in the running estimate of the replanning time. Default 0.2.
+        Weight of a new measurement in the running estimate of the replanning time.
     seed : int
-        Seed of the manager's random generator when none is given. Default 0.
+        Seed of the manager's random generator when none is given.
     """
 
-    horizon_s: float = 30.0
+    horizon_s: float = 20.0
     check_step_s: float = 0.1
+    evade_step_s: float = 0.2
+    inflation_m: float = 2.0
+    static_slack_m: float = 1.0
+    uncertainty_m_s: float = 0.3
+    uncertainty_max_m: float = 4.0
+    sensor_range_m: float = 1000.0
     replan_budget_s: float = 0.25
     replan_margin_s: float = 3.0
-    switch_range_m: float = 20.0
-    inflation_m: float = 2.0
-    sensor_range_m: float = 1000.0
-    sweep_horizon_s: float = 12.0
+    replan_iterations: int = 3
     replan_turn_rad: float = 1.0
     gart_budget_s: float = 0.08
     gart_first_budget_s: float = 0.15
+    switch_range_m: float = 20.0
     entry_spacing_m: float = 2.0
-    max_candidates: int = 8
-    switch_budget_s: float = 0.15
+    max_candidates: int = 6
+    switch_budget_s: float = 0.03
+    vertical_room_m: float = 8.0
+    min_altitude_m: float = 5.0
+    vertical_offsets_m: tuple[float, ...] = (6.0,)
+    retime_rates: tuple[float, ...] = (0.0, 0.4)
+    retime_waits_s: tuple[float, ...] = (0.0, 1.5, 3.0, 5.0, 8.0, 12.0)
     hold_decel_m_s2: float = 2.5
+    evade_speed_m_s: float = 5.0
+    evade_accel_m_s2: float = 2.5
+    evade_vertical_accel_m_s2: float = 1.5
+    evade_climb_m_s: float = 2.5
+    evade_descent_m_s: float = 1.5
+    evade_coasts_s: tuple[float, ...] = (1.0, 2.5, 5.0)
+    restart_s: float = 4.0
+    clearance_weight_s_m: float = 1.0
+    clearance_cap_m: float = 3.0
     estimate_gain: float = 0.2
     seed: int = 0
 
     def __post_init__(self) -> None:
+        for name in ("vertical_offsets_m", "retime_rates", "retime_waits_s", "evade_coasts_s"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+            for i, v in enumerate(getattr(self, name)):
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                    raise ConfigError(f"threats.{name}[{i}]: must be a finite number >= 0, got {v!r}")
+        if any(r >= 1.0 for r in self.retime_rates):
+            raise ConfigError(f"threats.retime_rates: every rate must be in [0, 1), got {self.retime_rates!r}")
+        if not self.evade_coasts_s:
+            raise ConfigError("threats.evade_coasts_s: give at least one coast duration")
         require_numbers(ConfigError, "threats", self, positive=(
-            "horizon_s", "check_step_s", "replan_budget_s", "switch_range_m", "sensor_range_m",
-            "switch_budget_s", "sweep_horizon_s", "gart_budget_s", "entry_spacing_m",
-            "gart_first_budget_s", "hold_decel_m_s2", "estimate_gain"),
-            non_negative=("replan_margin_s", "inflation_m", "replan_turn_rad"))
+            "horizon_s", "check_step_s", "evade_step_s", "replan_budget_s", "switch_range_m",
+            "sensor_range_m", "switch_budget_s", "gart_budget_s", "entry_spacing_m",
+            "gart_first_budget_s", "hold_decel_m_s2", "estimate_gain", "evade_speed_m_s",
+            "evade_accel_m_s2", "evade_vertical_accel_m_s2", "evade_climb_m_s", "evade_descent_m_s"),
+            non_negative=("replan_margin_s", "inflation_m", "static_slack_m", "replan_turn_rad", "uncertainty_m_s",
+                          "uncertainty_max_m", "restart_s", "vertical_room_m", "min_altitude_m", "clearance_weight_s_m", "clearance_cap_m"))
+        if self.horizon_s < 10.0:
+            raise ConfigError(f"threats.horizon_s: must be >= 10 s (DESIGN 7.2), got {self.horizon_s!r}")
         if self.replan_turn_rad >= math.pi:
             raise ConfigError(f"threats.replan_turn_rad: must be < pi, got {self.replan_turn_rad!r}")
         if self.estimate_gain > 1:
             raise ConfigError(f"threats.estimate_gain: must be in (0, 1], got {self.estimate_gain!r}")
         require_int(ConfigError, "threats", "max_candidates", self.max_candidates, 1, 1000)
+        require_int(ConfigError, "threats", "replan_iterations", self.replan_iterations, 1, 10)
         require_int(ConfigError, "threats", "seed", self.seed, 0, 2**63 - 1)

@@ -11,7 +11,8 @@ tube's radius is taken at its larger end, so the check never reports "clear" whe
 closest approach intrudes, whatever the step (the step only costs conservatism). The static
 world (obstacles inflated by their margin, and the bounds) is a 1-Lipschitz distance field:
 over a chord of length L between samples of clearance c_a and c_b it stays above
-``(c_a + c_b - L) / 2``.
+``(c_a + c_b - L) / 2``; candidates may use ``static_slack_m`` of the safety margin (never more
+than the margin itself).
 
 Clearance is positive outside every inflated tube and obstacle. Candidates that intrude are
 ranked by the intrusion integral ``sum(max(0, -c)^2 dt)`` (deep intrusions weigh most), which
@@ -120,7 +121,8 @@ def _static_clearance(pos, world) -> np.ndarray:
     return 0.5 * (point[:, :-1] + point[:, 1:] - chord)
 
 
-def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: float = 3.0) -> BatchCheck:
+def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: float = 3.0,
+                     static_slack_m: float = 0.0) -> BatchCheck:
     """Check C candidates sampled at common times against every tube and the static world.
 
     Parameters
@@ -135,6 +137,10 @@ def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: flo
         Static obstacles and bounds (dimension d).
     accel_bound_m_s2 : float
         Upper bound of the candidates' acceleration, for the chord error ``a dt^2 / 8``.
+    static_slack_m : float
+        How far into the world's safety margin a candidate may go (m; capped at the margin, so
+        never into an obstacle itself). Planned references keep the whole margin, which the
+        chord bound can otherwise mistake for a conflict when a path grazes it.
 
     Returns
     -------
@@ -156,7 +162,7 @@ def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: flo
         clearance = np.where(closer, c, clearance)
         source = np.where(closer, i, source)
     if world is not None:
-        c = _static_clearance(pos, world)
+        c = _static_clearance(pos, world) + min(static_slack_m, world.margin_m)
         closer = c < clearance
         clearance = np.where(closer, c, clearance)
         source = np.where(closer, len(tubes), source)

@@ -1,0 +1,79 @@
+"""Joins and alternatives (the one splice, M-GART switching targets) and the replan estimate."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
+from companion.threats.alternatives import Alternative, switch_candidates
+from companion.threats.join import HOVER_SPEED_M_S, join_trajectory
+from companion.threats.model import Threat
+from companion.threats.policy import ThreatManager
+from companion.threats.settings import ThreatSettings
+from companion.world import World
+
+GOAL = np.array([200.0, 0.0])
+LIMITS = TrajectoryLimits(speed_m_s=5.0)
+DETOUR = np.array([[0.0, 0.0], [30.0, 0.0], [60.0, 25.0], [170.0, 25.0], [200.0, 0.0]])
+
+
+def straight_leg():
+    world = World([], [-10.0, -50.0], [210.0, 50.0])
+    traj = time_parameterize(smooth_g2(np.array([[0.0, 0.0], GOAL]), 0.1), LIMITS)
+    return world, traj
+
+
+def state(traj, t_s):
+    p, v, _ = traj.sample(np.array([t_s]))
+    return p[0], v[0]
+
+
+def test_replan_estimate_follows_measurements():
+    world, traj = straight_leg()
+    m = ThreatManager(world, GOAL, limits=LIMITS, rng=np.random.default_rng(0),
+                      settings=ThreatSettings(replan_budget_s=5.0))
+    m.set_active(traj, 0.0, "leg0")
+    far = Threat("p1", "popup", "local_ned", (90.0, 0.0, 0.0), radius_m=6.0, received_t_s=5.0)
+    m.on_threats([far], 5.0)
+    assert m.replan_estimate_s < 5.0
+
+
+def test_alternative_entries_cover_the_path():
+    alt = Alternative.from_path("a", DETOUR, spacing_m=2.0)
+    gaps = np.linalg.norm(np.diff(alt.entry_pos_ned_m, axis=0), axis=1)
+    assert gaps.max() <= 2.0 + 1e-9
+    total = np.sum(np.linalg.norm(np.diff(DETOUR, axis=0), axis=1))
+    assert alt.entry_remaining_m[0] == pytest.approx(total)
+    nodes = alt.nodes_from(0)
+    np.testing.assert_allclose(nodes[-1], DETOUR[-1])
+    assert all(any(np.linalg.norm(nodes - p, axis=1) < 1e-9) for p in DETOUR)
+
+
+def test_switch_candidates_are_in_range_cheapest_first_and_diverse():
+    near = Alternative.from_path("near", DETOUR, spacing_m=2.0)
+    other = Alternative.from_path("other", DETOUR * [1.0, -1.0], spacing_m=2.0)
+    picked = switch_candidates([near, other], np.array([10.0, 0.0]), 20.0, 2.0)
+    assert {c[1].path_id for c in picked[:2]} == {"near", "other"}      # one of each first
+    for cost, alt, i in picked:
+        assert np.linalg.norm(alt.entry_pos_ned_m[i] - [10.0, 0.0]) <= 20.0
+    costs = [c[0] for c in picked if c[1].path_id == "near"]
+    assert costs == sorted(costs)
+
+
+@settings(deadline=None, max_examples=15)
+@given(st.floats(0.0, 5.0), st.floats(-math.pi, math.pi), st.floats(-0.6 * math.pi, 0.6 * math.pi))
+def test_join_starts_at_the_reference_state(speed, heading, turn):
+    """Whatever the current speed and the direction of the target, no setpoint jump."""
+    world = World([], [-200.0, -200.0], [200.0, 200.0])
+    u = np.array([math.cos(heading), math.sin(heading)])
+    w = np.array([math.cos(heading + turn), math.sin(heading + turn)])
+    nodes = np.array([60.0 * w, 60.0 * w + 80.0 * u])
+    traj, poly = join_trajectory(np.zeros(2), speed * u, nodes, world=world, limits=LIMITS, kappa_max_1_m=0.1)
+    assert traj is not None, poly
+    p, v = state(traj, 0.0)
+    assert np.linalg.norm(p) < 1e-9
+    assert np.linalg.norm(v - speed * u) <= max(0.02 * speed + 0.06, HOVER_SPEED_M_S)
+    np.testing.assert_allclose(traj.end_pos_ned_m, nodes[-1], atol=1e-6)
