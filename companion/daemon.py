@@ -162,12 +162,16 @@ class CompanionDaemon:
     # ------------------------------------------------------------------ reference
     def engage(self, trajectory, path_id: str, t0_s: float | None = None, turn: bool = False,
                resume: bool = False) -> ActiveReference:
-        """Make ``trajectory`` the active reference from mission time ``t0_s`` (default now),
-        first turning on the spot to its heading if ``turn`` (a leg that starts at rest);
+        """Make ``trajectory`` the active reference from mission time ``t0_s`` (default now; a
+        later ``t0_s`` keeps the current reference until then), first turning on the spot to its
+        heading if ``turn`` (a leg that starts at rest);
         ``resume``: it stops short of the leg's goal on purpose (``ActiveReference``)."""
-        ref = ActiveReference(trajectory, self.clock.now_s() if t0_s is None else t0_s,
+        now = self.clock.now_s()
+        later = t0_s is not None and t0_s > now
+        ref = ActiveReference(trajectory, now if t0_s is None else t0_s,
                               self.clock, path_id, turn_from_yaw_rad=self._current_yaw() if turn else None,
-                              turn_rate_rad_s=self.settings.flight.turn_rate_rad_s, resume=resume)
+                              turn_rate_rad_s=self.settings.flight.turn_rate_rad_s, resume=resume,
+                              previous=self.reference if later else None)
         self.reference = ref
         if self.streamer is not None:
             self.streamer.set_source(ref.setpoint_at)

@@ -63,13 +63,16 @@ class ActiveReference:
     trajectory starts when the turn is done (a leg that starts at rest in a new direction).
     ``first_sent_monotonic_s`` is set when the stream first samples it (latency measurement).
     ``resume``: the reference stops short of the leg's goal on purpose (an evasion or a hold),
-    the flight phases plan back to the mission as soon as it has ended.
+    the flight phases plan back to the mission as soon as it has ended. ``previous``: the
+    reference flown until ``t0_s`` when that lies in the future (a decision planned from the
+    state its commit time will find, so the setpoint does not jump whatever the decision took).
     """
 
     def __init__(self, trajectory, t0_s: float, clock: VehicleClock, path_id: str, *,
                  turn_from_yaw_rad: float | None = None, turn_rate_rad_s: float = 0.6,
-                 resume: bool = False):
+                 resume: bool = False, previous: "ActiveReference | None" = None):
         self.trajectory = trajectory
+        self.previous = previous
         self.clock = clock
         self.path_id = path_id
         self.resume = resume
@@ -87,6 +90,10 @@ class ActiveReference:
 
     def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
         """Position, velocity, acceleration (NED), yaw and yaw rate at mission time ``t_s``."""
+        if self.previous is not None:
+            if t_s < self.turn_start_s:
+                return self.previous.state(t_s)
+            self.previous = None
         tau = min(max(t_s - self.t0_s, 0.0), self.trajectory.duration_s)
         at = np.array([tau])
         pos, vel, acc = (v[0] for v in self.trajectory.sample(at))
@@ -100,9 +107,10 @@ class ActiveReference:
 
     def setpoint_at(self, monotonic_s: float) -> Setpoint:
         """The setpoint streamed at ``monotonic_s`` (the yaw rate as feed-forward)."""
-        if self.first_sent_monotonic_s is None:
+        t_s = self.clock.now_s(monotonic_s)
+        if self.first_sent_monotonic_s is None and t_s >= self.turn_start_s:
             self.first_sent_monotonic_s = monotonic_s
-        return Setpoint(*self.state(self.clock.now_s(monotonic_s)))
+        return Setpoint(*self.state(t_s))
 
     def finished(self, t_s: float) -> bool:
         return t_s >= self.t_end_s

@@ -35,7 +35,7 @@ from companion.threats.settings import ThreatSettings
 from companion.threats.spacetime import STATIC_ID, check_candidates, sample_times
 from companion.world import Disc, Sphere, World
 
-__all__ = ["Situation", "judge", "evade_candidates", "retime_candidates", "switch_to_alternatives",
+__all__ = ["Situation", "check", "judge", "evade_candidates", "retime_candidates", "switch_to_alternatives",
            "replan_candidates", "positions_at", "meeting_obstacles", "check_candidates"]
 
 log = logging.getLogger(__name__)
@@ -98,14 +98,20 @@ def positions_at(trajectory, start_t_s: float, t_s: np.ndarray, dim: int) -> np.
     return np.atleast_2d(pos)[:, :dim]
 
 
+def check(sit: Situation, t_s: np.ndarray, pos: np.ndarray, *, static: bool = True):
+    """``check_candidates`` with the situation's tubes, airspace and settings; ``static=False``
+    for candidates on an already checked path (keep, retime): the static world never changes."""
+    return check_candidates(t_s, pos, sit.tubes, sit.world if static else None,
+                            accel_bound_m_s2=sit.accel_bound_m_s2, static_slack_m=sit.settings.static_slack_m)
+
+
 def judge(sit: Situation, candidates: list[Candidate], step_s: float | None = None) -> list[Candidate]:
     """Run the space-time check on every candidate (t = 0 at the situation's time)."""
     if not candidates:
         return candidates
     t = sit.times(step_s or sit.settings.check_step_s)
     pos = np.stack([positions_at(c.trajectory, sit.ref.t_s, t, sit.dim) for c in candidates])
-    res = check_candidates(t, pos, sit.tubes, sit.world, accel_bound_m_s2=sit.accel_bound_m_s2,
-                           static_slack_m=sit.settings.static_slack_m)
+    res = check(sit, t, pos)
     for i, c in enumerate(candidates):
         c.judged(res.clear[i], res.min_clearance_m[i], res.intrusion_m2s[i], res.conflicts[i])
     return candidates
@@ -121,8 +127,13 @@ def _nearest_threat(sit: Situation) -> np.ndarray | None:
     return centers[int(np.argmin(d))]
 
 
-def evade_candidates(sit: Situation, *, brake_only: bool = False) -> list[Candidate]:
-    """The best escape manoeuvre (and the brake, as ``hold``), judged in one vectorised pass."""
+def evade_candidates(sit: Situation, remaining_to_goal_s: float, *, brake_only: bool = False) -> list[Candidate]:
+    """The best escape manoeuvre (and the brake, as ``hold``), judged in one vectorised pass.
+
+    An escape ends in a hover away from the route: its time to the goal is the route's
+    remaining time plus the manoeuvre, the way back to where it left the route at cruise speed
+    and ``restart_s`` (stop, plan back, accelerate again).
+    """
     s = sit.settings
     lim = EscapeLimits(sit.cruise_m_s(), s.evade_accel_m_s2, s.evade_climb_m_s, s.evade_descent_m_s,
                        s.evade_vertical_accel_m_s2, s.evade_coasts_s)
@@ -132,11 +143,10 @@ def evade_candidates(sit: Situation, *, brake_only: bool = False) -> list[Candid
     pos, duration = lib.positions(t - sit.ref.t_s)
     if brake_only:
         pos, duration = pos[:1], duration[:1]
-    res = check_candidates(t, pos[:, :, :sit.dim], sit.tubes, sit.world,
-                           accel_bound_m_s2=sit.accel_bound_m_s2,
-                           static_slack_m=sit.settings.static_slack_m)
+    res = check(sit, t, pos[:, :, :sit.dim])
     end = pos[:, -1, :sit.dim]
-    to_goal = duration + np.linalg.norm(end - sit.goal_ned_m[None, :], axis=1) / sit.cruise_m_s() + s.restart_s
+    back_m = np.linalg.norm(end - sit.ref.pos_ned_m[None, :sit.dim], axis=1)
+    to_goal = remaining_to_goal_s + duration + back_m / sit.cruise_m_s() + s.restart_s
     bonus = s.clearance_weight_s_m * np.clip(res.min_clearance_m, 0.0, s.clearance_cap_m)
     picks = {0}                                             # the brake: the hold candidate
     if res.clear.any():
@@ -175,12 +185,13 @@ def retime_candidates(sit: Situation, active, active_start_t_s: float, remaining
                                      f"retime {'pause' if rate == 0 else f'x{rate:.1f}'} {wait:.1f} s")
             out.append(Candidate("retime", traj.label, traj, remaining_to_goal_s + traj.delay_s,
                                  ends_short=ends_short))
-    # one vectorised sampling of the base for every warp
-    t = sit.times(s.check_step_s)
+    # one vectorised sampling of the base for every warp, over the horizon plus the longest
+    # delay: a retime must not merely push a conflict beyond the horizon
+    delay = max(c.trajectory.delay_s for c in out)
+    t = sample_times(sit.ref.t_s, s.horizon_s + delay, s.check_step_s)
     taus = np.concatenate([c.trajectory.tau_at(t - sit.ref.t_s) for c in out])
     pos = np.atleast_2d(active.sample(taus)[0])[:, :sit.dim].reshape(len(out), t.size, sit.dim)
-    res = check_candidates(t, pos, sit.tubes, sit.world, accel_bound_m_s2=sit.accel_bound_m_s2,
-                           static_slack_m=sit.settings.static_slack_m)
+    res = check(sit, t, pos, static=False)                    # on the active, checked path
     for i, c in enumerate(out):
         c.judged(res.clear[i], res.min_clearance_m[i], res.intrusion_m2s[i], res.conflicts[i])
     return out

@@ -7,8 +7,9 @@ alternatives, and decides:
   is checked against the tubes over the horizon. Clear -> ``none`` (keep it). Otherwise the
   strategies of the mode produce candidates (``candidates.py``), all judged by the same
   space-time check and chosen by the same cost (``decision.choose``). In ``hybrid`` mode the
-  fast candidates (evade and hold, retime, switch: milliseconds) are always generated, and a
-  replan too when the conflict is further away than the replanning estimate. A candidate that
+  fast candidates (evade and hold, retime, switch: milliseconds) are always generated; when none
+  of them reaches the goal clear (retime, switch) and the conflict is further away than the
+  measured replanning time, a replan joins them. A candidate that
   still intrudes replaces the active reference only when it is strictly better, so the same
   answer is never decided twice.
 - ``resume`` (after an evasion or a hold has ended in a hover): plan back to the mission
@@ -36,13 +37,15 @@ from companion.threats.alternatives import Alternative, airspace_for, plan_alter
 from companion.threats.decision import Candidate, Decision, ReferenceState, choose
 from companion.threats.prediction import predict_tubes
 from companion.threats.settings import ThreatSettings
-from companion.threats.spacetime import Conflict, check_candidates
+from companion.threats.spacetime import Conflict
 from companion.world import World
 
 __all__ = ["ThreatManager", "ThreatManagerError"]
 
 log = logging.getLogger(__name__)
 
+#: First estimate of the fast candidates' wall-clock time (s), before any was measured.
+FAST_ESTIMATE_S = 0.03
 #: An intruding candidate replaces an intruding active reference only with this much more
 #: minimum clearance (m).
 BETTER_BY_M = 0.3
@@ -61,8 +64,8 @@ class _Active:
 
 
 @dataclass
-class _ReplanEstimate:
-    """Running estimate of the replanning time: mean and mean absolute deviation (s)."""
+class _RunningEstimate:
+    """Running estimate of a step's wall-clock time: mean and mean absolute deviation (s)."""
 
     mean_s: float
     dev_s: float = 0.0
@@ -101,6 +104,9 @@ class ThreatManager:
         Default: ``numpy.random.default_rng(settings.seed)``.
     mode : str
         One of ``MODES`` (``hybrid``, DESIGN section 7, is the default).
+    time_scale : float
+        Clock seconds per wall-clock second (a SITL speed-up): the decision's own measured
+        duration, in clock seconds, is how far ahead its candidates start.
     """
 
     MODES = ("hybrid", "hold", "retime", "switch", "replan", "evade")
@@ -108,7 +114,7 @@ class ThreatManager:
     def __init__(self, world: World, goal_ned_m, *, settings: ThreatSettings | None = None,
                  limits: TrajectoryLimits | None = None, kappa_max_1_m: float = 0.1,
                  gart_settings: GartSettings | None = None, rng: np.random.Generator | None = None,
-                 mode: str = "hybrid") -> None:
+                 mode: str = "hybrid", time_scale: float = 1.0) -> None:
         self.settings = settings or ThreatSettings()
         if not isinstance(self.settings, ThreatSettings):
             raise ThreatManagerError(f"settings: expected ThreatSettings, got {type(settings).__name__}")
@@ -116,7 +122,10 @@ class ThreatManager:
             raise ThreatManagerError(f"mode: expected one of {', '.join(self.MODES)}, got {mode!r}")
         if not (isinstance(kappa_max_1_m, (int, float)) and math.isfinite(kappa_max_1_m) and kappa_max_1_m > 0):
             raise ThreatManagerError(f"kappa_max_1_m: must be a finite number > 0, got {kappa_max_1_m!r}")
+        if not (isinstance(time_scale, (int, float)) and math.isfinite(time_scale) and time_scale > 0):
+            raise ThreatManagerError(f"time_scale: must be a finite number > 0, got {time_scale!r}")
         self.mode = mode
+        self.time_scale = float(time_scale)
         self.limits = limits or TrajectoryLimits()
         self.kappa_max_1_m = float(kappa_max_1_m)
         self.gart_settings = gart_settings or GartSettings(kappa_max_1_m=self.kappa_max_1_m)
@@ -124,7 +133,8 @@ class ThreatManager:
         self.set_leg(world, goal_ned_m)
         self._active: _Active | None = None
         self._alternatives: tuple[Alternative, ...] = ()
-        self._estimate = _ReplanEstimate(self.settings.replan_budget_s)
+        self._estimate = _RunningEstimate(self.settings.replan_budget_s)
+        self._fast = _RunningEstimate(FAST_ESTIMATE_S)
         self._counter = 0
 
     # ------------------------------------------------------------------ inputs
@@ -137,6 +147,7 @@ class ThreatManager:
             raise ThreatManagerError(f"goal_ned_m: expected {world.dim} finite numbers, got {goal_ned_m!r}")
         self.world = world
         self.goal_ned_m = goal
+        self._worlds: dict[str, World] = {}
 
     def set_active(self, trajectory, start_t_s: float, path_id: str = "active", ends_short: bool = False) -> None:
         """The reference being flown: ``trajectory`` with its t = 0 at clock time ``start_t_s``."""
@@ -224,6 +235,7 @@ class ThreatManager:
         return out
 
     def _situation(self, t_s: float, threats) -> gen.Situation | None:
+        """Everything the candidates need, from the reference state at ``t_s``."""
         ref = self.reference_state(t_s)
         if ref is None:
             return None
@@ -232,13 +244,27 @@ class ThreatManager:
                               uncertainty_m_s=s.uncertainty_m_s, uncertainty_max_m=s.uncertainty_max_m)
         lift = float(ref.pos_ned_m[2]) if self.world.dim == 2 and ref.pos_ned_m.shape[0] == 3 else None
         here = [ref.pos_ned_m[: self.world.dim]]
-        return gen.Situation(ref, tubes, self._airspace(here), airspace_for(self.world, here),
+        return gen.Situation(ref, tubes, self._airspace(here), self._slab(here),
                              self.goal_ned_m, s, self.limits, self.kappa_max_1_m, lift)
 
     def _airspace(self, points) -> World:
-        """The leg's world with room above and below for escapes and alternatives."""
+        """The leg's world with room above and below for escapes and alternatives (cached)."""
         s = self.settings
-        return airspace_for(self.world, points, s.vertical_room_m, -s.min_altitude_m)
+        return self._cached("airspace", points, lambda: airspace_for(self.world, points, s.vertical_room_m,
+                                                                     -s.min_altitude_m))
+
+    def _slab(self, points) -> World:
+        """The leg's planning world widened to contain ``points`` (cached)."""
+        return self._cached("slab", points, lambda: airspace_for(self.world, points))
+
+    def _cached(self, name: str, points, build) -> World:
+        """A widened world, rebuilt only when a point leaves the cached one's down bounds."""
+        world = self._worlds.get(name)
+        downs = np.atleast_2d(np.asarray(points, dtype=float))[:, -1]
+        if world is None or world.dim == 3 and not (
+                np.all(downs >= world.bounds_min[2]) and np.all(downs <= world.bounds_max[2])):
+            world = self._worlds[name] = build()
+        return world
 
     def check(self, threats, t_s: float) -> Conflict | None:
         """First conflict of the active reference with ``threats`` over the horizon (or None)."""
@@ -250,17 +276,26 @@ class ThreatManager:
     def _keep_at(self, sit: gen.Situation) -> Candidate:
         """The active reference as the ``keep`` candidate, judged."""
         a = self._active
-        remaining = max(a.start_t_s + a.trajectory.duration_s - sit.ref.t_s, 0.0)
-        keep = Candidate("none", "keep", a.trajectory, remaining, a.path_id, ends_short=a.ends_short)
+        keep = Candidate("none", "keep", a.trajectory, self._remaining_s(sit), a.path_id, ends_short=a.ends_short)
         t = sit.times(sit.settings.check_step_s)
         pos = gen.positions_at(a.trajectory, a.start_t_s, t, sit.dim)
-        res = check_candidates(t, pos, sit.tubes, sit.world, accel_bound_m_s2=sit.accel_bound_m_s2,
-                               static_slack_m=sit.settings.static_slack_m)
+        res = gen.check(sit, t, pos, static=False)          # the static world was checked before
         return keep.judged(res.clear[0], res.min_clearance_m[0], res.intrusion_m2s[0], res.conflicts[0])
 
     # ------------------------------------------------------------------ the decision
     def on_threats(self, threats, t_s: float) -> Decision:
         """Decide what to do about ``threats`` at clock time ``t_s`` (see the module docstring).
+
+        New candidates start from the active reference's state at the time the decision is
+        expected to take effect (``t_s`` plus the measured decision time, in clock seconds:
+        ``time_scale``), which the vehicle keeps flying until then: the setpoint never jumps.
+
+        Parameters
+        ----------
+        threats : sequence of Threat
+            Every threat known now, local frame, stamped on the same clock as ``t_s``.
+        t_s : float
+            Now: the active reference is checked from here.
 
         Returns
         -------
@@ -277,13 +312,28 @@ class ThreatManager:
             return Decision("none", "the active reference stays clear", decide_ms=_ms_since(t0),
                             resume=self._active.ends_short, min_clearance_m=keep.min_clearance_m)
         ttc = keep.conflict.time_to_conflict_s
-        cands = self._candidates(sit, ttc)
-        return self._finish(sit, keep, cands, f"{keep.conflict.threat_id} in {ttc:.1f} s", t0)
+        what = f"{keep.conflict.threat_id} in {ttc:.1f} s"
+        fast = self._situation(t_s + self._lead_s(self._fast), threats)
+        cands = self._fast_candidates(fast)
+        continues = any(c.clear and not c.ends_short for c in cands)     # a clear way to the goal
+        slow_lead = self._lead_s(self._fast) + self._lead_s(self._estimate)
+        stop_s = float(np.linalg.norm(fast.ref.vel_ned_m_s)) / self.settings.evade_accel_m_s2
+        urgent = ttc <= slow_lead + stop_s + self.settings.urgency_margin_s
+        if self.mode == "replan" or (self.mode == "hybrid" and not continues and not urgent):
+            # there is time to replan: plan from where the vehicle will be when it is done
+            slow = self._situation(t_s + slow_lead, threats)
+            cands = self._replan(slow)
+            if self.mode == "hybrid":
+                cands += gen.evade_candidates(slow, self._remaining_s(slow))
+            return self._finish(slow, keep, cands, what, t0)
+        self._fast.update(time.perf_counter() - t0, self.settings.estimate_gain)
+        return self._finish(fast, keep, cands, what, t0)
 
     def resume(self, threats, t_s: float) -> Decision:
-        """Plan back to the mission from the active reference (after an evasion or a hold)."""
+        """Plan back to the mission from the active reference (after an evasion or a hold),
+        from its state when the measured replanning time has passed."""
         t0 = time.perf_counter()
-        sit = self._situation(t_s, threats)
+        sit = self._situation(t_s + self._lead_s(self._estimate), threats)
         if sit is None:
             return Decision("none", "no active trajectory", decide_ms=_ms_since(t0))
         cands = []
@@ -303,23 +353,27 @@ class ThreatManager:
         return Decision("rejected", str(error))
 
     # ------------------------------------------------------------------ internals
-    def _candidates(self, sit: gen.Situation, ttc_s: float) -> list[Candidate]:
+    def _lead_s(self, estimate: "_RunningEstimate") -> float:
+        """Clock seconds that a decision step is expected to take (its high estimate)."""
+        return estimate.high_s * self.time_scale
+
+    def _remaining_s(self, sit: gen.Situation) -> float:
+        """Time left on the active reference from the situation's time (s)."""
+        a = self._active
+        return max(a.start_t_s + a.trajectory.duration_s - sit.ref.t_s, 0.0)
+
+    def _fast_candidates(self, sit: gen.Situation) -> list[Candidate]:
+        """The candidates of milliseconds: evade and hold, retime, switch (by mode)."""
         mode = self.mode
         a = self._active
+        remaining = self._remaining_s(sit)
         out: list[Candidate] = []
-        if mode in ("hybrid", "evade"):
-            out += gen.evade_candidates(sit)
-        if mode == "hold":
-            out += gen.evade_candidates(sit, brake_only=True)
+        if mode in ("hybrid", "evade", "hold"):
+            out += gen.evade_candidates(sit, remaining, brake_only=mode == "hold")
         if mode in ("hybrid", "retime"):
-            remaining = max(a.start_t_s + a.trajectory.duration_s - sit.ref.t_s, 0.0)
             out += gen.retime_candidates(sit, a.trajectory, a.start_t_s, remaining, a.ends_short)
         if mode in ("hybrid", "switch") and not any(c.clear and c.kind == "retime" for c in out):
             out += gen.switch_to_alternatives(sit, self._alternatives)[0]
-        fast_clear = any(c.clear for c in out)
-        if mode == "replan" or (mode == "hybrid" and (ttc_s > self._estimate.high_s + self.settings.replan_margin_s
-                                                      or (not fast_clear and ttc_s > self._estimate.high_s))):
-            out += self._replan(sit)
         return out
 
     def _replan(self, sit: gen.Situation) -> list[Candidate]:

@@ -167,7 +167,8 @@ class ThreatReactor:
     def _default_manager(self, leg) -> ThreatManager:
         s = self.settings
         return ThreatManager(leg.world, leg.goal_ned_m, settings=s.threats, limits=s.smoothing.limits,
-                             kappa_max_1_m=s.smoothing.kappa_max_1_m, gart_settings=s.gart, rng=self.rng)
+                             kappa_max_1_m=s.smoothing.kappa_max_1_m, gart_settings=s.gart, rng=self.rng,
+                             time_scale=s.link.time_scale)
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self, home_lla) -> None:

@@ -10,10 +10,10 @@ Why these defaults (paper section 3.3, Fig. 5 and Fig. 8; R-50-class helicopter 
 - ``inflation_m = 2``: half the rotor span (1.8 m) plus a few tenths for tracking error, added to
   every threat radius; ``uncertainty_m_s = 0.3`` grows a moving threat's tube with the time
   since its last update (capped at ``uncertainty_max_m = 4``).
-- ``replan_budget_s = 0.25`` (first estimate of the replanning time, then measured) and
-  ``replan_margin_s = 3``: a replan is attempted only when the conflict is further away than
-  the estimate plus the margin; closer conflicts are answered by the fast candidates (evade,
-  retime, switch), whose decisions take milliseconds.
+- ``replan_budget_s = 0.25``: first estimate of the replanning time (then measured); a replan
+  is attempted only when no fast candidate (evade, retime, switch: milliseconds) keeps going to
+  the goal clear and the conflict is further away than that estimate plus the time to stop
+  plus ``urgency_margin_s = 3``; closer conflicts are answered in milliseconds.
 - ``switch_range_m = 20``: the paper's switching range (Fig. 5).
 - escape manoeuvres at 2.5 m/s^2 horizontally and 1.5 m/s^2 vertically: the lateral limit of
   the smoothing settings, which the LQI tracks within a few decimetres.
@@ -112,8 +112,9 @@ class ThreatSettings:
         Threats farther than this from the vehicle (now) are ignored by the decision (m).
     replan_budget_s : float
         Initial estimate of the replanning time (s), refined by the measured times.
-    replan_margin_s : float
-        Replan only when the conflict is further away than the estimate plus this margin (s).
+    urgency_margin_s : float
+        A conflict closer than the replanning estimate + the time to stop + this margin (s) is
+        urgent: only the fast candidates are judged. Default 3.
     replan_iterations : int
         Rounds of replan -> space-time check -> the mover placed where it would be met.
     replan_turn_rad : float
@@ -150,7 +151,9 @@ class ThreatSettings:
     evade_coasts_s : tuple of float
         Coast durations of the escape manoeuvres (s).
     restart_s : float
-        Cost of coming back to the mission after a manoeuvre that ends in a hover (s).
+        Cost of coming back to the mission after a manoeuvre that ends in a hover (s): stop,
+        plan back, accelerate again. Default 10, so that a clear way that keeps going wins
+        unless it is much longer.
     clearance_weight_s_m, clearance_cap_m : float
         Clearance bonus of the cost (s per m, up to the cap in m).
     estimate_gain : float
@@ -168,7 +171,7 @@ class ThreatSettings:
     uncertainty_max_m: float = 4.0
     sensor_range_m: float = 1000.0
     replan_budget_s: float = 0.25
-    replan_margin_s: float = 3.0
+    urgency_margin_s: float = 3.0
     replan_iterations: int = 3
     replan_turn_rad: float = 1.0
     gart_budget_s: float = 0.08
@@ -189,7 +192,7 @@ class ThreatSettings:
     evade_climb_m_s: float = 2.5
     evade_descent_m_s: float = 1.5
     evade_coasts_s: tuple[float, ...] = (1.0, 2.5, 5.0)
-    restart_s: float = 4.0
+    restart_s: float = 10.0
     clearance_weight_s_m: float = 1.0
     clearance_cap_m: float = 3.0
     estimate_gain: float = 0.2
@@ -210,7 +213,7 @@ class ThreatSettings:
             "sensor_range_m", "switch_budget_s", "gart_budget_s", "entry_spacing_m",
             "gart_first_budget_s", "hold_decel_m_s2", "estimate_gain", "evade_speed_m_s",
             "evade_accel_m_s2", "evade_vertical_accel_m_s2", "evade_climb_m_s", "evade_descent_m_s"),
-            non_negative=("replan_margin_s", "inflation_m", "static_slack_m", "replan_turn_rad", "uncertainty_m_s",
+            non_negative=("inflation_m", "urgency_margin_s", "static_slack_m", "replan_turn_rad", "uncertainty_m_s",
                           "uncertainty_max_m", "restart_s", "vertical_room_m", "min_altitude_m", "clearance_weight_s_m", "clearance_cap_m"))
         if self.horizon_s < 10.0:
             raise ConfigError(f"threats.horizon_s: must be >= 10 s (DESIGN 7.2), got {self.horizon_s!r}")
