@@ -36,12 +36,15 @@ from pathlib import Path
 import numpy as np
 
 from companion.errors import CompanionError
+from companion.geo import LocalFrame
 from companion.threats.bus import ThreatBus
 from companion.threats.model import Threat
 
 log = logging.getLogger(__name__)
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+#: ``sim-vehicle``'s default home (lat, lon, alt AMSL): the origin of the demo's global threats.
+DEMO_HOME = (47.397742, 8.545594, 488.0)
 DEMO_MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
 
 
@@ -71,7 +74,12 @@ class Injection:
         ... moved this far to the right of the path (negative: left).
     radius_m : float
     speed_m_s : float
-        Moving threats head towards the path, perpendicular to it, at this speed.
+        Moving threats move at this speed ...
+    heading : str
+        ... ``across`` the path (towards it, perpendicular) or ``head_on`` (back along it,
+        towards the vehicle).
+    frame : str
+        ``local_ned`` or ``global`` (the threat is sent as lat/lon/alt about ``DEMO_HOME``).
     ttl_s : float
     raw_payload : bytes, optional
         Put these bytes instead of a placed threat (an invalid payload, to be rejected).
@@ -85,18 +93,21 @@ class Injection:
     radius_m: float
     lateral_m: float = 0.0
     speed_m_s: float = 0.0
+    heading: str = "across"
+    frame: str = "local_ned"
     ttl_s: float = 120.0
     raw_payload: bytes | None = None
 
 
-#: The demo's threats on ``exclusion_zones.plan``: a pop-up far ahead (replan), a threat moving
-#: at sqrt(2) m/s across the path close ahead (switch), an invalid payload (rejected).
-DEMO_POPUP = Injection("popup1", "popup", leg=1, after_s=1.0, ahead_s=8.0, radius_m=5.0)
-DEMO_MOVER = Injection("mover1", "moving", leg=3, after_s=3.0, ahead_s=4.0, radius_m=3.0,
-                       lateral_m=-4.0, speed_m_s=math.sqrt(2.0))
+#: The demo's threats on ``exclusion_zones.plan``: a threat coming head-on along leg 1 at
+#: 3 m/s (an evasion: no retiming or path helps against it), a pop-up on leg 3 once its M-GART
+#: alternatives are ready (a switch), an invalid payload (rejected).
+DEMO_HEAD_ON = Injection("mover1", "moving", leg=1, after_s=2.0, ahead_s=5.0, radius_m=3.0,
+                         speed_m_s=3.0, heading="head_on")
+DEMO_POPUP = Injection("popup1", "popup", leg=3, after_s=4.0, ahead_s=5.0, radius_m=5.0)
 DEMO_INVALID = Injection("broken", "popup", leg=3, after_s=3.0, ahead_s=0.0, radius_m=1.0,
                          raw_payload=b'{"v": 1, "id": "broken", "kind": "popup"}')
-DEMO_INJECTIONS = (DEMO_POPUP, DEMO_MOVER, DEMO_INVALID)
+DEMO_INJECTIONS = (DEMO_HEAD_ON, DEMO_POPUP, DEMO_INVALID)
 
 
 class FlightWatcher:
@@ -156,16 +167,21 @@ class FlightWatcher:
 
 
 def place(injection: Injection, watcher: FlightWatcher) -> Threat:
-    """The threat of ``injection`` on the current reference (local NED)."""
+    """The threat of ``injection`` on the current reference (local NED, or global)."""
     now = watcher.status["t_s"]
     pos, direction = watcher.reference_at(now + injection.ahead_s)
     right = np.array([-direction[1], direction[0], 0.0]) / max(np.linalg.norm(direction[:2]), 1e-9)
-    centre = pos + injection.lateral_m * right
+    meet = pos + injection.lateral_m * right
     velocity = np.zeros(3)
-    if injection.speed_m_s > 0:
-        towards_path = -np.sign(injection.lateral_m or 1.0) * right
-        velocity = injection.speed_m_s * towards_path
-    return Threat(injection.threat_id, injection.kind, "local_ned", tuple(map(float, centre)),
+    if injection.speed_m_s > 0 and injection.heading == "head_on":
+        velocity = -injection.speed_m_s * np.append(direction[:2], 0.0) / max(np.linalg.norm(direction[:2]), 1e-9)
+    elif injection.speed_m_s > 0:
+        velocity = -np.sign(injection.lateral_m or 1.0) * injection.speed_m_s * right
+    position = tuple(map(float, meet))
+    if injection.frame == "global":
+        lat, lon, alt = LocalFrame(*DEMO_HOME).to_lla(*meet)
+        position = (float(lat), float(lon), float(alt))
+    return Threat(injection.threat_id, injection.kind, injection.frame, position,
                   tuple(map(float, velocity)), injection.radius_m, injection.ttl_s)
 
 

@@ -4,14 +4,17 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "demo", help="fly the demo: SITL helicopter, companion and threats (make demo)",
         description="Start a sim-vehicle and a companion run on free ports, fly "
         "mission_files/exclusion_zones.plan and inject threats over zenoh from this process: "
-        "a pop-up far ahead (replan), a threat moving at sqrt(2) m/s met close by (switch) and "
-        "an invalid payload (rejected). Prints the decisions, latencies, minimum separation and "
+        "a threat coming head-on at 3 m/s (an evasion), a pop-up on the path once M-GART "
+        "alternatives are ready (a switch) and an invalid payload (rejected). Prints the "
+        "decisions, latencies, the longest way back to the mission, minimum separation and "
         "tracking error, and writes the report. A ground station on udp 14550 can watch.",
         epilog="Example: companion demo --out out/demo --speedup 4",
         formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -35,13 +38,33 @@ def run(args: argparse.Namespace) -> int:
     print(f"demo: flying mission_files/exclusion_zones.plan at {args.speedup:g}x; logs in {out}")
     summary = run_demo(out, speedup=args.speedup, gcs_out=None if args.no_gcs else "127.0.0.1:14550")
     for e in summary.pop("events"):
-        if e.get("event") in ("replan", "switch", "hold", "rejected"):
+        if e.get("event") not in (None, "none"):
             latency = e.get("latency_ms")
             print(f"  {e['event']:8s} {'' if latency is None else f'{latency:6.1f} ms'}  {e.get('reason')}")
+    record = load_record(out / "flight.jsonl")
+    ratios = detour_ratios(record)
+    if ratios:
+        print(f"longest way back to the mission: {max(ratios):.2f} x the direct distance "
+              f"({len(ratios)} new paths)")
     print(f"legs reached {summary['legs_reached']}/{summary['legs_planned']}, landed {summary['landed']}, "
           f"RMS tracking error {summary['rms_tracking_error_m']:.2f} m "
           f"(max {summary['max_tracking_error_m']:.2f} m), "
           f"minimum threat separation {summary['min_threat_separation_m']} m")
-    for path in render_report(load_record(out / "flight.jsonl"), out / "report"):
+    for path in render_report(record, out / "report"):
         print(f"  wrote {path}")
     return 0 if summary["outcome"] == "completed" else 1
+
+
+def detour_ratios(record) -> list[float]:
+    """Length of every new path that leads to a leg's goal (switch, replan) over the straight
+    distance from its start to that goal."""
+    out = []
+    for d in record.decisions:
+        path = d.get("path_ned_m")
+        if d.get("kind") not in ("switch", "replan") or not path or len(path) < 2:
+            continue
+        path = np.asarray(path, dtype=float)
+        direct = float(np.linalg.norm(path[-1] - path[0]))
+        if direct > 1.0:
+            out.append(float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))) / direct)
+    return out

@@ -139,7 +139,7 @@ def evade_candidates(sit: Situation, remaining_to_goal_s: float, *, brake_only: 
                        s.evade_vertical_accel_m_s2, s.evade_coasts_s)
     lib = escape_library(sit.ref.pos_ned_m, sit.ref.vel_ned_m_s, lim, vertical=sit.dim == 3,
                          away_from=_nearest_threat(sit))
-    t = sit.times(s.evade_step_s)
+    t = sample_times(sit.ref.t_s, s.evade_horizon_s, s.evade_step_s)
     pos, duration = lib.positions(t - sit.ref.t_s)
     if brake_only:
         pos, duration = pos[:1], duration[:1]

@@ -98,8 +98,10 @@ class ThreatSettings:
     check_step_s : float
         Sample step of the space-time check of planned references (s); the check is exact
         between samples up to ``a dt^2 / 8``. Default 0.1.
-    evade_step_s : float
-        Sample step for the escape library (s). Default 0.2.
+    evade_step_s, evade_horizon_s : float
+        Sample step and horizon of the escape library's check (s; >= 10 s, and every
+        manoeuvre has ended in a hover within it, after which the 10 Hz monitor watches the
+        hover). Defaults 0.25 and 12.
     inflation_m : float
         Added to every threat radius (m): rotor radius plus tracking error. Default 2.
     static_slack_m : float
@@ -126,9 +128,9 @@ class ThreatSettings:
     entry_spacing_m : float
         Entry nodes of an alternative are at most this far apart (m). Default 2.
     max_candidates : int
-        Most switch entries smoothed and checked per decision. Default 6.
+        Most switch entries smoothed and checked per decision. Default 4.
     switch_budget_s : float
-        Wall-clock time after which no further switch entry is tried (s). Default 0.03.
+        Wall-clock time after which no further switch entry is tried (s). Default 0.02.
     vertical_room_m : float
         Room above and below the leg's planning slab for escapes and alternatives (m).
         Default 8.
@@ -164,7 +166,8 @@ class ThreatSettings:
 
     horizon_s: float = 20.0
     check_step_s: float = 0.1
-    evade_step_s: float = 0.2
+    evade_step_s: float = 0.25
+    evade_horizon_s: float = 12.0
     inflation_m: float = 2.0
     static_slack_m: float = 1.0
     uncertainty_m_s: float = 0.3
@@ -178,8 +181,8 @@ class ThreatSettings:
     gart_first_budget_s: float = 0.15
     switch_range_m: float = 20.0
     entry_spacing_m: float = 2.0
-    max_candidates: int = 6
-    switch_budget_s: float = 0.03
+    max_candidates: int = 4
+    switch_budget_s: float = 0.02
     vertical_room_m: float = 8.0
     min_altitude_m: float = 5.0
     vertical_offsets_m: tuple[float, ...] = (6.0,)
@@ -215,8 +218,9 @@ class ThreatSettings:
             "evade_accel_m_s2", "evade_vertical_accel_m_s2", "evade_climb_m_s", "evade_descent_m_s"),
             non_negative=("inflation_m", "urgency_margin_s", "static_slack_m", "replan_turn_rad", "uncertainty_m_s",
                           "uncertainty_max_m", "restart_s", "vertical_room_m", "min_altitude_m", "clearance_weight_s_m", "clearance_cap_m"))
-        if self.horizon_s < 10.0:
-            raise ConfigError(f"threats.horizon_s: must be >= 10 s (DESIGN 7.2), got {self.horizon_s!r}")
+        for name in ("horizon_s", "evade_horizon_s"):
+            if getattr(self, name) < 10.0:
+                raise ConfigError(f"threats.{name}: must be >= 10 s (DESIGN 7.2), got {getattr(self, name)!r}")
         if self.replan_turn_rad >= math.pi:
             raise ConfigError(f"threats.replan_turn_rad: must be < pi, got {self.replan_turn_rad!r}")
         if self.estimate_gain > 1:
