@@ -249,16 +249,17 @@ class FlightProcesses:
 
 @contextlib.contextmanager
 def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
-                     gcs_out: str | None = None, extra_args=()):
+                     gcs_out: str | None = None, extra_args=(), sim_args=()):
     """Start ``sim-vehicle`` and ``companion run --mission`` on free loopback ports.
 
+    ``extra_args`` go to ``companion run``, ``sim_args`` to ``sim-vehicle`` (e.g. wind).
     Yields ``FlightProcesses``; both processes are stopped on exit (SIGTERM, then SIGKILL).
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     mav_port, vehicle_port, zenoh_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
     outs = ["--out", f"127.0.0.1:{mav_port}"] + (["--out", gcs_out] if gcs_out else [])
-    sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(speedup)],
+    sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(speedup), *sim_args],
                 out_dir / "sim_vehicle.log")
     record, log_path = out_dir / "flight.jsonl", out_dir / "companion.log"
     companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",

@@ -354,8 +354,8 @@ class ThreatManager:
 
     # ------------------------------------------------------------------ internals
     def _lead_s(self, estimate: "_RunningEstimate") -> float:
-        """Clock seconds that a decision step is expected to take (its high estimate)."""
-        return estimate.high_s * self.time_scale
+        """Clock seconds that a decision step is expected to take (mean + 1 deviation)."""
+        return (estimate.mean_s + estimate.dev_s) * self.time_scale
 
     def _remaining_s(self, sit: gen.Situation) -> float:
         """Time left on the active reference from the situation's time (s)."""

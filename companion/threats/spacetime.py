@@ -109,13 +109,34 @@ def _tube_clearance(t_s, pos, tube, dim: int) -> np.ndarray:
     return dist - np.maximum(radius[:-1], radius[1:])[None, :]
 
 
+#: Static clearances beyond this (m) are reported as a lower bound only (from bounding boxes).
+STATIC_REACH_M = 6.0
+
+
+def _obstacle_clearance(flat: np.ndarray, world) -> np.ndarray:
+    """Clearance (K,) from the inflated obstacles: exact within ``STATIC_REACH_M`` of an
+    obstacle's bounding box, a lower bound (the box distance) farther away."""
+    dim = world.dim
+    margin = world.margin_m
+    out = np.full(flat.shape[0], np.inf)
+    for ob in world.obstacles:
+        lo, hi = (np.asarray(v, dtype=float)[:dim] for v in ob.aabb(dim))
+        gap = np.maximum(np.maximum(lo[None, :] - flat, flat - hi[None, :]), 0.0)
+        box = np.sqrt(np.einsum("ij,ij->i", gap, gap)) - margin
+        near = box < STATIC_REACH_M
+        if near.any():
+            box[near] = ob.sdf_batch(flat[near]) - margin
+        out = np.minimum(out, box)
+    return out
+
+
 def _static_clearance(pos, world) -> np.ndarray:
     """Lower bound (C, K-1) of the static world's clearance on every chord."""
     c_n, k_n, d = pos.shape
     flat = pos.reshape(-1, d)
     point = np.minimum(flat - world.bounds_min[None, :], world.bounds_max[None, :] - flat).min(axis=1)
     if world.obstacles:
-        point = np.minimum(point, world.clearance_m(flat))
+        point = np.minimum(point, _obstacle_clearance(flat, world))
     point = point.reshape(c_n, k_n)
     chord = np.linalg.norm(np.diff(pos, axis=1), axis=2)
     return 0.5 * (point[:, :-1] + point[:, 1:] - chord)

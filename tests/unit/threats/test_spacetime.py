@@ -10,7 +10,7 @@ from hypothesis import given, settings, strategies as st
 from companion.threats.model import Threat
 from companion.threats.prediction import predict_tubes
 from companion.threats.spacetime import STATIC_ID, check_candidates, sample_times, segment_min_distance
-from companion.world import Disc, World
+from companion.world import Disc, Sphere, World
 
 coord = st.floats(-50.0, 50.0, allow_nan=False)
 speed = st.floats(-8.0, 8.0, allow_nan=False)
@@ -98,3 +98,22 @@ def test_expired_tube_is_gone():
     hover_later = np.zeros((t.size, 3))
     res = check_candidates(t[t > 3.0], hover_later[t > 3.0], [tube])
     assert res.clear[0]
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000))
+def test_static_clearance_is_exact_near_obstacles_and_a_lower_bound_far(seed):
+    from companion.threats.spacetime import STATIC_REACH_M, _obstacle_clearance
+    from companion.world import Cylinder, Prism
+
+    rng = np.random.default_rng(seed)
+    obstacles = [Prism(((0.0, 0.0), (10.0, 0.0), (5.0, 8.0)), -30.0, 0.0),
+                 Cylinder((30.0, 5.0), float(rng.uniform(1.0, 5.0)), -25.0, -5.0),
+                 Sphere((10.0, 30.0, -15.0), 4.0)]
+    world = World(obstacles, [-20.0, -20.0, -40.0], [60.0, 60.0, 0.0], margin_m=float(rng.uniform(0.0, 3.0)))
+    pts = rng.uniform([-20.0, -20.0, -40.0], [60.0, 60.0, 0.0], size=(500, 3))
+    exact = world.clearance_m(pts)
+    fast = _obstacle_clearance(pts, world)
+    assert np.all(fast <= exact + 1e-9)
+    near = fast < STATIC_REACH_M - world.margin_m
+    np.testing.assert_allclose(fast[near], exact[near], atol=1e-9)
