@@ -27,7 +27,7 @@ import numpy as np
 from companion.planning import gart
 from companion.smoothing import TrajectoryLimits
 from companion.threats.alternatives import airspace_for, switch_candidates
-from companion.threats.decision import Candidate, ReferenceState
+from companion.threats.decision import Candidate, ReferenceState, intruding_key
 from companion.threats.evasion import EscapeLimits, escape_library
 from companion.threats.join import HOVER_SPEED_M_S, join_trajectory, lead_length_m, turn_rad
 from companion.threats.retime import RetimedTrajectory, ramp_time_s
@@ -100,20 +100,26 @@ def positions_at(trajectory, start_t_s: float, t_s: np.ndarray, dim: int) -> np.
 
 def check(sit: Situation, t_s: np.ndarray, pos: np.ndarray, *, static: bool = True):
     """``check_candidates`` with the situation's tubes, airspace and settings; ``static=False``
-    for candidates on an already checked path (keep, retime): the static world never changes."""
+    for candidates on paths whose static clearance is known (keep, retime, planned joins)."""
     return check_candidates(t_s, pos, sit.tubes, sit.world if static else None,
                             accel_bound_m_s2=sit.accel_bound_m_s2, static_slack_m=sit.settings.static_slack_m)
 
 
-def judge(sit: Situation, candidates: list[Candidate], step_s: float | None = None) -> list[Candidate]:
-    """Run the space-time check on every candidate (t = 0 at the situation's time)."""
+def judge(sit: Situation, candidates: list[Candidate]) -> list[Candidate]:
+    """Check planned candidates (t = 0 at the situation's time) against the tubes.
+
+    Planned candidates (switch and replan joins) are built from segments checked free and G2
+    corners repaired in the world (``join.py``), like the mission's legs: the static world is
+    honoured by construction, and re-checking it with the chord bound would only mistake a
+    path that grazes the safety margin for a conflict.
+    """
     if not candidates:
         return candidates
-    t = sit.times(step_s or sit.settings.check_step_s)
+    t = sit.times(sit.settings.check_step_s)
     pos = np.stack([positions_at(c.trajectory, sit.ref.t_s, t, sit.dim) for c in candidates])
-    res = check(sit, t, pos)
+    res = check(sit, t, pos, static=False)
     for i, c in enumerate(candidates):
-        c.judged(res.clear[i], res.min_clearance_m[i], res.intrusion_m2s[i], res.conflicts[i])
+        c.judged(res, i)
     return candidates
 
 
@@ -152,15 +158,14 @@ def evade_candidates(sit: Situation, remaining_to_goal_s: float, *, brake_only: 
     if res.clear.any():
         picks.add(int(np.argmin(np.where(res.clear, to_goal - bonus, np.inf))))
     else:
-        picks.add(min(range(len(duration)), key=lambda i: (-round(float(res.min_clearance_m[i]), 1),
-                                                            float(res.intrusion_m2s[i]))))
+        picks.add(min(range(len(duration)), key=lambda i: intruding_key(
+            float(res.static_clearance_m[i]), float(res.min_clearance_m[i]), float(res.intrusion_m2s[i]))))
     out = []
     for i in sorted(picks):
         kind = "hold" if i == 0 else "evade"
         cand = Candidate(kind, "hold (brake to a hover)" if i == 0 else f"evade {lib.labels[i]}",
                          lib.manoeuvre(i, sit.ref.yaw_rad), float(to_goal[i]), ends_short=True)
-        out.append(cand.judged(res.clear[i], res.min_clearance_m[i], res.intrusion_m2s[i],
-                               res.conflicts[i]))
+        out.append(cand.judged(res, i))
     for c in out:
         c.path_ned_m = c.trajectory.sample(np.linspace(0.0, c.trajectory.duration_s, 12))[0][:, :sit.dim]
     return out
@@ -193,7 +198,7 @@ def retime_candidates(sit: Situation, active, active_start_t_s: float, remaining
     pos = np.atleast_2d(active.sample(taus)[0])[:, :sit.dim].reshape(len(out), t.size, sit.dim)
     res = check(sit, t, pos, static=False)                    # on the active, checked path
     for i, c in enumerate(out):
-        c.judged(res.clear[i], res.min_clearance_m[i], res.intrusion_m2s[i], res.conflicts[i])
+        c.judged(res, i)
     return out
 
 

@@ -8,7 +8,9 @@ the same space-time check (``spacetime.check_candidates``) and the same cost:
    deviation in one unit: an evasion that ends in a hover pays the way back at cruise speed
    plus ``restart_s``) minus a bonus for clearance, ``clearance_weight_s_m`` per metre up to
    ``clearance_cap_m`` (so a comfortable margin wins over a marginal one of similar cost);
-3. among intruding ones the largest minimum clearance, then the least intrusion integral.
+3. among intruding ones, those that keep off the static obstacles (a hard constraint; a
+   threat's inflation is a margin), then the largest minimum clearance, then the least
+   intrusion integral.
 
 Pure: no I/O.
 """
@@ -22,7 +24,7 @@ import numpy as np
 
 from companion.threats.spacetime import Conflict
 
-__all__ = ["ReferenceState", "Candidate", "Decision", "choose", "KINDS"]
+__all__ = ["ReferenceState", "Candidate", "Decision", "choose", "intruding_key", "KINDS"]
 
 #: Decision kinds: ``none`` keeps the active reference.
 KINDS = ("none", "retime", "switch", "replan", "evade", "hold", "rejected")
@@ -64,7 +66,7 @@ class Candidate:
         Estimated time from now to the leg's goal along this candidate (s).
     path_id : str
     path_ned_m : ndarray (M, d) or None
-    clear, min_clearance_m, intrusion_m2s, conflict
+    clear, min_clearance_m, intrusion_m2s, conflict, static_clearance_m
         Filled by the check.
     ends_short : bool
         The candidate stops short of the goal (a plan back is needed after it).
@@ -81,10 +83,13 @@ class Candidate:
     intrusion_m2s: float = math.inf
     conflict: Conflict | None = None
     ends_short: bool = False
+    static_clearance_m: float = math.inf
 
-    def judged(self, clear: bool, min_clearance_m: float, intrusion_m2s: float, conflict) -> "Candidate":
-        self.clear, self.min_clearance_m = bool(clear), float(min_clearance_m)
-        self.intrusion_m2s, self.conflict = float(intrusion_m2s), conflict
+    def judged(self, check, i: int) -> "Candidate":
+        """Take candidate ``i``'s result from a ``BatchCheck``."""
+        self.clear, self.min_clearance_m = bool(check.clear[i]), float(check.min_clearance_m[i])
+        self.intrusion_m2s, self.conflict = float(check.intrusion_m2s[i]), check.conflicts[i]
+        self.static_clearance_m = float(check.static_clearance_m[i])
         return self
 
     def cost_s(self, clearance_weight_s_m: float, clearance_cap_m: float) -> float:
@@ -94,10 +99,16 @@ class Candidate:
 
 
 def rank_key(c: Candidate, clearance_weight_s_m: float, clearance_cap_m: float) -> tuple:
-    """Sort key: clear first by cost; intruding ones by clearance (0.1 m steps), then intrusion."""
+    """Sort key: clear first by cost; then those that keep off the static obstacles (hard), by
+    clearance (0.1 m steps), then by intrusion."""
     if c.clear:
-        return (0, c.cost_s(clearance_weight_s_m, clearance_cap_m), 0.0)
-    return (1, -round(c.min_clearance_m, 1), c.intrusion_m2s)
+        return (0, False, c.cost_s(clearance_weight_s_m, clearance_cap_m), 0.0)
+    return intruding_key(c.static_clearance_m, c.min_clearance_m, c.intrusion_m2s)
+
+
+def intruding_key(static_clearance_m: float, min_clearance_m: float, intrusion_m2s: float) -> tuple:
+    """Sort key of a candidate that is not clear (see ``rank_key``)."""
+    return (1, static_clearance_m < 0.0, -round(min_clearance_m, 1), intrusion_m2s)
 
 
 def choose(candidates, clearance_weight_s_m: float, clearance_cap_m: float) -> Candidate | None:

@@ -46,9 +46,14 @@ log = logging.getLogger(__name__)
 
 #: First estimate of the fast candidates' wall-clock time (s), before any was measured.
 FAST_ESTIMATE_S = 0.03
+#: After a replan that found nothing clear, no replan for this long (clock s): the same
+#: failing answer is not sought again every monitor tick.
+REPLAN_BACKOFF_S = 1.0
+#: Longest candidate accepted (s): a longer one is a numerical failure, logged and dropped.
+MAX_DURATION_S = 3600.0
 #: An intruding candidate replaces an intruding active reference only with this much more
 #: minimum clearance (m).
-BETTER_BY_M = 0.3
+BETTER_BY_M = 1.0
 
 
 class ThreatManagerError(CompanionError, ValueError):
@@ -136,6 +141,7 @@ class ThreatManager:
         self._estimate = _RunningEstimate(self.settings.replan_budget_s)
         self._fast = _RunningEstimate(FAST_ESTIMATE_S)
         self._counter = 0
+        self._replan_blocked_until_s = -math.inf
 
     # ------------------------------------------------------------------ inputs
     def set_leg(self, world: World, goal_ned_m) -> None:
@@ -280,7 +286,7 @@ class ThreatManager:
         t = sit.times(sit.settings.check_step_s)
         pos = gen.positions_at(a.trajectory, a.start_t_s, t, sit.dim)
         res = gen.check(sit, t, pos, static=False)          # the static world was checked before
-        return keep.judged(res.clear[0], res.min_clearance_m[0], res.intrusion_m2s[0], res.conflicts[0])
+        return keep.judged(res, 0)
 
     # ------------------------------------------------------------------ the decision
     def on_threats(self, threats, t_s: float) -> Decision:
@@ -341,7 +347,7 @@ class ThreatManager:
             cands += gen.switch_to_alternatives(sit, self._alternatives)[0]
         if self.mode != "switch":
             cands += self._replan(sit)
-        best = choose([c for c in cands if c.clear], self.settings.clearance_weight_s_m,
+        best = choose([c for c in _sane(cands) if c.clear], self.settings.clearance_weight_s_m,
                       self.settings.clearance_cap_m)
         if best is None:
             return Decision("none", "no clear way back to the mission yet", decide_ms=_ms_since(t0),
@@ -377,17 +383,22 @@ class ThreatManager:
         return out
 
     def _replan(self, sit: gen.Situation) -> list[Candidate]:
+        """Replan candidates, unless a replan found nothing clear less than
+        ``REPLAN_BACKOFF_S`` ago."""
+        if sit.ref.t_s < self._replan_blocked_until_s:
+            return []
         t0 = time.perf_counter()
         self._counter += 1
-        try:
-            return gen.replan_candidates(sit, rng=self.rng, gart_settings=self.gart_settings,
-                                         path_id=f"replan-{self._counter}")
-        finally:
-            self._estimate.update(time.perf_counter() - t0, self.settings.estimate_gain)
+        out = gen.replan_candidates(sit, rng=self.rng, gart_settings=self.gart_settings,
+                                    path_id=f"replan-{self._counter}")
+        self._estimate.update(time.perf_counter() - t0, self.settings.estimate_gain)
+        if not any(c.clear for c in out):
+            self._replan_blocked_until_s = sit.ref.t_s + REPLAN_BACKOFF_S * self.time_scale
+        return out
 
     def _finish(self, sit, keep: Candidate, cands: list[Candidate], what: str, t0: float) -> Decision:
         s = self.settings
-        best = choose(cands, s.clearance_weight_s_m, s.clearance_cap_m)
+        best = choose(_sane(cands), s.clearance_weight_s_m, s.clearance_cap_m)
         if best is None or (not best.clear and best.min_clearance_m < keep.min_clearance_m + BETTER_BY_M):
             return Decision("none", f"{what}: no candidate better than the active reference",
                             decide_ms=_ms_since(t0), resume=self._active.ends_short, conflict=keep.conflict,
@@ -407,6 +418,17 @@ class ThreatManager:
         log.info("threat decision %s (%s) path %s: decide %.1f ms", decision.kind, decision.reason,
                  path_id, decision.decide_ms)
         return decision
+
+
+def _sane(cands) -> list[Candidate]:
+    """Candidates with a finite, plausible duration (others are logged and dropped)."""
+    out = []
+    for c in cands:
+        if math.isfinite(c.trajectory.duration_s) and c.trajectory.duration_s <= MAX_DURATION_S:
+            out.append(c)
+        else:
+            log.warning("candidate %s dropped: duration %r s", c.label, c.trajectory.duration_s)
+    return out
 
 
 def _counts(cands) -> dict:

@@ -105,8 +105,9 @@ class ThreatSettings:
     inflation_m : float
         Added to every threat radius (m): rotor radius plus tracking error. Default 2.
     static_slack_m : float
-        How far into the static world's safety margin a candidate may go (m, capped at the
-        margin): planned references keep all of it; an escape may use this much. Default 1.
+        How far into the static world's safety margin a candidate may go (m, capped at half
+        the margin): planned references keep all of it; an escape may use this much.
+        Default 0.5.
     uncertainty_m_s, uncertainty_max_m : float
         Growth of a moving threat's radius per second since its last update (m/s), and its
         cap (m). Defaults 0.3 and 4.
@@ -169,7 +170,7 @@ class ThreatSettings:
     evade_step_s: float = 0.25
     evade_horizon_s: float = 12.0
     inflation_m: float = 2.0
-    static_slack_m: float = 1.0
+    static_slack_m: float = 0.5
     uncertainty_m_s: float = 0.3
     uncertainty_max_m: float = 4.0
     sensor_range_m: float = 1000.0
@@ -189,7 +190,7 @@ class ThreatSettings:
     retime_rates: tuple[float, ...] = (0.0, 0.4)
     retime_waits_s: tuple[float, ...] = (0.0, 1.5, 3.0, 5.0, 8.0, 12.0)
     hold_decel_m_s2: float = 2.5
-    evade_speed_m_s: float = 5.0
+    evade_speed_m_s: float = 6.0
     evade_accel_m_s2: float = 2.5
     evade_vertical_accel_m_s2: float = 1.5
     evade_climb_m_s: float = 2.5

@@ -12,7 +12,7 @@ closest approach intrudes, whatever the step (the step only costs conservatism).
 world (obstacles inflated by their margin, and the bounds) is a 1-Lipschitz distance field:
 over a chord of length L between samples of clearance c_a and c_b it stays above
 ``(c_a + c_b - L) / 2``; candidates may use ``static_slack_m`` of the safety margin (never more
-than the margin itself).
+than half of it).
 
 Clearance is positive outside every inflated tube and obstacle. Candidates that intrude are
 ranked by the intrusion integral ``sum(max(0, -c)^2 dt)`` (deep intrusions weigh most), which
@@ -69,21 +69,16 @@ class BatchCheck:
     intrusion_m2s : ndarray, shape (C,)
         ``sum(max(0, -clearance)^2 * dt)`` over the intervals (0 when clear).
     conflicts : list of (Conflict or None), length C
+    static_clearance_m : ndarray, shape (C,)
+        Smallest clearance from the static world alone (inf when not checked): negative means
+        the candidate goes deeper into the safety margin than allowed.
     """
 
     clear: np.ndarray
     min_clearance_m: np.ndarray
     intrusion_m2s: np.ndarray
     conflicts: list
-
-    def first(self) -> "BatchCheck":
-        """The result of candidate 0 as a batch of one (for single checks)."""
-        return BatchCheck(self.clear[:1], self.min_clearance_m[:1], self.intrusion_m2s[:1],
-                          self.conflicts[:1])
-
-    def rank_key(self, i: int) -> tuple:
-        """Sort key of candidate ``i``: clear first, then the least intrusion, then clearance."""
-        return (not bool(self.clear[i]), float(self.intrusion_m2s[i]), -float(self.min_clearance_m[i]))
+    static_clearance_m: np.ndarray
 
 
 def sample_times(t_from_s: float, horizon_s: float, step_s: float) -> np.ndarray:
@@ -159,8 +154,8 @@ def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: flo
     accel_bound_m_s2 : float
         Upper bound of the candidates' acceleration, for the chord error ``a dt^2 / 8``.
     static_slack_m : float
-        How far into the world's safety margin a candidate may go (m; capped at the margin, so
-        never into an obstacle itself). Planned references keep the whole margin, which the
+        How far into the world's safety margin a candidate may go (m; capped at half the
+        margin, so never into an obstacle itself). Planned references keep the whole margin, which the
         chord bound can otherwise mistake for a conflict when a path grazes it.
 
     Returns
@@ -182,8 +177,10 @@ def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: flo
         closer = c < clearance
         clearance = np.where(closer, c, clearance)
         source = np.where(closer, i, source)
+    static = np.full(c_n, np.inf)
     if world is not None:
-        c = _static_clearance(pos, world) + min(static_slack_m, world.margin_m)
+        c = _static_clearance(pos, world) + min(static_slack_m, 0.5 * world.margin_m)
+        static = c.min(axis=1) - chord_err.max()
         closer = c < clearance
         clearance = np.where(closer, c, clearance)
         source = np.where(closer, len(tubes), source)
@@ -199,4 +196,4 @@ def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: flo
         k = int(np.argmax(bad[c]))
         conflicts.append(Conflict(sources[source[c, k]], float(t[k]), float(t[k] - t[0]),
                                   float(clearance[c, k])))
-    return BatchCheck(clear, clearance.min(axis=1), intrusion, conflicts)
+    return BatchCheck(clear, clearance.min(axis=1), intrusion, conflicts, static)
