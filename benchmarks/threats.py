@@ -371,7 +371,8 @@ def summarize_group(rows: list[dict], strategy: str) -> dict:
     res = [r[strategy] for r in rows]
     avoid = [r[strategy] for r in rows if r["avoidable"]]
     extra = [x["extra_length_m"] for x in res if x["extra_length_m"] is not None]
-    latency = [d["decide_ms"] for x in res for d in x["decisions"] if d["kind"] != "none"]
+    latency = [d["decide_ms"] for x in res for d in x["decisions"] if d["kind"] != "none" and d["via"] != "resume"]
+    back = [d["decide_ms"] for x in res for d in x["decisions"] if d["kind"] != "none" and d["via"] == "resume"]
     kinds: dict[str, int] = {}
     for x in res:
         for d in x["decisions"]:
@@ -391,6 +392,7 @@ def summarize_group(rows: list[dict], strategy: str) -> dict:
             "extra_length_m": {"median": percentile(extra, 50), "p95": percentile(extra, 95)},
             "latency_ms": {"n": len(latency), "p50": percentile(latency, 50), "p99": percentile(latency, 99),
                            "max": max(latency) if latency else None},
+            "back_latency_ms": {"n": len(back), "p50": percentile(back, 50), "p99": percentile(back, 99)},
             "decisions": kinds, "wall_s_mean": float(np.mean([x["wall_s"] for x in res])) if res else None}
 
 
@@ -527,14 +529,16 @@ def encounter_tables(summary: dict, strategies, n: int, wall_s: float, workers: 
              f"unavoidable by the oracle); strategies: {', '.join(strategies)}; "
              f"{wall_s:.0f} s wall time on {workers} worker processes.", "",
              "| strategy | success (avoidable) | success (all) | completion | extra length median (m) | "
-             "decision latency p50 / p99 (ms) | intrusions / static collisions | decisions |",
-             "|---|---|---|---|---|---|---|---|"]
+             "avoidance decision p50 / p99 (ms) | way back p50 / p99 (ms) | intrusions / static collisions "
+             "| decisions |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for s in strategies:
         x = total["strategies"][s]
         kinds = ", ".join(f"{k} {v}" for k, v in sorted(x["decisions"].items(), key=lambda kv: -kv[1]))
         lines.append(f"| {s} | {pct(x['success_avoidable'])} | {pct(x['success_all'])} | {pct(x['completion'])} | "
                      f"{fmt(x['extra_length_m']['median'])} | {fmt(x['latency_ms']['p50'])} / "
-                     f"{fmt(x['latency_ms']['p99'])} | {x['threat_intrusions']} / {x['static_collisions']} | "
+                     f"{fmt(x['latency_ms']['p99'])} | {fmt(x['back_latency_ms']['p50'])} / "
+                     f"{fmt(x['back_latency_ms']['p99'])} | {x['threat_intrusions']} / {x['static_collisions']} | "
                      f"{kinds} |")
     head = "| category | n | unavoidable | " + " | ".join(strategies) + " |"
     sep = "|---|---|---|" + "---|" * len(strategies)
@@ -544,7 +548,7 @@ def encounter_tables(summary: dict, strategies, n: int, wall_s: float, workers: 
         cells = [f"{pct(g['strategies'][s]['success_avoidable'])} / {pct(g['strategies'][s]['success_all'])} / "
                  f"{pct(g['strategies'][s]['completion'])}" for s in strategies]
         lines.append(f"| {k} | {g['n']} | {g['unavoidable']} | " + " | ".join(cells) + " |")
-    lines += ["", "Extra length median (m) / decision latency p50 / p99 (ms), by category:", "", head, sep]
+    lines += ["", "Extra length median (m) / avoidance decision p50 / p99 (ms), by category:", "", head, sep]
     for k in rows:
         g = summary[k]
         cells = []

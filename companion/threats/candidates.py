@@ -27,7 +27,7 @@ import numpy as np
 from companion.planning import gart
 from companion.smoothing import TrajectoryLimits
 from companion.threats.alternatives import airspace_for, switch_candidates
-from companion.threats.decision import Candidate, ReferenceState, intruding_key
+from companion.threats.decision import Candidate, ReferenceState, rank_key
 from companion.threats.evasion import EscapeLimits, escape_library
 from companion.threats.join import HOVER_SPEED_M_S, join_trajectory, lead_length_m, turn_rad
 from companion.threats.retime import RetimedTrajectory, ramp_time_s
@@ -40,6 +40,8 @@ __all__ = ["Situation", "check", "judge", "evade_candidates", "retime_candidates
 
 log = logging.getLogger(__name__)
 
+#: Escapes may fly this much faster than the planned trajectories' speed limit.
+ESCAPE_SPEED_FACTOR = 1.2
 #: Half-length (s) of the stretch of a mover's track placed where a replan would meet it.
 MEETING_HALF_S = 1.5
 
@@ -89,7 +91,12 @@ class Situation:
                    s.hold_decel_m_s2) * 1.5
 
     def cruise_m_s(self) -> float:
-        return min(self.limits.speed_m_s, self.settings.evade_speed_m_s)
+        """Speed of the way back to the route (the planned trajectories' limit)."""
+        return self.limits.speed_m_s
+
+    def escape_speed_m_s(self) -> float:
+        """Escape speed: ``evade_speed_m_s``, at most 1.2 times the planned speed limit."""
+        return min(self.settings.evade_speed_m_s, ESCAPE_SPEED_FACTOR * self.limits.speed_m_s)
 
 
 def positions_at(trajectory, start_t_s: float, t_s: np.ndarray, dim: int) -> np.ndarray:
@@ -133,41 +140,48 @@ def _nearest_threat(sit: Situation) -> np.ndarray | None:
     return centers[int(np.argmin(d))]
 
 
+def _judge_library(sit: Situation, lib, remaining_to_goal_s: float) -> list[tuple]:
+    """Every manoeuvre of ``lib`` judged (one vectorised check): (candidate without its
+    trajectory yet, library, index) triples."""
+    s = sit.settings
+    t = sample_times(sit.ref.t_s, s.evade_horizon_s, s.evade_step_s)
+    pos, duration = lib.positions(t - sit.ref.t_s)
+    res = check(sit, t, pos[:, :, :sit.dim])
+    back_m = np.linalg.norm(pos[:, -1, :sit.dim] - sit.ref.pos_ned_m[None, :sit.dim], axis=1)
+    to_goal = remaining_to_goal_s + duration + back_m / sit.cruise_m_s() + s.restart_s
+    return [(Candidate("evade", f"evade {lib.labels[i]}", None, float(to_goal[i]), ends_short=True).judged(res, i),
+             lib, i) for i in range(len(lib))]
+
+
 def evade_candidates(sit: Situation, remaining_to_goal_s: float, *, brake_only: bool = False) -> list[Candidate]:
-    """The best escape manoeuvre (and the brake, as ``hold``), judged in one vectorised pass.
+    """The brake (as ``hold``) and the best escape manoeuvre, from the library judged in one
+    vectorised pass; when none is clear, a local search around the four least bad.
 
     An escape ends in a hover away from the route: its time to the goal is the route's
     remaining time plus the manoeuvre, the way back to where it left the route at cruise speed
     and ``restart_s`` (stop, plan back, accelerate again).
     """
     s = sit.settings
-    lim = EscapeLimits(sit.cruise_m_s(), s.evade_accel_m_s2, s.evade_climb_m_s, s.evade_descent_m_s,
+    lim = EscapeLimits(sit.escape_speed_m_s(), s.evade_accel_m_s2, s.evade_climb_m_s, s.evade_descent_m_s,
                        s.evade_vertical_accel_m_s2, s.evade_coasts_s)
     lib = escape_library(sit.ref.pos_ned_m, sit.ref.vel_ned_m_s, lim, vertical=sit.dim == 3,
                          away_from=_nearest_threat(sit))
-    t = sample_times(sit.ref.t_s, s.evade_horizon_s, s.evade_step_s)
-    pos, duration = lib.positions(t - sit.ref.t_s)
-    if brake_only:
-        pos, duration = pos[:1], duration[:1]
-    res = check(sit, t, pos[:, :, :sit.dim])
-    end = pos[:, -1, :sit.dim]
-    back_m = np.linalg.norm(end - sit.ref.pos_ned_m[None, :sit.dim], axis=1)
-    to_goal = remaining_to_goal_s + duration + back_m / sit.cruise_m_s() + s.restart_s
-    bonus = s.clearance_weight_s_m * np.clip(res.min_clearance_m, 0.0, s.clearance_cap_m)
-    picks = {0}                                             # the brake: the hold candidate
-    if res.clear.any():
-        picks.add(int(np.argmin(np.where(res.clear, to_goal - bonus, np.inf))))
-    else:
-        picks.add(min(range(len(duration)), key=lambda i: intruding_key(
-            float(res.static_clearance_m[i]), float(res.min_clearance_m[i]), float(res.intrusion_m2s[i]))))
+    judged = _judge_library(sit, lib, remaining_to_goal_s)
+    brake = judged[0]
+    brake[0].kind, brake[0].label = "hold", "hold (brake to a hover)"
+    rank = lambda entry: rank_key(entry[0], s.clearance_weight_s_m, s.clearance_cap_m)   # noqa: E731
+    picks = [brake]
+    if not brake_only:
+        escapes = sorted(judged[1:], key=rank)
+        if not escapes[0][0].clear:
+            least_bad = lib.refined([i for _, _, i in escapes[:4]])
+            escapes = sorted(escapes[:4] + _judge_library(sit, least_bad, remaining_to_goal_s), key=rank)
+        picks.append(escapes[0])
     out = []
-    for i in sorted(picks):
-        kind = "hold" if i == 0 else "evade"
-        cand = Candidate(kind, "hold (brake to a hover)" if i == 0 else f"evade {lib.labels[i]}",
-                         lib.manoeuvre(i, sit.ref.yaw_rad), float(to_goal[i]), ends_short=True)
-        out.append(cand.judged(res, i))
-    for c in out:
-        c.path_ned_m = c.trajectory.sample(np.linspace(0.0, c.trajectory.duration_s, 12))[0][:, :sit.dim]
+    for cand, library, i in picks:
+        cand.trajectory = library.manoeuvre(i, sit.ref.yaw_rad)
+        cand.path_ned_m = cand.trajectory.sample(np.linspace(0.0, cand.trajectory.duration_s, 12))[0][:, :sit.dim]
+        out.append(cand)
     return out
 
 

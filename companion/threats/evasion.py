@@ -8,8 +8,9 @@ Every manoeuvre leaves the current reference state (p0, v0) and ends in a hover:
 3. brake to rest at the same limits, then hover.
 
 The targets span a hard brake (v1 = 0), the eight horizontal directions around the current
-heading (ahead, sidesteps left/right, diagonal, retreat) at half and full evasion speed, each
-combined with a climb or a descent when the world is 3D, and pure climbs and descents. This is
+heading (ahead, sidesteps left/right, diagonal, retreat) at half and full evasion speed,
+swerves (the current velocity plus a sideways one), each combined with a climb or a descent
+when the world is 3D, and pure climbs and descents. This is
 the ADS-B avoidance repertoire of ArduPilot's ``AP_Avoidance`` (climb, descend, move
 perpendicular, hover) made kinodynamic. Positions are closed-form piecewise quadratics, so the
 whole library is sampled and checked in one vectorised pass (a few milliseconds).
@@ -55,6 +56,30 @@ class EscapeLimits:
 #: Horizontal directions (deg, clockwise from the heading: +90 is right) and their names.
 DIRECTIONS = ((0, "ahead"), (45, "ahead right"), (90, "right"), (135, "back right"), (180, "back"),
               (-135, "back left"), (-90, "left"), (-45, "ahead left"))
+
+
+def _directions(heading: np.ndarray, lim: EscapeLimits) -> list:
+    """Horizontal target velocities in the eight directions around the heading, at half and
+    full evasion speed (a sidestep, a retreat ...)."""
+    right = np.array([-heading[1], heading[0]])
+    out = []
+    for deg, name in DIRECTIONS:
+        rad = math.radians(deg)
+        direction = math.cos(rad) * heading + math.sin(rad) * right
+        out += [(frac * lim.speed_m_s * direction, name) for frac in (0.5, 1.0)]
+    return out
+
+
+def _swerves(vel_ne_m_s: np.ndarray, heading: np.ndarray, lim: EscapeLimits) -> list:
+    """Keep the current velocity and add a sideways one (half and full evasion speed), capped
+    at the evasion speed: a swerve, against a threat from behind or ahead."""
+    right = np.array([-heading[1], heading[0]])
+    out = []
+    for side, name in ((1.0, "swerve right"), (-1.0, "swerve left")):
+        for frac in (0.5, 1.0):
+            v = vel_ne_m_s + side * frac * lim.speed_m_s * right
+            out.append((_capped(v, lim.speed_m_s), name))
+    return out
 
 
 def _phase_times(v0: np.ndarray, v1: np.ndarray, lim: EscapeLimits) -> tuple[np.ndarray, np.ndarray]:
@@ -107,60 +132,26 @@ def _kinematics(p0, v0, v1, coast_s, t_rel, lim: EscapeLimits):
 
 
 class EscapeLibrary:
-    """Every escape manoeuvre from one reference state, sampled together.
+    """Escape manoeuvres from one reference state, sampled together.
 
     Parameters
     ----------
     pos_ned_m, vel_ned_m_s : array_like, shape (D,)
         Reference state (D = 2 or 3).
-    heading : array_like, shape (2,)
-        Horizontal unit vector the directions are measured from.
-    limits : EscapeLimits
-    vertical : bool
-        Include climbs and descents (3D worlds).
-
-    Attributes
-    ----------
-    targets : ndarray, shape (C, D)
+    targets : array_like, shape (C, D)
         Target velocities v1.
-    coasts_s : ndarray, shape (C,)
+    coasts_s : array_like, shape (C,)
     labels : list of str
+    limits : EscapeLimits
     """
 
-    def __init__(self, pos_ned_m, vel_ned_m_s, heading, limits: EscapeLimits, *, vertical: bool):
+    def __init__(self, pos_ned_m, vel_ned_m_s, targets, coasts_s, labels, limits: EscapeLimits):
         self.p0 = np.asarray(pos_ned_m, dtype=float)
         self.v0 = np.asarray(vel_ned_m_s, dtype=float)
+        self.targets = np.asarray(targets, dtype=float).reshape(-1, self.p0.shape[0])
+        self.coasts_s = np.asarray(coasts_s, dtype=float)
+        self.labels = list(labels)
         self.limits = limits
-        d = self.p0.shape[0]
-        h = np.asarray(heading, dtype=float)[:2]
-        right = np.array([-h[1], h[0]])
-        verticals = [(0.0, "")]
-        if vertical and d == 3:
-            verticals += [(-limits.climb_m_s, "climb"), (limits.descent_m_s, "descend")]
-        targets, coasts, labels = [np.zeros(d)], [0.0], ["brake"]
-        for vz, vname in verticals[1:]:
-            v1 = np.zeros(d)
-            v1[2] = vz
-            for coast in limits.coasts_s:
-                targets.append(v1)
-                coasts.append(coast)
-                labels.append(vname)
-        for deg, name in DIRECTIONS:
-            rad = math.radians(deg)
-            direction = math.cos(rad) * h + math.sin(rad) * right
-            for frac in (0.5, 1.0):
-                for vz, vname in verticals:
-                    v1 = np.zeros(d)
-                    v1[:2] = frac * limits.speed_m_s * direction
-                    if d == 3:
-                        v1[2] = vz
-                    for coast in limits.coasts_s:
-                        targets.append(v1)
-                        coasts.append(coast)
-                        labels.append(f"{name}{' + ' + vname if vname else ''}")
-        self.targets = np.array(targets)
-        self.coasts_s = np.array(coasts)
-        self.labels = labels
 
     def __len__(self) -> int:
         return len(self.labels)
@@ -175,21 +166,78 @@ class EscapeLibrary:
         return EscapeManoeuvre(self.p0, self.v0, self.targets[i], float(self.coasts_s[i]),
                                self.limits, yaw_rad, self.labels[i])
 
+    def refined(self, indices) -> "EscapeLibrary":
+        """Variants around manoeuvres ``indices`` (a local search when none of them is clear):
+        the target turned by +-15 and +-30 degrees, 25 % slower or faster (capped at the
+        evasion speed), with each
+        vertical option, and the coast 40 % shorter or 60 % longer."""
+        lim = self.limits
+        d = self.p0.shape[0]
+        verticals = [0.0, -lim.climb_m_s, lim.descent_m_s] if d == 3 else [0.0]
+        targets, coasts, labels = [], [], []
+        for i in indices:
+            v1, coast, label = self.targets[i], float(self.coasts_s[i]), self.labels[i]
+            horizontal = [_turned(v1[:2], deg) for deg in (-30.0, -15.0, 15.0, 30.0)] + \
+                [_capped(v1[:2] * f, lim.speed_m_s) for f in (0.75, 1.25)]
+            for v_h in horizontal + [v1[:2]]:
+                for vz in verticals:
+                    for c in (0.6 * coast, coast, 1.6 * coast):
+                        v = np.zeros(d)
+                        v[:2] = v_h
+                        if d == 3:
+                            v[2] = vz
+                        targets.append(v)
+                        coasts.append(c)
+                        labels.append(f"{label} (refined)")
+        return EscapeLibrary(self.p0, self.v0, targets, coasts, labels, lim)
+
+
+def _turned(v_ne: np.ndarray, deg: float) -> np.ndarray:
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    return np.array([c * v_ne[0] - s * v_ne[1], s * v_ne[0] + c * v_ne[1]])
+
+
+def _capped(v_ne: np.ndarray, cap_m_s: float) -> np.ndarray:
+    speed = float(np.linalg.norm(v_ne))
+    return v_ne * min(1.0, cap_m_s / max(speed, 1e-9))
+
 
 def escape_library(pos_ned_m, vel_ned_m_s, limits: EscapeLimits, *, vertical: bool,
                    away_from=None) -> EscapeLibrary:
     """The library around the current heading (or, at a hover, facing away from ``away_from``,
-    a horizontal point such as the nearest threat; north when none)."""
-    v = np.asarray(vel_ned_m_s, dtype=float)[:2]
-    speed = float(np.linalg.norm(v))
+    a horizontal point such as the nearest threat; north when none): candidate 0 is the hard
+    brake; then every horizontal target (directions, swerves, a stop) with each vertical option
+    (level, climb, descend in 3D) and each coast time."""
+    p0 = np.asarray(pos_ned_m, dtype=float)
+    v0 = np.asarray(vel_ned_m_s, dtype=float)
+    d = p0.shape[0]
+    speed = float(np.linalg.norm(v0[:2]))
     if speed > 0.3:
-        heading = v / speed
-    elif away_from is not None and np.linalg.norm(np.asarray(pos_ned_m)[:2] - away_from[:2]) > 1e-6:
-        rel = np.asarray(pos_ned_m, dtype=float)[:2] - np.asarray(away_from, dtype=float)[:2]
+        heading = v0[:2] / speed
+    elif away_from is not None and np.linalg.norm(p0[:2] - np.asarray(away_from)[:2]) > 1e-6:
+        rel = p0[:2] - np.asarray(away_from, dtype=float)[:2]
         heading = rel / np.linalg.norm(rel)
     else:
         heading = np.array([1.0, 0.0])
-    return EscapeLibrary(pos_ned_m, vel_ned_m_s, heading, limits, vertical=vertical)
+    verticals = [(0.0, "")]
+    if vertical and d == 3:
+        verticals += [(-limits.climb_m_s, "climb"), (limits.descent_m_s, "descend")]
+    horizontals = [(np.zeros(2), "brake")] + _directions(heading, limits) + _swerves(v0[:2], heading, limits)
+    targets, coasts, labels = [np.zeros(d)], [0.0], ["brake"]
+    for v_h, name in horizontals:
+        for vz, vname in verticals:
+            if name == "brake" and not vname:
+                continue                                  # the hard brake is candidate 0
+            v1 = np.zeros(d)
+            v1[:2] = v_h
+            if d == 3:
+                v1[2] = vz
+            label = vname if name == "brake" else f"{name}{' + ' + vname if vname else ''}"
+            for coast in limits.coasts_s:
+                targets.append(v1)
+                coasts.append(coast)
+                labels.append(label)
+    return EscapeLibrary(p0, v0, targets, coasts, labels, limits)
 
 
 class EscapeManoeuvre:

@@ -146,7 +146,8 @@ class ThreatSettings:
     hold_decel_m_s2 : float
         Along-track deceleration of retimes and pauses (m/s^2). Default 2.5.
     evade_speed_m_s : float
-        Horizontal speed of the escape manoeuvres (m/s), capped by the trajectory limits.
+        Horizontal speed of the escape manoeuvres (m/s), at most 1.2 times the planned
+        trajectories' speed limit. Default 7.
     evade_accel_m_s2, evade_vertical_accel_m_s2 : float
         Acceleration limits of the escape manoeuvres (m/s^2).
     evade_climb_m_s, evade_descent_m_s : float
@@ -190,7 +191,7 @@ class ThreatSettings:
     retime_rates: tuple[float, ...] = (0.0, 0.4)
     retime_waits_s: tuple[float, ...] = (0.0, 1.5, 3.0, 5.0, 8.0, 12.0)
     hold_decel_m_s2: float = 2.5
-    evade_speed_m_s: float = 6.0
+    evade_speed_m_s: float = 7.0
     evade_accel_m_s2: float = 2.5
     evade_vertical_accel_m_s2: float = 1.5
     evade_climb_m_s: float = 2.5

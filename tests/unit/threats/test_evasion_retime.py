@@ -15,7 +15,7 @@ LIM = EscapeLimits(speed_m_s=5.0, accel_m_s2=2.5, climb_m_s=2.5, descent_m_s=1.5
 vel = st.floats(-6.0, 6.0, allow_nan=False)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=20, deadline=None)
 @given(st.tuples(vel, vel, st.floats(-1.0, 1.0)))
 def test_every_manoeuvre_starts_at_the_state_respects_the_limits_and_ends_in_a_hover(v0):
     p0 = np.array([10.0, -5.0, -20.0])
@@ -90,3 +90,19 @@ def test_retime_is_continuous_stays_on_the_path_and_arrives_later(base, rate, wa
     if rate == 0.0 and wait > 0:
         stopped = np.linalg.norm(vel, axis=1) < 1e-6
         assert stopped.any()
+
+
+def test_refined_variants_stay_within_the_limits_and_around_their_parents():
+    lib = escape_library(np.array([0.0, 0.0, -20.0]), np.array([6.0, 1.0, 0.0]), LIM, vertical=True)
+    parents = [3, 40]
+    refined = lib.refined(parents)
+    assert len(refined) == len(parents) * 7 * 3 * 3
+    for i in range(0, len(refined), 5):
+        m = refined.manoeuvre(i, 0.0)
+        t = np.linspace(0.0, m.duration_s, 300)
+        pos, v, acc = m.sample(t)
+        np.testing.assert_allclose(v[0], [6.0, 1.0, 0.0], atol=1e-9)
+        assert np.all(np.linalg.norm(acc[:, :2], axis=1) <= LIM.accel_m_s2 + 1e-6)
+        assert np.linalg.norm(refined.targets[i][:2]) <= LIM.speed_m_s + 1e-9 or \
+            any(np.allclose(refined.targets[i][:2], lib.targets[p][:2]) for p in parents)
+    assert all(label.endswith("(refined)") for label in refined.labels)
