@@ -140,17 +140,41 @@ def _nearest_threat(sit: Situation) -> np.ndarray | None:
     return centers[int(np.argmin(d))]
 
 
-def _judge_library(sit: Situation, lib, remaining_to_goal_s: float) -> list[tuple]:
-    """Every manoeuvre of ``lib`` judged (one vectorised check): (candidate without its
-    trajectory yet, library, index) triples."""
+#: Escapes whose static clearance is computed at a time, best first (see ``_judge_library``).
+STATIC_CHUNK = 24
+
+
+def _judge_library(sit: Situation, lib, remaining_to_goal_s: float, rank) -> list[tuple]:
+    """The manoeuvres of ``lib`` judged: (candidate without its trajectory yet, library, index)
+    triples, for every manoeuvre that may be the best and the brake (index 0).
+
+    All are checked against the tubes in one vectorised pass; the static world (the costly
+    part) only best first, in chunks, until the next unchecked one ranks no better than the
+    best checked one: the static world can only make a candidate worse, so the others cannot
+    win (branch and bound, exact).
+    """
     s = sit.settings
     t = sample_times(sit.ref.t_s, s.evade_horizon_s, s.evade_step_s)
     pos, duration = lib.positions(t - sit.ref.t_s)
-    res = check(sit, t, pos[:, :, :sit.dim])
-    back_m = np.linalg.norm(pos[:, -1, :sit.dim] - sit.ref.pos_ned_m[None, :sit.dim], axis=1)
+    pos = pos[:, :, :sit.dim]
+    tubes_only = check(sit, t, pos, static=False)
+    back_m = np.linalg.norm(pos[:, -1] - sit.ref.pos_ned_m[None, :sit.dim], axis=1)
     to_goal = remaining_to_goal_s + duration + back_m / sit.cruise_m_s() + s.restart_s
-    return [(Candidate("evade", f"evade {lib.labels[i]}", None, float(to_goal[i]), ends_short=True).judged(res, i),
-             lib, i) for i in range(len(lib))]
+    cands = [Candidate("evade", f"evade {lib.labels[i]}", None, float(to_goal[i]), ends_short=True)
+             .judged(tubes_only, i) for i in range(len(lib))]
+    order = sorted(range(1, len(cands)), key=lambda i: rank(cands[i]))
+    checked: list[int] = []
+    best = None
+    while order and (best is None or rank(cands[order[0]]) < best):
+        chunk, order = order[:STATIC_CHUNK], order[STATIC_CHUNK:]
+        if not checked:
+            chunk = [0] + chunk
+        full = check(sit, t, pos[chunk])
+        for j, i in enumerate(chunk):
+            cands[i].judged(full, j)
+        checked += chunk
+        best = min(rank(cands[i]) for i in checked if i != 0) if len(checked) > 1 else None
+    return [(cands[i], lib, i) for i in checked]
 
 
 def evade_candidates(sit: Situation, remaining_to_goal_s: float, *, brake_only: bool = False) -> list[Candidate]:
@@ -166,16 +190,17 @@ def evade_candidates(sit: Situation, remaining_to_goal_s: float, *, brake_only: 
                        s.evade_vertical_accel_m_s2, s.evade_coasts_s)
     lib = escape_library(sit.ref.pos_ned_m, sit.ref.vel_ned_m_s, lim, vertical=sit.dim == 3,
                          away_from=_nearest_threat(sit))
-    judged = _judge_library(sit, lib, remaining_to_goal_s)
+    rank = lambda c: rank_key(c, s.clearance_weight_s_m, s.clearance_cap_m)   # noqa: E731
+    judged = _judge_library(sit, lib, remaining_to_goal_s, rank)
     brake = judged[0]
     brake[0].kind, brake[0].label = "hold", "hold (brake to a hover)"
-    rank = lambda entry: rank_key(entry[0], s.clearance_weight_s_m, s.clearance_cap_m)   # noqa: E731
     picks = [brake]
     if not brake_only:
-        escapes = sorted(judged[1:], key=rank)
+        escapes = sorted(judged[1:], key=lambda entry: rank(entry[0]))
         if not escapes[0][0].clear:
             least_bad = lib.refined([i for _, _, i in escapes[:4]])
-            escapes = sorted(escapes[:4] + _judge_library(sit, least_bad, remaining_to_goal_s), key=rank)
+            escapes = sorted(escapes[:4] + _judge_library(sit, least_bad, remaining_to_goal_s, rank),
+                             key=lambda entry: rank(entry[0]))
         picks.append(escapes[0])
     out = []
     for cand, library, i in picks:

@@ -10,8 +10,8 @@ The vehicle's curve leaves its chord by at most ``a_max dt^2 / 8`` (``accel_boun
 tube's radius is taken at its larger end, so the check never reports "clear" where the exact
 closest approach intrudes, whatever the step (the step only costs conservatism). The static
 world (obstacles inflated by their margin, and the bounds) is a 1-Lipschitz distance field:
-over a chord of length L between samples of clearance c_a and c_b it stays above
-``(c_a + c_b - L) / 2``; candidates may use ``static_slack_m`` of the safety margin (never more
+over a piece of length L between points of clearance c_a and c_b it stays above
+``(c_a + c_b - L) / 2`` (each chord is cut into ``STATIC_SUBSTEPS`` pieces); candidates may use ``static_slack_m`` of the safety margin (never more
 than half of it).
 
 Clearance is positive outside every inflated tube and obstacle. Candidates that intrude are
@@ -104,6 +104,9 @@ def _tube_clearance(t_s, pos, tube, dim: int) -> np.ndarray:
     return dist - np.maximum(radius[:-1], radius[1:])[None, :]
 
 
+#: Pieces a chord near the static world is cut into, and what "near" is (m).
+STATIC_SUBSTEPS = 4
+STATIC_REFINE_M = 1.0
 #: Static clearances beyond this (m) are reported as a lower bound only (from bounding boxes).
 STATIC_REACH_M = 6.0
 
@@ -113,28 +116,43 @@ def _obstacle_clearance(flat: np.ndarray, world) -> np.ndarray:
     obstacle's bounding box, a lower bound (the box distance) farther away."""
     dim = world.dim
     margin = world.margin_m
-    out = np.full(flat.shape[0], np.inf)
-    for ob in world.obstacles:
-        lo, hi = (np.asarray(v, dtype=float)[:dim] for v in ob.aabb(dim))
-        gap = np.maximum(np.maximum(lo[None, :] - flat, flat - hi[None, :]), 0.0)
-        box = np.sqrt(np.einsum("ij,ij->i", gap, gap)) - margin
-        near = box < STATIC_REACH_M
-        if near.any():
-            box[near] = ob.sdf_batch(flat[near]) - margin
-        out = np.minimum(out, box)
-    return out
+    boxes = [ob.aabb(dim) for ob in world.obstacles]
+    lo = np.array([b[0][:dim] for b in boxes], dtype=float)                  # (M, d)
+    hi = np.array([b[1][:dim] for b in boxes], dtype=float)
+    gap = np.maximum(np.maximum(lo[None] - flat[:, None], flat[:, None] - hi[None]), 0.0)
+    box = np.sqrt(np.einsum("kmi,kmi->km", gap, gap)) - margin              # (K, M)
+    near = box < STATIC_REACH_M
+    for m in np.flatnonzero(near.any(axis=0)):
+        rows = near[:, m]
+        box[rows, m] = world.obstacles[m].sdf_batch(flat[rows]) - margin
+    return box.min(axis=1)
 
 
-def _static_clearance(pos, world) -> np.ndarray:
-    """Lower bound (C, K-1) of the static world's clearance on every chord."""
-    c_n, k_n, d = pos.shape
-    flat = pos.reshape(-1, d)
+def _point_clearance(flat: np.ndarray, world) -> np.ndarray:
+    """Static clearance (K,) of points: bounds and inflated obstacles."""
     point = np.minimum(flat - world.bounds_min[None, :], world.bounds_max[None, :] - flat).min(axis=1)
     if world.obstacles:
         point = np.minimum(point, _obstacle_clearance(flat, world))
-    point = point.reshape(c_n, k_n)
-    chord = np.linalg.norm(np.diff(pos, axis=1), axis=2)
-    return 0.5 * (point[:, :-1] + point[:, 1:] - chord)
+    return point
+
+
+def _static_clearance(pos, world, substeps: int = STATIC_SUBSTEPS) -> np.ndarray:
+    """Lower bound (C, K-1) of the static world's clearance on every chord. Chords whose bound
+    is below ``STATIC_REFINE_M`` are cut into ``substeps`` pieces (the Lipschitz bound then
+    costs only a piece's half-length)."""
+    c_n, k_n, d = pos.shape
+    point = _point_clearance(pos.reshape(-1, d), world).reshape(c_n, k_n)
+    step = np.diff(pos, axis=1)
+    chord = np.linalg.norm(step, axis=2)
+    bound = 0.5 * (point[:, :-1] + point[:, 1:] - chord)
+    near = bound < STATIC_REFINE_M
+    if near.any():
+        f = np.arange(substeps + 1)[:, None] / substeps                      # (n+1, 1)
+        fine = pos[:, :-1][near][:, None, :] + f[None] * step[near][:, None, :]
+        fine_point = _point_clearance(fine.reshape(-1, d), world).reshape(-1, substeps + 1)
+        piece = chord[near][:, None] / substeps
+        bound[near] = (0.5 * (fine_point[:, :-1] + fine_point[:, 1:] - piece)).min(axis=1)
+    return bound
 
 
 def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: float = 3.0,
