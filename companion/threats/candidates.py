@@ -154,7 +154,7 @@ def _judge_library(sit: Situation, lib, remaining_to_goal_s: float, rank) -> lis
     win (branch and bound, exact).
     """
     s = sit.settings
-    t = sample_times(sit.ref.t_s, s.evade_horizon_s, s.evade_step_s)
+    t = sit.times(s.evade_step_s)
     pos, duration = lib.positions(t - sit.ref.t_s)
     pos = pos[:, :, :sit.dim]
     tubes_only = check(sit, t, pos, static=False)

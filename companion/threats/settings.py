@@ -5,7 +5,7 @@ dataclasses into the settings tree (tables ``[zenoh]`` and ``[threats]``).
 
 Why these defaults (paper section 3.3, Fig. 5 and Fig. 8; R-50-class helicopter at 6-8 m/s):
 
-- ``horizon_s = 20``: candidates are checked 20 s (120-160 m) ahead in space and time; a
+- ``horizon_s = 15``: candidates are checked 15 s (90-120 m) ahead in space and time; a
   conflict further away is met again by the 10 Hz monitor as it comes closer.
 - ``inflation_m = 2``: half the rotor span (1.8 m) plus a few tenths for tracking error, added to
   every threat radius; ``uncertainty_m_s = 0.3`` grows a moving threat's tube with the time
@@ -94,14 +94,14 @@ class ThreatSettings:
     Parameters
     ----------
     horizon_s : float
-        How far ahead in time candidates are checked against the tubes (s). Default 20.
+        How far ahead in time every candidate, and the active reference, is checked against
+        the tubes (s): one horizon, so that a chosen candidate stays clear when the monitor
+        re-checks it. Default 15.
     check_step_s : float
         Sample step of the space-time check of planned references (s); the check is exact
         between samples up to ``a dt^2 / 8`` (2 cm at 0.2 s). Default 0.2.
-    evade_step_s, evade_horizon_s : float
-        Sample step and horizon of the escape library's check (s; >= 10 s, and every
-        manoeuvre has ended in a hover within it, after which the 10 Hz monitor watches the
-        hover). Defaults 0.25 and 12.
+    evade_step_s : float
+        Sample step of the escape library's check (s). Default 0.25.
     inflation_m : float
         Added to every threat radius (m): rotor radius plus tracking error. Default 2.
     static_slack_m : float
@@ -166,10 +166,9 @@ class ThreatSettings:
         Seed of the manager's random generator when none is given.
     """
 
-    horizon_s: float = 20.0
+    horizon_s: float = 15.0
     check_step_s: float = 0.2
     evade_step_s: float = 0.25
-    evade_horizon_s: float = 12.0
     inflation_m: float = 2.0
     static_slack_m: float = 0.5
     uncertainty_m_s: float = 0.3
@@ -220,9 +219,8 @@ class ThreatSettings:
             "evade_accel_m_s2", "evade_vertical_accel_m_s2", "evade_climb_m_s", "evade_descent_m_s"),
             non_negative=("inflation_m", "urgency_margin_s", "static_slack_m", "replan_turn_rad", "uncertainty_m_s",
                           "uncertainty_max_m", "restart_s", "vertical_room_m", "min_altitude_m", "clearance_weight_s_m", "clearance_cap_m"))
-        for name in ("horizon_s", "evade_horizon_s"):
-            if getattr(self, name) < 10.0:
-                raise ConfigError(f"threats.{name}: must be >= 10 s (DESIGN 7.2), got {getattr(self, name)!r}")
+        if self.horizon_s < 10.0:
+            raise ConfigError(f"threats.horizon_s: must be >= 10 s (DESIGN 7.2), got {self.horizon_s!r}")
         if self.replan_turn_rad >= math.pi:
             raise ConfigError(f"threats.replan_turn_rad: must be < pi, got {self.replan_turn_rad!r}")
         if self.estimate_gain > 1:
