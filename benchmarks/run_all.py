@@ -32,6 +32,7 @@ BENCHMARKS = {
     "setpoint_jitter": ["--sitl"],
     "flight_tracking": [],
     "threats": [],
+    "threats_sitl": [],
     "threat_storm": [],
 }
 

@@ -338,8 +338,8 @@ def replan_candidates(sit: Situation, *, rng: np.random.Generator, gart_settings
     p, v = sit.ref.pos_ned_m[:d], sit.ref.vel_ned_m_s[:d]
     start, lead = _replan_start(sit)
     world = airspace_for(sit.planning_world, [p, start])
-    if lead is not None and not world.segment_free(p, start):
-        log.info("replan: the stopping lead leaves the free space")
+    if not world.in_bounds(p) or (lead is not None and not world.segment_free(p, start)):
+        log.info("replan: the start or its stopping lead is outside the free space")
         return []
     keep = [p, start, sit.goal_ned_m]
     obstacles = static_spheres(sit, keep)

@@ -128,20 +128,21 @@ def _obstacle_clearance(flat: np.ndarray, world) -> np.ndarray:
     return box.min(axis=1)
 
 
-def _point_clearance(flat: np.ndarray, world) -> np.ndarray:
-    """Static clearance (K,) of points: bounds and inflated obstacles."""
+def _point_clearance(flat: np.ndarray, world, slack_m: float) -> np.ndarray:
+    """Static clearance (K,) of points: the bounds (hard) and the inflated obstacles, into
+    whose margin ``slack_m`` may be used."""
     point = np.minimum(flat - world.bounds_min[None, :], world.bounds_max[None, :] - flat).min(axis=1)
     if world.obstacles:
-        point = np.minimum(point, _obstacle_clearance(flat, world))
+        point = np.minimum(point, _obstacle_clearance(flat, world) + slack_m)
     return point
 
 
-def _static_clearance(pos, world, substeps: int = STATIC_SUBSTEPS) -> np.ndarray:
+def _static_clearance(pos, world, slack_m: float, substeps: int = STATIC_SUBSTEPS) -> np.ndarray:
     """Lower bound (C, K-1) of the static world's clearance on every chord. Chords whose bound
     is below ``STATIC_REFINE_M`` are cut into ``substeps`` pieces (the Lipschitz bound then
     costs only a piece's half-length)."""
     c_n, k_n, d = pos.shape
-    point = _point_clearance(pos.reshape(-1, d), world).reshape(c_n, k_n)
+    point = _point_clearance(pos.reshape(-1, d), world, slack_m).reshape(c_n, k_n)
     step = np.diff(pos, axis=1)
     chord = np.linalg.norm(step, axis=2)
     bound = 0.5 * (point[:, :-1] + point[:, 1:] - chord)
@@ -149,7 +150,7 @@ def _static_clearance(pos, world, substeps: int = STATIC_SUBSTEPS) -> np.ndarray
     if near.any():
         f = np.arange(substeps + 1)[:, None] / substeps                      # (n+1, 1)
         fine = pos[:, :-1][near][:, None, :] + f[None] * step[near][:, None, :]
-        fine_point = _point_clearance(fine.reshape(-1, d), world).reshape(-1, substeps + 1)
+        fine_point = _point_clearance(fine.reshape(-1, d), world, slack_m).reshape(-1, substeps + 1)
         piece = chord[near][:, None] / substeps
         bound[near] = (0.5 * (fine_point[:, :-1] + fine_point[:, 1:] - piece)).min(axis=1)
     return bound
@@ -172,8 +173,8 @@ def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: flo
     accel_bound_m_s2 : float
         Upper bound of the candidates' acceleration, for the chord error ``a dt^2 / 8``.
     static_slack_m : float
-        How far into the world's safety margin a candidate may go (m; capped at half the
-        margin, so never into an obstacle itself). Planned references keep the whole margin, which the
+        How far into the obstacles' safety margin a candidate may go (m; capped at half the
+        margin, so never into an obstacle itself; the bounds are hard). Planned references keep the whole margin, which the
         chord bound can otherwise mistake for a conflict when a path grazes it.
 
     Returns
@@ -197,7 +198,7 @@ def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: flo
         source = np.where(closer, i, source)
     static = np.full(c_n, np.inf)
     if world is not None:
-        c = _static_clearance(pos, world) + min(static_slack_m, 0.5 * world.margin_m)
+        c = _static_clearance(pos, world, min(static_slack_m, 0.5 * world.margin_m))
         static = c.min(axis=1) - chord_err.max()
         closer = c < clearance
         clearance = np.where(closer, c, clearance)
