@@ -480,7 +480,20 @@ class Autopilot:
             self._stages = [Stage("hold", target=self._brake_point())]
 
     def takeoff(self, alt_m: float) -> tuple[bool, str]:
-        """GUIDED takeoff to ``alt_m`` above home."""
+        """GUIDED takeoff to ``alt_m`` above home.
+
+        Refusals are :class:`QuietRefusal`: ArduCopter answers COMMAND_ACK FAILED without a
+        STATUSTEXT (``Mode::do_user_takeoff``). Accepted once the motor interlock is in effect;
+        the climb then waits for the rotor run-up.
+        """
+        ok, reason = self._takeoff_refusal(alt_m)
+        if not ok:
+            return False, QuietRefusal(reason)
+        self._stages = [self._takeoff_stage(alt_m), Stage("hold")]
+        log.info("takeoff to %.1f m%s", alt_m, "" if self.rotor.runup_complete else " once the rotor has run up")
+        return True, ""
+
+    def _takeoff_refusal(self, alt_m: float) -> tuple[bool, str]:
         if not math.isfinite(alt_m) or not 0.5 <= alt_m <= MAX_TAKEOFF_ALT_M:
             return False, f"takeoff altitude {alt_m!r} m outside 0.5..{MAX_TAKEOFF_ALT_M:g}"
         if not self.armed:
@@ -492,11 +505,8 @@ class Autopilot:
         if alt_m <= self.height_above_home_m:
             return False, f"takeoff altitude {alt_m:g} m is not above the vehicle"
         if not self.rotor.interlock:
-            why = ("motor interlock not engaged yet (ARMING_DELAY_SEC after arming)" if self.rotor.switch_engaged
-                   else "motor interlock not engaged (RC8 high or DO_AUX_FUNCTION 32 high)")
-            return False, QuietRefusal(why)  # ArduPilot: COMMAND_ACK FAILED, no STATUSTEXT
-        self._stages = [self._takeoff_stage(alt_m), Stage("hold")]
-        log.info("takeoff to %.1f m", alt_m)
+            return False, ("motor interlock not in effect yet (ARMING_DELAY_SEC after arming)"
+                           if self.rotor.switch_engaged else "motor interlock not engaged (RC8 or DO_AUX_FUNCTION 32)")
         return True, ""
 
     def land(self) -> tuple[bool, str]:

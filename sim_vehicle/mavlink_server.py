@@ -325,6 +325,7 @@ class MavlinkServer:
                 continue
             good = True
             self.stats.messages_in += 1
+            self.peers[address] = self.wall_s()  # before dispatch: a reply broadcast (STATUSTEXT) reaches it too
             if self._tlog is not None:
                 self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + bytes(msg.get_msgbuf()))
             try:
@@ -334,8 +335,6 @@ class MavlinkServer:
                 log.exception("error handling %s from %s", msg.get_type(), address)
         if parser.buf_len() > 0:
             self._count_bad("truncated", f"{parser.buf_len()} bytes left over", address)
-        if good:
-            self.peers[address] = self.wall_s()
 
     def _count_bad(self, kind: str, reason: str, address: Address) -> None:
         setattr(self.stats, kind, getattr(self.stats, kind) + 1)
