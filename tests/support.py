@@ -273,11 +273,11 @@ class MavlinkPeer:
                     return msg
         return None
 
-    def command(self, command: int, *params: float, timeout_s: float = 3.0, use_int: bool = False):
-        """Send COMMAND_LONG (or COMMAND_INT) and return its COMMAND_ACK (None if none came)."""
+    def command(self, command: int, *params: float, timeout_s: float = 3.0, use_int: bool = False, frame: int = 0):
+        """Send COMMAND_LONG (or COMMAND_INT in ``frame``) and return its COMMAND_ACK (None if none came)."""
         p = list(params) + [0.0] * (7 - len(params))
         if use_int:
-            self.send(self.mav.command_int_encode(self.sysid, 1, 0, command, 0, 0, p[0], p[1], p[2], p[3],
+            self.send(self.mav.command_int_encode(self.sysid, 1, frame, command, 0, 0, p[0], p[1], p[2], p[3],
                                                   int(p[4]), int(p[5]), p[6]))
         else:
             self.send(self.mav.command_long_encode(self.sysid, 1, command, 0, *p))
