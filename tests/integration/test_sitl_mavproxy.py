@@ -1,8 +1,8 @@
 """MAVProxy (from PyPI) loads a QGC WPL 110 file into a real ``sim-vehicle``; it flies it in AUTO.
 
 Issue 2: MAVProxy loads the file non-interactively and the vehicle answers MISSION_ACK
-ACCEPTED; then the vehicle flies the mission in AUTO to its land item and disarms. MAVProxy asks
-for its telemetry itself (REQUEST_DATA_STREAM), the pymavlink peer with SET_MESSAGE_INTERVAL.
+ACCEPTED; then the vehicle flies the mission in AUTO to its land item and disarms. The pymavlink
+peer asks for its telemetry (SET_MESSAGE_INTERVAL) and starts the rotor as with ArduCopter heli.
 """
 
 from __future__ import annotations
