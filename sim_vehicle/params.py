@@ -99,6 +99,8 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
               description="rotor speed control mode 1..4 (all run up alike here)"),
     ParamSpec("H_RSC_RUNUP_TIME", "rsc.runup_time_s", 1.0, 1.0, 60.0, MAV_PARAM_TYPE_INT8,
               description="rotor run-up time, s"),
+    ParamSpec("H_RSC_RAMP_TIME", "rsc.ramp_time_s", 1.0, 0.0, 60.0, MAV_PARAM_TYPE_INT8,
+              description="RSC output ramp time, s"),
     ParamSpec("H_RSC_CRITICAL", "rsc.critical_pct", 1.0, 0.0, 100.0, MAV_PARAM_TYPE_INT16,
               description="critical rotor speed, percent"),
     ParamSpec("H_RSC_SETPOINT", "rsc.setpoint_pct", 1.0, 0.0, 100.0, MAV_PARAM_TYPE_INT16,

@@ -11,11 +11,13 @@ ArduPilot's behaviour, checked against the reference firmware (``../shared/ardup
 * **Arming delay.** For ARMING_DELAY_SEC (2 s, a constant of ArduCopter) after arming the
   *effective* interlock stays off whatever the switch says (``Copter::motors_output``): the
   switch is accepted, but the rotor does not start and NAV_TAKEOFF is refused until then.
-* **Run-up.** With the interlock on, the rotor speed estimate rises to full speed in
-  H_RSC_RUNUP_TIME (``AP_MotorsHeli_RSC::update_rotor_runup``); the run-up is complete at full
-  speed and stays complete until the speed falls below H_RSC_CRITICAL. A takeoff accepted
-  earlier waits on the ground until then. With the interlock off (or disarmed) the rotor runs
-  down at the same rate.
+* **Run-up.** With the interlock on, the RSC output ramps to H_RSC_SETPOINT in H_RSC_RAMP_TIME
+  (1 s; SERVO_OUTPUT_RAW servo 8) and the rotor speed estimate rises to full speed in
+  H_RSC_RUNUP_TIME (``AP_MotorsHeli_RSC::update_rotor_runup``); the run-up is complete when both
+  are full and stays complete until the speed falls below H_RSC_CRITICAL. A takeoff accepted
+  earlier waits on the ground until then (the reference firmware: takeoff accepted 2.0 s after
+  arming, climbing from 12.5 s). With the interlock off (or disarmed) both run down at the same
+  rates.
 
 Pure: no I/O, no clock; :func:`update` maps (state, inputs, dt) to the next state and
 :class:`RotorControl` keeps one vehicle's rotor, switch and RC8 input between calls.
@@ -51,6 +53,8 @@ class RscSettings:
         Rotor control mode 1..4 [H_RSC_MODE]; every mode runs up the same way here.
     runup_time_s : float
         Time from rest to full rotor speed, simulated s [H_RSC_RUNUP_TIME].
+    ramp_time_s : float
+        Time of the RSC output ramp from rest to the setpoint, simulated s [H_RSC_RAMP_TIME].
     critical_pct : float
         Below this rotor speed (percent) the run-up counts as incomplete again [H_RSC_CRITICAL].
     setpoint_pct : float
@@ -67,6 +71,7 @@ class RscSettings:
 
     mode: int = 2
     runup_time_s: float = 10.0
+    ramp_time_s: float = 1.0
     critical_pct: float = 50.0
     setpoint_pct: float = 66.0
     arming_delay_s: float = 2.0
@@ -76,7 +81,8 @@ class RscSettings:
     def __post_init__(self) -> None:
         if self.mode not in ROTOR_CONTROL_MODES:
             raise ValueError(f"mode: expected one of {sorted(ROTOR_CONTROL_MODES)}, got {self.mode!r}")
-        for name, lo, hi in (("runup_time_s", 0.5, 60.0), ("critical_pct", 0.0, 100.0), ("setpoint_pct", 0.0, 100.0),
+        for name, lo, hi in (("runup_time_s", 0.5, 60.0), ("ramp_time_s", 0.0, 60.0), ("critical_pct", 0.0, 100.0),
+                             ("setpoint_pct", 0.0, 100.0),
                              ("arming_delay_s", 0.0, 60.0), ("rc_override_timeout_s", 0.1, 120.0)):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and lo <= value <= hi):
@@ -99,12 +105,15 @@ class RotorState:
         Rotor speed estimate, fraction of full speed in [0, 1].
     runup_complete : bool
         The rotor has reached full speed (and not fallen below the critical speed since).
+    ramp : float
+        RSC output ramp, fraction of H_RSC_SETPOINT in [0, 1].
     """
 
     switch_engaged: bool = True
     interlock: bool = False
     speed: float = 0.0
     runup_complete: bool = False
+    ramp: float = 0.0
 
     def above_critical(self, settings: RscSettings) -> bool:
         """True while the rotor turns faster than H_RSC_CRITICAL (no auto-disarm then)."""
@@ -155,17 +164,19 @@ def update(state: RotorState, *, armed: bool, armed_for_s: float, dt_s: float, s
     """
     interlock = armed and armed_for_s >= settings.arming_delay_s and state.switch_engaged
     target = 1.0 if interlock else 0.0
-    step = max(dt_s, 0.0) / settings.runup_time_s
-    if state.speed < target:
-        speed = min(target, state.speed + step)
-    else:
-        speed = max(target, state.speed - step)
+    dt_s = max(dt_s, 0.0)
+    speed = _approach(state.speed, target, dt_s / settings.runup_time_s)
+    ramp = _approach(state.ramp, target, dt_s / settings.ramp_time_s if settings.ramp_time_s > 0 else 1.0)
     complete = state.runup_complete
-    if not complete and interlock and speed >= 1.0:
+    if not complete and interlock and speed >= 1.0 and ramp >= 1.0:
         complete = True
     if complete and speed <= settings.critical_pct / 100.0:
         complete = False
-    return RotorState(state.switch_engaged, interlock, speed, complete)
+    return RotorState(state.switch_engaged, interlock, speed, complete, ramp)
+
+
+def _approach(value: float, target: float, step: float) -> float:
+    return min(target, value + step) if value < target else max(target, value - step)
 
 
 def with_switch(state: RotorState, engaged: bool) -> RotorState:
@@ -240,8 +251,8 @@ class RotorControl:
 
 
 def output_pwm_us(state: RotorState, settings: RscSettings) -> int:
-    """RSC output (SERVO_OUTPUT_RAW servo 8): 1000 us at rest, H_RSC_SETPOINT at full speed."""
-    return int(round(1000.0 + 10.0 * settings.setpoint_pct * state.speed))
+    """RSC output (SERVO_OUTPUT_RAW servo 8): 1000 us at rest, H_RSC_SETPOINT once ramped up."""
+    return int(round(1000.0 + 10.0 * settings.setpoint_pct * state.ramp))
 
 
 __all__ = ["RscSettings", "RotorState", "RotorControl", "update", "with_switch", "switch_position", "engages", "rc8_pwm_us",

@@ -65,6 +65,8 @@ def test_interlock_waits_for_the_arming_delay_then_the_rotor_runs_up_in_runup_ti
     complete = [t for t, s in history if s.runup_complete]
     assert effective[0] == pytest.approx(2.0, abs=0.011)                 # ARMING_DELAY_SEC
     assert complete[0] == pytest.approx(2.0 + 10.0, abs=0.02)            # + H_RSC_RUNUP_TIME
+    ramped = [t for t, s in history if rsc.output_pwm_us(s, rsc.RscSettings()) == 1660]
+    assert ramped[0] == pytest.approx(2.0 + 1.0, abs=0.02)               # servo 8 at H_RSC_SETPOINT after 1 s
     assert state.speed == 1.0 and state.above_critical(rsc.RscSettings())
 
 
