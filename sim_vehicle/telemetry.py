@@ -126,7 +126,7 @@ class Telemetry:
             state = mavlink.MAV_LANDED_STATE_LANDING
         else:
             state = mavlink.MAV_LANDED_STATE_IN_AIR
-        return self.mav.extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED, state)
+        return self.mav.extended_sys_state_encode(mavlink.MAV_VTOL_STATE_MC, state)  # as ArduCopter sends it
 
     def msg_mission_current(self) -> Any:
         a = self.autopilot
