@@ -429,3 +429,25 @@ def test_aux_function_rc_override_from_the_gcs_sysid_only_and_chunked_statustext
     assert replies[0].result == mavlink.MAV_RESULT_ACCEPTED
     replies = command(server, mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 10)
     assert replies[0].result == mavlink.MAV_RESULT_FAILED and len(replies) == 1  # interlock off: likewise
+
+
+# ================================================================ settings and parameters
+def test_settings_and_parameters_of_the_new_behaviour():
+    from sim_vehicle.config import SimConfigError, settings_from_dict
+    from sim_vehicle.params import ParameterTable
+
+    tree = settings_from_dict({"link": {"mav1": {"position": 4}}, "rsc": {"runup_time_s": 5.0},
+                               "adsb": {"count": 2, "radius_m": 300.0}})
+    assert tree.link.mav1.as_groups()["POSITION"] == 4 and tree.link.mav2.position == 0
+    assert tree.rsc.runup_time_s == 5.0 and tree.adsb.count == 2
+    for bad, key in (({"adsb": {"count": -1}}, "adsb"), ({"rsc": {"mode": 7}}, "rsc"),
+                     ({"link": {"mav1": {"extra1": -2}}}, "link.mav1"), ({"link": {"mav4": {}}}, "mav4")):
+        with pytest.raises(SimConfigError, match=key):
+            settings_from_dict(bad)
+    table = ParameterTable(VehicleSettings())
+    defaults = {"H_RSC_MODE": 2, "H_RSC_RUNUP_TIME": 10, "H_RSC_RAMP_TIME": 1, "H_RSC_CRITICAL": 50,
+                "MAV1_POSITION": 0, "MAV3_ADSB": 0, "MAV_GCS_SYSID": 255, "SIM_ADSB_COUNT": 0}
+    assert {name: table.value(table.lookup(name)) for name in defaults} == defaults  # ArduPilot's defaults
+    assert table.set("H_RSC_RUNUP_TIME", 6.0)[0] and table.settings.rsc.runup_time_s == 6.0
+    assert table.set("MAV2_EXTRA1", 3.0)[0] and table.settings.link.mav2.extra1 == 3
+    assert not table.set("H_RSC_MODE", 9.0)[0] and not table.set("SIM_ADSB_COUNT", 1000.0)[0]
