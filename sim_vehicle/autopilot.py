@@ -17,8 +17,15 @@ flight controller is the paper's LQI with the PID position loop (section 2.2,
   NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_LOITER_UNLIM/TIME and DO_CHANGE_SPEED are flown; other
   DO commands are skipped with a log line. MISSION_ITEM_REACHED events are returned by
   :meth:`Autopilot.step`.
-* **Ground.** Flat ground at home altitude (``down = 0``): the vehicle cannot go below it, sits
-  still on it while disarmed or idle, and a landing disarms on touchdown.
+* **Ground.** Flat ground at the start altitude (``down = 0`` of the ground frame,
+  :mod:`sim_vehicle.frames`): the vehicle cannot go below it, sits still on it while disarmed or
+  idle, and a landing disarms on touchdown. Relative altitudes are above home (DO_SET_HOME
+  moves it); the EKF origin (LOCAL_POSITION_NED) may differ from both.
+* **Rotor.** ArduCopter heli's rotor speed controller and motor interlock
+  (:mod:`sim_vehicle.rsc`): arming is refused while the interlock switch (RC8, DO_AUX_FUNCTION
+  32) is engaged, the interlock takes effect ARMING_DELAY_SEC after arming, NAV_TAKEOFF is
+  refused until it has, and a vehicle told to climb waits on the ground until the rotor has run
+  up (H_RSC_RUNUP_TIME).
 
 Physics runs at ``timing.physics_rate_hz`` (400 Hz) with RK4 (:mod:`sim_vehicle.dynamics`)
 and the controller at ``timing.control_rate_hz`` (100 Hz). Pure simulation: no I/O.
@@ -33,10 +40,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from sim_vehicle import dynamics
+from sim_vehicle import dynamics, rsc
 from sim_vehicle.config import VehicleSettings
 from sim_vehicle.control import FlightController, Setpoint
-from sim_vehicle.geo_flat import LocalFrame
+from sim_vehicle.frames import Frames
 from sim_vehicle.mission_store import (
     FRAME_GLOBAL, FRAME_GLOBAL_INT, FRAME_LOCAL_NED, FRAME_MISSION, MissionItem,
 )
@@ -79,6 +86,13 @@ LIFTOFF_HEIGHT_M = 0.2
 TOUCHDOWN_HEIGHT_M = 0.03
 """Height below which a descending vehicle counts as landed."""
 MAX_TAKEOFF_ALT_M = 1000.0
+PREARM_REPORT_PERIOD_S = 30.0
+"""While disarmed, a failing pre-arm check is reported this often (ArduPilot's PREARM_DISPLAY_PERIOD)."""
+MAV_SEVERITY_CRITICAL = 2
+
+
+class QuietRefusal(str):
+    """A refusal reason that is logged but not sent as STATUSTEXT (ArduPilot sends none there)."""
 
 
 def mode_name(mode: int) -> str:
@@ -252,6 +266,8 @@ class Autopilot:
         Home position and initial heading; the vehicle starts there, landed and disarmed.
     rng : numpy.random.Generator
         Source of the wind gusts.
+    origin_lla : tuple (lat_deg, lon_deg, alt_m), optional
+        EKF origin, the frame of LOCAL_POSITION_NED (default: home).
 
     Attributes
     ----------
@@ -266,15 +282,20 @@ class Autopilot:
         Last rotor inputs ``[d_lat, d_lon, d_ped, d_col]`` in [-1, 1].
     mission_current : int
         Sequence number of the current mission item.
+    frames : Frames
+        Ground frame (internal), EKF origin and home.
+    rotor : sim_vehicle.rsc.RotorState
+        Interlock switch, effective interlock and rotor run-up.
     """
 
     def __init__(self, model: HeliModel, settings: VehicleSettings, home_lla: Sequence[float],
-                 rng: np.random.Generator) -> None:
+                 rng: np.random.Generator, origin_lla: Sequence[float] | None = None) -> None:
         lat, lon, alt, yaw_deg = (float(v) for v in home_lla)
         self.model = model
         self.rng = rng
-        self.frame = LocalFrame(lat, lon, alt)
-        self.home_lla = (lat, lon, alt, yaw_deg)
+        self.frames = Frames((lat, lon, alt), origin_lla)
+        self.frame = self.frames.ground
+        self._home_yaw_deg = yaw_deg
         self.x = dynamics.hover_state(model, (0.0, 0.0, 0.0), math.radians(yaw_deg))
         self.delta = np.zeros(4)
         self.mode = STABILIZE
@@ -296,6 +317,8 @@ class Autopilot:
         self._landed_since_s = 0.0
         self._events: list[tuple] = []
         self.settings = settings
+        self.rotor_control = rsc.RotorControl(settings.rsc)
+        self._prearm_reported_s = 0.0
         self._apply_settings(settings, first=True)
 
     # ------------------------------------------------------------------ settings
@@ -309,6 +332,8 @@ class Autopilot:
         if first or controller_settings != self.controller.settings:
             self.controller = FlightController(self.model, controller_settings)
             self.controller.reset(self.x)
+        if not first:
+            self.rotor_control.settings = settings.rsc
         if first or settings.wind != old.wind:
             wind = settings.wind
             if wind.enabled:
@@ -330,8 +355,23 @@ class Autopilot:
 
     @property
     def pos_ned_m(self) -> np.ndarray:
-        """Position, (3,) m NED from home."""
+        """Position, (3,) m NED in the ground frame (from the start point; ground at down 0)."""
         return dynamics.pos_ned_m(self.x)
+
+    @property
+    def local_ned_m(self) -> np.ndarray:
+        """Position, (3,) m NED from the EKF origin (LOCAL_POSITION_NED)."""
+        return self.frames.to_local(self.pos_ned_m)
+
+    @property
+    def home_lla(self) -> tuple[float, float, float, float]:
+        """Home: latitude, longitude (degrees), altitude AMSL (m), initial heading (degrees)."""
+        return (*self.frames.home_lla, self._home_yaw_deg)
+
+    @property
+    def height_above_home_m(self) -> float:
+        """Height of the vehicle above home, m."""
+        return self.frames.height_above_home(self.pos_ned_m)
 
     @property
     def vel_ned_m_s(self) -> np.ndarray:
@@ -373,7 +413,10 @@ class Autopilot:
             return False, "state estimate not healthy"
         if self.settings.flight.prearm_fail:
             return False, "PreArm: simulated sensor failure (SIM_PREARM_FAIL)"
+        if self.rotor.switch_engaged:
+            return False, "Arm: Motor Interlock Enabled"
         self.armed = True
+        self.rotor_control.armed(self.time_s)
         self._landed_since_s = self.time_s
         self._yaw_hold_rad = float(self.x[dynamics.IDX_PSI])
         self.controller.reset(self.x)
@@ -437,7 +480,20 @@ class Autopilot:
             self._stages = [Stage("hold", target=self._brake_point())]
 
     def takeoff(self, alt_m: float) -> tuple[bool, str]:
-        """GUIDED takeoff to ``alt_m`` above home."""
+        """GUIDED takeoff to ``alt_m`` above home.
+
+        Refusals are :class:`QuietRefusal`: ArduCopter answers COMMAND_ACK FAILED without a
+        STATUSTEXT (``Mode::do_user_takeoff``). Accepted once the motor interlock is in effect;
+        the climb then waits for the rotor run-up.
+        """
+        ok, reason = self._takeoff_refusal(alt_m)
+        if not ok:
+            return False, QuietRefusal(reason)
+        self._stages = [self._takeoff_stage(alt_m), Stage("hold")]
+        log.info("takeoff to %.1f m%s", alt_m, "" if self.rotor.runup_complete else " once the rotor has run up")
+        return True, ""
+
+    def _takeoff_refusal(self, alt_m: float) -> tuple[bool, str]:
         if not math.isfinite(alt_m) or not 0.5 <= alt_m <= MAX_TAKEOFF_ALT_M:
             return False, f"takeoff altitude {alt_m!r} m outside 0.5..{MAX_TAKEOFF_ALT_M:g}"
         if not self.armed:
@@ -446,8 +502,11 @@ class Autopilot:
             return False, f"takeoff needs GUIDED, mode is {mode_name(self.mode)}"
         if not self.landed:
             return False, "already flying"
-        self._stages = [self._takeoff_stage(alt_m), Stage("hold")]
-        log.info("takeoff to %.1f m", alt_m)
+        if alt_m <= self.height_above_home_m:
+            return False, f"takeoff altitude {alt_m:g} m is not above the vehicle"
+        if not self.rotor.interlock:
+            return False, ("motor interlock not in effect yet (ARMING_DELAY_SEC after arming)"
+                           if self.rotor.switch_engaged else "motor interlock not engaged (RC8 or DO_AUX_FUNCTION 32)")
         return True, ""
 
     def land(self) -> tuple[bool, str]:
@@ -457,6 +516,71 @@ class Autopilot:
     def rtl(self) -> tuple[bool, str]:
         """Switch to RTL."""
         return self.set_mode(RTL)
+
+    # ------------------------------------------------------------------ rotor and interlock
+    @property
+    def rotor(self) -> rsc.RotorState:
+        """Interlock switch, effective interlock and rotor run-up now."""
+        return self.rotor_control.state
+
+    def set_interlock_switch(self, position: int) -> tuple[bool, str]:
+        """MAV_CMD_DO_AUX_FUNCTION 32: interlock switch LOW (0), MIDDLE (1) or HIGH (2).
+
+        Accepted at any time on the ground, as ArduPilot does (during ARMING_DELAY_SEC after
+        arming it is stored and takes effect afterwards); refused in flight when it would stop
+        the rotor.
+        """
+        engaged_before = self.rotor.switch_engaged
+        ok, reason = self.rotor_control.set_switch(position, flying=self.armed and not self.landed)
+        if ok and self.rotor.switch_engaged != engaged_before:
+            log.info("motor interlock switch %s", "engaged" if self.rotor.switch_engaged else "released")
+        return ok, reason
+
+    def rc_override(self, chan8_us: int) -> None:
+        """RC_CHANNELS_OVERRIDE of RC8 in us (0 releases it back to the RC input)."""
+        self.rotor_control.rc_override(chan8_us, self.time_s)
+
+    @property
+    def rc8_us(self) -> int:
+        """RC8 input now (the override while fresh, else the SITL's stick at 1500 us)."""
+        return self.rotor_control.rc8_us(self.time_s)
+
+    def _update_rotor(self, dt_s: float) -> None:
+        was_complete = self.rotor.runup_complete
+        for severity, text in self.rotor_control.tick(self.time_s, dt_s, self.armed, self.armed and not self.landed):
+            log.info("%s", text)
+            self._events.append(("text", severity, text))
+        if self.rotor.runup_complete != was_complete:
+            log.info("rotor run-up %s", "complete" if self.rotor.runup_complete else "lost (below H_RSC_CRITICAL)")
+
+    def prearm_failure(self) -> str | None:
+        """The failing pre-arm check (as ArduPilot words it after "PreArm: "), or None."""
+        if self.settings.flight.prearm_fail:
+            return "simulated sensor failure (SIM_PREARM_FAIL)"
+        if self.rotor.switch_engaged:
+            return "Motor Interlock Enabled"
+        return None
+
+    def _report_prearm(self, t: float) -> None:
+        if t - self._prearm_reported_s < PREARM_REPORT_PERIOD_S:
+            return
+        self._prearm_reported_s = t
+        failure = self.prearm_failure()
+        if failure is not None:
+            self._events.append(("text", MAV_SEVERITY_CRITICAL, f"PreArm: {failure}"))
+
+    # ------------------------------------------------------------------ home
+    def set_home(self, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[bool, str]:
+        """MAV_CMD_DO_SET_HOME: move home (RTL, relative altitudes); the EKF origin stays."""
+        if not all(math.isfinite(v) for v in (lat_deg, lon_deg, alt_m)):
+            return False, "home must be finite"
+        if not (-90.0 <= lat_deg <= 90.0 and -180.0 <= lon_deg <= 180.0) or (lat_deg == 0.0 and lon_deg == 0.0):
+            return False, f"home {lat_deg!r}, {lon_deg!r} is not a valid position"
+        self.frames.set_home(lat_deg, lon_deg, alt_m)
+        home = self.frames.home_local_ned_m
+        log.info("home set to %.7f, %.7f, %.2f m AMSL (N %.1f E %.1f D %.1f m from the EKF origin)", lat_deg, lon_deg,
+                 alt_m, *home)
+        return True, ""
 
     def mission_start(self, first: int = 0) -> tuple[bool, str]:
         """MAV_CMD_MISSION_START: AUTO from item ``first`` (0 = from item 1)."""
@@ -552,7 +676,9 @@ class Autopilot:
         f = self.settings.flight
         if not f.fence_enable or self.landed:
             return
-        reason = fence_breach(self.fence, self.pos_ned_m, f.fence_alt_max_m)
+        pos = self.pos_ned_m.copy()
+        pos[2] = -self.frames.height_above_home(pos)  # FENCE_ALT_MAX is above home
+        reason = fence_breach(self.fence, pos, f.fence_alt_max_m)
         if reason is None:
             if self.fence_breached is not None:
                 log.info("fence: back inside")
@@ -651,13 +777,18 @@ class Autopilot:
 
     def _control_tick(self) -> None:
         t = self.time_s
+        self._update_rotor(self.physics_dt_s * self.steps_per_control)
         if not self.armed:
+            self._report_prearm(t)
             return
         self._check_fence()
         if self.mode == AUTO:
             self._advance_mission(t)
+        if self.landed and self._climbing_stage() and not self.rotor.runup_complete:
+            self._idle_on_ground(t)  # waiting for the rotor: the stages (and their legs' timing) start after it
+            return
         self._advance_stages(t)
-        if self.landed and not self._climbing_stage():
+        if self.landed and not self._lifting_off():
             self._idle_on_ground(t)
             return
         setpoint = self._setpoint(t)
@@ -665,7 +796,7 @@ class Autopilot:
 
     def _physics_tick(self) -> None:
         self._steps += 1
-        if not self.armed or (self.landed and not self._climbing_stage()):
+        if not self.armed or (self.landed and not self._lifting_off()):
             return
         wind = None if self._wind_calm else self.wind.step(self.physics_dt_s)
         self.x = dynamics.step_rk4(self.model, self.x, self.delta, self.physics_dt_s, wind)
@@ -718,11 +849,26 @@ class Autopilot:
         self.controller.reset(self.x)
 
     def _idle_on_ground(self, t: float) -> None:
+        """Sit on the ground; disarm as ArduCopter heli's auto-disarm does.
+
+        Never while the rotor turns above H_RSC_CRITICAL; after half of DISARM_DELAY when the
+        interlock is off; otherwise after DISARM_DELAY (not in AUTO).
+        """
         self.delta = np.zeros(4)
         self.controller.reset(self.x)
         delay = self.settings.flight.disarm_delay_s
-        if delay > 0 and t - self._landed_since_s >= delay and self.mode != AUTO:
+        if self.rotor.above_critical(self.settings.rsc):
+            self._landed_since_s = t
+            return
+        interlock_off = not self.rotor.interlock
+        if interlock_off:
+            delay *= 0.5
+        if delay > 0 and t - self._landed_since_s >= delay and (interlock_off or self.mode != AUTO):
             self.disarm(reason=f"landed and idle for {delay:g} s")
+
+    def _lifting_off(self) -> bool:
+        """True when a landed vehicle is told to climb and its rotor has run up."""
+        return self._climbing_stage() and self.rotor.runup_complete
 
     def _climbing_stage(self) -> bool:
         """True when the current stage asks a landed vehicle to lift off."""
@@ -753,8 +899,15 @@ class Autopilot:
 
     @property
     def taking_off(self) -> bool:
-        """True while landed but climbing away."""
-        return self.armed and self.landed and self._climbing_stage()
+        """True from lift-off until a takeoff has reached its altitude (MAV_LANDED_STATE_TAKEOFF).
+
+        A vehicle waiting on the ground for its rotor to run up is still ON_GROUND, as in ArduPilot.
+        """
+        if not self.armed or not self._stages:
+            return False
+        stage = self._stages[0]
+        takeoff = stage.kind == "leg" and stage.vertical_only
+        return takeoff and (not self.landed or self._lifting_off())
 
     # ------------------------------------------------------------------ stages
     def _speed_xy(self, stage: Stage) -> float:
@@ -875,24 +1028,28 @@ class Autopilot:
         return self._yaw_hold_rad
 
     def _takeoff_stage(self, alt_m: float) -> Stage:
+        """Climb straight up to ``alt_m`` above home."""
         pos = self.pos_ned_m
-        return Stage("leg", target=np.array([pos[0], pos[1], -float(alt_m)]), radius_m=0.5, vertical_only=True)
+        down = self.frames.down_at_height_above_home(float(alt_m))
+        return Stage("leg", target=np.array([pos[0], pos[1], down]), radius_m=0.5, vertical_only=True)
 
     def _rtl_stages(self) -> list[Stage]:
         f = self.settings.flight
         pos = self.pos_ned_m
-        alt_m = max(f.rtl_alt_m, -float(pos[2]))
+        height = self.frames.height_above_home(pos)
+        alt_m = max(f.rtl_alt_m, height)
+        down = min(self.frames.down_at_height_above_home(alt_m), float(pos[2]))
         stages = []
-        if -pos[2] < alt_m - 0.5:
-            stages.append(Stage("leg", target=np.array([pos[0], pos[1], -alt_m]), radius_m=1.0))
+        if height < alt_m - 0.5:
+            stages.append(Stage("leg", target=np.array([pos[0], pos[1], down]), radius_m=1.0))
         destination = self._rtl_destination(pos)
-        stages.append(Stage("leg", target=np.array([destination[0], destination[1], -alt_m])))
+        stages.append(Stage("leg", target=np.array([destination[0], destination[1], down])))
         stages.append(Stage("land"))
         return stages
 
     def _rtl_destination(self, pos: np.ndarray) -> np.ndarray:
         """Nearest (horizontally) of home and the rally points."""
-        candidates = [np.zeros(3)] + list(self.rally_ned_m)
+        candidates = [self.frames.home_ground_ned_m.copy()] + list(self.rally_ned_m)
         distances = [math.hypot(c[0] - pos[0], c[1] - pos[1]) for c in candidates]
         best = candidates[int(np.argmin(distances))]
         if best is not candidates[0]:
@@ -956,17 +1113,17 @@ class Autopilot:
         """Target of a mission item in NED, m; a missing position keeps the current one."""
         pos = self.pos_ned_m
         has_position = not (item.x == 0 and item.y == 0)
-        if item.frame == FRAME_LOCAL_NED:
-            return np.array([item.x * 1e-4, item.y * 1e-4, item.z])
+        if item.frame == FRAME_LOCAL_NED:  # metres from the EKF origin, as in ArduPilot
+            return self.frames.from_local((item.x * 1e-4, item.y * 1e-4, item.z))
         if item.frame == FRAME_MISSION or not has_position:
             north, east = pos[0], pos[1]
         else:
-            alt_amsl = item.z if item.frame in (FRAME_GLOBAL, FRAME_GLOBAL_INT) else self.frame.alt0_m + item.z
+            alt_amsl = item.z if item.frame in (FRAME_GLOBAL, FRAME_GLOBAL_INT) else self.frames.home_alt_m + item.z
             north, east, _ = self.frame.to_ned(item.lat_deg, item.lon_deg, alt_amsl)
         if item.frame in (FRAME_GLOBAL, FRAME_GLOBAL_INT):
             down = -(item.z - self.frame.alt0_m)
-        else:
-            down = -item.z
+        else:  # relative altitudes are above home
+            down = self.frames.down_at_height_above_home(item.z)
         return np.array([north, east, down])
 
     def _item_stages(self, item: MissionItem) -> list[Stage] | None:
@@ -981,8 +1138,8 @@ class Autopilot:
             log.info("AUTO: item %d command %d not simulated; skipped", item.seq, cmd)
             return None
         if cmd == CMD_NAV_TAKEOFF:
-            alt_m = item.z if item.frame not in (FRAME_GLOBAL, FRAME_GLOBAL_INT) else item.z - self.frame.alt0_m
-            if -self.pos_ned_m[2] >= alt_m - 0.5:
+            alt_m = item.z if item.frame not in (FRAME_GLOBAL, FRAME_GLOBAL_INT) else item.z - self.frames.home_alt_m
+            if self.height_above_home_m >= alt_m - 0.5:
                 return [Stage("hold", duration_s=0.0)]
             return [self._takeoff_stage(alt_m)]
         if cmd == CMD_NAV_RETURN_TO_LAUNCH:

@@ -26,9 +26,15 @@ examples:
   sim-vehicle --speedup 5 --out 127.0.0.1:14560 # 5x faster, telemetry to one address only
   sim-vehicle --instance 1                      # a second vehicle: port 14565, sysid 2
   sim-vehicle --home 46.5197,6.6323,372,90 --wind-speed 5 --wind-dir 270 --gust 1 --tlog flight.tlog
+  sim-vehicle --origin 47.3970,8.5450,480 --adsb-traffic 3 --seed 7   # EKF origin away from home, traffic
 
 Any MAVLink client can also just send to the vehicle's port: it answers every peer heard in the
-last 10 s. Modes are ArduCopter's (GUIDED 4, AUTO 3, LOITER 5, RTL 6, LAND 9, BRAKE 17).
+last 10 s. As ArduCopter, it sends nothing but HEARTBEAT until asked (SET_MESSAGE_INTERVAL,
+REQUEST_DATA_STREAM). Like an ArduCopter helicopter it refuses to arm while the motor interlock
+(RC8, or MAV_CMD_DO_AUX_FUNCTION 32) is engaged, which it is at start (RC8 1500 us): set it low,
+arm, set it high (effective 2 s after arming), then take off; the rotor needs H_RSC_RUNUP_TIME
+(10 s) to run up. MAVProxy: rc 8 1000 / arm throttle / rc 8 2000 / takeoff 10.
+Modes are ArduCopter's (GUIDED 4, AUTO 3, LOITER 5, RTL 6, LAND 9, BRAKE 17).
 """
 
 log = logging.getLogger("sim_vehicle")
@@ -55,6 +61,24 @@ def _home(text: str) -> tuple[float, float, float, float]:
     if not -500.0 <= alt <= 9000.0:
         raise argparse.ArgumentTypeError(f"altitude must be -500..9000 m AMSL, got {alt:g}")
     return lat, lon, alt, yaw % 360.0
+
+
+def _origin(text: str) -> tuple[float, float, float]:
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"expected LAT,LON,ALT, got {text!r}")
+    lat, lon, alt, _ = _home(text)
+    return lat, lon, alt
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if not 0 <= value <= 100:
+        raise argparse.ArgumentTypeError(f"expected 0..100, got {value}")
+    return value
 
 
 def _positive(text: str) -> float:
@@ -101,6 +125,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--home", type=_home, default=None, metavar="LAT,LON,ALT,YAW",
                         help="home: degrees, metres AMSL, heading in degrees "
                         "(default 47.397742,8.545594,488,0: PX4's SITL field)")
+    parser.add_argument("--origin", type=_origin, default=None, metavar="LAT,LON,ALT",
+                        help="EKF origin (GPS_GLOBAL_ORIGIN), the frame of LOCAL_POSITION_NED and "
+                        "SET_POSITION_TARGET_LOCAL_NED (default: the home)")
+    parser.add_argument("--adsb-traffic", type=_count, default=None, metavar="N",
+                        help="simulate N aircraft crossing the area around home, reported as ADSB_VEHICLE when "
+                        "asked (SIM_ADSB_COUNT; default 0)")
     parser.add_argument("--speedup", type=_positive, default=None, metavar="X",
                         help="run X times faster than real time (heartbeats stay at 1 Hz wall clock; default 1)")
     parser.add_argument("--out", type=_address, action="append", default=None, metavar="HOST:PORT",
@@ -111,7 +141,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--port", type=int, default=None, metavar="N", help="UDP port to bind (default 14555+10*N)")
     parser.add_argument("--bind", default=None, metavar="HOST", help="address to bind (default 0.0.0.0)")
     parser.add_argument("--profile", default=None, metavar="FILE", help="vehicle profile TOML (default: R-50-class)")
-    parser.add_argument("--seed", type=int, default=None, metavar="N", help="random seed of the wind gusts (default 0)")
+    parser.add_argument("--seed", type=int, default=None, metavar="N",
+                        help="random seed of the wind gusts and the ADS-B traffic (default 0)")
     parser.add_argument("--tlog", default=None, metavar="FILE", help="record all MAVLink traffic to a .tlog file")
     parser.add_argument("--wind-speed", type=_non_negative, default=None, metavar="M_S", help="steady wind speed, m/s")
     parser.add_argument("--wind-dir", type=float, default=None, metavar="DEG",
@@ -136,6 +167,8 @@ def _settings_from_args(args: argparse.Namespace):
         settings = replace_path(settings, "timing.physics_rate_hz", args.physics_rate)
     if args.seed is not None:
         settings = dataclasses.replace(settings, seed=args.seed)
+    if args.adsb_traffic is not None:
+        settings = replace_path(settings, "adsb.count", args.adsb_traffic)
     if args.out is not None or args.no_default_out:
         settings = replace_path(settings, "link.out", tuple(args.out or ()))
     if args.bind is not None:
@@ -160,6 +193,7 @@ def run(args: argparse.Namespace) -> int:
     """Build the vehicle from parsed arguments and fly until a signal arrives."""
     import numpy as np
 
+    from sim_vehicle.adsb import TrafficModel
     from sim_vehicle.autopilot import Autopilot
     from sim_vehicle.config import SimConfigError
     from sim_vehicle.mavlink_server import MavlinkServer
@@ -185,9 +219,11 @@ def run(args: argparse.Namespace) -> int:
             open(args.tlog, "ab").close()
         except OSError as exc:
             raise SimConfigError(f"--tlog: cannot write {args.tlog} ({exc.strerror or exc})") from None
-    vehicle = Autopilot(model, settings, home, np.random.default_rng(settings.seed))
+    origin = args.origin or home[:3]
+    vehicle = Autopilot(model, settings, home, np.random.default_rng(settings.seed), origin_lla=origin)
+    traffic = TrafficModel(settings.adsb, np.random.default_rng([settings.seed, 0xAD5B]))
     try:
-        server = MavlinkServer(vehicle, settings, sysid, port, tlog_path=args.tlog)
+        server = MavlinkServer(vehicle, settings, sysid, port, tlog_path=args.tlog, traffic=traffic)
     except OSError as exc:
         raise SimConfigError(f"cannot use UDP port {port} ({exc.strerror or exc}); pick another with --port") from None
 
@@ -200,6 +236,12 @@ def run(args: argparse.Namespace) -> int:
     log.info("vehicle '%s', home %.6f,%.6f,%.1f m, heading %.0f deg, seed %d, physics %g Hz, control %g Hz",
              model.name, home[0], home[1], home[2], home[3], settings.seed, settings.timing.physics_rate_hz,
              settings.timing.control_rate_hz)
+    if args.origin is not None:
+        log.info("EKF origin %.6f,%.6f,%.1f m: home is N %.1f E %.1f D %.1f m from it", *origin,
+                 *vehicle.frames.home_local_ned_m)
+    if settings.adsb.count:
+        log.info("ADS-B traffic: %d aircraft crossing %g m around home at %g +- %g m", settings.adsb.count,
+                 settings.adsb.radius_m, settings.adsb.alt_m, settings.adsb.alt_spread_m)
     try:
         server.run()
     finally:

@@ -6,7 +6,7 @@ The MAVLink parameters (``sim_vehicle.params``) are views onto this tree, in Ard
 
 Example ``--config`` file::
 
-    [sim]
+    [timing]
     speedup = 5.0
     [flight]
     wp_speed_m_s = 8.0
@@ -14,6 +14,12 @@ Example ``--config`` file::
     [wind]
     speed_m_s = 4.0
     from_deg = 270.0
+    [rsc]
+    runup_time_s = 5.0
+    [adsb]
+    count = 3
+    [link.mav1]          # the first --out address streams positions at 4 Hz from the start
+    position = 4
 """
 
 from __future__ import annotations
@@ -23,7 +29,9 @@ import math
 from pathlib import Path
 from typing import Any
 
+from sim_vehicle.adsb import AdsbSettings
 from sim_vehicle.control import ControllerSettings
+from sim_vehicle.rsc import RscSettings
 from sim_vehicle.typed_config import from_dict, load_toml
 
 
@@ -209,24 +217,32 @@ class WindConfig:
 
 
 @dataclasses.dataclass(frozen=True)
-class StreamRates:
-    """Telemetry rates in Hz of *simulated* time (0 = off); SET_MESSAGE_INTERVAL changes them."""
+class StreamGroupRates:
+    """Stream group rates a link starts with, Hz (ArduPilot's ``MAVn_*`` parameters; 0 = off).
 
-    SYS_STATUS: float = 2.0
-    GLOBAL_POSITION_INT: float = 10.0
-    LOCAL_POSITION_NED: float = 10.0
-    ATTITUDE: float = 10.0
-    VFR_HUD: float = 4.0
-    EXTENDED_SYS_STATE: float = 2.0
-    MISSION_CURRENT: float = 2.0
-    SERVO_OUTPUT_RAW: float = 4.0
-    SYSTEM_TIME: float = 1.0
-    HOME_POSITION: float = 0.0
+    ArduCopter's defaults are 0 for every group: nothing but HEARTBEAT until a ground station
+    asks (see :mod:`sim_vehicle.streams`). REQUEST_DATA_STREAM writes the rate it sets here.
+    """
+
+    raw_sens: int = 0
+    ext_stat: int = 0
+    rc_chan: int = 0
+    raw_ctrl: int = 0
+    position: int = 0
+    extra1: int = 0
+    extra2: int = 0
+    extra3: int = 0
+    params: int = 0
+    adsb: int = 0
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            _require(math.isfinite(value) and 0.0 <= value <= 400.0, f"{f.name}: expected 0..400 Hz, got {value!r}")
+            _require(isinstance(value, int) and 0 <= value <= 1000, f"{f.name}: expected 0..1000 Hz, got {value!r}")
+
+    def as_groups(self) -> dict[str, int]:
+        """Group name (``RAW_SENS``, ``EXT_STAT``, ...) -> rate, Hz."""
+        return {f.name.upper(): getattr(self, f.name) for f in dataclasses.fields(self)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -245,8 +261,11 @@ class LinkSettings:
         A peer not heard for this long (wall clock) no longer gets telemetry.
     mission_upload_timeout_s : float
         A mission upload with no item for this long (wall clock) is abandoned (old list kept).
-    streams : StreamRates
-        Default stream rates.
+    mav1, mav2, mav3 : StreamGroupRates
+        Stream rates the first, second and third ``out`` address start with [MAV1_*, MAV2_*,
+        MAV3_*]; other peers start with every stream off.
+    gcs_sysid : int
+        Only this system id may override RC channels (RC_CHANNELS_OVERRIDE) [MAV_GCS_SYSID].
     """
 
     port: int = 0
@@ -254,9 +273,14 @@ class LinkSettings:
     out: tuple[str, ...] = ("127.0.0.1:14550", "127.0.0.1:14540")
     peer_timeout_s: float = 10.0
     mission_upload_timeout_s: float = 5.0
-    streams: StreamRates = dataclasses.field(default_factory=StreamRates)
+    mav1: StreamGroupRates = dataclasses.field(default_factory=StreamGroupRates)
+    mav2: StreamGroupRates = dataclasses.field(default_factory=StreamGroupRates)
+    mav3: StreamGroupRates = dataclasses.field(default_factory=StreamGroupRates)
+    gcs_sysid: int = 255
 
     def __post_init__(self) -> None:
+        _require(isinstance(self.gcs_sysid, int) and 1 <= self.gcs_sysid <= 255,
+                 f"gcs_sysid: expected 1..255, got {self.gcs_sysid!r}")
         _require(0 <= self.port <= 65535, f"port: expected 0..65535, got {self.port!r}")
         for address in self.out:
             parse_host_port(address, "out")
@@ -269,7 +293,8 @@ class LinkSettings:
 class VehicleSettings:
     """The whole ``sim-vehicle`` settings tree.
 
-    ``controller`` is the flight controller's own settings (:class:`sim_vehicle.control.
+    ``rsc`` is the rotor speed controller and motor interlock (:mod:`sim_vehicle.rsc`), ``adsb``
+    the simulated ADS-B traffic (:mod:`sim_vehicle.adsb`). ``controller`` is the flight controller's own settings (:class:`sim_vehicle.control.
     ControllerSettings`: LQI weights, PID gains, limits); its ``control_dt_s`` is replaced by
     ``1 / timing.control_rate_hz`` when the vehicle is built.
     """
@@ -279,6 +304,8 @@ class VehicleSettings:
     flight: FlightSettings = dataclasses.field(default_factory=FlightSettings)
     wind: WindConfig = dataclasses.field(default_factory=WindConfig)
     link: LinkSettings = dataclasses.field(default_factory=LinkSettings)
+    rsc: RscSettings = dataclasses.field(default_factory=RscSettings)
+    adsb: AdsbSettings = dataclasses.field(default_factory=AdsbSettings)
     controller: ControllerSettings = dataclasses.field(default_factory=ControllerSettings)
 
 

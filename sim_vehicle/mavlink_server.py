@@ -2,12 +2,17 @@
 
 Implements the MAVLink contract of DESIGN section 5 the way ArduPilot's SITL presents itself
 (https://mavlink.io/en/services/): HEARTBEAT as an ArduCopter helicopter at 1 Hz of wall-clock
-time, telemetry streams whose rates SET_MESSAGE_INTERVAL / REQUEST_DATA_STREAM change, every
-COMMAND_LONG / COMMAND_INT addressed to the vehicle answered with a COMMAND_ACK, the mission
-protocol (MISSION_INT and the legacy float items) for the mission, fence and rally lists with
-atomic replacement (:mod:`sim_vehicle.mission_store`), the parameter protocol
-(:mod:`sim_vehicle.params`), TIMESYNC, HOME_POSITION and AUTOPILOT_VERSION. A STATUSTEXT from
-another component (a companion) is forwarded to the other links, as ArduPilot's routing does.
+time and nothing else unasked; telemetry streams per link, only as requested with
+SET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM or the MAVn_* parameters (:mod:`sim_vehicle.streams`;
+messages built by :mod:`sim_vehicle.telemetry`); every COMMAND_LONG / COMMAND_INT addressed to
+the vehicle answered with a COMMAND_ACK; the mission protocol (MISSION_INT and the legacy float
+items) for the mission, fence and rally lists with atomic replacement
+(:mod:`sim_vehicle.mission_store`); the parameter protocol (:mod:`sim_vehicle.params`);
+TIMESYNC, REQUEST_MESSAGE, DO_SET_HOME (HOME_POSITION and GPS_GLOBAL_ORIGIN follow the ACK to
+every link, as ArduPilot sends them whenever home is set), the motor interlock
+(DO_AUX_FUNCTION 32 and RC_CHANNELS_OVERRIDE of RC8 from MAV_GCS_SYSID, :mod:`sim_vehicle.rsc`)
+and simulated ADS-B traffic (:mod:`sim_vehicle.adsb`). A STATUSTEXT from another component (a
+companion) is forwarded to the other links, as ArduPilot's routing does.
 
 Everything runs in one thread and one process: :meth:`MavlinkServer.run` paces the
 simulation (:mod:`sim_vehicle.clock`), drains the socket, and sends what is due, sleeping in
@@ -33,9 +38,11 @@ from typing import Any, Callable, Iterable
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from sim_vehicle import autopilot as ap
-from sim_vehicle.autopilot import Autopilot
+from sim_vehicle import rsc
+from sim_vehicle.adsb import TrafficModel
+from sim_vehicle.autopilot import Autopilot, QuietRefusal
 from sim_vehicle.clock import SimClock, WallTimer
-from sim_vehicle.config import VehicleSettings, parse_host_port
+from sim_vehicle.config import VehicleSettings, parse_host_port, replace_path
 from sim_vehicle.control import Setpoint
 from sim_vehicle.mission_store import (
     FRAME_GLOBAL, FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT,
@@ -43,36 +50,19 @@ from sim_vehicle.mission_store import (
     MISSION_TYPE_FENCE, MISSION_TYPE_NAMES, MISSION_TYPE_RALLY, MISSION_TYPES, MissionItem, MissionResult, MissionStore,
 )
 from sim_vehicle.params import ParameterTable
+from sim_vehicle.streams import MESSAGE_IDS, NAMES_BY_ID, StreamTable
+from sim_vehicle.telemetry import CAPABILITIES, Telemetry
 
 log = logging.getLogger(__name__)
 
 COMPONENT_ID = 1
-FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (0 << 8) | 255  # "4.5.0 official", like ArduCopter 4.5
-CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY)
-SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-           | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-           | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-           | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION | mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION
-           | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
-           | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | mavlink.MAV_SYS_STATUS_AHRS)
 FORCE_DISARM_MAGIC = 21196
 MAX_STREAM_WALL_HZ = 50.0
 """A stream is never sent faster than this in wall-clock time, whatever the speed-up."""
 REQUEST_RETRY_S = 1.0
-DATA_STREAM_GROUPS = {
-    mavlink.MAV_DATA_STREAM_RAW_SENSORS: ("GPS_RAW_INT",),
-    mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "MISSION_CURRENT", "GPS_RAW_INT", "EXTENDED_SYS_STATE"),
-    mavlink.MAV_DATA_STREAM_RC_CHANNELS: ("SERVO_OUTPUT_RAW",),
-    mavlink.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
-    mavlink.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
-    mavlink.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
-    mavlink.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "HOME_POSITION"),
-}
+REQUESTABLE: dict[str, int] = {**MESSAGE_IDS, "AUTOPILOT_VERSION": mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
+"""Messages MAV_CMD_REQUEST_MESSAGE answers (once, on the requesting link)."""
+STATUSTEXT_CHUNK = 50
 GLOBAL_FRAMES = frozenset({FRAME_GLOBAL, FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT,
                            FRAME_GLOBAL_TERRAIN_ALT, FRAME_GLOBAL_TERRAIN_ALT_INT})
 
@@ -126,10 +116,14 @@ class MavlinkServer:
         Write every packet in and out to this ``.tlog`` file.
     wall_s : callable
         Monotonic wall clock (tests may inject one).
+    traffic : TrafficModel, optional
+        Simulated ADS-B aircraft (default: ``settings.adsb`` with a generator seeded by
+        ``settings.seed``).
     """
 
     def __init__(self, autopilot: Autopilot, settings: VehicleSettings, sysid: int, port: int,
-                 tlog_path: str | None = None, wall_s: Callable[[], float] = time.monotonic) -> None:
+                 tlog_path: str | None = None, wall_s: Callable[[], float] = time.monotonic,
+                 traffic: TrafficModel | None = None) -> None:
         self.autopilot = autopilot
         self.settings = settings
         self.sysid = int(sysid)
@@ -143,9 +137,17 @@ class MavlinkServer:
         self.mav = mavlink.MAVLink(None, srcSystem=self.sysid, srcComponent=COMPONENT_ID)
         self.outs: list[Address] = [self._resolve(a) for a in settings.link.out]
         self.peers: dict[Address, float] = {}
-        self.stream_hz: dict[str, float] = dict(dataclasses.asdict(settings.link.streams))
-        self.stream_hz.setdefault("GPS_RAW_INT", 2.0)
-        self._stream_next_s: dict[str, float] = {}
+        if traffic is None:
+            import numpy as np
+
+            traffic = TrafficModel(settings.adsb, np.random.default_rng([settings.seed, 0xAD5B]))
+        self.traffic = traffic
+        link = settings.link
+        self.streams = StreamTable(self.outs, [link.mav1.as_groups(), link.mav2.as_groups(), link.mav3.as_groups()])
+        self.telemetry = Telemetry(self.mav, autopilot, self.clock, self.store, traffic, self.sysid,
+                                   lambda: self.stats.dropped)
+        self._origin_announced = False
+        self._statustext_id = 0
         self._uploads: dict[int, _UploadPeer] = {}
         self._completed_upload: dict[int, tuple[int, float]] = {}
         self._bad_logged = collections.Counter()
@@ -201,10 +203,14 @@ class MavlinkServer:
                 self.autopilot.recover(f"{type(exc).__name__}: {exc}")
                 events = self.autopilot.run_steps(0)
             self.clock.advance(chunk)
+            self.traffic.step(chunk * self.clock.physics_dt_s)
             self._handle_events(events)
         self._receive()
         if self.heartbeat.due():
             self._send_heartbeat()
+            if not self._origin_announced:  # origin and home are set at start: ArduPilot announces both
+                self._origin_announced = True
+                self._send_home_and_origin()
         self._send_due_streams()
         if self.housekeeping.due():
             self._housekeeping()
@@ -245,156 +251,42 @@ class MavlinkServer:
         if self._tlog is not None:
             self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + buf)
 
-    def _time_boot_ms(self) -> int:
-        return int(self.clock.time_s * 1000.0) & 0xFFFFFFFF
-
     def _send_heartbeat(self) -> None:
-        a = self.autopilot
-        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
-        if a.mode in (ap.GUIDED, ap.AUTO, ap.RTL, ap.LOITER, ap.LAND, ap.BRAKE):
-            base |= mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
-        if a.mode == ap.AUTO:
-            base |= mavlink.MAV_MODE_FLAG_AUTO_ENABLED
-        if a.armed:
-            base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-        status = mavlink.MAV_STATE_ACTIVE if a.armed else mavlink.MAV_STATE_STANDBY
-        self._send(self.mav.heartbeat_encode(mavlink.MAV_TYPE_HELICOPTER, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                                             base, a.mode, status))
+        self._send(self.telemetry.msg_heartbeat())
+
+    def _send_home_and_origin(self) -> None:
+        """GPS_GLOBAL_ORIGIN then HOME_POSITION to every link (ArduPilot does so whenever home is set)."""
+        self._send(self.telemetry.msg_gps_global_origin())
+        self._send(self.telemetry.msg_home_position())
 
     def _send_due_streams(self) -> None:
+        """Each link's due messages, to that link only (streams are per link, as in ArduPilot)."""
         now = self.clock.time_s
         min_period = self.clock.speedup / MAX_STREAM_WALL_HZ
-        for name, hz in self.stream_hz.items():
-            if hz <= 0.0:
-                continue
-            next_s = self._stream_next_s.get(name, 0.0)
-            if now < next_s:
-                continue
-            period = max(1.0 / hz, min_period)
-            self._stream_next_s[name] = next_s + period if now - next_s < period else now + period
-            try:
-                self._send_stream(name)
-            except Exception as exc:  # e.g. a value out of the field's range: skip it, keep flying
-                key = f"stream:{name}"
-                n = self._bad_logged[key] = self._bad_logged[key] + 1
-                if n <= 3 or n % 1000 == 0:
-                    log.error("cannot send %s: %s: %s", name, type(exc).__name__, exc)
-
-    def _send_stream(self, name: str, to: Address | None = None) -> bool:
-        build = getattr(self, f"_msg_{name.lower()}", None)
-        if build is None:
-            return False
-        self._send(build(), to)
-        return True
-
-    # ---- message builders (one per streamed or requested message)
-    def _msg_sys_status(self) -> Any:
-        return self.mav.sys_status_encode(SENSORS, SENSORS, SENSORS, 250, 22200, 1000 if self.autopilot.armed else 0,
-                                          100, 0, self.stats.dropped & 0xFFFF, 0, 0, 0, 0)
-
-    def _msg_global_position_int(self) -> Any:
-        a = self.autopilot
-        lat, lon, alt = a.position_lla()
-        vel = a.vel_ned_m_s
-        heading = math.degrees(a.euler_rad[2]) % 360.0
-        return self.mav.global_position_int_encode(
-            self._time_boot_ms(), int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)),
-            int(round(-a.pos_ned_m[2] * 1000.0)), _i16(vel[0] * 100.0), _i16(vel[1] * 100.0), _i16(vel[2] * 100.0),
-            int(round(heading * 100.0)) % 36000)
-
-    def _msg_local_position_ned(self) -> Any:
-        a = self.autopilot
-        p, v = a.pos_ned_m, a.vel_ned_m_s
-        return self.mav.local_position_ned_encode(self._time_boot_ms(), p[0], p[1], p[2], v[0], v[1], v[2])
-
-    def _msg_attitude(self) -> Any:
-        a = self.autopilot
-        roll, pitch, yaw = a.euler_rad
-        p, q, r = a.body_rates_rad_s
-        return self.mav.attitude_encode(self._time_boot_ms(), roll, pitch, yaw, p, q, r)
-
-    def _msg_vfr_hud(self) -> Any:
-        a = self.autopilot
-        v = a.vel_ned_m_s
-        ground = math.hypot(v[0], v[1])
-        air = float(math.hypot(*(v[:2] - a.wind.current()[:2])))
-        heading = int(round(math.degrees(a.euler_rad[2]))) % 360
-        throttle = int(round(min(100.0, max(0.0, 50.0 + 50.0 * a.delta[3])))) if a.armed and not a.landed else 0
-        _, _, alt = a.position_lla()
-        return self.mav.vfr_hud_encode(air, ground, heading, throttle, alt, -v[2])
-
-    def _msg_extended_sys_state(self) -> Any:
-        a = self.autopilot
-        if a.taking_off:
-            state = mavlink.MAV_LANDED_STATE_TAKEOFF
-        elif a.landed:
-            state = mavlink.MAV_LANDED_STATE_ON_GROUND
-        elif a.landing:
-            state = mavlink.MAV_LANDED_STATE_LANDING
-        else:
-            state = mavlink.MAV_LANDED_STATE_IN_AIR
-        return self.mav.extended_sys_state_encode(mavlink.MAV_VTOL_STATE_UNDEFINED, state)
-
-    def _msg_mission_current(self) -> Any:
-        a = self.autopilot
-        total = len(self.store.items(MISSION_TYPE_MISSION))
-        if total == 0:
-            state = mavlink.MISSION_STATE_NO_MISSION
-        elif a.mission_finished:
-            state = mavlink.MISSION_STATE_COMPLETE
-        elif a.mode == ap.AUTO and a.armed:
-            state = mavlink.MISSION_STATE_ACTIVE
-        else:
-            state = mavlink.MISSION_STATE_NOT_STARTED
-        return self.mav.mission_current_encode(a.mission_current, total, state, 1 if a.mode == ap.AUTO else 2)
-
-    def _msg_servo_output_raw(self) -> Any:
-        d = self.autopilot.delta
-        us = [int(round(1500.0 + 500.0 * max(-1.0, min(1.0, float(v))))) for v in d]
-        # servo1 lateral cyclic, servo2 longitudinal cyclic, servo3 collective, servo4 tail rotor
-        return self.mav.servo_output_raw_encode(int(self.clock.time_s * 1e6) & 0xFFFFFFFF, 0,
-                                                us[0], us[1], us[3], us[2], 0, 0, 0, 0)
-
-    def _msg_system_time(self) -> Any:
-        return self.mav.system_time_encode(int(time.time() * 1e6), self._time_boot_ms())
-
-    def _msg_gps_raw_int(self) -> Any:
-        a = self.autopilot
-        lat, lon, alt = a.position_lla()
-        v = a.vel_ned_m_s
-        cog = int(round(math.degrees(math.atan2(v[1], v[0])) % 360.0 * 100.0)) % 36000
-        return self.mav.gps_raw_int_encode(int(self.clock.time_s * 1e6), 3, int(round(lat * 1e7)),
-                                           int(round(lon * 1e7)), int(round(alt * 1000.0)), 70, 90,
-                                           int(round(math.hypot(v[0], v[1]) * 100.0)), cog, 14)
-
-    def _msg_home_position(self) -> Any:
-        lat, lon, alt, _ = self.autopilot.home_lla
-        return self.mav.home_position_encode(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)),
-                                             0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
-                                             int(self.clock.time_s * 1e6))
-
-    def _msg_autopilot_version(self) -> Any:
-        return self.mav.autopilot_version_encode(CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
-                                                 0, 0, 0x5157_0000 + self.sysid)
-
-    _STREAM_IDS = {
-        "SYS_STATUS": mavlink.MAVLINK_MSG_ID_SYS_STATUS,
-        "GLOBAL_POSITION_INT": mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
-        "LOCAL_POSITION_NED": mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
-        "ATTITUDE": mavlink.MAVLINK_MSG_ID_ATTITUDE,
-        "VFR_HUD": mavlink.MAVLINK_MSG_ID_VFR_HUD,
-        "EXTENDED_SYS_STATE": mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
-        "MISSION_CURRENT": mavlink.MAVLINK_MSG_ID_MISSION_CURRENT,
-        "SERVO_OUTPUT_RAW": mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW,
-        "SYSTEM_TIME": mavlink.MAVLINK_MSG_ID_SYSTEM_TIME,
-        "GPS_RAW_INT": mavlink.MAVLINK_MSG_ID_GPS_RAW_INT,
-        "HOME_POSITION": mavlink.MAVLINK_MSG_ID_HOME_POSITION,
-    }
-    _REQUESTABLE_IDS = {**_STREAM_IDS, "AUTOPILOT_VERSION": mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
-    _NAME_BY_ID = {v: k for k, v in _REQUESTABLE_IDS.items()}
+        for address in self._destinations():
+            link = self.streams.link(address, now)
+            for name in link.due(now, min_period):
+                try:
+                    msg = self.telemetry.build(name, link)
+                except Exception as exc:  # e.g. a value out of the field's range: skip it, keep flying
+                    key = f"stream:{name}"
+                    n = self._bad_logged[key] = self._bad_logged[key] + 1
+                    if n <= 3 or n % 1000 == 0:
+                        log.error("cannot send %s: %s: %s", name, type(exc).__name__, exc)
+                    continue
+                if msg is not None:
+                    self._send(msg, address)
 
     def _statustext(self, severity: int, text: str) -> None:
-        self._send(self.mav.statustext_encode(severity, text[:50].encode()))
+        """STATUSTEXT to every link; longer texts in 50-character chunks with an id, as ArduPilot sends them."""
+        data = text.encode(errors="replace")
+        if len(data) <= STATUSTEXT_CHUNK:
+            self._send(self.mav.statustext_encode(severity, data))
+            return
+        self._statustext_id = self._statustext_id % 0xFFFF + 1
+        chunks = [data[i:i + STATUSTEXT_CHUNK] for i in range(0, len(data), STATUSTEXT_CHUNK)]
+        for seq, chunk in enumerate(chunks[:255]):
+            self._send(self.mav.statustext_encode(severity, chunk, self._statustext_id, seq))
 
     # ================================================================== receiving
     def _receive(self) -> None:
@@ -433,6 +325,7 @@ class MavlinkServer:
                 continue
             good = True
             self.stats.messages_in += 1
+            self.peers[address] = self.wall_s()  # before dispatch: a reply broadcast (STATUSTEXT) reaches it too
             if self._tlog is not None:
                 self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + bytes(msg.get_msgbuf()))
             try:
@@ -442,8 +335,6 @@ class MavlinkServer:
                 log.exception("error handling %s from %s", msg.get_type(), address)
         if parser.buf_len() > 0:
             self._count_bad("truncated", f"{parser.buf_len()} bytes left over", address)
-        if good:
-            self.peers[address] = self.wall_s()
 
     def _count_bad(self, kind: str, reason: str, address: Address) -> None:
         setattr(self.stats, kind, getattr(self.stats, kind) + 1)
@@ -526,8 +417,10 @@ class MavlinkServer:
         replies, self._after_ack = self._after_ack, []
         for reply, to in replies:  # requested messages follow the ACK, as in ArduPilot
             self._send(reply, to)
-        if result != mavlink.MAV_RESULT_ACCEPTED and reason and result == mavlink.MAV_RESULT_FAILED:
-            self._statustext(mavlink.MAV_SEVERITY_WARNING, reason)
+        if (result != mavlink.MAV_RESULT_ACCEPTED and reason and result == mavlink.MAV_RESULT_FAILED
+                and not isinstance(reason, QuietRefusal)):
+            self._statustext(mavlink.MAV_SEVERITY_CRITICAL if reason.startswith(("Arm:", "PreArm:"))
+                             else mavlink.MAV_SEVERITY_WARNING, reason)
 
     @staticmethod
     def _outcome(ok_reason: tuple[bool, str]) -> tuple[int, str]:
@@ -577,7 +470,7 @@ class MavlinkServer:
         if not math.isfinite(seq) or seq != int(seq) or not 0 <= seq < len(self.autopilot.mission_items):
             return mavlink.MAV_RESULT_DENIED, f"mission item {seq!r} does not exist"
         result = self._outcome(self.autopilot.set_current(int(seq)))
-        self._send(self._msg_mission_current())
+        self._send(self.telemetry.msg_mission_current())
         return result
 
     def _cmd_change_speed(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
@@ -621,57 +514,80 @@ class MavlinkServer:
         return self._outcome(a.set_guided_setpoint(Setpoint(pos_ned_m=target, yaw_rad=yaw)))
 
     def _cmd_set_message_interval(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
-        msg_id, interval_us = p[0], p[1]
-        if not (math.isfinite(msg_id) and math.isfinite(interval_us)):
-            return mavlink.MAV_RESULT_DENIED, f"message id / interval must be finite, got {msg_id!r}, {interval_us!r}"
-        name = self._NAME_BY_ID.get(int(msg_id))
-        if name is None or name not in self._STREAM_IDS:
-            return mavlink.MAV_RESULT_DENIED, f"message {int(msg_id)} cannot be streamed"
-        if interval_us == -1:
-            hz = 0.0
-        elif interval_us == 0:
-            hz = getattr(self.settings.link.streams, name, 2.0)
-        elif interval_us < 0 or interval_us < 2500:
-            return mavlink.MAV_RESULT_DENIED, f"interval {interval_us!r} us invalid (-1 off, 0 default, >= 2500)"
-        else:
-            hz = 1e6 / interval_us
-        self.stream_hz[name] = hz
-        self._stream_next_s[name] = self.clock.time_s
-        log.info("stream %s at %.3g Hz (SET_MESSAGE_INTERVAL)", name, hz)
-        return mavlink.MAV_RESULT_ACCEPTED, ""
+        """SET_MESSAGE_INTERVAL for the requesting link (:meth:`StreamTable.set_message_interval`)."""
+        result, text = self.streams.set_message_interval(address, p[0], p[1], self.clock.time_s)
+        if text:
+            self._statustext(mavlink.MAV_SEVERITY_INFO, text)  # ArduPilot's own words, sent by it too
+        if result != mavlink.MAV_RESULT_ACCEPTED:
+            return result, QuietRefusal(text or f"message {p[0]!r} interval {p[1]!r} us refused")
+        return result, ""
 
     def _cmd_get_message_interval(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
         if not math.isfinite(p[0]):
             return mavlink.MAV_RESULT_DENIED, "message id must be finite"
-        name = self._NAME_BY_ID.get(int(p[0]))
-        if name is None or name not in self._STREAM_IDS:
-            interval = 0
-        else:
-            hz = self.stream_hz.get(name, 0.0)
-            interval = int(1e6 / hz) if hz > 0 else -1
-        self._after_ack.append((self.mav.message_interval_encode(int(p[0]), interval), address))
+        name = NAMES_BY_ID.get(int(p[0]))
+        interval = 0 if name is None else self.streams.link(address, self.clock.time_s).interval_us(name)
+        # ArduPilot sends MESSAGE_INTERVAL before the COMMAND_ACK
+        self._send(self.mav.message_interval_encode(int(p[0]), interval), address)
         return mavlink.MAV_RESULT_ACCEPTED, ""
 
     def _cmd_request_message(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
+        """REQUEST_MESSAGE: the message once, after the ACK, on the requesting link; unknown: FAILED."""
         if not math.isfinite(p[0]):
             return mavlink.MAV_RESULT_DENIED, "message id (param1) must be finite"
-        name = self._NAME_BY_ID.get(int(p[0]))
+        name = next((n for n, i in REQUESTABLE.items() if i == int(p[0])), None)
         if name is None:
             if int(p[0]) not in self._refused_requests:
                 self._refused_requests.add(int(p[0]))
                 log.info("REQUEST_MESSAGE %d: not available", int(p[0]))
-            return mavlink.MAV_RESULT_UNSUPPORTED, ""
-        build = getattr(self, f"_msg_{name.lower()}")
-        self._after_ack.append((build(), None if name == "HOME_POSITION" else address))
+            return mavlink.MAV_RESULT_FAILED, QuietRefusal(f"message {int(p[0])} not available")
+        reply = self.telemetry.build(name, self.streams.link(address, self.clock.time_s))
+        if reply is not None:
+            self._after_ack.append((reply, address))
         return mavlink.MAV_RESULT_ACCEPTED, ""
 
     def _cmd_autopilot_capabilities(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
-        self._after_ack.append((self._msg_autopilot_version(), address))
+        self._after_ack.append((self.telemetry.msg_autopilot_version(), address))
         return mavlink.MAV_RESULT_ACCEPTED, ""
 
     def _cmd_get_home(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
-        self._after_ack.append((self._msg_home_position(), address))
+        self._after_ack.append((self.telemetry.msg_home_position(), address))
         return mavlink.MAV_RESULT_ACCEPTED, ""
+
+    def _cmd_set_home(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
+        """MAV_CMD_DO_SET_HOME: param1 1 (or lat = lon = 0) = here, else params 5-7.
+
+        COMMAND_LONG: degrees and metres AMSL. COMMAND_INT: degE7, altitude in ``frame``
+        (GLOBAL: AMSL, GLOBAL_RELATIVE_ALT: above the current home). Then GPS_GLOBAL_ORIGIN and
+        HOME_POSITION go to every link, as ArduPilot sends them.
+        """
+        a = self.autopilot
+        if not all(math.isfinite(v) for v in (p[0], p[4], p[5], p[6])):
+            return mavlink.MAV_RESULT_DENIED, "DO_SET_HOME parameters must be finite"
+        if frame is None:
+            lat, lon, alt = p[4], p[5], p[6]
+        else:
+            lat, lon, alt = p[4] * 1e-7, p[5] * 1e-7, p[6]
+            if frame in (FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT):
+                alt = a.frames.home_alt_m + alt
+            elif frame not in (FRAME_GLOBAL, FRAME_GLOBAL_INT):
+                return mavlink.MAV_RESULT_DENIED, f"DO_SET_HOME: frame {frame} not supported (use a global frame)"
+        if p[0] == 1.0 or (p[4] == 0 and p[5] == 0):
+            lat, lon, alt = a.position_lla()
+        result = self._outcome(a.set_home(lat, lon, alt))
+        if result[0] == mavlink.MAV_RESULT_ACCEPTED:
+            self._after_ack.append((self.telemetry.msg_gps_global_origin(), None))
+            self._after_ack.append((self.telemetry.msg_home_position(), None))
+        return result
+
+    def _cmd_aux_function(self, p: list[float], frame: Any, msg: Any, address: Address) -> tuple[int, str]:
+        """MAV_CMD_DO_AUX_FUNCTION: only 32 (MOTOR_INTERLOCK) is simulated; position 0/1/2."""
+        function, position = p[0], p[1]
+        if not (math.isfinite(function) and math.isfinite(position)) or position not in (0.0, 1.0, 2.0):
+            return mavlink.MAV_RESULT_DENIED, f"switch position (param2) {position!r}: expected 0, 1 or 2"
+        if function != rsc.AUX_FUNCTION_MOTOR_INTERLOCK:
+            return mavlink.MAV_RESULT_FAILED, QuietRefusal(f"aux function {function:g} not simulated")
+        return self._outcome(self.autopilot.set_interlock_switch(int(position)))
 
     _COMMANDS: dict[int, Callable] = {
         mavlink.MAV_CMD_COMPONENT_ARM_DISARM: _cmd_arm,
@@ -689,6 +605,8 @@ class MavlinkServer:
         mavlink.MAV_CMD_REQUEST_MESSAGE: _cmd_request_message,
         mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: _cmd_autopilot_capabilities,
         mavlink.MAV_CMD_GET_HOME_POSITION: _cmd_get_home,
+        mavlink.MAV_CMD_DO_SET_HOME: _cmd_set_home,
+        mavlink.MAV_CMD_DO_AUX_FUNCTION: _cmd_aux_function,
     }
 
     def _on_set_mode(self, msg: Any, address: Address) -> None:
@@ -705,14 +623,28 @@ class MavlinkServer:
         self._ack(msg, address, mavlink.MAVLINK_MSG_ID_SET_MODE, result)
 
     def _on_request_data_stream(self, msg: Any, address: Address) -> None:
-        names = (self._STREAM_IDS if msg.req_stream_id == mavlink.MAV_DATA_STREAM_ALL
-                 else DATA_STREAM_GROUPS.get(msg.req_stream_id, ()))
-        hz = float(msg.req_message_rate) if msg.start_stop else 0.0
-        for name in names:
-            if name == "HOME_POSITION":
-                continue
-            self.stream_hz[name] = hz
-        log.debug("REQUEST_DATA_STREAM %d at %g Hz", msg.req_stream_id, hz)
+        """REQUEST_DATA_STREAM for the requesting link; a numbered link's MAVn_ parameter follows."""
+        changed = self.streams.request_data_stream(address, msg.req_stream_id, msg.req_message_rate, msg.start_stop,
+                                                   self.clock.time_s)
+        n = self.streams.number(address)
+        if n is None or n > 3 or not changed:
+            return
+        settings = self.settings
+        for group, hz in changed:
+            settings = replace_path(settings, f"link.mav{n}.{group.lower()}", min(int(hz), 1000))
+        self.settings = self.params.settings = settings
+
+    def _on_rc_channels_override(self, msg: Any, address: Address) -> None:
+        """RC8 override (motor interlock switch); only from MAV_GCS_SYSID, as ArduPilot accepts it."""
+        if msg.get_srcSystem() != self.settings.link.gcs_sysid:
+            key = f"rc_override:{msg.get_srcSystem()}"
+            n = self._bad_logged[key] = self._bad_logged[key] + 1
+            if n <= 3:
+                log.info("RC_CHANNELS_OVERRIDE from system %d ignored (MAV_GCS_SYSID is %d)", msg.get_srcSystem(),
+                         self.settings.link.gcs_sysid)
+            return
+        if msg.chan8_raw != 0xFFFF:  # UINT16_MAX: leave the channel as it is
+            self.autopilot.rc_override(int(msg.chan8_raw))
 
     def _on_timesync(self, msg: Any, address: Address) -> None:
         if msg.tc1 == 0:
@@ -744,6 +676,8 @@ class MavlinkServer:
             pos = (off[0] + here[0], off[1] + here[1], off[2] + here[2])
         elif frame == mavlink.MAV_FRAME_LOCAL_OFFSET_NED:
             pos = (pos[0] + here[0], pos[1] + here[1], pos[2] + here[2])
+        elif frame == mavlink.MAV_FRAME_LOCAL_NED:  # metres from the EKF origin, as in ArduPilot
+            pos = tuple(a.frames.from_local(pos))
         self._guided_target(msg, pos, vel, acc)
 
     def _on_set_position_target_global_int(self, msg: Any, address: Address) -> None:
@@ -884,7 +818,7 @@ class MavlinkServer:
     def _apply_list(self, mission_type: int) -> None:
         if mission_type == MISSION_TYPE_MISSION:
             self.autopilot.set_mission(self.store.items(MISSION_TYPE_MISSION))
-            self._send(self._msg_mission_current())
+            self._send(self.telemetry.msg_mission_current())
         elif mission_type == MISSION_TYPE_RALLY:
             self.autopilot.set_rally(self.store.items(MISSION_TYPE_RALLY))
         else:
@@ -943,7 +877,7 @@ class MavlinkServer:
         if not ok:
             log.warning("MISSION_SET_CURRENT %d refused: %s", msg.seq, reason)
             self._statustext(mavlink.MAV_SEVERITY_WARNING, f"set current refused: {reason}")
-        self._send(self._msg_mission_current())
+        self._send(self.telemetry.msg_mission_current())
 
     def _on_mission_ack(self, msg: Any, address: Address) -> None:
         mission_type = self._mission_type(msg)
@@ -990,6 +924,13 @@ class MavlinkServer:
         if settings.timing.speedup != old.timing.speedup:
             self.clock.set_speedup(settings.timing.speedup)
             log.info("speed-up now %g", settings.timing.speedup)
+        if settings.adsb != old.adsb:
+            self.traffic.apply_settings(settings.adsb)
+            log.info("ADS-B traffic: %d aircraft within %g m", settings.adsb.count, settings.adsb.radius_m)
+        if settings.link != old.link and any(getattr(settings.link, f"mav{n}") != getattr(old.link, f"mav{n}")
+                                             for n in (1, 2, 3)):
+            log.info("MAVn_* stream rates stored; as in ArduPilot they apply at the next start "
+                     "(use SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM now)")
 
     #: Broadcast messages forwarded between links (``_route``), as ArduPilot does.
     ROUTED = frozenset({"STATUSTEXT"})
@@ -999,6 +940,7 @@ class MavlinkServer:
         "COMMAND_INT": _on_command_int,
         "SET_MODE": _on_set_mode,
         "REQUEST_DATA_STREAM": _on_request_data_stream,
+        "RC_CHANNELS_OVERRIDE": _on_rc_channels_override,
         "TIMESYNC": _on_timesync,
         "SET_POSITION_TARGET_LOCAL_NED": _on_set_position_target_local_ned,
         "SET_POSITION_TARGET_GLOBAL_INT": _on_set_position_target_global_int,
@@ -1024,7 +966,7 @@ class MavlinkServer:
                 self._send(self.mav.mission_item_reached_encode(event[1]))
                 self._statustext(mavlink.MAV_SEVERITY_INFO, f"Reached waypoint #{event[1]}")
             elif kind == "mission_current":
-                self._send(self._msg_mission_current())
+                self._send(self.telemetry.msg_mission_current())
             elif kind == "mode":
                 self._send_heartbeat()
             elif kind in ("armed", "disarmed"):

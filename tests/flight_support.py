@@ -2,7 +2,9 @@
 
 ``TrackListener`` is an independent pymavlink listener on its own UDP port (give its address to
 ``sim-vehicle --out``): the flown track and the armed state come from the vehicle itself, not
-from the companion under test.
+from the companion under test. Like any logger of an ArduPilot vehicle it asks for what it
+records: on the first HEARTBEAT it sends SET_MESSAGE_INTERVAL for LOCAL_POSITION_NED back to the
+address the heartbeat came from (its own link), and asks again each second until the track flows.
 """
 
 from __future__ import annotations
@@ -22,17 +24,26 @@ MAV_MODE_FLAG_SAFETY_ARMED = 128
 
 
 class TrackListener:
-    """Collects LOCAL_POSITION_NED and HEARTBEAT from the vehicle on a UDP port of its own."""
+    """Collects LOCAL_POSITION_NED and HEARTBEAT from the vehicle on a UDP port of its own.
 
-    def __init__(self) -> None:
+    Parameters
+    ----------
+    rate_hz : float
+        LOCAL_POSITION_NED rate it asks for, Hz of simulated time.
+    """
+
+    def __init__(self, rate_hz: float = 10.0) -> None:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+        self.mavlink = mavlink2
+        self.rate_hz = float(rate_hz)
         self.port = free_udp_port()
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", self.port))
         self._sock.settimeout(0.2)
-        self._mav = mavlink2.MAVLink(None)
+        self._mav = mavlink2.MAVLink(None, srcSystem=253, srcComponent=191)
         self._mav.robust_parsing = True
+        self._requested_wall_s = -1e9
         self.track: list[tuple[float, float, float, float]] = []   # (time_boot_s, n, e, d)
         self.armed: bool | None = None
         self.mode: int | None = None
@@ -46,7 +57,7 @@ class TrackListener:
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
-                data = self._sock.recv(65535)
+                data, vehicle = self._sock.recvfrom(65535)
             except (socket.timeout, OSError):
                 continue
             for msg in self._mav.parse_buffer(data) or []:
@@ -56,6 +67,22 @@ class TrackListener:
                 elif kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
                     self.armed = bool(msg.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
                     self.mode = msg.custom_mode
+                    self._ask_for_track(vehicle, msg.get_srcSystem())
+
+    def _ask_for_track(self, vehicle: tuple[str, int], sysid: int) -> None:
+        """SET_MESSAGE_INTERVAL LOCAL_POSITION_NED to the vehicle, until the track flows."""
+        now = time.monotonic()
+        if self.track or now - self._requested_wall_s < 1.0:
+            return
+        self._requested_wall_s = now
+        m = self.mavlink
+        request = self._mav.command_long_encode(sysid, 1, m.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                                m.MAVLINK_MSG_ID_LOCAL_POSITION_NED, int(round(1e6 / self.rate_hz)),
+                                                0, 0, 0, 0, 0)
+        try:
+            self._sock.sendto(request.pack(self._mav), vehicle)
+        except OSError:
+            pass
 
     def positions(self) -> np.ndarray:
         """The track so far as (K, 3) NED positions."""

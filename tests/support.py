@@ -196,7 +196,9 @@ class MavlinkPeer:
     """A minimal pymavlink ground station on loopback for tests (blocking, no threads).
 
     It sends a GCS heartbeat at least once a second while it waits, so the vehicle keeps it as a
-    peer and streams telemetry to it.
+    peer. Like ArduPilot, the vehicle streams nothing but HEARTBEAT to it until it asks:
+    :meth:`request` (SET_MESSAGE_INTERVAL per message), as a ground station does. A helicopter
+    takes off only with its motor interlock engaged and its rotor run up: :meth:`heli_takeoff`.
 
     Parameters
     ----------
@@ -271,11 +273,11 @@ class MavlinkPeer:
                     return msg
         return None
 
-    def command(self, command: int, *params: float, timeout_s: float = 3.0, use_int: bool = False):
-        """Send COMMAND_LONG (or COMMAND_INT) and return its COMMAND_ACK (None if none came)."""
+    def command(self, command: int, *params: float, timeout_s: float = 3.0, use_int: bool = False, frame: int = 0):
+        """Send COMMAND_LONG (or COMMAND_INT in ``frame``) and return its COMMAND_ACK (None if none came)."""
         p = list(params) + [0.0] * (7 - len(params))
         if use_int:
-            self.send(self.mav.command_int_encode(self.sysid, 1, 0, command, 0, 0, p[0], p[1], p[2], p[3],
+            self.send(self.mav.command_int_encode(self.sysid, 1, frame, command, 0, 0, p[0], p[1], p[2], p[3],
                                                   int(p[4]), int(p[5]), p[6]))
         else:
             self.send(self.mav.command_long_encode(self.sysid, 1, command, 0, *p))
@@ -285,6 +287,52 @@ class MavlinkPeer:
         """DO_SET_MODE with an ArduCopter mode number; returns the COMMAND_ACK."""
         return self.command(self.mavlink.MAV_CMD_DO_SET_MODE, self.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
                             custom_mode)
+
+    def request(self, *messages: str, rate_hz: float = 10.0) -> None:
+        """Ask for ``messages`` (names, e.g. ``"GLOBAL_POSITION_INT"``) at ``rate_hz`` (0 stops them).
+
+        One MAV_CMD_SET_MESSAGE_INTERVAL each, on this peer's link; raises if one is not accepted.
+        """
+        m = self.mavlink
+        interval_us = -1 if rate_hz <= 0 else int(round(1e6 / rate_hz))
+        for name in messages:
+            ack = self.command(m.MAV_CMD_SET_MESSAGE_INTERVAL, getattr(m, f"MAVLINK_MSG_ID_{name}"), interval_us)
+            if ack is None or ack.result != m.MAV_RESULT_ACCEPTED:
+                raise AssertionError(f"SET_MESSAGE_INTERVAL {name} at {rate_hz} Hz: {ack}")
+
+    def set_interlock(self, engaged: bool):
+        """MAV_CMD_DO_AUX_FUNCTION 32 (motor interlock) high or low; returns the COMMAND_ACK."""
+        m = self.mavlink
+        return self.command(m.MAV_CMD_DO_AUX_FUNCTION, 32, 2 if engaged else 0)
+
+    def arm_heli(self) -> None:
+        """ArduCopter heli start-up: interlock low, arm, interlock high (it takes effect 2 s after arming)."""
+        m = self.mavlink
+        for step, ack in (("interlock low", lambda: self.set_interlock(False)),
+                          ("arm", lambda: self.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)),
+                          ("interlock high", lambda: self.set_interlock(True))):
+            result = ack()
+            if result is None or result.result != m.MAV_RESULT_ACCEPTED:
+                raise AssertionError(f"{step}: {result}")
+
+    def heli_takeoff(self, alt_m: float, timeout_s: float = 30.0):
+        """GUIDED, :meth:`arm_heli`, then NAV_TAKEOFF until accepted (refused during the arming delay).
+
+        The vehicle then waits on the ground for its rotor run-up (H_RSC_RUNUP_TIME) and climbs.
+        Returns the accepting COMMAND_ACK; raises if there is none within ``timeout_s`` (wall clock).
+        """
+        m = self.mavlink
+        ack = self.set_mode(4)
+        if ack is None or ack.result != m.MAV_RESULT_ACCEPTED:
+            raise AssertionError(f"GUIDED: {ack}")
+        self.arm_heli()
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            ack = self.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, alt_m)
+            if ack is not None and ack.result == m.MAV_RESULT_ACCEPTED:
+                return ack
+            self.wait("HEARTBEAT", 0.2)
+        raise AssertionError(f"NAV_TAKEOFF never accepted; last answer {ack}")
 
     def download(self, mission_type: int = 0, timeout_s: float = 5.0) -> list | None:
         """The vehicle's list of ``mission_type`` with MISSION_ITEM_INT (None on a protocol failure)."""

@@ -1,7 +1,8 @@
 """MAVProxy (from PyPI) loads a QGC WPL 110 file into a real ``sim-vehicle``; it flies it in AUTO.
 
 Issue 2: MAVProxy loads the file non-interactively and the vehicle answers MISSION_ACK
-ACCEPTED; then the vehicle flies the mission in AUTO to its land item and disarms.
+ACCEPTED; then the vehicle flies the mission in AUTO to its land item and disarms. The pymavlink
+peer asks for its telemetry (SET_MESSAGE_INTERVAL) and starts the rotor as with ArduCopter heli.
 """
 
 from __future__ import annotations
@@ -87,9 +88,11 @@ def test_mavproxy_loads_wpl_and_vehicle_flies_it_to_land(tmp_path):
                 assert item.x == round(float(row[8]) * 1e7) and item.y == round(float(row[9]) * 1e7)
                 assert math.isclose(item.z, float(row[10]), abs_tol=1e-3)
 
+            gcs.request("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT", "EXTENDED_SYS_STATE", rate_hz=4.0)
             assert gcs.set_mode(AUTO).result == 0
-            ack = gcs.command(400, 1.0)  # arm in AUTO: the mission starts
-            assert ack is not None and ack.result == 0, sim.log_tail()
+            # arm in AUTO (interlock low first, as ArduCopter heli requires): the mission starts and
+            # its takeoff waits for the interlock (high) and the rotor run-up
+            gcs.arm_heli()
 
             reached: list[int] = []
             disarmed = None

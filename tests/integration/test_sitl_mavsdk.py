@@ -4,6 +4,10 @@ Issue 2, "What it must show": MAVSDK discovers the vehicle, uploads a 5-item mis
 mission_raw and downloads it identical, imports a ``.plan`` with a fence and rally points and
 uploads them, arms, takes off to 10 m (within 0.5 m), flies in GUIDED by position setpoints to
 a point 30 m away and holds there within 0.5 m.
+
+As with ArduCopter heli (issue 10): MAVSDK asks for the position itself (``set_rate_position``:
+SET_MESSAGE_INTERVAL), the pymavlink link asks for LOCAL_POSITION_NED, arming is refused while the
+motor interlock is engaged, and the takeoff is accepted once the interlock is in effect.
 """
 
 from __future__ import annotations
@@ -73,6 +77,27 @@ class GuidedLink:
     def send(self, msg) -> None:
         self.sock.sendto(msg.pack(self.mav), self.address)
 
+    def command(self, command: int, *params: float, timeout_s: float = 3.0):
+        """COMMAND_LONG; returns its COMMAND_ACK (None if none came)."""
+        p = list(params) + [0.0] * (7 - len(params))
+        self.send(self.mav.command_long_encode(self.sysid, 1, command, 0, *p))
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            try:
+                data = self.sock.recv(65535)
+            except BlockingIOError:
+                time.sleep(0.01)
+                continue
+            for msg in self.mav.parse_buffer(data) or []:
+                if msg.get_type() == "COMMAND_ACK" and msg.command == command:
+                    return msg
+        return None
+
+    def interlock(self, engaged: bool) -> int:
+        """MAV_CMD_DO_AUX_FUNCTION 32 (motor interlock) high or low; returns the MAV_RESULT."""
+        ack = self.command(mavlink.MAV_CMD_DO_AUX_FUNCTION, 32, 2 if engaged else 0)
+        return -1 if ack is None else ack.result
+
     def position_target(self, north: float, east: float, down: float) -> None:
         mask = 0b110111111000  # position only
         self.send(self.mav.set_position_target_local_ned_encode(0, self.sysid, 1, mavlink.MAV_FRAME_LOCAL_NED, mask,
@@ -139,12 +164,30 @@ async def _missions_and_guided_flight():
             # the mission list was not touched by the fence and rally uploads
             assert [fields(i) for i in await mission_raw.download_mission()] == [fields(i) for i in items]
 
-            # ---- arm, take off to 10 m
+            # ---- arm, take off to 10 m: ArduCopter heli's interlock and run-up
+            from mavsdk.asyncio.plugins.action import ActionError
+
             action = ActionAsync(system)
             telemetry = TelemetryAsync(system)
+            await telemetry.set_rate_position(10.0)  # as ArduPilot, nothing is streamed unasked
             await action.set_takeoff_altitude(10.0)
+            link = GuidedLink(sim.port, sim.sysid)
+            link.send(link.mav.command_long_encode(sim.sysid, 1, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                                   mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 50_000, 0, 0, 0, 0, 0))
+            with pytest.raises(ActionError):
+                await action.arm()  # the SITL's RC8 (1500 us) engages the interlock: "Arm: Motor Interlock Enabled"
+            assert "Arm: Motor Interlock Enabled" in sim.log_text()
+            assert link.interlock(False) == mavlink.MAV_RESULT_ACCEPTED
             await action.arm()
-            await action.takeoff()
+            assert link.interlock(True) == mavlink.MAV_RESULT_ACCEPTED  # effective 2 s (simulated) after arming
+            deadline = time.monotonic() + 10.0
+            while True:
+                try:
+                    await action.takeoff()
+                    break
+                except ActionError:  # refused until the interlock is in effect, as ArduPilot does
+                    assert time.monotonic() < deadline, sim.log_tail()
+                    await asyncio.sleep(0.1)
 
             async def relative_alt():
                 return (await telemetry.position()).relative_altitude_m
@@ -155,7 +198,6 @@ async def _missions_and_guided_flight():
             assert abs(alt - 10.0) <= 0.5, f"altitude {alt:.2f} m after takeoff"
 
             # ---- GUIDED: position setpoints to a point 30 m away, then hold
-            link = GuidedLink(sim.port, sim.sysid)
             try:
                 target = (30.0, 0.0, -10.0)
                 deadline = time.monotonic() + 60.0

@@ -32,9 +32,9 @@ MISSION = [  # frame, command, p1..p4, x, y, z
 
 
 def take_off(gcs: MavlinkPeer, alt_m: float, timeout_s: float = 30.0) -> None:
-    assert gcs.set_mode(GUIDED).result == mavlink.MAV_RESULT_ACCEPTED
-    assert gcs.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0).result == mavlink.MAV_RESULT_ACCEPTED
-    assert gcs.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, alt_m).result == mavlink.MAV_RESULT_ACCEPTED
+    """GUIDED takeoff as with ArduCopter heli (interlock, run-up), position telemetry requested."""
+    gcs.request("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED")
+    gcs.heli_takeoff(alt_m)
     reached = gcs.wait("GLOBAL_POSITION_INT", timeout_s, lambda m: abs(m.relative_alt / 1000.0 - alt_m) < 0.2)
     assert reached is not None
 
@@ -136,6 +136,7 @@ def test_two_instances_side_by_side_and_tlog(tmp_path):
         assert (sim0.sysid, sim1.sysid) == (1, 2)
         assert gcs0.wait("HEARTBEAT", 3.0).get_srcSystem() == 1
         assert gcs1.wait("HEARTBEAT", 3.0).get_srcSystem() == 2
+        gcs0.request("GLOBAL_POSITION_INT")
         assert gcs0.upload(MISSION) == mavlink.MAV_MISSION_ACCEPTED
         take_off(gcs1, 5.0)
         # instance 0 did not move and got no mission from instance 1; instance 1 has no mission
@@ -183,6 +184,7 @@ def test_port_in_use_is_a_clear_error():
 def test_guided_global_int_velocity_and_yaw_setpoints():
     with start_sim_vehicle(speedup=10.0) as sim, MavlinkPeer(sim.port, sim.sysid) as gcs:
         take_off(gcs, 8.0)
+        gcs.request("ATTITUDE")
         # SET_POSITION_TARGET_GLOBAL_INT: 15 m north of home at 12 m relative altitude, yaw 90 deg
         lat = int(round((47.397742 + 15.0 / 111_132.95) * 1e7))
         mask = 0b100111111000  # position + yaw
@@ -218,6 +220,12 @@ def test_guided_global_int_velocity_and_yaw_setpoints():
 def test_requests_streams_timesync_and_wall_clock_heartbeats():
     M = mavlink
     with start_sim_vehicle(speedup=5.0) as sim, MavlinkPeer(sim.port, sim.sysid) as gcs:
+        # as ArduCopter: nothing but HEARTBEAT until asked
+        unasked = set()
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            unasked |= {m.get_type() for m in gcs.receive(0.1)}
+        assert unasked <= {"HEARTBEAT"}, unasked
         # AUTOPILOT_VERSION on request, with the capabilities MAVSDK and QGC need
         for command, params in ((M.MAV_CMD_REQUEST_MESSAGE, (M.MAVLINK_MSG_ID_AUTOPILOT_VERSION,)),
                                 (M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, (1,))):
@@ -236,7 +244,7 @@ def test_requests_streams_timesync_and_wall_clock_heartbeats():
         gcs.last.pop("HOME_POSITION")
         assert gcs.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_HOME_POSITION).result == M.MAV_RESULT_ACCEPTED
         assert gcs.last.get("HOME_POSITION") or gcs.wait("HOME_POSITION", 3.0)
-        assert gcs.command(M.MAV_CMD_REQUEST_MESSAGE, 12345).result == M.MAV_RESULT_UNSUPPORTED
+        assert gcs.command(M.MAV_CMD_REQUEST_MESSAGE, 12345).result == M.MAV_RESULT_FAILED  # as ArduPilot answers
         # TIMESYNC answered
         gcs.send(gcs.mav.timesync_encode(0, 123456789))
         sync = gcs.wait("TIMESYNC", 3.0, lambda m: m.ts1 == 123456789)
@@ -249,6 +257,7 @@ def test_requests_streams_timesync_and_wall_clock_heartbeats():
             stamps.append(gcs.wait("ATTITUDE", 3.0).time_boot_ms)
         assert 19 <= len(stamps) <= 23  # 5 Hz over 4 s, plus the end points
         assert gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE, -1).result == 0
+        gcs.request("SYSTEM_TIME", rate_hz=1.0)
         gcs.wait("SYSTEM_TIME", 2.0)
         assert gcs.wait("ATTITUDE", 2.0) is None
         # heartbeats at 1 Hz of wall-clock time: far fewer than one per simulated second at 5x
@@ -263,9 +272,10 @@ def test_requests_streams_timesync_and_wall_clock_heartbeats():
         sim_s = (now.time_boot_ms - start.time_boot_ms) / 1000.0
         wall_s = (now.time_unix_usec - start.time_unix_usec) / 1e6
         assert beats <= 0.5 * sim_s and abs(beats - wall_s) <= 2.0
-        # streamed without being asked, SERVO_OUTPUT_RAW in 1000..2000 us
+        # every stream group at once (REQUEST_DATA_STREAM ALL, as MAVProxy asks); SERVO_OUTPUT_RAW in 1000..2000 us
+        gcs.send(gcs.mav.request_data_stream_encode(sim.sysid, 1, M.MAV_DATA_STREAM_ALL, 4, 1))
         assert gcs.wait("GLOBAL_POSITION_INT", 3.0) is not None
         servo = gcs.wait("SERVO_OUTPUT_RAW", 3.0)
         assert all(1000 <= getattr(servo, f"servo{i}_raw") <= 2000 for i in range(1, 5))
-        for kind in ("SYS_STATUS", "LOCAL_POSITION_NED", "VFR_HUD", "EXTENDED_SYS_STATE", "MISSION_CURRENT"):
+        for kind in ("SYS_STATUS", "LOCAL_POSITION_NED", "VFR_HUD", "MISSION_CURRENT", "ATTITUDE", "RC_CHANNELS"):
             assert gcs.wait(kind, 3.0) is not None, kind

@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sim_vehicle import autopilot as ap
+from sim_vehicle import rsc
 from sim_vehicle.autopilot import Autopilot, Leg
 from sim_vehicle.clock import SimClock, WallTimer
 from sim_vehicle.config import VehicleSettings, replace_path
@@ -36,10 +37,26 @@ def fly(vehicle: Autopilot, seconds: float) -> list[tuple]:
     return events
 
 
+def arm_with_interlock(vehicle: Autopilot) -> None:
+    """ArduCopter heli start-up: interlock switch low, arm, switch high (effective after the arming delay)."""
+    assert vehicle.set_interlock_switch(rsc.SWITCH_LOW)[0]
+    ok, reason = vehicle.arm()
+    assert ok, reason
+    assert vehicle.set_interlock_switch(rsc.SWITCH_HIGH)[0]
+
+
+def arm_and_run_up(vehicle: Autopilot) -> None:
+    """Arm as above and wait on the ground until the rotor has run up."""
+    arm_with_interlock(vehicle)
+    s = vehicle.settings.rsc
+    fly(vehicle, s.arming_delay_s + s.runup_time_s + 0.5)
+    assert vehicle.rotor.runup_complete and vehicle.armed and vehicle.landed
+
+
 def airborne_at_10m(model: HeliModel) -> Autopilot:
     vehicle = make_vehicle(model)
     assert vehicle.set_mode(ap.GUIDED)[0]
-    assert vehicle.arm()[0]
+    arm_and_run_up(vehicle)
     assert vehicle.takeoff(10.0)[0]
     fly(vehicle, 12.0)
     return vehicle
@@ -89,7 +106,8 @@ def test_prearm_checks(model):
 def test_takeoff_reaches_altitude_and_disarm_is_refused_in_flight(model):
     vehicle = make_vehicle(model)
     assert not vehicle.takeoff(10.0)[0]  # not armed
-    vehicle.arm()
+    assert vehicle.arm() == (False, "Arm: Motor Interlock Enabled")  # the SITL's RC8 (1500 us) engages it
+    arm_and_run_up(vehicle)
     assert not vehicle.takeoff(10.0)[0]  # not GUIDED
     vehicle.set_mode(ap.GUIDED)
     assert not vehicle.takeoff(float("nan"))[0]
@@ -177,7 +195,7 @@ def test_auto_mission_reaches_items_in_order_and_lands(model):
     vehicle = make_vehicle(model)
     vehicle.set_mission(mission)
     assert vehicle.set_mode(ap.AUTO)[0]
-    assert vehicle.arm()[0]
+    arm_with_interlock(vehicle)  # the takeoff item waits on the ground for the rotor run-up
     events = []
     for _ in range(200):
         events += vehicle.step(0.5)
@@ -193,12 +211,21 @@ def test_auto_mission_reaches_items_in_order_and_lands(model):
 def test_idle_on_ground_disarms_after_delay(model):
     vehicle = make_vehicle(model, replace_path(VehicleSettings(), "flight.disarm_delay_s", 4.0))
     vehicle.set_mode(ap.GUIDED)
-    vehicle.arm()
-    fly(vehicle, 3.0)
+    assert vehicle.set_interlock_switch(rsc.SWITCH_LOW)[0]
+    assert vehicle.arm()[0]
+    fly(vehicle, 1.5)
     assert vehicle.armed
-    events = fly(vehicle, 2.0)
+    events = fly(vehicle, 1.0)  # interlock off: half of DISARM_DELAY, as ArduCopter heli
     assert not vehicle.armed and any(e[0] == "disarmed" for e in events)
     assert np.allclose(vehicle.pos_ned_m, 0.0)
+
+
+def test_no_auto_disarm_while_the_rotor_turns(model):
+    vehicle = make_vehicle(model)
+    vehicle.set_mode(ap.GUIDED)
+    arm_and_run_up(vehicle)
+    fly(vehicle, 30.0)  # three times DISARM_DELAY on the ground with the rotor at speed
+    assert vehicle.armed and vehicle.rotor.above_critical(vehicle.settings.rsc)
 
 
 def test_new_mission_does_not_disturb_disarmed_vehicle(model):
@@ -260,7 +287,7 @@ def test_wall_timer_fires_once_per_period():
 def test_direct_setpoints_right_after_takeoff_command_lift_off(model):
     vehicle = make_vehicle(model)
     vehicle.set_mode(ap.GUIDED)
-    vehicle.arm()
+    arm_and_run_up(vehicle)
     vehicle.takeoff(5.0)
     vehicle.step(0.02)  # still on the ground
     assert vehicle.landed
@@ -320,7 +347,7 @@ def test_fence_breach_switches_to_rtl_when_enabled(model):
                       + [item(4, ap.CMD_FENCE_CIRCLE_EXCLUSION, *north_east_deg(-10.0, 0.0), p1=3.0)])
     assert len(vehicle.fence.inclusion_polygons) == 1 and len(vehicle.fence.exclusion_circles) == 1
     vehicle.set_mode(ap.GUIDED)
-    vehicle.arm()
+    arm_and_run_up(vehicle)
     vehicle.takeoff(10.0)
     fly(vehicle, 12.0)
     assert vehicle.fence_breached is None
@@ -350,7 +377,7 @@ def test_completed_mission_restarts_from_item_1(model):
     vehicle.set_mission(mission)
     vehicle.set_mode(ap.AUTO)
     for flight in range(2):
-        assert vehicle.arm()[0]
+        arm_with_interlock(vehicle)
         events = []
         for _ in range(100):
             events += vehicle.step(0.5)
@@ -367,8 +394,8 @@ def test_leaving_auto_mid_item_reports_nothing_and_resumes_later(model):
     vehicle = make_vehicle(model)
     vehicle.set_mission(mission)
     vehicle.set_mode(ap.AUTO)
-    vehicle.arm()
-    events = fly(vehicle, 8.0)
+    arm_with_interlock(vehicle)
+    events = fly(vehicle, 8.0 + 12.0)  # 12 s of rotor start-up first
     assert vehicle.mission_current == 2
     vehicle.set_mode(ap.GUIDED)
     vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(0.0, 10.0, -5.0)))
@@ -384,13 +411,13 @@ def test_leaving_auto_mid_item_reports_nothing_and_resumes_later(model):
 
 
 # ---------------------------------------------------------------- MAVLink server fed with fuzzed messages
-FUZZ_TYPES = ("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "REQUEST_DATA_STREAM", "TIMESYNC",
+FUZZ_TYPES = ("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "REQUEST_DATA_STREAM", "TIMESYNC", "RC_CHANNELS_OVERRIDE",
               "SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT", "MISSION_COUNT", "MISSION_ITEM_INT",
               "MISSION_ITEM", "MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_CLEAR_ALL",
               "MISSION_SET_CURRENT", "MISSION_ACK", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET")
 FUZZ_FLOATS = (0.0, 1.0, -1.0, 4.0, 10.0, float("nan"), float("inf"), -float("inf"), 1e30, -1e30, 0.5, 1e9)
-FUZZ_INTS = (0, 1, 1, 2, 3, 4, 5, 6, 9, 16, 17, 20, 21, 22, 176, 178, 192, 300, 400, 410, 511, 512, 520, 5001, 5100,
-             255)
+FUZZ_INTS = (0, 1, 1, 2, 3, 4, 5, 6, 9, 16, 17, 20, 21, 22, 176, 178, 179, 192, 218, 300, 400, 410, 511, 512, 520,
+             1000, 2000, 5001, 5100, 255)
 
 
 def fuzz_message(mavlink, rng: np.random.Generator, gcs) -> bytes | None:
@@ -426,8 +453,8 @@ def test_server_survives_fuzzed_messages_while_flying(model, caplog):
     server = MavlinkServer(vehicle, link_settings, 1, 0)
     try:
         vehicle.set_mode(ap.GUIDED)
-        vehicle.arm()
-        vehicle.takeoff(10.0)
+        arm_and_run_up(vehicle)
+        assert vehicle.takeoff(10.0)[0]
         vehicle.run_steps(4000)
         rng = np.random.default_rng(3)
         gcs = mavlink.MAVLink(None, 255, 190)
