@@ -360,6 +360,11 @@ class CompanionDaemon:
             log.error("could not restore the vehicle's previous mission: %s", exc)
 
     # ------------------------------------------------------------------ flight phases
+    async def wait_vehicle_clock(self, timeout_s: float) -> None:
+        """Wait until the mission clock runs on the vehicle's time (a first LOCAL_POSITION_NED
+        seen by the clock's watcher): references are timed on it."""
+        await self.link.wait_for(lambda t: self.clock.synced, timeout_s, "the vehicle's clock")
+
     async def start_or_join(self, alt_m: float) -> None:
         """Join a flying vehicle where it is (GUIDED, no arming, no takeoff), or start it
         (``companion.link.startup.start_vehicle``) and climb to ``alt_m`` above home."""
@@ -527,6 +532,7 @@ class CompanionDaemon:
                 statustext=self.send_statustext)
             await self.threats.start(home)
         self._start_background()
+        await self.wait_vehicle_clock(s.link.connect_timeout_s)
         self.summary.outcome = "flying"
         try:
             await self.start_or_join(alt)

@@ -17,7 +17,10 @@ With the interlock off it disarms after DISARM_DELAY (10 s).
    without ``H_RSC_MODE``, a ``multirotor`` profile, or one that answers DO_AUX_FUNCTION with
    UNSUPPORTED needs no interlock (logged);
 2. GUIDED while disarmed;
-3. :func:`interlock_low` (DO_AUX_FUNCTION 32, switch 0), so that arming is allowed;
+3. :func:`interlock_low` (DO_AUX_FUNCTION 32, switch 0), so that arming is allowed, then
+   :func:`wait_prearm`: ArduCopter runs its other pre-arm checks only once the interlock is
+   low, and its IMUs must then agree for 10 s ("Accels inconsistent"); the vehicle's SYS_STATUS
+   says when they pass (a vehicle that does not report them is not waited for);
 4. :func:`arm`, with bounded retries and the vehicle's own reason (its STATUSTEXT) on refusal;
 5. :func:`wait_arming_delay`, then :func:`engage_interlock` (switch 2), or, with
    ``interlock = "pilot"`` (or ``H_RSC_MODE`` 1, passthrough), the pilot's switch;
@@ -49,7 +52,7 @@ from companion.errors import ConfigError, FlightAborted, LinkError, VehicleRefus
 from sim_vehicle.typed_config import require_int, require_numbers
 
 __all__ = ["StartupSettings", "RotorPlan", "rotor_plan", "is_airborne", "start_vehicle",
-           "read_rotor_parameters", "interlock_low", "arm", "wait_arming_delay",
+           "read_rotor_parameters", "interlock_low", "wait_prearm", "arm", "wait_arming_delay",
            "engage_interlock", "wait_runup", "take_off", "abandon_start", "rpm_settled",
            "AUX_MOTOR_INTERLOCK", "RSC_PARAMETERS"]
 
@@ -89,6 +92,9 @@ class StartupSettings:
     pilot_timeout_s : float
         How long to wait for the pilot's interlock (vehicle seconds). ArduCopter disarms an
         armed helicopter whose interlock stays off for DISARM_DELAY (10 s).
+    prearm_timeout_s : float
+        How long to wait for the vehicle's pre-arm checks to pass before arming anyway (the
+        refusal then names the failing check; vehicle seconds).
     arm_attempts, takeoff_attempts : int
         Bounded retries of a refused arm or takeoff.
     retry_interval_s : float
@@ -105,6 +111,7 @@ class StartupSettings:
     runup_time_s: float = 10.0
     runup_margin_s: float = 1.0
     pilot_timeout_s: float = 60.0
+    prearm_timeout_s: float = 30.0
     arm_attempts: int = 4
     takeoff_attempts: int = 5
     retry_interval_s: float = 2.0
@@ -113,7 +120,7 @@ class StartupSettings:
 
     def __post_init__(self) -> None:
         require_numbers(ConfigError, "startup", self, positive=(
-            "pilot_timeout_s", "retry_interval_s", "param_timeout_s"),
+            "pilot_timeout_s", "prearm_timeout_s", "retry_interval_s", "param_timeout_s"),
             non_negative=("arming_delay_s", "runup_time_s", "runup_margin_s", "join_min_height_m"))
         require_int(ConfigError, "startup", "arm_attempts", self.arm_attempts, 1, 20)
         require_int(ConfigError, "startup", "takeoff_attempts", self.takeoff_attempts, 1, 50)
@@ -216,6 +223,27 @@ async def interlock_low(link) -> bool:
         raise VehicleRefused(link.refusal_text("motor interlock low (DO_AUX_FUNCTION 32)", result, sent),
                              result)
     return True
+
+
+async def wait_prearm(link, settings: StartupSettings, now_s) -> bool:
+    """Wait (up to ``prearm_timeout_s`` of vehicle time) until the vehicle reports its pre-arm
+    checks passing (SYS_STATUS); returns whether they did. A vehicle that does not report them
+    (``prearm_ok`` None once SYS_STATUS has arrived, or after two seconds) is not waited for."""
+    start = now_s()
+    await asyncio.sleep(0.1)
+    streams = getattr(link, "streams", None)
+    while True:
+        ok = link.telemetry.prearm_ok
+        elapsed = now_s() - start
+        if ok:
+            return True
+        if ok is None and (elapsed > 2.0 or (streams is not None and streams.seen("SYS_STATUS"))):
+            return False
+        if elapsed > settings.prearm_timeout_s:
+            log.warning("the vehicle's pre-arm checks still fail after %.0f s: arming anyway",
+                        settings.prearm_timeout_s)
+            return False
+        await asyncio.sleep(0.05)
 
 
 async def arm(link, settings: StartupSettings, now_s) -> float:
@@ -402,6 +430,8 @@ async def start_vehicle(link, settings: StartupSettings, alt_m: float, now_s: Ca
                              "DO_AUX_FUNCTION unsupported by the vehicle: no interlock")
             log.info("start-up: %s", plan.reason)
     try:
+        if await wait_prearm(link, settings, now_s):
+            log.info("start-up: the vehicle's pre-arm checks pass")
         armed_at = await arm(link, settings, now_s)
         tell("armed", interlock=plan.interlock)
         deadline = None

@@ -80,7 +80,8 @@ class StreamSettings:
     adsb_vehicle_hz : float
         Rates. LOCAL_POSITION_NED drives the vehicle clock and the tracking error (10 Hz);
         SERVO_OUTPUT_RAW is recorded at 10 Hz at most (5 Hz); HOME_POSITION and
-        GPS_GLOBAL_ORIGIN change rarely (0.5 Hz).
+        GPS_GLOBAL_ORIGIN change rarely (0.5 Hz); ADSB_VEHICLE is 1 Hz per aircraft (each report
+        is a threat update and a threat decision).
     stale_after_s : float
         Wall-clock seconds of silence of a core stream (LOCAL_POSITION_NED, ATTITUDE) while
         heartbeats arrive after which every request is made again (also the shortest time
@@ -98,7 +99,7 @@ class StreamSettings:
     sys_status_hz: float = 1.0
     servo_output_raw_hz: float = 5.0
     rpm_hz: float = 2.0
-    adsb_vehicle_hz: float = 2.0
+    adsb_vehicle_hz: float = 1.0
     stale_after_s: float = 3.0
     command_timeout_s: float = 1.5
 

@@ -77,6 +77,8 @@ MAV_RESULT_NAMES = {0: "ACCEPTED", 1: "TEMPORARILY_REJECTED", 2: "DENIED", 3: "U
                     4: "FAILED", 5: "IN_PROGRESS", 6: "CANCELLED"}
 #: EXTENDED_SYS_STATE.landed_state values that mean "not on the ground" (MAV_LANDED_STATE).
 LANDED_STATES_IN_AIR = (2, 3, 4)
+#: SYS_STATUS sensor bit of the pre-arm checks (MAV_SYS_STATUS_PREARM_CHECK).
+MAV_SYS_STATUS_PREARM_CHECK = 1 << 28
 #: How many recent STATUSTEXTs of the vehicle are kept (``VehicleLink.statustexts``).
 STATUSTEXT_KEEP = 64
 
@@ -197,6 +199,9 @@ class Telemetry:
         MAV_LANDED_STATE (0 undefined, 1 on ground, 2 in air, 3 takeoff, 4 landing).
     rotor_rpm : float or None
         RPM.rpm1 (ArduPilot's rotor speed sensor), when the vehicle sends it.
+    prearm_ok : bool or None
+        SYS_STATUS: the vehicle's pre-arm checks pass (MAV_SYS_STATUS_PREARM_CHECK healthy);
+        None when the vehicle does not report them.
     boot_s : float or None
         ``time_boot_ms`` of the last LOCAL_POSITION_NED, in seconds (vehicle time).
     connected : bool
@@ -219,6 +224,7 @@ class Telemetry:
     in_air: bool | None = None
     landed_state: int | None = None
     rotor_rpm: float | None = None
+    prearm_ok: bool | None = None
     boot_s: float | None = None
     connected: bool = False
     heartbeat_age_s: float = math.inf
@@ -511,7 +517,7 @@ class VehicleLink:
         coros = [self._watch_heartbeat(), self._watch_link(), self._watch_local_position(),
                  self._watch_attitude(), self._watch_armed(), self._watch_landed_state(),
                  self._watch_home(), self._watch_origin(), self._watch_global_position(),
-                 self._watch_statustext(), self._watch_rpm()]
+                 self._watch_statustext(), self._watch_rpm(), self._watch_sys_status()]
         if self.streams is not None:
             coros.append(self.streams.run())
         self._tasks = [loop.create_task(coro, name=f"link-{coro.__name__}") for coro in coros]
@@ -627,6 +633,17 @@ class VehicleLink:
             self.statustexts.append((time.monotonic(), severity, text))
             log.log(logging.WARNING if severity <= 4 else logging.INFO, "vehicle: %s", text)
         await self._guarded("STATUSTEXT", lambda: self.messages("STATUSTEXT"), apply)
+
+    async def _watch_sys_status(self) -> None:
+        def apply(fields: dict) -> None:
+            if not self._from_vehicle(fields) or fields.get("_compid") != self.target_component:
+                return
+            present = int(fields.get("onboard_control_sensors_present", 0))
+            health = int(fields.get("onboard_control_sensors_health", 0))
+            self._state.values["prearm_ok"] = (bool(health & MAV_SYS_STATUS_PREARM_CHECK)
+                                               if present & MAV_SYS_STATUS_PREARM_CHECK else None)
+            self._note("SYS_STATUS")
+        await self._guarded("SYS_STATUS", lambda: self.messages("SYS_STATUS"), apply)
 
     async def _watch_rpm(self) -> None:
         def apply(fields: dict) -> None:
