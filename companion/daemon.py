@@ -56,7 +56,7 @@ from companion.flight_plan import LegPlan, plan_leg, plan_mission
 from companion.reference import ActiveReference, VehicleClock
 from companion.link.setpoints import (SetpointStreamer, hold_position,
                                       raise_stream_priority, restore_normal_priority)
-from companion.link.startup import is_airborne, start_vehicle
+from companion.link.startup import AUX_MOTOR_INTERLOCK, is_airborne, start_vehicle
 from companion.link.vehicle import VehicleLink
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
@@ -139,6 +139,7 @@ class CompanionDaemon:
         self._link_lost_at: float | None = None
         self._resume_needed = False
         self.home_lla: tuple | None = None
+        self.rotor_plan = None                    # how the start-up handled the rotor
         self._executor = ThreadPoolExecutor(2, thread_name_prefix="planning",
                                             initializer=restore_normal_priority)
 
@@ -377,8 +378,9 @@ class CompanionDaemon:
             if tele.mode != GUIDED:
                 await self.link.set_mode("GUIDED")
             return
-        await start_vehicle(self.link, st, alt_m, self.clock.now_s, time_scale=self.settings.link.time_scale,
-                            climb_speed_m_s=self.settings.flight.climb_speed_m_s, event=self.event)
+        self.rotor_plan = await start_vehicle(
+            self.link, st, alt_m, self.clock.now_s, time_scale=self.settings.link.time_scale,
+            climb_speed_m_s=self.settings.flight.climb_speed_m_s, event=self.event)
         self.event("takeoff_complete", alt_m=alt_m)
 
     async def resume_leg(self, leg: LegPlan) -> None:
@@ -459,6 +461,8 @@ class CompanionDaemon:
                                      "the landing and disarm")
             self.summary.landed = True
             self.event("landed")
+            if self.rotor_plan is not None and self.rotor_plan.interlock == "command":
+                await self.link.aux_function(AUX_MOTOR_INTERLOCK, 0)    # as the start found it
         else:
             await self.link.set_mode("LOITER")
             self.event("loiter", reason="the mission ends without LAND or RTL")
