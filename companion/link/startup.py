@@ -423,21 +423,27 @@ async def start_vehicle(link, settings: StartupSettings, alt_m: float, now_s: Ca
              plan.reason, plan.arming_delay_s, plan.runup_time_s)
     await link.set_mode("GUIDED")
     commanded = False
-    if plan.interlock == "command":
+    already_armed = bool(link.telemetry.armed)         # e.g. on the ground with the rotor running
+    if plan.interlock == "command" and not already_armed:
         commanded = await interlock_low(link)
         if not commanded:
             plan = RotorPlan("none", plan.arming_delay_s, 0.0,
                              "DO_AUX_FUNCTION unsupported by the vehicle: no interlock")
             log.info("start-up: %s", plan.reason)
     try:
-        if await wait_prearm(link, settings, now_s):
-            log.info("start-up: the vehicle's pre-arm checks pass")
-        armed_at = await arm(link, settings, now_s)
-        tell("armed", interlock=plan.interlock)
+        if already_armed:
+            log.info("start-up: the vehicle is already armed on the ground")
+            armed_at = now_s() - plan.arming_delay_s
+        else:
+            if await wait_prearm(link, settings, now_s):
+                log.info("start-up: the vehicle's pre-arm checks pass")
+            armed_at = await arm(link, settings, now_s)
+            tell("armed", interlock=plan.interlock)
         deadline = None
         if plan.interlock == "command":
             await wait_arming_delay(link, plan, armed_at, now_s)
             if await engage_interlock(link, plan, settings, now_s):
+                commanded = True
                 tell("interlock", switch="high")
                 rpm = await wait_runup(link, plan, settings, now_s)
                 tell("rotor_runup", seconds=plan.runup_time_s, rpm=None if math.isnan(rpm) else round(rpm))

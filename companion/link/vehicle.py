@@ -423,8 +423,8 @@ class VehicleLink:
         origin = self._state.values.get("origin_lla")
         self.frames = LinkFrames.build(home_lla, origin)
         if origin is None:
-            log.warning("the vehicle reports no EKF origin (GPS_GLOBAL_ORIGIN): its local frame "
-                        "is taken to be home's")
+            log.info("the vehicle reports no EKF origin (GPS_GLOBAL_ORIGIN): its local frame is "
+                     "taken to be home's")
         else:
             log.info("home %.7f, %.7f, %.2f m; EKF origin %.7f, %.7f, %.2f m; home in the "
                      "vehicle's local frame: %s m", *self.frames.home_lla, *origin,
@@ -438,11 +438,17 @@ class VehicleLink:
     async def wait_origin(self, timeout_s: float = 5.0) -> tuple | None:
         """Wait for the vehicle's EKF origin (GPS_GLOBAL_ORIGIN, asked for by the stream
         requests); None after ``timeout_s`` or as soon as the vehicle says it cannot send it."""
-        deadline = time.monotonic() + timeout_s
+        start = time.monotonic()
+        asked = False
         while self._state.values.get("origin_lla") is None:
-            if time.monotonic() > deadline or (
+            waited = time.monotonic() - start
+            if waited > timeout_s or (
                     self.streams is not None and self.streams.unavailable("GPS_GLOBAL_ORIGIN")):
                 return None
+            if not asked and waited > timeout_s / 2.0:       # the stream is slow: ask once
+                asked = True
+                await self.command_result(MAV_CMD_REQUEST_MESSAGE, (MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,),
+                                          what="request GPS_GLOBAL_ORIGIN", timeout_s=1.0)
             await asyncio.sleep(0.05)
         return self._state.values["origin_lla"]
 

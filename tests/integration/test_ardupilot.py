@@ -205,3 +205,32 @@ def test_a_hovering_helicopter_is_joined_without_arming_or_takeoff(sitl, joined)
     reach = int(np.argmax(np.linalg.norm(pos - first_wp.pos_ned_m, axis=1) <= first_wp.acceptance_radius_m))
     assert reach > 0 and pos[:reach, 2].max() < -(JOIN_ALT_M - 3.0), \
         "the vehicle must stay in the air from the join to the first waypoint"
+
+
+def test_after_a_reboot_the_link_asks_for_its_streams_again(sitl, joined):
+    """ArduCopter forgets every requested rate when it reboots: the link must ask again."""
+    import asyncio
+
+    from companion.link import VehicleLink
+    from companion.link.streams import StreamSettings
+
+    obs = sitl.observer
+    obs.wait_until(lambda: obs.armed is False, 30.0, "the vehicle disarmed")
+
+    async def main():
+        link = VehicleLink("companion", streams=StreamSettings(stale_after_s=2.0))
+        await link.connect(f"udpin://127.0.0.1:{sitl.companion_port}", timeout_s=20.0)
+        try:
+            await link.wait_ready(20.0)
+            rounds, boot_s = link.streams.rounds, link.telemetry.boot_s
+            assert boot_s is not None and boot_s > 60.0
+            result = await asyncio.to_thread(obs.command, obs.mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 1)
+            assert result == obs.mavlink.MAV_RESULT_ACCEPTED
+            await link.wait_for(lambda t: t.boot_s is not None and t.boot_s < boot_s and t.position_age_s < 1.0,
+                                90.0, "positions from the rebooted vehicle")
+            assert link.streams.rounds > rounds
+            assert link.streams.status["LOCAL_POSITION_NED"] == "interval"
+        finally:
+            await link.aclose()
+
+    asyncio.run(main())

@@ -218,6 +218,15 @@ def test_with_the_pilots_interlock_left_on_arming_is_refused_with_the_reason():
     assert not heli.armed
 
 
+def test_a_helicopter_armed_on_the_ground_is_not_armed_again_nor_its_interlock_dropped():
+    heli = FakeHeli()
+    heli.armed, heli.armed_at = True, -30.0            # armed long ago, rotor turning
+    start(heli)
+    steps = heli.steps()
+    assert "arm" not in steps and "aux 32 0" not in steps
+    assert steps[:3] == ["params", "mode GUIDED", "aux 32 2"] and steps[-1] == "takeoff"
+
+
 def test_rotor_plan_decisions():
     s = StartupSettings()
     assert rotor_plan(s, {"H_RSC_MODE": 1.0}).interlock == "pilot"           # RC passthrough
