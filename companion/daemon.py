@@ -545,7 +545,8 @@ class CompanionDaemon:
                 await self.restore_mission(previous)
             raise
         self.streamer = SetpointStreamer(self.link.send_setpoint, rate_hz=s.link.setpoint_rate_hz)
-        self.hold_here(self.link.telemetry.pos_ned_m, "takeoff complete")
+        self.hold_here(self.link.telemetry.pos_ned_m,
+                       "joined in the air" if self.summary.joined else "takeoff complete")
         self.streamer.start()
         for leg in self.legs:
             await self.fly_leg(leg)
