@@ -7,7 +7,10 @@ overrides. A wrong key or value is a ``ConfigError`` that names it with its dott
 Tree (``companion run --config FILE``; ``companion run --print-config`` shows it whole)::
 
     seed        random seed of every planner run (logged; any flight can be replayed)
-    link        vehicle connection, setpoint rate, time scale, timeouts
+    link        vehicle connection, setpoint rate, time scale, timeouts; link.streams: the
+                telemetry rates asked for (companion.link.streams.StreamSettings)
+    startup     arming, motor interlock, rotor run-up, takeoff, joining a flying vehicle
+                (companion.link.startup.StartupSettings)
     zenoh       session endpoints and the key prefix's system id
     mission     mission -> local NED + world (margin, padding, ceiling)
     flight      per-leg planning budget, planning slab, climb and descent, M-GART alternatives
@@ -15,6 +18,7 @@ Tree (``companion run --config FILE``; ``companion run --print-config`` shows it
     smoothing   G1/G2, K_max, speed/acceleration/jerk limits
     feasibility closed-loop check on the helicopter model
     threats     threat-manager policy (companion.threats.settings.ThreatSettings)
+    adsb        ADS-B traffic as threats (companion.threats.adsb.AdsbSettings)
 """
 
 from __future__ import annotations
@@ -26,9 +30,12 @@ from typing import Literal
 
 from companion.errors import ConfigError
 from companion.flight_plan import FlightPlanSettings
+from companion.link.startup import StartupSettings
+from companion.link.streams import StreamSettings
 from companion.mission.convert import ConversionSettings
 from companion.planning import GartSettings
 from companion.smoothing import FeasibilitySettings, SmoothingSettings
+from companion.threats.adsb import AdsbSettings
 from companion.threats.settings import ThreatSettings, ZenohSettings
 from sim_vehicle.typed_config import from_dict, load_toml, require_numbers
 
@@ -58,6 +65,11 @@ class LinkSettings:
         Rate of ``sample`` lines in the flight record.
     status_rate_hz : float
         Rate of ``uav/<sysid>/status`` messages (also sent on every change).
+    origin_timeout_s : float
+        How long to wait for the vehicle's EKF origin (GPS_GLOBAL_ORIGIN) before taking its
+        local frame to be home's (wall clock).
+    streams : StreamSettings
+        The telemetry asked for (``companion.link.streams``).
     """
 
     connect: str = "udpin://0.0.0.0:14540"
@@ -68,11 +80,13 @@ class LinkSettings:
     on_interrupt: Literal["hold", "land", "rtl"] = "hold"
     record_rate_hz: float = 10.0
     status_rate_hz: float = 2.0
+    origin_timeout_s: float = 5.0
+    streams: StreamSettings = StreamSettings()
 
     def __post_init__(self) -> None:
         require_numbers(ConfigError, "link", self, positive=(
             "connect_timeout_s", "setpoint_rate_hz", "time_scale",
-            "leg_timeout_margin_s", "record_rate_hz", "status_rate_hz"))
+            "leg_timeout_margin_s", "record_rate_hz", "status_rate_hz", "origin_timeout_s"))
         if self.setpoint_rate_hz > 200:
             raise ConfigError(f"link.setpoint_rate_hz: at most 200, got {self.setpoint_rate_hz}")
 
@@ -83,6 +97,7 @@ class Settings:
 
     seed: int = 0
     link: LinkSettings = LinkSettings()
+    startup: StartupSettings = StartupSettings()
     zenoh: ZenohSettings = ZenohSettings()
     mission: ConversionSettings = ConversionSettings()
     flight: FlightPlanSettings = FlightPlanSettings()
@@ -90,6 +105,7 @@ class Settings:
     smoothing: SmoothingSettings = SmoothingSettings()
     feasibility: FeasibilitySettings = FeasibilitySettings()
     threats: ThreatSettings = ThreatSettings()
+    adsb: AdsbSettings = AdsbSettings()
 
     def __post_init__(self) -> None:
         if self.seed < 0:

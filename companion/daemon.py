@@ -2,14 +2,19 @@
 
 ``CompanionDaemon.run()`` is the whole flight:
 
-1. connect to the vehicle (MAVSDK), wait for telemetry and home;
+1. connect to the vehicle (MAVSDK; the telemetry it needs is requested, ``companion.link.streams``),
+   wait for telemetry, home and the vehicle's EKF origin, and freeze the planning frame (home;
+   the link converts to and from the vehicle's local frame, ``companion.link.frames``);
 2. take the mission: the file given (validated, planned, then uploaded so that every ground
    station shows it) or the one stored on the vehicle (a mission uploaded by any ground station
    gets flown);
 3. convert it to local NED and a world (exclusion zones, inclusion fence, world file) and plan
    every leg before takeoff (GART -> G2/G1 -> speed profile, ``companion.flight_plan``): an
    unreachable waypoint is an error before anything moves;
-4. GUIDED, arm, take off; stream the reference at 50 Hz (``SetpointStreamer``) leg after leg,
+4. start the vehicle (``companion.link.startup``: GUIDED, motor interlock low, arm, interlock
+   after the arming delay, rotor run-up, take off), or *join* it where it flies (armed and in
+   the air: no arming, no takeoff); a start that fails leaves the vehicle disarmed on the
+   ground or holding in the air; stream the reference at 50 Hz (``SetpointStreamer``) leg after leg,
    each leg flown by the pure phase machine of ``companion.phases`` (observe, step, act): done
    when its reference has ended and the vehicle is within the acceptance radius, then the hold
    time; a reference that ended short of the goal (an evasion or a hold) is followed by a plan
@@ -18,7 +23,8 @@
 
 Around it: zenoh status at 2 Hz and on every event, the threat reactor
 (``companion.threats.reactor``: threats in, a >= 10 Hz monitor, decisions that swap the active
-reference, events, path and STATUSTEXT out), the flight record, link-loss handling (keep
+reference, events, path and STATUSTEXT out), ADS-B traffic as threats (``[adsb] enabled``,
+``companion.threats.adsb``), the flight record, link-loss handling (keep
 streaming; when the link returns, hold and replan the leg from where the vehicle is), a pilot
 taking over (mode changed away from GUIDED: the companion stops commanding and ends the flight),
 and SIGINT/SIGTERM (hold, land or RTL per ``link.on_interrupt``, then exit).
@@ -44,16 +50,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.config import Settings, settings_to_dict
-from companion.errors import CompanionError, LinkError, MissionError
+from companion.errors import CompanionError, FlightAborted, LinkError, MissionError, VehicleRefused
+from companion.geo import LocalFrame
 from companion.flight_plan import LegPlan, plan_leg, plan_mission
 from companion.reference import ActiveReference, VehicleClock
 from companion.link.setpoints import (SetpointStreamer, hold_position,
                                       raise_stream_priority, restore_normal_priority)
+from companion.link.startup import AUX_MOTOR_INTERLOCK, is_airborne, start_vehicle
 from companion.link.vehicle import VehicleLink
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
 from companion.phases import ActionKind, LegObservation, LegState, leg_step
 from companion.record import FlightRecorder
+from companion.threats.adsb import threat_from_adsb
 from companion.threats.reactor import ThreatReactor
 from companion.world import world_to_dict
 
@@ -64,8 +73,7 @@ GUIDED = 4
 GIL_SWITCH_INTERVAL_S = 0.0005
 
 
-class FlightAborted(CompanionError):
-    """The flight cannot go on (pilot took over, vehicle disarmed, leg not reached)."""
+__all__ = ["CompanionDaemon", "FlightAborted", "FlightSummary"]
 
 
 @dataclass
@@ -81,6 +89,7 @@ class FlightSummary:
     min_threat_separation_m: float = math.inf
     latency_ms: dict = field(default_factory=dict)
     threat_updates: int = 0
+    joined: bool = False
     outcome: str = "not flown"
 
     def as_dict(self) -> dict:
@@ -113,7 +122,8 @@ class CompanionDaemon:
         self.world_path = world_path
         self.record_path = record_path
         self.rng = np.random.default_rng(settings.seed)
-        self.link = VehicleLink("companion")
+        self.link = VehicleLink("companion", streams=settings.link.streams,
+                                adsb=settings.adsb.enabled)
         self.clock = VehicleClock(settings.link.time_scale)
         self.streamer: SetpointStreamer | None = None
         self.reference: ActiveReference | None = None
@@ -128,6 +138,8 @@ class CompanionDaemon:
         self._tasks: list[asyncio.Task] = []
         self._link_lost_at: float | None = None
         self._resume_needed = False
+        self.home_lla: tuple | None = None
+        self.rotor_plan = None                    # how the start-up handled the rotor
         self._executor = ThreadPoolExecutor(2, thread_name_prefix="planning",
                                             initializer=restore_normal_priority)
 
@@ -207,16 +219,33 @@ class CompanionDaemon:
     async def _watch_local_position(self) -> None:
         """LOCAL_POSITION_NED with its timestamp: drives the clock and the tracking error."""
         async for fields in self.link.messages("LOCAL_POSITION_NED"):
+            if fields.get("_sysid") != self.link.target_system:
+                continue
             boot_s = fields.get("time_boot_ms", 0) / 1000.0
             self.clock.observe(boot_s, fields["_t_s"])
             if self.reference is not None:
-                pos = np.array([fields["x"], fields["y"], fields["z"]], dtype=float)
+                pos = self.link.to_home_frame([fields["x"], fields["y"], fields["z"]])
                 ref_pos = self.reference.state(boot_s)[0]      # mission time is vehicle time
                 self._errors_m.append(float(np.linalg.norm(pos - ref_pos)))
 
     async def _watch_servos(self) -> None:
         async for fields in self.link.messages("SERVO_OUTPUT_RAW"):
-            self._servo_us = [fields.get(f"servo{i}_raw", 1500) for i in range(1, 5)]
+            if fields.get("_sysid") == self.link.target_system:
+                self._servo_us = [fields.get(f"servo{i}_raw", 1500) for i in range(1, 5)]
+
+    async def _watch_adsb(self) -> None:
+        """ADSB_VEHICLE reports become threats, treated as zenoh PUTs (``companion.threats.adsb``)."""
+        home = LocalFrame(*self.home_lla)
+        async for fields in self.link.messages("ADSB_VEHICLE"):
+            if fields.get("_sysid") != self.link.target_system or self.threats is None:
+                continue
+            try:
+                threat = threat_from_adsb(fields, self.settings.adsb, self.clock.now_s(), home)
+            except (CompanionError, ValueError, TypeError) as exc:
+                log.info("ADSB_VEHICLE ignored: %s", exc)
+                continue
+            if threat is not None:
+                self.threats.on_local_threat(threat, fields["_t_s"])
 
     async def _record_samples(self) -> None:
         period = 1.0 / self.settings.link.record_rate_hz
@@ -256,8 +285,14 @@ class CompanionDaemon:
 
     def _start_background(self) -> None:
         loop = asyncio.get_running_loop()
-        for coro in (self._watch_local_position(), self._watch_servos(), self._record_samples(),
-                     self._publish_status()):
+        coros = [self._watch_local_position(), self._watch_servos(), self._record_samples(),
+                 self._publish_status()]
+        if self.settings.adsb.enabled:
+            if self.threats is None:
+                log.warning("ADS-B traffic is ignored: threats need zenoh (zenoh.enabled)")
+            else:
+                coros.append(self._watch_adsb())
+        for coro in coros:
             self._tasks.append(loop.create_task(coro, name=coro.__name__))
         self.link.on_link_change(self._on_link_change)
 
@@ -283,12 +318,15 @@ class CompanionDaemon:
         s = self.settings
         self.local_mission = mission_to_local(plan, home_lla, settings=s.mission,
                                               world_file=self.world_path, dim=3)
+        frames = self.link.frames
         self.record("header", settings=settings_to_dict(s), seed=s.seed, home_lla=home_lla,
+                    ekf_origin_lla=frames.origin_lla, home_in_origin_ned_m=frames.home_in_origin_ned_m,
                     mission=str(self.mission_path) if self.mission_path else "from the vehicle",
                     waypoints_ned_m=[w.pos_ned_m for w in self.local_mission.waypoints])
         start = tele.pos_ned_m
         takeoff = self.local_mission.waypoints[0]          # always the (possibly implied) takeoff
-        alt_m = -float(start[2]) if tele.in_air else -float(takeoff.pos_ned_m[2])
+        flying = is_airborne(tele, s.startup.join_min_height_m)
+        alt_m = -float(start[2]) if flying else -float(takeoff.pos_ned_m[2])
         first = np.array([start[0], start[1], -alt_m])
         t0 = time.perf_counter()
         self.legs = await self.in_worker(
@@ -323,20 +361,27 @@ class CompanionDaemon:
             log.error("could not restore the vehicle's previous mission: %s", exc)
 
     # ------------------------------------------------------------------ flight phases
-    async def takeoff(self, alt_m: float) -> None:
+    async def wait_vehicle_clock(self, timeout_s: float) -> None:
+        """Wait until the mission clock runs on the vehicle's time (a first LOCAL_POSITION_NED
+        seen by the clock's watcher): references are timed on it."""
+        await self.link.wait_for(lambda t: self.clock.synced, timeout_s, "the vehicle's clock")
+
+    async def start_or_join(self, alt_m: float) -> None:
+        """Join a flying vehicle where it is (GUIDED, no arming, no takeoff), or start it
+        (``companion.link.startup.start_vehicle``) and climb to ``alt_m`` above home."""
         tele = self.link.telemetry
-        if tele.armed and tele.in_air:
-            self.event("already_flying", alt_m=round(-float(tele.pos_ned_m[2]), 2))
-            await self.link.set_mode("GUIDED")
+        st = self.settings.startup
+        if is_airborne(tele, st.join_min_height_m):
+            self.summary.joined = True
+            self.event("joined", height_m=None if tele.height_m is None else round(tele.height_m, 2),
+                       mode=tele.mode_name, landed_state=tele.landed_state)
+            if tele.mode != GUIDED:
+                await self.link.set_mode("GUIDED")
             return
-        await self.link.set_mode("GUIDED")
-        await self.link.arm()
-        self.event("armed")
-        await self.link.takeoff(alt_m)
-        self.event("takeoff", alt_m=alt_m)
-        timeout = 30.0 + alt_m / self.settings.flight.climb_speed_m_s * 3 / self.settings.link.time_scale
-        await self.link.wait_for(lambda t: t.pos_ned_m is not None and -t.pos_ned_m[2] >= alt_m - 0.5,
-                                 timeout, f"the takeoff to {alt_m:.1f} m")
+        self.rotor_plan = await start_vehicle(
+            self.link, st, alt_m, self.clock.now_s, time_scale=self.settings.link.time_scale,
+            climb_speed_m_s=self.settings.flight.climb_speed_m_s, event=self.event)
+        self.event("takeoff_complete", alt_m=alt_m)
 
     async def resume_leg(self, leg: LegPlan) -> None:
         """Replan the rest of ``leg`` from where the vehicle is (after a link loss)."""
@@ -416,6 +461,8 @@ class CompanionDaemon:
                                      "the landing and disarm")
             self.summary.landed = True
             self.event("landed")
+            if self.rotor_plan is not None and self.rotor_plan.interlock == "command":
+                await self.link.aux_function(AUX_MOTOR_INTERLOCK, 0)    # as the start found it
         else:
             await self.link.set_mode("LOITER")
             self.event("loiter", reason="the mission ends without LAND or RTL")
@@ -452,6 +499,9 @@ class CompanionDaemon:
             self.summary.outcome = "interrupted"
             await asyncio.shield(self.safe_stop("interrupted (SIGINT/SIGTERM)"))
             raise
+        except VehicleRefused as exc:
+            self.summary.outcome = f"refused: {exc}"
+            raise
         except FlightAborted as exc:
             self.summary.outcome = f"aborted: {exc}"
             log.error("flight aborted: %s", exc)
@@ -463,8 +513,14 @@ class CompanionDaemon:
 
     async def _fly(self) -> FlightSummary:
         s = self.settings
-        tele = await self.link.wait_ready(s.link.connect_timeout_s)
+        await self.link.wait_ready(s.link.connect_timeout_s)
         home = await self.link.wait_home(s.link.connect_timeout_s)
+        await self.link.wait_origin(s.link.origin_timeout_s)
+        frames = self.link.set_planning_home(home)
+        self.home_lla = home
+        tele = self.link.telemetry                   # positions about home from here on
+        self.event("frames", home_lla=home, ekf_origin_lla=frames.origin_lla,
+                   home_in_origin_ned_m=np.round(frames.home_in_origin_ned_m, 3))
         plan = await self.take_mission()
         alt = await self.plan_flight(plan, home, tele)
         previous = None
@@ -480,15 +536,17 @@ class CompanionDaemon:
                 statustext=self.send_statustext)
             await self.threats.start(home)
         self._start_background()
+        await self.wait_vehicle_clock(s.link.connect_timeout_s)
         self.summary.outcome = "flying"
         try:
-            await self.takeoff(alt)
+            await self.start_or_join(alt)
         except LinkError:
-            if previous is not None and not self.link.telemetry.in_air:
+            if previous is not None and not is_airborne(self.link.telemetry, s.startup.join_min_height_m):
                 await self.restore_mission(previous)
             raise
         self.streamer = SetpointStreamer(self.link.send_setpoint, rate_hz=s.link.setpoint_rate_hz)
-        self.hold_here(self.link.telemetry.pos_ned_m, "takeoff complete")
+        self.hold_here(self.link.telemetry.pos_ned_m,
+                       "joined in the air" if self.summary.joined else "takeoff complete")
         self.streamer.start()
         for leg in self.legs:
             await self.fly_leg(leg)

@@ -40,3 +40,17 @@ class ThreatPayloadError(CompanionError, ValueError):
 
 class LinkError(CompanionError):
     """The vehicle link failed (no autopilot, refused command, upload failed)."""
+
+
+class VehicleRefused(LinkError):
+    """The vehicle answered a command with anything but ACCEPTED (arm, takeoff, mode, interlock)
+    or did not do what it accepted; ``result`` is the MAV_RESULT (None when not a command)."""
+
+    def __init__(self, message: str, result: int | None = None):
+        super().__init__(message)
+        self.result = result
+
+
+class FlightAborted(CompanionError):
+    """The flight cannot go on (pilot took over, vehicle disarmed, leg not reached, start-up
+    failed after the vehicle left the ground): the vehicle is held, or left on the ground."""

@@ -45,6 +45,11 @@ class VehicleClock:
             self._offsets.popleft()
         self._offset = max(o for _, o in self._offsets)
 
+    @property
+    def synced(self) -> bool:
+        """True once a vehicle timestamp has been observed (before: free-running)."""
+        return self._offset is not None
+
     def now_s(self, monotonic_s: float | None = None) -> float:
         mono = time.monotonic() if monotonic_s is None else monotonic_s
         if self._offset is None:

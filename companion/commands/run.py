@@ -5,17 +5,32 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import sys
 
 log = logging.getLogger(__name__)
+
+#: Exit statuses of ``companion run`` (2, bad input, comes from ``companion.cli``).
+EXIT_REFUSED = 3
+EXIT_ABORTED = 4
 
 EPILOG = """examples:
   sim-vehicle --speedup 4 &                      # a SITL helicopter sending to udp 14540
   companion run --mission mission_files/exclusion_zones.plan --time-scale 4 --record out/flight.jsonl
   companion run                                  # fly the mission already stored on the vehicle
   companion run --config my.toml --zenoh-connect tcp/192.168.1.10:7447
+  companion run --connect udpin://0.0.0.0:14540 --mission mission_files/exclusion_zones.plan \\
+      --time-scale 8                             # ArduPilot's arducopter-heli SITL at --speedup 8
+  companion run --connect serial:///dev/ttyAMA0:921600 --interlock pilot --adsb   # a real helicopter
 
-exit status: 0 mission completed, 1 flight aborted (the vehicle is held), 2 bad input (nothing
-flown), 130 interrupted (the vehicle is held, landed or returned per link.on_interrupt)."""
+start-up: a helicopter (H_RSC_* parameters) is armed with its motor interlock low, the interlock
+is engaged after the arming delay (--interlock command, default; or by the pilot's RC switch,
+--interlock pilot) and the rotor run-up (H_RSC_RUNUP_TIME) awaited before the takeoff; a vehicle
+already armed and flying is joined where it is (no arming, no takeoff).
+
+exit status: 0 mission completed; 2 bad input or no vehicle (nothing flown); 3 the vehicle
+refused (arming, mode, interlock or takeoff: it is left disarmed on the ground); 4 flight aborted
+(the vehicle holds in the air, or was left disarmed on the ground); 130 interrupted (the vehicle
+is held, landed or returned per link.on_interrupt)."""
 
 
 def register(subparsers) -> None:
@@ -40,6 +55,14 @@ def register(subparsers) -> None:
     p.add_argument("--time-scale", type=float, metavar="X",
                    help="vehicle seconds per wall-clock second: sim-vehicle's --speedup")
     p.add_argument("--smooth", choices=("g1", "g2", "none"), help="smoother (default g2)")
+    p.add_argument("--vehicle", choices=("helicopter", "multirotor"),
+                   help="vehicle profile (default helicopter: motor interlock and rotor run-up "
+                   "when the vehicle has them; multirotor: none)")
+    p.add_argument("--interlock", choices=("command", "pilot"),
+                   help="who engages a helicopter's motor interlock: the companion (DO_AUX_FUNCTION, "
+                   "default) or the safety pilot's RC switch")
+    p.add_argument("--adsb", action="store_true",
+                   help="treat ADS-B traffic (ADSB_VEHICLE) as moving threats")
     p.add_argument("--print-config", action="store_true",
                    help="print the effective settings as JSON and exit")
     p.set_defaults(func=run)
@@ -56,6 +79,12 @@ def settings_overrides(args: argparse.Namespace) -> dict:
         out["seed"] = args.seed
     if args.smooth:
         out.setdefault("smoothing", {})["method"] = args.smooth
+    if getattr(args, "vehicle", None):
+        out.setdefault("startup", {})["vehicle"] = args.vehicle
+    if getattr(args, "interlock", None):
+        out.setdefault("startup", {})["interlock"] = args.interlock
+    if getattr(args, "adsb", False):
+        out.setdefault("adsb", {})["enabled"] = True
     if args.zenoh_listen is not None:
         out.setdefault("zenoh", {})["listen"] = args.zenoh_listen
     if args.zenoh_connect is not None:
@@ -70,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
     import signal
 
     from companion.config import load_settings, settings_to_dict
-    from companion.daemon import CompanionDaemon, FlightAborted
+    from companion.daemon import CompanionDaemon
+    from companion.errors import FlightAborted, VehicleRefused
 
     settings = load_settings(args.config, settings_overrides(args))
     if args.print_config:
@@ -89,9 +119,12 @@ def run(args: argparse.Namespace) -> int:
             status = 0
         except asyncio.CancelledError:
             status = 130
+        except VehicleRefused as exc:
+            print(f"companion: error: {exc}", file=sys.stderr)
+            status = EXIT_REFUSED
         except FlightAborted as exc:
-            log.error("%s", exc)
-            status = 1
+            print(f"companion: error: flight aborted: {exc}", file=sys.stderr)
+            status = EXIT_ABORTED
         print(json.dumps(daemon.summary.as_dict()))      # the last line: the flight's summary
         return status
 

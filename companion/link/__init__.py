@@ -1,6 +1,10 @@
 """The vehicle link: MAVSDK 4.x connection, telemetry, missions, commands and the 50 Hz
 GUIDED setpoint stream (DESIGN.md section 5).
 
+Modules: ``vehicle`` (VehicleLink), ``streams`` (the telemetry asked for), ``frames`` (home vs
+the vehicle's EKF origin), ``startup`` (arming, motor interlock, rotor run-up, takeoff, joining),
+``setpoints`` (the 50 Hz stream).
+
 MAVSDK is imported lazily (inside ``VehicleLink.connect``), so importing this package is cheap.
 """
 

@@ -4,16 +4,21 @@ Implements the companion side of the MAVLink contract of DESIGN.md section 5:
 
 - connection by MAVSDK URL (``udpin://``, ``udpout://``, ``tcpin://``, ``tcpout://``,
   ``serial://``), waiting for the first autopilot;
+- telemetry streams requested, never assumed (``companion.link.streams.StreamKeeper``: ArduCopter
+  sends only HEARTBEAT until asked), and requested again after a reboot or a link loss;
 - telemetry as an always-fresh snapshot (``VehicleLink.telemetry``) kept up to date by
-  background subscriptions (MAVSDK Telemetry plugin for position/velocity NED, attitude, armed,
-  in-air, home, global position; raw HEARTBEAT through MavlinkDirect for the exact ArduCopter
-  custom mode and for link-loss detection);
+  background subscriptions (raw LOCAL_POSITION_NED, EXTENDED_SYS_STATE, HOME_POSITION,
+  GPS_GLOBAL_ORIGIN, RPM, STATUSTEXT and HEARTBEAT through MavlinkDirect; MAVSDK's Telemetry
+  plugin for attitude, armed and global position);
+- the two local frames (``companion.link.frames``): positions in and out of the link are about
+  the planning home, the vehicle's LOCAL_NED messages about its EKF origin; the link converts;
 - mission, fence and rally upload and download with MissionRaw (MISSION_ITEM_INT, ArduPilot's
   home at mission seq 0), with rollback so a failed upload leaves the vehicle's lists as they
   were;
 - commands (COMMAND_LONG through MavlinkDirect.send_command, each checked against its
-  COMMAND_ACK): DO_SET_MODE with ArduCopter custom modes (GUIDED 4 ...), arm/disarm, takeoff,
-  land, RTL, mission start;
+  COMMAND_ACK; a refusal is ``VehicleRefused``): DO_SET_MODE with ArduCopter custom modes
+  (GUIDED 4 ...), arm/disarm, takeoff, land, RTL, mission start, DO_AUX_FUNCTION (the motor
+  interlock); parameters read with PARAM_REQUEST_READ;
 - GUIDED setpoints: SET_POSITION_TARGET_LOCAL_NED (position + velocity + acceleration + yaw,
   type_mask from what is given) sent without blocking the event loop
   (``MavlinkDirect.send_message`` of the synchronous plugin: a ~20 us ctypes call);
@@ -26,6 +31,7 @@ MAVSDK 4.x note: ``Configuration`` is built with ``Configuration.create_with_com
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import dataclasses
 import json
@@ -36,7 +42,9 @@ from typing import AsyncIterator, Callable
 
 import numpy as np
 
-from companion.errors import LinkError, MissionError
+from companion.errors import LinkError, MissionError, VehicleRefused
+from companion.link.frames import LinkFrames
+from companion.link.streams import StreamKeeper, StreamSettings
 from companion.mission.model import MissionPlan
 from companion.mission.raw import (RawItem, fence_to_raw, mission_to_raw, rally_to_raw,
                                    raw_to_plan)
@@ -59,12 +67,20 @@ MAV_CMD_MISSION_START = 300
 MAV_CMD_COMPONENT_ARM_DISARM = 400
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 MAV_CMD_REQUEST_MESSAGE = 512
+MAV_CMD_DO_AUX_FUNCTION = 218
 MAVLINK_MSG_ID_HOME_POSITION = 242
+MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN = 49
 MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 FORCE_DISARM_MAGIC = 21196.0
 MAV_RESULT_NAMES = {0: "ACCEPTED", 1: "TEMPORARILY_REJECTED", 2: "DENIED", 3: "UNSUPPORTED",
                     4: "FAILED", 5: "IN_PROGRESS", 6: "CANCELLED"}
+#: EXTENDED_SYS_STATE.landed_state values that mean "not on the ground" (MAV_LANDED_STATE).
+LANDED_STATES_IN_AIR = (2, 3, 4)
+#: SYS_STATUS sensor bit of the pre-arm checks (MAV_SYS_STATUS_PREARM_CHECK).
+MAV_SYS_STATUS_PREARM_CHECK = 1 << 28
+#: How many recent STATUSTEXTs of the vehicle are kept (``VehicleLink.statustexts``).
+STATUSTEXT_KEEP = 64
 
 MAV_FRAME_LOCAL_NED = 1
 # SET_POSITION_TARGET type_mask bits (POSITION_TARGET_TYPEMASK)
@@ -165,15 +181,29 @@ class Telemetry:
     Attributes
     ----------
     pos_ned_m, vel_ned_m_s : ndarray (3,) or None
-        LOCAL_POSITION_NED about the vehicle's EKF origin (home in sim-vehicle).
+        LOCAL_POSITION_NED converted to the planning home's frame (``VehicleLink.frames``;
+        before ``set_planning_home`` the vehicle's own local frame).
     attitude_rad : ndarray (3,) or None
         Roll, pitch, yaw.
     lat_deg, lon_deg, alt_amsl_m, rel_alt_m : float or None
-        GLOBAL_POSITION_INT.
+        GLOBAL_POSITION_INT (``rel_alt_m``: above the vehicle's home).
     home_lla : (lat_deg, lon_deg, alt_m AMSL) or None
+        The vehicle's home now (HOME_POSITION).
+    origin_lla : (lat_deg, lon_deg, alt_m AMSL) or None
+        The vehicle's EKF origin (GPS_GLOBAL_ORIGIN): its local frame.
     mode : int or None
         ArduCopter custom mode (``COPTER_MODES``); ``mode_name`` its name.
     armed, in_air : bool or None
+        ``in_air`` from EXTENDED_SYS_STATE (``landed_state`` IN_AIR, TAKEOFF or LANDING).
+    landed_state : int or None
+        MAV_LANDED_STATE (0 undefined, 1 on ground, 2 in air, 3 takeoff, 4 landing).
+    rotor_rpm : float or None
+        RPM.rpm1 (ArduPilot's rotor speed sensor), when the vehicle sends it.
+    prearm_ok : bool or None
+        SYS_STATUS: the vehicle's pre-arm checks pass (MAV_SYS_STATUS_PREARM_CHECK healthy);
+        None when the vehicle does not report them.
+    boot_s : float or None
+        ``time_boot_ms`` of the last LOCAL_POSITION_NED, in seconds (vehicle time).
     connected : bool
         A heartbeat arrived in the last ``HEARTBEAT_TIMEOUT_S``.
     heartbeat_age_s, position_age_s : float
@@ -188,9 +218,14 @@ class Telemetry:
     alt_amsl_m: float | None = None
     rel_alt_m: float | None = None
     home_lla: tuple[float, float, float] | None = None
+    origin_lla: tuple[float, float, float] | None = None
     mode: int | None = None
     armed: bool | None = None
     in_air: bool | None = None
+    landed_state: int | None = None
+    rotor_rpm: float | None = None
+    prearm_ok: bool | None = None
+    boot_s: float | None = None
     connected: bool = False
     heartbeat_age_s: float = math.inf
     position_age_s: float = math.inf
@@ -201,18 +236,34 @@ class Telemetry:
             return "UNKNOWN"
         return COPTER_MODE_NAMES.get(self.mode, f"MODE{self.mode}")
 
+    @property
+    def height_m(self) -> float | None:
+        """Height above home (m): GLOBAL_POSITION_INT's relative altitude, else -down."""
+        if self.rel_alt_m is not None:
+            return self.rel_alt_m
+        return None if self.pos_ned_m is None else -float(self.pos_ned_m[2])
+
 
 class TelemetryState:
-    """The mutable state behind ``Telemetry`` snapshots (owned by the link's event loop)."""
+    """The mutable state behind ``Telemetry`` snapshots (owned by the link's event loop).
+
+    Positions are kept in the vehicle's local frame (``pos_origin``) and converted by the
+    snapshot with the link's current ``LinkFrames``.
+    """
 
     def __init__(self) -> None:
         self.values: dict = {}
+        self.pos_origin: np.ndarray | None = None
         self.heartbeat_t = -math.inf
         self.position_t = -math.inf
 
-    def snapshot(self, now: float) -> Telemetry:
+    def snapshot(self, now: float, frames: LinkFrames | None = None) -> Telemetry:
         hb_age = now - self.heartbeat_t
-        return Telemetry(**self.values, connected=hb_age < HEARTBEAT_TIMEOUT_S,
+        values = self.values
+        if self.pos_origin is not None:
+            pos = self.pos_origin if frames is None else frames.to_home(self.pos_origin)
+            values = {**values, "pos_ned_m": pos}
+        return Telemetry(**values, connected=hb_age < HEARTBEAT_TIMEOUT_S,
                          heartbeat_age_s=hb_age, position_age_s=now - self.position_t)
 
 
@@ -224,6 +275,11 @@ class VehicleLink:
     role : str
         ``"companion"`` (MAVSDK ComponentType.COMPANION_COMPUTER) or ``"gcs"``
         (GROUND_STATION, as ``companion upload/download``).
+    streams : StreamSettings, optional
+        The telemetry the link asks for (``companion.link.streams``). Default: the defaults
+        for a companion, nothing for a ground station (mission transfers need no streams).
+    adsb : bool
+        Also ask for ADSB_VEHICLE (ADS-B traffic as threats).
 
     Examples
     --------
@@ -234,13 +290,21 @@ class VehicleLink:
     >>> link.send_setpoint(pos_ned_m=[0, 0, -10], vel_ned_m_s=[0, 0, 0], yaw_rad=0.0)
     """
 
-    def __init__(self, role: str = "companion") -> None:
+    def __init__(self, role: str = "companion", *, streams: StreamSettings | None = None,
+                 adsb: bool = False) -> None:
         if role not in ("companion", "gcs"):
             raise LinkError(f"role must be 'companion' or 'gcs', got {role!r}")
         self.role = role
         self.url: str | None = None
         self.target_system = 1
         self.target_component = 1
+        self.frames = LinkFrames()
+        if streams is None and role == "companion":
+            streams = StreamSettings()
+        self.stream_settings = streams
+        self.adsb = bool(adsb)
+        self.streams: StreamKeeper | None = None
+        self.statustexts: collections.deque = collections.deque(maxlen=STATUSTEXT_KEEP)
         self._mavsdk = None
         self._system = None
         self._direct = None        # MavlinkDirectAsync (commands, subscriptions)
@@ -297,6 +361,8 @@ class VehicleLink:
         self._telemetry_plugin = TelemetryAsync(system)
         self._state.heartbeat_t = time.monotonic()
         self._was_connected = True
+        if self.stream_settings is not None:
+            self.streams = StreamKeeper(self, self.stream_settings, adsb=self.adsb)
         self._start_subscriptions()
         log.info("connected to system %d on %s", self.target_system, url)
 
@@ -348,7 +414,47 @@ class VehicleLink:
     @property
     def telemetry(self) -> Telemetry:
         """The latest vehicle state (a new immutable snapshot on every access)."""
-        return self._state.snapshot(time.monotonic())
+        return self._state.snapshot(time.monotonic(), self.frames)
+
+    def set_planning_home(self, home_lla) -> LinkFrames:
+        """Freeze the home frame: positions in and out of the link are about ``home_lla`` from
+        now on, converted with the vehicle's EKF origin if it reported one
+        (``companion.link.frames``). Returns the frames."""
+        origin = self._state.values.get("origin_lla")
+        self.frames = LinkFrames.build(home_lla, origin)
+        if origin is None:
+            log.info("the vehicle reports no EKF origin (GPS_GLOBAL_ORIGIN): its local frame is "
+                     "taken to be home's")
+        else:
+            log.info("home %.7f, %.7f, %.2f m; EKF origin %.7f, %.7f, %.2f m; home in the "
+                     "vehicle's local frame: %s m", *self.frames.home_lla, *origin,
+                     np.round(self.frames.home_in_origin_ned_m, 3).tolist())
+        return self.frames
+
+    def to_home_frame(self, pos_origin_ned_m) -> np.ndarray:
+        """A LOCAL_POSITION_NED position (vehicle frame) in the planning home's frame."""
+        return self.frames.to_home(pos_origin_ned_m)
+
+    async def wait_origin(self, timeout_s: float = 5.0) -> tuple | None:
+        """Wait for the vehicle's EKF origin (GPS_GLOBAL_ORIGIN, asked for by the stream
+        requests); None after ``timeout_s`` or as soon as the vehicle says it cannot send it."""
+        start = time.monotonic()
+        asked = False
+        while self._state.values.get("origin_lla") is None:
+            waited = time.monotonic() - start
+            if waited > timeout_s or (
+                    self.streams is not None and self.streams.unavailable("GPS_GLOBAL_ORIGIN")):
+                return None
+            if not asked and waited > timeout_s / 2.0:       # the stream is slow: ask once
+                asked = True
+                await self.command_result(MAV_CMD_REQUEST_MESSAGE, (MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,),
+                                          what="request GPS_GLOBAL_ORIGIN", timeout_s=1.0)
+            await asyncio.sleep(0.05)
+        return self._state.values["origin_lla"]
+
+    def statustexts_since(self, t_monotonic_s: float) -> list[str]:
+        """The vehicle's STATUSTEXTs received since ``t_monotonic_s`` (oldest first)."""
+        return [text for t, _, text in list(self.statustexts) if t >= t_monotonic_s]
 
     async def wait_position(self, timeout_s: float = 10.0) -> Telemetry:
         """Wait for a fresh position; raises ``LinkError`` on timeout."""
@@ -414,10 +520,20 @@ class VehicleLink:
 
     def _start_subscriptions(self) -> None:
         loop = asyncio.get_running_loop()
-        self._tasks = [loop.create_task(coro, name=f"link-{coro.__name__}") for coro in (
-            self._watch_heartbeat(), self._watch_link(), self._watch_position_velocity(),
-            self._watch_attitude(), self._watch_armed(), self._watch_in_air(),
-            self._watch_home(), self._watch_global_position())]
+        coros = [self._watch_heartbeat(), self._watch_link(), self._watch_local_position(),
+                 self._watch_attitude(), self._watch_armed(), self._watch_landed_state(),
+                 self._watch_home(), self._watch_origin(), self._watch_global_position(),
+                 self._watch_statustext(), self._watch_rpm(), self._watch_sys_status()]
+        if self.streams is not None:
+            coros.append(self.streams.run())
+        self._tasks = [loop.create_task(coro, name=f"link-{coro.__name__}") for coro in coros]
+
+    def _note(self, name: str, boot_s: float | None = None) -> None:
+        if self.streams is not None:
+            self.streams.note(name, boot_s)
+
+    def _from_vehicle(self, fields: dict) -> bool:
+        return fields.get("_sysid") == self.target_system
 
     async def _guarded(self, what: str, agen, apply: Callable) -> None:
         """Run one subscription forever; a failure is logged and the subscription restarted."""
@@ -452,6 +568,8 @@ class VehicleLink:
                 self._was_connected = now_connected
                 if now_connected:
                     log.warning("link to system %d is back", self.target_system)
+                    if self.streams is not None:
+                        self.streams.request_again("link back")
                 else:
                     log.warning("link to system %d lost: no heartbeat for %.1f s; still "
                                 "listening on %s", self.target_system, HEARTBEAT_TIMEOUT_S,
@@ -462,20 +580,25 @@ class VehicleLink:
                     except Exception:  # noqa: BLE001
                         log.exception("link listener failed")
 
-    async def _watch_position_velocity(self) -> None:
-        def apply(pv) -> None:
-            self._state.values["pos_ned_m"] = np.array(
-                [pv.position.north_m, pv.position.east_m, pv.position.down_m])
+    async def _watch_local_position(self) -> None:
+        def apply(fields: dict) -> None:
+            if not self._from_vehicle(fields):
+                return
+            self._state.pos_origin = np.array([fields.get("x", 0.0), fields.get("y", 0.0),
+                                               fields.get("z", 0.0)], dtype=float)
             self._state.values["vel_ned_m_s"] = np.array(
-                [pv.velocity.north_m_s, pv.velocity.east_m_s, pv.velocity.down_m_s])
+                [fields.get("vx", 0.0), fields.get("vy", 0.0), fields.get("vz", 0.0)], dtype=float)
+            boot_s = fields.get("time_boot_ms", 0) / 1000.0
+            self._state.values["boot_s"] = boot_s
             self._state.position_t = time.monotonic()
-        await self._guarded("position_velocity_ned",
-                            self._telemetry_plugin.subscribe_position_velocity_ned, apply)
+            self._note("LOCAL_POSITION_NED", boot_s)
+        await self._guarded("LOCAL_POSITION_NED", lambda: self.messages("LOCAL_POSITION_NED"), apply)
 
     async def _watch_attitude(self) -> None:
         def apply(att) -> None:
             self._state.values["attitude_rad"] = np.radians(
                 [att.roll_deg, att.pitch_deg, att.yaw_deg])
+            self._note("ATTITUDE")
         await self._guarded("attitude", self._telemetry_plugin.subscribe_attitude_euler, apply)
 
     async def _watch_armed(self) -> None:
@@ -483,10 +606,57 @@ class VehicleLink:
             self._state.values["armed"] = bool(armed)
         await self._guarded("armed", self._telemetry_plugin.subscribe_armed, apply)
 
-    async def _watch_in_air(self) -> None:
-        def apply(in_air) -> None:
-            self._state.values["in_air"] = bool(in_air)
-        await self._guarded("in_air", self._telemetry_plugin.subscribe_in_air, apply)
+    async def _watch_landed_state(self) -> None:
+        def apply(fields: dict) -> None:
+            if not self._from_vehicle(fields):
+                return
+            state = int(fields.get("landed_state", 0))
+            self._state.values["landed_state"] = state
+            self._state.values["in_air"] = None if state == 0 else state in LANDED_STATES_IN_AIR
+            self._note("EXTENDED_SYS_STATE")
+        await self._guarded("EXTENDED_SYS_STATE", lambda: self.messages("EXTENDED_SYS_STATE"), apply)
+
+    async def _watch_origin(self) -> None:
+        def apply(fields: dict) -> None:
+            if not self._from_vehicle(fields):
+                return
+            lat, lon = fields.get("latitude", 0) / 1e7, fields.get("longitude", 0) / 1e7
+            if (lat, lon) != (0.0, 0.0) and abs(lat) <= 90.0 and abs(lon) <= 180.0:
+                origin = (lat, lon, fields.get("altitude", 0) / 1e3)
+                old = self._state.values.get("origin_lla")
+                if old is not None and old != origin:
+                    log.warning("the vehicle's EKF origin moved from %s to %s", old, origin)
+                self._state.values["origin_lla"] = origin
+            self._note("GPS_GLOBAL_ORIGIN")
+        await self._guarded("GPS_GLOBAL_ORIGIN", lambda: self.messages("GPS_GLOBAL_ORIGIN"), apply)
+
+    async def _watch_statustext(self) -> None:
+        def apply(fields: dict) -> None:
+            if not self._from_vehicle(fields):
+                return
+            text = str(fields.get("text", "")).rstrip("\x00")
+            severity = int(fields.get("severity", 6))
+            self.statustexts.append((time.monotonic(), severity, text))
+            log.log(logging.WARNING if severity <= 4 else logging.INFO, "vehicle: %s", text)
+        await self._guarded("STATUSTEXT", lambda: self.messages("STATUSTEXT"), apply)
+
+    async def _watch_sys_status(self) -> None:
+        def apply(fields: dict) -> None:
+            if not self._from_vehicle(fields) or fields.get("_compid") != self.target_component:
+                return
+            present = int(fields.get("onboard_control_sensors_present", 0))
+            health = int(fields.get("onboard_control_sensors_health", 0))
+            self._state.values["prearm_ok"] = (bool(health & MAV_SYS_STATUS_PREARM_CHECK)
+                                               if present & MAV_SYS_STATUS_PREARM_CHECK else None)
+            self._note("SYS_STATUS")
+        await self._guarded("SYS_STATUS", lambda: self.messages("SYS_STATUS"), apply)
+
+    async def _watch_rpm(self) -> None:
+        def apply(fields: dict) -> None:
+            if self._from_vehicle(fields):
+                self._state.values["rotor_rpm"] = float(fields.get("rpm1", 0.0))
+                self._note("RPM")
+        await self._guarded("RPM", lambda: self.messages("RPM"), apply)
 
     async def _watch_home(self) -> None:
         def apply(fields: dict) -> None:
@@ -496,6 +666,7 @@ class VehicleLink:
             lon = fields.get("longitude", 0) / 1e7
             if (lat, lon) != (0.0, 0.0) and abs(lat) <= 90.0 and abs(lon) <= 180.0:
                 self._state.values["home_lla"] = (lat, lon, fields.get("altitude", 0) / 1e3)
+            self._note("HOME_POSITION")
         await self._guarded("HOME_POSITION", lambda: self.messages("HOME_POSITION"), apply)
 
     async def request_home(self) -> None:
@@ -509,6 +680,7 @@ class VehicleLink:
                                       lon_deg=float(pos.longitude_deg),
                                       alt_amsl_m=float(pos.absolute_altitude_m),
                                       rel_alt_m=float(pos.relative_altitude_m))
+            self._note("GLOBAL_POSITION_INT")
         await self._guarded("position", self._telemetry_plugin.subscribe_position, apply)
 
     # ----------------------------------------------------------------- commands
@@ -516,6 +688,45 @@ class VehicleLink:
     def _require_connected(self) -> None:
         if self._system is None or self._mavsdk is None:
             raise LinkError("the link is not connected (call connect() first)")
+
+    def _command_message(self, command: int, params):
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        # MavlinkDirect takes strict JSON, which has no NaN: unset parameters travel as 0
+        values = [float(p) if math.isfinite(float(p)) else 0.0 for p in params]
+        values += [0.0] * (7 - len(values))
+        fields = {"target_system": self.target_system, "target_component": self.target_component,
+                  "command": int(command), "confirmation": 0}
+        fields.update({f"param{k + 1}": v for k, v in enumerate(values)})
+        return MavlinkMessage("COMMAND_LONG", 0, 0, self.target_system, self.target_component,
+                              json.dumps(fields))
+
+    async def command_result(self, command: int, params=(), *, what: str | None = None,
+                             timeout_s: float = 10.0) -> int | None:
+        """Send COMMAND_LONG and return the MAV_RESULT of its COMMAND_ACK (None: no final ack
+        within ``timeout_s``). Never raises for a refusal: see ``command_long``."""
+        from mavsdk.plugins.mavlink_direct import MavlinkDirectError
+
+        self._require_connected()
+        message = self._command_message(command, params)
+        label = what or f"command {command}"
+        async with self._command_lock:
+            try:
+                ack = await asyncio.wait_for(self._direct.send_command(message), timeout_s)
+            except asyncio.TimeoutError:
+                log.info("%s: no COMMAND_ACK within %g s", label, timeout_s)
+                return None
+            except MavlinkDirectError as exc:
+                log.info("%s: no COMMAND_ACK (%s)", label, exc.result.name)
+                return None
+        try:
+            result = int(json.loads(ack.fields_json).get("result", -1))
+        except (json.JSONDecodeError, TypeError, ValueError, AttributeError):
+            log.info("%s: unreadable COMMAND_ACK", label)
+            return None
+        log.log(logging.INFO if result == 0 else logging.DEBUG, "%s: %s", label,
+                MAV_RESULT_NAMES.get(result, result))
+        return result
 
     async def command_long(self, command: int, params=(), *, what: str | None = None,
                            timeout_s: float = 10.0) -> None:
@@ -531,36 +742,27 @@ class VehicleLink:
         Raises
         ------
         LinkError
-            No final ack (naming ``what``), or the vehicle answered anything but ACCEPTED
-            (naming the MAV_RESULT).
+            No final ack (naming ``what``).
+        VehicleRefused
+            The vehicle answered anything but ACCEPTED (naming the MAV_RESULT and the
+            vehicle's last STATUSTEXT, e.g. ``PreArm: Motor Interlock Enabled``).
         """
-        from mavsdk.plugins.mavlink_direct import MavlinkDirectError, MavlinkMessage
-
-        self._require_connected()
-        # MavlinkDirect takes strict JSON, which has no NaN: unset parameters travel as 0
-        values = [float(p) if math.isfinite(float(p)) else 0.0 for p in params]
-        values += [0.0] * (7 - len(values))
-        fields = {"target_system": self.target_system, "target_component": self.target_component,
-                  "command": int(command), "confirmation": 0}
-        fields.update({f"param{k + 1}": v for k, v in enumerate(values)})
-        message = MavlinkMessage("COMMAND_LONG", 0, 0, self.target_system, self.target_component,
-                                 json.dumps(fields))
         label = what or f"command {command}"
-        async with self._command_lock:
-            try:
-                ack = await asyncio.wait_for(self._direct.send_command(message), timeout_s)
-            except asyncio.TimeoutError:
-                raise LinkError(f"{label}: no COMMAND_ACK within {timeout_s:g} s") from None
-            except MavlinkDirectError as exc:
-                raise LinkError(f"{label}: no COMMAND_ACK ({exc.result.name})") from None
-        try:
-            result = int(json.loads(ack.fields_json).get("result", -1))
-        except (json.JSONDecodeError, TypeError, ValueError, AttributeError):
-            raise LinkError(f"{label}: unreadable COMMAND_ACK") from None
+        sent_t = time.monotonic()
+        result = await self.command_result(command, params, what=label, timeout_s=timeout_s)
+        if result is None:
+            raise LinkError(f"{label}: no COMMAND_ACK within {timeout_s:g} s")
         if result != 0:
-            raise LinkError(f"{label} refused by the vehicle: "
-                            f"{MAV_RESULT_NAMES.get(result, result)}")
-        log.info("%s accepted", label)
+            raise VehicleRefused(self.refusal_text(label, result, sent_t), result)
+
+    def refusal_text(self, label: str, result: int | None, since_monotonic_s: float) -> str:
+        """``"<label> refused by the vehicle: FAILED (PreArm: ...)"``: the MAV_RESULT and the
+        vehicle's most telling STATUSTEXT since ``since_monotonic_s`` (a PreArm/Arm line first)."""
+        texts = self.statustexts_since(since_monotonic_s - 0.5)
+        telling = [t for t in texts if t.startswith(("PreArm", "Arm"))] or texts
+        why = f" ({telling[-1]})" if telling else ""
+        name = "no answer" if result is None else MAV_RESULT_NAMES.get(result, result)
+        return f"{label} refused by the vehicle: {name}{why}"
 
     async def set_mode(self, mode) -> None:
         """Switch to an ArduCopter mode (name or number) with DO_SET_MODE and wait to see it."""
@@ -607,6 +809,60 @@ class VehicleLink:
         await self.command_long(MAV_CMD_SET_MESSAGE_INTERVAL, (message_id, interval_us),
                                 what=f"message interval of {message_id}")
 
+    async def aux_function(self, function: int, switch: int, *, timeout_s: float = 3.0) -> int | None:
+        """MAV_CMD_DO_AUX_FUNCTION (an RC switch function, e.g. 32 MOTOR_INTERLOCK) at switch
+        position ``switch`` (0 low, 1 middle, 2 high); returns the MAV_RESULT (None: no ack)."""
+        return await self.command_result(MAV_CMD_DO_AUX_FUNCTION, (function, switch),
+                                         what=f"aux function {function} switch {switch}",
+                                         timeout_s=timeout_s)
+
+    async def read_params(self, names, timeout_s: float = 2.0) -> dict[str, float]:
+        """Read parameters with PARAM_REQUEST_READ (sent twice, all at once).
+
+        Returns
+        -------
+        dict
+            Name -> value (ArduPilot encoding: the value as a float) of those the vehicle
+            answered within ``timeout_s``; a parameter the vehicle does not have is absent.
+        """
+        self._require_connected()
+        wanted = {str(n) for n in names}
+        got: dict[str, float] = {}
+
+        async def collect() -> None:
+            async for fields in self.messages("PARAM_VALUE"):
+                name = str(fields.get("param_id", "")).rstrip("\x00")
+                if self._from_vehicle(fields) and name in wanted:
+                    got[name] = float(fields.get("param_value", math.nan))
+                    if len(got) == len(wanted):
+                        return
+
+        waiter = asyncio.ensure_future(collect())
+        await asyncio.sleep(0)                    # subscribed before the requests go out
+        try:
+            for attempt in range(2):
+                for name in sorted(wanted - set(got)):
+                    self.send_message("PARAM_REQUEST_READ", {
+                        "target_system": self.target_system, "target_component": self.target_component,
+                        "param_id": name, "param_index": -1})
+                done, _ = await asyncio.wait({waiter}, timeout=timeout_s / 2.0)
+                if done:
+                    break
+        finally:
+            waiter.cancel()
+            await asyncio.gather(waiter, return_exceptions=True)
+        log.info("parameters read: %s%s", ", ".join(f"{k}={v:g}" for k, v in sorted(got.items())) or "none",
+                 "" if len(got) == len(wanted) else f"; not on the vehicle: {', '.join(sorted(wanted - set(got)))}")
+        return got
+
+    def send_message(self, name: str, fields: dict) -> None:
+        """Send one MAVLink message ``name`` with ``fields`` now (non-blocking)."""
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        self._require_connected()
+        self._direct_sync.send_message(MavlinkMessage(name, 0, 0, self.target_system,
+                                                      self.target_component, json.dumps(fields)))
+
     # ----------------------------------------------------------------- setpoints
 
     def send_setpoint(self, pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
@@ -614,11 +870,14 @@ class VehicleLink:
         """Send one SET_POSITION_TARGET_LOCAL_NED now (non-blocking; call from the loop thread).
 
         ``None`` fields are masked out in ``type_mask``. Raises ``LinkError`` for non-finite
-        values (nothing is sent then).
+        values (nothing is sent then). ``pos_ned_m`` is about the planning home and is sent
+        in the vehicle's local frame (``frames.to_origin``).
         """
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         self._require_connected()
+        if pos_ned_m is not None:
+            pos_ned_m = self.frames.to_origin(pos_ned_m)
         time_boot_ms = int((time.monotonic() - self._t0) * 1000.0)
         fields = setpoint_fields(time_boot_ms, self.target_system, self.target_component,
                                  pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s)

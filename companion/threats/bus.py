@@ -184,7 +184,7 @@ class ThreatBus:
         self._lock = threading.Lock()
         self._seq = 0
         self._counts = {"received": 0, "put": 0, "delete": 0, "rejected": 0, "delivered": 0,
-                        "handler_errors": 0, "undeliverable": 0, "queries": 0}
+                        "handler_errors": 0, "undeliverable": 0, "queries": 0, "republished": 0}
 
     @classmethod
     def from_settings(cls, settings, *, clock=None) -> "ThreatBus":
@@ -432,6 +432,21 @@ class ThreatBus:
         """PUT ``threat`` (encoded, validated) on ``uav/<sysid>/threats/<id>``."""
         payload = codec.encode(threat)
         self._publisher(f"threats/{threat.id}", block=True).put(payload)
+
+    def republish_threat(self, threat: Threat) -> bool:
+        """PUT ``threat`` on ``uav/<sysid>/threats/<id>`` for *other* processes only (a threat
+        this process learnt otherwise, e.g. from ADS-B): zenoh's ``allowed_destination`` REMOTE
+        keeps it from the local subscriber, and it is dropped rather than wait under congestion
+        (the next report replaces it). Returns False when the session is not open."""
+        import zenoh
+
+        if self._session is None:
+            return False
+        self._session.put(self.key(f"threats/{threat.id}"), codec.encode(threat),
+                          allowed_destination=zenoh.Locality.REMOTE,
+                          congestion_control=zenoh.CongestionControl.DROP)
+        self._count("republished")
+        return True
 
     def put_raw(self, threat_id: str, payload: bytes) -> None:
         """PUT an arbitrary payload on ``uav/<sysid>/threats/<threat_id>`` (tests, fault injection)."""

@@ -4,7 +4,10 @@
 ``ThreatManager`` per flight to the daemon through a few callables (it never sees the daemon):
 
 - **Threats in.** zenoh samples arrive on the event loop (``ThreatBus.subscribe(loop=...)``);
-  every PUT or DELETE updates the table and asks the manager for a decision.
+  every PUT or DELETE updates the table and asks the manager for a decision. A threat the
+  companion learns itself (an ADS-B report, ``companion.threats.adsb``) goes through
+  :meth:`ThreatReactor.on_local_threat`: the very same path as a PUT, then it is republished on
+  ``uav/<sysid>/threats/<id>`` for the other processes (never back to this one).
 - **Monitor** (DESIGN 7.3). While a leg is flown and any threat is known, the active reference
   is re-checked every ``monitor_period_s`` of wall-clock time (default 0.1 s, >= 10 Hz), on the
   same path as a threat update; a tick is skipped while a decision is under way.
@@ -162,6 +165,7 @@ class ThreatReactor:
         self._pending: tuple[float, str] | None = None
         self._alt_busy = False
         self._alt_dirty = False
+        self._local_seq = 0
         self._tasks: list[asyncio.Task] = []
 
     def _default_manager(self, leg) -> ThreatManager:
@@ -221,6 +225,20 @@ class ThreatReactor:
             self.record("threat", id=th.id, kind=th.kind, position_ned_m=th.pos_ned_m,
                         velocity_ned_m_s=th.velocity_ned_m_s, radius_m=th.radius_m, t_s=update.received_t_s)
         self.schedule(update.received_mono_s, "threat")
+
+    def on_local_threat(self, threat, received_mono_s: float | None = None) -> None:
+        """A threat this process learnt itself (e.g. ADS-B; on the loop): stored and decided
+        exactly as a zenoh PUT (:meth:`on_update`), then republished for other consumers."""
+        self._local_seq += 1
+        update = ThreatUpdate("put", threat.id, threat, None, self.bus.key(f"threats/{threat.id}"),
+                              threat.received_t_s,
+                              time.monotonic() if received_mono_s is None else received_mono_s,
+                              self._local_seq)
+        self.on_update(update)
+        try:
+            self.bus.republish_threat(threat)
+        except Exception as exc:  # noqa: BLE001 - republishing is a courtesy; the flight goes on
+            log.info("threat %s not republished: %s", threat.id, exc)
 
     def reject(self, event: dict) -> None:
         """Publish, record and tell a rejected threat sample (the flight goes on)."""

@@ -42,8 +42,8 @@ def run_bad(url: str, *args: str):
                          timeout_s=120)
 
 
-def assert_one_line_error(result, *needles: str) -> None:
-    assert result.returncode == 2, result.stderr[-2000:]
+def assert_one_line_error(result, *needles: str, status: int = 2) -> None:
+    assert result.returncode == status, result.stderr[-2000:]
     lines = [ln for ln in result.stderr.splitlines() if ln.startswith("companion: error:")]
     assert len(lines) == 1, result.stderr[-2000:]
     assert "Traceback" not in result.stderr
@@ -123,6 +123,7 @@ def set_param(sim, name: str, value: float) -> None:
 
 
 def test_a_vehicle_that_refuses_to_arm_is_left_with_its_mission(vehicle, tmp_path):
+    """A refusal by the vehicle is not bad input: exit status 3, the vehicle's reason in the line."""
     sim, track, url = vehicle
     before = stored_items(url, tmp_path)
     set_param(sim, "SIM_PREARM_FAIL", 1.0)
@@ -130,6 +131,7 @@ def test_a_vehicle_that_refuses_to_arm_is_left_with_its_mission(vehicle, tmp_pat
         result = run_bad(url, "--mission", str(MISSION))
     finally:
         set_param(sim, "SIM_PREARM_FAIL", 0.0)
-    assert_one_line_error(result, "arm")
+    assert_one_line_error(result, "arm refused by the vehicle", status=3)
     assert "PreArm" in result.stderr or "DENIED" in result.stderr or "FAILED" in result.stderr
+    assert json.loads(result.stdout.strip().splitlines()[-1])["outcome"].startswith("refused: arm")
     check_untouched(vehicle, before, tmp_path)

@@ -128,7 +128,15 @@ class MemoryBus:
 
     def __init__(self):
         self.events, self.paths, self.statuses = [], [], []
+        self.republished = []
         self.handler = None
+
+    def key(self, leaf):
+        return f"uav/1/{leaf}"
+
+    def republish_threat(self, threat):
+        self.republished.append(threat)
+        return True
 
     def open(self):
         return self
@@ -524,3 +532,27 @@ def test_statustext_for(kind, label, tid, latency, text, severity):
 def test_statustext_is_cut_to_50_characters_keeping_the_latency():
     text, _ = statustext_for("switch", "switch " + "x" * 80, "a-long-threat-id", 1234.0)
     assert len(text) == STATUSTEXT_MAX_CHARS and text.endswith(", 1234 ms")
+
+
+# ---------------------------------------------------------------------------- threats learnt locally
+def test_a_local_threat_goes_the_way_of_a_zenoh_put_and_is_republished():
+    """An ADS-B threat: stored, decided on like a PUT, recorded, and republished for others."""
+    h = Harness(monitor_period_s=60.0)
+    h.manager.on_threats_script = [trajectory_decision("evade", threat_id="adsb-4b1805")]
+
+    async def main(h):
+        await h.start()
+        threat = Threat("adsb-4b1805", "moving", "global", (47.3986, 8.5456, 508.0), (0.0, 20.0, 0.0),
+                        radius_m=20.0, ttl_s=5.0, received_t_s=4.0)
+        receipt = time.monotonic()
+        h.reactor.on_local_threat(threat, receipt)
+        await until(lambda: h.bus.events, "the decision")
+        assert "adsb-4b1805" in h.reactor.table and h.reactor.table.get("adsb-4b1805").frame == "local_ned"
+        assert h.manager.calls[0][:2] == ("on_threats", ("adsb-4b1805",))
+        assert h.bus.events[0]["threat_id"] == "adsb-4b1805" and h.bus.events[0]["trigger"] == "threat"
+        assert [t.id for t in h.bus.republished] == ["adsb-4b1805"]
+        assert h.bus.republished[0].frame == "global"               # as received, for other consumers
+        recorded = [f for kind, f in h.records if kind == "threat"]
+        assert recorded[0]["id"] == "adsb-4b1805" and recorded[0]["t_s"] == 4.0
+
+    run(main, h)
