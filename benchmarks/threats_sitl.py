@@ -154,7 +154,7 @@ def judge(flight: dict) -> list[dict]:
         sep = math.inf
         stamped = [th.with_time(enc["t_put_s"]) for th in enc["threats"]]
         for th in stamped:
-            after = t >= enc["t_put_s"]
+            after = (t >= enc["t_put_s"]) & (t <= enc["t_put_s"] + th.ttl_s)    # while it lives
             if after.sum() < 2:
                 continue
             centre = th.position_at(t[after])

@@ -7,7 +7,7 @@ pymavlink listener records the vehicle's own LOCAL_POSITION_NED. One flight of
 
 - leg 1: a threat coming head-on along the leg at 3 m/s;
 - leg 2: an invalid payload (rejected); a harmless threat put then DELETEd; a pop-up on the
-  path 2 s ahead;
+  path 3 s ahead (its inflated radius is met in about 2 s: only a stop or a sidestep clears it);
 - leg 3: a threat in the *global* frame crossing the leg at right angles at 2 m/s, timed to
   meet the vehicle where the path crosses its track;
 
@@ -33,7 +33,7 @@ SPEEDUP = 2.0
 MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
 HEAD_ON = Injection("headon1", "moving", leg=1, after_s=3.0, ahead_s=6.0, radius_m=3.0, speed_m_s=3.0,
                     heading="head_on")
-POPUP = Injection("popup2", "popup", leg=2, after_s=5.0, ahead_s=2.0, radius_m=3.0)
+POPUP = Injection("popup2", "popup", leg=2, after_s=5.0, ahead_s=3.0, radius_m=3.0)
 CROSSING = Injection("cross3", "moving", leg=3, after_s=3.0, ahead_s=5.0, radius_m=3.0, speed_m_s=2.0,
                      lateral_m=-10.0, frame="global")
 HARMLESS = Threat("far1", "popup", "local_ned", (300.0, 300.0, -15.0), (0.0, 0.0, 0.0), 2.0, 60.0)
@@ -74,12 +74,12 @@ def first_decision(flight, threat_id):
 
 
 def separation_m(flight, threat_id) -> float:
-    """Smallest distance from the vehicle's own track to the threat's surface after its receipt."""
+    """Smallest distance from the vehicle's own track to the threat's surface while it lives."""
     sent = next(t for t in flight["seen"]["threats"] if t.id == threat_id)
     stamp = next(th["t_s"] for th in flight["record"].threats if th.get("id") == threat_id)
     local = sent.to_local(LocalFrame(*DEMO_HOME))
     t, pos = flight["track_t_s"], flight["track_ned_m"]
-    after = t >= stamp
+    after = (t >= stamp) & (t <= stamp + (sent.ttl_s or np.inf))
     assert after.sum() > 50
     centre = local.pos_ned_m[None, :] + np.outer(t[after] - stamp, local.velocity_ned_m_s)
     return float(np.min(np.linalg.norm(pos[after] - centre, axis=1)) - sent.radius_m)
