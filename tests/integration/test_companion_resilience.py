@@ -35,6 +35,7 @@ def test_sigint_in_flight_leaves_the_vehicle_hovering_in_loiter(tmp_path):
             hb = gcs.wait("HEARTBEAT", 5.0, lambda m: m.get_srcComponent() == 1)
             assert hb.custom_mode == LOITER
             assert hb.base_mode & 128, "the vehicle must still be armed (hovering, not dropped)"
+            gcs.request("LOCAL_POSITION_NED")          # as ArduPilot: only what is asked for
             first = gcs.wait("LOCAL_POSITION_NED", 5.0)
             time.sleep(1.0)
             later = gcs.wait("LOCAL_POSITION_NED", 5.0)

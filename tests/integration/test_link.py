@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from companion.link.startup import StartupSettings, start_vehicle
+from companion.reference import VehicleClock
 from companion.errors import LinkError
 from companion.link import COPTER_MODES, SetpointStreamer, VehicleLink, hold_position
 
@@ -63,9 +65,9 @@ def test_guided_takeoff_and_setpoints_move_the_vehicle():
         try:
             with pytest.raises(LinkError, match="refused"):
                 await link.takeoff(10.0)             # disarmed: the vehicle refuses
-            await link.set_mode("GUIDED")
-            await link.arm()
-            await link.takeoff(10.0)
+            # a helicopter: interlock low, arm, interlock after the arming delay, run-up, takeoff
+            await start_vehicle(link, StartupSettings(), 10.0, VehicleClock(4.0).now_s, time_scale=4.0,
+                                climb_speed_m_s=2.5)
             await link.wait_for(lambda t: t.pos_ned_m[2] < -8.0, 60, "takeoff to 10 m")
             target = np.array([15.0, 10.0, -12.0])
             streamer.set_source(hold_position(target, 0.0))
