@@ -107,7 +107,8 @@ def test_the_same_mission_in_auto_crosses_an_exclusion_zone(flight, local_missio
     start = len(track.track)
     with MavlinkPeer(sim.port, sim.sysid) as gcs:
         assert gcs.set_mode(AUTO).result == 0
-        assert gcs.command(gcs.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == 0
+        gcs.arm_heli()                           # interlock low, arm, interlock high
+        time.sleep(2.5 / SPEEDUP + 0.5)          # the interlock takes effect after the arming delay
         assert gcs.command(gcs.mavlink.MAV_CMD_MISSION_START, 0, 0).result == 0
         deadline = time.monotonic() + 240.0 / SPEEDUP + 60.0
         while time.monotonic() < deadline:
