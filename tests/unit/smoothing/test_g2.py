@@ -12,7 +12,7 @@ from companion.errors import SmoothingError
 from companion.smoothing import bezier, smooth_g2
 from companion.smoothing.g2 import C4, spiral_distance_m
 
-KAPPA_ZERO_1_M = 1e-7      # both sides below this (a radius over 10 000 km): a zero-curvature joint
+KAPPA_ZERO_1_M = 1e-6      # both sides below this (a radius over 1000 km): a numerically flat joint
 
 
 def joint_curvatures(pieces):
