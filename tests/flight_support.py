@@ -86,7 +86,13 @@ class TrackListener:
 
     def positions(self) -> np.ndarray:
         """The track so far as (K, 3) NED positions."""
-        return np.array([p[1:] for p in self.track], dtype=float).reshape(-1, 3)
+        return self.samples()[1]
+
+    def samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """One consistent snapshot of the track (the listener keeps appending): times (K,) in s
+        since the vehicle's boot and NED positions (K, 3)."""
+        track = np.array(list(self.track), dtype=float).reshape(-1, 4)
+        return track[:, 0], track[:, 1:]
 
     def __enter__(self) -> "TrackListener":
         self._thread.start()

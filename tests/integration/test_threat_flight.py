@@ -60,8 +60,7 @@ def flight(tmp_path_factory):
             seen["threats"] += inject(watcher, [POPUP, CROSSING], 240, done=running)
             flight.companion.wait(300)
             seen["events"] = list(watcher.events)
-        track_t = np.array([p[0] for p in track.track])
-        track_pos = track.positions()
+        track_t, track_pos = track.samples()
     yield {"rc": flight.companion.returncode, "summary": last_json_line(flight.log), "seen": seen,
            "record": load_record(flight.record), "log": flight.log.read_text(),
            "track_t_s": track_t, "track_ned_m": track_pos}

@@ -1,0 +1,14 @@
+"""MAVLink 2 message signing shared by ``sim-vehicle`` and the companion (pymavlink underneath).
+
+- ``keys``: the key file (64 hex digits, or a passphrase whose SHA-256 is the key, as MAVProxy's
+  ``signing`` commands take it);
+- ``verify``: the incoming check (signature, then a timestamp that moves forward per stream);
+- ``sign``: a pymavlink ``MAVLink`` encoder that signs what it packs.
+"""
+
+from mavlink_signing.keys import SigningKeyError, key_from_text, load_key
+from mavlink_signing.sign import signing_encoder, signing_timestamp_now
+from mavlink_signing.verify import SignatureCheck, Verdict
+
+__all__ = ["SigningKeyError", "key_from_text", "load_key", "signing_encoder", "signing_timestamp_now",
+           "SignatureCheck", "Verdict"]
