@@ -7,6 +7,8 @@ import json
 import logging
 import sys
 
+from companion.commands.mission_io import add_signing_argument
+
 log = logging.getLogger(__name__)
 
 #: Exit statuses of ``companion run`` (2, bad input, comes from ``companion.cli``).
@@ -43,6 +45,7 @@ def register(subparsers) -> None:
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--connect", help="MAVSDK URL of the vehicle (default udpin://0.0.0.0:14540)")
     p.add_argument("--config", help="settings file (TOML); see --print-config")
+    add_signing_argument(p)
     p.add_argument("--mission", help=".plan or QGC WPL 110 file to upload and fly")
     p.add_argument("--world", help="world file with extra obstacles (local NED about home)")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", default=None,
@@ -73,6 +76,8 @@ def settings_overrides(args: argparse.Namespace) -> dict:
     out: dict = {}
     if args.connect:
         out.setdefault("link", {})["connect"] = args.connect
+    if args.signing_key:
+        out.setdefault("link", {})["signing_key_file"] = args.signing_key
     if args.time_scale is not None:
         out.setdefault("link", {})["time_scale"] = args.time_scale
     if args.seed is not None:
