@@ -26,7 +26,7 @@ from pathlib import Path
 from companion.errors import ConfigError
 
 __all__ = ["Identity", "KeyMaterialError", "NAME_PATTERN", "check_name", "create_ca", "issue_identity",
-           "load_certificate", "common_name", "verify_signed_by", "write_private_key", "write_certificate"]
+           "load_certificate", "load_identity", "common_name", "verify_signed_by", "write_private_key", "write_certificate"]
 
 log = logging.getLogger(__name__)
 
@@ -181,6 +181,21 @@ def write_certificate(identity: Identity, path: str | Path) -> Path:
     path.write_bytes(identity.cert.public_bytes(serialization.Encoding.PEM))
     path.chmod(0o644)
     return path
+
+
+def load_identity(key_path: str | Path, cert_path: str | Path) -> Identity:
+    """Read a PEM private key and its certificate (e.g. the CA, to issue one more identity)."""
+    from cryptography.hazmat.primitives import serialization
+
+    key_path = Path(key_path)
+    try:
+        key = serialization.load_pem_private_key(key_path.read_bytes(), password=None)
+    except OSError as exc:
+        raise KeyMaterialError(f"{key_path}: cannot read the private key: {exc.strerror or exc}") from None
+    except (ValueError, TypeError) as exc:
+        raise KeyMaterialError(f"{key_path}: not an unencrypted PEM private key ({exc})") from None
+    cert = load_certificate(cert_path)
+    return Identity(common_name(cert), key, cert)
 
 
 def load_certificate(path: str | Path):
