@@ -111,6 +111,10 @@ def run(args: argparse.Namespace) -> int:
     if args.print_config:
         print(json.dumps(settings_to_dict(settings), indent=2))
         return 0
+    if settings.zenoh.enabled and settings.zenoh.config:      # a bad file: refused before any flight
+        from companion.threats.access import load_config
+
+        load_config(settings.zenoh.config)
     daemon = CompanionDaemon(settings, mission_path=args.mission, world_path=args.world,
                              record_path=args.record)
 

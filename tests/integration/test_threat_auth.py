@@ -183,3 +183,21 @@ def test_the_decision_event_names_the_source_and_only_authorised_readers_see_it(
         assert h.reactor.table.get("radar1/p1").source == "radar1"
 
     run(main, h)
+
+
+def test_companion_run_refuses_a_bad_zenoh_config_before_connecting(tmp_path, deploy):
+    started = time.monotonic()
+    res = companion("run", "--zenoh-config", str(tmp_path / "nope.json5"), "--connect", "udpin://127.0.0.1:9")
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert f"--zenoh-config {tmp_path / 'nope.json5'}: no such file" in res.stderr
+    (deploy.directory / "companion.pem").unlink()
+    res = companion("run", "--zenoh-config", str(deploy.configs["companion"]), "--connect", "udpin://127.0.0.1:9")
+    assert res.returncode == 2 and "companion.pem" in res.stderr and "no such file" in res.stderr
+    assert time.monotonic() - started < 30.0          # not after waiting for a vehicle
+
+
+def test_companion_threat_with_a_bad_zenoh_config_is_one_line(tmp_path):
+    res = companion("threat", "add", "--zenoh-config", str(tmp_path / "nope.json5"), "--id", "p1",
+                    "--pos", "1,2,-3", "--radius", "2")
+    assert res.returncode == 2 and res.stderr.strip().count("\n") == 0
+    assert "nope.json5: no such file" in res.stderr
