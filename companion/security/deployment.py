@@ -110,7 +110,7 @@ def init_deployment(directory, *, sysid: int = 1, companion: str = "companion", 
     except OSError as exc:
         raise keys.KeyMaterialError(f"{d}: cannot create the directory: {exc.strerror or exc}") from None
     d = d.resolve()
-    # the listen endpoints come first: when no connect endpoint names a host, the cert still works locally
+    # the names sources may reach the companion by: loopback, the --connect hosts, specific --listen hosts
     companion_hosts = list(dict.fromkeys(["localhost", "127.0.0.1", *_hosts_of(connect), *_hosts_of(listen),
                                           *hosts]))
     try:

@@ -26,7 +26,7 @@ from pathlib import Path
 from companion.errors import ConfigError
 
 __all__ = ["SecurityInfo", "access_control", "companion_config", "peer_config", "load_config",
-           "TELEMETRY_LEAVES", "TLS_KEYS"]
+           "write_config", "TELEMETRY_LEAVES", "TLS_KEYS"]
 
 log = logging.getLogger(__name__)
 
