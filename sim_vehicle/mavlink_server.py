@@ -913,6 +913,7 @@ class MavlinkServer:
 
     # ================================================================== signing
     def _on_setup_signing(self, msg: Any, address: Address) -> None:
+        """SETUP_SIGNING: change or switch off the key by the rules of :mod:`sim_vehicle.signing`; log either way."""
         done, what = self.signing.setup(msg)
         if done:
             log.info("SETUP_SIGNING from %s:%d (system %d): %s", *address, msg.get_srcSystem(), what)
