@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import signal
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -112,3 +113,19 @@ def test_without_a_key_setup_needs_accept_signing_setup():
     assert done and accepting.enabled and accepting.check.key == NEW_KEY
     assert sent_by(accepting)[2] & mavlink.MAVLINK_IFLAG_SIGNED
     assert accepting.verdict(parsed(plain.heartbeat_encode(6, 8, 0, 0, 0).pack(plain))) is Verdict.UNSIGNED
+
+
+def test_a_bad_key_file_is_one_line_naming_it_and_exit_status_2(tmp_path, capsys):
+    from sim_vehicle.cli import main
+
+    empty = tmp_path / "empty.key"
+    empty.write_text("\n")
+    sigterm = signal.getsignal(signal.SIGTERM)  # main() installs its own
+    try:
+        for path in (empty, tmp_path / "missing.key"):
+            assert main(["--signing-key", str(path), "--no-default-out", "--port", "0"]) == 2
+            err = capsys.readouterr().err.strip()
+            assert len(err.splitlines()) == 1 and err.startswith("sim-vehicle: error: --signing-key:")
+            assert str(path) in err
+    finally:
+        signal.signal(signal.SIGTERM, sigterm)
