@@ -19,10 +19,10 @@ simulation (:mod:`sim_vehicle.clock`), drains the socket, and sends what is due,
 ``select`` in between. Each datagram is parsed on its own, so random bytes, truncated frames,
 wrong CRCs and unknown message ids are counted (``stats``), logged (rate-limited) and dropped
 without disturbing the flight. With a signing key (:mod:`sim_vehicle.signing`) everything sent
-is signed and a message that is not signed with the key, or replays an old timestamp, is
-counted by reason and dropped before dispatch and routing. An optional ``.tlog`` records every packet in and out in the
-standard format (8-byte big-endian microseconds since the Unix epoch, then the raw packet),
-which MAVProxy and MAVExplorer open.
+is signed, and a message that is not signed with the key, or replays an old timestamp, is
+counted by reason and dropped before dispatch and routing. An optional ``.tlog`` records every
+packet in and out in the standard format (8-byte big-endian microseconds since the Unix epoch,
+then the raw packet), which MAVProxy and MAVExplorer open.
 """
 
 from __future__ import annotations
@@ -85,6 +85,7 @@ class LinkStats:
     truncated: int = 0
     ignored: int = 0
     commands: int = 0
+    # dropped by the signing check (sim_vehicle.signing.Verdict); not in ``dropped`` (SYS_STATUS errors_comm)
     unsigned: int = 0
     bad_signature: int = 0
     replayed: int = 0
@@ -94,11 +95,6 @@ class LinkStats:
     def dropped(self) -> int:
         """Malformed input dropped so far."""
         return self.bad_crc + self.unknown_id + self.bad_data + self.truncated
-
-    @property
-    def rejected(self) -> int:
-        """Well-formed messages dropped by the signing check so far (:mod:`sim_vehicle.signing`)."""
-        return self.unsigned + self.bad_signature + self.replayed + self.stale
 
 
 @dataclasses.dataclass

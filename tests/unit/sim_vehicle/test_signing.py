@@ -129,3 +129,14 @@ def test_a_bad_key_file_is_one_line_naming_it_and_exit_status_2(tmp_path, capsys
             assert str(path) in err
     finally:
         signal.signal(signal.SIGTERM, sigterm)
+
+
+def test_every_drop_reason_has_a_link_counter_next_to_the_malformed_ones():
+    import dataclasses
+
+    from sim_vehicle.mavlink_server import LinkStats
+    from sim_vehicle.signing import DROP_REASONS
+
+    fields = {f.name for f in dataclasses.fields(LinkStats)}
+    assert {reason.value for reason in DROP_REASONS} == {"unsigned", "bad_signature", "replayed", "stale"}
+    assert {reason.value for reason in DROP_REASONS} <= fields and "bad_crc" in fields
