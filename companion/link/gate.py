@@ -25,7 +25,8 @@ import logging
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import LinkError
-from mavlink_signing import SignatureCheck, SigningKeyError, Verdict, load_key, signing_encoder
+from mavlink_signing import (SignatureCheck, SigningKeyError, Verdict, load_key, signing_encoder,
+                             signing_timestamp_now)
 from mavlink_signing.keys import key_fingerprint
 
 log = logging.getLogger(__name__)
@@ -200,4 +201,7 @@ class OutboundSigner:
             return None
         enc = self.encoder
         enc.srcSystem, enc.srcComponent, enc.seq = msg.get_srcSystem(), msg.get_srcComponent(), msg.get_seq()
+        # pymavlink adds one tick (10 us) per frame: keep up with the wall clock, so a receiver
+        # that meets this link later never finds it a minute behind (stale)
+        enc.signing.timestamp = max(enc.signing.timestamp, signing_timestamp_now())
         return bytes(msg.pack(enc))
