@@ -376,6 +376,14 @@ class VehicleLink:
         for task in self._tasks:
             task.cancel()
         self._tasks.clear()
+        # MAVSDK aborts the process if it is destroyed while a plugin or a System it handed out
+        # is alive: release them first, newest first
+        for owned in (self._telemetry_plugin, self._mission, self._direct_sync, self._direct,
+                      getattr(self._system, "_system", None)):
+            if owned is not None:
+                with contextlib.suppress(Exception):
+                    owned.destroy()
+        self._telemetry_plugin = self._mission = self._direct_sync = self._direct = self._system = None
         if self._mavsdk is not None:
             with contextlib.suppress(Exception):
                 self._mavsdk.destroy()
