@@ -159,7 +159,12 @@ AFTER_RESTART = Injection("after1", "popup", leg=3, after_s=3.0, ahead_s=5.0, ra
 
 
 def router(port: int, log_path):
-    return spawn(["companion.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"], log_path)
+    """``companion router`` on ``port``, once it says it listens."""
+    proc = spawn(["companion.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"], log_path)
+    wait_until(lambda: "zenoh router listening" in log_path.read_text(errors="replace") or proc.poll() is not None,
+               60, "the router")
+    assert proc.poll() is None, log_path.read_text()
+    return proc
 
 
 def test_a_router_that_stops_and_returns_loses_neither_the_flight_nor_later_threats(tmp_path):
@@ -168,7 +173,6 @@ def test_a_router_that_stops_and_returns_loses_neither_the_flight_nor_later_thre
     with TrackListener() as track:
         sim = vehicle(tmp_path, mav_port, track)
         rtr = router(router_port, tmp_path / "router1.log")
-        time.sleep(2.0)
         companion = spawn(companion_args(mav_port, f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}",
                                          tmp_path / "flight.jsonl", "--mission", str(MISSION),
                                          "--zenoh-connect", router_ep), tmp_path / "companion.log")
