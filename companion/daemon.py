@@ -29,6 +29,14 @@ streaming; when the link returns, hold and replan the leg from where the vehicle
 taking over (mode changed away from GUIDED: the companion stops commanding and ends the flight),
 and SIGINT/SIGTERM (hold, land or RTL per ``link.on_interrupt``, then exit).
 
+Crash and restart (``resume=True``, ``companion run --resume``): the vehicle's current mission
+item is kept at the goal of the leg flown (DO_SET_MISSION_CURRENT at every leg) and the threats
+held are written to a snapshot as they change (``companion.state``, ``state.dir``); a companion
+started with ``resume`` joins the hovering vehicle, reads MISSION_CURRENT, plans from where it
+is to that item and on (``companion.resume``) and puts the snapshot's live threats back before
+the first leg. zenoh router loss: events ``zenoh_lost`` / ``zenoh_back``; the session reconnects
+by itself (``companion.threats.bus.CONNECT_RETRY``).
+
 Only this module, ``companion.link`` and ``companion.threats`` (bus, reactor) do I/O. The event-loop
 thread that streams setpoints runs at real-time priority when allowed
 (``raise_stream_priority``); planning, threat decisions and M-GART refreshes run in worker
@@ -56,7 +64,8 @@ from companion.flight_plan import LegPlan, plan_leg, plan_mission
 from companion.reference import ActiveReference, VehicleClock
 from companion.link.setpoints import (SetpointStreamer, hold_position,
                                       raise_stream_priority, restore_normal_priority)
-from companion.link.startup import AUX_MOTOR_INTERLOCK, is_airborne, start_vehicle
+from companion.link.startup import (AUX_MOTOR_INTERLOCK, is_airborne, read_rotor_parameters, rotor_plan,
+                                    start_vehicle)
 from companion.link.vehicle import VehicleLink
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
@@ -424,6 +433,8 @@ class CompanionDaemon:
                        mode=tele.mode_name, landed_state=tele.landed_state)
             if tele.mode != GUIDED:
                 await self.link.set_mode("GUIDED")
+            if self.resume:        # the crashed companion engaged the interlock: put it back at the end
+                self.rotor_plan = rotor_plan(st, await read_rotor_parameters(self.link, st))
             return
         self.rotor_plan = await start_vehicle(
             self.link, st, alt_m, self.clock.now_s, time_scale=self.settings.link.time_scale,
