@@ -52,6 +52,15 @@ def midpoint_of(path_ned_m) -> np.ndarray:
     return np.array([np.interp(half, s, path[:, i]) for i in range(3)])
 
 
+def horizontal_speed(track: TrackListener, over_s: float = 1.0) -> float:
+    """The vehicle's mean horizontal speed over its last ``over_s`` simulated seconds (its own track)."""
+    t, pos = track.samples()
+    if len(t) < 2 or t[-1] - t[0] < over_s:
+        return 0.0
+    recent = pos[t >= t[-1] - over_s]
+    return float(np.linalg.norm(recent[-1, :2] - recent[0, :2])) / over_s
+
+
 def window(track_t, track_pos, t0: float, t1: float) -> np.ndarray:
     return track_pos[(track_t >= t0) & (track_t <= t1)]
 
@@ -79,7 +88,8 @@ def test_a_killed_companion_leaves_a_hover_and_resume_finishes_the_mission_with_
                 bus.put_threat(threat)
                 wait_until(lambda: _snapshot_ids(state) == ["keep1"], 30, "the threat in the snapshot")
                 wait_until(lambda: watcher.status["leg"] >= 1, 120, "leg 1 (towards item 4)")
-                time.sleep(1.0)                                       # well into the leg
+                wait_until(lambda: horizontal_speed(track) > 2.0, 60, "the vehicle under way on leg 1")
+                leg_at_kill = watcher.status["leg"]
             kill_track_t = track.samples()[0][-1]
             first.send_signal(signal.SIGKILL)
             first.wait(10)
@@ -109,21 +119,24 @@ def test_a_killed_companion_leaves_a_hover_and_resume_finishes_the_mission_with_
                     stop(proc)
     summary = last_json_line(tmp_path / "second.log")
     record = load_record(tmp_path / "second.jsonl")
+    seq_of_leg = {p["leg"]: p["seq"] for p in load_record(tmp_path / "first.jsonl").plans}
+    current = seq_of_leg[leg_at_kill]          # 4 unless the machine is very slow
+    remaining = [q for q in (2, 4, 5, 6, 7) if q >= current]
     events = {e["name"]: e for e in record.events}
     # it took over at the leg flown when the first one died, and flew the rest
     assert summary["outcome"] == "completed" and summary["landed"] is True
-    assert summary["resumed_at_seq"] == 4 and summary["joined"] is True
+    assert summary["resumed_at_seq"] == current and summary["joined"] is True
     reached = [e["seq"] for e in record.events if e["name"] == "reached"]
-    assert reached == [4, 5, 6, 7]
+    assert reached == remaining
     # the threat put before the crash: restored with its remaining TTL, and kept out of
     assert summary["threats_restored"] == 1 and events["threats_restored"]["ids"] == ["keep1"]
-    remaining = events["threats_restored"]["remaining_ttl_s"]["keep1"]
-    assert 0.0 < remaining < THREAT_TTL_S - GUIDED_TIMEOUT_S
+    ttl_left = events["threats_restored"]["remaining_ttl_s"]["keep1"]
+    assert 0.0 < ttl_left < THREAT_TTL_S - GUIDED_TIMEOUT_S
     assert any(th.get("id") == "keep1" and th.get("restored") for th in record.threats)
     # judged by the vehicle: every remaining goal visited after the resume, no sample in the threat
     after = pos[t >= resume_track_t]
     goals = {p["seq"]: np.asarray(p["path_ned_m"])[-1] for p in load_record(tmp_path / "first.jsonl").plans}
-    for seq in (4, 5, 6):
+    for seq in [q for q in remaining if q != 7]:
         closest = np.min(np.linalg.norm(after - goals[seq], axis=1))
         assert closest < 3.0, f"item {seq}: the vehicle came no closer than {closest:.1f} m"
     assert np.min(np.linalg.norm(pos - centre, axis=1)) > THREAT_RADIUS_M
