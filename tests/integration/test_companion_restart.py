@@ -133,6 +133,7 @@ def test_a_killed_companion_leaves_a_hover_and_resume_finishes_the_mission_with_
     ttl_left = events["threats_restored"]["remaining_ttl_s"]["keep1"]
     assert 0.0 < ttl_left < THREAT_TTL_S - GUIDED_TIMEOUT_S
     assert any(th.get("id") == "keep1" and th.get("restored") for th in record.threats)
+    assert any(d.get("threat_id") == "keep1" for d in record.decisions), "decided on from the restored table"
     # judged by the vehicle: every remaining goal visited after the resume, no sample in the threat
     after = pos[t >= resume_track_t]
     goals = {p["seq"]: np.asarray(p["path_ned_m"])[-1] for p in load_record(tmp_path / "first.jsonl").plans}
