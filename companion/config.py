@@ -19,6 +19,7 @@ Tree (``companion run --config FILE``; ``companion run --print-config`` shows it
     feasibility closed-loop check on the helicopter model
     threats     threat-manager policy (companion.threats.settings.ThreatSettings)
     adsb        ADS-B traffic as threats (companion.threats.adsb.AdsbSettings)
+    state       where the threat snapshot is kept for a resume after a crash (companion.state)
 """
 
 from __future__ import annotations
@@ -96,6 +97,27 @@ class LinkSettings:
 
 
 @dataclass(frozen=True)
+class StateSettings:
+    """The companion's state on disk (``companion.state``).
+
+    Parameters
+    ----------
+    dir : str
+        Directory of the threat snapshot ``threats-uav<sysid>.json``, written whenever the
+        threats held change and read by ``companion run --resume``. Empty (default): no snapshot
+        is written, and a resume starts without threats. ``--state-dir`` sets it.
+    mission_current_timeout_s : float
+        How long ``--resume`` waits for the vehicle's MISSION_CURRENT (wall clock, s).
+    """
+
+    dir: str = ""
+    mission_current_timeout_s: float = 10.0
+
+    def __post_init__(self) -> None:
+        require_numbers(ConfigError, "state", self, positive=("mission_current_timeout_s",))
+
+
+@dataclass(frozen=True)
 class Settings:
     """The whole companion settings tree (see the module docstring)."""
 
@@ -110,6 +132,7 @@ class Settings:
     feasibility: FeasibilitySettings = FeasibilitySettings()
     threats: ThreatSettings = ThreatSettings()
     adsb: AdsbSettings = AdsbSettings()
+    state: StateSettings = StateSettings()
 
     def __post_init__(self) -> None:
         if self.seed < 0:

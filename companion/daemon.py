@@ -29,6 +29,14 @@ streaming; when the link returns, hold and replan the leg from where the vehicle
 taking over (mode changed away from GUIDED: the companion stops commanding and ends the flight),
 and SIGINT/SIGTERM (hold, land or RTL per ``link.on_interrupt``, then exit).
 
+Crash and restart (``resume=True``, ``companion run --resume``): the vehicle's current mission
+item is kept at the goal of the leg flown (DO_SET_MISSION_CURRENT at every leg) and the threats
+held are written to a snapshot as they change (``companion.state``, ``state.dir``); a companion
+started with ``resume`` joins the hovering vehicle, reads MISSION_CURRENT, plans from where it
+is to that item and on (``companion.resume``) and puts the snapshot's live threats back before
+the first leg. zenoh router loss: events ``zenoh_lost`` / ``zenoh_back``; the session reconnects
+by itself (``companion.threats.bus.CONNECT_RETRY``).
+
 Only this module, ``companion.link`` and ``companion.threats`` (bus, reactor) do I/O. The event-loop
 thread that streams setpoints runs at real-time priority when allowed
 (``raise_stream_priority``); planning, threat decisions and M-GART refreshes run in worker
@@ -57,12 +65,15 @@ from companion.reference import ActiveReference, VehicleClock
 from companion.link.gate import SigningKey
 from companion.link.setpoints import (SetpointStreamer, hold_position,
                                       raise_stream_priority, restore_normal_priority)
-from companion.link.startup import AUX_MOTOR_INTERLOCK, is_airborne, start_vehicle
+from companion.link.startup import (AUX_MOTOR_INTERLOCK, is_airborne, read_rotor_parameters, rotor_plan,
+                                    start_vehicle)
 from companion.link.vehicle import VehicleLink
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
 from companion.phases import ActionKind, LegObservation, LegState, leg_step
 from companion.record import FlightRecorder
+from companion.resume import resume_mission, resume_refusal
+from companion.state import SnapshotWriter, load_live_threats, snapshot_path
 from companion.threats.adsb import threat_from_adsb
 from companion.threats.reactor import ThreatReactor
 from companion.world import world_to_dict
@@ -70,6 +81,12 @@ from companion.world import world_to_dict
 log = logging.getLogger(__name__)
 
 GUIDED = 4
+#: MAV_CMD_DO_SET_MISSION_CURRENT (ArduCopter accepts it in any mode) and MAV_CMD_REQUEST_MESSAGE.
+MAV_CMD_DO_SET_MISSION_CURRENT = 224
+MAV_CMD_REQUEST_MESSAGE = 512
+MSG_ID_MISSION_CURRENT = 42
+#: How often (wall clock, s) the zenoh session's peers and routers are counted (router loss).
+ZENOH_WATCH_PERIOD_S = 1.0
 #: GIL switch interval (s): a planning thread hands the GIL to the setpoint stream this often.
 GIL_SWITCH_INTERVAL_S = 0.0005
 
@@ -91,6 +108,8 @@ class FlightSummary:
     latency_ms: dict = field(default_factory=dict)
     threat_updates: int = 0
     joined: bool = False
+    resumed_at_seq: int | None = None
+    threats_restored: int = 0
     outcome: str = "not flown"
 
     def as_dict(self) -> dict:
@@ -114,11 +133,20 @@ class CompanionDaemon:
         A world file whose obstacles are added to the mission's exclusion zones.
     record_path : path, optional
         Where to write the flight record (JSON Lines).
+    resume : bool
+        Take over a vehicle that is already flying its mission (a previous companion crashed):
+        the vehicle's mission from its current item (MISSION_CURRENT), the threats of the
+        snapshot in ``state.dir`` (``companion.state``). Refused (``MissionError``) without a
+        mission on the vehicle or with the vehicle on the ground.
     """
 
     def __init__(self, settings: Settings, *, mission_path=None, world_path=None,
-                 record_path=None):
+                 record_path=None, resume: bool = False):
+        if resume and mission_path is not None:
+            raise MissionError("--resume flies the mission stored on the vehicle: leave out --mission")
         self.settings = settings
+        self.resume = resume
+        self.snapshots: SnapshotWriter | None = None
         self.mission_path = mission_path
         self.world_path = world_path
         self.record_path = record_path
@@ -274,6 +302,23 @@ class CompanionDaemon:
             if self.threats is not None:
                 self.threats.publish_status(self.status())
 
+    async def _watch_zenoh(self) -> None:
+        """Event ``zenoh_lost`` when the session loses its last peer or router (e.g. the router
+        stopped), ``zenoh_back`` when one is connected again. zenoh reconnects by itself
+        (``connect/retry``) and redeclares the subscriptions; the flight goes on meanwhile on
+        the threats already held."""
+        had = None
+        while True:
+            await asyncio.sleep(ZENOH_WATCH_PERIOD_S)
+            try:
+                now = self.threats.bus.connected_peers() > 0
+            except Exception as exc:  # noqa: BLE001 - the session is closing
+                log.debug("zenoh session info: %s", exc)
+                continue
+            if had is not None and now != had:
+                self.event("zenoh_back" if now else "zenoh_lost")
+            had = now
+
     def _on_link_change(self, connected: bool) -> None:
         if not connected:
             self._link_lost_at = self.clock.now_s()
@@ -294,6 +339,8 @@ class CompanionDaemon:
                 log.warning("ADS-B traffic is ignored: threats need zenoh (zenoh.enabled)")
             else:
                 coros.append(self._watch_adsb())
+        if self.threats is not None:
+            coros.append(self._watch_zenoh())
         for coro in coros:
             self._tasks.append(loop.create_task(coro, name=coro.__name__))
         self.link.on_link_change(self._on_link_change)
@@ -305,15 +352,21 @@ class CompanionDaemon:
         if self.mission_path is not None:
             return load_mission_file(self.mission_path)
         plan = await self.link.download_plan()
+        if self.resume:
+            refusal = resume_refusal(mission_items=len(plan.items), airborne=True)
+            if refusal is not None:
+                raise MissionError(refusal)
         if not plan.items:
             raise MissionError("the vehicle has no mission: upload one (companion upload FILE, "
                                "QGroundControl, MAVProxy) or pass --mission FILE")
         self.event("mission_downloaded", items=len(plan.items))
         return plan
 
-    async def plan_flight(self, plan, home_lla, tele) -> float:
+    async def plan_flight(self, plan, home_lla, tele, current_seq: int | None = None) -> float:
         """Convert and plan every leg (in a worker thread); errors name the mission item.
 
+        With ``current_seq`` (a resume) only the goals from that mission item on are planned
+        (``companion.resume.resume_mission``), the first from where the vehicle is.
         Returns the takeoff altitude (m above home): the mission's takeoff item, or where the
         vehicle already flies.
         """
@@ -326,13 +379,16 @@ class CompanionDaemon:
                     mission=str(self.mission_path) if self.mission_path else "from the vehicle",
                     waypoints_ned_m=[w.pos_ned_m for w in self.local_mission.waypoints])
         start = tele.pos_ned_m
-        takeoff = self.local_mission.waypoints[0]          # always the (possibly implied) takeoff
         flying = is_airborne(tele, s.startup.join_min_height_m)
-        alt_m = -float(start[2]) if flying else -float(takeoff.pos_ned_m[2])
+        if flying:
+            alt_m = -float(start[2])
+        else:
+            alt_m = -float(self.local_mission.waypoints[0].pos_ned_m[2])   # the (implied) takeoff
         first = np.array([start[0], start[1], -alt_m])
+        to_fly = self.local_mission if current_seq is None else resume_mission(self.local_mission, current_seq)
         t0 = time.perf_counter()
         self.legs = await self.in_worker(
-            plan_mission, self.local_mission, first, gart_settings=s.gart,
+            plan_mission, to_fly, first, gart_settings=s.gart,
             smoothing=s.smoothing, settings=s.flight, rng=self.rng)
         self.summary.legs_planned = len(self.legs)
         self.record("world", **world_to_dict(self.local_mission.world))
@@ -379,6 +435,8 @@ class CompanionDaemon:
                        mode=tele.mode_name, landed_state=tele.landed_state)
             if tele.mode != GUIDED:
                 await self.link.set_mode("GUIDED")
+            if self.resume:        # the crashed companion engaged the interlock: put it back at the end
+                self.rotor_plan = rotor_plan(st, await read_rotor_parameters(self.link, st))
             return
         self.rotor_plan = await start_vehicle(
             self.link, st, alt_m, self.clock.now_s, time_scale=self.settings.link.time_scale,
@@ -431,6 +489,8 @@ class CompanionDaemon:
         """Fly one leg: observe, step the phase machine (``companion.phases``), act; until the
         reference has ended and the vehicle is within the acceptance radius."""
         self.leg_index = leg.index
+        self._tasks.append(asyncio.get_running_loop().create_task(
+            self.set_mission_current(leg.waypoint.seq), name="set-mission-current"))
         ref = self.engage(leg.trajectory, f"leg{leg.index}", turn=True)
         if self.threats is not None:
             self.threats.on_leg_started(leg, ref)
@@ -453,6 +513,75 @@ class CompanionDaemon:
                    error_m=round(float(np.linalg.norm(self.link.telemetry.pos_ned_m - leg.goal_ned_m)), 3))
         if leg.waypoint.hold_s > 0:
             await asyncio.sleep(leg.waypoint.hold_s / self.settings.link.time_scale)
+
+    async def set_mission_current(self, seq: int) -> None:
+        """Make ``seq`` (the goal of the leg now flown) the vehicle's current mission item
+        (MAV_CMD_DO_SET_MISSION_CURRENT, accepted in GUIDED): ground stations show it, and a
+        companion restarted with ``--resume`` reads it back. Never fails the flight."""
+        try:
+            result = await self.link.command_result(
+                MAV_CMD_DO_SET_MISSION_CURRENT, (float(seq),), what=f"DO_SET_MISSION_CURRENT {seq}",
+                timeout_s=3.0)
+        except CompanionError as exc:          # the link is down: set again at the next leg
+            log.info("current mission item %d not set: %s", seq, exc)
+            return
+        if result != 0:
+            log.warning("current mission item %d not set: MAV_RESULT %s", seq, result)
+
+    async def read_mission_current(self, timeout_s: float) -> int:
+        """The vehicle's current mission item (MISSION_CURRENT ``seq``), asked for with
+        MAV_CMD_REQUEST_MESSAGE every second until it arrives (ArduPilot also streams it with
+        the EXTENDED_STATUS group).
+
+        Raises
+        ------
+        LinkError
+            No MISSION_CURRENT within ``timeout_s``.
+        """
+        async def first_seq() -> int:
+            async for fields in self.link.messages("MISSION_CURRENT"):
+                if fields.get("_sysid") == self.link.target_system:
+                    return int(fields["seq"])
+            raise LinkError("the MISSION_CURRENT subscription ended")
+
+        task = asyncio.get_running_loop().create_task(first_seq(), name="mission-current")
+        deadline = time.monotonic() + timeout_s
+        try:
+            while time.monotonic() < deadline:
+                await self.link.command_result(MAV_CMD_REQUEST_MESSAGE, (float(MSG_ID_MISSION_CURRENT),),
+                                               what="REQUEST_MESSAGE MISSION_CURRENT", timeout_s=1.0)
+                done, _ = await asyncio.wait({task}, timeout=min(1.0, max(0.0, deadline - time.monotonic())))
+                if done:
+                    return task.result()
+        finally:
+            task.cancel()
+        raise LinkError(f"timed out after {timeout_s:g} s waiting for the vehicle's MISSION_CURRENT")
+
+    # ------------------------------------------------------------------ threat snapshot
+    def _open_snapshots(self, home) -> None:
+        """Write the threat snapshot from now on when ``state.dir`` is set (``companion.state``)."""
+        if not self.settings.state.dir or self.threats is None:
+            return
+        path = snapshot_path(self.settings.state.dir, self.settings.zenoh.sysid)
+        self.snapshots = SnapshotWriter(path, sysid=self.settings.zenoh.sysid, home_lla=home)
+        self.threats.on_table_change = self.snapshots.save
+
+    def restore_threats(self) -> None:
+        """A resume: put the live threats of the snapshot back in the table (none when there
+        is no usable snapshot: that is logged, never fatal), then write the snapshot afresh."""
+        if self.threats is None:
+            return
+        if not self.settings.state.dir:
+            log.warning("resuming without a state directory (--state-dir): no threats are restored")
+            return
+        path = snapshot_path(self.settings.state.dir, self.settings.zenoh.sysid)
+        threats = load_live_threats(path, self.clock.now_s(), sysid=self.settings.zenoh.sysid,
+                                    home_lla=self.home_lla)
+        ids = self.threats.restore(threats)
+        self.summary.threats_restored = len(ids)
+        self.event("threats_restored", ids=ids, snapshot=str(path),
+                   remaining_ttl_s={t.id: round(t.expires_t_s - self.clock.now_s(), 2)
+                                    for t in threats if t.ttl_s is not None})
 
     async def finish(self, end_action: str) -> None:
         """Land (LAND or RTL missions) and wait for the disarm, or hover in LOITER."""
@@ -513,6 +642,18 @@ class CompanionDaemon:
         finally:
             await self.shutdown()
 
+    async def resume_point(self) -> int:
+        """A resume: check that the vehicle flies and read its current mission item."""
+        refusal = resume_refusal(mission_items=1, airborne=is_airborne(
+            self.link.telemetry, self.settings.startup.join_min_height_m))
+        if refusal is not None:
+            raise MissionError(refusal)
+        seq = await self.read_mission_current(self.settings.state.mission_current_timeout_s)
+        self.summary.resumed_at_seq = seq
+        self.event("resume", current_seq=seq, pos_ned_m=self.link.telemetry.pos_ned_m,
+                   mode=self.link.telemetry.mode_name)
+        return seq
+
     async def _fly(self) -> FlightSummary:
         s = self.settings
         await self.link.wait_ready(s.link.connect_timeout_s)
@@ -523,8 +664,9 @@ class CompanionDaemon:
         tele = self.link.telemetry                   # positions about home from here on
         self.event("frames", home_lla=home, ekf_origin_lla=frames.origin_lla,
                    home_in_origin_ned_m=np.round(frames.home_in_origin_ned_m, 3))
+        current_seq = await self.resume_point() if self.resume else None
         plan = await self.take_mission()
-        alt = await self.plan_flight(plan, home, tele)
+        alt = await self.plan_flight(plan, home, tele, current_seq)
         previous = None
         if self.mission_path is not None:          # planned: every item is reachable
             previous = await self.link.download_plan()
@@ -537,8 +679,13 @@ class CompanionDaemon:
                 position_ned_m=lambda: self.link.telemetry.pos_ned_m, record=self.record,
                 statustext=self.send_statustext)
             await self.threats.start(home)
+            self._open_snapshots(home)
         self._start_background()
         await self.wait_vehicle_clock(s.link.connect_timeout_s)
+        if self.resume:
+            self.restore_threats()
+        elif self.snapshots is not None:
+            self.threats.table_changed()       # a new flight: the previous flight's threats go
         self.summary.outcome = "flying"
         try:
             await self.start_or_join(alt)
@@ -569,6 +716,8 @@ class CompanionDaemon:
             self.summary.threat_updates = counts["received"]
             self.record("event", name="threat_bus", **counts)
             await self.threats.stop()
+        if self.snapshots is not None:
+            self.snapshots.close()
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)

@@ -23,6 +23,7 @@ EPILOG = """examples:
   companion run --connect udpin://0.0.0.0:14540 --mission mission_files/exclusion_zones.plan \\
       --time-scale 8                             # ArduPilot's arducopter-heli SITL at --speedup 8
   companion run --connect serial:///dev/ttyAMA0:921600 --interlock pilot --adsb   # a real helicopter
+  companion run --state-dir /var/lib/companion --resume   # take over after a crash, threats kept
 
 start-up: a helicopter (H_RSC_* parameters) is armed with its motor interlock low, the interlock
 is engaged after the arming delay (--interlock command, default; or by the pilot's RC switch,
@@ -32,7 +33,13 @@ already armed and flying is joined where it is (no arming, no takeoff).
 exit status: 0 mission completed; 2 bad input or no vehicle (nothing flown); 3 the vehicle
 refused (arming, mode, interlock or takeoff: it is left disarmed on the ground); 4 flight aborted
 (the vehicle holds in the air, or was left disarmed on the ground); 130 interrupted (the vehicle
-is held, landed or returned per link.on_interrupt)."""
+is held, landed or returned per link.on_interrupt).
+
+crash and restart: a companion killed in flight leaves the vehicle hovering (GUIDED setpoints
+stop: it brakes after GUID_TIMEOUT). `companion run --resume` takes it over: the vehicle's
+mission from its current item (the companion sets it at every leg), planned from where it
+hovers, and the threats of the snapshot in --state-dir (written whenever they change) with
+their remaining TTL. --resume refuses (status 2) a vehicle without a mission or not flying."""
 
 
 def register(subparsers) -> None:
@@ -69,6 +76,12 @@ def register(subparsers) -> None:
                    "default) or the safety pilot's RC switch")
     p.add_argument("--adsb", action="store_true",
                    help="treat ADS-B traffic (ADSB_VEHICLE) as moving threats")
+    p.add_argument("--resume", action="store_true",
+                   help="take over a vehicle already flying its mission after a companion crash: "
+                   "fly on from its current mission item, with the threats of the --state-dir snapshot")
+    p.add_argument("--state-dir", metavar="DIR",
+                   help="keep the threat snapshot here (state.dir): written as threats change, "
+                   "read by --resume")
     p.add_argument("--print-config", action="store_true",
                    help="print the effective settings as JSON and exit")
     p.set_defaults(func=run)
@@ -99,6 +112,8 @@ def settings_overrides(args: argparse.Namespace) -> dict:
         out.setdefault("zenoh", {})["connect"] = args.zenoh_connect
     if getattr(args, "zenoh_config", None):
         out.setdefault("zenoh", {})["config"] = args.zenoh_config
+    if getattr(args, "state_dir", None):
+        out.setdefault("state", {})["dir"] = args.state_dir
     if args.no_zenoh:
         out.setdefault("zenoh", {})["enabled"] = False
     return out
@@ -121,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
 
         load_config(settings.zenoh.config)
     daemon = CompanionDaemon(settings, mission_path=args.mission, world_path=args.world,
-                             record_path=args.record)
+                             record_path=args.record, resume=args.resume)
 
     async def main() -> int:
         task = asyncio.current_task()

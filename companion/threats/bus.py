@@ -127,6 +127,10 @@ def to_json_bytes(message: dict) -> bytes:
                       allow_nan=False).encode("utf-8")
 
 
+#: zenoh ``connect/retry``: how a lost connection is retried (ms; README "Faults").
+CONNECT_RETRY = {"period_init_ms": 500, "period_max_ms": 2000, "period_increase_factor": 2}
+
+
 def session_config(*, mode: str = "peer", listen=(), connect=()):
     """A ``zenoh.Config``: ``mode``, multicast scouting off, explicit endpoints.
 
@@ -152,6 +156,9 @@ def session_config(*, mode: str = "peer", listen=(), connect=()):
     cfg.insert_json5("scouting/multicast/enabled", "false")
     cfg.insert_json5("listen/endpoints", json.dumps(listen))
     cfg.insert_json5("connect/endpoints", json.dumps(connect))
+    # a lost router or peer is retried every 0.5 s at first, then every 2 s at most; the
+    # subscriptions and queryables are redeclared on reconnection (zenoh 1.x)
+    cfg.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
     return cfg
 
 

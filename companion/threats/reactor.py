@@ -134,13 +134,16 @@ class ThreatReactor:
         ``settings``).
     monitor_period_s : float
         See :data:`MONITOR_PERIOD_S`.
+    on_table_change : callable (threats, now_t_s), optional
+        Called on the loop after every PUT or DELETE (and a restore) with the threats held and
+        the mission time: the daemon's threat snapshot (``companion.state``).
     """
 
     def __init__(self, settings, *, clock_now_s: Callable[[], float], in_worker, rng: np.random.Generator,
                  engage: Callable, send_now: Callable[[], None], reference: Callable,
                  position_ned_m: Callable, record: Callable, statustext: Callable | None = None,
                  bus: ThreatBus | None = None, manager_factory: Callable | None = None,
-                 monitor_period_s: float = MONITOR_PERIOD_S):
+                 monitor_period_s: float = MONITOR_PERIOD_S, on_table_change: Callable | None = None):
         self.settings = settings
         self.clock_now_s = clock_now_s
         self.in_worker = in_worker
@@ -154,6 +157,7 @@ class ThreatReactor:
         self.bus = bus if bus is not None else ThreatBus.from_settings(settings.zenoh, clock=clock_now_s)
         self.manager_factory = manager_factory or self._default_manager
         self.monitor_period_s = float(monitor_period_s)
+        self.on_table_change = on_table_change
         self.table = ThreatTable()
         self.manager = None
         self.leg = None
@@ -225,7 +229,32 @@ class ThreatReactor:
             th = self.table.get(update.uid)
             self.record("threat", id=th.uid, source=th.source, kind=th.kind, position_ned_m=th.pos_ned_m,
                         velocity_ned_m_s=th.velocity_ned_m_s, radius_m=th.radius_m, t_s=update.received_t_s)
+        self.table_changed()
         self.schedule(update.received_mono_s, "threat")
+
+    def table_changed(self) -> None:
+        """Tell ``on_table_change`` (the snapshot) the threats now held."""
+        if self.on_table_change is None:
+            return
+        now = self.clock_now_s()
+        try:
+            self.on_table_change(self.table.snapshot(now), now)
+        except Exception:  # noqa: BLE001 - the snapshot is a courtesy; the flight goes on
+            log.exception("threat table change handler failed")
+
+    def restore(self, threats) -> list[str]:
+        """Put threats known before a restart (``companion.state``) back in the table, times
+        unchanged (the remaining TTL is kept); recorded with ``restored=True``. Returns their ids.
+        Decided on at the next leg start (``on_leg_started``), like any threat held then."""
+        ids = []
+        for th in threats:
+            self.table.put(th)
+            ids.append(th.id)
+            self.record("threat", id=th.id, kind=th.kind, position_ned_m=th.pos_ned_m,
+                        velocity_ned_m_s=th.velocity_ned_m_s, radius_m=th.radius_m,
+                        t_s=th.received_t_s, expires_t_s=th.expires_t_s, restored=True)
+        self.table_changed()
+        return ids
 
     def on_local_threat(self, threat, received_mono_s: float | None = None) -> None:
         """A threat this process learnt itself (e.g. ADS-B; on the loop): stored and decided
