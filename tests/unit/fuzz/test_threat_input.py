@@ -172,7 +172,7 @@ def named(field: str, broken: str) -> bool:
 
 
 # ================================================================ the properties
-@settings(max_examples=250, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(payload=st.binary(max_size=600), key_id=st.one_of(IDS, st.text(max_size=10)))
 def test_any_bytes_on_any_key(bus, payload, key_id):
     update = receive(bus, KEY + key_id, payload)
@@ -181,7 +181,7 @@ def test_any_bytes_on_any_key(bus, payload, key_id):
         assert update.action == "rejected" and update.error.field == "key" and update.threat_id is None
 
 
-@settings(max_examples=250, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(value=JSON, key_id=IDS)
 def test_any_json_value(bus, value, key_id):
     update = receive(bus, KEY + key_id, json.dumps(value, allow_nan=True).encode())
@@ -190,7 +190,7 @@ def test_any_json_value(bus, value, key_id):
         assert update.action == "rejected" and update.error.field == "payload"
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=250, deadline=None)
 @given(case=near_valid())
 def test_one_broken_field_is_named(bus, case):
     payload, key_id, broken = case

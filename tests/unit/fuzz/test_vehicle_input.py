@@ -293,7 +293,7 @@ def check_vehicle(server) -> None:
     assert vehicle.pos_ned_m[2] < 0.5, "below the ground"
 
 
-@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(datagrams=st.lists(DATAGRAMS, min_size=1, max_size=12))
 def test_junk_is_counted_and_changes_nothing_stored(flying, datagrams):
     server = flying
