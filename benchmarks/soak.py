@@ -1,8 +1,8 @@
 """Soak (issue 11): 100,000 bad MAVLink frames and 10,000 threat payloads during one real flight.
 
 Separate ``sim-vehicle`` and ``companion run`` processes fly ``mission_files/exclusion_zones.plan``
-at 4x (``companion.demo.flight_processes``, as the threat storm does). Once the first leg is
-flown, this process
+(``companion.demo.flight_processes``, as the threat storm does; in real time by default, so that
+the injection fits in the flight). Once the first leg is flown, this process
 
 - sends ``--frames`` MAVLink datagrams from its own UDP socket, paced at ``--rate`` per second,
   three quarters to the vehicle's port and one quarter to the companion's MAVSDK port: random
@@ -12,7 +12,8 @@ flown, this process
   (takeoff, arm, mode, reposition, mission start, speed, yaw, home) or an unknown command,
   PARAM_SET with NaN or out-of-range values, and abandoned mission uploads (MISSION_COUNT, then
   an item out of order, then nothing);
-- meanwhile PUTs ``--payloads`` threat payloads over zenoh (a second thread): mostly junk (random
+- meanwhile PUTs ``--payloads`` threat payloads over zenoh (a second thread, spread over the same
+  time): mostly junk (random
   bytes, random JSON, valid threats with one field broken, an id that is not the key's), one in a
   hundred a valid threat 2 km away (accepted, never in the way).
 
@@ -70,7 +71,8 @@ from support import MavlinkPeer  # noqa: E402
 
 log = logging.getLogger("soak")
 
-SPEEDUP = 4.0
+SPEEDUP = 1.0
+"""Real time by default: 100,000 frames at 1000 per s need a flight of 100 s after the first leg."""
 FOREIGN_SYSID = 77
 VEHICLE_SYSID = 1
 VEHICLE_SHARE = 0.75
@@ -395,6 +397,8 @@ def run(frames_n: int, payloads_n: int, rate_hz: float, payload_rate_hz: float, 
         summary = last_json_line(flight.log) or {}
         record = load_record(flight.record)
         bus_counts = next((e for e in record.events if e.get("name") == "threat_bus"), {})
+        decisions = collections.Counter(d.get("kind") for d in record.decisions)
+        jitter = next((e for e in record.events if e.get("name") == "setpoint_jitter"), {})
         counters = vehicle_counters(out / "sim_vehicle.log")
         track_t, track_pos = track.samples()
         cost = vehicle_cost(frames, out)
@@ -414,8 +418,9 @@ def run(frames_n: int, payloads_n: int, rate_hz: float, payload_rate_hz: float, 
         "kernel_drops": lost,
         "vehicle_cost": cost, "speedup": speedup,
         "vehicle": counters,
-        "mission_unchanged": before == after and before.get("mission") is not None,
-        "lists_before": before if before != after else None, "lists_after": after if before != after else None,
+        "mission_unchanged": repr(before) == repr(after) and before.get("mission") is not None,  # NaN == NaN
+        "lists_before": before if repr(before) != repr(after) else None,
+        "lists_after": after if repr(before) != repr(after) else None,
         "mission_items": None if before.get("mission") is None else len(before["mission"]),
         "fence_items": None if before.get("fence") is None else len(before["fence"]),
         "payloads": {"sent": payload_result.get("sent"), "valid_sent": valid_sent,
@@ -426,6 +431,8 @@ def run(frames_n: int, payloads_n: int, rate_hz: float, payload_rate_hz: float, 
                      payload_result.get("sent", 0) - bus_counts["received"]},
         "outcome": summary.get("outcome"), "legs": f"{summary.get('legs_reached')}/{summary.get('legs_planned')}",
         "rms_tracking_error_m": summary.get("rms_tracking_error_m"),
+        "max_tracking_error_m": summary.get("max_tracking_error_m"),
+        "decisions": dict(decisions), "setpoint_jitter_p99_ms": jitter.get("p99_ms"),
         "vehicle_disarmed_at_end": track.armed is False,
         "vehicle_final_height_m": None if not np.all(np.isfinite(final)) else round(float(-final[2]), 2),
     }
@@ -476,12 +483,17 @@ def table(r: dict) -> str:
         f"| {p['sent']} | {p['valid_sent']} | {p['received']} | {p['put']} | {p['rejected']} | {p['handler_errors']} "
         f"| {p['lost']} |", "",
         "| flight outcome | legs | still flying when the injection ended | vehicle disarmed at the end | mission / "
-        "fence items unchanged | RMS tracking error (m) |",
-        "|---|---|---|---|---|---|",
+        "fence items unchanged | RMS / max tracking error (m) | setpoint jitter p99 (ms) |",
+        "|---|---|---|---|---|---|---|",
         f"| {r['outcome']} | {r['legs']} | {f['still_flying_at_end']} | {r['vehicle_disarmed_at_end']} | "
         f"{r['mission_unchanged']} ({r['mission_items']} / {r['fence_items']}) | "
-        f"{r['rms_tracking_error_m'] if r['rms_tracking_error_m'] is None else round(r['rms_tracking_error_m'], 3)} |",
+        f"{_round(r.get('rms_tracking_error_m'))} / {_round(r.get('max_tracking_error_m'))} | "
+        f"{_round(r.get('setpoint_jitter_p99_ms'), 2)} |",
     ])
+
+
+def _round(value, digits: int = 3):
+    return "-" if value is None else round(value, digits)
 
 
 def main() -> int:
@@ -489,13 +501,15 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=100_000, help="MAVLink datagrams to send")
     parser.add_argument("--payloads", type=int, default=10_000, help="threat payloads to PUT")
     parser.add_argument("--rate", type=float, default=1000.0, help="datagrams per second")
-    parser.add_argument("--payload-rate", type=float, default=500.0, help="threat payloads per second")
+    parser.add_argument("--payload-rate", type=float, default=None,
+                        help="threat payloads per second (default: spread over the frames' injection)")
     parser.add_argument("--speedup", type=float, default=SPEEDUP, help="SITL speed-up of the flight")
     parser.add_argument("--quick", action="store_true", help="10,000 frames and 1,000 payloads")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     frames_n, payloads_n = (10_000, 1_000) if args.quick else (args.frames, args.payloads)
-    result = run(frames_n, payloads_n, args.rate, args.payload_rate, args.speedup)
+    payload_rate = args.payload_rate or payloads_n * args.rate / max(frames_n, 1)
+    result = run(frames_n, payloads_n, args.rate, payload_rate, args.speedup)
     text = table(result)
     log.info("result:\n%s", text)
     bench = REPO / "out" / "bench"
