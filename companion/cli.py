@@ -17,7 +17,7 @@ import sys
 
 from companion.errors import CompanionError
 
-COMMAND_MODULES = ("run", "mission_io", "plan", "threat", "report", "demo")
+COMMAND_MODULES = ("run", "mission_io", "plan", "threat", "keys", "report", "demo")
 
 log = logging.getLogger(__name__)
 

@@ -70,6 +70,9 @@ class LinkSettings:
         local frame to be home's (wall clock).
     streams : StreamSettings
         The telemetry asked for (``companion.link.streams``).
+    signing_key_file : str
+        MAVLink 2 signing key file (64 hex digits or a passphrase; ``--signing-key``): sign
+        everything sent, accept only frames signed with it. Empty: no signing.
     """
 
     connect: str = "udpin://0.0.0.0:14540"
@@ -82,6 +85,7 @@ class LinkSettings:
     status_rate_hz: float = 2.0
     origin_timeout_s: float = 5.0
     streams: StreamSettings = StreamSettings()
+    signing_key_file: str = ""
 
     def __post_init__(self) -> None:
         require_numbers(ConfigError, "link", self, positive=(

@@ -54,6 +54,7 @@ from companion.errors import CompanionError, FlightAborted, LinkError, MissionEr
 from companion.geo import LocalFrame
 from companion.flight_plan import LegPlan, plan_leg, plan_mission
 from companion.reference import ActiveReference, VehicleClock
+from companion.link.gate import SigningKey
 from companion.link.setpoints import (SetpointStreamer, hold_position,
                                       raise_stream_priority, restore_normal_priority)
 from companion.link.startup import AUX_MOTOR_INTERLOCK, is_airborne, start_vehicle
@@ -123,7 +124,8 @@ class CompanionDaemon:
         self.record_path = record_path
         self.rng = np.random.default_rng(settings.seed)
         self.link = VehicleLink("companion", streams=settings.link.streams,
-                                adsb=settings.adsb.enabled)
+                                adsb=settings.adsb.enabled,
+                                signing_key=SigningKey.from_file(settings.link.signing_key_file))
         self.clock = VehicleClock(settings.link.time_scale)
         self.streamer: SetpointStreamer | None = None
         self.reference: ActiveReference | None = None

@@ -8,7 +8,7 @@
 
 from mavlink_signing.keys import SigningKeyError, key_from_text, load_key
 from mavlink_signing.sign import signing_encoder, signing_timestamp_now
-from mavlink_signing.verify import SignatureCheck, Verdict
+from mavlink_signing.verify import SignatureCheck, Verdict, frame_timestamp, signature_matches
 
 __all__ = ["SigningKeyError", "key_from_text", "load_key", "signing_encoder", "signing_timestamp_now",
-           "SignatureCheck", "Verdict"]
+           "SignatureCheck", "Verdict", "frame_timestamp", "signature_matches"]

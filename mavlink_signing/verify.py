@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import enum
 import hashlib
+import hmac
 import struct
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -58,15 +59,30 @@ class SignatureCheck:
         self.counts[verdict] += 1
         return verdict
 
+    def advance(self, timestamp: int) -> None:
+        """Move the newest known timestamp forward to ``timestamp`` (e.g. the wall clock, once a second).
+
+        A stream not seen before must then start no more than ``NEW_STREAM_WINDOW`` behind it,
+        so frames recorded long ago stay stale however quiet the link has been.
+        """
+        self.newest = max(self.newest, int(timestamp))
+
+    def rekey(self, key: bytes, timestamp: int = 0) -> None:
+        """Check with ``key`` from now on; the newest timestamp becomes at least ``timestamp``.
+
+        The streams' last timestamps are kept: a frame recorded before the change stays a replay.
+        """
+        self.key = bytes(key)
+        self.advance(timestamp)
+
     def _judge(self, buf: bytes, msg_id: int, src_system: int, src_component: int) -> Verdict:
         signed = len(buf) > SIGNATURE_BYTES and buf[0] == mavlink.PROTOCOL_MARKER_V2 and buf[2] & 0x01
         if not signed:
             return Verdict.ACCEPTED if msg_id in UNSIGNED_ALLOWED else Verdict.UNSIGNED
-        if hashlib.sha256(self.key + buf[:-6]).digest()[:6] != buf[-6:]:
+        if not signature_matches(self.key, buf):
             return Verdict.BAD_SIGNATURE
         link_id = buf[-SIGNATURE_BYTES]
-        low, high = struct.unpack("<IH", buf[-12:-6])
-        timestamp = low + (high << 32)
+        timestamp = frame_timestamp(buf)
         stream = (link_id, src_system, src_component)
         last = self.streams.get(stream)
         if last is not None and timestamp <= last:
@@ -76,3 +92,21 @@ class SignatureCheck:
         self.streams[stream] = timestamp
         self.newest = max(self.newest, timestamp)
         return Verdict.ACCEPTED
+
+
+def signature_matches(key: bytes, buf: bytes) -> bool:
+    """True if the signed MAVLink 2 frame ``buf`` carries the signature of ``key``.
+
+    The signature is the first 6 bytes of SHA-256 over the key, then the frame from its header
+    to the link id and timestamp (everything but the signature itself).
+    """
+    buf = bytes(buf)
+    if len(buf) <= SIGNATURE_BYTES:
+        return False
+    return hmac.compare_digest(hashlib.sha256(bytes(key) + buf[:-6]).digest()[:6], buf[-6:])
+
+
+def frame_timestamp(buf: bytes) -> int:
+    """The 48-bit signing timestamp (10 us ticks since 2015) of the signed frame ``buf``."""
+    low, high = struct.unpack("<IH", bytes(buf)[-12:-6])
+    return low + (high << 32)

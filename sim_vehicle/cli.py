@@ -27,6 +27,7 @@ examples:
   sim-vehicle --instance 1                      # a second vehicle: port 14565, sysid 2
   sim-vehicle --home 46.5197,6.6323,372,90 --wind-speed 5 --wind-dir 270 --gust 1 --tlog flight.tlog
   sim-vehicle --origin 47.3970,8.5450,480 --adsb-traffic 3 --seed 7   # EKF origin away from home, traffic
+  sim-vehicle --signing-key key.txt             # MAVLink 2 signing; MAVProxy: signing key PASSPHRASE
 
 Any MAVLink client can also just send to the vehicle's port: it answers every peer heard in the
 last 10 s. As ArduCopter, it sends nothing but HEARTBEAT until asked (SET_MESSAGE_INTERVAL,
@@ -151,6 +152,12 @@ def build_parser() -> argparse.ArgumentParser:
                         help="gust standard deviation per axis, m/s")
     parser.add_argument("--physics-rate", type=_positive, default=None, metavar="HZ",
                         help="physics rate in simulated Hz (default 400; a multiple of the 100 Hz control rate)")
+    parser.add_argument("--signing-key", default=None, metavar="FILE",
+                        help="MAVLink 2 signing: the key file (64 hex digits, or a passphrase whose SHA-256 is the "
+                        "key, as MAVProxy's 'signing key PASSPHRASE'); sign everything sent, drop what is not "
+                        "signed with the key (RADIO_STATUS excepted)")
+    parser.add_argument("--accept-signing-setup", action="store_true",
+                        help="take SETUP_SIGNING while there is no key (with a key it must be signed with it)")
     parser.add_argument("--config", default=None, metavar="FILE", help="settings TOML (see sim_vehicle/config.py)")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging (-v debug)")
     parser.add_argument("-q", "--quiet", action="store_true", help="warnings and errors only")
@@ -189,6 +196,19 @@ def _configure_logging(args: argparse.Namespace) -> None:
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 
 
+def _signing_key(path: str | None) -> bytes | None:
+    """The key of ``--signing-key FILE`` (None without it); a bad file is a user mistake naming it."""
+    if path is None:
+        return None
+    from mavlink_signing import SigningKeyError, load_key
+    from sim_vehicle.config import SimConfigError
+
+    try:
+        return load_key(path)
+    except SigningKeyError as exc:
+        raise SimConfigError(f"--signing-key: {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     """Build the vehicle from parsed arguments and fly until a signal arrives."""
     import numpy as np
@@ -201,6 +221,7 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0 <= args.instance <= 200:
         raise SimConfigError(f"--instance: expected 0..200, got {args.instance}")
+    signing_key = _signing_key(args.signing_key)
     try:
         settings = _settings_from_args(args)
     except ValueError as exc:
@@ -223,7 +244,8 @@ def run(args: argparse.Namespace) -> int:
     vehicle = Autopilot(model, settings, home, np.random.default_rng(settings.seed), origin_lla=origin)
     traffic = TrafficModel(settings.adsb, np.random.default_rng([settings.seed, 0xAD5B]))
     try:
-        server = MavlinkServer(vehicle, settings, sysid, port, tlog_path=args.tlog, traffic=traffic)
+        server = MavlinkServer(vehicle, settings, sysid, port, tlog_path=args.tlog, traffic=traffic,
+                               signing_key=signing_key, accept_signing_setup=args.accept_signing_setup)
     except OSError as exc:
         raise SimConfigError(f"cannot use UDP port {port} ({exc.strerror or exc}); pick another with --port") from None
 

@@ -18,9 +18,11 @@ Everything runs in one thread and one process: :meth:`MavlinkServer.run` paces t
 simulation (:mod:`sim_vehicle.clock`), drains the socket, and sends what is due, sleeping in
 ``select`` in between. Each datagram is parsed on its own, so random bytes, truncated frames,
 wrong CRCs and unknown message ids are counted (``stats``), logged (rate-limited) and dropped
-without disturbing the flight. An optional ``.tlog`` records every packet in and out in the
-standard format (8-byte big-endian microseconds since the Unix epoch, then the raw packet),
-which MAVProxy and MAVExplorer open.
+without disturbing the flight. With a signing key (:mod:`sim_vehicle.signing`) everything sent
+is signed, and a message that is not signed with the key, or replays an old timestamp, is
+counted by reason and dropped before dispatch and routing. An optional ``.tlog`` records every
+packet in and out in the standard format (8-byte big-endian microseconds since the Unix epoch,
+then the raw packet), which MAVProxy and MAVExplorer open.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ from sim_vehicle.mission_store import (
     MISSION_TYPE_FENCE, MISSION_TYPE_NAMES, MISSION_TYPE_RALLY, MISSION_TYPES, MissionItem, MissionResult, MissionStore,
 )
 from sim_vehicle.params import ParameterTable
+from sim_vehicle.signing import Verdict, VehicleSigning
 from sim_vehicle.streams import MESSAGE_IDS, NAMES_BY_ID, StreamTable
 from sim_vehicle.telemetry import CAPABILITIES, Telemetry
 
@@ -82,6 +85,11 @@ class LinkStats:
     truncated: int = 0
     ignored: int = 0
     commands: int = 0
+    # dropped by the signing check (sim_vehicle.signing.Verdict); not in ``dropped`` (SYS_STATUS errors_comm)
+    unsigned: int = 0
+    bad_signature: int = 0
+    replayed: int = 0
+    stale: int = 0
 
     @property
     def dropped(self) -> int:
@@ -119,11 +127,17 @@ class MavlinkServer:
     traffic : TrafficModel, optional
         Simulated ADS-B aircraft (default: ``settings.adsb`` with a generator seeded by
         ``settings.seed``).
+    signing_key : bytes, optional
+        MAVLink 2 signing key: sign everything sent, accept only what is signed with it
+        (:mod:`sim_vehicle.signing`).
+    accept_signing_setup : bool
+        Take SETUP_SIGNING while there is no signing key.
     """
 
     def __init__(self, autopilot: Autopilot, settings: VehicleSettings, sysid: int, port: int,
                  tlog_path: str | None = None, wall_s: Callable[[], float] = time.monotonic,
-                 traffic: TrafficModel | None = None) -> None:
+                 traffic: TrafficModel | None = None, signing_key: bytes | None = None,
+                 accept_signing_setup: bool = False) -> None:
         self.autopilot = autopilot
         self.settings = settings
         self.sysid = int(sysid)
@@ -135,6 +149,7 @@ class MavlinkServer:
         self.wall_s = wall_s
         self.stats = LinkStats()
         self.mav = mavlink.MAVLink(None, srcSystem=self.sysid, srcComponent=COMPONENT_ID)
+        self.signing = VehicleSigning(self.mav, signing_key, accept_signing_setup)
         self.outs: list[Address] = [self._resolve(a) for a in settings.link.out]
         self.peers: dict[Address, float] = {}
         if traffic is None:
@@ -184,6 +199,8 @@ class MavlinkServer:
         log.info("sim-vehicle sysid %d listening on UDP %s:%d, telemetry to %s and peers; speed-up %g",
                  self.sysid, self.settings.link.bind_host, self.port,
                  ", ".join(f"{h}:{p}" for h, p in self.outs) or "(no --out)", self.clock.speedup)
+        log.info("MAVLink 2 signing: %s", f"on, key {self.signing.fingerprint}" if self.signing.enabled else
+                 "off" + (", SETUP_SIGNING accepted" if self.signing.accept_setup else ""))
         while not self._stop:
             if duration_wall_s is not None and self.wall_s() - start >= duration_wall_s:
                 break
@@ -207,6 +224,7 @@ class MavlinkServer:
             self._handle_events(events)
         self._receive()
         if self.heartbeat.due():
+            self.signing.tick()
             self._send_heartbeat()
             if not self._origin_announced:  # origin and home are set at start: ArduPilot announces both
                 self._origin_announced = True
@@ -323,6 +341,10 @@ class MavlinkServer:
             if isinstance(msg, mavlink.MAVLink_unknown):
                 self._count_bad("unknown_id", f"unknown message id {msg.get_msgId()}", address)
                 continue
+            verdict = self.signing.verdict(msg)
+            if verdict is not Verdict.ACCEPTED:  # before dispatch and routing, before it makes a peer
+                self._count_bad(verdict.value, msg.get_type(), address, what="unauthenticated message")
+                continue
             good = True
             self.stats.messages_in += 1
             self.peers[address] = self.wall_s()  # before dispatch: a reply broadcast (STATUSTEXT) reaches it too
@@ -336,12 +358,11 @@ class MavlinkServer:
         if parser.buf_len() > 0:
             self._count_bad("truncated", f"{parser.buf_len()} bytes left over", address)
 
-    def _count_bad(self, kind: str, reason: str, address: Address) -> None:
+    def _count_bad(self, kind: str, reason: str, address: Address, what: str = "malformed packet") -> None:
         setattr(self.stats, kind, getattr(self.stats, kind) + 1)
         n = self._bad_logged[kind] = self._bad_logged[kind] + 1
         if n <= 10 or n % 100 == 0:
-            log.warning("dropped malformed packet from %s:%d (%s: %s; %d so far)", address[0], address[1], kind,
-                        reason, n)
+            log.warning("dropped %s from %s:%d (%s: %s; %d so far)", what, address[0], address[1], kind, reason, n)
 
     def _route(self, msg: Any, address: Address) -> None:
         """Forward a broadcast message of another component to every other destination.
@@ -886,6 +907,18 @@ class MavlinkServer:
             self.store.cancel_upload(mission_type, f"sender sent MISSION_ACK {msg.type}")
             self._uploads.pop(mission_type, None)
 
+    # ================================================================== signing
+    def _on_setup_signing(self, msg: Any, address: Address) -> None:
+        """SETUP_SIGNING: change or switch off the key by the rules of :mod:`sim_vehicle.signing`; log either way."""
+        done, what = self.signing.setup(msg)
+        if done:
+            log.info("SETUP_SIGNING from %s:%d (system %d): %s", *address, msg.get_srcSystem(), what)
+            return
+        n = self._bad_logged["setup_signing"] = self._bad_logged["setup_signing"] + 1
+        if n <= 10 or n % 100 == 0:
+            log.warning("SETUP_SIGNING from %s:%d (system %d) refused: %s; %d so far", *address,
+                        msg.get_srcSystem(), what, n)
+
     # ================================================================== parameters
     def _param_value(self, index: int, address: Address | None = None) -> None:
         spec = self.params.specs[index]
@@ -956,6 +989,7 @@ class MavlinkServer:
         "PARAM_REQUEST_LIST": _on_param_request_list,
         "PARAM_REQUEST_READ": _on_param_request_read,
         "PARAM_SET": _on_param_set,
+        "SETUP_SIGNING": _on_setup_signing,
     }
 
     # ================================================================== events and housekeeping

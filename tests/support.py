@@ -102,10 +102,12 @@ def sim_vehicle_command(port: int, out: Sequence[str] = (), speedup: float = 1.0
     return cmd + list(extra_args)
 
 
-def wait_for_heartbeat(port: int, sysid: int, timeout_s: float, proc: subprocess.Popen | None = None) -> bool:
+def wait_for_heartbeat(port: int, sysid: int, timeout_s: float, proc: subprocess.Popen | None = None,
+                       signing_key: bytes | None = None) -> bool:
     """Send GCS heartbeats to ``127.0.0.1:port`` until the vehicle ``sysid`` answers with one.
 
-    The probe is a peer for 10 s only; it does not use any of the ``--out`` ports.
+    The probe is a peer for 10 s only; it does not use any of the ``--out`` ports. A vehicle
+    with a signing key hears only a probe that signs with ``signing_key``.
     """
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -114,12 +116,14 @@ def wait_for_heartbeat(port: int, sysid: int, timeout_s: float, proc: subprocess
         sock.settimeout(0.2)
         mav = mavlink2.MAVLink(None, srcSystem=254, srcComponent=190)
         mav.robust_parsing = True
-        hb = mav.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0).pack(mav)
+        if signing_key is not None:
+            sign_with(mav, signing_key, link_id=254)
+        hb = mav.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0)
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if proc is not None and proc.poll() is not None:
                 return False
-            sock.sendto(hb, ("127.0.0.1", port))
+            sock.sendto(hb.pack(mav), ("127.0.0.1", port))  # packed each time: a signed frame sent twice is a replay
             try:
                 data = sock.recv(65535)
             except (socket.timeout, ConnectionRefusedError):
@@ -128,6 +132,20 @@ def wait_for_heartbeat(port: int, sysid: int, timeout_s: float, proc: subprocess
                 if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == sysid:
                     return True
     return False
+
+
+def sign_with(mav, key: bytes, link_id: int = 1) -> None:
+    """Make the pymavlink ``MAVLink`` object ``mav`` sign what it packs and check what it parses.
+
+    As ``mavutil``'s ``setup_signing(key, sign_outgoing=True)``: the timestamp starts at the
+    wall clock (10 us since 2015).
+    """
+    from mavlink_signing import signing_timestamp_now
+
+    mav.signing.secret_key = bytes(key)
+    mav.signing.sign_outgoing = True
+    mav.signing.link_id = int(link_id)
+    mav.signing.timestamp = signing_timestamp_now()
 
 
 def stop_process(proc: subprocess.Popen, timeout_s: float = 10.0) -> int | None:
@@ -145,7 +163,8 @@ def stop_process(proc: subprocess.Popen, timeout_s: float = 10.0) -> int | None:
 @contextlib.contextmanager
 def start_sim_vehicle(port: int | None = None, out: Sequence[str] = (), speedup: float = 1.0,
                       instance: int = 0, extra_args: Sequence[str] = (), ready_timeout_s: float = 20.0,
-                      log_dir: str | os.PathLike | None = None) -> Iterator[SimVehicle]:
+                      log_dir: str | os.PathLike | None = None,
+                      signing_key: bytes | None = None) -> Iterator[SimVehicle]:
     """Start a real ``sim-vehicle`` process and wait until it sends heartbeats.
 
     Parameters
@@ -165,6 +184,8 @@ def start_sim_vehicle(port: int | None = None, out: Sequence[str] = (), speedup:
         How long to wait for the first heartbeat.
     log_dir : path, optional
         Where the log file goes (default: a temporary directory).
+    signing_key : bytes, optional
+        The key the ready probe signs with (pass ``--signing-key FILE`` in ``extra_args``).
 
     Yields
     ------
@@ -184,7 +205,7 @@ def start_sim_vehicle(port: int | None = None, out: Sequence[str] = (), speedup:
     sim = SimVehicle(port=port, sysid=1 + instance, instance=instance, proc=proc, log_path=log_path,
                      out=list(out))
     try:
-        if not wait_for_heartbeat(port, sim.sysid, ready_timeout_s, proc):
+        if not wait_for_heartbeat(port, sim.sysid, ready_timeout_s, proc, signing_key):
             raise RuntimeError(f"sim-vehicle on port {port} did not become ready "
                                f"(exit status {proc.poll()}); log:\n{sim.log_tail()}")
         yield sim
@@ -208,9 +229,12 @@ class MavlinkPeer:
         The vehicle's system id (commands target it).
     source_system, source_component : int
         Our own ids.
+    signing_key : bytes, optional
+        Sign what we send and accept only what is signed with this key (:func:`sign_with`).
     """
 
-    def __init__(self, port: int, sysid: int = 1, source_system: int = 250, source_component: int = 190) -> None:
+    def __init__(self, port: int, sysid: int = 1, source_system: int = 250, source_component: int = 190,
+                 signing_key: bytes | None = None) -> None:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
         self.mavlink = mavlink2
@@ -221,6 +245,8 @@ class MavlinkPeer:
         self.sysid = int(sysid)
         self.mav = mavlink2.MAVLink(None, srcSystem=source_system, srcComponent=source_component)
         self.mav.robust_parsing = True
+        if signing_key is not None:
+            sign_with(self.mav, signing_key)
         self.last = {}
         self._last_heartbeat = 0.0
         self.heartbeat()

@@ -53,6 +53,20 @@ def add_link_arguments(parser: argparse.ArgumentParser) -> None:
                              f"serial:///dev/ttyUSB0:57600 (default {DEFAULT_CONNECT})")
     parser.add_argument("--timeout", type=float, default=15.0, metavar="S",
                         help="seconds to wait for the vehicle (default 15)")
+    add_signing_argument(parser)
+
+
+def add_signing_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--signing-key", metavar="FILE",
+                        help="MAVLink 2 signing key file: 64 hex digits (the 32-byte key) or a "
+                             "passphrase (its SHA-256, as MAVProxy's signing commands take it); "
+                             "sign everything sent, accept only frames signed with it")
+
+
+def signing_key(path: str | None):
+    from companion.link.gate import SigningKey
+
+    return SigningKey.from_file(path)      # None without --signing-key
 
 
 def run_upload(args) -> int:
@@ -61,7 +75,7 @@ def run_upload(args) -> int:
 
     check_url(args.connect)
     plan = load_mission_file(args.file)          # validates everything before connecting
-    asyncio.run(upload_plan(plan, args.connect, args.timeout))
+    asyncio.run(upload_plan(plan, args.connect, args.timeout, signing_key(args.signing_key)))
     print(f"uploaded {args.file}: {len(plan.items)} mission items, "
           f"{len(plan.polygons)} fence polygons, {len(plan.circles)} fence circles, "
           f"{len(plan.rally)} rally points")
@@ -74,7 +88,7 @@ def run_download(args) -> int:
 
     check_url(args.connect)
     kind = mission_file_kind(args.file)           # bad extension: error before connecting
-    plan = asyncio.run(download_plan(args.connect, args.timeout))
+    plan = asyncio.run(download_plan(args.connect, args.timeout, signing_key(args.signing_key)))
     if kind == "wpl" and (plan.polygons or plan.circles or plan.rally):
         print(f"note: {args.file} is QGC WPL 110, which holds no geofence or rally points; "
               f"use a .plan file to keep them")
@@ -95,12 +109,12 @@ def check_flyable(plan, home_lla) -> None:
     mission_to_local(plan, home_lla)
 
 
-async def upload_plan(plan, url: str, timeout_s: float) -> None:
+async def upload_plan(plan, url: str, timeout_s: float, key=None) -> None:
     from companion.link.vehicle import VehicleLink
 
     if plan.planned_home is not None:
         check_flyable(plan, plan.planned_home)    # before connecting: fail fast
-    link = VehicleLink(role="gcs")
+    link = VehicleLink(role="gcs", signing_key=key)
     await link.connect(url, timeout_s=timeout_s)
     try:
         home = await home_or_none(link)
@@ -115,10 +129,10 @@ async def upload_plan(plan, url: str, timeout_s: float) -> None:
         await link.aclose()
 
 
-async def download_plan(url: str, timeout_s: float):
+async def download_plan(url: str, timeout_s: float, key=None):
     from companion.link.vehicle import VehicleLink
 
-    link = VehicleLink(role="gcs")
+    link = VehicleLink(role="gcs", signing_key=key)
     await link.connect(url, timeout_s=timeout_s)
     try:
         return await asyncio.wait_for(link.download_plan(), timeout=max(timeout_s, 30.0))

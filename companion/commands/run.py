@@ -7,6 +7,8 @@ import json
 import logging
 import sys
 
+from companion.commands.mission_io import add_signing_argument
+
 log = logging.getLogger(__name__)
 
 #: Exit statuses of ``companion run`` (2, bad input, comes from ``companion.cli``).
@@ -43,12 +45,16 @@ def register(subparsers) -> None:
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--connect", help="MAVSDK URL of the vehicle (default udpin://0.0.0.0:14540)")
     p.add_argument("--config", help="settings file (TOML); see --print-config")
+    add_signing_argument(p)
     p.add_argument("--mission", help=".plan or QGC WPL 110 file to upload and fly")
     p.add_argument("--world", help="world file with extra obstacles (local NED about home)")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", default=None,
                    help="zenoh endpoint to listen on (repeatable), e.g. tcp/0.0.0.0:7447")
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", default=None,
                    help="zenoh endpoint to connect to (repeatable)")
+    p.add_argument("--zenoh-config", metavar="FILE",
+                   help="zenoh configuration file (JSON5, e.g. from `companion keys init`): mutual TLS "
+                   "and access control; its endpoints replace the default ones")
     p.add_argument("--no-zenoh", action="store_true", help="fly without zenoh (no threats, no status)")
     p.add_argument("--record", metavar="FILE", help="write the flight record (JSON Lines) here")
     p.add_argument("--seed", type=int, help="random seed of the planners (default from settings)")
@@ -73,6 +79,8 @@ def settings_overrides(args: argparse.Namespace) -> dict:
     out: dict = {}
     if args.connect:
         out.setdefault("link", {})["connect"] = args.connect
+    if args.signing_key:
+        out.setdefault("link", {})["signing_key_file"] = args.signing_key
     if args.time_scale is not None:
         out.setdefault("link", {})["time_scale"] = args.time_scale
     if args.seed is not None:
@@ -89,6 +97,8 @@ def settings_overrides(args: argparse.Namespace) -> dict:
         out.setdefault("zenoh", {})["listen"] = args.zenoh_listen
     if args.zenoh_connect is not None:
         out.setdefault("zenoh", {})["connect"] = args.zenoh_connect
+    if getattr(args, "zenoh_config", None):
+        out.setdefault("zenoh", {})["config"] = args.zenoh_config
     if args.no_zenoh:
         out.setdefault("zenoh", {})["enabled"] = False
     return out
@@ -106,6 +116,10 @@ def run(args: argparse.Namespace) -> int:
     if args.print_config:
         print(json.dumps(settings_to_dict(settings), indent=2))
         return 0
+    if settings.zenoh.enabled and settings.zenoh.config:      # a bad file: refused before any flight
+        from companion.threats.access import load_config
+
+        load_config(settings.zenoh.config)
     daemon = CompanionDaemon(settings, mission_path=args.mission, world_path=args.world,
                              record_path=args.record)
 

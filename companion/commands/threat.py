@@ -32,10 +32,15 @@ Examples:
   companion threat list --scenario mission_files/threats/demo.toml
   companion threat play mission_files/threats/demo.toml --time-scale 5
   companion threat add --id p1 --pos 75,75,-20 --radius 5 --sysid 2 --zenoh-connect tcp/10.0.0.5:7447
+  companion threat add --zenoh-config deploy/radar1.json5 --id p1 --pos 75,75,-20 --radius 5
+                                       # an authenticated source (companion keys init): key
+                                       # uav/<sysid>/threats/radar1/p1
 
 Positions are local NED metres about the vehicle's home (north,east,down: -20 is 20 m up) or
 WGS-84 --lat/--lon/--alt (altitude AMSL, m). The companion (`companion run`) listens on
-tcp/127.0.0.1:7447 by default; this command connects to it (or to a zenoh router)."""
+tcp/127.0.0.1:7447 by default; this command connects to it (or to a zenoh router). With
+--zenoh-config (a source's file from `companion keys init`) it connects over mutual TLS and puts
+on uav/<sysid>/threats/<source>/<id>, <source> being its certificate's name."""
 
 SUBCOMMAND_HELP = {
     "add": "PUT a new threat (replaces one with the same id)",
@@ -62,6 +67,12 @@ def _add_bus_options(p) -> None:
                    help=f"zenoh endpoints to connect to (default {DEFAULT_CONNECT})")
     p.add_argument("--zenoh-listen", dest="zenoh_listen", nargs="+", metavar="ENDPOINT", default=[],
                    help="zenoh endpoints to listen on as well (default none)")
+    p.add_argument("--zenoh-config", dest="zenoh_config", metavar="FILE",
+                   help="zenoh configuration file (JSON5, e.g. a source's from `companion keys init`): "
+                   "TLS certificate and endpoints; --zenoh-connect/--zenoh-listen replace its endpoints")
+    p.add_argument("--source", metavar="NAME",
+                   help="put and delete on uav/<sysid>/threats/NAME/<id> (default: the common name of "
+                   "the --zenoh-config certificate, else the plain uav/<sysid>/threats/<id>)")
     p.add_argument("--wait", type=float, default=3.0, metavar="S",
                    help="how long to wait for the companion's subscriber or reply (default 3 s)")
 
@@ -167,22 +178,26 @@ def describe(threat) -> str:
     speed = math.sqrt(sum(v * v for v in threat.velocity_ned_m_s))
     ttl = "until removed" if threat.ttl_s is None else f"ttl {threat.ttl_s:.0f} s"
     vel = ",".join(f"{v:.2f}" for v in threat.velocity_ned_m_s)
-    return f"{threat.id}: {threat.kind} r={threat.radius_m:.1f} m at {where}, vel {vel} m/s ({speed:.2f}), {ttl}"
+    return f"{threat.uid}: {threat.kind} r={threat.radius_m:.1f} m at {where}, vel {vel} m/s ({speed:.2f}), {ttl}"
 
 
 # ---------------------------------------------------------------------------- commands
 def _open_bus(args):
     from companion.threats.bus import ThreatBus
 
+    if getattr(args, "zenoh_config", None):
+        return ThreatBus(args.sysid, listen=args.zenoh_listen or None, connect=args.zenoh_connect or None,
+                         zenoh_config=args.zenoh_config, source=args.source).open()
     connect = args.zenoh_connect if args.zenoh_connect else ([] if args.zenoh_listen else [DEFAULT_CONNECT])
-    return ThreatBus(args.sysid, listen=args.zenoh_listen, connect=connect).open()
+    return ThreatBus(args.sysid, listen=args.zenoh_listen, connect=connect, source=args.source).open()
 
 
 def _wait_subscriber(bus, args, threat_id: str) -> bool:
     if bus.wait_for_subscriber(args.wait, threat_id):
         return True
-    print(f"companion threat: warning: no subscriber of uav/{args.sysid}/threats/** within {args.wait:g} s "
-          f"(is `companion run` listening?); sending anyway", file=sys.stderr)
+    hint = (" or does its access control refuse this identity?" if bus.security is not None else "")
+    print(f"companion threat: warning: no subscriber of {bus.key(bus.threat_leaf(threat_id))} within "
+          f"{args.wait:g} s (is `companion run` listening{hint}); sending anyway", file=sys.stderr)
     return False
 
 
@@ -206,20 +221,21 @@ def run(args) -> int:
         if action == "add":
             ok = _wait_subscriber(bus, args, threat.id)
             bus.put_threat(threat)
-            print(f"PUT uav/{args.sysid}/threats/{threat.id}: {describe(threat)}")
+            print(f"PUT {bus.key(bus.threat_leaf(threat.id))}: {describe(threat)}")
             return 0 if ok else 1
         if action == "move":
             previous = None
             if args.radius is None or _position(args) is None:
-                held = {t.id: t for t in bus.list_threats(args.wait)}
-                previous = held.get(args.id)
+                held = {t.uid: t for t in bus.list_threats(args.wait)}
+                uid = args.id if bus.source is None else f"{bus.source}/{args.id}"
+                previous = held.get(uid)
                 if previous is None:
                     raise ThreatPayloadError(f"--id: the companion holds no threat {args.id!r} "
                                              f"(add it first, or give --pos and --radius)")
             threat = threat_from_args(args, previous) if previous is not None else _full_move(args)
             ok = _wait_subscriber(bus, args, threat.id)
             bus.put_threat(threat)
-            print(f"PUT uav/{args.sysid}/threats/{threat.id}: {describe(threat)}")
+            print(f"PUT {bus.key(bus.threat_leaf(threat.id))}: {describe(threat)}")
             return 0 if ok else 1
         if action == "remove":
             from companion.threats import codec
@@ -227,7 +243,7 @@ def run(args) -> int:
             codec.check_id(args.id, "--id")
             ok = _wait_subscriber(bus, args, args.id)
             bus.delete_threat(args.id)
-            print(f"DELETE uav/{args.sysid}/threats/{args.id}")
+            print(f"DELETE {bus.key(bus.threat_leaf(args.id))}")
             return 0 if ok else 1
         if action == "list":
             return list_held(bus, args)
@@ -247,7 +263,7 @@ def list_held(bus, args) -> int:
     threats = bus.list_threats(args.wait)
     if args.json:
         for t in threats:
-            print(json.dumps(codec.to_dict(t)))
+            print(json.dumps({**codec.to_dict(t), "source": t.source}))
         return 0
     if not threats:
         print(f"no threats held by a companion on uav/{args.sysid} (or none answered within {args.wait:g} s)")
@@ -280,7 +296,7 @@ def play(bus, scenario, args) -> int:
             time.sleep(delay)
         if ev.action == "remove":
             bus.delete_threat(ev.threat_id)
-            print(f"t+{ev.at_s:7.2f} s  DELETE uav/{args.sysid}/threats/{ev.threat_id}", flush=True)
+            print(f"t+{ev.at_s:7.2f} s  DELETE {bus.key(bus.threat_leaf(ev.threat_id))}", flush=True)
         else:
             bus.put_threat(ev.threat)
             print(f"t+{ev.at_s:7.2f} s  PUT    {describe(ev.threat)}", flush=True)

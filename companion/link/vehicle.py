@@ -44,6 +44,8 @@ import numpy as np
 
 from companion.errors import LinkError, MissionError, VehicleRefused
 from companion.link.frames import LinkFrames
+from companion.link.gate import SigningKey, silence_reason
+from companion.link.transport import GateThread, open_gate
 from companion.link.streams import StreamKeeper, StreamSettings
 from companion.mission.model import MissionPlan
 from companion.mission.raw import (RawItem, fence_to_raw, mission_to_raw, rally_to_raw,
@@ -291,7 +293,7 @@ class VehicleLink:
     """
 
     def __init__(self, role: str = "companion", *, streams: StreamSettings | None = None,
-                 adsb: bool = False) -> None:
+                 adsb: bool = False, signing_key: SigningKey | None = None) -> None:
         if role not in ("companion", "gcs"):
             raise LinkError(f"role must be 'companion' or 'gcs', got {role!r}")
         self.role = role
@@ -303,6 +305,8 @@ class VehicleLink:
             streams = StreamSettings()
         self.stream_settings = streams
         self.adsb = bool(adsb)
+        self.signing_key = signing_key
+        self.gate: GateThread | None = None
         self.streams: StreamKeeper | None = None
         self.statustexts: collections.deque = collections.deque(maxlen=STATUSTEXT_KEEP)
         self._mavsdk = None
@@ -339,19 +343,20 @@ class VehicleLink:
         route_mavsdk_logs()
         kind = (ComponentType.COMPANION_COMPUTER if self.role == "companion"
                 else ComponentType.GROUND_STATION)
+        self.gate = open_gate(url, self.signing_key)
         self._mavsdk = Mavsdk(Configuration.create_with_component_type(kind))
         self._command_lock = asyncio.Lock()
         self._mission_lock = asyncio.Lock()
         try:
-            await self._mavsdk.add_any_connection(url)
+            await self._mavsdk.add_any_connection(self.gate.mavsdk_url)
         except MavsdkConnectionError as exc:
             self.close()
             raise LinkError(f"cannot open {url}: {exc}") from None
         system = await self._mavsdk.first_autopilot(timeout_s=float(timeout_s))
         if system is None:
+            why = silence_reason(self.gate.inbound.counts, self.signing_key)
             self.close()
-            raise LinkError(f"no autopilot heard on {url} within {timeout_s:g} s (is the vehicle "
-                            f"running and sending to this address?)")
+            raise LinkError(f"no autopilot heard on {url} within {timeout_s:g} s ({why})")
         self.url = url
         self._system = system
         self.target_system = await system.get_system_id()
@@ -375,6 +380,9 @@ class VehicleLink:
             with contextlib.suppress(Exception):
                 self._mavsdk.destroy()
         self._mavsdk = None
+        if self.gate is not None:
+            self.gate.close()
+        self.gate = None
 
     async def aclose(self) -> None:
         """Cancel the subscriptions, let them unsubscribe, then release MAVSDK (idempotent)."""

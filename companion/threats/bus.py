@@ -4,7 +4,12 @@
 off and explicit endpoints (listen and/or connect; a zenoh router is reached by connecting to
 it, in ``peer`` or ``client`` mode). Keys, with prefix ``uav/<sysid>``:
 
-- ``threats/<id>``: subscribed (PUT: a version-1 JSON threat, DELETE: remove it). Every sample
+- ``threats/<source>/<id>`` and ``threats/<id>``: subscribed (PUT: a version-1 JSON threat,
+  DELETE: remove it). ``<source>`` names who put the threat (``Threat.source``); the plain key
+  ``threats/<id>`` is source ``local``. With a zenoh configuration file whose access control is
+  enabled (``companion keys init``; ``companion.threats.access``), the ``<source>`` segment is
+  authenticated (zenoh lets the certificate with common name ``S`` put only on
+  ``threats/S/*``) and the plain key is refused; without one, ``<source>`` is only a label. Every sample
   is decoded and validated *on the zenoh thread* and handed on as a ``ThreatUpdate`` with action
   ``put``, ``delete`` or ``rejected`` (with the ``ThreatPayloadError`` naming the field).
   zenoh-python has no asyncio API: with ``loop`` given the handler runs on that loop through
@@ -16,7 +21,8 @@ it, in ``peer`` or ``client`` mode). Keys, with prefix ``uav/<sysid>``:
 - ``status``, ``events``, ``path``: JSON objects published by the companion.
 
 The client side (``put_threat``, ``delete_threat``, ``list_threats``) is what
-``companion threat`` uses. This is an I/O module: nothing numeric happens here.
+``companion threat`` uses; it puts on ``threats/<source>/<id>`` when the bus has a ``source``
+(given, or the common name of the certificate of its zenoh configuration file). This is an I/O module: nothing numeric happens here.
 """
 
 from __future__ import annotations
@@ -27,14 +33,14 @@ import math
 import queue
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
 
 from companion.errors import CompanionError, ThreatPayloadError
 from companion.threats import codec
-from companion.threats.model import Threat, payload_error
+from companion.threats.model import LOCAL_SOURCE, Threat, payload_error, threat_uid
 from companion.threats.settings import check_endpoint
 
 __all__ = ["ThreatBus", "ThreatUpdate", "ThreatBusError", "session_config", "to_json_bytes"]
@@ -68,6 +74,9 @@ class ThreatUpdate:
         ``time.monotonic()`` at receipt (for latency measurements).
     seq : int
         Receive order, from 1.
+    source : str or None
+        Who put it: the key's ``<source>`` segment, ``"local"`` for the plain key, None when
+        the key itself is invalid.
     """
 
     action: str
@@ -78,6 +87,12 @@ class ThreatUpdate:
     received_t_s: float
     received_mono_s: float
     seq: int
+    source: str | None = LOCAL_SOURCE
+
+    @property
+    def uid(self) -> str | None:
+        """The threat's identity in the table (``Threat.uid``), None for an invalid key."""
+        return None if self.threat_id is None else threat_uid(self.source, self.threat_id)
 
 
 def _json_default(value):
@@ -147,13 +162,23 @@ class ThreatBus:
     ----------
     sysid : int
         Key prefix ``uav/<sysid>``.
-    listen, connect : sequence of str
-        zenoh endpoints (default: listen on ``tcp/127.0.0.1:7447``, connect to none).
+    listen, connect : sequence of str, optional
+        zenoh endpoints (default: listen on ``tcp/127.0.0.1:7447``, connect to none; with
+        ``zenoh_config``: the file's, replaced by these when given).
     mode : str
-        ``peer`` (default), ``client`` (through a router) or ``router``.
+        ``peer`` (default), ``client`` (through a router) or ``router``; with ``zenoh_config``
+        the file's mode is used.
     clock : callable, optional
         Time source (s) stamped on received threats, e.g. the daemon's mission clock; default
         ``time.monotonic``. Called on the zenoh thread.
+    zenoh_config : str or Path, optional
+        A zenoh configuration file (JSON5), e.g. written by ``companion keys init``: TLS,
+        access control, endpoints. When its access control is enabled, threats must come on
+        ``threats/<source>/<id>``.
+    source : str, optional
+        Client side: put and delete on ``threats/<source>/<id>``. Default: the common name of
+        the certificate of ``zenoh_config`` if any (but not for a configuration with access
+        control, i.e. the companion's own), else the plain ``threats/<id>``.
 
     Examples
     --------
@@ -163,17 +188,36 @@ class ThreatBus:
     >>> bus.close()
     """
 
-    def __init__(self, sysid: int = 1, *, listen=("tcp/127.0.0.1:7447",), connect=(),
-                 mode: str = "peer", clock: Callable[[], float] | None = None) -> None:
+    def __init__(self, sysid: int = 1, *, listen=None, connect=None, mode: str = "peer",
+                 clock: Callable[[], float] | None = None, zenoh_config=None,
+                 source: str | None = None) -> None:
         if isinstance(sysid, bool) or not isinstance(sysid, int) or not 1 <= sysid <= 255:
             raise ThreatBusError(f"sysid: must be an integer in 1..255, got {sysid!r}")
         self.sysid = sysid
         self.prefix = f"uav/{sysid}"
-        self.listen = tuple(listen)
-        self.connect = tuple(connect)
-        self.mode = mode
         self.clock = clock or time.monotonic
-        self._config = session_config(mode=mode, listen=self.listen, connect=self.connect)
+        self.security = None
+        if zenoh_config is not None:
+            from companion.threats import access
+
+            self._config, self.security = access.load_config(zenoh_config, listen=listen, connect=connect)
+            self.mode = self.security.mode
+            self.listen = tuple(json.loads(self._config.get_json("listen/endpoints"))
+                                if listen is None else listen)
+            self.connect = tuple(json.loads(self._config.get_json("connect/endpoints"))
+                                 if connect is None else connect)
+        else:
+            self.listen = ("tcp/127.0.0.1:7447",) if listen is None else tuple(listen)
+            self.connect = () if connect is None else tuple(connect)
+            self.mode = mode
+            self._config = session_config(mode=mode, listen=self.listen, connect=self.connect)
+        #: Threats must come on ``threats/<source>/<id>`` (the configuration's ACL is on).
+        self.require_source = bool(self.security is not None and self.security.acl_enabled)
+        if source is None and self.security is not None and not self.require_source:
+            source = self.security.identity
+        if source is not None:
+            source = _check_source(source, "source")
+        self.source = source
         self._session = None
         self._subscriber = None
         self._queryable = None
@@ -189,6 +233,10 @@ class ThreatBus:
     @classmethod
     def from_settings(cls, settings, *, clock=None) -> "ThreatBus":
         """Build from ``companion.threats.settings.ZenohSettings`` (not opened yet)."""
+        if getattr(settings, "config", None):
+            if settings.connect or tuple(settings.listen) != ("tcp/127.0.0.1:7447",):
+                log.warning("zenoh.listen/connect ignored: the endpoints of %s are used", settings.config)
+            return cls(settings.sysid, clock=clock, zenoh_config=settings.config)
         return cls(settings.sysid, listen=settings.listen, connect=settings.connect,
                    mode=settings.mode, clock=clock)
 
@@ -202,10 +250,14 @@ class ThreatBus:
         try:
             self._session = zenoh.open(self._config)
         except Exception as exc:       # zenoh.ZError: port in use, unreachable router ...
+            where = f", config {self.security.path}" if self.security is not None else ""
             raise ThreatBusError(f"zenoh session ({self.mode}, listen {list(self.listen)}, connect "
-                                 f"{list(self.connect)}): {exc}") from None
-        log.info("zenoh %s session %s: listen %s connect %s, prefix %s", self.mode,
-                 self._session.zid(), list(self.listen), list(self.connect), self.prefix)
+                                 f"{list(self.connect)}{where}): {exc}") from None
+        log.info("zenoh %s session %s: listen %s connect %s, prefix %s%s", self.mode,
+                 self._session.zid(), list(self.listen), list(self.connect), self.prefix,
+                 "" if self.security is None else
+                 f", config {self.security.path} (identity {self.security.identity}, access control "
+                 f"{'on: threats from authenticated sources only' if self.require_source else 'off'})")
         return self
 
     def close(self) -> None:
@@ -283,23 +335,45 @@ class ThreatBus:
             self._seq += 1
             seq = self._seq
             self._counts["received"] += 1
-        head = self.key("threats/")
-        threat_id, threat, error = None, None, None
+        threat_id, source, threat, error = None, None, None, None
         try:
-            leaf = key[len(head):] if key.startswith(head) else ""
-            threat_id = codec.check_id(leaf, "key")
+            source, threat_id = self.parse_key(key)
             if sample.kind == zenoh.SampleKind.DELETE:
                 action = "delete"
             else:
                 action = "put"
                 threat = codec.decode(sample.payload.to_bytes(), received_t_s=t_s, key_id=threat_id)
+                if source != LOCAL_SOURCE:
+                    threat = replace(threat, source=source)
         except ThreatPayloadError as exc:
             action, error, threat = "rejected", exc, None
-            if getattr(exc, "field", None) == "key":
-                threat_id = None
         with self._lock:
             self._counts[action] += 1
-        return ThreatUpdate(action, threat_id, threat, error, key, t_s, mono, seq)
+        return ThreatUpdate(action, threat_id, threat, error, key, t_s, mono, seq, source)
+
+    def parse_key(self, key: str) -> tuple[str, str]:
+        """``(source, threat_id)`` of a threat key.
+
+        ``uav/<sysid>/threats/<source>/<id>`` or, unless ``require_source``,
+        ``uav/<sysid>/threats/<id>`` (source ``"local"``).
+
+        Raises
+        ------
+        ThreatPayloadError
+            With ``field`` ``"key"``.
+        """
+        head = self.key("threats/")
+        leaf = key[len(head):] if key.startswith(head) else ""
+        chunks = leaf.split("/")
+        if len(chunks) == 2:
+            return _check_source(chunks[0], "key"), codec.check_id(chunks[1], "key")
+        if len(chunks) == 1 and self.require_source:
+            raise payload_error("key", f"{key!r}: this companion takes threats from authenticated sources "
+                                f"only, on {self.prefix}/threats/<source>/<id> (its zenoh access control is on)")
+        if len(chunks) > 2:
+            raise payload_error("key", f"{key!r}: expected {self.prefix}/threats/<id> or "
+                                f"{self.prefix}/threats/<source>/<id>")
+        return LOCAL_SOURCE, codec.check_id(leaf, "key")
 
     def _deliver(self, update: ThreatUpdate) -> None:
         handler = self._handler
@@ -367,7 +441,7 @@ class ThreatBus:
                     ttl = None if threat.ttl_s is None else max(threat.expires_t_s - now_t_s, 1e-3)
                     current = Threat(threat.id, threat.kind, threat.frame, tuple(float(x) for x in pos),
                                      threat.velocity_ned_m_s, threat.radius_m, ttl, now_t_s)
-                    query.reply(self.key(f"threats/{threat.id}"), codec.encode(current))
+                    query.reply(self.key(f"threats/{threat.uid}"), codec.encode(current))
             except Exception:
                 log.exception("answering a threat list query failed")
 
@@ -417,9 +491,14 @@ class ThreatBus:
         return sub
 
     # ------------------------------------------------------------------ client side
+    def threat_leaf(self, threat_id: str) -> str:
+        """``threats/<source>/<id>`` with this bus's ``source``, else ``threats/<id>``."""
+        codec.check_id(threat_id)
+        return f"threats/{threat_uid(self.source, threat_id)}"
+
     def wait_for_subscriber(self, timeout_s: float, threat_id: str = "probe") -> bool:
-        """Wait until a subscriber of ``uav/<sysid>/threats/<threat_id>`` is known (True) or timeout."""
-        pub = self._publisher(f"threats/{codec.check_id(threat_id)}", block=True)
+        """Wait until a subscriber of this bus's key of ``threat_id`` is known (True) or timeout."""
+        pub = self._publisher(self.threat_leaf(threat_id), block=True)
         deadline = time.monotonic() + timeout_s
         while True:
             if pub.matching_status.matching:
@@ -429,9 +508,9 @@ class ThreatBus:
             time.sleep(0.01)
 
     def put_threat(self, threat: Threat) -> None:
-        """PUT ``threat`` (encoded, validated) on ``uav/<sysid>/threats/<id>``."""
+        """PUT ``threat`` (encoded, validated) on ``uav/<sysid>/threats/[<source>/]<id>``."""
         payload = codec.encode(threat)
-        self._publisher(f"threats/{threat.id}", block=True).put(payload)
+        self._publisher(self.threat_leaf(threat.id), block=True).put(payload)
 
     def republish_threat(self, threat: Threat) -> bool:
         """PUT ``threat`` on ``uav/<sysid>/threats/<id>`` for *other* processes only (a threat
@@ -448,16 +527,17 @@ class ThreatBus:
         self._count("republished")
         return True
 
-    def put_raw(self, threat_id: str, payload: bytes) -> None:
-        """PUT an arbitrary payload on ``uav/<sysid>/threats/<threat_id>`` (tests, fault injection)."""
-        self.session.put(self.key(f"threats/{threat_id}"), payload)
+    def put_raw(self, leaf: str, payload: bytes) -> None:
+        """PUT an arbitrary payload on ``uav/<sysid>/threats/<leaf>`` (tests, fault injection)."""
+        self.session.put(self.key(f"threats/{leaf}"), payload)
 
     def delete_threat(self, threat_id: str) -> None:
-        """DELETE ``uav/<sysid>/threats/<threat_id>``."""
-        self._publisher(f"threats/{codec.check_id(threat_id)}", block=True).delete()
+        """DELETE ``uav/<sysid>/threats/[<source>/]<threat_id>``."""
+        self._publisher(self.threat_leaf(threat_id), block=True).delete()
 
     def list_threats(self, timeout_s: float = 2.0) -> list[Threat]:
-        """Ask the companion(s) for the threats they hold (``serve_threats``), sorted by id.
+        """Ask the companion(s) for the threats they hold (``serve_threats``), sorted by uid
+        (``<source>/<id>``; ``source`` set from the reply's key).
 
         Invalid replies are logged and skipped.
         """
@@ -469,15 +549,30 @@ class ThreatBus:
                 continue
             try:
                 threat = codec.decode(sample.payload.to_bytes(), received_t_s=time.monotonic())
+                head, _, last = str(sample.key_expr).rpartition("/")
+                source = head.rpartition("/")[2] if head != self.key("threats") else LOCAL_SOURCE
+                if last != threat.id:
+                    raise payload_error("id", f"{threat.id!r} does not match the key's last chunk {last!r}")
+                threat = replace(threat, source=source)
             except ThreatPayloadError as exc:
                 log.warning("invalid threat in a list reply on %s: %s", sample.key_expr, exc)
                 continue
-            out[threat.id] = threat
+            out[threat.uid] = threat
         return [out[k] for k in sorted(out)]
 
 
 def rejected_event(update: ThreatUpdate) -> dict:
     """The ``rejected`` event the companion publishes for an invalid sample (DESIGN 6)."""
     err = update.error or payload_error("payload", "rejected")
-    return {"event": "rejected", "threat_id": update.threat_id, "key": update.key,
+    return {"event": "rejected", "threat_id": update.uid, "source": update.source, "key": update.key,
             "field": getattr(err, "field", "payload"), "reason": str(err), "t_s": update.received_t_s}
+
+
+def _check_source(name: str, field: str) -> str:
+    """A source name: a valid identity name (``companion.security.keys.check_name``)."""
+    from companion.security.keys import KeyMaterialError, check_name
+
+    try:
+        return check_name(name, "source")
+    except KeyMaterialError as exc:
+        raise payload_error(field, str(exc)) from None

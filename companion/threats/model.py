@@ -19,9 +19,11 @@ import numpy as np
 
 from companion.errors import ThreatPayloadError
 
-__all__ = ["Threat", "ThreatTable", "KINDS", "FRAMES", "payload_error"]
+__all__ = ["Threat", "ThreatTable", "KINDS", "FRAMES", "LOCAL_SOURCE", "payload_error", "threat_uid"]
 
 KINDS = ("popup", "moving")
+#: Source of a threat put on the plain key ``uav/<sysid>/threats/<id>`` (unauthenticated).
+LOCAL_SOURCE = "local"
 FRAMES = ("local_ned", "global")
 
 
@@ -30,6 +32,11 @@ def payload_error(field: str, message: str) -> ThreatPayloadError:
     exc = ThreatPayloadError(f"{field}: {message}")
     exc.field = field
     return exc
+
+
+def threat_uid(source: str | None, threat_id: str) -> str:
+    """``threat_id`` for the local source, else ``<source>/<threat_id>`` (``Threat.uid``)."""
+    return threat_id if source in (None, LOCAL_SOURCE) else f"{source}/{threat_id}"
 
 
 @dataclass(frozen=True)
@@ -55,6 +62,10 @@ class Threat:
         Lifetime after ``received_t_s`` (s); None: until deleted.
     received_t_s : float
         Time the position refers to (the receiver's clock, s).
+    source : str
+        Who put the threat: the ``<source>`` segment of an authenticated key
+        ``uav/<sysid>/threats/<source>/<id>``, or ``"local"`` (the plain key
+        ``uav/<sysid>/threats/<id>``, or learnt by the companion itself, e.g. ADS-B).
     """
 
     id: str
@@ -65,6 +76,13 @@ class Threat:
     radius_m: float = 1.0
     ttl_s: float | None = None
     received_t_s: float = 0.0
+    source: str = LOCAL_SOURCE
+
+    @property
+    def uid(self) -> str:
+        """Identity in the table: ``id`` for a local threat, ``<source>/<id>`` otherwise (two
+        sources may use the same id; neither can replace or delete the other's threat)."""
+        return threat_uid(self.source, self.id)
 
     @property
     def pos_ned_m(self) -> np.ndarray:
@@ -119,7 +137,7 @@ class Threat:
 
 
 class ThreatTable:
-    """The threats currently known, by id, in the local NED frame (thread-safe).
+    """The threats currently known, by ``Threat.uid``, in the local NED frame (thread-safe).
 
     PUT inserts or replaces, DELETE removes, and a threat whose ttl has run out is removed by
     ``expire``. Counters of every operation are kept (``stats``).
@@ -159,15 +177,15 @@ class ThreatTable:
                 raise payload_error("frame", "global threat received before the home position is known")
             threat = threat.to_local(self._home)
         with self._lock:
-            replaced = threat.id in self._threats
-            self._threats[threat.id] = threat
+            replaced = threat.uid in self._threats
+            self._threats[threat.uid] = threat
             self._version += 1
             self._counts["put"] += 1
             self._counts["replaced"] += int(replaced)
         return replaced
 
     def delete(self, threat_id: str) -> bool:
-        """Remove the threat ``threat_id``; returns False if it was not known."""
+        """Remove the threat ``threat_id`` (its ``uid``); returns False if it was not known."""
         with self._lock:
             known = self._threats.pop(threat_id, None) is not None
             if known:
@@ -197,9 +215,9 @@ class ThreatTable:
 
     # ------------------------------------------------------------------ queries
     def snapshot(self, now_t_s: float | None = None) -> tuple[Threat, ...]:
-        """The threats known (not yet expired at ``now_t_s`` if given), sorted by id."""
+        """The threats known (not yet expired at ``now_t_s`` if given), sorted by uid."""
         with self._lock:
-            items = sorted(self._threats.values(), key=lambda t: t.id)
+            items = sorted(self._threats.values(), key=lambda t: t.uid)
         if now_t_s is None:
             return tuple(items)
         return tuple(t for t in items if t.expires_t_s > now_t_s)

@@ -32,6 +32,7 @@ class Tube:
     Attributes
     ----------
     threat_id : str
+        The threat's ``uid`` (``<source>/<id>``, or ``id`` for a local threat).
     center_ned_m : ndarray, shape (3,)
         Position at ``t0_s``.
     vel_ned_m_s : ndarray, shape (3,)
@@ -95,7 +96,7 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
     for th in threats:
         vel = np.asarray(th.velocity_ned_m_s, dtype=float)
         moving = float(np.linalg.norm(vel)) > STATIC_SPEED_M_S
-        out.append(Tube(th.id, th.pos_ned_m, vel, float(th.received_t_s),
+        out.append(Tube(th.uid, th.pos_ned_m, vel, float(th.received_t_s),
                         float(th.radius_m) + inflation_m, float(th.radius_m),
                         uncertainty_m_s if moving else 0.0, uncertainty_max_m if moving else 0.0,
                         th.expires_t_s))

@@ -211,18 +211,19 @@ class ThreatReactor:
             self.reject(rejected_event(update))
             return
         if update.action == "delete":
-            known = self.table.delete(update.threat_id)
-            self.record("threat", id=update.threat_id, removed=True, known=known, t_s=update.received_t_s)
-            log.info("threat %s removed%s", update.threat_id, "" if known else " (was not known)")
+            known = self.table.delete(update.uid)
+            self.record("threat", id=update.uid, source=update.source, removed=True, known=known,
+                        t_s=update.received_t_s)
+            log.info("threat %s removed by %s%s", update.uid, update.source, "" if known else " (was not known)")
         else:
             try:
                 self.table.put(update.threat)
             except CompanionError as exc:           # e.g. a global threat before home
-                self.reject({"event": "rejected", "threat_id": update.threat_id,
+                self.reject({"event": "rejected", "threat_id": update.uid, "source": update.source,
                              "field": getattr(exc, "field", "payload"), "reason": str(exc)})
                 return
-            th = self.table.get(update.threat_id)
-            self.record("threat", id=th.id, kind=th.kind, position_ned_m=th.pos_ned_m,
+            th = self.table.get(update.uid)
+            self.record("threat", id=th.uid, source=th.source, kind=th.kind, position_ned_m=th.pos_ned_m,
                         velocity_ned_m_s=th.velocity_ned_m_s, radius_m=th.radius_m, t_s=update.received_t_s)
         self.schedule(update.received_mono_s, "threat")
 
@@ -240,6 +241,12 @@ class ThreatReactor:
         except Exception as exc:  # noqa: BLE001 - republishing is a courtesy; the flight goes on
             log.info("threat %s not republished: %s", threat.id, exc)
 
+    def source_of(self, threat_uid: str | None) -> str | None:
+        """Who put the threat ``threat_uid`` (its ``Threat.source``); None for the static world
+        or a threat no longer held."""
+        threat = self.table.get(threat_uid) if threat_uid is not None else None
+        return threat.source if threat is not None else None
+
     def reject(self, event: dict) -> None:
         """Publish, record and tell a rejected threat sample (the flight goes on)."""
         event = {**event, "t_s": self.clock_now_s()}
@@ -247,7 +254,7 @@ class ThreatReactor:
         self.decisions += 1
         self.bus.publish_event(event)
         self.record("decision", kind="rejected", reason=event.get("reason"), t_s=event["t_s"],
-                    field=event.get("field"), threat_id=event.get("threat_id"))
+                    field=event.get("field"), threat_id=event.get("threat_id"), source=event.get("source"))
         self._tell(*statustext_for("rejected", str(event.get("field") or ""), event.get("threat_id"), None))
 
     # ------------------------------------------------------------------ decisions
@@ -333,6 +340,8 @@ class ThreatReactor:
         label = getattr(decision, "label", None) or decision.kind
         event = {**decision.as_event(), "label": label, "trigger": trigger, "latency_ms": latency_ms,
                  "t_s": self.clock_now_s(), "pos_ned_m": self.position_ned_m(), "leg": self.leg_index}
+        if "threat_id" in event:
+            event["source"] = self.source_of(event["threat_id"])
         self.decisions += 1
         log.warning("decision %s (%s, %s): %s (latency %s ms, decide %.1f ms, plan %.1f ms, seed %d)",
                     decision.kind, label, trigger, decision.reason,

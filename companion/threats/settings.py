@@ -63,6 +63,12 @@ class ZenohSettings:
         connect.
     connect : tuple of str
         Endpoints (peers or a router) this session connects to. Default none.
+    config : str or None
+        A zenoh configuration file (JSON5), e.g. ``companion keys init``'s ``companion.json5``
+        (mutual TLS and access control: threats only from authenticated sources, on
+        ``uav/<sysid>/threats/<source>/<id>``). When set, the file's mode and endpoints are
+        used and ``mode``, ``listen``, ``connect`` are ignored. Default None: the plain
+        session above.
     """
 
     enabled: bool = True
@@ -70,8 +76,11 @@ class ZenohSettings:
     mode: str = "peer"
     listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
     connect: tuple[str, ...] = ()
+    config: str | None = None
 
     def __post_init__(self) -> None:
+        if self.config is not None and (not isinstance(self.config, str) or not self.config.strip()):
+            raise ConfigError(f"zenoh.config: expected the path of a zenoh configuration file, got {self.config!r}")
         require_int(ConfigError, "zenoh", "sysid", self.sysid, 1, 255)
         if self.mode not in ("peer", "client"):
             raise ConfigError(f"zenoh.mode: expected 'peer' or 'client', got {self.mode!r}")

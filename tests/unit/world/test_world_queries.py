@@ -144,7 +144,8 @@ def test_segment_distance_matches_dense_sampling(data, d):
     sampled = np.maximum(ob.sdf_batch(a + ts[:, None] * (b - a)), 0.0).min()
     exact = ob.segment_distance(tuple(a), tuple(b))
     spacing = np.linalg.norm(b - a) / (n - 1)
-    assert exact <= sampled + 1e-7
+    # rounding grows with the segment's length (hypothesis found 2.2e-7 on a 23 m segment)
+    assert exact <= sampled + 1e-7 * (1.0 + np.linalg.norm(b - a))
     assert sampled - exact <= spacing / 2 + 1e-6
 
 

@@ -1,0 +1,207 @@
+"""The companion's MAVLink gate: MAVSDK reaches the vehicle only through it.
+
+MAVSDK 4.x has no MAVLink 2 signing, and it takes any COMMAND_ACK or mission answer of the
+vehicle as its own, even one the vehicle addressed to another sender. The gate sits between
+the two on this machine (MAVSDK talks to it over loopback UDP) and does, per direction:
+
+- **inbound** (vehicle -> MAVSDK, ``InboundFilter``): parse; with a key, drop every frame not
+  correctly signed with it or whose timestamp does not move forward (``SignatureCheck``); drop
+  frames addressed to another system or component (MAVLink routing: a message with
+  ``target_system`` / ``target_component`` is for that system / component; 0 is broadcast);
+  pass the rest on unchanged. Every frame is counted by what happened to it.
+- **outbound** (MAVSDK -> vehicle, ``OutboundSigner``): with a key, re-pack each message signed
+  (same system, component and sequence); without one, pass the bytes on. MAVSDK's own system and
+  component ids are learned from its first HEARTBEAT, which tells the inbound side who "us" is.
+
+The transport to the vehicle (``companion.link.transport``) follows the MAVSDK URL the user gave.
+This module is pure: bytes in, bytes out; the thread and sockets are in ``GateThread``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from companion.errors import LinkError
+from mavlink_signing import (SignatureCheck, SigningKeyError, Verdict, load_key, signing_encoder,
+                             signing_timestamp_now)
+from mavlink_signing.keys import key_fingerprint
+
+log = logging.getLogger(__name__)
+
+#: Inbound outcomes counted besides the signature verdicts.
+PASSED, NOT_FOR_US, MALFORMED = "passed", "not_for_us", "malformed"
+
+
+@dataclasses.dataclass(frozen=True)
+class SigningKey:
+    """A signing key and where it came from (errors name the file, logs the fingerprint)."""
+
+    key: bytes
+    path: str
+
+    @classmethod
+    def from_file(cls, path) -> "SigningKey | None":
+        """Read a key file (``mavlink_signing.load_key``: 64 hex digits or a passphrase); None
+        for an empty path; a bad file is a ``LinkError`` naming it."""
+        if not path:
+            return None
+        try:
+            return cls(load_key(path), str(path))
+        except SigningKeyError as exc:
+            raise LinkError(f"--signing-key: {exc}") from None
+
+    def __str__(self) -> str:
+        return f"{self.path} (key id {key_fingerprint(self.key)})"
+
+
+def silence_reason(counts: dict[str, int], key: SigningKey | None) -> str:
+    """Why no autopilot was heard, from what the inbound filter dropped (one line)."""
+    if key is not None and counts.get(Verdict.BAD_SIGNATURE.value, 0):
+        return (f"{counts[Verdict.BAD_SIGNATURE.value]} frames came signed with another key than "
+                f"--signing-key {key}")
+    if key is not None and counts.get(Verdict.UNSIGNED.value, 0):
+        return (f"{counts[Verdict.UNSIGNED.value]} frames came unsigned although --signing-key "
+                f"{key} is given: is the vehicle started with that key?")
+    if counts.get(MALFORMED, 0) and not counts.get(PASSED, 0):
+        return f"{counts[MALFORMED]} frames arrived but none was MAVLink"
+    return "is the vehicle running and sending to this address?"
+
+
+@dataclasses.dataclass
+class Identity:
+    """MAVSDK's own MAVLink address (learned from its first HEARTBEAT)."""
+
+    system: int | None = None
+    component: int | None = None
+
+    def addressed_elsewhere(self, msg) -> bool:
+        """Is ``msg`` addressed to a system or component that is not us?"""
+        target_system = getattr(msg, "target_system", 0) or 0
+        target_component = getattr(msg, "target_component", 0) or 0
+        if target_system == 0:
+            return False
+        if self.system is None or target_system != self.system:
+            return True
+        return target_component not in (0, self.component)
+
+
+def new_parser() -> mavlink.MAVLink:
+    """A pymavlink parser that returns BAD_DATA for garbage instead of raising."""
+    parser = mavlink.MAVLink(None)
+    parser.robust_parsing = True
+    return parser
+
+
+class InboundFilter:
+    """Frames from the vehicle: which of them MAVSDK may see.
+
+    Parameters
+    ----------
+    identity : Identity
+        Who we are (shared with the outbound side, which learns it).
+    check : SignatureCheck or None
+        With a signing key: the signature and timestamp check.
+
+    Attributes
+    ----------
+    counts : dict of str to int
+        ``passed``, ``not_for_us``, ``malformed`` and, with a key, each refused ``Verdict`` value
+        (``unsigned``, ``bad_signature``, ``replayed``, ``stale``).
+    """
+
+    def __init__(self, identity: Identity, check: SignatureCheck | None = None) -> None:
+        self.identity = identity
+        self.check = check
+        self.parser = new_parser()
+        self.counts: dict[str, int] = {PASSED: 0, NOT_FOR_US: 0, MALFORMED: 0}
+        if check is not None:
+            self.counts.update({v.value: 0 for v in Verdict if v is not Verdict.ACCEPTED})
+
+    def filter(self, data: bytes) -> list[bytes]:
+        """The complete frames of ``data`` (a datagram, or a piece of a byte stream: partial
+        frames wait for the next call) that MAVSDK may see, in order."""
+        try:
+            messages = self.parser.parse_buffer(bytes(data)) or []
+        except Exception:  # pymavlink raises odd errors on some garbage: drop, never stop
+            self.parser = new_parser()
+            self._count(MALFORMED)
+            return []
+        return [bytes(msg.get_msgbuf()) for msg in messages if self._admits(msg)]
+
+    def _admits(self, msg) -> bool:
+        if msg.get_type() == "BAD_DATA" or isinstance(msg, mavlink.MAVLink_unknown):
+            return self._count(MALFORMED)
+        if self.check is not None:
+            verdict = self.check.check(msg.get_msgbuf(), msg.get_msgId(), msg.get_srcSystem(),
+                                       msg.get_srcComponent())
+            if verdict is not Verdict.ACCEPTED:
+                return self._count(verdict.value)
+        if self.identity.addressed_elsewhere(msg):
+            return self._count(NOT_FOR_US)
+        self.counts[PASSED] += 1
+        return True
+
+    def _count(self, outcome: str) -> bool:
+        """Count a dropped frame; log the first of each kind, then every 1000th."""
+        n = self.counts[outcome] = self.counts[outcome] + 1
+        if outcome != NOT_FOR_US and (n == 1 or n % 1000 == 0):
+            log.warning("dropping frames from the vehicle link: %s (%d so far)", outcome, n)
+        return False
+
+
+class OutboundSigner:
+    """Frames from MAVSDK to the vehicle: learn who we are; sign them with a key.
+
+    Parameters
+    ----------
+    identity : Identity
+        Filled in from MAVSDK's first HEARTBEAT.
+    key : bytes or None
+        The 32-byte signing key (None: frames pass unchanged).
+    link_id : int
+        The signing link id of this link.
+    """
+
+    def __init__(self, identity: Identity, key: bytes | None = None, link_id: int = 0) -> None:
+        self.identity = identity
+        self.parser = new_parser()
+        self.encoder = None if key is None else signing_encoder(key, link_id, 0, 0)
+        self.unsignable = 0
+
+    def convert(self, data: bytes) -> list[bytes]:
+        """The frames to send to the vehicle for the bytes MAVSDK sent."""
+        try:
+            messages = self.parser.parse_buffer(bytes(data)) or []
+        except Exception:
+            self.parser = new_parser()
+            messages = []
+        known = [m for m in messages if m.get_type() != "BAD_DATA"]
+        for msg in known:
+            self._learn_identity(msg)
+        if self.encoder is None:
+            return [bytes(data)] if known else []
+        return [frame for frame in map(self._signed, known) if frame is not None]
+
+    def _learn_identity(self, msg) -> None:
+        if self.identity.system is None and msg.get_type() == "HEARTBEAT":
+            self.identity.component = msg.get_srcComponent()
+            self.identity.system = msg.get_srcSystem()
+            log.debug("MAVSDK speaks as system %d component %d", self.identity.system,
+                      self.identity.component)
+
+    def _signed(self, msg) -> bytes | None:
+        if isinstance(msg, mavlink.MAVLink_unknown):
+            self.unsignable += 1
+            if self.unsignable <= 10:
+                log.warning("cannot sign message id %d from MAVSDK (not in the dialect): dropped",
+                            msg.get_msgId())
+            return None
+        enc = self.encoder
+        enc.srcSystem, enc.srcComponent, enc.seq = msg.get_srcSystem(), msg.get_srcComponent(), msg.get_seq()
+        # pymavlink adds one tick (10 us) per frame: keep up with the wall clock, so a receiver
+        # that meets this link later never finds it a minute behind (stale)
+        enc.signing.timestamp = max(enc.signing.timestamp, signing_timestamp_now())
+        return bytes(msg.pack(enc))

@@ -1,0 +1,197 @@
+"""The gate's two sockets and its thread: the vehicle side as the user's URL says, MAVSDK's side
+on loopback UDP.
+
+Vehicle side, by MAVSDK URL:
+
+- ``udpin://HOST:PORT`` (and ``udp://``): listen; answer the address of the last frame the
+  inbound filter *accepted* (junk or unsigned frames from elsewhere never redirect the link);
+- ``udpout://HOST:PORT``: send to that address, receive its answers;
+- ``tcpout://HOST:PORT`` (and ``tcp://``), ``tcpin://``, ``serial://DEVICE[:BAUD]``: through
+  pymavlink's ``mavutil`` as a byte stream.
+
+``GateThread`` moves bytes between the two with ``select`` on one thread (a few tens of
+microseconds per frame), so the asyncio loop that streams setpoints never parses MAVLink.
+"""
+
+from __future__ import annotations
+
+import logging
+import select
+import socket
+import threading
+
+from companion.errors import LinkError
+from companion.link.gate import Identity, InboundFilter, OutboundSigner, SigningKey
+from mavlink_signing import SignatureCheck
+
+log = logging.getLogger(__name__)
+
+MAX_DATAGRAM = 65535
+
+
+def split_url(url: str) -> tuple[str, str, int]:
+    """``(scheme, host_or_device, port_or_baud)`` of a MAVSDK URL (checked by ``check_url``)."""
+    scheme, _, rest = url.partition("://")
+    if scheme == "serial":
+        device, _, baud = rest.rpartition(":") if rest.count(":") else (rest, "", "57600")
+        return scheme, device, int(baud or 57600)
+    host, _, port = rest.rpartition(":")
+    if not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise LinkError(f"cannot open {url}: the port must be a number from 1 to 65535")
+    return scheme, host or "0.0.0.0", int(port)
+
+
+class UdpVehicleSide:
+    """The vehicle's UDP side: ``udpin`` listens, ``udpout`` sends to a fixed address."""
+
+    def __init__(self, scheme: str, host: str, port: int) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.peer: tuple[str, int] | None = None
+        self.last_from: tuple[str, int] | None = None
+        try:
+            if scheme in ("udpin", "udp"):
+                self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                self.sock.bind((host, port))
+            else:
+                self.peer = (host, port)
+        except OSError as exc:
+            self.sock.close()
+            raise LinkError(f"cannot open {scheme}://{host}:{port}: {exc}") from None
+        self.fixed_peer = self.peer is not None
+        self.sock.setblocking(False)
+
+    def fileno(self) -> int:
+        return self.sock.fileno()
+
+    def read(self) -> bytes:
+        data, self.last_from = self.sock.recvfrom(MAX_DATAGRAM)
+        return data
+
+    def accepted_from_last(self) -> None:
+        """The last datagram held an accepted frame: answer its sender from now on."""
+        if not self.fixed_peer:
+            self.peer = self.last_from
+
+    def write(self, data: bytes) -> None:
+        if self.peer is not None:
+            try:
+                self.sock.sendto(data, self.peer)
+            except OSError as exc:      # e.g. ICMP unreachable while the vehicle restarts
+                log.debug("send to the vehicle failed: %s", exc)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class StreamVehicleSide:
+    """TCP or serial to the vehicle through ``mavutil`` (a byte stream)."""
+
+    def __init__(self, scheme: str, host: str, port: int) -> None:
+        from pymavlink import mavutil
+
+        device = {"tcpout": f"tcp:{host}:{port}", "tcp": f"tcp:{host}:{port}",
+                  "tcpin": f"tcpin:{host}:{port}"}.get(scheme, host)
+        try:
+            self.conn = mavutil.mavlink_connection(device, baud=port if scheme == "serial" else 57600,
+                                                   autoreconnect=True)
+        except Exception as exc:
+            raise LinkError(f"cannot open {scheme}://{host}:{port}: {exc}") from None
+
+    def fileno(self) -> int:
+        return self.conn.fd if getattr(self.conn, "fd", None) is not None else self.conn.port.fileno()
+
+    def read(self) -> bytes:
+        return bytes(self.conn.recv(MAX_DATAGRAM) or b"")
+
+    def accepted_from_last(self) -> None:
+        pass
+
+    def write(self, data: bytes) -> None:
+        try:
+            self.conn.write(data)
+        except OSError as exc:
+            log.debug("send to the vehicle failed: %s", exc)
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+def open_vehicle_side(url: str):
+    scheme, host, port = split_url(url)
+    if scheme in ("udpin", "udp", "udpout"):
+        return UdpVehicleSide(scheme, host, port)
+    return StreamVehicleSide(scheme, host, port)
+
+
+class GateThread:
+    """Runs the gate: ``mavsdk_url`` is what MAVSDK connects to (``udpout://127.0.0.1:PORT``).
+
+    Parameters
+    ----------
+    url : str
+        The vehicle's MAVSDK URL.
+    inbound : InboundFilter
+    outbound : OutboundSigner
+    """
+
+    def __init__(self, url: str, inbound: InboundFilter, outbound: OutboundSigner) -> None:
+        self.inbound, self.outbound = inbound, outbound
+        self.vehicle = open_vehicle_side(url)
+        self.local = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.local.bind(("127.0.0.1", 0))
+        self.local.setblocking(False)
+        self.mavsdk_address: tuple[str, int] | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="mavlink-gate", daemon=True)
+
+    @property
+    def mavsdk_url(self) -> str:
+        return f"udpout://127.0.0.1:{self.local.getsockname()[1]}"
+
+    def start(self) -> "GateThread":
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self.vehicle.close()
+        self.local.close()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([self.vehicle, self.local], [], [], 0.2)
+            except (OSError, ValueError):
+                return                              # closed under us
+            for side in ready:
+                try:
+                    self._from_vehicle() if side is self.vehicle else self._from_mavsdk()
+                except (BlockingIOError, InterruptedError):
+                    continue
+                except OSError as exc:
+                    log.debug("gate: %s", exc)
+                except Exception:                    # never let the gate die silently
+                    log.exception("gate: unexpected error (the link goes on)")
+
+    def _from_vehicle(self) -> None:
+        frames = self.inbound.filter(self.vehicle.read())
+        if not frames:
+            return
+        self.vehicle.accepted_from_last()
+        if self.mavsdk_address is not None:
+            for frame in frames:
+                self.local.sendto(frame, self.mavsdk_address)
+
+    def _from_mavsdk(self) -> None:
+        data, self.mavsdk_address = self.local.recvfrom(MAX_DATAGRAM)
+        for frame in self.outbound.convert(data):
+            self.vehicle.write(frame)
+
+
+def open_gate(url: str, key: SigningKey | None = None, link_id: int = 0) -> GateThread:
+    """Open the vehicle side of ``url`` and start the gate (signing with ``key`` if given)."""
+    identity = Identity()
+    check = None if key is None else SignatureCheck(key.key)
+    outbound = OutboundSigner(identity, None if key is None else key.key, link_id)
+    return GateThread(url, InboundFilter(identity, check), outbound).start()

@@ -1,0 +1,135 @@
+"""``companion keys init``: the certificates and zenoh configurations of a small deployment.
+
+Layout of the directory (every path inside the configurations is absolute)::
+
+    ca.key  ca.pem                 the CA (keep ca.key offline once the identities are issued)
+    <companion>.key .pem .json5    the companion: listens on tls/ with mutual TLS and the ACL
+    <source>.key .pem .json5       each threat source: connects with its certificate; may put
+                                   and delete uav/<sysid>/threats/<source>/<id> only
+    <observer>.key .pem .json5     each observer: may read status, events and path only
+
+Private keys are written with mode 0600.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from companion.security import keys
+from companion.threats import access
+
+__all__ = ["Deployment", "init_deployment"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Deployment:
+    """What ``init_deployment`` wrote (paths), by identity name."""
+
+    directory: Path
+    ca_cert: Path
+    ca_key: Path
+    companion: str
+    sources: list
+    observers: list
+    certs: dict = field(default_factory=dict)
+    keys: dict = field(default_factory=dict)
+    configs: dict = field(default_factory=dict)
+
+
+def _hosts_of(endpoints) -> list:
+    out = []
+    for ep in endpoints:
+        m = re.match(r"^tls/\[?([^\]]+?)\]?:\d+$", ep)
+        if m and m.group(1) not in ("0.0.0.0", "::"):
+            out.append(m.group(1))
+    return out
+
+
+def init_deployment(directory, *, sysid: int = 1, companion: str = "companion", sources=("source1",),
+                    observers=(), listen=("tls/0.0.0.0:7447",), connect=("tls/localhost:7447",),
+                    hosts=(), days: int = keys.DEFAULT_DAYS, force: bool = False) -> Deployment:
+    """Create the CA, the identities and their zenoh configurations in ``directory``.
+
+    Parameters
+    ----------
+    directory : str or Path
+        Created if needed; an existing non-empty directory is refused unless ``force``.
+    sysid : int
+        Vehicle system id of the keys in the ACL (``uav/<sysid>/...``).
+    companion : str
+        Common name of the companion.
+    sources, observers : sequence of str
+        Common names of the threat sources (at least one) and of the read-only observers.
+    listen : sequence of str
+        The companion's ``tls/`` endpoints.
+    connect : sequence of str
+        The endpoints the sources and observers connect to (the companion's address as they
+        reach it; its host names are put in the companion's certificate).
+    hosts : sequence of str
+        More host names or IP addresses for the companion's certificate.
+    days : int
+        Validity of the identities (days).
+    force : bool
+        Overwrite the files of an existing deployment.
+
+    Raises
+    ------
+    companion.security.keys.KeyMaterialError
+        A bad or repeated name, a non-empty directory without ``force``, a file that cannot be
+        written.
+    """
+    if isinstance(sysid, bool) or not isinstance(sysid, int) or not 1 <= sysid <= 255:
+        raise keys.KeyMaterialError(f"--sysid: must be an integer in 1..255, got {sysid!r}")
+    if not isinstance(days, int) or days < 1:
+        raise keys.KeyMaterialError(f"--days: must be a positive integer, got {days!r}")
+    sources, observers = list(sources), list(observers)
+    if not sources:
+        raise keys.KeyMaterialError("--source: give at least one threat source name")
+    keys.check_name(companion, "--companion")
+    for s in sources:
+        keys.check_name(s, "--source")
+    for o in observers:
+        keys.check_name(o, "--observer")
+    names = [companion, *sources, *observers]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise keys.KeyMaterialError(f"names must be distinct: {', '.join(repeated)} given more than once")
+    d = Path(directory)
+    if d.exists() and not d.is_dir():
+        raise keys.KeyMaterialError(f"{d}: exists and is not a directory")
+    if d.is_dir() and any(d.iterdir()) and not force:
+        raise keys.KeyMaterialError(f"{d}: directory is not empty (it may hold a deployment's keys); "
+                                    f"use --force to overwrite, or choose another directory")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise keys.KeyMaterialError(f"{d}: cannot create the directory: {exc.strerror or exc}") from None
+    d = d.resolve()
+    # the names sources may reach the companion by: loopback, the --connect hosts, specific --listen hosts
+    companion_hosts = list(dict.fromkeys(["localhost", "127.0.0.1", *_hosts_of(connect), *_hosts_of(listen),
+                                          *hosts]))
+    try:
+        ca = keys.create_ca(f"{companion}-ca")
+        out = Deployment(d, keys.write_certificate(ca, d / "ca.pem"), keys.write_private_key(ca, d / "ca.key"),
+                         companion, sources, observers)
+        for name in names:
+            ident = keys.issue_identity(ca, name, hosts=companion_hosts if name == companion else (), days=days)
+            out.keys[name] = keys.write_private_key(ident, d / f"{name}.key")
+            out.certs[name] = keys.write_certificate(ident, d / f"{name}.pem")
+        common = {"ca_cert": out.ca_cert}
+        cfg = access.companion_config(**common, key=out.keys[companion], cert=out.certs[companion],
+                                      listen=listen, sysid=sysid, sources=sources, observers=observers)
+        out.configs[companion] = access.write_config(cfg, d / f"{companion}.json5")
+        for name in [*sources, *observers]:
+            cfg = access.peer_config(**common, key=out.keys[name], cert=out.certs[name], connect=connect)
+            out.configs[name] = access.write_config(cfg, d / f"{name}.json5")
+    except OSError as exc:
+        raise keys.KeyMaterialError(f"{getattr(exc, 'filename', None) or d}: cannot write: "
+                                    f"{exc.strerror or exc}") from None
+    log.info("deployment in %s: companion %s, sources %s, observers %s", d, companion, sources, observers)
+    return out

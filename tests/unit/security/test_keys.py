@@ -1,0 +1,145 @@
+"""``companion keys init``: CA, identities, zenoh configurations (companion.security, threats.access)."""
+
+from __future__ import annotations
+
+import ipaddress
+import json
+import stat
+
+import pytest
+
+from companion.cli import main
+from companion.security import keys
+from companion.security.deployment import init_deployment
+
+
+@pytest.fixture(scope="module")
+def deployment(tmp_path_factory):
+    d = tmp_path_factory.mktemp("deploy")
+    return init_deployment(d, sysid=3, sources=["radar1", "radar2"], observers=["gcs"],
+                           listen=["tls/0.0.0.0:7447"], connect=["tls/10.1.2.3:7447"], hosts=["heli.local"])
+
+
+def _load_json5(path):
+    text = path.read_text()
+    assert text.startswith("//")
+    return json.loads(text.split("\n", 1)[1])
+
+
+def test_every_identity_has_a_private_key_readable_by_the_owner_only(deployment):
+    for path in [deployment.ca_key, *deployment.keys.values()]:
+        assert stat.S_IMODE(path.stat().st_mode) == 0o600, path
+        assert path.read_text().startswith("-----BEGIN PRIVATE KEY-----")
+    assert set(deployment.keys) == {"companion", "radar1", "radar2", "gcs"}
+
+
+def test_certificates_verify_against_the_ca_and_carry_their_names(deployment):
+    ca = keys.load_certificate(deployment.ca_cert)
+    for name, path in deployment.certs.items():
+        cert = keys.load_certificate(path)
+        keys.verify_signed_by(cert, ca)
+        assert keys.common_name(cert) == name
+
+
+def test_a_certificate_of_another_ca_does_not_verify(deployment):
+    stranger = keys.issue_identity(keys.create_ca("other-ca"), "radar1")
+    with pytest.raises(keys.KeyMaterialError, match="not by the CA"):
+        keys.verify_signed_by(stranger.cert, keys.load_certificate(deployment.ca_cert))
+    ca = keys.create_ca("companion-ca")          # same name, other key: the signature fails
+    forged = keys.issue_identity(ca, "radar1")
+    with pytest.raises(keys.KeyMaterialError, match="signature"):
+        keys.verify_signed_by(forged.cert, keys.load_certificate(deployment.ca_cert))
+
+
+def test_the_companion_certificate_names_the_hosts_sources_connect_to(deployment):
+    from cryptography import x509
+
+    cert = keys.load_certificate(deployment.certs["companion"])
+    san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert {"companion", "localhost", "heli.local"} <= set(san.get_values_for_type(x509.DNSName))
+    assert {ipaddress.ip_address("127.0.0.1"), ipaddress.ip_address("10.1.2.3")} <= set(
+        san.get_values_for_type(x509.IPAddress))
+    assert "0.0.0.0" not in str(san)
+
+
+def test_configs_load_in_zenoh_and_name_the_files_written(deployment):
+    import zenoh
+
+    for name, path in deployment.configs.items():
+        zenoh.Config.from_file(str(path))
+        cfg = _load_json5(path)
+        tls = cfg["transport"]["link"]["tls"]
+        assert tls["enable_mtls"] is True and tls["root_ca_certificate"] == str(deployment.ca_cert)
+        assert tls["connect_certificate"] == str(deployment.certs[name])
+        assert tls["connect_private_key"] == str(deployment.keys[name])
+        assert cfg["scouting"]["multicast"]["enabled"] is False
+    comp = _load_json5(deployment.configs["companion"])
+    assert comp["listen"]["endpoints"] == ["tls/0.0.0.0:7447"]
+    assert comp["transport"]["link"]["tls"]["listen_certificate"] == str(deployment.certs["companion"])
+    src = _load_json5(deployment.configs["radar1"])
+    assert src["connect"]["endpoints"] == ["tls/10.1.2.3:7447"] and src["listen"]["endpoints"] == []
+    assert "access_control" not in src and "listen_private_key" not in src["transport"]["link"]["tls"]
+
+
+def test_the_acl_binds_each_source_to_its_own_key_space(deployment):
+    acl = _load_json5(deployment.configs["companion"])["access_control"]
+    assert acl["enabled"] is True and acl["default_permission"] == "deny"
+    rules = {r["id"]: r for r in acl["rules"]}
+    subjects = {s["id"]: s for s in acl["subjects"]}
+    assert all(r["permission"] == "allow" for r in rules.values())
+    for policy in acl["policies"]:
+        assert set(policy["rules"]) <= set(rules) and set(policy["subjects"]) <= set(subjects)
+    # who may put/delete where: only <name> on uav/3/threats/<name>/*
+    puts = {}
+    for policy in acl["policies"]:
+        for rid in policy["rules"]:
+            if "put" in rules[rid]["messages"] and "ingress" in rules[rid]["flows"]:
+                for sid in policy["subjects"]:
+                    for cn in subjects[sid]["cert_common_names"]:
+                        puts.setdefault(cn, []).extend(rules[rid]["key_exprs"])
+    assert puts == {"radar1": ["uav/3/threats/radar1/*"], "radar2": ["uav/3/threats/radar2/*"]}
+    assert set(subjects["readers"]["cert_common_names"]) == {"radar1", "radar2", "gcs"}
+    assert "gcs" not in subjects["sources"]["cert_common_names"]
+    assert rules["telemetry-out"]["key_exprs"] == ["uav/3/status", "uav/3/events", "uav/3/path"]
+    assert rules["telemetry-out"]["flows"] == ["egress"]
+
+
+def test_a_non_empty_directory_is_refused_unless_forced(tmp_path):
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(keys.KeyMaterialError, match="not empty.*--force"):
+        init_deployment(tmp_path)
+    dep = init_deployment(tmp_path, force=True)
+    assert dep.sources == ["source1"] and (tmp_path / "source1.json5").is_file()
+    first = (tmp_path / "ca.pem").read_text()
+    init_deployment(tmp_path, force=True)
+    assert (tmp_path / "ca.pem").read_text() != first      # a new CA
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"sources": ["radar 1"]}, "--source"),
+    ({"sources": ["local"]}, "reserved"),
+    ({"sources": []}, "at least one"),
+    ({"sources": ["a"], "observers": ["a"]}, "distinct"),
+    ({"companion": "radar1", "sources": ["radar1"]}, "distinct"),
+    ({"sysid": 0}, "--sysid"),
+    ({"listen": ["tcp/0.0.0.0:7447"]}, "listen\\[0\\]: expected a tls/"),
+])
+def test_bad_arguments_name_what_is_wrong(tmp_path, kwargs, message):
+    with pytest.raises(Exception, match=message):
+        init_deployment(tmp_path / "d", **kwargs)
+
+
+def test_keys_init_command_writes_and_refuses_an_existing_deployment(tmp_path, capsys):
+    d = tmp_path / "deploy"
+    assert main(["keys", "init", str(d), "--source", "radar1", "--observer", "gcs"]) == 0
+    out = capsys.readouterr().out
+    assert "source    radar1" in out and "observer  gcs" in out and "--zenoh-config" in out
+    assert main(["keys", "init", str(d)]) == 2
+    assert "not empty" in capsys.readouterr().err
+
+
+def test_a_file_path_is_refused(tmp_path):
+    f = tmp_path / "file"
+    f.write_text("")
+    with pytest.raises(keys.KeyMaterialError, match="not a directory"):
+        init_deployment(f)
