@@ -1,8 +1,8 @@
 """Property-based fuzz of the companion's MAVLink input: the telemetry watchers of ``VehicleLink``.
 
-``companion.link.gate.InboundFilter`` (the gate between MAVSDK and the vehicle) does not exist
-yet; until it does, the companion's own parsing of what MAVSDK hands it is fuzzed: each watcher
-of :class:`~companion.link.vehicle.VehicleLink` (HEARTBEAT, LOCAL_POSITION_NED,
+What passes the gate (``companion.link.gate``, fuzzed in ``test_gate_input.py``) reaches the
+companion through MAVSDK; this fuzzes the companion's own parsing of what MAVSDK hands it: each
+watcher of :class:`~companion.link.vehicle.VehicleLink` (HEARTBEAT, LOCAL_POSITION_NED,
 EXTENDED_SYS_STATE, GPS_GLOBAL_ORIGIN, HOME_POSITION, STATUSTEXT, SYS_STATUS, RPM from
 MavlinkDirect as JSON field dicts; attitude, armed and position from MAVSDK's telemetry
 plugin) runs on its own event loop, fed by a stand-in subscription with hypothesis field dicts:
