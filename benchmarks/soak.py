@@ -5,7 +5,8 @@ Separate ``sim-vehicle`` and ``companion run`` processes fly ``mission_files/exc
 the injection fits in the flight). Once the first leg is flown, this process
 
 - sends ``--frames`` MAVLink datagrams from its own UDP socket, paced at ``--rate`` per second,
-  three quarters to the vehicle's port and one quarter to the companion's MAVSDK port: random
+  three quarters to the vehicle's port and one quarter to the companion's MAVLink port (its gate,
+  in front of MAVSDK): random
   bytes, valid frames with a broken CRC, truncated frames, unknown message ids, and valid frames
   from a foreign system id (77) that must all be refused: SET_POSITION_TARGET_LOCAL_NED with NaN
   (yaw NaN too) or infinite fields, COMMAND_LONG with NaN or out-of-range parameters
@@ -461,7 +462,7 @@ def table(r: dict) -> str:
     drops = r["kernel_drops"]
     return "\n".join([
         f"{f['to_vehicle'] + f['to_companion']} bad MAVLink frames ({f['to_vehicle']} to the vehicle, "
-        f"{f['to_companion']} to the companion's MAVSDK port) in {f['seconds']:g} s and {p['sent']} threat payloads "
+        f"{f['to_companion']} to the companion's MAVLink port) in {f['seconds']:g} s and {p['sent']} threat payloads "
         f"over zenoh in {p['seconds']:g} s, during one flight of `exclusion_zones.plan` (real `sim-vehicle` and "
         f"`companion run` processes, SITL at {r['speedup']:g}x, no MAVLink signing, so no MISSION_CLEAR_ALL: unsigned, "
         "a vehicle obeys it from anyone). Goals: nothing lost, every bad frame counted and refused, the flight "
