@@ -34,6 +34,7 @@ BENCHMARKS = {
     "threats": [],
     "threats_sitl": [],
     "threat_storm": [],
+    "soak": [],
 }
 
 

@@ -15,7 +15,8 @@ key chunk), ``kind`` (``popup``: static, its velocity must be zero; ``moving``),
 zero, each component at most 300 m/s) and ``ttl_s`` (0 < ttl <= 1e6, or null or absent: until
 deleted) are optional. Unknown or duplicate fields, wrong types, NaN/inf, a payload over 4096
 bytes or not UTF-8 JSON are rejected with a ``ThreatPayloadError`` whose message starts with
-the field at fault (and whose ``field`` attribute names it).
+the field at fault (and whose ``field`` attribute names it; an unknown or duplicate field whose
+name is not plain ``A-Z a-z 0-9 _`` is named quoted as JSON, e.g. ``""`` for an empty name).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ MAX_SPEED_M_S = 300.0
 MAX_TTL_S = 1e6
 MAX_LOCAL_M = 1e6
 ID_PATTERN = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9_]{1,64}$")
 REQUIRED = ("v", "id", "kind", "frame", "position", "radius_m")
 OPTIONAL = ("velocity_ned_m_s", "ttl_s")
 GLOBAL_KEYS = ("lat", "lon", "alt_m")
@@ -67,6 +69,12 @@ def _type_name(value) -> str:
             list: "a list", dict: "an object"}.get(type(value), type(value).__name__)
 
 
+def _key_name(key: str) -> str:
+    """How an unknown or duplicate field is named: as it is if it is a plain name, else quoted
+    as JSON (at most 64 characters), so that an empty or odd name is still visible."""
+    return key if NAME_PATTERN.match(key) else json.dumps(key[:64])
+
+
 def _number(value, field: str) -> float:
     if isinstance(value, _NonFinite):
         raise payload_error(field, f"must be a finite number, got {value.text}")
@@ -96,7 +104,7 @@ def _global_position(value) -> tuple:
                             f"frame 'global', got {_type_name(value)}")
     for key in value:
         if key not in GLOBAL_KEYS:
-            raise payload_error(f"position.{key}", "unknown field (expected lat, lon, alt_m)")
+            raise payload_error(f"position.{_key_name(key)}", "unknown field (expected lat, lon, alt_m)")
     for key in GLOBAL_KEYS:
         if key not in value:
             raise payload_error(f"position.{key}", "missing")
@@ -116,7 +124,7 @@ def _pairs_hook(pairs: list) -> dict:
     out: dict = {}
     for key, value in pairs:
         if key in out:
-            raise payload_error(key, "duplicate field")
+            raise payload_error(_key_name(key), "duplicate field")
         out[key] = value
     return out
 
@@ -172,7 +180,7 @@ def decode(payload, *, received_t_s: float | None = None, key_id: str | None = N
     data = _parse_json(payload)
     for key in data:
         if key not in REQUIRED and key not in OPTIONAL:
-            raise payload_error(key, f"unknown field (known: {', '.join(REQUIRED + OPTIONAL)})")
+            raise payload_error(_key_name(key), f"unknown field (known: {', '.join(REQUIRED + OPTIONAL)})")
     for key in REQUIRED:
         if key not in data:
             raise payload_error(key, "missing")
