@@ -107,6 +107,10 @@ class _UploadPeer:
     requested_seq: int = 0
 
 
+#: Kernel receive buffer of the vehicle's socket (the kernel may cap it at net.core.rmem_max).
+RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
+
+
 class MavlinkServer:
     """The vehicle's MAVLink endpoint and main loop.
 
@@ -171,6 +175,8 @@ class MavlinkServer:
         self._tlog = open(tlog_path, "ab") if tlog_path else None
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 0)
+        # a flood (or a burst while the physics steps) must not overflow the kernel's buffer
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
         self.sock.bind((settings.link.bind_host, int(port)))
         self.sock.setblocking(False)
         self.port = self.sock.getsockname()[1]

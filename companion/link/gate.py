@@ -104,6 +104,10 @@ class InboundFilter:
         Who we are (shared with the outbound side, which learns it).
     check : SignatureCheck or None
         With a signing key: the signature and timestamp check.
+    stream : bool
+        The vehicle link is a byte stream (TCP, serial): a frame may span two reads, so the
+        parser keeps what is left. A datagram link parses each datagram on its own, so a
+        truncated datagram can never swallow the start of the next.
 
     Attributes
     ----------
@@ -112,23 +116,34 @@ class InboundFilter:
         (``unsigned``, ``bad_signature``, ``replayed``, ``stale``).
     """
 
-    def __init__(self, identity: Identity, check: SignatureCheck | None = None) -> None:
+    def __init__(self, identity: Identity, check: SignatureCheck | None = None,
+                 stream: bool = False) -> None:
         self.identity = identity
         self.check = check
+        self.stream = stream
         self.parser = new_parser()
+        self.autopilot_heard = False
         self.counts: dict[str, int] = {PASSED: 0, NOT_FOR_US: 0, MALFORMED: 0}
         if check is not None:
             self.counts.update({v.value: 0 for v in Verdict if v is not Verdict.ACCEPTED})
 
     def filter(self, data: bytes) -> list[bytes]:
         """The complete frames of ``data`` (a datagram, or a piece of a byte stream: partial
-        frames wait for the next call) that MAVSDK may see, in order."""
+        frames wait for the next call) that MAVSDK may see, in order.
+
+        ``autopilot_heard`` tells whether an accepted frame of ``data`` was an autopilot's
+        HEARTBEAT (the gate answers only such a sender on a listening link)."""
+        self.autopilot_heard = False
+        if not self.stream:
+            self.parser = new_parser()
         try:
             messages = self.parser.parse_buffer(bytes(data)) or []
         except Exception:  # pymavlink raises odd errors on some garbage: drop, never stop
             self.parser = new_parser()
             self._count(MALFORMED)
             return []
+        if not self.stream and self.parser.buf_len() > 0:
+            self._count(MALFORMED)                # a datagram that ends inside a frame
         return [bytes(msg.get_msgbuf()) for msg in messages if self._admits(msg)]
 
     def _admits(self, msg) -> bool:
@@ -142,6 +157,8 @@ class InboundFilter:
         if self.identity.addressed_elsewhere(msg):
             return self._count(NOT_FOR_US)
         self.counts[PASSED] += 1
+        self.autopilot_heard |= (msg.get_type() == "HEARTBEAT"
+                                 and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID)
         return True
 
     def _count(self, outcome: str) -> bool:
@@ -167,16 +184,14 @@ class OutboundSigner:
 
     def __init__(self, identity: Identity, key: bytes | None = None, link_id: int = 0) -> None:
         self.identity = identity
-        self.parser = new_parser()
         self.encoder = None if key is None else signing_encoder(key, link_id, 0, 0)
         self.unsignable = 0
 
     def convert(self, data: bytes) -> list[bytes]:
-        """The frames to send to the vehicle for the bytes MAVSDK sent."""
+        """The frames to send to the vehicle for the datagram MAVSDK sent."""
         try:
-            messages = self.parser.parse_buffer(bytes(data)) or []
+            messages = new_parser().parse_buffer(bytes(data)) or []
         except Exception:
-            self.parser = new_parser()
             messages = []
         known = [m for m in messages if m.get_type() != "BAD_DATA"]
         for msg in known:

@@ -3,8 +3,9 @@ on loopback UDP.
 
 Vehicle side, by MAVSDK URL:
 
-- ``udpin://HOST:PORT`` (and ``udp://``): listen; answer the address of the last frame the
-  inbound filter *accepted* (junk or unsigned frames from elsewhere never redirect the link);
+- ``udpin://HOST:PORT`` (and ``udp://``): listen; answer the address of the last autopilot
+  HEARTBEAT the inbound filter *accepted* (junk, unsigned frames or a ground station's
+  heartbeat from elsewhere never redirect the link);
 - ``udpout://HOST:PORT``: send to that address, receive its answers;
 - ``tcpout://HOST:PORT`` (and ``tcp://``), ``tcpin://``, ``serial://DEVICE[:BAUD]``: through
   pymavlink's ``mavutil`` as a byte stream.
@@ -176,9 +177,8 @@ class GateThread:
 
     def _from_vehicle(self) -> None:
         frames = self.inbound.filter(self.vehicle.read())
-        if not frames:
-            return
-        self.vehicle.accepted_from_last()
+        if self.inbound.autopilot_heard:
+            self.vehicle.accepted_from_last()
         if self.mavsdk_address is not None:
             for frame in frames:
                 self.local.sendto(frame, self.mavsdk_address)
@@ -194,4 +194,6 @@ def open_gate(url: str, key: SigningKey | None = None, link_id: int = 0) -> Gate
     identity = Identity()
     check = None if key is None else SignatureCheck(key.key)
     outbound = OutboundSigner(identity, None if key is None else key.key, link_id)
-    return GateThread(url, InboundFilter(identity, check), outbound).start()
+    gate = GateThread(url, InboundFilter(identity, check), outbound)
+    gate.inbound.stream = not isinstance(gate.vehicle, UdpVehicleSide)
+    return gate.start()

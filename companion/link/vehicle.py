@@ -156,6 +156,17 @@ def setpoint_fields(time_boot_ms: int, target_system: int, target_component: int
     return fields
 
 
+def finite_fields(fields, *names: str) -> list[float] | None:
+    """The named fields of a message (a MavlinkDirect dict or a MAVSDK struct) as floats, or
+    None when one is missing, null or not finite: such a message is dropped, never applied."""
+    get = fields.get if isinstance(fields, dict) else lambda name: getattr(fields, name, None)
+    try:
+        values = [float(get(name)) for name in names]
+    except (TypeError, ValueError):
+        return None
+    return values if all(map(math.isfinite, values)) else None
+
+
 def check_url(url: str) -> str:
     """Raise ``LinkError`` naming ``url`` unless it is a MAVSDK connection URL."""
     if not isinstance(url, str) or not url.startswith(URL_SCHEMES):
@@ -569,10 +580,13 @@ class VehicleLink:
                     self.target_component:
                 return
             self._state.heartbeat_t = time.monotonic()
-            if int(fields.get("base_mode", 0)) & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                self._state.values["mode"] = int(fields.get("custom_mode", 0))
-            self._state.values["armed"] = bool(int(fields.get("base_mode", 0))
-                                               & MAV_MODE_FLAG_SAFETY_ARMED)
+            values = finite_fields(fields, "base_mode", "custom_mode")
+            if values is None:
+                return
+            base_mode, custom_mode = map(int, values)
+            if base_mode & MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+                self._state.values["mode"] = custom_mode
+            self._state.values["armed"] = bool(base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
         await self._guarded("HEARTBEAT", lambda: self.messages("HEARTBEAT"), apply)
 
     async def _watch_link(self) -> None:
@@ -598,13 +612,12 @@ class VehicleLink:
 
     async def _watch_local_position(self) -> None:
         def apply(fields: dict) -> None:
-            if not self._from_vehicle(fields):
+            values = finite_fields(fields, "x", "y", "z", "vx", "vy", "vz", "time_boot_ms")
+            if not self._from_vehicle(fields) or values is None:
                 return
-            self._state.pos_origin = np.array([fields.get("x", 0.0), fields.get("y", 0.0),
-                                               fields.get("z", 0.0)], dtype=float)
-            self._state.values["vel_ned_m_s"] = np.array(
-                [fields.get("vx", 0.0), fields.get("vy", 0.0), fields.get("vz", 0.0)], dtype=float)
-            boot_s = fields.get("time_boot_ms", 0) / 1000.0
+            self._state.pos_origin = np.array(values[:3])
+            self._state.values["vel_ned_m_s"] = np.array(values[3:6])
+            boot_s = values[6] / 1000.0
             self._state.values["boot_s"] = boot_s
             self._state.position_t = time.monotonic()
             self._note("LOCAL_POSITION_NED", boot_s)
@@ -612,8 +625,10 @@ class VehicleLink:
 
     async def _watch_attitude(self) -> None:
         def apply(att) -> None:
-            self._state.values["attitude_rad"] = np.radians(
-                [att.roll_deg, att.pitch_deg, att.yaw_deg])
+            values = finite_fields(att, "roll_deg", "pitch_deg", "yaw_deg")
+            if values is None:
+                return
+            self._state.values["attitude_rad"] = np.radians(values)
             self._note("ATTITUDE")
         await self._guarded("attitude", self._telemetry_plugin.subscribe_attitude_euler, apply)
 
@@ -624,9 +639,10 @@ class VehicleLink:
 
     async def _watch_landed_state(self) -> None:
         def apply(fields: dict) -> None:
-            if not self._from_vehicle(fields):
+            values = finite_fields(fields, "landed_state")
+            if not self._from_vehicle(fields) or values is None:
                 return
-            state = int(fields.get("landed_state", 0))
+            state = int(values[0])
             self._state.values["landed_state"] = state
             self._state.values["in_air"] = None if state == 0 else state in LANDED_STATES_IN_AIR
             self._note("EXTENDED_SYS_STATE")
@@ -634,11 +650,12 @@ class VehicleLink:
 
     async def _watch_origin(self) -> None:
         def apply(fields: dict) -> None:
-            if not self._from_vehicle(fields):
+            lla = finite_fields(fields, "latitude", "longitude", "altitude")
+            if not self._from_vehicle(fields) or lla is None:
                 return
-            lat, lon = fields.get("latitude", 0) / 1e7, fields.get("longitude", 0) / 1e7
+            lat, lon = lla[0] / 1e7, lla[1] / 1e7
             if (lat, lon) != (0.0, 0.0) and abs(lat) <= 90.0 and abs(lon) <= 180.0:
-                origin = (lat, lon, fields.get("altitude", 0) / 1e3)
+                origin = (lat, lon, lla[2] / 1e3)
                 old = self._state.values.get("origin_lla")
                 if old is not None and old != origin:
                     log.warning("the vehicle's EKF origin moved from %s to %s", old, origin)
@@ -651,17 +668,19 @@ class VehicleLink:
             if not self._from_vehicle(fields):
                 return
             text = str(fields.get("text", "")).rstrip("\x00")
-            severity = int(fields.get("severity", 6))
+            severity = int((finite_fields(fields, "severity") or [6])[0])
             self.statustexts.append((time.monotonic(), severity, text))
             log.log(logging.WARNING if severity <= 4 else logging.INFO, "vehicle: %s", text)
         await self._guarded("STATUSTEXT", lambda: self.messages("STATUSTEXT"), apply)
 
     async def _watch_sys_status(self) -> None:
         def apply(fields: dict) -> None:
-            if not self._from_vehicle(fields) or fields.get("_compid") != self.target_component:
+            sensors = finite_fields(fields, "onboard_control_sensors_present",
+                                    "onboard_control_sensors_health")
+            if not self._from_vehicle(fields) or fields.get("_compid") != self.target_component \
+                    or sensors is None:
                 return
-            present = int(fields.get("onboard_control_sensors_present", 0))
-            health = int(fields.get("onboard_control_sensors_health", 0))
+            present, health = map(int, sensors)
             self._state.values["prearm_ok"] = (bool(health & MAV_SYS_STATUS_PREARM_CHECK)
                                                if present & MAV_SYS_STATUS_PREARM_CHECK else None)
             self._note("SYS_STATUS")
@@ -669,19 +688,20 @@ class VehicleLink:
 
     async def _watch_rpm(self) -> None:
         def apply(fields: dict) -> None:
-            if self._from_vehicle(fields):
-                self._state.values["rotor_rpm"] = float(fields.get("rpm1", 0.0))
+            values = finite_fields(fields, "rpm1")
+            if self._from_vehicle(fields) and values is not None:
+                self._state.values["rotor_rpm"] = values[0]
                 self._note("RPM")
         await self._guarded("RPM", lambda: self.messages("RPM"), apply)
 
     async def _watch_home(self) -> None:
         def apply(fields: dict) -> None:
-            if fields.get("_sysid") != self.target_system:
+            lla = finite_fields(fields, "latitude", "longitude", "altitude")
+            if not self._from_vehicle(fields) or lla is None:
                 return
-            lat = fields.get("latitude", 0) / 1e7
-            lon = fields.get("longitude", 0) / 1e7
+            lat, lon = lla[0] / 1e7, lla[1] / 1e7
             if (lat, lon) != (0.0, 0.0) and abs(lat) <= 90.0 and abs(lon) <= 180.0:
-                self._state.values["home_lla"] = (lat, lon, fields.get("altitude", 0) / 1e3)
+                self._state.values["home_lla"] = (lat, lon, lla[2] / 1e3)
             self._note("HOME_POSITION")
         await self._guarded("HOME_POSITION", lambda: self.messages("HOME_POSITION"), apply)
 
@@ -692,10 +712,11 @@ class VehicleLink:
 
     async def _watch_global_position(self) -> None:
         def apply(pos) -> None:
-            self._state.values.update(lat_deg=float(pos.latitude_deg),
-                                      lon_deg=float(pos.longitude_deg),
-                                      alt_amsl_m=float(pos.absolute_altitude_m),
-                                      rel_alt_m=float(pos.relative_altitude_m))
+            values = finite_fields(pos, "latitude_deg", "longitude_deg", "absolute_altitude_m",
+                                   "relative_altitude_m")
+            if values is None:
+                return
+            self._state.values.update(zip(("lat_deg", "lon_deg", "alt_amsl_m", "rel_alt_m"), values))
             self._note("GLOBAL_POSITION_INT")
         await self._guarded("position", self._telemetry_plugin.subscribe_position, apply)
 

@@ -48,6 +48,11 @@ from companion.threats.bus import ThreatBus, ThreatUpdate, rejected_event
 from companion.threats.model import ThreatTable
 from companion.threats.policy import ThreatManager
 
+#: At most one STATUSTEXT about rejected threat samples per this many seconds (wall clock): a
+#: flood of junk must not flood the vehicle's links (every rejection is still published and
+#: recorded).
+REJECTED_TEXT_PERIOD_S = 2.0
+
 __all__ = ["ThreatReactor", "statustext_for", "MONITOR_PERIOD_S", "STATUSTEXT_MAX_CHARS"]
 
 log = logging.getLogger(__name__)
@@ -165,6 +170,7 @@ class ThreatReactor:
         self.decisions = 0
         self.latencies_ms: dict[str, list[float]] = {}
         self._busy = False
+        self._rejected_told_s = -math.inf
         self._resume_waiting = False
         self._pending: tuple[float, str] | None = None
         self._alt_busy = False
@@ -284,7 +290,9 @@ class ThreatReactor:
         self.bus.publish_event(event)
         self.record("decision", kind="rejected", reason=event.get("reason"), t_s=event["t_s"],
                     field=event.get("field"), threat_id=event.get("threat_id"), source=event.get("source"))
-        self._tell(*statustext_for("rejected", str(event.get("field") or ""), event.get("threat_id"), None))
+        if time.monotonic() - self._rejected_told_s >= REJECTED_TEXT_PERIOD_S:
+            self._rejected_told_s = time.monotonic()     # a flood of junk: one line per period
+            self._tell(*statustext_for("rejected", str(event.get("field") or ""), event.get("threat_id"), None))
 
     # ------------------------------------------------------------------ decisions
     def schedule(self, trigger_mono_s: float, trigger: str = "threat") -> None:

@@ -12,10 +12,9 @@ Properties: nothing raises out of a watcher's ``apply`` (a raise would be caught
 ``_guarded``, logged, and the subscription restarted after 0.5 s, losing what arrives
 meanwhile); the telemetry snapshot stays finite (positions, velocities, attitude, home, origin).
 
-The second property does not hold today, nor does the first for null values: both are marked
-``xfail(strict=True)`` with reproducers (bugs in ``companion/link/vehicle.py``, reported to its
-owners rather than fixed here). When they are fixed, the strict xfails turn into failures:
-remove the marks then.
+The fuzz found both broken at first (NaN stored as it came; a null field raised out of
+``apply``); the reproducers stay below as fixed cases. A message whose fields are null or not
+finite is now dropped whole (``companion.link.vehicle.finite_fields``).
 """
 
 from __future__ import annotations
@@ -28,7 +27,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from hypothesis import Phase, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -187,20 +186,13 @@ def test_watchers_never_raise_on_typed_fields(received):
     assert link._state.values.get("mode") is None or isinstance(link._state.values["mode"], int)
 
 
-BUG_NON_FINITE = ("BUG (issue 11 fuzz) in companion/link/vehicle.py, reported, not fixed here: the watchers "
-                  "store NaN/inf from the vehicle's system id as they come, so the telemetry (position, "
-                  "velocity, attitude, global position, RPM) becomes non-finite")
-
-
-@pytest.mark.xfail(strict=True, reason=BUG_NON_FINITE)
-@settings(max_examples=60, deadline=None, phases=[Phase.explicit, Phase.generate])  # no shrinking: it fails
+@settings(max_examples=60, deadline=None)
 @given(received=inputs())
 def test_telemetry_stays_finite(received):
     link, _ = asyncio.run(drive(received))
     assert not finite_telemetry(link)
 
 
-@pytest.mark.xfail(strict=True, reason=BUG_NON_FINITE)
 @pytest.mark.parametrize("sub, value", [
     ("LOCAL_POSITION_NED", {"_sysid": VEHICLE, "_compid": 1, "x": math.nan, "y": 0.0, "z": -10.0,
                             "vx": 0.0, "vy": 0.0, "vz": 0.0, "time_boot_ms": 1000}),
@@ -217,12 +209,6 @@ def test_reproducers_non_finite_telemetry(sub, value):
     assert not finite_telemetry(link)
 
 
-BUG_NULL = ("BUG (issue 11 fuzz) in companion/link/vehicle.py, reported, not fixed here: a null (None) value, "
-            "e.g. a NaN a JSON encoder wrote as null, raises out of the watcher's apply (int(None), None / 1000); "
-            "_guarded logs it and restarts the subscription after 0.5 s, dropping what arrives meanwhile")
-
-
-@pytest.mark.xfail(strict=True, reason=BUG_NULL)
 @pytest.mark.parametrize("sub, value", [
     ("EXTENDED_SYS_STATE", {"_sysid": VEHICLE, "_compid": 1, "landed_state": None, "vtol_state": 0}),
     ("LOCAL_POSITION_NED", {"_sysid": VEHICLE, "_compid": 1, "x": 0.0, "y": 0.0, "z": -10.0,
