@@ -56,6 +56,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.config import Settings, settings_to_dict
 from companion.errors import CompanionError, FlightAborted, LinkError, MissionError, VehicleRefused
@@ -81,10 +82,6 @@ from companion.world import world_to_dict
 log = logging.getLogger(__name__)
 
 GUIDED = 4
-#: MAV_CMD_DO_SET_MISSION_CURRENT (ArduCopter accepts it in any mode) and MAV_CMD_REQUEST_MESSAGE.
-MAV_CMD_DO_SET_MISSION_CURRENT = 224
-MAV_CMD_REQUEST_MESSAGE = 512
-MSG_ID_MISSION_CURRENT = 42
 #: How often (wall clock, s) the zenoh session's peers and routers are counted (router loss).
 ZENOH_WATCH_PERIOD_S = 1.0
 #: GIL switch interval (s): a planning thread hands the GIL to the setpoint stream this often.
@@ -520,7 +517,7 @@ class CompanionDaemon:
         companion restarted with ``--resume`` reads it back. Never fails the flight."""
         try:
             result = await self.link.command_result(
-                MAV_CMD_DO_SET_MISSION_CURRENT, (float(seq),), what=f"DO_SET_MISSION_CURRENT {seq}",
+                mavlink.MAV_CMD_DO_SET_MISSION_CURRENT, (float(seq),), what=f"DO_SET_MISSION_CURRENT {seq}",
                 timeout_s=3.0)
         except CompanionError as exc:          # the link is down: set again at the next leg
             log.info("current mission item %d not set: %s", seq, exc)
@@ -548,7 +545,8 @@ class CompanionDaemon:
         deadline = time.monotonic() + timeout_s
         try:
             while time.monotonic() < deadline:
-                await self.link.command_result(MAV_CMD_REQUEST_MESSAGE, (float(MSG_ID_MISSION_CURRENT),),
+                await self.link.command_result(mavlink.MAV_CMD_REQUEST_MESSAGE,
+                                               (float(mavlink.MAVLINK_MSG_ID_MISSION_CURRENT),),
                                                what="REQUEST_MESSAGE MISSION_CURRENT", timeout_s=1.0)
                 done, _ = await asyncio.wait({task}, timeout=min(1.0, max(0.0, deadline - time.monotonic())))
                 if done:

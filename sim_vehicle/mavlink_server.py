@@ -333,7 +333,6 @@ class MavlinkServer:
         except Exception as exc:  # pymavlink raises a few odd errors on garbage: drop, never crash
             self._count_bad("bad_data", f"{type(exc).__name__}: {exc}", address)
             return
-        good = False
         for msg in messages:
             if msg.get_type() == "BAD_DATA":
                 reason = str(getattr(msg, "reason", ""))
@@ -351,7 +350,6 @@ class MavlinkServer:
             if verdict is not Verdict.ACCEPTED:  # before dispatch and routing, before it makes a peer
                 self._count_bad(verdict.value, msg.get_type(), address, what="unauthenticated message")
                 continue
-            good = True
             self.stats.messages_in += 1
             self.peers[address] = self.wall_s()  # before dispatch: a reply broadcast (STATUSTEXT) reaches it too
             if self._tlog is not None:

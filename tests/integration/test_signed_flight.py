@@ -118,3 +118,17 @@ def test_a_companion_with_the_wrong_key_fails_with_one_line_naming_it(tmp_path):
     errors = [line for line in result.stderr.splitlines() if line.startswith("companion: error:")]
     assert len(errors) == 1, result.stderr[-2000:]
     assert str(wrong) in errors[0] and "another key" in errors[0], errors[0]
+
+
+def test_upload_and_download_sign_with_the_key_and_are_refused_without_it(key_file, tmp_path):
+    with start_sim_vehicle(speedup=SPEEDUP, signing_key=KEY, extra_args=["--signing-key", str(key_file)]) as sim:
+        url = f"udpout://127.0.0.1:{sim.port}"
+        up = run_companion("upload", str(MISSION), "--connect", url, "--signing-key", str(key_file), timeout_s=90)
+        assert up.returncode == 0, up.stderr[-2000:]
+        back = tmp_path / "back.waypoints"
+        down = run_companion("download", str(back), "--connect", url, "--signing-key", str(key_file), timeout_s=90)
+        assert down.returncode == 0, down.stderr[-2000:]
+        assert len(back.read_text().splitlines()) == len(MISSION.read_text().splitlines())
+        unsigned = run_companion("download", str(tmp_path / "x.waypoints"), "--connect", url, "--timeout", "3",
+                                 timeout_s=60)
+        assert unsigned.returncode == 2 and "no autopilot heard" in unsigned.stderr

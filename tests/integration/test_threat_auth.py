@@ -9,8 +9,6 @@ control on the same companion session, so that "nothing arrived" is not a dead l
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import time
 
 import pytest
@@ -20,26 +18,13 @@ from companion.security.deployment import init_deployment
 from companion.threats import access, codec
 from companion.threats.bus import ThreatBus
 from companion.threats.model import Threat, ThreatTable
-from tests.support import REPO_ROOT, free_tcp_port
+from tests.support import free_tcp_port
+from tests.integration.test_threat_bus import companion, wait_for
 from tests.unit.threats.test_reactor import Harness, run, trajectory_decision, until
 
 pytestmark = pytest.mark.integration
 
-COMPANION = [sys.executable, "-m", "companion.cli"]
 SETTLE_S = 1.0      # time for zenoh declarations to propagate between sessions
-
-
-def companion(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
-    return subprocess.run([*COMPANION, *args], capture_output=True, text=True, timeout=timeout, cwd=REPO_ROOT)
-
-
-def wait_for(predicate, timeout_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return predicate()
 
 
 def popup(tid: str) -> bytes:
