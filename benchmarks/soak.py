@@ -501,7 +501,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=100_000, help="MAVLink datagrams to send")
     parser.add_argument("--payloads", type=int, default=10_000, help="threat payloads to PUT")
-    parser.add_argument("--rate", type=float, default=1000.0, help="datagrams per second")
+    parser.add_argument("--rate", type=float, default=2000.0,
+                        help="datagrams per second (the injection must end before the flight does)")
     parser.add_argument("--payload-rate", type=float, default=None,
                         help="threat payloads per second (default: spread over the frames' injection)")
     parser.add_argument("--speedup", type=float, default=SPEEDUP, help="SITL speed-up of the flight")
