@@ -107,6 +107,7 @@ class FlightSummary:
     joined: bool = False
     resumed_at_seq: int | None = None
     threats_restored: int = 0
+    feasibility: dict = field(default_factory=dict)
     outcome: str = "not flown"
 
     def as_dict(self) -> dict:
@@ -115,6 +116,32 @@ class FlightSummary:
         if not math.isfinite(out["min_threat_separation_m"]):
             out["min_threat_separation_m"] = None
         return out
+
+
+def make_checker(settings):
+    """The closed-loop checker of every leg, on the default (R-50-class) model: the LQI design
+    (python-control, about 2.5 s once) is cached on the model at the first check."""
+    from companion.smoothing.feasibility import FeasibilityChecker
+    from sim_vehicle.model import HeliModel
+
+    return FeasibilityChecker(HeliModel.default(), settings)
+
+
+def feasibility_totals(legs) -> dict:
+    """The flight's closed-loop figures over its checked legs (empty when none was checked)."""
+    checked = [leg.feasibility for leg in legs if leg.feasibility is not None]
+    if not checked:
+        return {}
+    return {
+        "legs_checked": len(checked),
+        "legs_stretched": sum(1 for f in checked if f["stretch"] > 1.0),
+        "legs_infeasible": sum(1 for f in checked if not f["feasible"]),
+        "max_stretch": max(f["stretch"] for f in checked),
+        "max_abs_delta": max(f["max_abs_delta"] for f in checked),
+        "initial_max_abs_delta": max(f["initial_max_abs_delta"] for f in checked),
+        "max_tracking_error_m": max(f["max_tracking_error_m"] for f in checked),
+        "check_s": sum(f["check_s"] for f in checked),
+    }
 
 
 class CompanionDaemon:
@@ -167,6 +194,7 @@ class CompanionDaemon:
         self._resume_needed = False
         self.home_lla: tuple | None = None
         self.rotor_plan = None                    # how the start-up handled the rotor
+        self.checker = None                       # closed-loop feasibility (settings.feasibility)
         self._executor = ThreadPoolExecutor(2, thread_name_prefix="planning",
                                             initializer=restore_normal_priority)
 
@@ -384,15 +412,19 @@ class CompanionDaemon:
         first = np.array([start[0], start[1], -alt_m])
         to_fly = self.local_mission if current_seq is None else resume_mission(self.local_mission, current_seq)
         t0 = time.perf_counter()
+        # the check flies the helicopter model: not a multirotor's
+        if s.feasibility.enabled and s.startup.vehicle == "helicopter" and self.checker is None:
+            self.checker = await self.in_worker(make_checker, s.feasibility)
         self.legs = await self.in_worker(
             plan_mission, to_fly, first, gart_settings=s.gart,
-            smoothing=s.smoothing, settings=s.flight, rng=self.rng)
+            smoothing=s.smoothing, settings=s.flight, rng=self.rng, feasibility=self.checker)
         self.summary.legs_planned = len(self.legs)
+        self.summary.feasibility = feasibility_totals(self.legs)
         self.record("world", **world_to_dict(self.local_mission.world))
         for leg in self.legs:
             self.record_plan(leg)
         self.event("planned", legs=len(self.legs), seconds=round(time.perf_counter() - t0, 3),
-                   seed=s.seed)
+                   seed=s.seed, feasibility=self.summary.feasibility or None)
         return alt_m
 
     def record_plan(self, leg: LegPlan) -> None:
@@ -402,7 +434,9 @@ class CompanionDaemon:
         self.record("plan", leg=leg.index, seq=leg.waypoint.seq, path_id=f"leg{leg.index}",
                     path_ned_m=leg.path_ned_m, reference_ne=ref[:, :2],
                     tree={"nodes": tree.nodes, "parents": tree.parents} if tree is not None else None,
-                    summary=leg.plan.summary() if leg.plan is not None else None)
+                    summary=leg.plan.summary() if leg.plan is not None else None,
+                    duration_s=leg.trajectory.duration_s, notes=list(leg.notes),
+                    feasibility=leg.feasibility)
 
     async def restore_mission(self, previous) -> None:
         """Put the vehicle's previous lists back (the flight did not start)."""
@@ -447,7 +481,8 @@ class CompanionDaemon:
         s = self.settings
         new = await self.in_worker(plan_leg, leg.index, leg.waypoint, pos,
                                    self.local_mission.world, gart_settings=s.gart,
-                                   smoothing=s.smoothing, settings=s.flight, rng=self.rng)
+                                   smoothing=s.smoothing, settings=s.flight, rng=self.rng,
+                                   feasibility=self.checker)
         if new is not None:
             self.engage(new.trajectory, f"leg{leg.index}-resume", turn=True)
         self.event("resumed", leg=leg.index, from_ned_m=pos)

@@ -9,7 +9,12 @@ for every leg of a local mission:
 2. ``smooth``: G2 (default, curvature bounded by K_max), G1 or none, with the collision re-check
    against the world;
 3. ``time``: the speed profile under the leg's speed and the vehicle's acceleration, lateral
-   acceleration and jerk limits; the leg starts and ends at rest at its waypoints.
+   acceleration and jerk limits; the leg starts and ends at rest at its waypoints;
+4. ``check`` (when a ``FeasibilityChecker`` is given): every piece of the leg is flown by the
+   helicopter model and its LQI in closed loop (``companion.smoothing.feasibility``); a piece
+   that would saturate a rotor input or track too far off is stretched in time until it does
+   not. The figures (peak actuator use, predicted tracking error, stretch) are kept in
+   ``LegPlan.feasibility``.
 
 A leg whose altitude changes starts with a vertical climb or descent (its own straight
 trajectory), then flies level: what flight-test engineers expect, and what keeps the planner in
@@ -166,7 +171,9 @@ class LegPlan:
     world : World
         The slab the level part was planned in.
     notes : list of str
-        What the smoother or the timing could not honour.
+        What the smoother or the timing could not honour, and any stretch of the timing.
+    feasibility : dict or None
+        The closed-loop check of the leg (``feasibility_summary``); None when not checked.
     """
 
     index: int
@@ -178,6 +185,7 @@ class LegPlan:
     trajectory: TrajectoryChain
     world: World
     notes: list = field(default_factory=list)
+    feasibility: dict | None = None
 
 
 def leg_slab(world: World, down_values_m, margin_m: float) -> World:
@@ -285,9 +293,59 @@ def plan_level(level_start: np.ndarray, goal: np.ndarray, slab: World, waypoint,
     return result, path, trajectory
 
 
+def feasibility_summary(reports) -> dict:
+    """The closed-loop figures of a leg from the ``FeasibilityReport`` of each of its pieces.
+
+    Peaks and maxima are over the pieces, the stretch is the largest, the RMS tracking error is
+    weighted by the pieces' (stretched) durations; ``pieces`` keeps each piece's own figures.
+    """
+    parts = [r.summary() for r in reports]
+    durations = np.array([p["duration_s"] for p in parts])
+    rms = np.array([p["rms_tracking_error_m"] for p in parts])
+    weights = durations if durations.sum() > 0 else np.ones_like(durations)
+    peak = {name: max(p["peak_abs_delta"][name] for p in parts) for name in parts[0]["peak_abs_delta"]}
+    return {
+        "feasible": all(p["feasible"] for p in parts),
+        "stretch": max(p["stretch"] for p in parts),
+        "max_abs_delta": max(p["max_abs_delta"] for p in parts),
+        "peak_abs_delta": peak,
+        "saturated": any(p["saturated"] for p in parts),
+        "max_tracking_error_m": max(p["max_tracking_error_m"] for p in parts),
+        "rms_tracking_error_m": float(np.sqrt(np.sum(weights * rms**2) / np.sum(weights))),
+        "initial_max_abs_delta": max(p["initial_max_abs_delta"] for p in parts),
+        "initial_max_tracking_error_m": max(p["initial_max_tracking_error_m"] for p in parts),
+        "initial_saturated": any(p["initial_saturated"] for p in parts),
+        "attempts": sum(p["attempts"] for p in parts),
+        "reason": "; ".join(p["reason"] for p in parts if p["reason"]),
+        "duration_s": float(durations.sum()),
+        "check_s": sum(p["check_s"] for p in parts),
+        "pieces": parts,
+    }
+
+
+def check_pieces(pieces, checker) -> tuple[list, dict]:
+    """Stage 4: check every piece of a leg on the closed loop, stretching those that need it.
+
+    Returns the pieces to fly (stretched where needed) and ``feasibility_summary`` of them.
+    """
+    reports = [checker.check_and_stretch(p) for p in pieces]
+    flown = []
+    for piece, report in zip(pieces, reports):
+        if report.stretch > 1.0:
+            note = (f"feasibility: timing stretched x{report.stretch:.3g} "
+                    f"({piece.duration_s:.1f} s -> {report.trajectory.duration_s:.1f} s; first timing: "
+                    f"max |delta| {report.initial_max_abs_delta:.2f}, tracking error "
+                    f"{report.initial_max_tracking_error_m:.2f} m)")
+            report.trajectory.notes.append(note)
+        if not report.feasible:
+            report.trajectory.notes.append(f"feasibility: still infeasible: {report.reason}")
+        flown.append(report.trajectory)
+    return flown, feasibility_summary(reports)
+
+
 def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: GartSettings,
              smoothing: SmoothingSettings, settings: FlightPlanSettings,
-             rng: np.random.Generator, yaw_rad: float = 0.0) -> LegPlan | None:
+             rng: np.random.Generator, yaw_rad: float = 0.0, feasibility=None) -> LegPlan | None:
     """Plan, smooth and time one leg from ``start_ned_m`` to ``waypoint``.
 
     The level part is planned first; a climb or descent before it holds the level part's
@@ -320,21 +378,30 @@ def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: 
         pieces.append(level_part)
     if not pieces:
         return None
+    checked = None
+    if feasibility is not None:
+        pieces, checked = check_pieces(pieces, feasibility)
     notes = [n for p in pieces for n in p.notes]
     log.info("leg %d to %s: %s, %.1f m, %.1f s%s", index, where,
              result.status if result else "vertical", sum(p.length_m for p in pieces),
              sum(p.duration_s for p in pieces), f" ({'; '.join(notes)})" if notes else "")
+    if checked is not None:
+        log.info("leg %d: closed loop %s, stretch x%.3g, max |delta| %.2f, tracking error max %.2f m "
+                 "RMS %.2f m (check %.0f ms)", index, "feasible" if checked["feasible"] else "INFEASIBLE",
+                 checked["stretch"], checked["max_abs_delta"], checked["max_tracking_error_m"],
+                 checked["rms_tracking_error_m"], 1e3 * checked["check_s"])
     return LegPlan(index, waypoint, start, goal, result, np.vstack([start[None, :], path]),
-                   TrajectoryChain(pieces), slab, notes)
+                   TrajectoryChain(pieces), slab, notes, checked)
 
 
 def plan_mission(local_mission, start_ned_m, *, gart_settings: GartSettings,
                  smoothing: SmoothingSettings, settings: FlightPlanSettings,
-                 rng: np.random.Generator) -> list[LegPlan]:
+                 rng: np.random.Generator, feasibility=None) -> list[LegPlan]:
     """Plan every leg after the takeoff, in flight order; the first leg starts at ``start_ned_m``.
 
     The takeoff itself is the vehicle's (MAV_CMD_NAV_TAKEOFF); legs start at its altitude.
     Raises ``MissionError`` naming the first unreachable item; nothing is flown then.
+    ``feasibility``: a ``FeasibilityChecker`` that checks (and stretches) every leg, or None.
     """
     legs: list[LegPlan] = []
     start = np.asarray(start_ned_m, dtype=float)
@@ -342,7 +409,7 @@ def plan_mission(local_mission, start_ned_m, *, gart_settings: GartSettings,
         if waypoint.kind == "takeoff":
             continue
         leg = plan_leg(len(legs), waypoint, start, local_mission.world, gart_settings=gart_settings,
-                       smoothing=smoothing, settings=settings, rng=rng)
+                       smoothing=smoothing, settings=settings, rng=rng, feasibility=feasibility)
         if leg is not None:
             legs.append(leg)
             start = leg.goal_ned_m

@@ -82,6 +82,8 @@ def register(subparsers) -> None:
     p.add_argument("--state-dir", metavar="DIR",
                    help="keep the threat snapshot here (state.dir): written as threats change, "
                    "read by --resume")
+    p.add_argument("--no-feasibility", action="store_true", dest="no_feasibility",
+                   help="do not check the legs on the helicopter's closed loop (feasibility.enabled = false)")
     p.add_argument("--print-config", action="store_true",
                    help="print the effective settings as JSON and exit")
     p.set_defaults(func=run)
@@ -102,6 +104,8 @@ def settings_overrides(args: argparse.Namespace) -> dict:
         out.setdefault("smoothing", {})["method"] = args.smooth
     if getattr(args, "vehicle", None):
         out.setdefault("startup", {})["vehicle"] = args.vehicle
+    if getattr(args, "no_feasibility", False):
+        out.setdefault("feasibility", {})["enabled"] = False
     if getattr(args, "interlock", None):
         out.setdefault("startup", {})["interlock"] = args.interlock
     if getattr(args, "adsb", False):

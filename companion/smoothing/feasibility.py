@@ -27,7 +27,7 @@ from companion.errors import SmoothingError
 from companion.smoothing.settings import FeasibilitySettings
 from companion.trajectory import Trajectory
 
-__all__ = ["FeasibilityReport", "FeasibilityChecker", "check", "check_and_stretch"]
+__all__ = ["CHANNELS", "FeasibilityReport", "FeasibilityChecker", "check", "check_and_stretch"]
 
 logger = logging.getLogger(__name__)
 
@@ -62,6 +62,13 @@ class FeasibilityReport:
         Why the last simulated trajectory failed ('' when feasible).
     elapsed_s : float
         Wall-clock time of the whole check.
+    peak_abs_delta : tuple of 4 floats
+        Largest |delta| of each rotor input of the returned trajectory, in ``CHANNELS`` order
+        (lateral cyclic, longitudinal cyclic, pedal, collective).
+    rms_tracking_error_m : float
+        Root mean square of the predicted tracking error of the returned trajectory (m).
+    initial_saturated : bool
+        The input trajectory would have clipped some rotor input.
     """
 
     feasible: bool
@@ -77,6 +84,31 @@ class FeasibilityReport:
     initial_max_tracking_error_m: float
     reason: str
     elapsed_s: float
+    peak_abs_delta: tuple = (math.nan,) * 4
+    rms_tracking_error_m: float = math.nan
+    initial_saturated: bool = False
+
+    def summary(self) -> dict:
+        """The figures as plain data (flight record, ``companion plan --json``), without the
+        trajectory."""
+        return {
+            "feasible": bool(self.feasible), "stretch": float(self.stretch),
+            "max_abs_delta": float(self.max_abs_delta),
+            "peak_abs_delta": {name: float(v) for name, v in zip(CHANNELS, self.peak_abs_delta)},
+            "saturated": bool(self.saturated),
+            "max_tracking_error_m": float(self.max_tracking_error_m),
+            "rms_tracking_error_m": float(self.rms_tracking_error_m),
+            "initial_max_abs_delta": float(self.initial_max_abs_delta),
+            "initial_max_tracking_error_m": float(self.initial_max_tracking_error_m),
+            "initial_saturated": bool(self.initial_saturated),
+            "attempts": int(self.attempts), "reason": self.reason,
+            "duration_s": float(self.trajectory.duration_s),
+            "check_s": float(self.elapsed_s),
+        }
+
+
+#: Rotor inputs of the model, in the order of ``ClosedLoopResult.delta`` columns.
+CHANNELS = ("lateral_cyclic", "longitudinal_cyclic", "pedal", "collective")
 
 
 @dataclass(frozen=True)
@@ -84,6 +116,8 @@ class _Outcome:
     max_abs_delta: float
     max_tracking_error_m: float
     saturated: bool
+    peak_abs_delta: tuple = (math.nan,) * 4
+    rms_tracking_error_m: float = math.nan
 
 
 class FeasibilityChecker:
@@ -151,7 +185,9 @@ class FeasibilityChecker:
 
     def _outcome(self, trajectory: Trajectory) -> _Outcome:
         result = self.simulate(trajectory)
-        return _Outcome(float(result.max_abs_delta), float(np.max(result.tracking_error_m)), bool(result.saturated))
+        peak = tuple(float(v) for v in np.max(np.abs(np.asarray(result.delta, dtype=float)), axis=0))
+        return _Outcome(float(result.max_abs_delta), float(np.max(result.tracking_error_m)), bool(result.saturated),
+                        peak, float(result.rms_tracking_error_m))
 
     def _failure(self, out: _Outcome) -> str:
         s = self.settings
@@ -197,7 +233,8 @@ class FeasibilityChecker:
             error_margin_m=s.max_tracking_error_m - out.max_tracking_error_m, attempts=attempts,
             initial_max_abs_delta=first.max_abs_delta,
             initial_max_tracking_error_m=first.max_tracking_error_m, reason=reason,
-            elapsed_s=time.perf_counter() - start)
+            elapsed_s=time.perf_counter() - start, peak_abs_delta=out.peak_abs_delta,
+            rms_tracking_error_m=out.rms_tracking_error_m, initial_saturated=first.saturated)
 
 
 def check(trajectory: Trajectory, model=None, settings: FeasibilitySettings | None = None) -> FeasibilityReport:

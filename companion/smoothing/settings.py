@@ -117,6 +117,11 @@ class FeasibilitySettings:
 
     Parameters
     ----------
+    enabled : bool
+        Whether ``companion run`` checks every planned leg (and ``companion plan`` every
+        smoothed path) on the closed loop and stretches its timing where it is infeasible.
+        Default True. The check costs about 40 ms per minute of trajectory, after a one-off
+        LQI design of about 2.5 s before the first leg.
     max_abs_delta : float
         Largest normalised actuator input accepted (|delta| <= 1 is full travel). Default 0.8,
         a 20 % reserve for gusts and model error.
@@ -142,6 +147,7 @@ class FeasibilitySettings:
         error counts too. Default 2.
     """
 
+    enabled: bool = True
     max_abs_delta: float = 0.8
     max_tracking_error_m: float = 2.0
     sample_rate_hz: float = 50.0
@@ -156,5 +162,7 @@ class FeasibilitySettings:
             "max_abs_delta", "max_tracking_error_m", "sample_rate_hz", "max_stretch", "stretch_step"))
         if self.stretch_step <= 1.0:
             raise SmoothingError(f"feasibility.stretch_step: must be > 1, got {self.stretch_step!r}")
+        if not isinstance(self.enabled, bool):
+            raise SmoothingError(f"feasibility.enabled: expected true or false, got {self.enabled!r}")
         if not math.isfinite(self.down_m):
             raise SmoothingError(f"feasibility.down_m: must be finite, got {self.down_m!r}")
