@@ -119,12 +119,14 @@ class FlightSummary:
 
 
 def make_checker(settings):
-    """The closed-loop checker of every leg, on the default (R-50-class) model: the LQI design
-    (python-control, about 2.5 s once) is cached on the model at the first check."""
+    """The closed-loop checker of every leg, on the default (R-50-class) model, its LQI
+    designed now (python-control, about 2.5 s once; cached on the model)."""
     from companion.smoothing.feasibility import FeasibilityChecker
     from sim_vehicle.model import HeliModel
 
-    return FeasibilityChecker(HeliModel.default(), settings)
+    checker = FeasibilityChecker(HeliModel.default(), settings)
+    log.info("feasibility: closed-loop model ready in %.2f s", checker.warm_up())
+    return checker
 
 
 def feasibility_totals(legs) -> dict:

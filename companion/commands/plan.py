@@ -1,5 +1,11 @@
 """``companion plan``: plan (GART / M-GART) on a world file, optionally smooth, summarise, plot.
 
+A smoothed path is also timed (speed profile under the vehicle's limits, ``--speed``,
+``--accel``, ``--jerk``) and checked on the helicopter's closed loop, as ``companion run`` does
+with every leg (``companion.smoothing.feasibility``): where the timing would saturate a rotor
+input or track too far off it is stretched; the summary and ``--json`` carry the figures (peak
+actuator use, predicted tracking error, stretch). ``--no-feasibility`` skips the check.
+
 Paper Fig. 6a (GART tree and path), Fig. 6b/6c (smoothed path and its curvature) and Fig. 7
 (M-GART's several paths). The numerics live in ``companion.world``, ``companion.planning`` and
 ``companion.smoothing``; this module only parses, prints, writes JSON and draws.
@@ -43,6 +49,13 @@ def register(subparsers) -> None:
                    help="planning time budget in s (default: 1.0 for gart; 3.0 for mgart, which stops "
                    "as soon as it has k paths)")
     p.add_argument("--step", type=float, default=None, help="steering step in m (default 20)")
+    p.add_argument("--speed", type=float, default=None,
+                   help="cruise speed limit of the timing of smoothed paths, m/s (default 8)")
+    p.add_argument("--accel", type=float, default=None,
+                   help="longitudinal acceleration limit of the timing, m/s^2 (default 2)")
+    p.add_argument("--jerk", type=float, default=None, help="jerk limit of the timing, m/s^3 (default 3)")
+    p.add_argument("--no-feasibility", action="store_true", dest="no_feasibility",
+                   help="do not check the timed smoothed paths on the helicopter's closed loop")
     p.add_argument("--json", dest="json_out", help="write the result as JSON to this file")
     p.add_argument("--plot", help="draw tree, obstacles and paths to this PNG file")
     p.set_defaults(func=run)
@@ -98,6 +111,68 @@ def smooth_path(path, mode: str, kappa: float | None, world):
     return smooth_g2(path, kappa, world=world)
 
 
+def timing_limits(args):
+    """The vehicle's limits (``TrajectoryLimits`` defaults) with ``--speed/--accel/--jerk``."""
+    from dataclasses import replace
+
+    from companion.errors import SmoothingError
+    from companion.smoothing import TrajectoryLimits
+
+    changes = {name: value for name, value in (("speed_m_s", args.speed), ("accel_m_s2", args.accel),
+                                              ("jerk_m_s3", args.jerk)) if value is not None}
+    try:
+        return replace(TrajectoryLimits(), **changes)
+    except SmoothingError as exc:
+        raise PlanningError(f"--speed/--accel/--jerk: {exc}") from None
+
+
+def time_and_check(args, smoothed) -> list:
+    """Time every smoothed path; check it on the closed loop (stretching it where needed).
+
+    Returns, per path, None (no path) or a dict: ``duration_s`` of the first timing,
+    ``limits`` and ``feasibility`` (``FeasibilityReport.summary()``, None with
+    ``--no-feasibility``).
+    """
+    from dataclasses import asdict
+
+    from companion.smoothing import time_parameterize
+
+    limits = timing_limits(args)
+    checker = None
+    if not args.no_feasibility:
+        from companion.smoothing.feasibility import FeasibilityChecker
+        from sim_vehicle.model import HeliModel
+
+        checker = FeasibilityChecker(HeliModel.default())
+        checker.warm_up()          # the one-off LQI design is not any path's check time
+    out = []
+    for curve in smoothed:
+        if curve is None:
+            out.append(None)
+            continue
+        trajectory = time_parameterize(curve, limits)
+        report = checker.check_and_stretch(trajectory) if checker is not None else None
+        out.append({"duration_s": float(trajectory.duration_s), "limits": asdict(limits),
+                    "feasibility": report.summary() if report is not None else None})
+    return out
+
+
+def feasibility_line(f: dict) -> str:
+    """One line of closed-loop figures (``FeasibilityReport.summary()`` or a leg's)."""
+    peaks = " ".join(f"{name.split('_')[0][:3]} {v:.2f}" for name, v in f["peak_abs_delta"].items())
+    text = (f"closed loop: {'feasible' if f['feasible'] else 'INFEASIBLE'}, stretch x{f['stretch']:.3g}"
+            f" ({f['duration_s']:.1f} s), max |delta| {f['max_abs_delta']:.2f} ({peaks}), "
+            f"tracking error max {f['max_tracking_error_m']:.2f} m RMS {f['rms_tracking_error_m']:.2f} m, "
+            f"check {1e3 * f['check_s']:.0f} ms")
+    if f["stretch"] > 1.0:
+        text += (f"; first timing: max |delta| {f['initial_max_abs_delta']:.2f}"
+                 f"{' (saturates)' if f['initial_saturated'] else ''}, "
+                 f"error {f['initial_max_tracking_error_m']:.2f} m")
+    if f["reason"]:
+        text += f"; {f['reason']}"
+    return text
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -115,19 +190,20 @@ def run(args: argparse.Namespace) -> int:
     else:
         budget = args.budget if args.budget is not None else 3.0
         results = mgart(world, start, goal, args.k, rng=rng, max_time_s=budget, settings=ms)
-    smoothed = []
+    smoothed, timed = [], []
     if args.smooth != "none":
         smoothed = [smooth_path(r.path, args.smooth, kappa, world) if r.solved else None for r in results]
-    print_summary(args, wf, results, smoothed, start, goal)
+        timed = time_and_check(args, smoothed)
+    print_summary(args, wf, results, smoothed, start, goal, timed)
     if args.json_out:
-        write_json(args, wf, results, smoothed, start, goal, kappa)
+        write_json(args, wf, results, smoothed, start, goal, kappa, timed)
     if args.plot:
         plot_plan(args.plot, world, results, smoothed, start, goal, kappa, title=wf.name)
         print(f"plot: {args.plot}")
     return 0 if results[0].solved else 1
 
 
-def print_summary(args, wf, results, smoothed, start, goal) -> None:
+def print_summary(args, wf, results, smoothed, start, goal, timed=()) -> None:
     first = results[0]
     tree = first.tree
     print(f"world: {wf.name} ({wf.world.dim}D, {len(wf.world.obstacles)} obstacles, margin {wf.world.margin_m} m)")
@@ -147,9 +223,12 @@ def print_summary(args, wf, results, smoothed, start, goal) -> None:
             if not getattr(s, "kappa_ok", True):
                 line += " (K_max exceeded)"
         print(line)
+        if timed and timed[i] is not None:
+            f = timed[i]["feasibility"]
+            print(f"    timed {timed[i]['duration_s']:.1f} s" + (f"; {feasibility_line(f)}" if f else ""))
 
 
-def write_json(args, wf, results, smoothed, start, goal, kappa) -> None:
+def write_json(args, wf, results, smoothed, start, goal, kappa, timed=()) -> None:
     tree = results[0].tree
     out = {
         "world": str(args.world), "world_name": wf.name, "dim": wf.world.dim,
@@ -170,6 +249,8 @@ def write_json(args, wf, results, smoothed, start, goal, kappa) -> None:
                                  "kappa_ok": bool(getattr(s, "kappa_ok", True)),
                                  "notes": list(getattr(s, "notes", [])),
                                  "polyline": s.polyline(1.0).tolist()}
+            if timed and timed[i] is not None:
+                entry["smoothed"].update(timed[i])
         out["paths"].append(entry)
     path = Path(args.json_out)
     path.parent.mkdir(parents=True, exist_ok=True)

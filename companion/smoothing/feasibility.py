@@ -143,6 +143,18 @@ class FeasibilityChecker:
             raise SmoothingError(f"settings: expected a FeasibilitySettings, got {type(self.settings).__name__}")
         self.controller_settings = controller_settings
 
+    def warm_up(self) -> float:
+        """Design the LQI and build the closed loop now (about 2.5 s once per model, with the
+        import of python-control) rather than in the first check; returns the seconds taken."""
+        from sim_vehicle.control import simulate_closed_loop
+
+        start = time.perf_counter()
+        t = np.array([0.0, 1.0 / self.settings.sample_rate_hz])
+        zero = np.zeros((2, 3))
+        simulate_closed_loop(self.model, t, zero, zero, zero, np.zeros(2), self.controller_settings,
+                             yaw_rate_rad_s=np.zeros(2) if self.settings.yaw_rate_feedforward else None)
+        return time.perf_counter() - start
+
     def reference(self, trajectory: Trajectory) -> tuple[np.ndarray, ...]:
         """Setpoint stream of ``trajectory`` at the setpoint rate, then a hover at its end.
 

@@ -87,3 +87,24 @@ def test_bad_world_file_exit_2_names_the_key(tmp_path, capsys):
     assert main(["plan", "--world", str(bad)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "obstacles[0].radius" in err
+
+
+def test_smoothed_paths_are_timed_and_checked_on_the_closed_loop(world_file, tmp_path, capsys):
+    """Issue 12: ``companion plan --json`` carries the feasibility figures; a timing too
+    aggressive for the helicopter is stretched until it is feasible."""
+    out = tmp_path / "f.json"
+    rc = main(["plan", "--world", str(world_file), "--smooth", "g2", "--kappa-max", "0.3", "--seed", "3",
+               "--budget", "0.2", "--speed", "15", "--accel", "5", "--jerk", "20", "--json", str(out)])
+    assert rc == 0
+    assert "closed loop: feasible, stretch x" in capsys.readouterr().out
+    smoothed = json.loads(out.read_text())["paths"][0]["smoothed"]
+    f = smoothed["feasibility"]
+    assert smoothed["limits"]["jerk_m_s3"] == 20.0 and smoothed["duration_s"] > 0
+    assert f["initial_saturated"] and f["stretch"] > 1.0 and f["feasible"] and not f["saturated"]
+    assert f["duration_s"] == pytest.approx(f["stretch"] * smoothed["duration_s"])
+    assert f["max_abs_delta"] <= 0.8 and set(f["peak_abs_delta"]) == {
+        "lateral_cyclic", "longitudinal_cyclic", "pedal", "collective"}
+    assert 0 <= f["rms_tracking_error_m"] <= f["max_tracking_error_m"] <= 2.0 and f["check_s"] > 0
+    rc = main(["plan", "--world", str(world_file), "--smooth", "g2", "--kappa-max", "0.3", "--seed", "3",
+               "--budget", "0.2", "--no-feasibility", "--json", str(out)])
+    assert rc == 0 and json.loads(out.read_text())["paths"][0]["smoothed"]["feasibility"] is None
