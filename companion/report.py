@@ -8,8 +8,11 @@
 - ``tracking.png``: reference against actual north, east and altitude, and the tracking error
   over time with the decisions marked (Fig. 6e);
 - ``actuators.png``: the four normalised inputs (lateral and longitudinal cyclic, pedal,
-  collective) from SERVO_OUTPUT_RAW (Fig. 6f);
-- ``summary.json``: the record's summary plus the statistics computed here.
+  collective) from SERVO_OUTPUT_RAW (Fig. 6f), with the peak the closed-loop check predicted
+  for each (dashed);
+- ``summary.json``: the record's summary plus the statistics computed here, and ``legs``: each
+  planned leg's closed-loop check (peak actuator use, predicted tracking error, stretch);
+- ``summary.txt``: the same in a few lines of text (also printed by ``companion report``).
 
 Matplotlib is imported inside ``render_report`` (Agg backend) so that importing this module is
 cheap.
@@ -46,6 +49,42 @@ def tracking_statistics(record: FlightRecord) -> dict:
     return {"samples": int(err.size), "rms_tracking_error_m": float(np.sqrt(np.mean(err**2))),
             "max_tracking_error_m": float(np.max(err)),
             "duration_s": float(record.samples["t_s"][-1] - record.samples["t_s"][0])}
+
+
+def leg_feasibility(record: FlightRecord) -> list[dict]:
+    """Each recorded leg plan's closed-loop figures (``plan`` lines), without the per-piece
+    detail; legs planned without the check have ``feasibility`` None."""
+    out = []
+    for plan in record.plans:
+        f = plan.get("feasibility")
+        out.append({"leg": plan.get("leg"), "seq": plan.get("seq"), "duration_s": plan.get("duration_s"),
+                    "feasibility": None if f is None else {k: v for k, v in f.items() if k != "pieces"}})
+    return out
+
+
+def summary_text(summary: dict, legs: list[dict]) -> str:
+    """A few lines of the flight: legs, tracking, and each leg's closed-loop check."""
+    lines = [f"outcome: {summary.get('outcome')}  legs planned {summary.get('legs_planned')}  "
+             f"reached {summary.get('legs_reached')}"]
+    if summary.get("rms_tracking_error_m") is not None:
+        lines.append(f"tracking error (flown): RMS {summary['rms_tracking_error_m']:.2f} m, "
+                     f"max {summary.get('max_tracking_error_m', float('nan')):.2f} m")
+    for leg in legs:
+        f = leg["feasibility"]
+        head = f"leg {leg['leg']} (item {leg['seq']})"
+        if f is None:
+            lines.append(f"{head}: not checked on the closed loop")
+            continue
+        peaks = " ".join(f"{name.split('_')[0][:3]} {v:.2f}" for name, v in f["peak_abs_delta"].items())
+        line = (f"{head}: {'feasible' if f['feasible'] else 'INFEASIBLE'}, stretch x{f['stretch']:.3g} "
+                f"({f['duration_s']:.1f} s); predicted max |delta| {f['max_abs_delta']:.2f} ({peaks}), "
+                f"tracking error max {f['max_tracking_error_m']:.2f} m RMS {f['rms_tracking_error_m']:.2f} m; "
+                f"check {1e3 * f['check_s']:.0f} ms")
+        if f["stretch"] > 1.0:
+            line += (f"; first timing max |delta| {f['initial_max_abs_delta']:.2f}"
+                     f"{' (saturates)' if f['initial_saturated'] else ''}")
+        lines.append(line)
+    return "\n".join(lines) + "\n"
 
 
 def _draw_obstacles(ax, world: dict | None) -> None:
@@ -178,11 +217,19 @@ def _plot_tracking(plt, record: FlightRecord, path: Path) -> None:
 def _plot_actuators(plt, record: FlightRecord, path: Path) -> None:
     s = record.samples
     delta = servo_us_to_delta(s["servo_us"])
+    checked = [leg["feasibility"] for leg in leg_feasibility(record) if leg["feasibility"]]
     fig, axes = plt.subplots(4, 1, figsize=(9, 8), sharex=True)
     for i, ax in enumerate(axes):
         ax.plot(s["t_s"], delta[:, i], lw=0.8)
         ax.axhline(1.0, color="tab:red", ls=":", lw=0.8)
         ax.axhline(-1.0, color="tab:red", ls=":", lw=0.8)
+        if checked:
+            peak = max(list(f["peak_abs_delta"].values())[i] for f in checked)
+            for sign in (1.0, -1.0):
+                ax.axhline(sign * peak, color="tab:green", ls="--", lw=0.8,
+                           label="predicted peak" if sign > 0 and i == 0 else None)
+            if i == 0:
+                ax.legend(loc="upper right", fontsize=7)
         ax.set_ylabel(INPUT_NAMES[i], fontsize=8)
         _mark_decisions(ax, record)
     axes[-1].set_xlabel("time (s)")
@@ -216,7 +263,10 @@ def render_report(record: FlightRecord, out_dir: str | Path) -> list[Path]:
     summary.update(tracking_statistics(record))
     summary["decisions"] = [{k: d.get(k) for k in ("kind", "reason", "latency_ms", "t_s")}
                             for d in record.decisions]
+    summary["legs"] = leg_feasibility(record)
     written.append(out / "summary.json")
     written[-1].write_text(json.dumps(summary, indent=2))
+    written.append(out / "summary.txt")
+    written[-1].write_text(summary_text(summary, summary["legs"]))
     log.info("report written to %s (%d files)", out, len(written))
     return written

@@ -24,4 +24,6 @@ def run(args: argparse.Namespace) -> int:
 
     for path in render_report(load_record(args.record), args.out):
         print(path)
+        if path.name == "summary.txt":
+            print(path.read_text(), end="")
     return 0
