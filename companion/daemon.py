@@ -487,7 +487,9 @@ class CompanionDaemon:
                                    feasibility=self.checker)
         if new is not None:
             self.engage(new.trajectory, f"leg{leg.index}-resume", turn=True)
-        self.event("resumed", leg=leg.index, from_ned_m=pos)
+        checked = None if new is None or new.feasibility is None else \
+            {k: v for k, v in new.feasibility.items() if k != "pieces"}
+        self.event("resumed", leg=leg.index, from_ned_m=pos, feasibility=checked)
 
     async def continue_leg(self, leg: LegPlan, reason: str) -> None:
         """Plan back to the leg's goal from a reference that ended short of it (an evasion or
