@@ -112,3 +112,31 @@ def test_enabled_must_be_a_boolean():
     assert FeasibilitySettings().enabled is True
     with pytest.raises(SmoothingError, match="feasibility.enabled"):
         FeasibilitySettings(enabled="yes")
+
+
+def test_no_feasibility_option_turns_the_check_off(capsys):
+    import json
+
+    from companion.cli import main
+
+    assert main(["run", "--no-feasibility", "--print-config"]) == 0
+    assert json.loads(capsys.readouterr().out)["feasibility"]["enabled"] is False
+
+
+def test_the_flight_report_lists_each_legs_figures(checker, tmp_path):
+    from companion.daemon import feasibility_totals
+    from companion.record import FlightRecord
+    from companion.report import leg_feasibility, summary_text
+
+    legs = [leg(AGGRESSIVE, checker), leg(SmoothingSettings(), checker), leg(SmoothingSettings())]
+    totals = feasibility_totals(legs)
+    assert totals["legs_checked"] == 2 and totals["legs_stretched"] == 1 and totals["legs_infeasible"] == 0
+    record = FlightRecord()
+    record.plans = [{"leg": 0, "seq": 2, "duration_s": legs[0].trajectory.duration_s,
+                     "feasibility": legs[0].feasibility},
+                    {"leg": 1, "seq": 3, "duration_s": 1.0, "feasibility": None}]
+    rows = leg_feasibility(record)
+    assert "pieces" not in rows[0]["feasibility"] and rows[1]["feasibility"] is None
+    text = summary_text({"outcome": "completed", "legs_planned": 2, "legs_reached": 2}, rows)
+    assert "leg 0 (item 2): feasible, stretch x" in text and "(saturates)" in text
+    assert "leg 1 (item 3): not checked" in text
