@@ -225,11 +225,6 @@ class SetpointStreamer:
     def source(self) -> SetpointSource | None:
         return self._source
 
-    @property
-    def last_setpoint(self) -> Setpoint | None:
-        """The setpoint sent last (None before the first send)."""
-        return self._last
-
     def start(self) -> asyncio.Task:
         """Start streaming on the running loop; returns the task."""
         if self._task is None or self._task.done():
@@ -331,7 +326,3 @@ class SetpointStreamer:
     def stats(self) -> JitterStats:
         """Period jitter of the sends so far."""
         return jitter_stats(self.send_times_s, self.period_s, self.missed)
-
-    def reset_stats(self) -> None:
-        self._times = array("d")
-        self.missed = 0
