@@ -28,9 +28,9 @@ writes (``companion.daemon``, ``companion.threats.reactor``). Times ``t_s`` are 
               ``removed``, ``known``, ``t_s``; one restored after a restart: ``restored``,
               ``expires_t_s`` (no ``source``)
 ``event``     anything else worth a line: ``name`` (e.g. ``planned``, ``reached``,
-              ``link_lost`` / ``link_back``, ``zenoh_lost`` / ``zenoh_back``, ``hold``, ``landed``; at the end
-              ``setpoint_jitter`` and ``threat_bus``, which have no ``t_s``), ``t_s`` and the
-              event's own fields
+              ``link_lost`` / ``link_back``, ``zenoh_lost`` / ``zenoh_back``, ``hold``,
+              ``landed``; at the end ``setpoint_jitter`` and ``threat_bus``, which have no
+              ``t_s``), ``t_s`` and the event's own fields
 ``summary``   end of flight: ``FlightSummary`` (legs planned and reached, landed, RMS and
               maximum tracking error, decisions, minimum threat separation, latencies, threat
               updates, joined, resumed_at_seq, threats_restored, outcome)
