@@ -62,12 +62,12 @@ sys.path.insert(0, str(REPO / "tests"))
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from companion.demo import DEMO_MISSION, FlightWatcher, flight_processes, last_json_line  # noqa: E402
+from companion.demo import FlightWatcher, last_json_line  # noqa: E402
 from companion.record import load_record  # noqa: E402
 from companion.threats import codec  # noqa: E402
 from companion.threats.bus import ThreatBus  # noqa: E402
 from companion.threats.model import Threat  # noqa: E402
-from flight_support import TrackListener  # noqa: E402
+from flight_support import DEMO_MISSION, TrackListener, flight_processes  # noqa: E402
 from support import MavlinkPeer  # noqa: E402
 
 log = logging.getLogger("soak")

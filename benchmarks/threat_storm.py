@@ -25,11 +25,13 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tests"))
 
-from companion.demo import DEMO_MISSION, FlightWatcher, flight_processes, last_json_line  # noqa: E402
+from companion.demo import FlightWatcher, last_json_line  # noqa: E402
 from companion.record import load_record  # noqa: E402
 from companion.threats.bus import ThreatBus  # noqa: E402
 from companion.threats.model import Threat  # noqa: E402
+from flight_support import DEMO_MISSION, flight_processes  # noqa: E402
 
 SPEEDUP = 4.0
 

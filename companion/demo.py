@@ -15,15 +15,19 @@ latency (threat PUT to the first setpoint of the new trajectory), the minimum se
 the threats and the tracking error, and renders the report (``companion report``) with a
 Fig. 8-style plot.
 
-``Injection`` and ``FlightWatcher`` are also what the threat integration tests use.
+The mission is package data (``companion/data/exclusion_zones.plan``, read through
+``importlib.resources``), so the demo runs from an installed wheel anywhere. The child processes
+are ``python -m sim_vehicle.cli`` and ``python -m companion.cli`` of this interpreter, in the
+current directory and environment. The threat integration tests and the SITL benchmarks drive
+their flights with the same pieces (through ``tests/flight_support.py``).
 """
 
 from __future__ import annotations
 
 import contextlib
+import importlib.resources
 import json
 import logging
-import os
 import socket
 import subprocess
 import sys
@@ -41,10 +45,18 @@ from companion.threats.model import Threat
 
 log = logging.getLogger(__name__)
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
 #: ``sim-vehicle``'s default home (lat, lon, alt AMSL): the origin of the demo's global threats.
 DEMO_HOME = (47.397742, 8.545594, 488.0)
-DEMO_MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
+#: The demo's mission, package data of ``companion`` (``mission_files/`` links to it).
+DEMO_MISSION_RESOURCE = "data/exclusion_zones.plan"
+
+
+@contextlib.contextmanager
+def demo_mission():
+    """The demo mission as a file on disk (from the installed package), for the context."""
+    resource = importlib.resources.files("companion").joinpath(DEMO_MISSION_RESOURCE)
+    with importlib.resources.as_file(resource) as path:
+        yield Path(path)
 
 
 def free_port(kind: int = socket.SOCK_DGRAM) -> int:
@@ -207,11 +219,12 @@ def inject(watcher: FlightWatcher, injections, timeout_s: float, *, done=None) -
     return sent
 
 
-def spawn(args: list[str], log_path: Path) -> subprocess.Popen:
-    env = dict(os.environ, PYTHONPATH=str(REPO_ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+def spawn(args: list[str], log_path: Path, env: dict | None = None) -> subprocess.Popen:
+    """``python -m *args`` with this interpreter, output to ``log_path``; ``env`` defaults to
+    this process's environment."""
     with open(log_path, "wb") as fh:
         return subprocess.Popen([sys.executable, "-m", *args], stdout=fh, stderr=subprocess.STDOUT,
-                                cwd=str(REPO_ROOT), env=env)
+                                env=env)
 
 
 def stop(proc: subprocess.Popen, timeout_s: float = 15.0) -> None:
@@ -248,10 +261,11 @@ class FlightProcesses:
 
 @contextlib.contextmanager
 def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
-                     gcs_out: str | None = None, extra_args=(), sim_args=()):
+                     gcs_out: str | None = None, extra_args=(), sim_args=(), env: dict | None = None):
     """Start ``sim-vehicle`` and ``companion run --mission`` on free loopback ports.
 
-    ``extra_args`` go to ``companion run``, ``sim_args`` to ``sim-vehicle`` (e.g. wind).
+    ``extra_args`` go to ``companion run``, ``sim_args`` to ``sim-vehicle`` (e.g. wind); ``env``
+    is the processes' environment (default: this one's).
     Yields ``FlightProcesses``; both processes are stopped on exit (SIGTERM, then SIGKILL).
     """
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -259,11 +273,11 @@ def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
     outs = ["--out", f"127.0.0.1:{mav_port}"] + (["--out", gcs_out] if gcs_out else [])
     sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(speedup), *sim_args],
-                out_dir / "sim_vehicle.log")
+                out_dir / "sim_vehicle.log", env)
     record, log_path = out_dir / "flight.jsonl", out_dir / "companion.log"
     companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
                        "--mission", str(mission), "--time-scale", str(speedup),
-                       "--zenoh-listen", endpoint, "--record", str(record), *extra_args], log_path)
+                       "--zenoh-listen", endpoint, "--record", str(record), *extra_args], log_path, env)
     try:
         yield FlightProcesses(sim, companion, vehicle_port, endpoint, record, log_path)
     finally:
@@ -272,7 +286,7 @@ def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
 
 
 def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
-        timeout_s: float = 300.0, gcs_out: str | None = None, extra_args=()) -> dict:
+        timeout_s: float = 300.0, gcs_out: str | None = None, extra_args=(), env: dict | None = None) -> dict:
     """Fly ``mission`` with a fresh ``sim-vehicle`` and ``companion run`` (separate processes).
 
     This process watches the flight over zenoh and puts the ``injections`` when they are due,
@@ -280,7 +294,7 @@ def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
     ``record`` (the flight record's path).
     """
     with flight_processes(out_dir, mission, speedup=speedup, gcs_out=gcs_out,
-                          extra_args=extra_args) as flight:
+                          extra_args=extra_args, env=env) as flight:
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             watcher = FlightWatcher(bus)
             if injections:
@@ -299,5 +313,6 @@ def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
 
 
 def run_demo(out_dir: Path, *, speedup: float = 4.0, gcs_out: str | None = "127.0.0.1:14550") -> dict:
-    """The demo flight: ``DEMO_MISSION`` with ``DEMO_INJECTIONS``."""
-    return fly(out_dir, DEMO_MISSION, speedup=speedup, injections=DEMO_INJECTIONS, gcs_out=gcs_out)
+    """The demo flight: the demo mission (``demo_mission``) with ``DEMO_INJECTIONS``."""
+    with demo_mission() as mission:
+        return fly(out_dir, mission, speedup=speedup, injections=DEMO_INJECTIONS, gcs_out=gcs_out)

@@ -1,19 +1,40 @@
 """Flight record: one JSON object per line (JSON Lines), written as the flight goes.
 
 A record survives a crash up to its last flushed line (every half second) and can be read
-while it is written. Line types:
+while it is written. Every line has ``type``; the fields below are the ones ``companion run``
+writes (``companion.daemon``, ``companion.threats.reactor``). Times ``t_s`` are mission time
+(the vehicle's seconds), positions local NED about home (m).
 
-``header``    settings, seed, home (lat, lon, alt), command line
-``world``     obstacles (as ``World.to_dict()``), bounds, margin
-``plan``      one leg: planner polyline, smoothed samples, tree (nodes, parents), alternatives
-``sample``    time, reference pos/vel (NED), actual pos/vel (NED), attitude, actuator inputs
-``decision``  a threat-manager decision: kind, reason, latency, path id, new path
-``alternatives`` the M-GART alternatives of a leg, as refreshed
-``threat``    a threat as received (id, kind, position, velocity, radius) or its removal
-``event``     anything else worth a line (mode change, leg reached, link lost / back)
-``summary``   end of flight: tracking error statistics, legs reached, minimum separation
+``header``    ``settings`` (all of them), ``seed``, ``home_lla`` (lat, lon, alt AMSL),
+              ``ekf_origin_lla``, ``home_in_origin_ned_m``, ``mission`` (the file, or "from the
+              vehicle") and ``waypoints_ned_m``
+``world``     the mission's world as ``companion.world.io.world_to_dict``: ``world``
+              (``bounds_min``, ``bounds_max``, ``margin_m``) and ``obstacles``
+``plan``      one leg: ``leg``, ``seq``, ``path_id``, ``path_ned_m`` (the polyline flown),
+              ``reference_ne`` (the smoothed reference, north-east, 5 samples/s), ``tree``
+              (GART's ``nodes`` and ``parents``, or None) and the planner's ``summary``
+``sample``    ``t_s``, ``ref_pos_ned_m``, ``ref_vel_ned_m_s``, ``pos_ned_m``, ``vel_ned_m_s``
+              (the vehicle's), ``servo_us`` (SERVO_OUTPUT_RAW, or None), ``tracking_error_m``,
+              ``leg``, ``path_id``
+``decision``  a threat-manager decision: ``kind``, ``reason``, ``label``, ``path_id``,
+              ``path_ned_m`` (the new path), ``trigger``, ``latency_ms`` (threat to the first
+              setpoint of the new reference), ``decide_ms``, ``plan_ms``, ``candidates``,
+              ``min_clearance_m``, ``threat_id``, ``source``, ``time_to_conflict_s``, ``t_s``,
+              ``pos_ned_m``, ``leg``; a rejected payload: ``kind`` "rejected", ``reason``,
+              ``field``, ``threat_id``, ``source``, ``t_s``
+``alternatives`` the M-GART alternatives of a leg, as refreshed: ``leg``, ``t_s``, ``paths``
+``threat``    a threat as received: ``id``, ``source``, ``kind``, ``position_ned_m``,
+              ``velocity_ned_m_s``, ``radius_m``, ``t_s``; its removal: ``id``, ``source``,
+              ``removed``, ``known``, ``t_s``; one restored after a restart: ``restored``,
+              ``expires_t_s`` (no ``source``)
+``event``     anything else worth a line: ``name`` (e.g. ``planned``, ``reached``,
+              ``link_lost`` / ``link_back``, ``zenoh_lost`` / ``zenoh_back``, ``hold``,
+              ``landed``; at the end ``setpoint_jitter`` and ``threat_bus``, which have no
+              ``t_s``), ``t_s`` and the event's own fields
+``summary``   end of flight: ``FlightSummary`` (legs planned and reached, landed, RMS and
+              maximum tracking error, decisions, minimum threat separation, latencies, threat
+              updates, joined, resumed_at_seq, threats_restored, outcome)
 """
-
 from __future__ import annotations
 
 import json

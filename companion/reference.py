@@ -15,6 +15,7 @@ from collections import deque
 import numpy as np
 
 from companion.link.setpoints import Setpoint
+from companion.trajectory import FlyableReference
 
 __all__ = ["VehicleClock", "ActiveReference", "wrap_pi"]
 
@@ -73,7 +74,7 @@ class ActiveReference:
     state its commit time will find, so the setpoint does not jump whatever the decision took).
     """
 
-    def __init__(self, trajectory, t0_s: float, clock: VehicleClock, path_id: str, *,
+    def __init__(self, trajectory: FlyableReference, t0_s: float, clock: VehicleClock, path_id: str, *,
                  turn_from_yaw_rad: float | None = None, turn_rate_rad_s: float = 0.6,
                  resume: bool = False, previous: "ActiveReference | None" = None):
         self.trajectory = trajectory

@@ -20,6 +20,10 @@ velocity (up to the curve's arc-length table). Sampling K times costs a few vect
 operations (two ``searchsorted`` and one Bernstein evaluation).
 
 A 2D trajectory (north-east) is lifted to 3D NED at a fixed altitude with ``to_ned(down_m)``.
+
+``FlyableReference`` is what every reference the companion flies offers (``Trajectory``, the
+``TrajectoryChain`` of a leg, a ``RetimedTrajectory`` and its holds, an ``EscapeManoeuvre``):
+what ``ActiveReference``, the retimer and the chains use of it, and nothing more.
 """
 
 from __future__ import annotations
@@ -28,14 +32,53 @@ import logging
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from companion.errors import TrajectoryError
 
-__all__ = ["Trajectory", "RawProfile"]
+__all__ = ["Trajectory", "RawProfile", "FlyableReference"]
 
 logger = logging.getLogger(__name__)
+
+
+@runtime_checkable
+class FlyableReference(Protocol):
+    """A reference the companion can fly: sampled by time from t = 0 to ``duration_s``.
+
+    Used by ``companion.reference.ActiveReference`` (the setpoint stream), by
+    ``companion.flight_plan.TrajectoryChain`` (its pieces) and by
+    ``companion.threats.retime.RetimedTrajectory`` (its base). Implementations clip ``t_s`` to
+    [0, duration_s] (or hover after the end).
+
+    Attributes
+    ----------
+    duration_s : float
+        Time from the start to the end (s).
+    length_m : float
+        Length of the path flown (m).
+    end_pos_ned_m : ndarray, shape (D,)
+        Where it ends (where the vehicle holds after ``duration_s``).
+    """
+
+    duration_s: float
+    length_m: float
+
+    @property
+    def end_pos_ned_m(self) -> np.ndarray: ...
+
+    def sample(self, t_s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position, velocity, acceleration at times ``t_s`` (K,) -> three (K, D) arrays."""
+        ...
+
+    def yaw_rad(self, t_s) -> np.ndarray:
+        """Yaw reference (rad) at times ``t_s`` (K,) -> (K,)."""
+        ...
+
+    def yaw_rate_rad_s(self, t_s) -> np.ndarray:
+        """Yaw-rate reference (rad/s) at times ``t_s`` (K,) -> (K,)."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -300,15 +343,6 @@ class Trajectory:
                           (self._tau_start + self.duration_s) * k, yaw_mode=self.yaw_mode,
                           yaw_hold_rad=self.yaw_hold_rad, down_m=self.down_m, notes=self.notes,
                           grid_step_m=self.grid_step_m)
-
-    def retimed(self, limits) -> "Trajectory":
-        """The same curve and boundary speeds re-timed for other ``limits`` (e.g. stretched)."""
-        from companion.smoothing.timing import time_parameterize
-
-        out = time_parameterize(self.curve, limits, start_speed_m_s=self.profile.start_speed_m_s,
-                                end_speed_m_s=self.profile.end_speed_m_s, grid_step_m=self.grid_step_m,
-                                yaw_mode=self.yaw_mode, yaw_hold_rad=self.yaw_hold_rad)
-        return out.to_ned(self.down_m) if self.down_m is not None else out
 
     @property
     def start_pos_ned_m(self) -> np.ndarray:

@@ -1,5 +1,11 @@
 """Helpers for companion flight tests: a telemetry listener and the companion process.
 
+The flights with threats (``flight_processes``, ``fly``, ``spawn``) are ``companion.demo``'s, run
+on this checkout: the child processes get the repository root on their ``PYTHONPATH``, so they
+run the code under test even where another checkout is installed (a worktree, a benchmark run
+as a script). ``DEMO_MISSION`` is the demo's mission (``mission_files/`` links to the package
+data). The other flight helpers are re-exported from ``companion.demo``.
+
 ``TrackListener`` is an independent pymavlink listener on its own UDP port (give its address to
 ``sim-vehicle --out``): the flown track and the armed state come from the vehicle itself, not
 from the companion under test. Like any logger of an ArduPilot vehicle it asks for what it
@@ -18,6 +24,9 @@ import time
 
 import numpy as np
 
+from companion import demo as _demo
+from companion.demo import (DEMO_HOME, FlightWatcher, Injection, free_port, inject,  # noqa: F401
+                            last_json_line, place, stop)
 from support import REPO_ROOT, free_udp_port
 
 MAV_MODE_FLAG_SAFETY_ARMED = 128
@@ -117,3 +126,27 @@ def wait_until(predicate, timeout_s: float, what: str, poll_s: float = 0.1) -> N
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
         time.sleep(poll_s)
+
+
+#: The demo's mission in this checkout (a link to ``companion/data/exclusion_zones.plan``).
+DEMO_MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
+
+
+def checkout_env() -> dict:
+    """This environment with the repository root first on ``PYTHONPATH``."""
+    return dict(os.environ, PYTHONPATH=str(REPO_ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+
+def spawn(args: list[str], log_path) -> subprocess.Popen:
+    """``companion.demo.spawn`` on this checkout."""
+    return _demo.spawn(args, log_path, env=checkout_env())
+
+
+def flight_processes(out_dir, mission, **kwargs):
+    """``companion.demo.flight_processes`` on this checkout."""
+    return _demo.flight_processes(out_dir, mission, env=checkout_env(), **kwargs)
+
+
+def fly(out_dir, mission, **kwargs) -> dict:
+    """``companion.demo.fly`` on this checkout."""
+    return _demo.fly(out_dir, mission, env=checkout_env(), **kwargs)

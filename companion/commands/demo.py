@@ -11,7 +11,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "demo", help="fly the demo: SITL helicopter, companion and threats (make demo)",
         description="Start a sim-vehicle and a companion run on free ports, fly "
-        "mission_files/exclusion_zones.plan and inject threats over zenoh from this process: "
+        "the demo mission (exclusion_zones.plan, shipped in the package) and inject threats over zenoh from this process: "
         "a threat coming head-on at 3 m/s (an evasion), a pop-up on the path once M-GART "
         "alternatives are ready (a switch) and an invalid payload (rejected). Prints the "
         "decisions, latencies, the longest way back to the mission, minimum separation and "
@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0.5 <= args.speedup <= 10:
         raise CompanionError(f"--speedup: between 0.5 and 10, got {args.speedup}")
     out = Path(args.out)
-    print(f"demo: flying mission_files/exclusion_zones.plan at {args.speedup:g}x; logs in {out}")
+    print(f"demo: flying exclusion_zones.plan at {args.speedup:g}x; logs in {out}")
     summary = run_demo(out, speedup=args.speedup, gcs_out=None if args.no_gcs else "127.0.0.1:14550")
     for e in summary.pop("events"):
         if e.get("event") not in (None, "none"):

@@ -11,9 +11,15 @@ replaces atomically with ``set_source`` (a single attribute store) when a new tr
 ready, so a splice takes effect at the next tick. If the callable raises, the previous setpoint
 is repeated and the error logged (once per source).
 
-Planning must not hold the GIL for long stretches: run it in a ``ProcessPoolExecutor`` whose
-worker is niced, and give the streaming thread priority with ``raise_stream_priority`` (see
-``docs/benchmarks/setpoint_jitter.md`` for the measurements behind this recommendation).
+What ``companion run`` does (``companion.daemon``): the event-loop thread that streams is given
+priority with ``raise_stream_priority`` (SCHED_FIFO when allowed) before the link connects;
+planning, threat decisions and M-GART refreshes run in a two-thread ``ThreadPoolExecutor``
+(``FlightDaemon.in_worker``) whose threads go back to normal priority
+(``restore_normal_priority``), so the threat manager's state stays in one process; and a short
+GIL switch interval hands the GIL back to the stream quickly. ``planning_worker_init`` is the
+initializer for planning in a niced worker *process* instead, the alternative measured in
+``docs/benchmarks/setpoint_jitter.md`` (``benchmarks/setpoint_jitter.py``), which the daemon
+does not use.
 """
 
 from __future__ import annotations
@@ -40,7 +46,8 @@ def raise_stream_priority(fifo_priority: int = 10, nice_increment: int = -5) -> 
     (MAVSDK's I/O and callback threads, executor threads) inherit the policy, so a callback
     holding the GIL is not preempted by other processes while the stream waits for it. Safe
     for the stream (about 0.1 ms of work per 20 ms period); never call it from a thread that
-    runs long computations, and start planning workers with ``planning_worker_init``.
+    runs long computations: start planning threads with ``restore_normal_priority`` (as the
+    daemon does) or planning processes with ``planning_worker_init``.
 
     Returns
     -------
@@ -225,11 +232,6 @@ class SetpointStreamer:
     def source(self) -> SetpointSource | None:
         return self._source
 
-    @property
-    def last_setpoint(self) -> Setpoint | None:
-        """The setpoint sent last (None before the first send)."""
-        return self._last
-
     def start(self) -> asyncio.Task:
         """Start streaming on the running loop; returns the task."""
         if self._task is None or self._task.done():
@@ -331,7 +333,3 @@ class SetpointStreamer:
     def stats(self) -> JitterStats:
         """Period jitter of the sends so far."""
         return jitter_stats(self.send_times_s, self.period_s, self.missed)
-
-    def reset_stats(self) -> None:
-        self._times = array("d")
-        self.missed = 0

@@ -303,16 +303,6 @@ def power_basis_matrix(n: int) -> np.ndarray:
     return m
 
 
-def _horner(coeffs: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Evaluate power-basis polynomials ``coeffs`` (K, n+1, d) at ``u`` (K,) -> (K, d)."""
-    out = coeffs[:, -1].copy()
-    uu = u[:, None]
-    for j in range(coeffs.shape[1] - 2, -1, -1):
-        out *= uu
-        out += coeffs[:, j]
-    return out
-
-
 def _horner_grid(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Evaluate power-basis polynomials ``coeffs`` (K, n+1, d) at ``x`` (K, S) -> (K, S, d)."""
     xx = x[:, :, None]
@@ -716,20 +706,6 @@ class BezierPath:
         return kappa[0] if scalar else kappa
 
     # ------------------------------------------------------------------ per-piece access
-    def piece_curvature_at_end(self, piece: np.ndarray) -> np.ndarray:
-        """Curvature (1/m) at the end (u = 1) of pieces ``piece`` (K,) -> (K,)."""
-        piece = np.asarray(piece, dtype=int)
-        u = np.ones(piece.size)
-        return curvature_from_derivatives(self._piece_derivative(piece, u, 1), self._piece_derivative(piece, u, 2))
-
-    def piece_points(self, piece: int, u) -> np.ndarray:
-        """Points of piece ``piece`` at its own parameters ``u`` (K,) -> (K, d)."""
-        return evaluate(self.pieces[piece], u)
-
-    def piece_curvature(self, piece: int, u) -> np.ndarray:
-        """Curvature of piece ``piece`` at its own parameters ``u`` (K,) -> (K,)."""
-        return curvature(self.pieces[piece], u)
-
     @property
     def start(self) -> np.ndarray:
         """First point, shape (d,)."""

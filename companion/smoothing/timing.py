@@ -34,7 +34,7 @@ from companion.smoothing.bezier import BezierPath
 from companion.smoothing.settings import TrajectoryLimits
 from companion.trajectory import RawProfile, Trajectory
 
-__all__ = ["time_parameterize", "arc_grid", "speed_limit_sq", "erode", "forward_backward"]
+__all__ = ["time_parameterize", "retime", "arc_grid", "speed_limit_sq", "erode", "forward_backward"]
 
 logger = logging.getLogger(__name__)
 
@@ -250,3 +250,13 @@ def time_parameterize(curve, limits: TrajectoryLimits | None = None, *, start_sp
         yaw_hold_rad = float(math.atan2(t0[1], t0[0])) if np.hypot(t0[0], t0[1]) > 1e-6 else 0.0
     return Trajectory(path, profile, limits, tau_start, tau_end, yaw_mode=yaw_mode,
                       yaw_hold_rad=yaw_hold_rad, notes=notes, grid_step_m=float(grid_step_m))
+
+
+def retime(trajectory: Trajectory, limits: TrajectoryLimits) -> Trajectory:
+    """The same curve and boundary speeds as ``trajectory``, re-timed for other ``limits`` (e.g.
+    ``limits.stretched(k)``); lifted to the same altitude when ``trajectory`` is."""
+    p = trajectory.profile
+    out = time_parameterize(trajectory.curve, limits, start_speed_m_s=p.start_speed_m_s,
+                            end_speed_m_s=p.end_speed_m_s, grid_step_m=trajectory.grid_step_m,
+                            yaw_mode=trajectory.yaw_mode, yaw_hold_rad=trajectory.yaw_hold_rad)
+    return out.to_ned(trajectory.down_m) if trajectory.down_m is not None else out

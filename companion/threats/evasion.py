@@ -241,8 +241,8 @@ def escape_library(pos_ned_m, vel_ned_m_s, limits: EscapeLimits, *, vertical: bo
 
 
 class EscapeManoeuvre:
-    """One escape manoeuvre as a trajectory: ``sample``, ``yaw_rad``, ``yaw_rate_rad_s`` like
-    ``companion.trajectory.Trajectory`` (t = 0 at its start; a hover after its end).
+    """One escape manoeuvre as a ``companion.trajectory.FlyableReference`` (t = 0 at its start;
+    a hover after its end).
 
     Attributes
     ----------

@@ -33,8 +33,8 @@ class RetimedTrajectory:
 
     Parameters
     ----------
-    base : Trajectory-like
-        ``sample``, ``yaw_rad``, ``yaw_rate_rad_s``, ``duration_s``.
+    base : companion.trajectory.FlyableReference
+        Its ``sample``, ``yaw_rad``, ``yaw_rate_rad_s``, ``duration_s`` and ``length_m``.
     tau0_s : float
         Base time at this trajectory's t = 0.
     rate : float
@@ -136,4 +136,4 @@ class RetimedTrajectory:
 
     @property
     def length_m(self) -> float:
-        return float(getattr(self.base, "length_m", 0.0))
+        return float(self.base.length_m)

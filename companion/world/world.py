@@ -73,7 +73,7 @@ class World:
     the caches never change the answers, and the obstacles, bounds and margin cannot change.
     """
 
-    __slots__ = ("_dim", "_lo", "_hi", "_margin", "_obstacles", "_grid", "_balls", "_ball_ids",
+    __slots__ = ("_dim", "_lo", "_hi", "_margin", "_obstacles", "_grid", "_balls",
                  "_other_ids", "_cell_balls", "_cell_others", "_frozen", "point_free", "_memo")
 
     def __init__(self, obstacles: Iterable[Obstacle], bounds_min, bounds_max, margin_m: float = 0.0):
@@ -183,7 +183,6 @@ class World:
                 other_ids[i] = ob
         self._grid = grid
         self._balls = tuple(balls)
-        self._ball_ids = ball_ids
         self._other_ids = other_ids
         self._cell_balls = tuple(tuple(balls[ball_ids[i]] for i in cell_items if i in ball_ids)
                                  for cell_items in grid.cells)
@@ -406,11 +405,6 @@ class World:
             found = tuple(keep)
             self._memo[key] = found
         return found
-
-    def obstacles_in_box(self, lo: Sequence[float], hi: Sequence[float]) -> list:
-        """Obstacles whose inflated bounding box may overlap the box ``[lo, hi]`` (grid cells)."""
-        ids = self._grid.items_in_box(tuple(lo), tuple(hi))
-        return [self._obstacles[i] for i in sorted(ids)]
 
     def clearance_at(self, p: Sequence[float], max_range_m: float = math.inf) -> float:
         """Signed clearance (m) of point ``p`` from the nearest inflated obstacle surface.

@@ -7,10 +7,9 @@ import time
 
 import pytest
 
-from companion.demo import FlightWatcher, flight_processes, last_json_line
 from companion.record import load_record
 from companion.threats.bus import ThreatBus
-from flight_support import wait_until
+from flight_support import FlightWatcher, flight_processes, last_json_line, wait_until
 from support import REPO_ROOT, MavlinkPeer
 
 pytestmark = pytest.mark.integration

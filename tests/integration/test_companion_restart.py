@@ -14,12 +14,12 @@ import time
 import numpy as np
 import pytest
 
-from companion.demo import FlightWatcher, Injection, free_port, inject, last_json_line, spawn, stop
 from companion.record import load_record
 from companion.state import read_snapshot, snapshot_path
 from companion.threats.bus import ThreatBus
 from companion.threats.model import Threat
-from flight_support import TrackListener, wait_until
+from flight_support import (FlightWatcher, Injection, TrackListener, free_port, inject, last_json_line, spawn,
+                            stop, wait_until)
 from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration

@@ -14,12 +14,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from companion.demo import DEMO_HOME, FlightWatcher, Injection, flight_processes, inject, place
 from companion.geo import LocalFrame
 from companion.record import load_record
 from companion.security.deployment import init_deployment
 from companion.threats.bus import ThreatBus
-from flight_support import TrackListener, wait_until
+from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, inject,
+                            place, wait_until)
 from support import REPO_ROOT, free_tcp_port
 
 pytestmark = pytest.mark.integration

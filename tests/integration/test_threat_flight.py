@@ -19,12 +19,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from companion.demo import DEMO_HOME, FlightWatcher, Injection, flight_processes, inject, last_json_line
 from companion.geo import LocalFrame
 from companion.record import load_record
 from companion.threats.bus import ThreatBus
 from companion.threats.model import Threat
-from flight_support import TrackListener, wait_until
+from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, inject,
+                            last_json_line, wait_until)
 from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration

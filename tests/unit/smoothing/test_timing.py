@@ -14,6 +14,7 @@ from smoothing_strategies import polylines
 
 from companion.errors import SmoothingError
 from companion.smoothing import TrajectoryLimits, smooth_g1, smooth_g2, time_parameterize
+from companion.smoothing.timing import retime
 
 limit_values = st.tuples(st.floats(2.0, 15.0), st.floats(0.5, 4.0), st.floats(0.5, 5.0), st.floats(1.0, 20.0))
 
@@ -128,7 +129,7 @@ def test_2d_lifted_to_ned():
 def test_stretched_limits_scale_time_exactly():
     curve = smooth_g2(np.array([[0.0, 0.0], [80.0, 0.0], [80.0, 60.0]]), 0.1)
     base = time_parameterize(curve)
-    slow = base.retimed(base.limits.stretched(2.0))
+    slow = retime(base, base.limits.stretched(2.0))
     scaled = base.time_scaled(2.0)
     assert slow.duration_s == pytest.approx(2.0 * base.duration_s, rel=1e-6)
     assert scaled.duration_s == pytest.approx(2.0 * base.duration_s, rel=1e-12)
