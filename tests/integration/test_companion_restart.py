@@ -19,6 +19,7 @@ from companion.record import load_record
 from companion.state import read_snapshot, snapshot_path
 from companion.threats.bus import ThreatBus
 from companion.threats.model import Threat
+from heli_common.mavlink_ids import COPTER_MODES
 from flight_support import TrackListener, wait_until
 from support import REPO_ROOT
 
@@ -26,7 +27,7 @@ pytestmark = pytest.mark.integration
 
 MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
 SPEEDUP = 4.0
-GUIDED = 4
+GUIDED = COPTER_MODES["GUIDED"]
 GUIDED_TIMEOUT_S = 3.0          # sim-vehicle's default GUID_TIMEOUT (simulated s)
 BRAKE_S = 6.0                   # simulated s allowed for braking to a hover after it
 THREAT_TTL_S = 2000.0           # simulated s: alive through the crash and the rest of the flight
