@@ -1,8 +1,8 @@
 """Vehicle behaviour of the SITL helicopter: modes, arming, takeoff, landing, RTL, AUTO missions.
 
 Behaves like ArduCopter (https://ardupilot.org/copter/docs/flight-modes.html) with the mode
-numbers of DESIGN section 5 (taken from pymavlink through :mod:`heli_common.mavlink_ids`) (STABILIZE 0, ALT_HOLD 2, AUTO 3, GUIDED 4, LOITER 5, RTL 6,
-LAND 9, BRAKE 17); with no RC pilot, STABILIZE and ALT_HOLD hold position like LOITER. The
+numbers of DESIGN section 5 (STABILIZE 0, ALT_HOLD 2, AUTO 3, GUIDED 4, LOITER 5, RTL 6,
+LAND 9, BRAKE 17; taken from pymavlink through :mod:`heli_common.mavlink_ids`); with no RC pilot, STABILIZE and ALT_HOLD hold position like LOITER. The
 flight controller is the paper's LQI with the PID position loop (section 2.2,
 :mod:`sim_vehicle.control`); this module only decides *what* it tracks:
 
