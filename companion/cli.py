@@ -16,6 +16,7 @@ import logging
 import sys
 
 from companion.errors import CompanionError
+from companion.geo import GeoError
 
 COMMAND_MODULES = ("run", "mission_io", "plan", "threat", "keys", "router", "report", "demo")
 
@@ -56,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(args.verbose + 1)
     try:
         return int(args.func(args) or 0)
-    except CompanionError as exc:
+    except (CompanionError, GeoError) as exc:   # GeoError: heli_common's, a ValueError
         print(f"companion: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -58,6 +58,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from heli_common.mavlink_ids import COPTER_MODES
+
 from companion.config import Settings, settings_to_dict
 from companion.errors import CompanionError, FlightAborted, LinkError, MissionError, VehicleRefused
 from companion.geo import LocalFrame
@@ -81,7 +83,7 @@ from companion.world import world_to_dict
 
 log = logging.getLogger(__name__)
 
-GUIDED = 4
+GUIDED = COPTER_MODES["GUIDED"]
 #: How often (wall clock, s) the zenoh session's peers and routers are counted (router loss).
 ZENOH_WATCH_PERIOD_S = 1.0
 #: GIL switch interval (s): a planning thread hands the GIL to the setpoint stream this often.

@@ -2,7 +2,7 @@
 
 Behaves like ArduCopter (https://ardupilot.org/copter/docs/flight-modes.html) with the mode
 numbers of DESIGN section 5 (STABILIZE 0, ALT_HOLD 2, AUTO 3, GUIDED 4, LOITER 5, RTL 6,
-LAND 9, BRAKE 17); with no RC pilot, STABILIZE and ALT_HOLD hold position like LOITER. The
+LAND 9, BRAKE 17; taken from pymavlink through :mod:`heli_common.mavlink_ids`); with no RC pilot, STABILIZE and ALT_HOLD hold position like LOITER. The
 flight controller is the paper's LQI with the PID position loop (section 2.2,
 :mod:`sim_vehicle.control`); this module only decides *what* it tracks:
 
@@ -40,6 +40,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from heli_common.geometry import point_in_polygon
+from heli_common.mavlink_ids import COPTER_MODES, copter_mode_name, mavlink
+
 from sim_vehicle import dynamics, rsc
 from sim_vehicle.config import VehicleSettings
 from sim_vehicle.control import FlightController, Setpoint
@@ -52,32 +55,33 @@ from sim_vehicle.wind import WindModel, WindSettings
 
 log = logging.getLogger(__name__)
 
-# ArduCopter flight modes (custom_mode of HEARTBEAT)
-STABILIZE = 0
-ALT_HOLD = 2
-AUTO = 3
-GUIDED = 4
-LOITER = 5
-RTL = 6
-LAND = 9
-BRAKE = 17
-MODE_NAMES = {STABILIZE: "STABILIZE", ALT_HOLD: "ALT_HOLD", AUTO: "AUTO", GUIDED: "GUIDED", LOITER: "LOITER",
-              RTL: "RTL", LAND: "LAND", BRAKE: "BRAKE"}
+# ArduCopter flight modes (custom_mode of HEARTBEAT; numbers from pymavlink's mode_mapping_acm)
+STABILIZE = COPTER_MODES["STABILIZE"]
+ALT_HOLD = COPTER_MODES["ALT_HOLD"]
+AUTO = COPTER_MODES["AUTO"]
+GUIDED = COPTER_MODES["GUIDED"]
+LOITER = COPTER_MODES["LOITER"]
+RTL = COPTER_MODES["RTL"]
+LAND = COPTER_MODES["LAND"]
+BRAKE = COPTER_MODES["BRAKE"]
+#: the modes this vehicle flies, number -> name
+MODE_NAMES = {number: copter_mode_name(number) for number in
+              (STABILIZE, ALT_HOLD, AUTO, GUIDED, LOITER, RTL, LAND, BRAKE)}
 MODE_NUMBERS = {name: number for number, name in MODE_NAMES.items()}
 
-# MAV_CMD numbers of the mission items the vehicle flies
-CMD_NAV_WAYPOINT = 16
-CMD_NAV_LOITER_UNLIM = 17
-CMD_NAV_LOITER_TIME = 19
-CMD_NAV_RETURN_TO_LAUNCH = 20
-CMD_NAV_LAND = 21
-CMD_NAV_TAKEOFF = 22
-CMD_DO_CHANGE_SPEED = 178
-CMD_NAV_RALLY_POINT = 5100
-CMD_FENCE_POLYGON_INCLUSION = 5001
-CMD_FENCE_POLYGON_EXCLUSION = 5002
-CMD_FENCE_CIRCLE_INCLUSION = 5003
-CMD_FENCE_CIRCLE_EXCLUSION = 5004
+# MAV_CMD numbers of the mission items the vehicle flies (pymavlink's generated enums)
+CMD_NAV_WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
+CMD_NAV_LOITER_UNLIM = mavlink.MAV_CMD_NAV_LOITER_UNLIM
+CMD_NAV_LOITER_TIME = mavlink.MAV_CMD_NAV_LOITER_TIME
+CMD_NAV_RETURN_TO_LAUNCH = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
+CMD_NAV_LAND = mavlink.MAV_CMD_NAV_LAND
+CMD_NAV_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
+CMD_DO_CHANGE_SPEED = mavlink.MAV_CMD_DO_CHANGE_SPEED
+CMD_NAV_RALLY_POINT = mavlink.MAV_CMD_NAV_RALLY_POINT
+CMD_FENCE_POLYGON_INCLUSION = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+CMD_FENCE_POLYGON_EXCLUSION = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+CMD_FENCE_CIRCLE_INCLUSION = mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION
+CMD_FENCE_CIRCLE_EXCLUSION = mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
 NAV_COMMANDS = frozenset({CMD_NAV_WAYPOINT, CMD_NAV_LOITER_UNLIM, CMD_NAV_LOITER_TIME, CMD_NAV_RETURN_TO_LAUNCH,
                           CMD_NAV_LAND, CMD_NAV_TAKEOFF})
 
@@ -88,7 +92,7 @@ TOUCHDOWN_HEIGHT_M = 0.03
 MAX_TAKEOFF_ALT_M = 1000.0
 PREARM_REPORT_PERIOD_S = 30.0
 """While disarmed, a failing pre-arm check is reported this often (ArduPilot's PREARM_DISPLAY_PERIOD)."""
-MAV_SEVERITY_CRITICAL = 2
+MAV_SEVERITY_CRITICAL = mavlink.MAV_SEVERITY_CRITICAL
 
 
 class QuietRefusal(str):
@@ -123,21 +127,6 @@ class Fence:
         """True when no polygon or circle is defined."""
         return not (self.inclusion_polygons or self.exclusion_polygons or self.inclusion_circles
                     or self.exclusion_circles)
-
-
-def point_in_polygon(point_ne_m: np.ndarray, polygon_ne_m: np.ndarray) -> bool:
-    """Even-odd ray casting: is the (2,) point inside the (K, 2) polygon?"""
-    x, y = float(point_ne_m[0]), float(point_ne_m[1])
-    inside = False
-    k = len(polygon_ne_m)
-    for i in range(k):
-        x1, y1 = polygon_ne_m[i]
-        x2, y2 = polygon_ne_m[(i + 1) % k]
-        if (y1 > y) != (y2 > y):
-            x_cross = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-            if x < x_cross:
-                inside = not inside
-    return inside
 
 
 def fence_breach(fence: Fence, pos_ned_m: np.ndarray, alt_max_m: float) -> str | None:
@@ -390,8 +379,8 @@ class Autopilot:
 
     def position_lla(self) -> tuple[float, float, float]:
         """Latitude, longitude (degrees) and altitude AMSL (m) of the vehicle."""
-        n, e, d = self.pos_ned_m
-        return self.frame.to_lla(n, e, d)
+        lat, lon, alt = self.frame.to_lla(*self.pos_ned_m)
+        return float(lat), float(lon), float(alt)
 
     @property
     def has_mission(self) -> bool:

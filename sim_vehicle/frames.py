@@ -12,7 +12,8 @@
   ``relative_alt``, takeoff altitude, ``*_RELATIVE_ALT`` frames), RTL and mission item 0. Its
   HOME_POSITION ``x, y, z`` are its NED position from the origin.
 
-Geodesy through :class:`sim_vehicle.geo_flat.LocalFrame` (WGS-84, pymap3d). Pure: no I/O.
+Geodesy through :class:`heli_common.frames.LocalFrame` (WGS-84, pymap3d), the project's one
+local-frame conversion. Pure: no I/O.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
-from sim_vehicle.geo_flat import LocalFrame
+from heli_common.frames import LocalFrame
 
 
 class Frames:
@@ -81,11 +82,12 @@ class Frames:
     # ------------------------------------------------------------------ geodesy
     def to_lla(self, pos_ned_m: Sequence[float]) -> tuple[float, float, float]:
         """Ground frame -> latitude, longitude (degrees), altitude AMSL (m)."""
-        return self.ground.to_lla(float(pos_ned_m[0]), float(pos_ned_m[1]), float(pos_ned_m[2]))
+        lat, lon, alt = self.ground.to_lla(float(pos_ned_m[0]), float(pos_ned_m[1]), float(pos_ned_m[2]))
+        return float(lat), float(lon), float(alt)
 
     def to_ned(self, lat_deg: float, lon_deg: float, alt_m: float) -> np.ndarray:
         """Latitude, longitude (degrees), altitude AMSL (m) -> ground frame."""
-        return np.array(self.ground.to_ned(lat_deg, lon_deg, alt_m))
+        return np.array(self.ground.to_ned(lat_deg, lon_deg, alt_m), dtype=float)
 
 
 __all__ = ["Frames"]

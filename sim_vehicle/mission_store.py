@@ -18,100 +18,42 @@ import enum
 import logging
 import math
 
+from heli_common.mavlink_ids import enum_names, mavlink
+from heli_common.mission_item import MissionItemInt
+
 log = logging.getLogger(__name__)
 
-MISSION_TYPE_MISSION = 0
-MISSION_TYPE_FENCE = 1
-MISSION_TYPE_RALLY = 2
-MISSION_TYPE_ALL = 255
+MISSION_TYPE_MISSION = mavlink.MAV_MISSION_TYPE_MISSION
+MISSION_TYPE_FENCE = mavlink.MAV_MISSION_TYPE_FENCE
+MISSION_TYPE_RALLY = mavlink.MAV_MISSION_TYPE_RALLY
+MISSION_TYPE_ALL = mavlink.MAV_MISSION_TYPE_ALL
 MISSION_TYPES = (MISSION_TYPE_MISSION, MISSION_TYPE_FENCE, MISSION_TYPE_RALLY)
 MISSION_TYPE_NAMES = {MISSION_TYPE_MISSION: "mission", MISSION_TYPE_FENCE: "fence", MISSION_TYPE_RALLY: "rally"}
 
 MAX_ITEMS = 700
 
 
-class MissionResult(enum.IntEnum):
-    """``MAV_MISSION_RESULT`` values used by the store (numbers from the MAVLink standard)."""
-
-    ACCEPTED = 0
-    ERROR = 1
-    UNSUPPORTED_FRAME = 2
-    UNSUPPORTED = 3
-    NO_SPACE = 4
-    INVALID = 5
-    INVALID_PARAM1 = 6
-    INVALID_PARAM2 = 7
-    INVALID_PARAM3 = 8
-    INVALID_PARAM4 = 9
-    INVALID_PARAM5_X = 10
-    INVALID_PARAM6_Y = 11
-    INVALID_PARAM7 = 12
-    INVALID_SEQUENCE = 13
-    DENIED = 14
-    OPERATION_CANCELLED = 15
+#: ``MAV_MISSION_RESULT`` values (names and numbers from pymavlink's generated enum).
+MissionResult = enum.IntEnum("MissionResult", {name: value for value, name in
+                                               enum_names("MAV_MISSION_RESULT", "MAV_MISSION_").items()})
 
 
 # frames the vehicle can fly (MAV_FRAME numbers)
-FRAME_GLOBAL = 0
-FRAME_LOCAL_NED = 1
-FRAME_MISSION = 2
-FRAME_GLOBAL_RELATIVE_ALT = 3
-FRAME_GLOBAL_INT = 5
-FRAME_GLOBAL_RELATIVE_ALT_INT = 6
-FRAME_GLOBAL_TERRAIN_ALT = 10
-FRAME_GLOBAL_TERRAIN_ALT_INT = 11
+FRAME_GLOBAL = mavlink.MAV_FRAME_GLOBAL
+FRAME_LOCAL_NED = mavlink.MAV_FRAME_LOCAL_NED
+FRAME_MISSION = mavlink.MAV_FRAME_MISSION
+FRAME_GLOBAL_RELATIVE_ALT = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+FRAME_GLOBAL_INT = mavlink.MAV_FRAME_GLOBAL_INT
+FRAME_GLOBAL_RELATIVE_ALT_INT = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+FRAME_GLOBAL_TERRAIN_ALT = mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT
+FRAME_GLOBAL_TERRAIN_ALT_INT = mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT
 SUPPORTED_FRAMES = frozenset({FRAME_GLOBAL, FRAME_LOCAL_NED, FRAME_MISSION, FRAME_GLOBAL_RELATIVE_ALT,
                               FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT_INT, FRAME_GLOBAL_TERRAIN_ALT,
                               FRAME_GLOBAL_TERRAIN_ALT_INT})
 
 
-@dataclasses.dataclass(frozen=True)
-class MissionItem:
-    """One stored item with the fields of ``MISSION_ITEM_INT``.
-
-    Attributes
-    ----------
-    seq : int
-        Index in its list.
-    frame : int
-        ``MAV_FRAME``.
-    command : int
-        ``MAV_CMD``.
-    current, autocontinue : int
-        As sent (0/1).
-    param1 .. param4 : float
-        Command parameters.
-    x, y : int
-        Latitude and longitude in 1e-7 degrees (global frames) or local x/y * 1e4 (local frames).
-    z : float
-        Altitude, m (frame-dependent reference).
-    mission_type : int
-        0 mission, 1 fence, 2 rally.
-    """
-
-    seq: int
-    frame: int
-    command: int
-    current: int
-    autocontinue: int
-    param1: float
-    param2: float
-    param3: float
-    param4: float
-    x: int
-    y: int
-    z: float
-    mission_type: int = MISSION_TYPE_MISSION
-
-    @property
-    def lat_deg(self) -> float:
-        """Latitude, degrees (global frames)."""
-        return self.x * 1e-7
-
-    @property
-    def lon_deg(self) -> float:
-        """Longitude, degrees (global frames)."""
-        return self.y * 1e-7
+#: one stored item: the project's one ``MISSION_ITEM_INT`` record
+MissionItem = MissionItemInt
 
 
 def validate_item(item: MissionItem) -> MissionResult:

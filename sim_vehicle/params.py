@@ -14,14 +14,16 @@ import dataclasses
 import logging
 import math
 
+from heli_common.mavlink_ids import mavlink
+
 from sim_vehicle.config import VehicleSettings, get_path, replace_path
 
 log = logging.getLogger(__name__)
 
-MAV_PARAM_TYPE_INT8 = 2
-MAV_PARAM_TYPE_INT16 = 4
-MAV_PARAM_TYPE_INT32 = 6
-MAV_PARAM_TYPE_REAL32 = 9
+MAV_PARAM_TYPE_INT8 = mavlink.MAV_PARAM_TYPE_INT8
+MAV_PARAM_TYPE_INT16 = mavlink.MAV_PARAM_TYPE_INT16
+MAV_PARAM_TYPE_INT32 = mavlink.MAV_PARAM_TYPE_INT32
+MAV_PARAM_TYPE_REAL32 = mavlink.MAV_PARAM_TYPE_REAL32
 
 
 @dataclasses.dataclass(frozen=True)

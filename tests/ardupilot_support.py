@@ -29,13 +29,14 @@ from typing import Iterator
 
 import numpy as np
 
+from heli_common.mavlink_ids import COPTER_MODES
 from support import REPO_ROOT, free_udp_port, stop_process
 
 ARDUPILOT_DIR = REPO_ROOT.parent / "shared" / "ardupilot"
 ARDUPILOT_BIN = ARDUPILOT_DIR / "arducopter-heli"
 ARDUPILOT_PARAMS = ARDUPILOT_DIR / "copter-heli.parm"
 MAV_SYS_STATUS_PREARM_CHECK = 1 << 28
-GUIDED = 4
+GUIDED = COPTER_MODES["GUIDED"]
 
 
 def ardupilot_unavailable() -> str | None:

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_common.geometry import point_in_polygon  # noqa: F401  (re-exported)
+
 from companion.errors import MissionError
 from companion.geo import LocalFrame
 from sim_vehicle.typed_config import require_numbers
@@ -285,21 +287,6 @@ def world_bounds(waypoints: list[LocalWaypoint], zones: list[Zone],
         return lo_ne.astype(np.float64), hi_ne.astype(np.float64)
     return (np.array([lo_ne[0], lo_ne[1], -settings.ceiling_m]),
             np.array([hi_ne[0], hi_ne[1], 0.0]))
-
-
-def point_in_polygon(point_ne: np.ndarray, polygon_ne: np.ndarray) -> bool:
-    """Even-odd rule (crossing number), polygon (P, 2)."""
-    x, y = float(point_ne[0]), float(point_ne[1])
-    inside = False
-    p = len(polygon_ne)
-    for i in range(p):
-        x1, y1 = polygon_ne[i]
-        x2, y2 = polygon_ne[(i + 1) % p]
-        if (y1 > y) != (y2 > y):
-            x_cross = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-            if x < x_cross:
-                inside = not inside
-    return inside
 
 
 def check_waypoints_reachable(waypoints: list[LocalWaypoint], zones: list[Zone],

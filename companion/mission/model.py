@@ -21,20 +21,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from heli_common.mavlink_ids import mavlink
+
 from companion.errors import MissionError
 
-# MAV_CMD numbers (common.xml)
-MAV_CMD_NAV_WAYPOINT = 16
-MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
-MAV_CMD_NAV_LAND = 21
-MAV_CMD_NAV_TAKEOFF = 22
-MAV_CMD_DO_CHANGE_SPEED = 178
-MAV_CMD_NAV_FENCE_RETURN_POINT = 5000
-MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION = 5001
-MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION = 5002
-MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION = 5003
-MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION = 5004
-MAV_CMD_NAV_RALLY_POINT = 5100
+# MAV_CMD numbers (pymavlink's generated enums)
+MAV_CMD_NAV_WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
+MAV_CMD_NAV_RETURN_TO_LAUNCH = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
+MAV_CMD_NAV_LAND = mavlink.MAV_CMD_NAV_LAND
+MAV_CMD_NAV_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
+MAV_CMD_DO_CHANGE_SPEED = mavlink.MAV_CMD_DO_CHANGE_SPEED
+MAV_CMD_NAV_FENCE_RETURN_POINT = mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT
+MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION = mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION
+MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION = mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
+MAV_CMD_NAV_RALLY_POINT = mavlink.MAV_CMD_NAV_RALLY_POINT
 
 SUPPORTED_COMMANDS = {
     MAV_CMD_NAV_WAYPOINT: "NAV_WAYPOINT",
@@ -46,12 +48,12 @@ SUPPORTED_COMMANDS = {
 #: commands that carry a position (x = lat, y = lon, z = alt)
 NAV_COMMANDS = frozenset({MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LAND, MAV_CMD_NAV_TAKEOFF})
 
-# MAV_FRAME numbers
-MAV_FRAME_GLOBAL = 0
-MAV_FRAME_MISSION = 2
-MAV_FRAME_GLOBAL_RELATIVE_ALT = 3
-MAV_FRAME_GLOBAL_INT = 5
-MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 6
+# MAV_FRAME numbers (pymavlink's generated enums)
+MAV_FRAME_GLOBAL = mavlink.MAV_FRAME_GLOBAL
+MAV_FRAME_MISSION = mavlink.MAV_FRAME_MISSION
+MAV_FRAME_GLOBAL_RELATIVE_ALT = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+MAV_FRAME_GLOBAL_INT = mavlink.MAV_FRAME_GLOBAL_INT
+MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 #: frames whose altitude is metres AMSL
 AMSL_FRAMES = frozenset({MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_INT})
 #: frames whose altitude is metres above home
@@ -63,13 +65,9 @@ def command_name(command: int) -> str:
     """Human name of a MAV_CMD (``"MAV_CMD 31000"`` when unknown to pymavlink)."""
     if command in SUPPORTED_COMMANDS:
         return SUPPORTED_COMMANDS[command]
-    try:
-        from pymavlink.dialects.v20 import common
-        entry = common.enums["MAV_CMD"].get(command)
-        if entry is not None and not entry.name.endswith("ENUM_END"):
-            return entry.name.removeprefix("MAV_CMD_")
-    except ImportError:  # pragma: no cover - pymavlink is a dependency
-        pass
+    entry = mavlink.enums["MAV_CMD"].get(command)
+    if entry is not None and not entry.name.endswith("ENUM_END"):
+        return entry.name.removeprefix("MAV_CMD_")
     return f"MAV_CMD {command}"
 
 

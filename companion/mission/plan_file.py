@@ -13,13 +13,15 @@ import json
 import math
 from pathlib import Path
 
+from heli_common.mavlink_ids import mavlink
+
 from companion.errors import MissionError
 from companion.mission.model import (AMSL_FRAMES, FenceCircle, FencePolygon, MissionItem,
                                      MissionPlan, NAV_COMMANDS, RallyPoint)
 
 PLAN_FILE_TYPE = "Plan"
-MAV_AUTOPILOT_ARDUPILOTMEGA = 3
-MAV_TYPE_HELICOPTER = 4
+MAV_AUTOPILOT_ARDUPILOTMEGA = mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+MAV_TYPE_HELICOPTER = mavlink.MAV_TYPE_HELICOPTER
 
 
 def read_plan_text(text: str, source: str = "<plan>") -> MissionPlan:

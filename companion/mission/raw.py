@@ -15,7 +15,8 @@ Latitude and longitude travel as degrees * 1e7 integers. Pure data conversion: t
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from heli_common.mavlink_ids import mavlink
+from heli_common.mission_item import MissionItemInt
 
 from companion.errors import MissionError
 from companion.mission.model import (MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION,
@@ -27,29 +28,15 @@ from companion.mission.model import (MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION,
                                      MAV_FRAME_GLOBAL_RELATIVE_ALT, FenceCircle, FencePolygon,
                                      MissionItem, MissionPlan, RallyPoint)
 
-MAV_MISSION_TYPE_MISSION = 0
-MAV_MISSION_TYPE_FENCE = 1
-MAV_MISSION_TYPE_RALLY = 2
+MAV_MISSION_TYPE_MISSION = mavlink.MAV_MISSION_TYPE_MISSION
+MAV_MISSION_TYPE_FENCE = mavlink.MAV_MISSION_TYPE_FENCE
+MAV_MISSION_TYPE_RALLY = mavlink.MAV_MISSION_TYPE_RALLY
 DEG_E7 = 1e7
 
 
-@dataclass(frozen=True)
-class RawItem:
-    """A MISSION_ITEM_INT, field for field (``x``/``y`` are degrees * 1e7)."""
-
-    seq: int
-    frame: int
-    command: int
-    current: int
-    autocontinue: int
-    param1: float
-    param2: float
-    param3: float
-    param4: float
-    x: int
-    y: int
-    z: float
-    mission_type: int
+#: A MISSION_ITEM_INT, field for field (``x``/``y`` are degrees * 1e7): the project's one
+#: mission item record, shared with the SITL vehicle.
+RawItem = MissionItemInt
 
 
 def deg_to_e7(value_deg: float) -> int:

@@ -43,7 +43,7 @@ from typing import Callable
 import numpy as np
 
 from companion.errors import CompanionError
-from companion.geo import LocalFrame
+from companion.geo import GeoError, LocalFrame
 from companion.threats.bus import ThreatBus, ThreatUpdate, rejected_event
 from companion.threats.model import ThreatTable
 from companion.threats.policy import ThreatManager
@@ -228,7 +228,7 @@ class ThreatReactor:
         else:
             try:
                 self.table.put(update.threat)
-            except CompanionError as exc:           # e.g. a global threat before home
+            except (CompanionError, GeoError) as exc:   # e.g. a global threat before home
                 self.reject({"event": "rejected", "threat_id": update.uid, "source": update.source,
                              "field": getattr(exc, "field", "payload"), "reason": str(exc)})
                 return

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+from heli_common.geometry import point_in_polygon
+
 _EPS = 1e-12
 
 
@@ -88,21 +90,6 @@ def segments_cross_2d(a: tuple, b: tuple, c: tuple, d: tuple) -> bool:
     return segment_segment_dist2(a, b, c, d) <= _EPS
 
 
-def point_in_polygon(x: float, y: float, vertices: tuple) -> bool:
-    """Even-odd rule point-in-polygon test; ``vertices`` is a tuple of (x, y) tuples."""
-    inside = False
-    n = len(vertices)
-    xj, yj = vertices[n - 1]
-    for i in range(n):
-        xi, yi = vertices[i]
-        if (yi > y) != (yj > y):
-            x_cross = xi + (y - yi) * (xj - xi) / (yj - yi)
-            if x < x_cross:
-                inside = not inside
-        xj, yj = xi, yi
-    return inside
-
-
 def polygon_boundary_dist2(x: float, y: float, vertices: tuple) -> float:
     """Squared distance from (x, y) to the polygon's boundary edges."""
     best = math.inf
@@ -121,12 +108,12 @@ def polygon_boundary_dist2(x: float, y: float, vertices: tuple) -> float:
 def polygon_sdf(x: float, y: float, vertices: tuple) -> float:
     """Signed distance from (x, y) to a simple polygon (negative inside)."""
     d = math.sqrt(polygon_boundary_dist2(x, y, vertices))
-    return -d if point_in_polygon(x, y, vertices) else d
+    return -d if point_in_polygon((x, y), vertices) else d
 
 
 def segment_polygon_dist_2d(a: tuple, b: tuple, vertices: tuple) -> float:
     """Exact distance between 2D segment ``ab`` and a filled simple polygon (0 if they meet)."""
-    if point_in_polygon(a[0], a[1], vertices) or point_in_polygon(b[0], b[1], vertices):
+    if point_in_polygon(a, vertices) or point_in_polygon(b, vertices):
         return 0.0
     best = math.inf
     n = len(vertices)

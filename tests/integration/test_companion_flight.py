@@ -18,6 +18,7 @@ import pytest
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
 from companion.world import World
+from heli_common.mavlink_ids import COPTER_MODES
 from flight_support import TrackListener, run_companion, wait_until
 from support import REPO_ROOT, MavlinkPeer, free_udp_port, start_sim_vehicle
 
@@ -29,7 +30,7 @@ HOME = (47.397742, 8.545594, 488.0)      # sim-vehicle's default home
 #: The world's safety margin (3 m) is the rotor radius plus a tracking buffer; the flown track
 #: must stay clear of every zone inflated by the rotor radius (R-50 class: about 1.5 m).
 ROTOR_RADIUS_M = 1.5
-AUTO, GUIDED = 3, 4
+AUTO, GUIDED = COPTER_MODES["AUTO"], COPTER_MODES["GUIDED"]
 
 
 @pytest.fixture(scope="module")

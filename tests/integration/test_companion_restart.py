@@ -20,13 +20,14 @@ from companion.threats.bus import ThreatBus
 from companion.threats.model import Threat
 from flight_support import (FlightWatcher, Injection, TrackListener, free_port, inject, last_json_line, spawn,
                             stop, wait_until)
+from heli_common.mavlink_ids import COPTER_MODES
 from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration
 
 MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
 SPEEDUP = 4.0
-GUIDED = 4
+GUIDED = COPTER_MODES["GUIDED"]
 GUIDED_TIMEOUT_S = 3.0          # sim-vehicle's default GUID_TIMEOUT (simulated s)
 BRAKE_S = 6.0                   # simulated s allowed for braking to a hover after it
 THREAT_TTL_S = 2000.0           # simulated s: alive through the crash and the rest of the flight

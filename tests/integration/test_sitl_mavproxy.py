@@ -17,13 +17,14 @@ from pathlib import Path
 
 import pytest
 
+from heli_common.mavlink_ids import COPTER_MODES
 from support import MavlinkPeer, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 WAYPOINTS = DATA / "square_land.waypoints"
-AUTO, GUIDED = 3, 4
+AUTO, GUIDED = COPTER_MODES["AUTO"], COPTER_MODES["GUIDED"]
 
 
 def mavproxy_executable() -> str:
