@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from companion.record import FlightRecord
+from companion.smoothing.feasibility import describe
 
 log = logging.getLogger(__name__)
 
@@ -75,15 +76,7 @@ def summary_text(summary: dict, legs: list[dict]) -> str:
         if f is None:
             lines.append(f"{head}: not checked on the closed loop")
             continue
-        peaks = " ".join(f"{name.split('_')[0][:3]} {v:.2f}" for name, v in f["peak_abs_delta"].items())
-        line = (f"{head}: {'feasible' if f['feasible'] else 'INFEASIBLE'}, stretch x{f['stretch']:.3g} "
-                f"({f['duration_s']:.1f} s); predicted max |delta| {f['max_abs_delta']:.2f} ({peaks}), "
-                f"tracking error max {f['max_tracking_error_m']:.2f} m RMS {f['rms_tracking_error_m']:.2f} m; "
-                f"check {1e3 * f['check_s']:.0f} ms")
-        if f["stretch"] > 1.0:
-            line += (f"; first timing max |delta| {f['initial_max_abs_delta']:.2f}"
-                     f"{' (saturates)' if f['initial_saturated'] else ''}")
-        lines.append(line)
+        lines.append(f"{head}: {describe(f)}")
     return "\n".join(lines) + "\n"
 
 

@@ -157,22 +157,6 @@ def time_and_check(args, smoothed) -> list:
     return out
 
 
-def feasibility_line(f: dict) -> str:
-    """One line of closed-loop figures (``FeasibilityReport.summary()`` or a leg's)."""
-    peaks = " ".join(f"{name.split('_')[0][:3]} {v:.2f}" for name, v in f["peak_abs_delta"].items())
-    text = (f"closed loop: {'feasible' if f['feasible'] else 'INFEASIBLE'}, stretch x{f['stretch']:.3g}"
-            f" ({f['duration_s']:.1f} s), max |delta| {f['max_abs_delta']:.2f} ({peaks}), "
-            f"tracking error max {f['max_tracking_error_m']:.2f} m RMS {f['rms_tracking_error_m']:.2f} m, "
-            f"check {1e3 * f['check_s']:.0f} ms")
-    if f["stretch"] > 1.0:
-        text += (f"; first timing: max |delta| {f['initial_max_abs_delta']:.2f}"
-                 f"{' (saturates)' if f['initial_saturated'] else ''}, "
-                 f"error {f['initial_max_tracking_error_m']:.2f} m")
-    if f["reason"]:
-        text += f"; {f['reason']}"
-    return text
-
-
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -204,6 +188,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_summary(args, wf, results, smoothed, start, goal, timed=()) -> None:
+    from companion.smoothing.feasibility import describe
+
     first = results[0]
     tree = first.tree
     print(f"world: {wf.name} ({wf.world.dim}D, {len(wf.world.obstacles)} obstacles, margin {wf.world.margin_m} m)")
@@ -225,7 +211,7 @@ def print_summary(args, wf, results, smoothed, start, goal, timed=()) -> None:
         print(line)
         if timed and timed[i] is not None:
             f = timed[i]["feasibility"]
-            print(f"    timed {timed[i]['duration_s']:.1f} s" + (f"; {feasibility_line(f)}" if f else ""))
+            print(f"    timed {timed[i]['duration_s']:.1f} s" + (f"; closed loop: {describe(f)}" if f else ""))
 
 
 def write_json(args, wf, results, smoothed, start, goal, kappa, timed=()) -> None:

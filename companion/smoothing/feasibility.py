@@ -111,6 +111,23 @@ class FeasibilityReport:
 CHANNELS = ("lateral_cyclic", "longitudinal_cyclic", "pedal", "collective")
 
 
+def describe(summary: dict) -> str:
+    """One line of closed-loop figures from ``FeasibilityReport.summary()`` (or a recorded
+    leg's), as ``companion plan`` and ``companion report`` print them."""
+    f = summary
+    peaks = " ".join(f"{name.split('_')[0][:3]} {v:.2f}" for name, v in f["peak_abs_delta"].items())
+    text = (f"{'feasible' if f['feasible'] else 'INFEASIBLE'}, stretch x{f['stretch']:.3g} "
+            f"({f['duration_s']:.1f} s); predicted max |delta| {f['max_abs_delta']:.2f} ({peaks}), "
+            f"tracking error max {f['max_tracking_error_m']:.2f} m RMS {f['rms_tracking_error_m']:.2f} m; "
+            f"check {1e3 * f['check_s']:.0f} ms")
+    if f["stretch"] > 1.0:
+        text += (f"; first timing max |delta| {f['initial_max_abs_delta']:.2f}"
+                 f"{' (saturates)' if f['initial_saturated'] else ''}")
+    if f.get("reason"):
+        text += f"; {f['reason']}"
+    return text
+
+
 @dataclass(frozen=True)
 class _Outcome:
     max_abs_delta: float
