@@ -158,6 +158,10 @@ def setpoint_fields(time_boot_ms: int, target_system: int, target_component: int
     return fields
 
 
+#: How long ``aclose`` waits for MAVSDK command calls still running before releasing MAVSDK.
+IN_FLIGHT_WAIT_S = 10.0
+
+
 def finite_fields(fields, *names: str) -> list[float] | None:
     """The named fields of a message (a MavlinkDirect dict or a MAVSDK struct) as floats, or
     None when one is missing, null or not finite: such a message is dropped, never applied."""
@@ -334,6 +338,7 @@ class VehicleLink:
         self._link_listeners: list[Callable[[bool], None]] = []
         self._was_connected = False
         self._command_lock: asyncio.Lock | None = None
+        self._in_flight: set[asyncio.Future] = set()      # MAVSDK command calls still running
         self._mission_lock: asyncio.Lock | None = None
 
     # ----------------------------------------------------------------- connection
@@ -412,6 +417,8 @@ class VehicleLink:
             task.cancel()
         if tasks:
             await asyncio.gather(*tasks, return_exceptions=True)
+        if self._in_flight:              # MAVSDK ends each within its own retries (a few seconds)
+            await asyncio.wait(set(self._in_flight), timeout=IN_FLIGHT_WAIT_S)
         self.close()
 
     async def __aenter__(self) -> "VehicleLink":
@@ -750,8 +757,13 @@ class VehicleLink:
         message = self._command_message(command, params)
         label = what or f"command {command}"
         async with self._command_lock:
+            # MAVSDK's blocking call runs in a thread we keep track of: releasing MAVSDK while it
+            # waits would leave that thread blocked for good (see ``aclose``)
+            call = asyncio.get_running_loop().run_in_executor(None, self._direct_sync.send_command, message)
+            self._in_flight.add(call)
+            call.add_done_callback(self._command_call_done)
             try:
-                ack = await asyncio.wait_for(self._direct.send_command(message), timeout_s)
+                ack = await asyncio.wait_for(asyncio.shield(call), timeout_s)
             except asyncio.TimeoutError:
                 log.info("%s: no COMMAND_ACK within %g s", label, timeout_s)
                 return None
@@ -766,6 +778,11 @@ class VehicleLink:
         log.log(logging.INFO if result == 0 else logging.DEBUG, "%s: %s", label,
                 MAV_RESULT_NAMES.get(result, result))
         return result
+
+    def _command_call_done(self, call: asyncio.Future) -> None:
+        self._in_flight.discard(call)
+        if not call.cancelled():
+            call.exception()             # retrieved: a late failure after our timeout is no error
 
     async def command_long(self, command: int, params=(), *, what: str | None = None,
                            timeout_s: float = 10.0) -> None:
