@@ -49,6 +49,8 @@ from typing import Callable, Literal
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import ConfigError, FlightAborted, LinkError, VehicleRefused
+from heli_common.ardupilot_ids import AUX_FUNCTION_MOTOR_INTERLOCK as AUX_MOTOR_INTERLOCK
+from heli_common.ardupilot_ids import SWITCH_HIGH, SWITCH_LOW
 from sim_vehicle.typed_config import require_int, require_numbers
 
 __all__ = ["StartupSettings", "RotorPlan", "rotor_plan", "is_airborne", "start_vehicle",
@@ -58,9 +60,6 @@ __all__ = ["StartupSettings", "RotorPlan", "rotor_plan", "is_airborne", "start_v
 
 log = logging.getLogger(__name__)
 
-#: RC_Channel aux function MOTOR_INTERLOCK (ArduPilot's RC_Channel::AUX_FUNC 32).
-AUX_MOTOR_INTERLOCK = 32
-SWITCH_LOW, SWITCH_HIGH = 0, 2
 #: H_RSC_MODE 1: the rotor follows the RC8 input directly (DO_AUX_FUNCTION does not drive it).
 RSC_MODE_PASSTHROUGH = 1
 RSC_PARAMETERS = ("H_RSC_MODE", "H_RSC_RUNUP_TIME", "ARMING_DELAY_SEC")
