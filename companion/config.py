@@ -25,6 +25,7 @@ Tree (``companion run --config FILE``; ``companion run --print-config`` shows it
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -119,7 +120,15 @@ class StateSettings:
 
 @dataclass(frozen=True)
 class Settings:
-    """The whole companion settings tree (see the module docstring)."""
+    """The whole companion settings tree (see the module docstring).
+
+    Parameters
+    ----------
+    seed : int
+        Random seed of every planner run (logged, so that any flight can be replayed).
+    link, startup, zenoh, mission, flight, planning, smoothing, feasibility, threats, adsb, state
+        The tables of the tree (their keys are documented by their own classes).
+    """
 
     seed: int = 0
     link: LinkSettings = LinkSettings()
@@ -166,3 +175,38 @@ def load_settings(path: str | Path | None = None, overrides: dict | None = None)
 def settings_to_dict(settings) -> dict:
     """The settings tree as plain data (for logs, the flight record and ``--print-config``)."""
     return dataclasses.asdict(settings)
+
+
+def settings_to_toml(settings) -> str:
+    """The settings tree as a TOML file that ``--config`` reads back to the same settings.
+
+    Unset keys (None) have no TOML value: they are written as comments.
+    """
+    return "\n".join(_toml_table(settings_to_dict(settings), "")).strip() + "\n"
+
+
+def _toml_table(data: dict, name: str) -> list[str]:
+    lines = [f"[{name}]"] if name else []
+    tables = []
+    for key, value in data.items():
+        if isinstance(value, dict):
+            tables.append((key, value))
+        elif value is None:
+            lines.append(f"# {key} = (unset)")
+        else:
+            lines.append(f"{key} = {_toml_value(value)}")
+    for key, value in tables:
+        lines += ["", *_toml_table(value, f"{name}.{key}" if name else key)]
+    return lines
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)                  # a JSON string is a valid TOML basic string
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"no TOML form for {value!r}")

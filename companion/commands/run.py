@@ -84,8 +84,9 @@ def register(subparsers) -> None:
                    "read by --resume")
     p.add_argument("--no-feasibility", action="store_true", dest="no_feasibility",
                    help="do not check the legs on the helicopter's closed loop (feasibility.enabled = false)")
-    p.add_argument("--print-config", action="store_true",
-                   help="print the effective settings as JSON and exit")
+    p.add_argument("--print-config", nargs="?", const="toml", choices=("toml", "json"), metavar="FORMAT",
+                   help="print the effective settings and exit, as TOML that --config reads back "
+                   "(default) or as JSON")
     p.set_defaults(func=run)
 
 
@@ -127,13 +128,15 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
     import signal
 
-    from companion.config import load_settings, settings_to_dict
+    from companion.config import load_settings, settings_to_dict, settings_to_toml
     from companion.daemon import CompanionDaemon
     from companion.errors import FlightAborted, VehicleRefused
 
     settings = load_settings(args.config, settings_overrides(args))
     if args.print_config:
-        print(json.dumps(settings_to_dict(settings), indent=2))
+        text = (json.dumps(settings_to_dict(settings), indent=2) if args.print_config == "json"
+                else settings_to_toml(settings))
+        sys.stdout.write(text if text.endswith("\n") else text + "\n")
         return 0
     if settings.zenoh.enabled and settings.zenoh.config:      # a bad file: refused before any flight
         from companion.threats.access import load_config
