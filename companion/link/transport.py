@@ -23,6 +23,7 @@ import threading
 
 from companion.errors import LinkError
 from companion.link.gate import Identity, InboundFilter, OutboundSigner, SigningKey
+from heli_common.tlog import TlogWriter
 from mavlink_signing import SignatureCheck
 
 log = logging.getLogger(__name__)
@@ -133,10 +134,14 @@ class GateThread:
         The vehicle's MAVSDK URL.
     inbound : InboundFilter
     outbound : OutboundSigner
+    tlog : TlogWriter, optional
+        Records every frame accepted from the vehicle and every frame sent to it (closed with
+        the gate).
     """
 
-    def __init__(self, url: str, inbound: InboundFilter, outbound: OutboundSigner) -> None:
-        self.inbound, self.outbound = inbound, outbound
+    def __init__(self, url: str, inbound: InboundFilter, outbound: OutboundSigner,
+                 tlog: TlogWriter | None = None) -> None:
+        self.inbound, self.outbound, self.tlog = inbound, outbound, tlog
         self.vehicle = open_vehicle_side(url)
         self.local = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.local.bind(("127.0.0.1", 0))
@@ -158,6 +163,8 @@ class GateThread:
         self._thread.join(timeout=2.0)
         self.vehicle.close()
         self.local.close()
+        if self.tlog is not None:
+            self.tlog.close()
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -179,21 +186,31 @@ class GateThread:
         frames = self.inbound.filter(self.vehicle.read())
         if self.inbound.autopilot_heard:
             self.vehicle.accepted_from_last()
-        if self.mavsdk_address is not None:
-            for frame in frames:
+        for frame in frames:
+            if self.tlog is not None:
+                self.tlog.write(frame)
+            if self.mavsdk_address is not None:
                 self.local.sendto(frame, self.mavsdk_address)
 
     def _from_mavsdk(self) -> None:
         data, self.mavsdk_address = self.local.recvfrom(MAX_DATAGRAM)
         for frame in self.outbound.convert(data):
             self.vehicle.write(frame)
+            if self.tlog is not None:
+                self.tlog.write(frame)
 
 
-def open_gate(url: str, key: SigningKey | None = None, link_id: int = 0) -> GateThread:
-    """Open the vehicle side of ``url`` and start the gate (signing with ``key`` if given)."""
+def open_gate(url: str, key: SigningKey | None = None, link_id: int = 0,
+              tlog_path: str | None = None) -> GateThread:
+    """Open the vehicle side of ``url`` and start the gate (signing with ``key`` if given;
+    recording the traffic to the ``.tlog`` file ``tlog_path`` if given)."""
     identity = Identity()
     check = None if key is None else SignatureCheck(key.key)
     outbound = OutboundSigner(identity, None if key is None else key.key, link_id)
-    gate = GateThread(url, InboundFilter(identity, check), outbound)
+    try:
+        tlog = TlogWriter(tlog_path) if tlog_path else None
+    except OSError as exc:
+        raise LinkError(f"--tlog: cannot write {tlog_path} ({exc.strerror or exc})") from None
+    gate = GateThread(url, InboundFilter(identity, check), outbound, tlog)
     gate.inbound.stream = not isinstance(gate.vehicle, UdpVehicleSide)
     return gate.start()
