@@ -52,18 +52,20 @@ from companion.errors import CompanionError
 log = logging.getLogger(__name__)
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
+    """``value`` as plain JSON data: arrays as lists, floats rounded to 6 decimals, non-finite
+    numbers as None."""
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return jsonable(value.tolist())
     if isinstance(value, (np.floating, float)):
         v = float(value)
         return round(v, 6) if math.isfinite(v) else None
     if isinstance(value, np.integer):
         return int(value)
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     return value
 
 
@@ -84,7 +86,7 @@ class FlightRecorder:
     def write(self, line_type: str, /, **fields: Any) -> None:
         if self._fh is None:
             return
-        self._fh.write(json.dumps({"type": line_type, **_jsonable(fields)}, separators=(",", ":")))
+        self._fh.write(json.dumps({"type": line_type, **jsonable(fields)}, separators=(",", ":")))
         self._fh.write("\n")
         now = time.monotonic()
         if now - self._flushed_at >= self.flush_period_s:
@@ -168,12 +170,16 @@ def load_record(path: str | Path) -> FlightRecord:
             record.summary = item
         elif kind == "event":
             record.events.append(item)
-    if columns["t_s"]:
-        for key, values in columns.items():
-            column = _column(values)
-            if column is not None:
-                record.samples[key] = column
+    record.samples = samples_from_columns(columns)
     return record
+
+
+def samples_from_columns(columns: dict[str, list]) -> dict[str, np.ndarray]:
+    """Sample columns (key -> one value per sample) as arrays; empty when there is no sample."""
+    if not columns.get("t_s"):
+        return {}
+    arrays = {key: _column(values) for key, values in columns.items()}
+    return {key: column for key, column in arrays.items() if column is not None}
 
 
 def _column(values: list) -> np.ndarray | None:
