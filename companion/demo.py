@@ -124,8 +124,9 @@ DEMO_INJECTIONS = (DEMO_HEAD_ON, DEMO_POPUP, DEMO_INVALID)
 class FlightWatcher:
     """Follows a companion's ``status``, ``path`` and ``events`` over zenoh (thread-safe)."""
 
-    def __init__(self, bus: ThreatBus):
+    def __init__(self, bus: ThreatBus, listener=None):
         self.bus = bus
+        self.listener = listener                 # on_status(msg) / on_event(msg), e.g. FlightProgress
         self._lock = threading.Lock()
         self.status: dict | None = None
         self.path: dict | None = None
@@ -137,6 +138,8 @@ class FlightWatcher:
     def _on_status(self, key, msg) -> None:
         with self._lock:
             self.status = msg
+        if self.listener is not None and isinstance(msg, dict):
+            self.listener.on_status(msg)
 
     def _on_path(self, key, msg) -> None:
         with self._lock:
@@ -145,6 +148,8 @@ class FlightWatcher:
     def _on_event(self, key, msg) -> None:
         with self._lock:
             self.events.append(msg)
+        if self.listener is not None and isinstance(msg, dict):
+            self.listener.on_event(msg)
 
     def events_of(self, kind: str) -> list[dict]:
         with self._lock:
@@ -286,17 +291,19 @@ def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
 
 
 def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
-        timeout_s: float = 300.0, gcs_out: str | None = None, extra_args=(), env: dict | None = None) -> dict:
+        timeout_s: float = 300.0, gcs_out: str | None = None, extra_args=(), env: dict | None = None,
+        listener=None) -> dict:
     """Fly ``mission`` with a fresh ``sim-vehicle`` and ``companion run`` (separate processes).
 
-    This process watches the flight over zenoh and puts the ``injections`` when they are due,
-    then removes them. Returns the companion's summary plus ``events`` (seen on zenoh) and
+    This process watches the flight over zenoh (telling ``listener`` every status and event
+    message, e.g. a ``companion.progress.FlightProgress``) and puts the ``injections`` when they
+    are due, then removes them. Returns the companion's summary plus ``events`` (seen on zenoh) and
     ``record`` (the flight record's path).
     """
     with flight_processes(out_dir, mission, speedup=speedup, gcs_out=gcs_out,
                           extra_args=extra_args, env=env) as flight:
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
-            watcher = FlightWatcher(bus)
+            watcher = FlightWatcher(bus, listener)
             if injections:
                 sent = inject(watcher, injections, timeout_s, done=lambda: flight.companion.poll() is not None)
                 time.sleep(2.0)
@@ -312,7 +319,9 @@ def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
     return summary
 
 
-def run_demo(out_dir: Path, *, speedup: float = 4.0, gcs_out: str | None = "127.0.0.1:14550") -> dict:
+def run_demo(out_dir: Path, *, speedup: float = 4.0, gcs_out: str | None = "127.0.0.1:14550",
+             listener=None) -> dict:
     """The demo flight: the demo mission (``demo_mission``) with ``DEMO_INJECTIONS``."""
     with demo_mission() as mission:
-        return fly(out_dir, mission, speedup=speedup, injections=DEMO_INJECTIONS, gcs_out=gcs_out)
+        return fly(out_dir, mission, speedup=speedup, injections=DEMO_INJECTIONS, gcs_out=gcs_out,
+                   listener=listener)
