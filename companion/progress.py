@@ -11,6 +11,7 @@ from __future__ import annotations
 import threading
 
 from rich.console import Console
+from rich.markup import escape
 from rich.status import Status
 
 __all__ = ["FlightProgress", "status_text", "event_text"]
@@ -19,7 +20,7 @@ __all__ = ["FlightProgress", "status_text", "event_text"]
 def status_text(status: dict) -> str:
     """One line of a ``status`` message: ``GUIDED · leg 2/5 · alt2-14 · t 65.6 s · error 0.12 m``."""
     parts = [str(status.get("mode") or "?")]
-    if status.get("legs"):
+    if status.get("legs") and int(status.get("leg") or 0) >= 0:
         parts.append(f"leg {min(int(status.get('leg') or 0) + 1, status['legs'])}/{status['legs']}")
     if status.get("path_id"):
         parts.append(str(status["path_id"]))
@@ -68,17 +69,20 @@ class FlightProgress:
         with self._lock:
             for key, label in (("mode", "mode"), ("leg", "leg")):
                 if status.get(key) is not None and status.get(key) != self._last.get(key):
-                    if key == "leg" and status.get("legs"):
-                        self.console.print(f"{self.title}: leg {int(status['leg']) + 1}/{status['legs']}")
+                    if key == "leg" and status.get("legs") and int(status["leg"]) >= 0:
+                        self._print(f"{self.title}: leg {int(status['leg']) + 1}/{status['legs']}")
                     elif key == "mode":
-                        self.console.print(f"{self.title}: {label} {status[key]}")
+                        self._print(f"{self.title}: {label} {status[key]}")
             self._last = dict(status)
             if self._status is not None:
-                self._status.update(f"{self.title}: {status_text(status)}")
+                self._status.update(escape(f"{self.title}: {status_text(status)}"))
 
     def on_event(self, event: dict) -> None:
         """An ``events`` message: print it (decisions and rejected payloads)."""
         line = event_text(event)
         if line is not None:
             with self._lock:
-                self.console.print(f"{self.title}: {line}")
+                self._print(f"{self.title}: {line}")
+
+    def _print(self, text: str) -> None:
+        self.console.print(text, markup=False, highlight=False)     # "[radar1]" is not a style

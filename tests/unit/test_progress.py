@@ -24,11 +24,13 @@ def test_decisions_are_lines_and_no_change_is_silent():
 def test_new_legs_modes_and_decisions_are_printed_as_they_come():
     out = io.StringIO()
     with FlightProgress(Console(file=out, force_terminal=False, width=200), title="demo") as progress:
+        progress.on_status({"mode": "GUIDED", "leg": -1, "legs": 3, "t_s": 0.5})      # taking off
         progress.on_status({"mode": "GUIDED", "leg": 0, "legs": 3, "t_s": 1.0})
         progress.on_status({"mode": "GUIDED", "leg": 0, "legs": 3, "t_s": 1.5})
-        progress.on_event({"event": "switch", "reason": "back to the mission", "latency_ms": 250.0})
+        progress.on_event({"event": "switch", "reason": "back to the mission", "latency_ms": 250.0,
+                           "source": "demo"})
         progress.on_status({"mode": "GUIDED", "leg": 1, "legs": 3, "t_s": 9.0})
         progress.on_status({"mode": "LAND", "leg": 2, "legs": 3, "t_s": 30.0})
     lines = out.getvalue().splitlines()
-    assert lines == ["demo: mode GUIDED", "demo: leg 1/3", "demo: switch (250 ms): back to the mission",
+    assert lines == ["demo: mode GUIDED", "demo: leg 1/3", "demo: switch (250 ms) [demo]: back to the mission",
                      "demo: leg 2/3", "demo: mode LAND", "demo: leg 3/3"]
