@@ -1,9 +1,8 @@
-"""What the operator sees, as Foxglove scene entities: pure functions of the record's fields.
+"""What the operator sees, as Foxglove scene entities built from the record's fields.
 
-Frames: the record is in local NED about home (m); Foxglove's 3D panel draws a right-handed
-frame with z up, so every position is turned into ``map``, east-north-up about home
-(``enu_from_ned``). The vehicle is the frame ``base_link`` (forward-left-up), placed by a
-``FrameTransform`` from ``map``. Nothing here does I/O.
+Everything is drawn in ``map``, east-north-up about home (``companion.view.geometry``); the
+vehicle is the frame ``base_link`` (forward-left-up), placed by a ``FrameTransform`` from
+``map``. Nothing here does I/O.
 """
 
 from __future__ import annotations
@@ -17,22 +16,16 @@ from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, Duration
                                SceneEntity, SpherePrimitive, Timestamp, TriangleListPrimitive,
                                Vector3)
 
-__all__ = ["MAP_FRAME", "VEHICLE_FRAME", "enu_from_ned", "flu_quaternion_enu", "threat_tube",
-           "prism_side_triangles", "timestamp", "obstacle_entities", "path_entity", "threat_entity",
+from companion.view.geometry import enu_from_ned, flu_quaternion_enu, prism_side_triangles, threat_tube
+
+__all__ = ["MAP_FRAME", "VEHICLE_FRAME", "timestamp", "obstacle_entities", "path_entity", "threat_entity",
            "vehicle_entity", "vehicle_transform"]
 
 MAP_FRAME = "map"
 VEHICLE_FRAME = "base_link"
-#: NED -> ENU swaps north and east and flips down (its own inverse).
-_ENU_FROM_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 OBSTACLE_COLOUR = Color(r=0.85, g=0.3, b=0.25, a=0.35)
 THREAT_COLOUR = (1.0, 0.15, 0.1)
 UNBOUNDED_PAD_M = 5.0
-
-
-def enu_from_ned(points_ned_m: Sequence) -> np.ndarray:
-    """Positions NED -> ENU, shape (..., 3) -> (..., 3)."""
-    return np.asarray(points_ned_m, dtype=float) @ _ENU_FROM_NED.T
 
 
 def timestamp(time_s: float) -> Timestamp:
@@ -59,17 +52,6 @@ def _up_limits_m(ob: dict, bounds_down_m: tuple[float, float]) -> tuple[float, f
     down_min = ob.get("down_min", bounds_down_m[0] - UNBOUNDED_PAD_M)
     down_max = ob.get("down_max", bounds_down_m[1])
     return -float(down_max), -float(down_min)
-
-
-def prism_side_triangles(vertices_ne_m: Sequence, bottom_m: float, top_m: float) -> np.ndarray:
-    """The side walls of a polygon (north-east, shape (n, 2)) extruded from ``bottom_m`` to
-    ``top_m`` (up), two triangles per edge, ENU: shape (6 n, 3). Right for any simple polygon."""
-    ring = np.asarray(vertices_ne_m, dtype=float)[:, ::-1]             # (east, north)
-    nxt = np.roll(ring, -1, axis=0)
-    lo, hi = np.full((len(ring), 1), bottom_m), np.full((len(ring), 1), top_m)
-    a, b = np.hstack([ring, lo]), np.hstack([nxt, lo])
-    c, d = np.hstack([nxt, hi]), np.hstack([ring, hi])
-    return np.stack([a, b, c, a, c, d], axis=1).reshape(-1, 3)
 
 
 def _obstacle_primitives(ob: dict, bounds_down_m: tuple[float, float]) -> dict:
@@ -138,21 +120,6 @@ def threat_entity(threat_id: str, position_ned_m: Sequence, velocity_ned_m_s: Se
                        spheres=spheres, lines=lines)
 
 
-def threat_tube(position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray, radius_m: float, age_s: float,
-                horizon_s: float, step_s: float, uncertainty_m_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Centres (NED, shape (k, 3)) and radii (shape (k,)) of a threat's predicted tube.
-
-    Constant velocity from the report, ``age_s`` ago, every ``step_s`` up to ``horizon_s`` ahead
-    of now; a mover's radius grows by ``uncertainty_m_s`` per second since the report (as
-    ``companion.threats.prediction`` predicts it). A threat at rest is one sphere, its own size.
-    """
-    if np.linalg.norm(velocity_ned_m_s) <= 1e-6:
-        return position_ned_m[None, :].astype(float), np.array([float(radius_m)])
-    ages = age_s + np.arange(0.0, horizon_s + 1e-9, step_s)
-    centres = position_ned_m[None, :] + ages[:, None] * velocity_ned_m_s[None, :]
-    return centres, radius_m + uncertainty_m_s * ages
-
-
 def vehicle_entity(time_s: float, rotor_radius_m: float = 1.0) -> SceneEntity:
     """The helicopter in its own frame: a fuselage box and a translucent rotor disc."""
     body = CubePrimitive(pose=_pose((0, 0, 0)), size=_vector((1.6, 0.5, 0.5)), color=Color(r=0.2, g=0.4, b=0.9, a=1.0))
@@ -160,29 +127,6 @@ def vehicle_entity(time_s: float, rotor_radius_m: float = 1.0) -> SceneEntity:
                               bottom_scale=1.0, top_scale=1.0, color=Color(r=0.6, g=0.7, b=1.0, a=0.4))
     return SceneEntity(timestamp=timestamp(time_s), frame_id=VEHICLE_FRAME, id="vehicle", frame_locked=True,
                        cubes=[body], cylinders=[rotor], lifetime=Duration(sec=0, nsec=0))
-
-
-def _multiply(a: tuple, b: tuple) -> tuple[float, float, float, float]:
-    """Hamilton product of quaternions (x, y, z, w)."""
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-
-
-#: NED -> ENU is half a turn about (1, 1, 0); FLU -> FRD half a turn about x.
-_Q_ENU_FROM_NED = (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)
-_Q_FRD_FROM_FLU = (1.0, 0.0, 0.0, 0.0)
-
-
-def flu_quaternion_enu(euler_rad: Sequence[float]) -> tuple[float, float, float, float]:
-    """The attitude (roll, pitch, yaw of FRD in NED, rad; ZYX order) as the quaternion
-    (x, y, z, w) of the body's forward-left-up axes in east-north-up."""
-    roll, pitch, yaw = (0.5 * float(a) for a in euler_rad)
-    cr, sr, cp, sp, cy, sy = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw), math.sin(yaw)
-    q_ned_frd = (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-                 cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
-    return _multiply(_multiply(_Q_ENU_FROM_NED, q_ned_frd), _Q_FRD_FROM_FLU)
 
 
 def vehicle_transform(position_ned_m: Sequence, euler_rad: Sequence | None, time_s: float) -> FrameTransform:

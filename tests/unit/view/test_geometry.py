@@ -1,4 +1,4 @@
-"""The operator's scene maths: frames, attitude, threat tubes, prism walls (issue 14)."""
+"""The operator's view geometry: frames, attitude, threat tubes, prism walls (issue 14)."""
 
 import math
 
@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from companion.view import scene
+from companion.view import geometry as scene
 
 finite = st.floats(-1e4, 1e4, allow_nan=False)
 angle = st.floats(-math.pi, math.pi, allow_nan=False)
