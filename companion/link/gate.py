@@ -32,7 +32,7 @@ from mavlink_signing.keys import key_fingerprint
 log = logging.getLogger(__name__)
 
 #: Inbound outcomes counted besides the signature verdicts.
-PASSED, NOT_FOR_US, MALFORMED = "passed", "not_for_us", "malformed"
+PASSED, NOT_FOR_US, ONBOARD, MALFORMED = "passed", "not_for_us", "onboard", "malformed"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,19 +111,27 @@ class InboundFilter:
 
     Attributes
     ----------
+    onboard : OnboardComponent, optional
+        The companion's own component: commands addressed to it are answered by it (the
+        answers wait in ``replies``) and never reach MAVSDK.
+
+    Attributes
+    ----------
     counts : dict of str to int
-        ``passed``, ``not_for_us``, ``malformed`` and, with a key, each refused ``Verdict`` value
-        (``unsigned``, ``bad_signature``, ``replayed``, ``stale``).
+        ``passed``, ``not_for_us``, ``onboard``, ``malformed`` and, with a key, each refused
+        ``Verdict`` value (``unsigned``, ``bad_signature``, ``replayed``, ``stale``).
     """
 
     def __init__(self, identity: Identity, check: SignatureCheck | None = None,
-                 stream: bool = False) -> None:
+                 stream: bool = False, onboard=None) -> None:
         self.identity = identity
         self.check = check
         self.stream = stream
+        self.onboard = onboard                  # companion.link.onboard.OnboardComponent or None
+        self.replies: list[bytes] = []          # its answers, for the gate to send
         self.parser = new_parser()
         self.autopilot_heard = False
-        self.counts: dict[str, int] = {PASSED: 0, NOT_FOR_US: 0, MALFORMED: 0}
+        self.counts: dict[str, int] = {PASSED: 0, NOT_FOR_US: 0, ONBOARD: 0, MALFORMED: 0}
         if check is not None:
             self.counts.update({v.value: 0 for v in Verdict if v is not Verdict.ACCEPTED})
 
@@ -154,6 +162,9 @@ class InboundFilter:
                                        msg.get_srcComponent())
             if verdict is not Verdict.ACCEPTED:
                 return self._count(verdict.value)
+        if self.onboard is not None and self.onboard.addressed_to_us(msg):
+            self.replies.append(self.onboard.handle(msg))
+            return self._count(ONBOARD)
         if self.identity.addressed_elsewhere(msg):
             return self._count(NOT_FOR_US)
         self.counts[PASSED] += 1
@@ -164,7 +175,7 @@ class InboundFilter:
     def _count(self, outcome: str) -> bool:
         """Count a dropped frame; log the first of each kind, then every 1000th."""
         n = self.counts[outcome] = self.counts[outcome] + 1
-        if outcome != NOT_FOR_US and (n == 1 or n % 1000 == 0):
+        if outcome not in (NOT_FOR_US, ONBOARD) and (n == 1 or n % 1000 == 0):
             log.warning("dropping frames from the vehicle link: %s (%d so far)", outcome, n)
         return False
 
@@ -199,6 +210,14 @@ class OutboundSigner:
         if self.encoder is None:
             return [bytes(data)] if known else []
         return [frame for frame in map(self._signed, known) if frame is not None]
+
+    def sign(self, frame: bytes) -> bytes | None:
+        """One frame of our own (not MAVSDK's: it teaches nothing about who MAVSDK is), signed
+        when there is a key."""
+        if self.encoder is None:
+            return frame
+        messages = [m for m in new_parser().parse_buffer(frame) or [] if m.get_type() != "BAD_DATA"]
+        return self._signed(messages[0]) if len(messages) == 1 else None
 
     def _learn_identity(self, msg) -> None:
         if self.identity.system is None and msg.get_type() == "HEARTBEAT":

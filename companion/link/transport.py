@@ -20,6 +20,7 @@ import logging
 import select
 import socket
 import threading
+import time
 
 from companion.errors import LinkError
 from companion.link.gate import Identity, InboundFilter, OutboundSigner, SigningKey
@@ -137,11 +138,15 @@ class GateThread:
     tlog : TlogWriter, optional
         Records every frame accepted from the vehicle and every frame sent to it (closed with
         the gate).
+    onboard_period_s : float
+        With ``inbound.onboard`` (the companion's own component): its HEARTBEAT period.
     """
 
     def __init__(self, url: str, inbound: InboundFilter, outbound: OutboundSigner,
-                 tlog: TlogWriter | None = None) -> None:
+                 tlog: TlogWriter | None = None, onboard_period_s: float = 1.0) -> None:
         self.inbound, self.outbound, self.tlog = inbound, outbound, tlog
+        self.onboard_period_s = onboard_period_s
+        self._heartbeat_due_s = 0.0
         self.vehicle = open_vehicle_side(url)
         self.local = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.local.bind(("127.0.0.1", 0))
@@ -166,9 +171,24 @@ class GateThread:
         if self.tlog is not None:
             self.tlog.close()
 
+    def send_own(self, frame: bytes) -> None:
+        """Send a frame of the companion's own component (signed with the link's key)."""
+        signed = self.outbound.sign(frame)
+        if signed is not None:
+            self.vehicle.write(signed)
+            if self.tlog is not None:
+                self.tlog.write(signed)
+
+    def _onboard_heartbeat(self) -> None:
+        now = time.monotonic()
+        if self.inbound.onboard is not None and now >= self._heartbeat_due_s:
+            self._heartbeat_due_s = now + self.onboard_period_s
+            self.send_own(self.inbound.onboard.heartbeat())
+
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
+                self._onboard_heartbeat()
                 ready, _, _ = select.select([self.vehicle, self.local], [], [], 0.2)
             except (OSError, ValueError):
                 return                              # closed under us
@@ -184,6 +204,8 @@ class GateThread:
 
     def _from_vehicle(self) -> None:
         frames = self.inbound.filter(self.vehicle.read())
+        while self.inbound.replies:
+            self.send_own(self.inbound.replies.pop(0))
         if self.inbound.autopilot_heard:
             self.vehicle.accepted_from_last()
         for frame in frames:
@@ -201,9 +223,10 @@ class GateThread:
 
 
 def open_gate(url: str, key: SigningKey | None = None, link_id: int = 0,
-              tlog_path: str | None = None) -> GateThread:
+              tlog_path: str | None = None, onboard=None) -> GateThread:
     """Open the vehicle side of ``url`` and start the gate (signing with ``key`` if given;
-    recording the traffic to the ``.tlog`` file ``tlog_path`` if given)."""
+    recording the traffic to the ``.tlog`` file ``tlog_path`` if given; speaking as the
+    companion component ``onboard``, a ``companion.link.onboard.OnboardComponent``, if given)."""
     identity = Identity()
     check = None if key is None else SignatureCheck(key.key)
     outbound = OutboundSigner(identity, None if key is None else key.key, link_id)
@@ -211,6 +234,6 @@ def open_gate(url: str, key: SigningKey | None = None, link_id: int = 0,
         tlog = TlogWriter(tlog_path) if tlog_path else None
     except OSError as exc:
         raise LinkError(f"--tlog: cannot write {tlog_path} ({exc.strerror or exc})") from None
-    gate = GateThread(url, InboundFilter(identity, check), outbound, tlog)
+    gate = GateThread(url, InboundFilter(identity, check, onboard=onboard), outbound, tlog)
     gate.inbound.stream = not isinstance(gate.vehicle, UdpVehicleSide)
     return gate.start()

@@ -48,7 +48,7 @@ def test_answers_to_other_senders_never_reach_mavsdk():
     assert gate.filter(ack_to(255, 190)) == []                 # a ground station's answer
     assert gate.filter(ack_to(US[0], 190)) == []               # our system, another component
     assert gate.filter(heartbeat()) != []                      # broadcast
-    assert gate.counts == {"passed": 3, "not_for_us": 2, "malformed": 0}
+    assert gate.counts == {"passed": 3, "not_for_us": 2, "onboard": 0, "malformed": 0}
 
 
 def test_before_mavsdk_spoke_only_broadcasts_pass():
