@@ -87,3 +87,21 @@ def test_print_config_prints_toml_by_default_and_json_on_request(capsys):
     assert settings_from_dict(tomllib.loads(capsys.readouterr().out)) == Settings()
     assert main(["run", "--print-config", "json"]) == 0
     assert capsys.readouterr().out.lstrip().startswith("{")
+
+
+def test_a_setting_added_without_documentation_is_caught():
+    @dataclass(frozen=True)
+    class Grown:
+        """A settings table that grew a key.
+
+        Parameters
+        ----------
+        rate_hz : float
+            Documented.
+        """
+
+        rate_hz: float = 1.0
+        new_key_m: float = 2.0
+
+    undocumented = [d.key for d in setting_docs(Grown) if not d.meaning]
+    assert undocumented == ["new_key_m"]
