@@ -13,8 +13,9 @@ import logging
 import math
 from typing import Any
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
+from heli_common.mavlink_ids import (
+    TYPEMASK_IGNORE_ACCELERATION, TYPEMASK_IGNORE_POSITION, TYPEMASK_IGNORE_VELOCITY, mavlink,
+)
 from sim_vehicle.autopilot import Autopilot
 from sim_vehicle.control import Setpoint
 from sim_vehicle.mavlink.endpoint import Address, LogThrottle
@@ -25,13 +26,6 @@ log = logging.getLogger(__name__)
 LOCAL_FRAMES = frozenset({mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_OFFSET_NED,
                           mavlink.MAV_FRAME_BODY_NED, mavlink.MAV_FRAME_BODY_OFFSET_NED})
 BODY_FRAMES = frozenset({mavlink.MAV_FRAME_BODY_NED, mavlink.MAV_FRAME_BODY_OFFSET_NED})
-# POSITION_TARGET_TYPEMASK bits
-IGNORE_POSITION = (mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE
-                   | mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE)
-IGNORE_VELOCITY = (mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_VY_IGNORE
-                   | mavlink.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
-IGNORE_ACCELERATION = (mavlink.POSITION_TARGET_TYPEMASK_AX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_AY_IGNORE
-                       | mavlink.POSITION_TARGET_TYPEMASK_AZ_IGNORE)
 
 
 class GuidedSetpoints:
@@ -82,7 +76,7 @@ class GuidedSetpoints:
             log.warning("SET_POSITION_TARGET_GLOBAL_INT: frame %d not supported; ignored", frame)
             return
         pos: tuple = (math.nan, math.nan, math.nan)
-        if not msg.type_mask & IGNORE_POSITION:
+        if not msg.type_mask & TYPEMASK_IGNORE_POSITION:
             lat, lon = msg.lat_int * 1e-7, msg.lon_int * 1e-7
             if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0) or not math.isfinite(msg.alt):
                 log.warning("SET_POSITION_TARGET_GLOBAL_INT: position %r, %r, %r invalid; ignored",
@@ -97,9 +91,9 @@ class GuidedSetpoints:
         mask = msg.type_mask
         force = bool(mask & mavlink.POSITION_TARGET_TYPEMASK_FORCE_SET)
         setpoint = Setpoint(
-            pos_ned_m=None if mask & IGNORE_POSITION else pos,
-            vel_ned_m_s=None if mask & IGNORE_VELOCITY else vel,
-            acc_ned_m_s2=None if (mask & IGNORE_ACCELERATION or force) else acc,
+            pos_ned_m=None if mask & TYPEMASK_IGNORE_POSITION else pos,
+            vel_ned_m_s=None if mask & TYPEMASK_IGNORE_VELOCITY else vel,
+            acc_ned_m_s2=None if (mask & TYPEMASK_IGNORE_ACCELERATION or force) else acc,
             yaw_rad=None if mask & mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE else float(msg.yaw),
             yaw_rate_rad_s=None if mask & mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE else float(msg.yaw_rate),
         )

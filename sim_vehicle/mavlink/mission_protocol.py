@@ -19,7 +19,7 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from sim_vehicle.autopilot import Autopilot
-from sim_vehicle.mavlink import mission_wire
+from sim_vehicle.mavlink.mission_wire import encode_item, from_mission_item, from_mission_item_int
 from sim_vehicle.mavlink.endpoint import Address, Endpoint
 from sim_vehicle.mission_store import (
     MISSION_TYPE_ALL, MISSION_TYPE_FENCE, MISSION_TYPE_MISSION, MISSION_TYPE_NAMES, MISSION_TYPE_RALLY,
@@ -177,7 +177,7 @@ class MissionItemProtocol(abc.ABC):
         if not 0 <= msg.seq < len(items):
             refuse_request(self.endpoint, msg, address, len(items), self.mission_type)
             return
-        self.endpoint.send(mission_wire.encode_item(self.endpoint.mav, items[msg.seq], msg.get_srcSystem(),
+        self.endpoint.send(encode_item(self.endpoint.mav, items[msg.seq], msg.get_srcSystem(),
                                                     msg.get_srcComponent(), self.mission_type, legacy), address)
 
     # ---------------------------------------------------------------- clearing, cancelling, time-outs
@@ -258,10 +258,10 @@ class MissionProtocols:
             protocol.on_count(msg, address)
 
     def on_mission_item_int(self, msg: Any, address: Address) -> None:
-        self._on_item(msg, address, mission_wire.from_mission_item_int(msg, mission_type_of(msg)), legacy=False)
+        self._on_item(msg, address, from_mission_item_int(msg, mission_type_of(msg)), legacy=False)
 
     def on_mission_item(self, msg: Any, address: Address) -> None:
-        self._on_item(msg, address, mission_wire.from_mission_item(msg, mission_type_of(msg)), legacy=True)
+        self._on_item(msg, address, from_mission_item(msg, mission_type_of(msg)), legacy=True)
 
     def _on_item(self, msg: Any, address: Address, item: MissionItem, legacy: bool) -> None:
         protocol = self.lists.get(item.mission_type)
