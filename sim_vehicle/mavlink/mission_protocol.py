@@ -16,13 +16,11 @@ import dataclasses
 import logging
 from typing import Any
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
 from sim_vehicle.autopilot import Autopilot
-from sim_vehicle.mavlink.mission_wire import encode_item, from_mission_item, from_mission_item_int
 from sim_vehicle.mavlink.endpoint import Address, Endpoint
+from sim_vehicle.mavlink.mission_wire import encode_item
 from sim_vehicle.mission_store import (
-    MISSION_TYPE_ALL, MISSION_TYPE_FENCE, MISSION_TYPE_MISSION, MISSION_TYPE_NAMES, MISSION_TYPE_RALLY,
+    MISSION_TYPE_FENCE, MISSION_TYPE_MISSION, MISSION_TYPE_NAMES, MISSION_TYPE_RALLY,
     MissionItem, MissionResult, MissionStore, Upload,
 )
 from sim_vehicle.telemetry import Telemetry
@@ -233,90 +231,3 @@ class MissionItemProtocolRally(MissionItemProtocol):
 
     def apply(self) -> None:
         self.autopilot.set_rally(self.store.items(self.mission_type))
-
-
-class MissionProtocols:
-    """The mission messages routed to the protocol of their list; another list type is refused.
-
-    Parameters are those of :class:`MissionItemProtocol`.
-    """
-
-    def __init__(self, endpoint: Endpoint, store: MissionStore, autopilot: Autopilot, telemetry: Telemetry) -> None:
-        self.endpoint = endpoint
-        self.store = store
-        self.autopilot = autopilot
-        self.telemetry = telemetry
-        self.lists: dict[int, MissionItemProtocol] = {
-            cls.mission_type: cls(endpoint, store, autopilot, telemetry)
-            for cls in (MissionItemProtocolWaypoints, MissionItemProtocolFence, MissionItemProtocolRally)}
-
-    def on_mission_count(self, msg: Any, address: Address) -> None:
-        protocol = self.lists.get(mission_type_of(msg))
-        if protocol is None:
-            refuse_count(self.endpoint, msg, address, MissionResult.UNSUPPORTED, mission_type_of(msg))
-        else:
-            protocol.on_count(msg, address)
-
-    def on_mission_item_int(self, msg: Any, address: Address) -> None:
-        self._on_item(msg, address, from_mission_item_int(msg, mission_type_of(msg)), legacy=False)
-
-    def on_mission_item(self, msg: Any, address: Address) -> None:
-        self._on_item(msg, address, from_mission_item(msg, mission_type_of(msg)), legacy=True)
-
-    def _on_item(self, msg: Any, address: Address, item: MissionItem, legacy: bool) -> None:
-        protocol = self.lists.get(item.mission_type)
-        if protocol is None:
-            refuse_item(self.endpoint, msg, address, item)
-        else:
-            protocol.on_item(msg, address, item, legacy)
-
-    def on_mission_request_list(self, msg: Any, address: Address) -> None:
-        protocol = self.lists.get(mission_type_of(msg))
-        if protocol is None:
-            send_ack(self.endpoint, msg, address, MissionResult.UNSUPPORTED, mission_type_of(msg))
-        else:
-            protocol.on_request_list(msg, address)
-
-    def on_mission_request_int(self, msg: Any, address: Address) -> None:
-        self._on_request(msg, address, legacy=False)
-
-    def on_mission_request(self, msg: Any, address: Address) -> None:
-        self._on_request(msg, address, legacy=True)
-
-    def _on_request(self, msg: Any, address: Address, legacy: bool) -> None:
-        protocol = self.lists.get(mission_type_of(msg))
-        if protocol is None:
-            refuse_request(self.endpoint, msg, address, 0, mission_type_of(msg))
-        else:
-            protocol.on_request(msg, address, legacy)
-
-    def on_mission_clear_all(self, msg: Any, address: Address) -> None:
-        """MISSION_CLEAR_ALL of one list, or of all three (MAV_MISSION_TYPE_ALL)."""
-        mission_type = mission_type_of(msg)
-        result = self.store.clear(mission_type)
-        cleared = self.lists.values() if mission_type == MISSION_TYPE_ALL else \
-            [self.lists[mission_type]] if mission_type in self.lists else []
-        for protocol in cleared:
-            protocol.cleared(result == MissionResult.ACCEPTED)
-        send_ack(self.endpoint, msg, address, result, mission_type)
-
-    def on_mission_ack(self, msg: Any, address: Address) -> None:
-        protocol = self.lists.get(mission_type_of(msg))
-        if protocol is not None:
-            protocol.on_ack(msg, address)
-
-    def on_mission_set_current(self, msg: Any, address: Address) -> None:
-        """MISSION_SET_CURRENT: the mission item to fly next; MISSION_CURRENT to every link either way."""
-        ok, reason = self.autopilot.set_current(int(msg.seq))
-        if not ok:
-            log.warning("MISSION_SET_CURRENT %d refused: %s", msg.seq, reason)
-            self.endpoint.statustext(mavlink.MAV_SEVERITY_WARNING, f"set current refused: {reason}")
-        self.endpoint.send(self.telemetry.msg_mission_current())
-
-    def update(self) -> None:
-        """Housekeeping: uploads idle too long are cancelled, silent uploaders asked again."""
-        now = self.endpoint.wall_s()
-        for upload in self.store.expire_uploads(now):
-            self.lists[upload.mission_type].upload_expired(upload)
-        for protocol in self.lists.values():
-            protocol.retry(now)

@@ -31,7 +31,7 @@ from sim_vehicle.config import VehicleSettings
 from sim_vehicle.mavlink.commands import CommandProtocol
 from sim_vehicle.mavlink.endpoint import COMPONENT_ID, Address, Endpoint, LinkStats
 from sim_vehicle.mavlink.guided import GuidedSetpoints
-from sim_vehicle.mavlink.mission_protocol import MissionProtocols
+from sim_vehicle.mavlink.missions import MissionProtocols
 from sim_vehicle.mavlink.param_protocol import ParamProtocol
 from sim_vehicle.mavlink.stream_sender import StreamSender
 from sim_vehicle.mission_store import MissionStore
