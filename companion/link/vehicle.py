@@ -42,8 +42,9 @@ from typing import AsyncIterator, Callable
 
 import numpy as np
 
-from heli_common.mavlink_ids import (COPTER_MODE_NAMES, COPTER_MODES, MAV_RESULT_NAMES, enum_names,
-                                     mavlink)
+from heli_common.mavlink_ids import (COPTER_MODE_NAMES, COPTER_MODES, MAV_RESULT_NAMES,
+                                     TYPEMASK_IGNORE_ACCELERATION, TYPEMASK_IGNORE_POSITION,
+                                     TYPEMASK_IGNORE_VELOCITY, enum_names, mavlink)
 
 from companion.errors import LinkError, MissionError, VehicleRefused
 from companion.link.frames import LinkFrames
@@ -85,12 +86,9 @@ STATUSTEXT_KEEP = 64
 
 MAV_FRAME_LOCAL_NED = mavlink.MAV_FRAME_LOCAL_NED
 # SET_POSITION_TARGET type_mask bits (POSITION_TARGET_TYPEMASK)
-IGNORE_POS = (mavlink.POSITION_TARGET_TYPEMASK_X_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_Y_IGNORE
-              | mavlink.POSITION_TARGET_TYPEMASK_Z_IGNORE)
-IGNORE_VEL = (mavlink.POSITION_TARGET_TYPEMASK_VX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_VY_IGNORE
-              | mavlink.POSITION_TARGET_TYPEMASK_VZ_IGNORE)
-IGNORE_ACC = (mavlink.POSITION_TARGET_TYPEMASK_AX_IGNORE | mavlink.POSITION_TARGET_TYPEMASK_AY_IGNORE
-              | mavlink.POSITION_TARGET_TYPEMASK_AZ_IGNORE)
+IGNORE_POS = TYPEMASK_IGNORE_POSITION
+IGNORE_VEL = TYPEMASK_IGNORE_VELOCITY
+IGNORE_ACC = TYPEMASK_IGNORE_ACCELERATION
 IGNORE_YAW = mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE
 IGNORE_YAW_RATE = mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 
