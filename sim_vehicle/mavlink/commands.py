@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from heli_common.ardupilot_ids import FORCE_DISARM_MAGIC
 from sim_vehicle import autopilot as ap
 from sim_vehicle import rsc
 from sim_vehicle.autopilot import Autopilot, QuietRefusal
@@ -32,7 +33,6 @@ from sim_vehicle.telemetry import Telemetry
 
 log = logging.getLogger(__name__)
 
-FORCE_DISARM_MAGIC = 21196
 REQUESTABLE: dict[str, int] = {**MESSAGE_IDS, "AUTOPILOT_VERSION": mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
 """Messages MAV_CMD_REQUEST_MESSAGE answers (once, on the requesting link)."""
 

@@ -16,12 +16,12 @@ import collections
 import dataclasses
 import logging
 import socket
-import struct
 import time
 from typing import Any, Callable, Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from heli_common.tlog import TlogWriter
 from sim_vehicle.config import parse_host_port
 from sim_vehicle.signing import Verdict, VehicleSigning
 
@@ -120,7 +120,7 @@ class Endpoint:
         self.peers: dict[Address, float] = {}
         self._deliver = deliver
         self._statustext_id = 0
-        self._tlog = open(tlog_path, "ab") if tlog_path else None
+        self._tlog = TlogWriter(tlog_path) if tlog_path else None
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 0)
         # a flood (or a burst while the physics steps) must not overflow the kernel's buffer
@@ -184,7 +184,7 @@ class Endpoint:
 
     def _record(self, buf: bytes) -> None:
         if self._tlog is not None:
-            self._tlog.write(struct.pack(">Q", int(time.time() * 1e6)) + buf)
+            self._tlog.write(buf)
 
     def statustext(self, severity: int, text: str) -> None:
         """STATUSTEXT to every link; longer texts in 50-character chunks with an id, as ArduPilot sends them."""
