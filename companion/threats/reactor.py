@@ -44,7 +44,8 @@ import numpy as np
 
 from companion.errors import CompanionError
 from companion.geo import GeoError, LocalFrame
-from companion.threats.bus import ThreatBus, ThreatUpdate, rejected_event
+from companion.threats.bus import ThreatBus
+from companion.threats.update import ThreatUpdate, rejected_event
 from companion.threats.model import ThreatTable
 from companion.threats.policy import ThreatManager
 

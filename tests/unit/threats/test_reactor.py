@@ -14,7 +14,7 @@ import pytest
 
 from companion.config import Settings
 from companion.errors import LinkError
-from companion.threats.bus import ThreatUpdate
+from companion.threats.update import ThreatUpdate
 from companion.threats.model import Threat, payload_error
 from companion.threats.reactor import STATUSTEXT_MAX_CHARS, ThreatReactor, statustext_for
 
