@@ -118,7 +118,7 @@ class UdpSender:
         self.t0 = time.monotonic()
 
     def __call__(self, pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None):
-        from companion.link.vehicle import setpoint_fields
+        from companion.link.direct_messages import setpoint_fields
         f = setpoint_fields(int((time.monotonic() - self.t0) * 1e3), 1, 1, pos_ned_m,
                             vel_ned_m_s, acc_ned_m_s2, yaw_rad)
         msg = self.mav.set_position_target_local_ned_encode(

@@ -25,7 +25,8 @@ import numpy as np
 
 from companion.errors import WorldError
 from companion.world.index import UniformGrid
-from companion.world.obstacles import Disc, Obstacle, Sphere
+from companion.world.obstacles import Obstacle
+from companion.world.round_obstacles import Disc, Sphere
 
 __all__ = ["World"]
 
