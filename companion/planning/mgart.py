@@ -26,7 +26,9 @@ import numpy as np
 
 from companion.errors import PlanningError
 from companion.planning.cost import path_cost, path_length_m
-from companion.planning.gart import GartSearch, finish_path, validate_problem
+from companion.planning.gart import finish_path
+from companion.planning.problem import validate_problem
+from companion.planning.search import GartSearch
 from companion.planning.result import PlanResult
 from companion.planning.settings import MgartSettings
 
