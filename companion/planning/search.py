@@ -129,13 +129,13 @@ class GartSearch:
         ec = self.ec
         simple = self.simple_cost
         energy = self.s.cost.energy
-        cands = []
-        for i, dist in neighbours:
-            if dist < 1e-9:
-                continue
-            if simple:
-                cands.append((cost[i] + energy * dist, i, dist))
-            else:
+        if simple:
+            cands = [(cost[i] + energy * dist, i, dist) for i, dist in neighbours if dist >= 1e-9]
+        else:
+            cands = []
+            for i, dist in neighbours:
+                if dist < 1e-9:
+                    continue
                 p = pts[i]
                 u = tuple((b - a) / dist for a, b in zip(p, x_new))
                 cands.append((cost[i] + ec.edge(p, x_new, dist, dens[i], dens_new) + ec.corner(u_in[i], u), i, dist))
@@ -175,13 +175,15 @@ class GartSearch:
         u_node, len_node = u_in[node], len_in[node]
         ec, ok = self.ec, self.rule.ok
         free = self.world.segment_free
+        energy = self.s.cost.energy
+        skip = self.parent[node]
         changed = False
         for i, dist in neighbours:
-            if i == 0 or i == self.parent[node] or dist < 1e-9:
+            if c_new + dist * energy >= cost[i]:
+                continue  # cannot improve even on length alone
+            if i == 0 or i == skip or dist < 1e-9:
                 continue
             p = pts[i]
-            if c_new + dist * self.s.cost.energy >= cost[i]:
-                continue  # cannot improve even on length alone
             u = tuple((b - a) / dist for a, b in zip(x_new, p))
             e = ec.edge(x_new, p, dist, self.dens[node], self.dens[i])
             c = c_new + e + ec.corner(u_node, u)
@@ -271,8 +273,9 @@ class GartSearch:
         x_new = self.steer(self.pts[near], x_rand)
         if x_new is None or not self.world.point_free(x_new):
             return -1
-        neighbours = self.nn.within(x_new, self.radius())
-        if all(i != near for i, _ in neighbours):
+        radius = self.radius()
+        neighbours = self.nn.within(x_new, radius)
+        if not _listed(self.pts[near], x_new, radius):
             neighbours.append((near, math.dist(self.pts[near], x_new)))
         dens_new = self.ec.threat_density(x_new) if self.ec.uses_threat else 0.0
         chosen = self.choose_parent(x_new, neighbours, dens_new)
@@ -305,3 +308,15 @@ class GartSearch:
         return Tree(nodes=np.array(self.pts, dtype=float).reshape(-1, self.dim),
                     parents=np.array(self.parent, dtype=np.int64),
                     forbidden=np.array(self.forbidden, dtype=bool))
+
+
+def _listed(q: tuple, p: tuple, radius_m: float) -> bool:
+    """True when the nearest-neighbour query ``within(p, radius_m)`` lists the node at ``q``.
+
+    The same arithmetic as :class:`~companion.planning.nearest.NodeGrid` (node minus query).
+    """
+    d2 = 0.0
+    for a, b in zip(q, p):
+        d = a - b
+        d2 += d * d
+    return d2 <= radius_m * radius_m
