@@ -15,7 +15,7 @@ import math
 
 from companion.planning.node_arrays import NodeArrays
 
-__all__ = ["NodeGrid"]
+__all__ = ["NodeGrid", "listed_within"]
 
 _LINEAR_SCAN_BELOW = 40
 _VECTOR_FROM = 256
@@ -204,3 +204,15 @@ class NodeGrid:
                         if d2 <= r2:
                             out.append((n, sqrt(d2)))
         return out
+
+
+def listed_within(q: tuple, p: tuple, radius_m: float) -> bool:
+    """True when the nearest-neighbour query ``within(p, radius_m)`` lists the node at ``q``.
+
+    The same arithmetic as :meth:`NodeGrid.within` (node minus query), without a query.
+    """
+    d2 = 0.0
+    for a, b in zip(q, p):
+        d = a - b
+        d2 += d * d
+    return d2 <= radius_m * radius_m

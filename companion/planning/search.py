@@ -29,7 +29,7 @@ import numpy as np
 
 from companion.planning.cost import EdgeCost
 from companion.planning.guidance import Guidance
-from companion.planning.nearest import NodeGrid
+from companion.planning.nearest import NodeGrid, listed_within
 from companion.planning.result import Tree
 from companion.planning.sampling import RandomStream, Sampler
 from companion.planning.settings import GartSettings
@@ -275,7 +275,7 @@ class GartSearch:
             return -1
         radius = self.radius()
         neighbours = self.nn.within(x_new, radius)
-        if not _listed(self.pts[near], x_new, radius):
+        if not listed_within(self.pts[near], x_new, radius):
             neighbours.append((near, math.dist(self.pts[near], x_new)))
         dens_new = self.ec.threat_density(x_new) if self.ec.uses_threat else 0.0
         chosen = self.choose_parent(x_new, neighbours, dens_new)
@@ -308,15 +308,3 @@ class GartSearch:
         return Tree(nodes=np.array(self.pts, dtype=float).reshape(-1, self.dim),
                     parents=np.array(self.parent, dtype=np.int64),
                     forbidden=np.array(self.forbidden, dtype=bool))
-
-
-def _listed(q: tuple, p: tuple, radius_m: float) -> bool:
-    """True when the nearest-neighbour query ``within(p, radius_m)`` lists the node at ``q``.
-
-    The same arithmetic as :class:`~companion.planning.nearest.NodeGrid` (node minus query).
-    """
-    d2 = 0.0
-    for a, b in zip(q, p):
-        d = a - b
-        d2 += d * d
-    return d2 <= radius_m * radius_m
