@@ -8,8 +8,12 @@ extended nor rewired any more, except those within ``keep_near_root_m`` of the s
 goal), which stay available so new branches can leave the start and still reach the goal. With
 ``forbid_tube_m > 0`` the nodes within that distance of the branch are forbidden too, which
 steers the next branches away from the same corridor (a speed-up over the paper, where only the
-branch itself is forbidden; ``forbid_tube_m = 0`` gives the paper's rule). The tree keeps growing until ``k`` paths exist or the
-budget is spent. The threat manager uses the paths as pre-planned alternatives.
+branch itself is forbidden; ``forbid_tube_m = 0`` gives the paper's rule). The waypoints of each
+path kept within ``portal_zone_m`` of the goal become goal portals
+(:mod:`companion.planning.portals`): a later branch may end by joining one, so a goal reached
+only through a pocket is not re-entered by chance for every path (``portal_zone_m = 0``: the
+paper's rule). The tree keeps growing until ``k`` paths exist or the budget is spent. The
+threat manager uses the paths as pre-planned alternatives.
 
 Distinctness measure: the discrete Hausdorff distance between the two paths, each resampled every
 ``separation_sample_m``, must be at least ``min_separation_m``. Paths are returned sorted by cost
@@ -26,7 +30,10 @@ import numpy as np
 
 from companion.errors import PlanningError
 from companion.planning.cost import path_cost, path_length_m
-from companion.planning.gart import GartSearch, finish_path, validate_problem
+from companion.planning.gart import finish_path
+from companion.planning.portals import GoalPortals
+from companion.planning.problem import validate_problem
+from companion.planning.search import GartSearch
 from companion.planning.result import PlanResult
 from companion.planning.settings import MgartSettings
 
@@ -111,6 +118,7 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
                            elapsed_s=time.perf_counter() - t0, time_to_first_s=None, tree=None)]
     deadline = t0 + (max_time_s if max_time_s is not None else settings.time_budget_s)
     search = GartSearch(world, start_t, goal_t, gs, rng)
+    portals = GoalPortals(search, settings.portal_zone_m)
     found: list[tuple[np.ndarray, float, float, float]] = []  # path, cost, length, t_found
     clock = time.perf_counter
 
@@ -134,11 +142,17 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
         consider(np.array([start_t, goal_t]))
     while len(found) < k and clock() < deadline:
         node = search.iterate()
-        if node < 0 or node not in search.goal_links:
+        if node < 0:
             continue
-        consider(search.path_to_goal(node))
+        raw = search.path_to_goal(node) if node in search.goal_links else portals.join(node)
+        if raw is None:
+            continue
+        kept = len(found)
+        consider(raw)
+        if len(found) > kept:
+            portals.add_path(found[-1][0])
         forbid_branch(search, node, settings.keep_near_root_m, settings.forbid_tube_m)
-        del search.goal_links[node]
+        search.goal_links.pop(node, None)
     tree = search.tree()
     elapsed = clock() - t0
     if not found:

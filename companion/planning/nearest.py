@@ -4,16 +4,21 @@ RRT* asks for the nearest node and for the nodes within a radius on every iterat
 tree grows by one node; rebuilding a KD-tree each time costs more than the whole iteration
 (``ANCHORS.md``: cKDTree build 88 us for 1k nodes, query 10-15 us). Buckets of node ids keyed
 by flat integer cell indices are updated in O(1) and searched ring by ring (Chebyshev rings of
-cells around the query); a small tree is scanned linearly. Plain floats and ints only.
+cells around the query); a small tree is scanned linearly. Plain floats and ints only, except
+above ``_VECTOR_FROM`` nodes, where one numpy pass over all nodes
+(:class:`~companion.planning.node_arrays.NodeArrays`) answers the same queries in the same order.
 """
 
 from __future__ import annotations
 
 import math
 
-__all__ = ["NodeGrid"]
+from companion.planning.node_arrays import NodeArrays
+
+__all__ = ["NodeGrid", "listed_within"]
 
 _LINEAR_SCAN_BELOW = 40
+_VECTOR_FROM = 256
 
 
 class NodeGrid:
@@ -40,6 +45,7 @@ class NodeGrid:
         self.active: list[int] = []  # ids in the structure, for linear scans
         self.where: dict[int, int] = {}  # id -> position in active
         self._rings: list[list[tuple]] = [[(0,) * self.dim]]
+        self.arrays = NodeArrays(points, self.lo, self.inv, self.shape)
 
     # ------------------------------------------------------------------ cells
     def _index(self, p: tuple) -> tuple:
@@ -90,6 +96,7 @@ class NodeGrid:
             self.active[pos] = last
             self.where[last] = pos
         self.buckets[self._flat(self._index(self.points[node]))].remove(node)
+        self.arrays.set_active(node, False)
 
     # ------------------------------------------------------------------ queries
     def _scan(self, p: tuple, ids) -> tuple[int, float]:
@@ -120,6 +127,8 @@ class NodeGrid:
         """Id of the point nearest to ``p`` (-1 when empty)."""
         if len(self.active) < _LINEAR_SCAN_BELOW:
             return self._scan(p, self.active)[0]
+        if len(self.active) >= _VECTOR_FROM:
+            return self.arrays.nearest(p, self.arrays.sync(self.where))
         idx = self._index(p)
         shape = self.shape
         buckets = self.buckets
@@ -152,6 +161,8 @@ class NodeGrid:
 
     def within(self, p: tuple, radius_m: float) -> list[tuple[int, float]]:
         """``(id, distance)`` of every point within ``radius_m`` of ``p``."""
+        if len(self.active) >= _VECTOR_FROM:
+            return self.arrays.within(p, radius_m, self.arrays.sync(self.where))
         r2 = radius_m * radius_m
         pts = self.points
         out = []
@@ -193,3 +204,15 @@ class NodeGrid:
                         if d2 <= r2:
                             out.append((n, sqrt(d2)))
         return out
+
+
+def listed_within(q: tuple, p: tuple, radius_m: float) -> bool:
+    """True when the nearest-neighbour query ``within(p, radius_m)`` lists the node at ``q``.
+
+    The same arithmetic as :meth:`NodeGrid.within` (node minus query), without a query.
+    """
+    d2 = 0.0
+    for a, b in zip(q, p):
+        d = a - b
+        d2 += d * d
+    return d2 <= radius_m * radius_m

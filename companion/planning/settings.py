@@ -200,6 +200,10 @@ class MgartSettings:
     forbid_tube_m : float
         Nodes within this distance of a finished branch are forbidden with it (default 4;
         0 = only the branch, the paper's rule).
+    portal_zone_m : float
+        Waypoints of kept paths within this distance of the goal stay open as goal portals
+        that later branches may join (:mod:`companion.planning.portals`; default 40, twice the
+        default step; 0 = none, the paper's rule).
     time_budget_s : float
         Budget when the caller gives no ``max_time_s`` (default 0.5).
     """
@@ -209,6 +213,7 @@ class MgartSettings:
     min_separation_m: float = 4.0
     separation_sample_m: float = 1.0
     forbid_tube_m: float = 4.0
+    portal_zone_m: float = 40.0
     time_budget_s: float = 0.5
 
     def __post_init__(self):
@@ -216,5 +221,7 @@ class MgartSettings:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise PlanningError(f"settings.{name}: must be a positive finite number, got {v!r}")
-        if not (math.isfinite(self.forbid_tube_m) and self.forbid_tube_m >= 0):
-            raise PlanningError(f"settings.forbid_tube_m: must be >= 0, got {self.forbid_tube_m!r}")
+        for name in ("forbid_tube_m", "portal_zone_m"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+                raise PlanningError(f"settings.{name}: must be >= 0, got {v!r}")

@@ -15,6 +15,7 @@ import numpy as np
 from companion.planning.cost import EdgeCost
 from companion.planning.settings import G2_CORNER_COEFF, GartSettings
 from companion.world import World
+from companion.world.segments import segments_free_from
 
 __all__ = ["CornerRule", "shortcut_path"]
 
@@ -77,11 +78,38 @@ def _section_cost(points: list, ec: EdgeCost, u_before: tuple | None) -> float:
     return total
 
 
+class _Edges:
+    """Directions, lengths and cost terms of the edges of ``pts`` (recomputed after a change).
+
+    ``terms[k]`` is edge k's cost plus the corner at its start (0 at the first waypoint), so
+    the cost of the section from waypoint ``i`` to ``j`` is ``sum(terms[i:j])``, accumulated in
+    the order :func:`_section_cost` uses.
+    """
+
+    def __init__(self, pts: list, ec: EdgeCost):
+        self.u, self.length, self.terms = [], [], []
+        u_prev = None
+        for a, b in zip(pts[:-1], pts[1:]):
+            u, length = _edge(a, b)
+            self.u.append(u)
+            self.length.append(length)
+            self.terms.append(ec.edge(a, b, length) + ec.corner(u_prev, u))
+            u_prev = u
+
+    def section_cost(self, i: int, j: int) -> float:
+        """Cost of waypoints ``i .. j`` (edges i to j-1), the first corner included."""
+        total = 0.0
+        for term in self.terms[i:j]:
+            total += term
+        return total
+
+
 def shortcut_path(world: World, path, settings: GartSettings | None = None) -> np.ndarray:
     """Shortcut ``path`` (M, d) in ``world``; returns a new (M', d) path, M' <= M.
 
     The result is collision-free when the input is, never costs more, and keeps the first
-    and last waypoints.
+    and last waypoints. From each waypoint the later waypoints are tried farthest first; their
+    straight edges are tested together (:func:`~companion.world.segments.segments_free_from`).
     """
     settings = settings or GartSettings()
     rule = CornerRule(settings, world)
@@ -91,26 +119,41 @@ def shortcut_path(world: World, path, settings: GartSettings | None = None) -> n
     for _ in range(settings.simplify.max_rounds):
         changed = False
         i = 0
+        edges = _Edges(pts, ec)
         while i < len(pts) - 2:
-            u_before, len_before = (None, 0.0) if i == 0 else _edge(pts[i - 1], pts[i])
-            for j in range(len(pts) - 1, i + 1, -1):
-                u_new, len_new = _edge(pts[i], pts[j])
-                if not rule.ok(u_before, len_before, u_new, len_new, pts[i]):
-                    continue
-                if j < len(pts) - 1:
-                    u_after, len_after = _edge(pts[j], pts[j + 1])
-                    if not rule.ok(u_new, len_new, u_after, len_after, pts[j]):
-                        continue
-                    old = _section_cost(pts[i:j + 2], ec, u_before)
-                    new = _section_cost([pts[i], pts[j], pts[j + 1]], ec, u_before)
-                else:
-                    old = _section_cost(pts[i:j + 1], ec, u_before)
-                    new = _section_cost([pts[i], pts[j]], ec, u_before)
-                if new < old - 1e-9 and world.segment_free(pts[i], pts[j]):
-                    pts = pts[:i + 1] + pts[j:]
-                    changed = True
-                    break
+            j = _farthest_shortcut(world, rule, ec, pts, edges, i)
+            if j > 0:
+                pts = pts[:i + 1] + pts[j:]
+                edges = _Edges(pts, ec)
+                changed = True
             i += 1
         if not changed:
             break
     return np.array(pts, dtype=float)
+
+
+def _farthest_shortcut(world: World, rule: CornerRule, ec: EdgeCost, pts: list, edges: _Edges, i: int) -> int:
+    """The farthest waypoint ``j > i + 1`` that a free, cheaper, corner-respecting edge joins, or -1."""
+    u_before, len_before = (None, 0.0) if i == 0 else (edges.u[i - 1], edges.length[i - 1])
+    last = len(pts) - 1
+    free = None
+    for j in range(last, i + 1, -1):
+        u_new, len_new = _edge(pts[i], pts[j])
+        if not rule.ok(u_before, len_before, u_new, len_new, pts[i]):
+            continue
+        new = ec.edge(pts[i], pts[j], len_new) + ec.corner(u_before, u_new)
+        if j < last:
+            u_after, len_after = edges.u[j], edges.length[j]
+            if not rule.ok(u_new, len_new, u_after, len_after, pts[j]):
+                continue
+            old = edges.section_cost(i, j + 1)
+            new += ec.edge(pts[j], pts[j + 1], len_after) + ec.corner(u_new, u_after)
+        else:
+            old = edges.section_cost(i, j)
+        if not new < old - 1e-9:
+            continue
+        if free is None:  # the edges from i to every later waypoint, tested at once
+            free = segments_free_from(world, pts[i], pts[i + 2:j + 1])
+        if free[j - i - 2]:
+            return j
+    return -1

@@ -1,0 +1,123 @@
+"""GART step 2, ``attract``: the paper's bidirectional potential acting on a sample.
+
+Inside an inflated obstacle the sample is repelled to just outside the surface (by
+``repel_offset_m``); outside, each obstacle within ``influence_m`` attracts it towards its
+surface with a force ``k / c`` inversely proportional to the clearance ``c`` (capped at ``c / 2``
+so it never crosses the surface); the goal always attracts it by ``goal_gain_m``. The total
+displacement is capped at ``max_guidance_m``. Below 128 obstacles every obstacle is scanned with
+plain floats; with more, only those listed for the sample's grid cell.
+"""
+
+from __future__ import annotations
+
+import math
+
+from companion.planning.settings import GartSettings
+
+__all__ = ["Guidance"]
+
+_SCAN_ALL_OBSTACLES_BELOW = 128  # guidance scans every obstacle below this count, else grid cells
+
+
+class Guidance:
+    """The potential of ``world``'s obstacles and of ``goal`` (see the module docstring).
+
+    Parameters
+    ----------
+    world : World
+    goal : tuple of d floats
+    settings : GartSettings
+    """
+
+    def __init__(self, world, goal: tuple, settings: GartSettings):
+        self.world = world
+        self.goal = goal
+        self.s = settings
+        self.dim = world.dim
+        self.lo = tuple(world.bounds_min.tolist())
+        self.hi = tuple(world.bounds_max.tolist())
+        self.margin = world.margin_m
+        self.scan_all = len(world.obstacles) <= _SCAN_ALL_OBSTACLES_BELOW
+        influence = settings.influence_m
+        # (centre..., reach^2, r) with reach = r + influence: the skip test without arithmetic
+        self.balls = tuple(b[:-2] + ((b[-1] + influence) * (b[-1] + influence), b[-1])
+                           for b in world.inflated_balls)
+        self.others = world.non_ball_obstacles
+
+    def attract(self, p: tuple) -> tuple:
+        """Sample ``p`` moved by the potential, clamped to the bounds."""
+        s = self.s
+        force = [0.0] * self.dim
+        if self.scan_all:
+            balls, others = self.balls, self.others   # few obstacles: a plain scan is cheapest
+        else:
+            balls = ()
+            others = self.world.obstacles_acting_on_cell(self.world.cell_of(p), s.influence_m + self.margin)
+        if balls:
+            if self.dim == 2:
+                self._balls_2d(p, balls, force)
+            else:
+                self._balls_3d(p, balls, force)
+        if others:
+            self._others(p, others, force)
+        to_goal = [g - x for g, x in zip(self.goal, p)]
+        dist_goal = math.sqrt(sum(v * v for v in to_goal))
+        if dist_goal > 1e-9:
+            k = min(s.goal_gain_m, dist_goal) / dist_goal
+            for i in range(self.dim):
+                force[i] += k * to_goal[i]
+        norm = math.sqrt(sum(f * f for f in force))
+        if norm > s.max_guidance_m:
+            scale = s.max_guidance_m / norm
+            force = [f * scale for f in force]
+        return tuple(min(max(x + f, l), h) for x, f, l, h in zip(p, force, self.lo, self.hi))
+
+    def _others(self, p: tuple, others, force: list) -> None:
+        """Add the potential of general obstacles (signed distance and its gradient)."""
+        s = self.s
+        margin, influence, gain, repel = self.margin, s.influence_m, s.obstacle_gain_m2, s.repel_offset_m
+        for ob in others:
+            c = ob.sdf(p) - margin
+            if c >= influence:
+                continue
+            g = ob.gradient(p)
+            # inside: repel out of the inflated obstacle; outside: attract towards its surface
+            mag = -c + repel if c <= 0.0 else -min(gain / c, 0.5 * c)
+            for i in range(self.dim):
+                force[i] += mag * g[i]
+
+    def _balls_2d(self, p: tuple, balls: tuple, force: list) -> None:
+        """Add the potential of the discs ``balls`` at ``p`` to ``force``."""
+        gain, repel = self.s.obstacle_gain_m2, self.s.repel_offset_m
+        x, y = p
+        for cx, cy, reach2, r in balls:
+            dx, dy = x - cx, y - cy
+            if dx * dx + dy * dy >= reach2:
+                continue
+            n = math.sqrt(dx * dx + dy * dy)
+            c = n - r
+            mag = -c + repel if c <= 0.0 else -min(gain / c, 0.5 * c)
+            if n > 1e-12:
+                force[0] += mag * dx / n
+                force[1] += mag * dy / n
+            else:
+                force[0] += mag
+
+    def _balls_3d(self, p: tuple, balls: tuple, force: list) -> None:
+        """Add the potential of the spheres ``balls`` at ``p`` to ``force``."""
+        gain, repel = self.s.obstacle_gain_m2, self.s.repel_offset_m
+        x, y, z = p
+        for cx, cy, cz, reach2, r in balls:
+            dx, dy, dz = x - cx, y - cy, z - cz
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 >= reach2:
+                continue
+            n = math.sqrt(d2)
+            c = n - r
+            mag = -c + repel if c <= 0.0 else -min(gain / c, 0.5 * c)
+            if n > 1e-12:
+                force[0] += mag * dx / n
+                force[1] += mag * dy / n
+                force[2] += mag * dz / n
+            else:
+                force[0] += mag
