@@ -122,22 +122,25 @@ class VehicleUpdate:
         VehicleState
             The state ``dt_s`` later; ``state`` is not modified.
         """
-        if not 0.0 < dt_s <= self.law.settings.control_dt_s * (1.0 + 1e-9):
+        law = self.law
+        control_dt_s = law.settings.control_dt_s
+        if not 0.0 < dt_s <= control_dt_s * (1.0 + 1e-9):
             raise dynamics.DynamicsError(
-                f"dt_s: expected 0 < dt_s <= the control period {self.law.settings.control_dt_s:g} s, got {dt_s!r}")
-        controller, delta = state.controller, state.delta
-        if command.setpoint is not None:
-            controller = self.law.step(controller, state.x, command.setpoint, self.law.settings.control_dt_s)
+                f"dt_s: expected 0 < dt_s <= the control period {control_dt_s:g} s, got {dt_s!r}")
+        x, delta, controller = state
+        setpoint, wind = command
+        if setpoint is not None:
+            controller = law.step(controller, x, setpoint, control_dt_s)
             delta = controller.delta
         n = substeps(dt_s, self.physics_dt_s)
         h = dt_s / n
-        wind = command.wind_ned_m_s
         per_substep = wind is not None and np.ndim(wind) == 2
-        x = state.x
+        model, step_rk4 = self.model, dynamics.step_rk4
         for i in range(n):
-            x = dynamics.step_rk4(self.model, x, delta, h, wind[i] if per_substep else wind)
-            stop_on_ground(x)
-        return VehicleState(x=x, delta=delta, controller=controller)
+            x = step_rk4(model, x, delta, h, wind[i] if per_substep else wind)
+            if x[16] >= 0.0:
+                stop_on_ground(x)
+        return VehicleState(x, delta, controller)
 
 
 def substeps(dt_s: float, physics_dt_s: float) -> int:

@@ -179,7 +179,8 @@ def setpoint_axes(v: Any, name: str) -> tuple[float, float, float] | None:
     if v is None:
         return None
     try:
-        a, b, c = (float(x) for x in v)
+        a, b, c = v
+        a, b, c = float(a), float(b), float(c)
     except (TypeError, ValueError):
         raise ControlError(f"setpoint.{name}: expected 3 numbers, got {v!r}") from None
     for x in (a, b, c):
