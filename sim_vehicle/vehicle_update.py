@@ -92,11 +92,6 @@ class VehicleUpdate:
         """Design the controller for ``controller_settings`` (cached on the model) and keep the step."""
         return cls(model, ControlLaw(model, controller_settings), float(physics_dt_s))
 
-    @property
-    def control_dt_s(self) -> float:
-        """Control period of the designed controller, s."""
-        return self.law.settings.control_dt_s
-
     def hover_state(self, pos_ned_m=(0.0, 0.0, 0.0), yaw_rad: float = 0.0) -> VehicleState:
         """Trimmed hover at rest, rotor inputs zero, controller taking over there."""
         x = dynamics.hover_state(self.model, pos_ned_m, yaw_rad)

@@ -47,7 +47,8 @@ log = logging.getLogger(__name__)
 #: The modes this vehicle flies, number -> mode object.
 MODES: dict[int, Mode] = {m.number: m for m in (ModeStabilize(), ModeAltHold(), ModeAuto(), ModeGuided(), ModeLoiter(),
                                                 ModeRTL(), ModeLand(), ModeBrake())}
-assert set(MODES) == set(MODE_NAMES)
+if set(MODES) != set(MODE_NAMES):
+    raise RuntimeError("every mode of MODE_NAMES needs its mode object")
 
 
 class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, NavigationMixin):
@@ -90,7 +91,6 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
     controller : ControlLaw
         The designed flight controller (``gains``, ``settings``).
     """
-
 
     def __init__(self, model: HeliModel, settings: VehicleSettings, home_lla: Sequence[float],
                  rng: np.random.Generator, origin_lla: Sequence[float] | None = None) -> None:

@@ -8,7 +8,8 @@ The package, one room per job:
   design (:func:`design_lqi`, python-control's ``dlqr`` with integral action);
 * :mod:`~sim_vehicle.control.law`: the per-tick law as a pure function of the controller state
   (:class:`ControlLaw`, :class:`ControllerState`); :mod:`~sim_vehicle.control.flight_controller`:
-  :class:`FlightController`, the law with its state;
+  :class:`FlightController`, the law with its state; :mod:`~sim_vehicle.control.outer_loop`: the
+  PID position loop, command limits and heading reference the law uses;
 * :mod:`~sim_vehicle.control.closed_loop` (with :mod:`~sim_vehicle.control.closed_loop_model`
   and :mod:`~sim_vehicle.control.modal`): :func:`simulate_closed_loop`, the fast prediction of
   how the loop tracks a trajectory, used by the companion's feasibility check.
@@ -21,7 +22,8 @@ about 1.6 s).
 
 from sim_vehicle.control.closed_loop import ClosedLoopResult, simulate_closed_loop
 from sim_vehicle.control.flight_controller import FlightController
-from sim_vehicle.control.law import ControlLaw, ControllerState, initial_controller_state, wrap_pi
+from sim_vehicle.control.law import ControlLaw, ControllerState, initial_controller_state
+from sim_vehicle.control.outer_loop import wrap_pi
 from sim_vehicle.control.lqi import (
     LqiGains, control_law_matrix, design_lqi, feedforward_map, model_14, tracked_output_matrix, zoh,
 )

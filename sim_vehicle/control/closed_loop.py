@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from sim_vehicle.control.closed_loop_model import N_S, N_W, S_E, S_X, ClosedLoopModel, build_closed_loop
-from sim_vehicle.control.law import wrap_pi
+from sim_vehicle.control.outer_loop import wrap_pi
 from sim_vehicle.control.modal import run_modal, run_recursion, tall_matmul
 from sim_vehicle.control.settings import N_LQI_STATES, ControlError, ControllerSettings
 from sim_vehicle.dynamics import IDX_PSI
