@@ -180,11 +180,11 @@ class Endpoint:
                 self.stats.packets_out += 1
             except OSError as exc:  # unreachable peer, full buffer: never stop flying
                 log.debug("%s to %s failed: %s", what, address, exc)
-        self._record(buf)
+        if self._tlog is not None:
+            self._record(buf)
 
     def _record(self, buf: bytes) -> None:
-        if self._tlog is not None:
-            self._tlog.write(buf)
+        self._tlog.write(buf)
 
     def statustext(self, severity: int, text: str) -> None:
         """STATUSTEXT to every link; longer texts in 50-character chunks with an id, as ArduPilot sends them."""
@@ -249,7 +249,8 @@ class Endpoint:
     def _accept(self, msg: Any, address: Address) -> None:
         self.stats.messages_in += 1
         self.peers[address] = self.wall_s()  # before dispatch: a reply broadcast (STATUSTEXT) reaches it too
-        self._record(bytes(msg.get_msgbuf()))
+        if self._tlog is not None:
+            self._record(bytes(msg.get_msgbuf()))
         try:
             self._deliver(msg, address)
             self.route(msg, address)
