@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.smoothing.bezier import elevate_lines
+from companion.smoothing.bezier_maths import elevate_lines
 
 from companion.errors import SmoothingError
 
@@ -74,18 +74,59 @@ def drop_straight_nodes(arr: np.ndarray, index: np.ndarray) -> np.ndarray:
 
     Two straight pieces meeting there would carry that (numerically tiny) tangent jump; one
     straight piece through them has none and stays within ``STRAIGHT_RAD`` times its length
-    of the node.
+    of the node. The heading change at a node is measured from the last node kept, so the
+    rule is sequential; it is evaluated for all nodes at once against their direct neighbours,
+    and the exact sequential rule (``_straight_at``) is applied only to nodes within a factor 2
+    of the threshold and to the nodes that follow a dropped one: the same nodes are kept as by
+    a node-by-node walk.
+
+    Parameters
+    ----------
+    arr : ndarray, shape (M, d)
+    index : ndarray of int, shape (M',)
+        Nodes of ``arr`` to consider, in order (no consecutive repeats).
+
+    Returns
+    -------
+    ndarray of int, shape (M'',)
+        The subset of ``index`` that is kept (first and last always).
     """
-    keep = list(index[:1])
-    for i, j in zip(index[1:-1], index[2:]):
-        a, b = arr[i] - arr[keep[-1]], arr[j] - arr[i]
-        cos = float(np.dot(a, b)) / (np.linalg.norm(a) * np.linalg.norm(b))
-        sin = float(np.linalg.norm(np.cross(a, b) if a.size == 3 else a[0] * b[1] - a[1] * b[0]))
-        sin /= np.linalg.norm(a) * np.linalg.norm(b)
-        if math.atan2(sin, cos) >= STRAIGHT_RAD:
-            keep.append(i)
-    keep.append(index[-1])
-    return np.asarray(keep)
+    if index.size < 3:
+        return index
+    seg = np.diff(arr[index], axis=0)
+    a, b = seg[:-1], seg[1:]
+    cos = np.einsum("ij,ij->i", a, b)
+    sin = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) if arr.shape[1] == 2 else _norm(np.cross(a, b))
+    check = np.nonzero(np.arctan2(sin, cos) < 2.0 * STRAIGHT_RAD)[0] + 1   # positions in index
+    if check.size == 0:
+        return index
+    kept = np.ones(index.size, dtype=bool)
+    todo = sorted(check.tolist())
+    anchor = 0
+    while todo:
+        pos = todo.pop(0)
+        if kept[pos - 1]:
+            anchor = pos - 1
+        if not _straight_at(arr, index[anchor], index[pos], index[pos + 1]):
+            continue
+        kept[pos] = False
+        if pos + 1 < index.size - 1 and (not todo or todo[0] != pos + 1):
+            todo.insert(0, pos + 1)
+    return index[kept]
+
+
+def _straight_at(arr: np.ndarray, prev: int, node: int, nxt: int) -> bool:
+    """Whether the heading change at ``node`` (from ``prev``, to ``nxt``) is below ``STRAIGHT_RAD``."""
+    a, b = arr[node] - arr[prev], arr[nxt] - arr[node]
+    cos = float(np.dot(a, b)) / (np.linalg.norm(a) * np.linalg.norm(b))
+    sin = float(np.linalg.norm(np.cross(a, b) if a.size == 3 else a[0] * b[1] - a[1] * b[0]))
+    sin /= np.linalg.norm(a) * np.linalg.norm(b)
+    return math.atan2(sin, cos) < STRAIGHT_RAD
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norm of the rows of ``v`` (K, d) -> (K,)."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,259 @@
+"""Arc-length addressing of a chain of Bezier pieces: the knot table and its inverse.
+
+Every piece's parameter range [0, 1] is cut into ``TABLE_INTERVALS`` equal intervals. For each
+interval the table holds its arc length (composite Gauss-Legendre quadrature of the speed
+|B'(u)|, ``GAUSS_ORDER`` nodes) and, at both ends, the exact derivatives du/ds = 1 / |B'| and
+d2u/ds2 = -(B' . B'') / |B'|^4. Within an interval u(s) is the quintic Hermite interpolant of
+these values, so a batch of K arc lengths is addressed by one ``searchsorted`` and one
+polynomial evaluation (``locate``); ``arc_length_at`` inverts it exactly.
+
+The table is built for all pieces at once: the Bernstein bases at the quadrature nodes and at
+the knots are constants of the degree, and each evaluation is one matrix product over all
+pieces and coordinates. The squared speed at the quadrature nodes comes from the Gram matrices
+of the hodograph control points, which keeps the temporaries small (arrays of a few hundred
+kilobytes cost fresh pages, and page faults, on every call).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from companion.smoothing.bezier_maths import GAUSS_ORDER, bernstein, gauss_legendre, norm_rows
+
+__all__ = ["TABLE_INTERVALS", "ArcLengthTable", "build_table", "locate", "arc_length_at"]
+
+TABLE_INTERVALS = 16
+
+
+@dataclass(frozen=True)
+class ArcLengthTable:
+    """Knot table of a chain of P pieces, G = ``TABLE_INTERVALS`` intervals per piece.
+
+    Attributes
+    ----------
+    piece_start_s : ndarray, shape (P+1,)
+        Arc length at the start of every piece, and the total length last (m).
+    s_lo, h : ndarray, shape (P G,)
+        Arc length at the start of every interval and its length (m).
+    piece : ndarray of int, shape (P G,)
+        Piece of every interval.
+    u_lo : ndarray, shape (P G,)
+        Piece parameter at the start of every interval.
+    m0, m1, c0, c1 : ndarray, shape (P G,)
+        Scaled end slopes and second derivatives of the Hermite interpolant of u(s).
+    knot_kappa_curved : ndarray, shape (P', G+1)
+        Curvature (1/m) at the knots of the P' curved pieces (degree >= 2).
+    """
+
+    piece_start_s: np.ndarray
+    s_lo: np.ndarray
+    h: np.ndarray
+    piece: np.ndarray
+    u_lo: np.ndarray
+    m0: np.ndarray
+    m1: np.ndarray
+    c0: np.ndarray
+    c1: np.ndarray
+    knot_kappa_curved: np.ndarray
+
+
+@lru_cache(maxsize=16)
+def _bases(degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bernstein bases of the hodographs of a degree-``degree`` curve (read-only constants).
+
+    Returns
+    -------
+    squared_at_nodes : ndarray, shape (G GAUSS_ORDER, degree^2)
+        Products B_i(u) B_j(u) of the first hodograph's basis at the quadrature nodes of every
+        interval, so that |B'(u)|^2 = sum_ij B_i B_j (h_i . h_j) is one matrix product with the
+        Gram matrices of the hodograph control points h_i.
+    first_at_knots : ndarray, shape (G+1, degree)
+    second_at_knots : ndarray, shape (G+1, degree-1)
+    """
+    g = TABLE_INTERVALS
+    knots = np.linspace(0.0, 1.0, g + 1)
+    x, _ = gauss_legendre(GAUSS_ORDER)
+    nodes = (knots[:-1, None] + (1.0 / g) * x[None, :]).ravel()
+    first = bernstein(degree - 1, nodes)
+    squared = (first[:, :, None] * first[:, None, :]).reshape(nodes.size, -1)
+    out = (squared, bernstein(degree - 1, knots), bernstein(degree - 2, knots))
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
+def _components(basis: np.ndarray, hod: np.ndarray) -> np.ndarray:
+    """Curves ``hod`` (P', n, d) at the parameters of ``basis`` (K, n), as (K, d, P'): one matrix
+    product, and every coordinate a contiguous (K, P') block."""
+    n_pieces, n, d = hod.shape
+    flat = np.ascontiguousarray(hod.transpose(1, 2, 0)).reshape(n, d * n_pieces)
+    return (basis @ flat).reshape(basis.shape[0], d, n_pieces)
+
+
+def _cross_norm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """|a x b| of (K, d, P') component arrays -> (K, P') (exact formulas for d = 2 and 3)."""
+    if a.shape[1] == 2:
+        return np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    if a.shape[1] != 3:
+        gram = (np.einsum("kdp,kdp->kp", a, a) * np.einsum("kdp,kdp->kp", b, b)
+                - np.einsum("kdp,kdp->kp", a, b) ** 2)
+        return np.sqrt(np.maximum(gram, 0.0))
+    x, y, z = a[:, 0], a[:, 1], a[:, 2]
+    u, v, w = b[:, 0], b[:, 1], b[:, 2]
+    cx = y * w - z * v
+    cy = z * u - x * w
+    cz = x * v - y * u
+    return np.sqrt(cx * cx + cy * cy + cz * cz)
+
+
+def _curved_knots(hod1: np.ndarray, hod2: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Interval lengths and knot values of P' curved pieces of one degree.
+
+    Returns
+    -------
+    seg_len : ndarray, shape (P', G)
+        Arc length of every interval (quadrature of the speed).
+    speed, u_ss, kappa : ndarray, shape (P', G+1)
+        |B'|, d2u/ds2 = -(B' . B'') / |B'|^4 and the curvature (1/m) at the knots.
+    """
+    g = TABLE_INTERVALS
+    _, w = gauss_legendre(GAUSS_ORDER)
+    squared_at_nodes, first_at_knots, second_at_knots = _bases(hod1.shape[1])
+    gram = np.einsum("pid,pjd->pij", hod1, hod1).reshape(hod1.shape[0], -1)        # (P', n^2)
+    speed_nodes = np.sqrt(np.maximum(squared_at_nodes @ gram.T, 0.0))              # (G Q, P')
+    seg_len = np.einsum("gqp,q->pg", speed_nodes.reshape(g, w.size, -1), w) / g
+    d1 = _components(first_at_knots, hod1)                                        # (G+1, d, P')
+    d2 = _components(second_at_knots, hod2)
+    speed = np.sqrt(np.einsum("kdp,kdp->kp", d1, d1))
+    safe = np.maximum(speed, 1e-300)
+    cubed = safe * safe * safe
+    u_ss = -np.einsum("kdp,kdp->kp", d1, d2) / (cubed * safe)
+    kappa = np.where(speed > 0.0, _cross_norm(d1, d2) / cubed, 0.0)
+    return seg_len, speed.T, u_ss.T, kappa.T
+
+
+def build_table(ctrl: np.ndarray, degrees: np.ndarray, hod1: np.ndarray, hod2: np.ndarray) -> ArcLengthTable:
+    """Build the arc-length table of a chain.
+
+    Parameters
+    ----------
+    ctrl : ndarray, shape (P, N+1, d)
+        Control points, every piece elevated to degree N.
+    degrees : ndarray of int, shape (P,)
+        True degree of every piece: 1 for a straight line (its speed is constant), else N.
+    hod1, hod2 : ndarray, shapes (P, N, d) and (P, N-1, d)
+        First and second hodographs (N >= 2 if any piece is curved).
+
+    Returns
+    -------
+    ArcLengthTable
+    """
+    n_pieces = ctrl.shape[0]
+    g = TABLE_INTERVALS
+    curved = degrees >= 2
+    line = ~curved
+    seg_len = np.empty((n_pieces, g))
+    speed_knots = np.empty((n_pieces, g + 1))
+    u_ss_knots = np.zeros((n_pieces, g + 1))
+    seg_len[line] = norm_rows(ctrl[line, -1] - ctrl[line, 0])[:, None] / g
+    speed_knots[line] = norm_rows(hod1[line, 0])[:, None]
+    if np.any(curved):
+        seg_len[curved], speed_knots[curved], u_ss_knots[curved], knot_kappa = _curved_knots(
+            hod1[curved], hod2[curved])
+    else:
+        knot_kappa = np.zeros((0, g + 1))
+    piece_start_s = np.zeros(n_pieces + 1)
+    np.cumsum(seg_len.sum(axis=1), out=piece_start_s[1:])
+    s_lo = np.empty((n_pieces, g))
+    s_lo[:, 0] = 0.0
+    np.cumsum(seg_len[:, :-1], axis=1, out=s_lo[:, 1:])
+    s_lo += piece_start_s[:-1, None]
+    u_s = g / np.maximum(speed_knots, 1e-9 * max(float(piece_start_s[-1]), 1.0))     # du/ds over h
+    gl = g * seg_len
+    hh = seg_len * gl
+    return ArcLengthTable(
+        piece_start_s=piece_start_s, s_lo=s_lo.ravel(), h=seg_len.ravel(),
+        piece=np.repeat(np.arange(n_pieces), g), u_lo=np.tile(np.arange(g) / g, n_pieces),
+        m0=(seg_len * u_s[:, :-1]).ravel(), m1=(seg_len * u_s[:, 1:]).ravel(),
+        c0=(hh * u_ss_knots[:, :-1]).ravel(), c1=(hh * u_ss_knots[:, 1:]).ravel(),
+        knot_kappa_curved=knot_kappa)
+
+
+def _hermite_quintic(x: np.ndarray, m0: np.ndarray, m1: np.ndarray, c0: np.ndarray,
+                     c1: np.ndarray) -> np.ndarray:
+    """Quintic Hermite on [0, 1] from 0 to 1 with end slopes m0, m1 and second derivatives c0, c1."""
+    x2 = x * x
+    x3 = x2 * x
+    x4 = x3 * x
+    x5 = x4 * x
+    return ((x - 6 * x3 + 8 * x4 - 3 * x5) * m0
+            + (0.5 * x2 - 1.5 * x3 + 1.5 * x4 - 0.5 * x5) * c0
+            + (0.5 * x3 - x4 + 0.5 * x5) * c1
+            + (-4 * x3 + 7 * x4 - 3 * x5) * m1
+            + (10 * x3 - 15 * x4 + 6 * x5))
+
+
+def _hermite_quintic_dx(x: np.ndarray, m0: np.ndarray, m1: np.ndarray, c0: np.ndarray,
+                        c1: np.ndarray) -> np.ndarray:
+    """Derivative with respect to x of ``_hermite_quintic``."""
+    x2 = x * x
+    x3 = x2 * x
+    x4 = x3 * x
+    return ((1 - 18 * x2 + 32 * x3 - 15 * x4) * m0
+            + (x - 4.5 * x2 + 6 * x3 - 2.5 * x4) * c0
+            + (1.5 * x2 - 4 * x3 + 2.5 * x4) * c1
+            + (-12 * x2 + 28 * x3 - 15 * x4) * m1
+            + (30 * x2 - 60 * x3 + 30 * x4))
+
+
+def locate(table: ArcLengthTable, s_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Map arc lengths to (piece index, piece parameter).
+
+    Parameters
+    ----------
+    table : ArcLengthTable
+    s_m : ndarray, shape (K,)
+        Arc lengths (m); clipped to [0, total length].
+
+    Returns
+    -------
+    piece : ndarray of int, shape (K,)
+    u : ndarray, shape (K,)
+    """
+    s = np.clip(s_m, 0.0, table.piece_start_s[-1])
+    j = np.clip(np.searchsorted(table.s_lo, s, side="right") - 1, 0, table.s_lo.size - 1)
+    x = np.clip((s - table.s_lo[j]) / np.maximum(table.h[j], 1e-300), 0.0, 1.0)
+    frac = _hermite_quintic(x, table.m0[j], table.m1[j], table.c0[j], table.c1[j])
+    return table.piece[j], table.u_lo[j] + np.clip(frac, 0.0, 1.0) / TABLE_INTERVALS
+
+
+def arc_length_at(table: ArcLengthTable, piece: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Arc length (m) that ``locate`` maps to (piece (K,), u (K,)): its exact inverse.
+
+    Found by Newton's method within the table interval (bisection where it does not
+    converge), so ``locate(arc_length_at(p, u))`` returns (p, u) to about 1e-12.
+    """
+    g = TABLE_INTERVALS
+    u = np.asarray(u, dtype=float)
+    j = np.asarray(piece) * g + np.clip((u * g).astype(int), 0, g - 1)
+    target = (u - table.u_lo[j]) * g
+    args = (table.m0[j], table.m1[j], table.c0[j], table.c1[j])
+    x = target.copy()
+    for _ in range(8):                                   # Newton, then bisection where needed
+        step = (_hermite_quintic(x, *args) - target) / np.maximum(_hermite_quintic_dx(x, *args), 1e-12)
+        x = np.clip(x - step, 0.0, 1.0)
+    bad = np.abs(_hermite_quintic(x, *args) - target) > 1e-12
+    if np.any(bad):
+        lo = np.zeros(int(bad.sum()))
+        hi = np.ones_like(lo)
+        sub = tuple(a[bad] for a in args)
+        for _ in range(48):
+            mid = 0.5 * (lo + hi)
+            below = np.clip(_hermite_quintic(mid, *sub), 0.0, 1.0) < target[bad]
+            lo = np.where(below, mid, lo)
+            hi = np.where(below, hi, mid)
+        x[bad] = 0.5 * (lo + hi)
+    return table.s_lo[j] + table.h[j] * x
