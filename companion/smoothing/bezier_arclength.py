@@ -38,10 +38,7 @@ class ArcLengthTable:
         Arc length at the start of every piece, and the total length last (m).
     s_lo, h : ndarray, shape (P G,)
         Arc length at the start of every interval and its length (m).
-    piece : ndarray of int, shape (P G,)
-        Piece of every interval.
-    u_lo : ndarray, shape (P G,)
-        Piece parameter at the start of every interval.
+    (Interval j belongs to piece j // G and starts at parameter (j % G) / G.)
     m0, m1, c0, c1 : ndarray, shape (P G,)
         Scaled end slopes and second derivatives of the Hermite interpolant of u(s).
     knot_kappa_curved : ndarray, shape (P', G+1)
@@ -51,8 +48,6 @@ class ArcLengthTable:
     piece_start_s: np.ndarray
     s_lo: np.ndarray
     h: np.ndarray
-    piece: np.ndarray
-    u_lo: np.ndarray
     m0: np.ndarray
     m1: np.ndarray
     c0: np.ndarray
@@ -123,7 +118,8 @@ def _curved_knots(hod1: np.ndarray, hod2: np.ndarray) -> tuple[np.ndarray, ...]:
     _, w = gauss_legendre(GAUSS_ORDER)
     squared_at_nodes, first_at_knots, second_at_knots = _bases(hod1.shape[1])
     gram = np.einsum("pid,pjd->pij", hod1, hod1).reshape(hod1.shape[0], -1)        # (P', n^2)
-    speed_nodes = np.sqrt(np.maximum(squared_at_nodes @ gram.T, 0.0))              # (G Q, P')
+    speed_nodes = squared_at_nodes @ gram.T                                        # (G Q, P')
+    np.sqrt(np.maximum(speed_nodes, 0.0, out=speed_nodes), out=speed_nodes)
     seg_len = np.einsum("gqp,q->pg", speed_nodes.reshape(g, w.size, -1), w) / g
     d1 = _components(first_at_knots, hod1)                                        # (G+1, d, P')
     d2 = _components(second_at_knots, hod2)
@@ -176,7 +172,6 @@ def build_table(ctrl: np.ndarray, degrees: np.ndarray, hod1: np.ndarray, hod2: n
     hh = seg_len * gl
     return ArcLengthTable(
         piece_start_s=piece_start_s, s_lo=s_lo.ravel(), h=seg_len.ravel(),
-        piece=np.repeat(np.arange(n_pieces), g), u_lo=np.tile(np.arange(g) / g, n_pieces),
         m0=(seg_len * u_s[:, :-1]).ravel(), m1=(seg_len * u_s[:, 1:]).ravel(),
         c0=(hh * u_ss_knots[:, :-1]).ravel(), c1=(hh * u_ss_knots[:, 1:]).ravel(),
         knot_kappa_curved=knot_kappa)
@@ -227,7 +222,8 @@ def locate(table: ArcLengthTable, s_m: np.ndarray) -> tuple[np.ndarray, np.ndarr
     j = np.clip(np.searchsorted(table.s_lo, s, side="right") - 1, 0, table.s_lo.size - 1)
     x = np.clip((s - table.s_lo[j]) / np.maximum(table.h[j], 1e-300), 0.0, 1.0)
     frac = _hermite_quintic(x, table.m0[j], table.m1[j], table.c0[j], table.c1[j])
-    return table.piece[j], table.u_lo[j] + np.clip(frac, 0.0, 1.0) / TABLE_INTERVALS
+    piece, k = np.divmod(j, TABLE_INTERVALS)
+    return piece, (k + np.clip(frac, 0.0, 1.0)) / TABLE_INTERVALS
 
 
 def arc_length_at(table: ArcLengthTable, piece: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -239,7 +235,7 @@ def arc_length_at(table: ArcLengthTable, piece: np.ndarray, u: np.ndarray) -> np
     g = TABLE_INTERVALS
     u = np.asarray(u, dtype=float)
     j = np.asarray(piece) * g + np.clip((u * g).astype(int), 0, g - 1)
-    target = (u - table.u_lo[j]) * g
+    target = (u - (j % g) / g) * g
     args = (table.m0[j], table.m1[j], table.c0[j], table.c1[j])
     x = target.copy()
     for _ in range(8):                                   # Newton, then bisection where needed

@@ -18,21 +18,37 @@ __all__ = ["TANGENT_JUMP_RAD", "tangent_jumps"]
 TANGENT_JUMP_RAD = 1e-6
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    """Rows of ``v`` (K, d) scaled to unit length."""
-    n = np.linalg.norm(v, axis=1, keepdims=True)
-    return v / np.maximum(n, 1e-300)
+def _first_distinct(ctrl: np.ndarray, tol: np.ndarray) -> np.ndarray:
+    """Index of the first control point of each piece (P', N+1, d) farther than ``tol`` (P',) from
+    its first point (0 if none is)."""
+    differs = norm_rows(ctrl - ctrl[:, :1]) > tol[:, None]
+    differs[:, 0] = False
+    return np.argmax(differs, axis=1)
 
 
-def tangent_jumps(ctrl: np.ndarray, dist_from_start: np.ndarray | None = None) -> np.ndarray:
+def _tangents(ctrl: np.ndarray, tol: np.ndarray) -> np.ndarray:
+    """Unit tangent at the start of each piece (P', N+1, d), from its first distinct control point.
+
+    The neighbouring control point is taken where it is farther than the largest tolerance;
+    only the other pieces are searched.
+    """
+    step = ctrl[:, 1] - ctrl[:, 0]
+    length = norm_rows(step)
+    near = np.nonzero(length <= tol.max())[0]
+    if near.size:
+        first = _first_distinct(ctrl[near], tol[near])
+        step[near] = ctrl[near, first] - ctrl[near, 0]
+        length[near] = norm_rows(step[near])
+    return step / np.maximum(length, 1e-300)[:, None]
+
+
+def tangent_jumps(ctrl: np.ndarray) -> np.ndarray:
     """Which joints of a chain have a discontinuous tangent.
 
     Parameters
     ----------
     ctrl : ndarray, shape (P, N+1, d)
         Control points of the chain's pieces, in order.
-    dist_from_start : ndarray, shape (P, N+1), optional
-        ``|ctrl[:, i] - ctrl[:, 0]|`` if already known.
 
     Returns
     -------
@@ -40,20 +56,10 @@ def tangent_jumps(ctrl: np.ndarray, dist_from_start: np.ndarray | None = None) -
         True at joint i (between pieces i and i+1) when the tangent turns by more than
         ``TANGENT_JUMP_RAD`` there.
     """
-    n_pieces, n1 = ctrl.shape[:2]
-    if n_pieces < 2:
+    if ctrl.shape[0] < 2:
         return np.zeros(0, dtype=bool)
-    if dist_from_start is None:
-        dist_from_start = norm_rows(ctrl - ctrl[:, :1])
-    tol = 1e-12 * np.maximum(1.0, np.abs(ctrl).max(axis=(1, 2)))[:, None]
-    differs_start = dist_from_start[1:] > tol[1:]
-    differs_start[:, 0] = False
-    differs_end = norm_rows(ctrl[:-1, ::-1] - ctrl[:-1, -1:]) > tol[:-1]
-    differs_end[:, 0] = False
-    first = np.argmax(differs_start, axis=1)
-    last = n1 - 1 - np.argmax(differs_end, axis=1)
-    rows = np.arange(n_pieces - 1)
-    t_out = _unit(ctrl[:-1, -1] - ctrl[rows, last])
-    t_in = _unit(ctrl[rows + 1, first] - ctrl[1:, 0])
-    angle = np.arccos(np.clip(np.sum(t_out * t_in, axis=1), -1.0, 1.0))
-    return angle > TANGENT_JUMP_RAD
+    tol = 1e-12 * np.maximum(1.0, np.abs(ctrl).max(axis=(1, 2)))                    # (P,)
+    t_out = -_tangents(ctrl[:-1, ::-1], tol[:-1])
+    t_in = _tangents(ctrl[1:], tol[1:])
+    cosang = np.clip(np.einsum("ij,ij->i", t_out, t_in), -1.0, 1.0)
+    return np.arccos(cosang) > TANGENT_JUMP_RAD

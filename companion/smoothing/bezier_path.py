@@ -97,12 +97,11 @@ class BezierPath:
     def _init_arrays(self, ctrl, degrees, kappa_ok, notes, tight_corners, kappa_max_1_m,
                      peaks_at_joints) -> None:
         scale = max(1.0, float(np.max(np.abs(ctrl))))
-        dist_from_start = norm_rows(ctrl - ctrl[:, :1])                        # (P, N+1)
-        keep = np.max(dist_from_start, axis=1) > 1e-10 * scale
+        keep = np.max(norm_rows(ctrl - ctrl[:, :1]), axis=1) > 1e-10 * scale
         if not np.any(keep):
             raise SmoothingError("pieces: every piece has zero length")
         if not np.all(keep):
-            ctrl, degrees, dist_from_start = ctrl[keep], degrees[keep], dist_from_start[keep]
+            ctrl, degrees = ctrl[keep], degrees[keep]
         self._ctrl = ctrl                                                    # (P, N+1, d)
         self._degrees = degrees
         self.degree: int = ctrl.shape[1] - 1
@@ -119,7 +118,7 @@ class BezierPath:
         self._table = build_table(ctrl, degrees, self._hodograph(1), self._hodograph(2))
         self.piece_start_s: np.ndarray = self._table.piece_start_s
         self.length_m: float = float(self.piece_start_s[-1])
-        self.stop_s: np.ndarray = self.piece_start_s[1:-1][tangent_jumps(ctrl, dist_from_start)]
+        self.stop_s: np.ndarray = self.piece_start_s[1:-1][tangent_jumps(ctrl)]
 
     @cached_property
     def notes(self) -> list[str]:
