@@ -23,7 +23,8 @@ import numpy as np
 
 from companion.smoothing.bezier_maths import GAUSS_ORDER, bernstein, gauss_legendre, norm_rows
 
-__all__ = ["TABLE_INTERVALS", "ArcLengthTable", "build_table", "locate", "arc_length_at"]
+__all__ = ["TABLE_INTERVALS", "ArcLengthTable", "build_table", "knot_curvature", "locate", "arc_length_at",
+           "arc_derivatives"]
 
 TABLE_INTERVALS = 16
 
@@ -41,8 +42,6 @@ class ArcLengthTable:
     (Interval j belongs to piece j // G and starts at parameter (j % G) / G.)
     m0, m1, c0, c1 : ndarray, shape (P G,)
         Scaled end slopes and second derivatives of the Hermite interpolant of u(s).
-    knot_kappa_curved : ndarray, shape (P', G+1)
-        Curvature (1/m) at the knots of the P' curved pieces (degree >= 2).
     """
 
     piece_start_s: np.ndarray
@@ -52,7 +51,6 @@ class ArcLengthTable:
     m1: np.ndarray
     c0: np.ndarray
     c1: np.ndarray
-    knot_kappa_curved: np.ndarray
 
 
 @lru_cache(maxsize=16)
@@ -111,8 +109,8 @@ def _curved_knots(hod1: np.ndarray, hod2: np.ndarray) -> tuple[np.ndarray, ...]:
     -------
     seg_len : ndarray, shape (P', G)
         Arc length of every interval (quadrature of the speed).
-    speed, u_ss, kappa : ndarray, shape (P', G+1)
-        |B'|, d2u/ds2 = -(B' . B'') / |B'|^4 and the curvature (1/m) at the knots.
+    speed, u_ss : ndarray, shape (P', G+1)
+        |B'| and d2u/ds2 = -(B' . B'') / |B'|^4 at the knots.
     """
     g = TABLE_INTERVALS
     _, w = gauss_legendre(GAUSS_ORDER)
@@ -127,8 +125,23 @@ def _curved_knots(hod1: np.ndarray, hod2: np.ndarray) -> tuple[np.ndarray, ...]:
     safe = np.maximum(speed, 1e-300)
     cubed = safe * safe * safe
     u_ss = -np.einsum("kdp,kdp->kp", d1, d2) / (cubed * safe)
-    kappa = np.where(speed > 0.0, _cross_norm(d1, d2) / cubed, 0.0)
-    return seg_len, speed.T, u_ss.T, kappa.T
+    return seg_len, speed.T, u_ss.T
+
+
+def knot_curvature(hod1: np.ndarray, hod2: np.ndarray) -> np.ndarray:
+    """Curvature (1/m) at the table knots of P' curved pieces of one degree, shape (P', G+1).
+
+    Parameters
+    ----------
+    hod1, hod2 : ndarray, shapes (P', N, d) and (P', N-1, d)
+        First and second hodographs.
+    """
+    _, first_at_knots, second_at_knots = _bases(hod1.shape[1])
+    d1 = _components(first_at_knots, hod1)
+    d2 = _components(second_at_knots, hod2)
+    speed = np.sqrt(np.einsum("kdp,kdp->kp", d1, d1))
+    safe = np.maximum(speed, 1e-300)
+    return np.where(speed > 0.0, _cross_norm(d1, d2) / (safe * safe * safe), 0.0).T
 
 
 def build_table(ctrl: np.ndarray, degrees: np.ndarray, hod1: np.ndarray, hod2: np.ndarray) -> ArcLengthTable:
@@ -157,10 +170,7 @@ def build_table(ctrl: np.ndarray, degrees: np.ndarray, hod1: np.ndarray, hod2: n
     seg_len[line] = norm_rows(ctrl[line, -1] - ctrl[line, 0])[:, None] / g
     speed_knots[line] = norm_rows(hod1[line, 0])[:, None]
     if np.any(curved):
-        seg_len[curved], speed_knots[curved], u_ss_knots[curved], knot_kappa = _curved_knots(
-            hod1[curved], hod2[curved])
-    else:
-        knot_kappa = np.zeros((0, g + 1))
+        seg_len[curved], speed_knots[curved], u_ss_knots[curved] = _curved_knots(hod1[curved], hod2[curved])
     piece_start_s = np.zeros(n_pieces + 1)
     np.cumsum(seg_len.sum(axis=1), out=piece_start_s[1:])
     s_lo = np.empty((n_pieces, g))
@@ -173,8 +183,7 @@ def build_table(ctrl: np.ndarray, degrees: np.ndarray, hod1: np.ndarray, hod2: n
     return ArcLengthTable(
         piece_start_s=piece_start_s, s_lo=s_lo.ravel(), h=seg_len.ravel(),
         m0=(seg_len * u_s[:, :-1]).ravel(), m1=(seg_len * u_s[:, 1:]).ravel(),
-        c0=(hh * u_ss_knots[:, :-1]).ravel(), c1=(hh * u_ss_knots[:, 1:]).ravel(),
-        knot_kappa_curved=knot_kappa)
+        c0=(hh * u_ss_knots[:, :-1]).ravel(), c1=(hh * u_ss_knots[:, 1:]).ravel())
 
 
 def _hermite_quintic(x: np.ndarray, m0: np.ndarray, m1: np.ndarray, c0: np.ndarray,
@@ -253,3 +262,38 @@ def arc_length_at(table: ArcLengthTable, piece: np.ndarray, u: np.ndarray) -> np
             hi = np.where(below, hi, mid)
         x[bad] = 0.5 * (lo + hi)
     return table.s_lo[j] + table.h[j] * x
+
+
+def arc_derivatives(du: list[np.ndarray]) -> list[np.ndarray]:
+    """Derivatives with respect to arc length from those with respect to the parameter.
+
+    Parameters
+    ----------
+    du : list of ndarray, shape (K, d)
+        [r, r_u, r_uu, r_uuu], the first 1 to 4 of them.
+
+    Returns
+    -------
+    list of ndarray, shape (K, d)
+        [r, r_s, r_ss, r_sss], as many: the unit tangent, the curvature vector kappa n and its
+        arc-length derivative (chain rule with sigma = |r_u|).
+    """
+    out = [du[0]]
+    if len(du) == 1:
+        return out
+    a = du[1]
+    sig2 = np.maximum(np.sum(a * a, axis=1, keepdims=True), 1e-300)
+    sig = np.sqrt(sig2)
+    out.append(a / sig)
+    if len(du) == 2:
+        return out
+    b = du[2]
+    g = np.sum(a * b, axis=1, keepdims=True)
+    out.append(b / sig2 - g * a / sig2**2)
+    if len(du) == 3:
+        return out
+    c = du[3]
+    gp = np.sum(b * b, axis=1, keepdims=True) + np.sum(a * c, axis=1, keepdims=True)
+    dk_du = c / sig2 - 3.0 * g * b / sig2**2 - gp * a / sig2**2 + 4.0 * g**2 * a / sig2**3
+    out.append(dk_du / sig)
+    return out

@@ -21,7 +21,7 @@ from companion.errors import SmoothingError
 
 __all__ = ["bernstein", "evaluate", "derivative_control_points", "derivative",
            "norm_rows", "curvature_from_derivatives", "curvature", "gauss_legendre", "arc_length", "split",
-           "elevate", "lower_degree", "evaluate_many", "elevate_lines", "power_basis_matrix", "horner_grid",
+           "elevate", "lower_degree", "evaluate_many", "elevate_lines",
            "as_control_points", "GAUSS_ORDER"]
 
 GAUSS_ORDER = 4
@@ -283,22 +283,3 @@ def evaluate_many(basis: np.ndarray, hod: np.ndarray) -> np.ndarray:
     n_pieces, n1, d = hod.shape
     flat = np.ascontiguousarray(hod.transpose(1, 0, 2)).reshape(n1, n_pieces * d)
     return (basis @ flat).reshape(basis.shape[0], n_pieces, d)
-
-
-def power_basis_matrix(n: int) -> np.ndarray:
-    """M (n+1, n+1) with power coefficients a = M b of a degree-n Bernstein polynomial b."""
-    m = np.zeros((n + 1, n + 1))
-    for j in range(n + 1):
-        for i in range(j + 1):
-            m[j, i] = math.comb(n, j) * math.comb(j, i) * (-1) ** (j - i)
-    return m
-
-
-def horner_grid(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Evaluate power-basis polynomials ``coeffs`` (K, n+1, d) at ``x`` (K, S) -> (K, S, d)."""
-    xx = x[:, :, None]
-    out = np.broadcast_to(coeffs[:, None, -1], xx.shape[:2] + coeffs.shape[2:]).copy()
-    for j in range(coeffs.shape[1] - 2, -1, -1):
-        out *= xx
-        out += coeffs[:, None, j]
-    return out

@@ -1,11 +1,10 @@
 """A chain of Bezier pieces addressed by arc length (paper section 3.2).
 
-``BezierPath`` holds the pieces of a smoothed path (straight lines and G1 quartics or G2
-cubic spirals), stacked at one common degree, and is addressed by **arc length in metres**:
-``evaluate(s)``, ``derivative(s, order)`` (derivatives with respect to arc length) and
-``curvature(s)``. The steps are in their own modules: the single-curve maths in
-``bezier_maths``, the arc-length table and its inverse in ``bezier_arclength``, the curvature
-peak search in ``bezier_peaks`` and the tangent jumps at joints in ``bezier_joints``.
+``BezierPath`` holds a smoothed path's pieces (lines, G1 quartics or G2 cubic spirals) at one
+common degree, addressed by **arc length in metres**: ``evaluate(s)``, ``derivative(s, order)``
+(with respect to arc length) and ``curvature(s)``. Its steps have their own modules: one
+curve's maths (``bezier_maths``), the arc-length table and its inverse (``bezier_arclength``),
+the curvature peak search (``bezier_peaks``), the tangent jumps at joints (``bezier_joints``).
 """
 
 from __future__ import annotations
@@ -16,7 +15,8 @@ from functools import cached_property
 import numpy as np
 
 from companion.errors import SmoothingError
-from companion.smoothing.bezier_arclength import TABLE_INTERVALS, arc_length_at, build_table, locate
+from companion.smoothing.bezier_arclength import TABLE_INTERVALS, arc_derivatives, arc_length_at, build_table, \
+    knot_curvature, locate
 from companion.smoothing.bezier_joints import tangent_jumps
 from companion.smoothing.bezier_maths import as_control_points, bernstein, curvature_from_derivatives, elevate, \
     lower_degree, norm_rows
@@ -36,9 +36,8 @@ class BezierPath:
     kappa_ok : bool
         Whether the curvature bound that was asked for (if any) holds everywhere.
     notes : sequence of str, or callable returning a list of str
-        Human-readable record of what the smoother changed or could not honour. A callable is
-        called on the first read of ``notes`` (a smoother's per-corner notes cost more to format
-        than the curve costs to build, and most candidate curves are never reported).
+        Human-readable record of what the smoother changed or could not honour; a callable is
+        called on the first read of ``notes`` (most candidate curves are never reported).
     tight_corners : sequence of int
         Indices (in the input polyline) of corners whose curvature exceeds K_max or which were
         kept sharp; the planner can be asked for a gentler corner there.
@@ -93,7 +92,6 @@ class BezierPath:
                          kappa_max_1_m, peaks_at_joints)
         return obj
 
-
     def _init_arrays(self, ctrl, degrees, kappa_ok, notes, tight_corners, kappa_max_1_m,
                      peaks_at_joints) -> None:
         scale = max(1.0, float(np.max(np.abs(ctrl))))
@@ -136,20 +134,16 @@ class BezierPath:
     @cached_property
     def pieces(self) -> list[np.ndarray]:
         """Control points of every piece in its own degree, list of (n_i+1, d) arrays."""
-        out = []
-        for c, n in zip(self._ctrl, self._degrees):
-            out.append(c[[0, -1]].copy() if n == 1 else c.copy() if n == self.degree else lower_degree(c, int(n)))
-        return out
+        return [c[[0, -1]].copy() if n == 1 else c.copy() if n == self.degree else lower_degree(c, int(n))
+                for c, n in zip(self._ctrl, self._degrees)]
 
     def _hodograph(self, order: int) -> np.ndarray:
         """Derivative control points of every piece, shape (P, N+1-order, d) (computed once)."""
         hods = self._hodographs
         while len(hods) <= order:
-            k = len(hods) - 1
-            if k >= self.degree:
-                hods.append(np.zeros((self._ctrl.shape[0], 1, self.d)))
-            else:
-                hods.append((self.degree - k) * np.diff(hods[-1], axis=1))
+            k = len(hods) - 1                                 # order of the last one computed
+            hods.append((self.degree - k) * np.diff(hods[-1], axis=1) if k < self.degree
+                        else np.zeros((self._ctrl.shape[0], 1, self.d)))
         return hods[order]
 
     def _piece_derivative(self, piece: np.ndarray, u: np.ndarray, order: int) -> np.ndarray:
@@ -179,8 +173,6 @@ class BezierPath:
         if curved.size == 0 or self._peaks_at_joints:
             return np.zeros(0)
         index, u = interior_peaks(self._hodograph(1)[curved], self._hodograph(2)[curved])
-        if index.size == 0:
-            return np.zeros(0)
         return self.arc_length_at(curved[index], u)
 
     def knots_with_curvature(self) -> tuple[np.ndarray, np.ndarray]:
@@ -191,13 +183,11 @@ class BezierPath:
         s_m : ndarray, shape (17 P',)
         kappa_1_m : ndarray, shape (17 P',)
         """
-        g = TABLE_INTERVALS
         curved = np.nonzero(self._degrees >= 2)[0]
         if curved.size == 0:
             return np.zeros(0), np.zeros(0)
-        s_lo = self._table.s_lo.reshape(-1, g)[curved]
-        s_all = np.hstack([s_lo, self.piece_start_s[curved + 1][:, None]])
-        return s_all.ravel(), self._table.knot_kappa_curved.ravel()
+        s_all = np.hstack([self._table.s_lo.reshape(-1, TABLE_INTERVALS)[curved], self.piece_start_s[curved + 1, None]])
+        return s_all.ravel(), knot_curvature(self._hodograph(1)[curved], self._hodograph(2)[curved]).ravel()
 
     @property
     def curved_piece(self) -> np.ndarray:
@@ -257,26 +247,7 @@ class BezierPath:
 
     def _arc_derivatives(self, piece: np.ndarray, u: np.ndarray, order: int) -> list[np.ndarray]:
         """[r, r_s, r_ss, r_sss] up to ``order`` at (piece, u) by the chain rule."""
-        out = [self._piece_derivative(piece, u, 0)]
-        if order == 0:
-            return out
-        a = self._piece_derivative(piece, u, 1)
-        sig2 = np.maximum(np.sum(a * a, axis=1, keepdims=True), 1e-300)
-        sig = np.sqrt(sig2)
-        out.append(a / sig)
-        if order == 1:
-            return out
-        b = self._piece_derivative(piece, u, 2)
-        g = np.sum(a * b, axis=1, keepdims=True)
-        k_vec = b / sig2 - g * a / sig2**2
-        out.append(k_vec)
-        if order == 2:
-            return out
-        c = self._piece_derivative(piece, u, 3)
-        gp = np.sum(b * b, axis=1, keepdims=True) + np.sum(a * c, axis=1, keepdims=True)
-        dk_du = c / sig2 - 3.0 * g * b / sig2**2 - gp * a / sig2**2 + 4.0 * g**2 * a / sig2**3
-        out.append(dk_du / sig)
-        return out
+        return arc_derivatives([self._piece_derivative(piece, u, k) for k in range(order + 1)])
 
     def curvature(self, s_m, *, signed: bool = False) -> np.ndarray:
         """Curvature (1/m) at arc lengths ``s_m`` (K,) -> (K,).

@@ -11,18 +11,37 @@ refinement evaluates the hodographs in the power basis by Horner's rule.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
 
-from companion.smoothing.bezier_maths import bernstein, curvature_from_derivatives, evaluate_many, horner_grid, \
-    power_basis_matrix
+from companion.smoothing.bezier_maths import bernstein, curvature_from_derivatives, evaluate_many
 
-__all__ = ["SAMPLES", "sampled_curvature", "interior_peaks"]
+__all__ = ["SAMPLES", "sampled_curvature", "interior_peaks", "power_basis_matrix", "horner_grid"]
 
 SAMPLES = 65
 REFINE_SAMPLES = 17
 REFINE_ROUNDS = 4
+
+
+def power_basis_matrix(n: int) -> np.ndarray:
+    """M (n+1, n+1) with power coefficients a = M b of a degree-n Bernstein polynomial b."""
+    m = np.zeros((n + 1, n + 1))
+    for j in range(n + 1):
+        for i in range(j + 1):
+            m[j, i] = math.comb(n, j) * math.comb(j, i) * (-1) ** (j - i)
+    return m
+
+
+def horner_grid(coeffs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Evaluate power-basis polynomials ``coeffs`` (K, n+1, d) at ``x`` (K, S) -> (K, S, d)."""
+    xx = x[:, :, None]
+    out = np.broadcast_to(coeffs[:, None, -1], xx.shape[:2] + coeffs.shape[2:]).copy()
+    for j in range(coeffs.shape[1] - 2, -1, -1):
+        out *= xx
+        out += coeffs[:, None, j]
+    return out
 
 
 @lru_cache(maxsize=16)
