@@ -42,13 +42,15 @@ def _tangents(ctrl: np.ndarray, tol: np.ndarray) -> np.ndarray:
     return step / np.maximum(length, 1e-300)[:, None]
 
 
-def tangent_jumps(ctrl: np.ndarray) -> np.ndarray:
+def tangent_jumps(ctrl: np.ndarray, abs_max: np.ndarray | None = None) -> np.ndarray:
     """Which joints of a chain have a discontinuous tangent.
 
     Parameters
     ----------
     ctrl : ndarray, shape (P, N+1, d)
         Control points of the chain's pieces, in order.
+    abs_max : ndarray, shape (P,), optional
+        Largest absolute coordinate of every piece, if already known.
 
     Returns
     -------
@@ -58,7 +60,9 @@ def tangent_jumps(ctrl: np.ndarray) -> np.ndarray:
     """
     if ctrl.shape[0] < 2:
         return np.zeros(0, dtype=bool)
-    tol = 1e-12 * np.maximum(1.0, np.abs(ctrl).max(axis=(1, 2)))                    # (P,)
+    if abs_max is None:
+        abs_max = np.abs(ctrl).max(axis=(1, 2))
+    tol = 1e-12 * np.maximum(1.0, abs_max)                                             # (P,)
     t_out = -_tangents(ctrl[:-1, ::-1], tol[:-1])
     t_in = _tangents(ctrl[1:], tol[1:])
     cosang = np.clip(np.einsum("ij,ij->i", t_out, t_in), -1.0, 1.0)

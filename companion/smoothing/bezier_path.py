@@ -94,12 +94,12 @@ class BezierPath:
 
     def _init_arrays(self, ctrl, degrees, kappa_ok, notes, tight_corners, kappa_max_1_m,
                      peaks_at_joints) -> None:
-        scale = max(1.0, float(np.max(np.abs(ctrl))))
-        keep = np.max(norm_rows(ctrl - ctrl[:, :1]), axis=1) > 1e-10 * scale
+        abs_max = np.abs(ctrl).max(axis=(1, 2))                              # (P,)
+        keep = np.max(norm_rows(ctrl - ctrl[:, :1]), axis=1) > 1e-10 * max(1.0, float(abs_max.max()))
         if not np.any(keep):
             raise SmoothingError("pieces: every piece has zero length")
         if not np.all(keep):
-            ctrl, degrees = ctrl[keep], degrees[keep]
+            ctrl, degrees, abs_max = ctrl[keep], degrees[keep], abs_max[keep]
         self._ctrl = ctrl                                                    # (P, N+1, d)
         self._degrees = degrees
         self.degree: int = ctrl.shape[1] - 1
@@ -116,7 +116,7 @@ class BezierPath:
         self._table = build_table(ctrl, degrees, self._hodograph(1), self._hodograph(2))
         self.piece_start_s: np.ndarray = self._table.piece_start_s
         self.length_m: float = float(self.piece_start_s[-1])
-        self.stop_s: np.ndarray = self.piece_start_s[1:-1][tangent_jumps(ctrl)]
+        self.stop_s: np.ndarray = self.piece_start_s[1:-1][tangent_jumps(ctrl, abs_max)]
 
     @cached_property
     def notes(self) -> list[str]:
