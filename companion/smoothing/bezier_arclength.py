@@ -115,7 +115,7 @@ def _curved_knots(hod1: np.ndarray, hod2: np.ndarray) -> tuple[np.ndarray, ...]:
     g = TABLE_INTERVALS
     _, w = gauss_legendre(GAUSS_ORDER)
     squared_at_nodes, first_at_knots, second_at_knots = _bases(hod1.shape[1])
-    gram = np.einsum("pid,pjd->pij", hod1, hod1).reshape(hod1.shape[0], -1)        # (P', n^2)
+    gram = (hod1 @ hod1.transpose(0, 2, 1)).reshape(hod1.shape[0], -1)              # (P', n^2)
     speed_nodes = squared_at_nodes @ gram.T                                        # (G Q, P')
     np.sqrt(np.maximum(speed_nodes, 0.0, out=speed_nodes), out=speed_nodes)
     seg_len = np.einsum("gqp,q->pg", speed_nodes.reshape(g, w.size, -1), w) / g

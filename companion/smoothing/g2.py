@@ -118,10 +118,12 @@ def spiral_pairs(corner: np.ndarray, u_in: np.ndarray, u_out: np.ndarray, d_m: n
     e0 = corner + d * u_out
     e1 = e0 - C2 * C3 * d * u_out
     e2 = e1 - C3 * d * u_out
-    joint = 0.5 * (b2 + e2)
-    first = np.stack([b0, b1, b2, joint], axis=1)
-    second = np.stack([joint, e2, e1, e0], axis=1)
-    return np.stack([first, second], axis=1)
+    out = np.empty((corner.shape[0], 2, 4, corner.shape[1]))
+    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = b0, b1, b2
+    out[:, 1, 1], out[:, 1, 2], out[:, 1, 3] = e2, e1, e0
+    np.multiply(0.5, b2 + e2, out=out[:, 0, 3])
+    out[:, 1, 0] = out[:, 0, 3]
+    return out
 
 
 def spiral_pair(corner: np.ndarray, u_in: np.ndarray, u_out: np.ndarray, d_m: float) -> list[np.ndarray]:
