@@ -269,6 +269,11 @@ def table(result: dict) -> str:
              f"segments 10-30 m) and `sharp` (turns uniform in [0, 170] deg, segments 2-40 m); "
              f"{result['seeds']} seeds x 2D/3D, {n} timed calls per row and tree", ""]
     lines += smoother_table(result)
+    if result.get("baseline"):
+        lines += ["", f"`before` is revision {result['baseline']}, `after` this tree; both were timed in the same "
+                  "run, in subprocesses that alternate (two rounds each), on the same paths. 'met' asks for "
+                  "the median wall and CPU times of `after` within the goal ('CPU only': the wall time "
+                  "was not, under the machine's load)."]
     lines += ["", f"Time-parameterisation and checks, default limits; {result['seeds']} seeds x "
               f"{result['repeat']} repeats (median / min over all runs)", "",
               "| operation | median (ms) | min (ms) | goal (ms) |", "|---|---|---|---|"]
