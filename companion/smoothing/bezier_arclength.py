@@ -39,18 +39,24 @@ class ArcLengthTable:
         Arc length at the start of every piece, and the total length last (m).
     s_lo, h : ndarray, shape (P G,)
         Arc length at the start of every interval and its length (m).
-    (Interval j belongs to piece j // G and starts at parameter (j % G) / G.)
-    m0, m1, c0, c1 : ndarray, shape (P G,)
-        Scaled end slopes and second derivatives of the Hermite interpolant of u(s).
+    u_s, u_ss : ndarray, shape (P (G+1),)
+        G du/ds and d2u/ds2 at the knots, piece after piece (G+1 knots each). Interval j is
+        in piece j // G, starts at parameter (j % G) / G and at knot j + j // G.
     """
 
     piece_start_s: np.ndarray
     s_lo: np.ndarray
     h: np.ndarray
-    m0: np.ndarray
-    m1: np.ndarray
-    c0: np.ndarray
-    c1: np.ndarray
+    u_s: np.ndarray
+    u_ss: np.ndarray
+
+    def hermite_args(self, j: np.ndarray) -> tuple[np.ndarray, ...]:
+        """End slopes and second derivatives (m0, m1, c0, c1) of u(s) in intervals ``j`` (K,),
+        scaled to the interval: the coefficients of ``_hermite_quintic``."""
+        knot = j + j // TABLE_INTERVALS
+        h = self.h[j]
+        hh = h * (TABLE_INTERVALS * h)
+        return h * self.u_s[knot], h * self.u_s[knot + 1], hh * self.u_ss[knot], hh * self.u_ss[knot + 1]
 
 
 @lru_cache(maxsize=16)
@@ -162,8 +168,7 @@ def build_table(ctrl: np.ndarray, degrees: np.ndarray, hod1: np.ndarray, hod2: n
     """
     n_pieces = ctrl.shape[0]
     g = TABLE_INTERVALS
-    curved = degrees >= 2
-    line = ~curved
+    curved, line = degrees >= 2, degrees < 2
     seg_len = np.empty((n_pieces, g))
     speed_knots = np.empty((n_pieces, g + 1))
     u_ss_knots = np.zeros((n_pieces, g + 1))
@@ -173,17 +178,13 @@ def build_table(ctrl: np.ndarray, degrees: np.ndarray, hod1: np.ndarray, hod2: n
         seg_len[curved], speed_knots[curved], u_ss_knots[curved] = _curved_knots(hod1[curved], hod2[curved])
     piece_start_s = np.zeros(n_pieces + 1)
     np.cumsum(seg_len.sum(axis=1), out=piece_start_s[1:])
-    s_lo = np.empty((n_pieces, g))
-    s_lo[:, 0] = 0.0
+    s_lo = np.zeros((n_pieces, g))
     np.cumsum(seg_len[:, :-1], axis=1, out=s_lo[:, 1:])
     s_lo += piece_start_s[:-1, None]
-    u_s = g / np.maximum(speed_knots, 1e-9 * max(float(piece_start_s[-1]), 1.0))     # du/ds over h
-    gl = g * seg_len
-    hh = seg_len * gl
-    return ArcLengthTable(
-        piece_start_s=piece_start_s, s_lo=s_lo.ravel(), h=seg_len.ravel(),
-        m0=(seg_len * u_s[:, :-1]).ravel(), m1=(seg_len * u_s[:, 1:]).ravel(),
-        c0=(hh * u_ss_knots[:, :-1]).ravel(), c1=(hh * u_ss_knots[:, 1:]).ravel())
+    u_s = np.maximum(speed_knots, 1e-9 * max(float(piece_start_s[-1]), 1.0), out=speed_knots)
+    np.divide(g, u_s, out=u_s)                                                        # G du/ds
+    return ArcLengthTable(piece_start_s=piece_start_s, s_lo=s_lo.ravel(), h=seg_len.ravel(), u_s=u_s.ravel(),
+                          u_ss=u_ss_knots.ravel())
 
 
 def _hermite_quintic(x: np.ndarray, m0: np.ndarray, m1: np.ndarray, c0: np.ndarray,
@@ -230,7 +231,7 @@ def locate(table: ArcLengthTable, s_m: np.ndarray) -> tuple[np.ndarray, np.ndarr
     s = np.clip(s_m, 0.0, table.piece_start_s[-1])
     j = np.clip(np.searchsorted(table.s_lo, s, side="right") - 1, 0, table.s_lo.size - 1)
     x = np.clip((s - table.s_lo[j]) / np.maximum(table.h[j], 1e-300), 0.0, 1.0)
-    frac = _hermite_quintic(x, table.m0[j], table.m1[j], table.c0[j], table.c1[j])
+    frac = _hermite_quintic(x, *table.hermite_args(j))
     piece, k = np.divmod(j, TABLE_INTERVALS)
     return piece, (k + np.clip(frac, 0.0, 1.0)) / TABLE_INTERVALS
 
@@ -245,7 +246,7 @@ def arc_length_at(table: ArcLengthTable, piece: np.ndarray, u: np.ndarray) -> np
     u = np.asarray(u, dtype=float)
     j = np.asarray(piece) * g + np.clip((u * g).astype(int), 0, g - 1)
     target = (u - (j % g) / g) * g
-    args = (table.m0[j], table.m1[j], table.c0[j], table.c1[j])
+    args = table.hermite_args(j)
     x = target.copy()
     for _ in range(8):                                   # Newton, then bisection where needed
         step = (_hermite_quintic(x, *args) - target) / np.maximum(_hermite_quintic_dx(x, *args), 1e-12)
