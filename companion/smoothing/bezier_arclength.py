@@ -21,7 +21,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from companion.smoothing.bezier_maths import GAUSS_ORDER, bernstein, gauss_legendre, norm_rows
+from companion.smoothing.bezier_maths import GAUSS_ORDER, bernstein, curvature_from_derivatives, gauss_legendre, \
+    norm_rows
 
 __all__ = ["TABLE_INTERVALS", "ArcLengthTable", "build_table", "knot_curvature", "locate", "arc_length_at",
            "arc_derivatives"]
@@ -60,25 +61,31 @@ class ArcLengthTable:
 
 
 @lru_cache(maxsize=16)
-def _bases(degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _bases(degree: int) -> tuple[np.ndarray, ...]:
     """Bernstein bases of the hodographs of a degree-``degree`` curve (read-only constants).
+
+    With B_i the basis of the first hodograph (control points h_i) and C_j that of the second
+    (control points k_j), |B'(u)|^2 = sum_ij B_i B_j (h_i . h_j) and B' . B'' =
+    sum_ij B_i C_j (h_i . k_j): one matrix product each with the Gram matrices of the pieces.
 
     Returns
     -------
     squared_at_nodes : ndarray, shape (G GAUSS_ORDER, degree^2)
-        Products B_i(u) B_j(u) of the first hodograph's basis at the quadrature nodes of every
-        interval, so that |B'(u)|^2 = sum_ij B_i B_j (h_i . h_j) is one matrix product with the
-        Gram matrices of the hodograph control points h_i.
-    first_at_knots : ndarray, shape (G+1, degree)
-    second_at_knots : ndarray, shape (G+1, degree-1)
+        B_i B_j at the quadrature nodes of every interval.
+    squared_at_knots : ndarray, shape (G+1, degree^2)
+    mixed_at_knots : ndarray, shape (G+1, degree (degree-1))
+        B_i C_j at the knots.
+    first_at_knots, second_at_knots : ndarray, shapes (G+1, degree) and (G+1, degree-1)
     """
     g = TABLE_INTERVALS
     knots = np.linspace(0.0, 1.0, g + 1)
     x, _ = gauss_legendre(GAUSS_ORDER)
     nodes = (knots[:-1, None] + (1.0 / g) * x[None, :]).ravel()
-    first = bernstein(degree - 1, nodes)
-    squared = (first[:, :, None] * first[:, None, :]).reshape(nodes.size, -1)
-    out = (squared, bernstein(degree - 1, knots), bernstein(degree - 2, knots))
+    at_nodes = bernstein(degree - 1, nodes)
+    first, second = bernstein(degree - 1, knots), bernstein(degree - 2, knots)
+    out = ((at_nodes[:, :, None] * at_nodes[:, None, :]).reshape(nodes.size, -1),
+           (first[:, :, None] * first[:, None, :]).reshape(g + 1, -1),
+           (first[:, :, None] * second[:, None, :]).reshape(g + 1, -1), first, second)
     for a in out:
         a.setflags(write=False)
     return out
@@ -90,22 +97,6 @@ def _components(basis: np.ndarray, hod: np.ndarray) -> np.ndarray:
     n_pieces, n, d = hod.shape
     flat = np.ascontiguousarray(hod.transpose(1, 2, 0)).reshape(n, d * n_pieces)
     return (basis @ flat).reshape(basis.shape[0], d, n_pieces)
-
-
-def _cross_norm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """|a x b| of (K, d, P') component arrays -> (K, P') (exact formulas for d = 2 and 3)."""
-    if a.shape[1] == 2:
-        return np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
-    if a.shape[1] != 3:
-        gram = (np.einsum("kdp,kdp->kp", a, a) * np.einsum("kdp,kdp->kp", b, b)
-                - np.einsum("kdp,kdp->kp", a, b) ** 2)
-        return np.sqrt(np.maximum(gram, 0.0))
-    x, y, z = a[:, 0], a[:, 1], a[:, 2]
-    u, v, w = b[:, 0], b[:, 1], b[:, 2]
-    cx = y * w - z * v
-    cy = z * u - x * w
-    cz = x * v - y * u
-    return np.sqrt(cx * cx + cy * cy + cz * cz)
 
 
 def _curved_knots(hod1: np.ndarray, hod2: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -120,17 +111,18 @@ def _curved_knots(hod1: np.ndarray, hod2: np.ndarray) -> tuple[np.ndarray, ...]:
     """
     g = TABLE_INTERVALS
     _, w = gauss_legendre(GAUSS_ORDER)
-    squared_at_nodes, first_at_knots, second_at_knots = _bases(hod1.shape[1])
-    gram = (hod1 @ hod1.transpose(0, 2, 1)).reshape(hod1.shape[0], -1)              # (P', n^2)
+    squared_at_nodes, squared_at_knots, mixed_at_knots = _bases(hod1.shape[1])[:3]
+    n_pieces = hod1.shape[0]
+    gram = (hod1 @ hod1.transpose(0, 2, 1)).reshape(n_pieces, -1)                   # (P', n^2)
     speed_nodes = squared_at_nodes @ gram.T                                        # (G Q, P')
     np.sqrt(np.maximum(speed_nodes, 0.0, out=speed_nodes), out=speed_nodes)
     seg_len = np.einsum("gqp,q->pg", speed_nodes.reshape(g, w.size, -1), w) / g
-    d1 = _components(first_at_knots, hod1)                                        # (G+1, d, P')
-    d2 = _components(second_at_knots, hod2)
-    speed = np.sqrt(np.einsum("kdp,kdp->kp", d1, d1))
+    del speed_nodes
+    speed = squared_at_knots @ gram.T                                              # (G+1, P')
+    np.sqrt(np.maximum(speed, 0.0, out=speed), out=speed)
+    dot = mixed_at_knots @ (hod1 @ hod2.transpose(0, 2, 1)).reshape(n_pieces, -1).T
     safe = np.maximum(speed, 1e-300)
-    cubed = safe * safe * safe
-    u_ss = -np.einsum("kdp,kdp->kp", d1, d2) / (cubed * safe)
+    u_ss = -dot / (safe * safe * safe * safe)
     return seg_len, speed.T, u_ss.T
 
 
@@ -142,12 +134,9 @@ def knot_curvature(hod1: np.ndarray, hod2: np.ndarray) -> np.ndarray:
     hod1, hod2 : ndarray, shapes (P', N, d) and (P', N-1, d)
         First and second hodographs.
     """
-    _, first_at_knots, second_at_knots = _bases(hod1.shape[1])
-    d1 = _components(first_at_knots, hod1)
-    d2 = _components(second_at_knots, hod2)
-    speed = np.sqrt(np.einsum("kdp,kdp->kp", d1, d1))
-    safe = np.maximum(speed, 1e-300)
-    return np.where(speed > 0.0, _cross_norm(d1, d2) / (safe * safe * safe), 0.0).T
+    first_at_knots, second_at_knots = _bases(hod1.shape[1])[3:]
+    d1 = _components(first_at_knots, hod1).transpose(2, 0, 1)                      # (P', G+1, d)
+    return curvature_from_derivatives(d1, _components(second_at_knots, hod2).transpose(2, 0, 1))
 
 
 def build_table(ctrl: np.ndarray, degrees: np.ndarray, hod1: np.ndarray, hod2: np.ndarray) -> ArcLengthTable:
