@@ -14,6 +14,7 @@ of a chain (``bezier_path.BezierPath``) without changing it.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -260,8 +261,18 @@ def lower_degree(ctrl: np.ndarray, degree: int) -> np.ndarray:
 
 def elevate_lines(a: np.ndarray, b: np.ndarray, degree: int) -> np.ndarray:
     """Straight lines from ``a`` to ``b`` (K, d) as degree-``degree`` curves, shape (K, N+1, d)."""
+    w, one_minus_w = _line_weights(degree)
+    return a[:, None, :] * one_minus_w + b[:, None, :] * w
+
+
+@lru_cache(maxsize=16)
+def _line_weights(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Control-point weights w and 1 - w, shape (1, N+1, 1), of a line elevated to ``degree``."""
     w = np.linspace(0.0, 1.0, degree + 1)[None, :, None]
-    return a[:, None, :] * (1.0 - w) + b[:, None, :] * w
+    out = (w, 1.0 - w)
+    for x in out:
+        x.setflags(write=False)
+    return out
 
 
 def evaluate_many(basis: np.ndarray, hod: np.ndarray) -> np.ndarray:

@@ -35,7 +35,7 @@ import numpy as np
 
 from companion.errors import SmoothingError
 from companion.smoothing.bezier_path import BezierPath
-from companion.smoothing.polyline import assemble_stacked, clean_path, corner_geometry
+from companion.smoothing.polyline import assemble_stacked, prepare_path
 from companion.smoothing.repair import repair_corners
 
 __all__ = ["smooth_g2", "C1", "C2", "C3", "C4", "spiral_pair", "spiral_pairs", "spiral_distance_m",
@@ -193,8 +193,7 @@ def smooth_g2(path, kappa_max_1_m: float, *, world=None, max_halvings: int = 12)
         Fewer than 2 nodes, NaN, bad shape, K_max <= 0.
     """
     kappa = check_kappa(kappa_max_1_m)
-    nodes, index = clean_path(path)
-    corners = corner_geometry(nodes)
+    nodes, index, corners = prepare_path(path)
     turn = corners.kind == "turn"
     d_need = np.where(turn, spiral_distance_m(np.where(turn, corners.turn_rad, 0.0), kappa), 0.0)
     d_fit = allocate_segments(d_need, corners.len_in, corners.len_out)

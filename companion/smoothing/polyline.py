@@ -20,34 +20,14 @@ from companion.smoothing.bezier_maths import elevate_lines
 
 from companion.errors import SmoothingError
 
-__all__ = ["Corners", "clean_path", "corner_geometry", "assemble_stacked"]
+__all__ = ["Corners", "clean_path", "prepare_path", "corner_geometry", "assemble_stacked"]
 
 STRAIGHT_RAD = 1e-7
 REVERSAL_RAD = 1e-3
 
 
-def clean_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
-    """Validate a polyline and drop repeated consecutive nodes.
-
-    Parameters
-    ----------
-    path : array_like, shape (M, d)
-        Nodes, d = 2 (north-east) or 3 (NED), M >= 2.
-    name : str
-        Argument name used in error messages.
-
-    Returns
-    -------
-    nodes : ndarray, shape (M', d)
-        Nodes without consecutive repeats (M' >= 2).
-    index : ndarray of int, shape (M',)
-        Index of every kept node in the input.
-
-    Raises
-    ------
-    SmoothingError
-        Wrong shape, fewer than 2 nodes, NaN/inf, or every node at the same place.
-    """
+def _distinct_nodes(path, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a polyline (M, d) and index its nodes without consecutive repeats: (array, index)."""
     try:
         arr = np.asarray(path, dtype=float)
     except (TypeError, ValueError):
@@ -65,8 +45,56 @@ def clean_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
     index = np.nonzero(keep)[0]
     if index.size < 2:
         raise SmoothingError(f"{name}: all {arr.shape[0]} nodes are at the same place; nothing to smooth")
+    return arr, index
+
+
+def clean_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
+    """Validate a polyline, drop repeated consecutive nodes and nodes where it runs straight on.
+
+    Parameters
+    ----------
+    path : array_like, shape (M, d)
+        Nodes, d = 2 (north-east) or 3 (NED), M >= 2.
+    name : str
+        Argument name used in error messages.
+
+    Returns
+    -------
+    nodes : ndarray, shape (M', d)
+        Nodes without consecutive repeats or straight-on nodes (M' >= 2).
+    index : ndarray of int, shape (M',)
+        Index of every kept node in the input.
+
+    Raises
+    ------
+    SmoothingError
+        Wrong shape, fewer than 2 nodes, NaN/inf, or every node at the same place.
+    """
+    arr, index = _distinct_nodes(path, name)
     index = drop_straight_nodes(arr, index)
     return arr[index], index
+
+
+def prepare_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray, "Corners"]:
+    """``clean_path`` and ``corner_geometry`` in one pass (what the G1 and G2 smoothers need).
+
+    The corner geometry of the distinct nodes also tells whether any node runs straight on
+    (heading change below twice ``STRAIGHT_RAD``, a margin over the sequential rule of
+    ``drop_straight_nodes``); only then are nodes dropped and the geometry computed again.
+
+    Returns
+    -------
+    nodes : ndarray, shape (M', d)
+    index : ndarray of int, shape (M',)
+    corners : Corners
+        Geometry of the M' - 2 corners of ``nodes``.
+    """
+    arr, index = _distinct_nodes(path, name)
+    corners = corner_geometry(arr[index])
+    if np.any(corners.turn_rad < 2.0 * STRAIGHT_RAD):
+        index = drop_straight_nodes(arr, index)
+        corners = corner_geometry(arr[index])
+    return arr[index], index, corners
 
 
 def drop_straight_nodes(arr: np.ndarray, index: np.ndarray) -> np.ndarray:
