@@ -151,10 +151,6 @@ class FlightWatcher:
         if self.listener is not None and isinstance(msg, dict):
             self.listener.on_event(msg)
 
-    def events_of(self, kind: str) -> list[dict]:
-        with self._lock:
-            return [e for e in self.events if e and e.get("event") == kind]
-
     def reference_at(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
         """Reference position and unit direction of travel at mission time ``t_s``."""
         with self._lock:

@@ -99,11 +99,6 @@ def vel_ned_m_s(x: np.ndarray) -> np.ndarray:
     return np.array([c * u - s * v, s * u + c * v, w])
 
 
-def vel_body_m_s(x: np.ndarray) -> np.ndarray:
-    """Body FRD velocity ``[u, v, w]``, (3,) m/s."""
-    return np.array(x[0:3], dtype=float)
-
-
 def euler_rad(x: np.ndarray) -> np.ndarray:
     """Roll, pitch, yaw ``[phi, theta, psi]``, (3,) rad; yaw is wrapped to (-pi, pi]."""
     psi = math.remainder(float(x[IDX_PSI]), 2.0 * math.pi)
