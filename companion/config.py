@@ -20,6 +20,7 @@ Tree (``companion run --config FILE``; ``companion run --print-config`` shows it
     threats     threat-manager policy (companion.threats.settings.ThreatSettings)
     adsb        ADS-B traffic as threats (companion.threats.adsb.AdsbSettings)
     state       where the threat snapshot is kept for a resume after a crash (companion.state)
+    view        the live Foxglove server (companion.view)
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from companion.planning import GartSettings
 from companion.smoothing import FeasibilitySettings, SmoothingSettings
 from companion.threats.adsb import AdsbSettings
 from companion.threats.settings import ThreatSettings, ZenohSettings
+from companion.view.sinks import parse_foxglove_address
 from sim_vehicle.typed_config import from_dict, load_toml, require_numbers
 
 
@@ -75,6 +77,9 @@ class LinkSettings:
     signing_key_file : str
         MAVLink 2 signing key file (64 hex digits or a passphrase; ``--signing-key``): sign
         everything sent, accept only frames signed with it. Empty: no signing.
+    tlog_file : str
+        Record the companion's MAVLink traffic with the vehicle, both ways, to this ``.tlog``
+        file (``--tlog``; pymavlink, MAVExplorer and QGroundControl read it). Empty: none.
     """
 
     connect: str = "udpin://0.0.0.0:14540"
@@ -88,6 +93,7 @@ class LinkSettings:
     origin_timeout_s: float = 5.0
     streams: StreamSettings = StreamSettings()
     signing_key_file: str = ""
+    tlog_file: str = ""
 
     def __post_init__(self) -> None:
         require_numbers(ConfigError, "link", self, positive=(
@@ -95,6 +101,25 @@ class LinkSettings:
             "leg_timeout_margin_s", "record_rate_hz", "status_rate_hz", "origin_timeout_s"))
         if self.setpoint_rate_hz > 200:
             raise ConfigError(f"link.setpoint_rate_hz: at most 200, got {self.setpoint_rate_hz}")
+
+
+@dataclass(frozen=True)
+class ViewSettings:
+    """The operator's live view (``companion.view``).
+
+    Parameters
+    ----------
+    foxglove : str
+        Serve the flight live over the Foxglove WebSocket protocol on ``[HOST:]PORT``
+        (``--foxglove``; host 127.0.0.1 unless given, port 0 picks a free one): the 3D scene,
+        the map, the record's channels. Empty (default): no server.
+    """
+
+    foxglove: str = ""
+
+    def __post_init__(self) -> None:
+        if self.foxglove:
+            parse_foxglove_address(self.foxglove, "view.foxglove")
 
 
 @dataclass(frozen=True)
@@ -126,7 +151,7 @@ class Settings:
     ----------
     seed : int
         Random seed of every planner run (logged, so that any flight can be replayed).
-    link, startup, zenoh, mission, flight, planning, smoothing, feasibility, threats, adsb, state
+    link, startup, zenoh, mission, flight, planning, smoothing, feasibility, threats, adsb, state, view
         The tables of the tree (their keys are documented by their own classes).
     """
 
@@ -142,6 +167,7 @@ class Settings:
     threats: ThreatSettings = ThreatSettings()
     adsb: AdsbSettings = AdsbSettings()
     state: StateSettings = StateSettings()
+    view: ViewSettings = ViewSettings()
 
     def __post_init__(self) -> None:
         if self.seed < 0:

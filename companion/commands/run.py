@@ -24,6 +24,7 @@ EPILOG = """examples:
       --time-scale 8                             # ArduPilot's arducopter-heli SITL at --speedup 8
   companion run --connect serial:///dev/ttyAMA0:921600 --interlock pilot --adsb   # a real helicopter
   companion run --state-dir /var/lib/companion --resume   # take over after a crash, threats kept
+  companion run --record out/flight.mcap --foxglove 8765 --tlog out/flight.tlog   # watch it in Foxglove
 
 start-up: a helicopter (H_RSC_* parameters) is armed with its motor interlock low, the interlock
 is engaged after the arming delay (--interlock command, default; or by the pilot's RC switch,
@@ -63,7 +64,14 @@ def register(subparsers) -> None:
                    help="zenoh configuration file (JSON5, e.g. from `companion keys init`): mutual TLS "
                    "and access control; its endpoints replace the default ones")
     p.add_argument("--no-zenoh", action="store_true", help="fly without zenoh (no threats, no status)")
-    p.add_argument("--record", metavar="FILE", help="write the flight record (JSON Lines) here")
+    p.add_argument("--record", metavar="FILE",
+                   help="write the flight record here: MCAP (Foxglove opens it) when FILE ends in "
+                   ".mcap, else JSON Lines")
+    p.add_argument("--foxglove", metavar="[HOST:]PORT",
+                   help="serve the flight live to Foxglove (WebSocket; host 127.0.0.1 unless given): "
+                   "3D scene, map, decisions, threats (view.foxglove)")
+    p.add_argument("--tlog", metavar="FILE",
+                   help="record the MAVLink traffic with the vehicle, both ways, to this .tlog (link.tlog_file)")
     p.add_argument("--seed", type=int, help="random seed of the planners (default from settings)")
     p.add_argument("--time-scale", type=float, metavar="X",
                    help="vehicle seconds per wall-clock second: sim-vehicle's --speedup")
@@ -119,6 +127,10 @@ def settings_overrides(args: argparse.Namespace) -> dict:
         out.setdefault("zenoh", {})["config"] = args.zenoh_config
     if getattr(args, "state_dir", None):
         out.setdefault("state", {})["dir"] = args.state_dir
+    if getattr(args, "foxglove", None):
+        out.setdefault("view", {})["foxglove"] = args.foxglove
+    if getattr(args, "tlog", None):
+        out.setdefault("link", {})["tlog_file"] = args.tlog
     if args.no_zenoh:
         out.setdefault("zenoh", {})["enabled"] = False
     return out

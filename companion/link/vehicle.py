@@ -80,6 +80,10 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         for a companion, nothing for a ground station (mission transfers need no streams).
     adsb : bool
         Also ask for ADSB_VEHICLE (ADS-B traffic as threats).
+    signing_key : SigningKey, optional
+        Sign everything sent and accept only frames signed with it (``companion.link.gate``).
+    tlog_path : str, optional
+        Record the link's traffic, both ways, to this ``.tlog`` file (``heli_common.tlog``).
 
     Examples
     --------
@@ -91,7 +95,8 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
     """
 
     def __init__(self, role: str = "companion", *, streams: StreamSettings | None = None,
-                 adsb: bool = False, signing_key: SigningKey | None = None) -> None:
+                 adsb: bool = False, signing_key: SigningKey | None = None,
+                 tlog_path: str | None = None) -> None:
         if role not in ("companion", "gcs"):
             raise LinkError(f"role must be 'companion' or 'gcs', got {role!r}")
         self.role = role
@@ -104,6 +109,7 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self.stream_settings = streams
         self.adsb = bool(adsb)
         self.signing_key = signing_key
+        self.tlog_path = tlog_path or None
         self.gate: GateThread | None = None
         self.streams: StreamKeeper | None = None
         self.statustexts: collections.deque = collections.deque(maxlen=STATUSTEXT_KEEP)
@@ -142,7 +148,7 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         route_mavsdk_logs()
         kind = (ComponentType.COMPANION_COMPUTER if self.role == "companion"
                 else ComponentType.GROUND_STATION)
-        self.gate = open_gate(url, self.signing_key)
+        self.gate = open_gate(url, self.signing_key, tlog_path=self.tlog_path)
         self._mavsdk = Mavsdk(Configuration.create_with_component_type(kind))
         self._command_lock = asyncio.Lock()
         self._mission_lock = asyncio.Lock()

@@ -36,17 +36,17 @@ class RecordSinks:
                 log.exception("closing %s", type(sink).__name__)
 
 
-def parse_foxglove_address(text: str) -> tuple[str, int]:
+def parse_foxglove_address(text: str, name: str = "--foxglove") -> tuple[str, int]:
     """``[HOST:]PORT`` -> (host, port); port 0 picks a free port.
 
     Raises
     ------
     ConfigError
-        Naming ``--foxglove`` and the text when it is not ``[HOST:]PORT``.
+        Naming ``name`` and the text when it is not ``[HOST:]PORT``.
     """
-    host, _, port = text.rpartition(":")
+    host, _, port = str(text).rpartition(":")
     if not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise ConfigError(f"--foxglove: expected [HOST:]PORT (e.g. 8765 or 0.0.0.0:8765), got {text!r}")
+        raise ConfigError(f"{name}: expected [HOST:]PORT (e.g. 8765 or 0.0.0.0:8765), got {text!r}")
     return host or DEFAULT_FOXGLOVE_HOST, int(port)
 
 
