@@ -47,6 +47,8 @@ log = logging.getLogger(__name__)
 
 #: ``sim-vehicle``'s default home (lat, lon, alt AMSL): the origin of the demo's global threats.
 DEMO_HOME = (47.397742, 8.545594, 488.0)
+#: The demo's flight record, in its output directory: MCAP, which Foxglove opens.
+DEMO_RECORD = "flight.mcap"
 #: The demo's mission, package data of ``companion`` (``mission_files/`` links to it).
 DEMO_MISSION_RESOURCE = "data/exclusion_zones.plan"
 
@@ -262,11 +264,13 @@ class FlightProcesses:
 
 @contextlib.contextmanager
 def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
-                     gcs_out: str | None = None, extra_args=(), sim_args=(), env: dict | None = None):
+                     gcs_out: str | None = None, extra_args=(), sim_args=(), env: dict | None = None,
+                     record_name: str = "flight.jsonl"):
     """Start ``sim-vehicle`` and ``companion run --mission`` on free loopback ports.
 
     ``extra_args`` go to ``companion run``, ``sim_args`` to ``sim-vehicle`` (e.g. wind); ``env``
-    is the processes' environment (default: this one's).
+    is the processes' environment (default: this one's); the record is ``out_dir/record_name``
+    (``.mcap``: MCAP).
     Yields ``FlightProcesses``; both processes are stopped on exit (SIGTERM, then SIGKILL).
     """
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -275,7 +279,7 @@ def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
     outs = ["--out", f"127.0.0.1:{mav_port}"] + (["--out", gcs_out] if gcs_out else [])
     sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(speedup), *sim_args],
                 out_dir / "sim_vehicle.log", env)
-    record, log_path = out_dir / "flight.jsonl", out_dir / "companion.log"
+    record, log_path = out_dir / record_name, out_dir / "companion.log"
     companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
                        "--mission", str(mission), "--time-scale", str(speedup),
                        "--zenoh-listen", endpoint, "--record", str(record), *extra_args], log_path, env)
@@ -288,7 +292,7 @@ def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
 
 def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
         timeout_s: float = 300.0, gcs_out: str | None = None, extra_args=(), env: dict | None = None,
-        listener=None) -> dict:
+        listener=None, record_name: str = "flight.jsonl") -> dict:
     """Fly ``mission`` with a fresh ``sim-vehicle`` and ``companion run`` (separate processes).
 
     This process watches the flight over zenoh (telling ``listener`` every status and event
@@ -297,7 +301,7 @@ def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
     ``record`` (the flight record's path).
     """
     with flight_processes(out_dir, mission, speedup=speedup, gcs_out=gcs_out,
-                          extra_args=extra_args, env=env) as flight:
+                          extra_args=extra_args, env=env, record_name=record_name) as flight:
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             watcher = FlightWatcher(bus, listener)
             if injections:
@@ -320,4 +324,4 @@ def run_demo(out_dir: Path, *, speedup: float = 4.0, gcs_out: str | None = "127.
     """The demo flight: the demo mission (``demo_mission``) with ``DEMO_INJECTIONS``."""
     with demo_mission() as mission:
         return fly(out_dir, mission, speedup=speedup, injections=DEMO_INJECTIONS, gcs_out=gcs_out,
-                   listener=listener)
+                   listener=listener, record_name=DEMO_RECORD)

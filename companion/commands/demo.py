@@ -27,11 +27,11 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from companion.demo import run_demo
+    from companion.demo import DEMO_RECORD, run_demo
     from companion.errors import CompanionError
     from companion.progress import FlightProgress
-    from companion.record import load_record
     from companion.report import render_report
+    from companion.view.mcap_record import load_flight
 
     if not 0.5 <= args.speedup <= 10:
         raise CompanionError(f"--speedup: between 0.5 and 10, got {args.speedup}")
@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
         summary = run_demo(out, speedup=args.speedup, gcs_out=None if args.no_gcs else "127.0.0.1:14550",
                            listener=progress)
     summary.pop("events")
-    record = load_record(out / "flight.jsonl")
+    record = load_flight(out / DEMO_RECORD)
     ratios = detour_ratios(record)
     if ratios:
         print(f"longest way back to the mission: {max(ratios):.2f} x the direct distance "
