@@ -90,6 +90,8 @@ class CpuSampler:
         self.samples: list[tuple[float, float, float, bool]] = []
         self._children: dict[int, float] = {}
         self.threads: dict[int, tuple[str, float]] = {}
+        self.legs_threads_first: dict | None = None
+        self.legs_threads_last: dict | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="cpu-sampler", daemon=True)
 
@@ -107,8 +109,13 @@ class CpuSampler:
                 own, waited = process_cpu_s(self.pid)
             except (FileNotFoundError, ProcessLookupError):
                 return
-            self.samples.append((time.monotonic(), own, self._children_cpu_s(waited), bool(self.in_legs())))
+            legs = bool(self.in_legs())
+            self.samples.append((time.monotonic(), own, self._children_cpu_s(waited), legs))
             self._sample_threads()
+            if legs:
+                self.legs_threads_last = dict(self.threads)
+                if self.legs_threads_first is None:
+                    self.legs_threads_first = dict(self.threads)
             self._stop.wait(SAMPLE_PERIOD_S)
 
     def _sample_threads(self) -> None:
@@ -128,11 +135,10 @@ class CpuSampler:
             self.threads[int(tid)] = (name, (int(fields[11]) + int(fields[12])) / CLOCK_TICKS_S)
 
     def thread_cpu_s(self) -> dict[str, float]:
-        """CPU seconds per thread name (threads of one name summed), largest first."""
-        out: dict[str, float] = {}
-        for name, cpu in self.threads.values():
-            out[name] = out.get(name, 0.0) + cpu
-        return dict(sorted(((k, round(v, 2)) for k, v in out.items()), key=lambda kv: -kv[1]))
+        """CPU seconds per thread over the legs ("name/tid", the largest first)."""
+        first, last = self.legs_threads_first or {}, self.legs_threads_last or {}
+        out = {f"{name}/{tid}": cpu - first.get(tid, (name, 0.0))[1] for tid, (name, cpu) in last.items()}
+        return dict(sorted(((k, round(v, 2)) for k, v in out.items() if v > 0.0), key=lambda kv: -kv[1]))
 
     def __enter__(self) -> "CpuSampler":
         self._thread.start()
@@ -219,7 +225,7 @@ def main(argv=None) -> int:
     meta = {"cpus": os.cpu_count(), "load_average_1min": os.getloadavg()[0], "mission": MISSION.name}
     print(table(results))
     for r in results:
-        print(f"{r['flight']}: CPU s per thread {r['threads_cpu_s']}")
+        print(f"{r['flight']}: CPU s per thread over the legs {r['threads_cpu_s']}")
     print(f"{meta['cpus']} CPUs shared; 1-min load average {meta['load_average_1min']:.2f} at the end")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=2) + "\n")
