@@ -37,11 +37,16 @@ is to that item and on (``companion.resume``) and puts the snapshot's live threa
 the first leg. zenoh router loss: events ``zenoh_lost`` / ``zenoh_back``; the session reconnects
 by itself (``companion.threats.bus.CONNECT_RETRY``).
 
-Only this module, ``companion.link`` and ``companion.threats`` (bus, reactor) do I/O. The event-loop
-thread that streams setpoints runs at real-time priority when allowed
-(``raise_stream_priority``); planning, threat decisions and M-GART refreshes run in worker
-threads at normal priority, and a short GIL switch interval hands the GIL back to the stream
-within half a millisecond, so the 50 Hz period holds while a replan runs.
+The jobs live in ``companion.service``: the background tasks (``background``), the mission
+before and the landing after the legs (``mission``), the legs (``legs``) and the summary
+(``summary``); this module puts them together. Only these, ``companion.link`` and
+``companion.threats`` (bus, reactor) do I/O. The event-loop thread that streams setpoints runs
+at real-time priority when allowed (``raise_stream_priority``); planning, smoothing, the
+feasibility check, threat decisions and M-GART refreshes run in two warm, niced worker
+processes (``companion.workers``; the threat manager's state is adopted back after each call),
+so the 50 Hz period holds while a replan runs; a short GIL switch interval hands the GIL back
+to the stream from the link's own threads. An M-GART refresh with no threat held, on the same
+leg and reference as the last one, is not run (``companion.workers.AlternativesGate``).
 """
 
 from __future__ import annotations

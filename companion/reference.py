@@ -174,6 +174,7 @@ class ActiveReference:
         self.t0_s = t0_s + turn_s
         self.t_end_s = self.t0_s + trajectory.duration_s
         self.table = ReferenceTable(trajectory)
+        self._end_pos_ned_m: np.ndarray | None = None
 
     def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
         """Position, velocity, acceleration (NED), yaw and yaw rate at mission time ``t_s``."""
@@ -201,7 +202,9 @@ class ActiveReference:
 
     def end_gap_m(self, goal_ned_m: np.ndarray) -> float:
         """Distance from the trajectory's end point to ``goal_ned_m`` (m, common axes)."""
-        end = np.asarray(self.trajectory.end_pos_ned_m, dtype=float)
+        if self._end_pos_ned_m is None:          # evaluated once: asked every phase step
+            self._end_pos_ned_m = np.asarray(self.trajectory.end_pos_ned_m, dtype=float)
+        end = self._end_pos_ned_m
         n = min(end.shape[0], goal_ned_m.shape[0])
         return float(np.linalg.norm(end[:n] - goal_ned_m[:n]))
 
