@@ -65,7 +65,7 @@ from companion.link.gate import SigningKey
 from companion.link.setpoints import SetpointStreamer, hold_position, raise_stream_priority
 from companion.link.startup import is_airborne
 from companion.link.vehicle import VehicleLink
-from companion.record import FlightRecorder
+from companion.view.sinks import RecordSinks, open_record_sinks, parse_foxglove_address
 from companion.service.background import ZENOH_WATCH_PERIOD_S, BackgroundTasks
 from companion.service.legs import GUIDED, LegTasks
 from companion.service.mission import MissionTasks
@@ -121,11 +121,12 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         self.rng = np.random.default_rng(settings.seed)
         self.link = VehicleLink("companion", streams=settings.link.streams,
                                 adsb=settings.adsb.enabled,
-                                signing_key=SigningKey.from_file(settings.link.signing_key_file))
+                                signing_key=SigningKey.from_file(settings.link.signing_key_file),
+                                tlog_path=settings.link.tlog_file or None)
         self.clock = VehicleClock(settings.link.time_scale)
         self.streamer: SetpointStreamer | None = None
         self.reference: ActiveReference | None = None
-        self.recorder: FlightRecorder | None = None
+        self.recorder: RecordSinks | None = None
         self.summary = FlightSummary()
         self.local_mission = None
         self.legs: list[LegPlan] = []
@@ -150,6 +151,17 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         return await self.workers.run(fn, *args, **kwargs)
 
     # ------------------------------------------------------------------ recording and status
+    def _open_record(self) -> RecordSinks:
+        """The record's sinks: ``--record`` (MCAP or JSON Lines) and the live Foxglove server."""
+        s = self.settings
+        foxglove = parse_foxglove_address(s.view.foxglove, "view.foxglove") if s.view.foxglove else None
+        sinks = open_record_sinks(self.record_path, foxglove, s.threats.horizon_s, s.threats.uncertainty_m_s)
+        for sink in sinks.sinks:
+            if getattr(sink, "port", None):
+                log.info("Foxglove live view: ws://%s:%d (Foxglove: open connection, Foxglove WebSocket)",
+                         foxglove[0], sink.port)
+        return sinks
+
     def record(self, line_type: str, /, **fields) -> None:
         if self.recorder is not None:
             self.recorder.write(line_type, **fields)
@@ -224,9 +236,8 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         # the workers start before the stream's priority is raised and before any thread of
         # the link exists (the forkserver is exec'd from here); they warm up meanwhile
         self._workers_ready = self.workers.start()
+        self.recorder = self._open_record()  # before the priority: the live server's threads stay normal
         raise_stream_priority()              # before connect: MAVSDK's threads inherit it
-        if self.record_path is not None:
-            self.recorder = FlightRecorder(self.record_path)
         await self.link.connect(s.link.connect, s.link.connect_timeout_s)
         try:
             return await self._fly()

@@ -70,7 +70,7 @@ class BackgroundTasks:
                         pos_ned_m=tele.pos_ned_m, vel_ned_m_s=tele.vel_ned_m_s,
                         servo_us=self._servo_us,
                         tracking_error_m=self._errors_m[-1] if self._errors_m else None,
-                        leg=self.leg_index, path_id=self.reference.path_id)
+                        leg=self.leg_index, path_id=self.reference.path_id, euler_rad=tele.attitude_rad)
 
     async def _publish_status(self) -> None:
         period = 1.0 / self.settings.link.status_rate_hz
