@@ -1,5 +1,8 @@
 """Flight record: one JSON object per line (JSON Lines), written as the flight goes.
 
+``companion run --record FILE.mcap`` writes the same content as MCAP channels instead
+(``companion.view``); this format stays for ``--record FILE.jsonl`` and for old records.
+
 A record survives a crash up to its last flushed line (every half second) and can be read
 while it is written. Every line has ``type``; the fields below are the ones ``companion run``
 writes (``companion.daemon``, ``companion.threats.reactor``). Times ``t_s`` are mission time
@@ -14,8 +17,8 @@ writes (``companion.daemon``, ``companion.threats.reactor``). Times ``t_s`` are 
               ``reference_ne`` (the smoothed reference, north-east, 5 samples/s), ``tree``
               (GART's ``nodes`` and ``parents``, or None) and the planner's ``summary``
 ``sample``    ``t_s``, ``ref_pos_ned_m``, ``ref_vel_ned_m_s``, ``pos_ned_m``, ``vel_ned_m_s``
-              (the vehicle's), ``servo_us`` (SERVO_OUTPUT_RAW, or None), ``tracking_error_m``,
-              ``leg``, ``path_id``
+              and ``euler_rad`` (the vehicle's roll, pitch, yaw), ``servo_us``
+              (SERVO_OUTPUT_RAW, or None), ``tracking_error_m``, ``leg``, ``path_id``
 ``decision``  a threat-manager decision: ``kind``, ``reason``, ``label``, ``path_id``,
               ``path_ned_m`` (the new path), ``trigger``, ``latency_ms`` (threat to the first
               setpoint of the new reference), ``decide_ms``, ``plan_ms``, ``candidates``,
