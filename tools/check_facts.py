@@ -45,13 +45,13 @@ ARDUPILOT_NUMBER_RE = re.compile(r"^\s*(FORCE_DISARM_MAGIC|AUX_\w*MOTOR_INTERLOC
 MAX_LINES = 500
 SIZE_CHECKED = ("companion/", "sim_vehicle/")
 #: Modules (prefixes) that must compute only: numbers in, numbers out.
-NUMERICS = ("companion.planning", "companion.smoothing", "companion.world.geometry",
-            "companion.world.index", "companion.world.obstacles", "companion.threats.prediction",
+NUMERICS = ("companion.planning", "companion.smoothing", "companion.world", "companion.threats.prediction",
             "companion.threats.spacetime", "companion.threats.evasion", "companion.threats.retime",
-            "companion.threats.join", "companion.threats.alternatives",
-            "companion.threats.candidates", "companion.threats.decision", "companion.trajectory",
-            "sim_vehicle.dynamics", "sim_vehicle.model", "sim_vehicle.control", "sim_vehicle.wind",
-            "heli_common.geometry")
+            "companion.threats.join", "companion.threats.alternatives", "companion.threats.candidates",
+            "companion.threats.decision", "companion.trajectory", "companion.phases",
+            "companion.view.geometry", "sim_vehicle.dynamics", "sim_vehicle.model", "sim_vehicle.control",
+            "sim_vehicle.wind", "sim_vehicle.rsc", "sim_vehicle.autopilot", "sim_vehicle.vehicle_update",
+            "heli_common.geometry", "heli_common.frames")
 #: Top-level modules that do I/O (network, processes, MAVLink transports, logs on disk).
 IO_LIBRARIES = ("socket", "asyncio", "selectors", "subprocess", "zenoh", "mavsdk", "pymavlink",
                 "http", "urllib", "mcap", "foxglove", "serial")
