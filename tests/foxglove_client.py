@@ -26,18 +26,35 @@ class Received:
         return {c["topic"] for c in self.channels.values()}
 
 
-async def collect(port: int, topics: set[str], seconds: float, host: str = "127.0.0.1") -> Received:
-    """Subscribe to ``topics`` (as soon as they are advertised) and collect for ``seconds``."""
+async def connect(url: str, within_s: float):
+    """A WebSocket to ``url``, retrying while the server is not up yet."""
+    loop = asyncio.get_running_loop()
+    end = loop.time() + within_s
+    while True:
+        try:
+            return await websockets.connect(url, subprotocols=[SUBPROTOCOL], max_size=None)
+        except OSError:
+            if loop.time() > end:
+                raise
+            await asyncio.sleep(0.2)
+
+
+async def collect(port: int, topics: set[str], seconds: float, host: str = "127.0.0.1",
+                  until=None, connect_within_s: float = 30.0) -> Received:
+    """Subscribe to ``topics`` (as soon as they are advertised) and collect for ``seconds``, or
+    until ``until()`` is true (polled every 0.2 s) or the server closes."""
     got = Received()
     subscribed: dict[int, str] = {}                              # subscription id -> topic
-    async with websockets.connect(f"ws://{host}:{port}", subprotocols=[SUBPROTOCOL],
-                                  max_size=None) as ws:
+    ws = await connect(f"ws://{host}:{port}", connect_within_s)
+    async with ws:
         loop = asyncio.get_running_loop()
         end = loop.time() + seconds
-        while (left := end - loop.time()) > 0:
+        while (left := end - loop.time()) > 0 and not (until and until()):
             try:
-                frame = await asyncio.wait_for(ws.recv(), left)
+                frame = await asyncio.wait_for(ws.recv(), min(left, 0.2))
             except asyncio.TimeoutError:
+                continue
+            except websockets.ConnectionClosed:
                 break
             if isinstance(frame, bytes):
                 _data(frame, subscribed, got)
