@@ -115,19 +115,6 @@ class World:
             raise AttributeError("World is immutable; use with_threats() to add obstacles")
         object.__setattr__(self, name, value)
 
-    def __getstate__(self) -> dict:
-        """Obstacles, bounds, margin and index (a planning worker process receives worlds);
-        the memoised lookups are rebuilt on demand, the point test is bound again."""
-        return {name: getattr(self, name) for name in self.__slots__
-                if name not in ("point_free", "_memo", "_frozen")}
-
-    def __setstate__(self, state: dict) -> None:
-        for name, value in state.items():
-            object.__setattr__(self, name, value)
-        object.__setattr__(self, "_memo", {})
-        object.__setattr__(self, "point_free", self._point_free_2d if self._dim == 2 else self._point_free_3d)
-        object.__setattr__(self, "_frozen", True)
-
     # ------------------------------------------------------------------ construction helpers
     @classmethod
     def from_spheres(cls, centers, radii, bounds_min, bounds_max, margin_m: float = 0.0) -> "World":
