@@ -31,6 +31,15 @@ LANDED_STATES_IN_AIR = (mavlink.MAV_LANDED_STATE_IN_AIR, mavlink.MAV_LANDED_STAT
 MAV_SYS_STATUS_PREARM_CHECK = mavlink.MAV_SYS_STATUS_PREARM_CHECK
 
 
+
+def degrees_lla(lla_int) -> tuple[float, float, float] | None:
+    """(lat degE7, lon degE7, alt mm) as (lat deg, lon deg, alt m); None for the unset (0, 0)
+    or an impossible position."""
+    lat, lon = lla_int[0] / 1e7, lla_int[1] / 1e7
+    if (lat, lon) == (0.0, 0.0) or abs(lat) > 90.0 or abs(lon) > 180.0:
+        return None
+    return lat, lon, lla_int[2] / 1e3
+
 class TelemetryWatchers:
     """The subscriptions of a ``VehicleLink`` (a part of it: it uses the link's ``messages``,
     ``_from_vehicle``, ``connected`` and telemetry plugin)."""
@@ -151,9 +160,8 @@ class TelemetryWatchers:
             lla = finite_fields(fields, "latitude", "longitude", "altitude")
             if not self._from_vehicle(fields) or lla is None:
                 return
-            lat, lon = lla[0] / 1e7, lla[1] / 1e7
-            if (lat, lon) != (0.0, 0.0) and abs(lat) <= 90.0 and abs(lon) <= 180.0:
-                origin = (lat, lon, lla[2] / 1e3)
+            origin = degrees_lla(lla)
+            if origin is not None:
                 old = self._state.values.get("origin_lla")
                 if old is not None and old != origin:
                     log.warning("the vehicle's EKF origin moved from %s to %s", old, origin)
@@ -197,9 +205,9 @@ class TelemetryWatchers:
             lla = finite_fields(fields, "latitude", "longitude", "altitude")
             if not self._from_vehicle(fields) or lla is None:
                 return
-            lat, lon = lla[0] / 1e7, lla[1] / 1e7
-            if (lat, lon) != (0.0, 0.0) and abs(lat) <= 90.0 and abs(lon) <= 180.0:
-                self._state.values["home_lla"] = (lat, lon, lla[2] / 1e3)
+            home = degrees_lla(lla)
+            if home is not None:
+                self._state.values["home_lla"] = home
             self._note("HOME_POSITION")
         await self._guarded("HOME_POSITION", lambda: self.messages("HOME_POSITION"), apply)
 

@@ -11,6 +11,12 @@ first-order filter (``scipy.signal.lfilter``); the small rotation of those axes 
 of reference heading enters as a correction input iterated to a fixed point. Where that does
 not apply (PID integrators on a turning trajectory, heading jumps) a per-period recursion (one
 matrix-vector product and a 2-D rotation per period) gives the same result. It neglects the
+heading tracking error in the rotations, the command limits (speed, slew and heading-rate
+limits, inactive on a feasible trajectory) and the input clipping
+(``saturated`` reports whether the real loop would clip); it agrees with the full loop to
+about a centimetre on unsaturated trajectories, and takes 10-30 ms of CPU for 60 s.
+The solvers are in :mod:`sim_vehicle.control.modal`, the closed loop's matrices in
+:mod:`sim_vehicle.control.closed_loop_model`.
 """
 
 from __future__ import annotations

@@ -1,16 +1,11 @@
 """Solvers of the closed-loop recursion: modal form with C-level IIR filters, or a per-period loop.
 
-Fast prediction
----------------
-:func:`simulate_closed_loop` predicts how the vehicle tracks a reference trajectory without
-stepping :class:`FlightController` and RK4: the closed loop (plant, with its servo lag if any,
-ZOH-discretised at the control rate, LQI, PID, feed-forward) is one linear system in the *reference heading frame*
-(position error and PID integrator expressed in axes turned by the reference heading). Its
-time-invariant part is diagonalised once per design and every mode is run through a C-level
-first-order filter (``scipy.signal.lfilter``); the small rotation of those axes by the change
-of reference heading enters as a correction input iterated to a fixed point. Where that does
-not apply (PID integrators on a turning trajectory, heading jumps) a per-period recursion (one
-matrix-vector product and a 2-D rotation per period) gives the same result. It neglects the
+The closed loop of :func:`sim_vehicle.control.closed_loop.simulate_closed_loop` is linear in the
+reference heading frame: its time-invariant part, diagonalised once per design, runs mode by
+mode through ``scipy.signal.lfilter`` (``run_modal``), the rotation by the change of reference
+heading entering as a correction input iterated to a fixed point; where that does not apply
+(PID integrators on a turning trajectory, heading jumps) ``run_recursion`` steps one
+matrix-vector product and a 2-D rotation per period. Both give the same result.
 """
 
 from __future__ import annotations
