@@ -13,13 +13,11 @@ is repeated and the error logged (once per source).
 
 What ``companion run`` does (``companion.daemon``): the event-loop thread that streams is given
 priority with ``raise_stream_priority`` (SCHED_FIFO when allowed) before the link connects;
-planning, threat decisions and M-GART refreshes run in a two-thread ``ThreadPoolExecutor``
-(``FlightDaemon.in_worker``) whose threads go back to normal priority
-(``restore_normal_priority``), so the threat manager's state stays in one process; and a short
-GIL switch interval hands the GIL back to the stream quickly. ``planning_worker_init`` is the
-initializer for planning in a niced worker *process* instead, the alternative measured in
-``docs/benchmarks/setpoint_jitter.md`` (``benchmarks/setpoint_jitter.py``), which the daemon
-does not use.
+planning, threat decisions and M-GART refreshes run in two warm worker *processes*
+(``companion.workers.PlanningWorkers``, started before the priority is raised and niced by
+``planning_worker_init``), so they compete with the stream for a core, never for the GIL; a short
+GIL switch interval hands the GIL back to the stream quickly from the process's own threads.
+``docs/BENCHMARKS.md`` (``benchmarks/setpoint_jitter.py``) compares it with planning in threads.
 """
 
 from __future__ import annotations

@@ -53,6 +53,8 @@ DEFAULT_URL = "udpin://0.0.0.0:14540"
 URL_SCHEMES = ("udpin://", "udpout://", "udp://", "tcpin://", "tcpout://", "tcp://", "serial://")
 #: How many recent STATUSTEXTs of the vehicle are kept (``VehicleLink.statustexts``).
 STATUSTEXT_KEEP = 64
+#: How long ``aclose`` waits for the cancelled telemetry subscriptions to end (s).
+CANCEL_WAIT_S = 5.0
 #: How long ``aclose`` waits for MAVSDK command calls still running before releasing MAVSDK.
 IN_FLIGHT_WAIT_S = 10.0
 
@@ -202,8 +204,11 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         tasks, self._tasks = self._tasks, []
         for task in tasks:
             task.cancel()
-        if tasks:
-            await asyncio.gather(*tasks, return_exceptions=True)
+        if tasks:                        # a subscription stuck in MAVSDK must not hold the close
+            _, stuck = await asyncio.wait(tasks, timeout=CANCEL_WAIT_S)
+            if stuck:
+                log.warning("closing the link: %d telemetry subscriptions did not end within %g s (%s)",
+                            len(stuck), CANCEL_WAIT_S, ", ".join(sorted(t.get_name() for t in stuck)))
         if self._in_flight:              # MAVSDK ends each within its own retries (a few seconds)
             await asyncio.wait(set(self._in_flight), timeout=IN_FLIGHT_WAIT_S)
         self.close()
