@@ -56,9 +56,11 @@ class LinkSettings:
         How long to wait for an autopilot at start (wall-clock seconds).
     setpoint_rate_hz : float
         GUIDED setpoint stream rate (default 50 Hz).
-    time_scale : float
-        Simulated seconds per wall-clock second: set it to ``sim-vehicle --speedup`` so that the
-        reference advances at the vehicle's pace (1 for a real vehicle).
+    time_scale : float or None
+        Vehicle seconds per wall-clock second, so that the reference advances at the vehicle's
+        pace. None (default): read from the vehicle at connection, its ``SIM_SPEEDUP``
+        parameter (``sim-vehicle --speedup``, ArduPilot SITL's ``--speedup``), 1 for a vehicle
+        without one (a real helicopter). ``--time-scale`` sets it.
     leg_timeout_margin_s : float
         A leg not reached this long (mission time) after its trajectory ended is an error: the
         vehicle is held and the flight ends.
@@ -85,7 +87,7 @@ class LinkSettings:
     connect: str = "udpin://0.0.0.0:14540"
     connect_timeout_s: float = 30.0
     setpoint_rate_hz: float = 50.0
-    time_scale: float = 1.0
+    time_scale: float | None = None
     leg_timeout_margin_s: float = 30.0
     on_interrupt: Literal["hold", "land", "rtl"] = "hold"
     record_rate_hz: float = 10.0
@@ -97,8 +99,8 @@ class LinkSettings:
 
     def __post_init__(self) -> None:
         require_numbers(ConfigError, "link", self, positive=(
-            "connect_timeout_s", "setpoint_rate_hz", "time_scale",
-            "leg_timeout_margin_s", "record_rate_hz", "status_rate_hz", "origin_timeout_s"))
+            "connect_timeout_s", "setpoint_rate_hz", "leg_timeout_margin_s", "record_rate_hz",
+            "status_rate_hz", "origin_timeout_s") + (() if self.time_scale is None else ("time_scale",)))
         if self.setpoint_rate_hz > 200:
             raise ConfigError(f"link.setpoint_rate_hz: at most 200, got {self.setpoint_rate_hz}")
 

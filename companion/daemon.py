@@ -52,7 +52,9 @@ leg and reference as the last one, is not run (``companion.workers.AlternativesG
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
+import math
 import sys
 
 import numpy as np
@@ -123,7 +125,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
                                 adsb=settings.adsb.enabled,
                                 signing_key=SigningKey.from_file(settings.link.signing_key_file),
                                 tlog_path=settings.link.tlog_file or None)
-        self.clock = VehicleClock(settings.link.time_scale)
+        self.clock = VehicleClock(settings.link.time_scale or 1.0)   # the vehicle's, once connected
         self.streamer: SetpointStreamer | None = None
         self.reference: ActiveReference | None = None
         self.recorder: RecordSinks | None = None
@@ -240,6 +242,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         raise_stream_priority()              # before connect: MAVSDK's threads inherit it
         await self.link.connect(s.link.connect, s.link.connect_timeout_s)
         try:
+            await self._take_time_scale()
             return await self._fly()
         except asyncio.CancelledError:
             self.summary.outcome = "interrupted"
@@ -256,6 +259,20 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
             raise
         finally:
             await self.shutdown()
+
+    async def _take_time_scale(self) -> None:
+        """The vehicle's speed-up (``SIM_SPEEDUP``) unless ``link.time_scale`` is given; 1 for a
+        vehicle without that parameter. Every later reader sees it in ``self.settings``."""
+        link = self.settings.link
+        scale, source = link.time_scale, "given"
+        if scale is None:
+            got = await self.link.read_params(["SIM_SPEEDUP"], timeout_s=self.settings.startup.param_timeout_s)
+            value = got.get("SIM_SPEEDUP", math.nan)
+            scale, source = ((value, "the vehicle's SIM_SPEEDUP") if math.isfinite(value) and value > 0
+                             else (1.0, "real time: the vehicle has no SIM_SPEEDUP"))
+        self.settings = dataclasses.replace(self.settings, link=dataclasses.replace(link, time_scale=float(scale)))
+        self.clock.scale = float(scale)
+        log.info("time scale %g (%s)", scale, source)
 
     async def _fly(self) -> FlightSummary:
         s = self.settings

@@ -89,8 +89,9 @@ class Injection:
     speed_m_s : float
         Moving threats move at this speed ...
     heading : str
-        ... ``across`` the path (towards it, perpendicular) or ``head_on`` (back along it,
-        towards the vehicle).
+        ... ``across`` the path (towards it, perpendicular) or ``head_on`` (straight at the
+        vehicle: from the meeting point towards the reference position now, level, so that on
+        a curving leg too it comes at the vehicle and a hover in its way is no escape).
     frame : str
         ``local_ned`` or ``global`` (the threat is sent as lat/lon/alt about ``DEMO_HOME``).
     ttl_s : float
@@ -188,7 +189,11 @@ def place(injection: Injection, watcher: FlightWatcher) -> Threat:
     meet = pos + injection.lateral_m * right
     velocity = np.zeros(3)
     if injection.speed_m_s > 0 and injection.heading == "head_on":
-        velocity = -injection.speed_m_s * np.append(direction[:2], 0.0) / max(np.linalg.norm(direction[:2]), 1e-9)
+        here = watcher.reference_at(now)[0]
+        towards = np.append(here[:2] - meet[:2], 0.0)
+        norm = np.linalg.norm(towards)
+        towards = towards / norm if norm > 1e-6 else -np.append(direction[:2], 0.0)
+        velocity = injection.speed_m_s * towards
     elif injection.speed_m_s > 0:
         velocity = -np.sign(injection.lateral_m or 1.0) * injection.speed_m_s * right
     position = tuple(map(float, meet))
@@ -281,7 +286,7 @@ def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
                 out_dir / "sim_vehicle.log", env)
     record, log_path = out_dir / record_name, out_dir / "companion.log"
     companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
-                       "--mission", str(mission), "--time-scale", str(speedup),
+                       "--mission", str(mission),           # the time scale: the vehicle's SIM_SPEEDUP
                        "--zenoh-listen", endpoint, "--record", str(record), *extra_args], log_path, env)
     try:
         yield FlightProcesses(sim, companion, vehicle_port, endpoint, record, log_path)

@@ -48,7 +48,7 @@ class LegTasks:
                 self.rotor_plan = rotor_plan(st, await read_rotor_parameters(self.link, st))
             return
         self.rotor_plan = await start_vehicle(
-            self.link, st, alt_m, self.clock.now_s, time_scale=self.settings.link.time_scale,
+            self.link, st, alt_m, self.clock.now_s, time_scale=self.clock.scale,
             climb_speed_m_s=self.settings.flight.climb_speed_m_s, event=self.event)
         self.event("takeoff_complete", alt_m=alt_m)
 
@@ -124,7 +124,7 @@ class LegTasks:
         self.event("reached", leg=leg.index, seq=leg.waypoint.seq,
                    error_m=round(float(np.linalg.norm(self.link.telemetry.pos_ned_m - leg.goal_ned_m)), 3))
         if leg.waypoint.hold_s > 0:
-            await asyncio.sleep(leg.waypoint.hold_s / self.settings.link.time_scale)
+            await asyncio.sleep(leg.waypoint.hold_s / self.clock.scale)
 
     async def set_mission_current(self, seq: int) -> None:
         """Make ``seq`` (the goal of the leg now flown) the vehicle's current mission item

@@ -145,7 +145,7 @@ class MissionTasks:
         if end_action in ("land", "rtl"):
             await self.link.land()
             self.event("landing")
-            await self.link.wait_for(lambda t: t.armed is False, 60.0 + 120.0 / self.settings.link.time_scale,
+            await self.link.wait_for(lambda t: t.armed is False, 60.0 + 120.0 / self.clock.scale,
                                      "the landing and disarm")
             self.summary.landed = True
             self.event("landed")

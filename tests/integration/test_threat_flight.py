@@ -107,6 +107,7 @@ def separation_m(flight, threat_id) -> float:
 
 def test_the_flight_completes_despite_the_threats(flight):
     assert flight["rc"] == 0, flight["log"][-3000:]
+    assert f"time scale {SPEEDUP:g} (the vehicle's SIM_SPEEDUP)" in flight["log"]     # no --time-scale given
     assert flight["summary"]["outcome"] == "completed"
     assert flight["summary"]["landed"] is True
     assert flight["summary"]["legs_reached"] == flight["summary"]["legs_planned"]
