@@ -87,6 +87,14 @@ __all__ = ["CompanionDaemon", "FlightAborted", "FlightSummary", "feasibility_tot
            "GUIDED", "ZENOH_WATCH_PERIOD_S"]
 
 
+def companion_link(settings: Settings, onboard=None) -> VehicleLink:
+    """The companion's link to its vehicle, as ``settings.link`` and ``settings.adsb`` say (not
+    connected yet); ``onboard``: speak as the companion component too (``companion serve``)."""
+    return VehicleLink("companion", streams=settings.link.streams, adsb=settings.adsb.enabled,
+                       signing_key=SigningKey.from_file(settings.link.signing_key_file),
+                       tlog_path=settings.link.tlog_file or None, onboard=onboard)
+
+
 class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
     """The companion service for one vehicle (see the module docstring).
 
@@ -108,10 +116,18 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
     workers : str
         Where planning runs (``companion.workers.PlanningWorkers``): ``"process"`` (default)
         or ``"thread"``.
+    link : VehicleLink, optional
+        A link already connected that outlives this flight (``companion serve``'s,
+        ``companion.service.serve``): used as it is, left open. Default: a link of its own,
+        connected by ``run`` (after raising the stream's priority) and closed at the end.
+    bus : ThreatBus, optional
+        A zenoh session that outlives this flight (``companion serve``'s): the threat reactor
+        subscribes on it for the flight and leaves it open.
     """
 
     def __init__(self, settings: Settings, *, mission_path=None, world_path=None,
-                 record_path=None, resume: bool = False, workers: str = "process"):
+                 record_path=None, resume: bool = False, workers: str = "process",
+                 link: VehicleLink | None = None, bus=None):
         if resume and mission_path is not None:
             raise MissionError("--resume flies the mission stored on the vehicle: leave out --mission")
         self.settings = settings
@@ -121,10 +137,10 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         self.world_path = world_path
         self.record_path = record_path
         self.rng = np.random.default_rng(settings.seed)
-        self.link = VehicleLink("companion", streams=settings.link.streams,
-                                adsb=settings.adsb.enabled,
-                                signing_key=SigningKey.from_file(settings.link.signing_key_file),
-                                tlog_path=settings.link.tlog_file or None)
+        self.owns_link = link is None
+        self.link = link if link is not None else companion_link(settings)
+        self.bus = bus
+        self._stop_link_listener = None
         self.clock = VehicleClock(settings.link.time_scale or 1.0)   # the vehicle's, once connected
         self.streamer: SetpointStreamer | None = None
         self.reference: ActiveReference | None = None
@@ -239,8 +255,9 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         # the link exists (the forkserver is exec'd from here); they warm up meanwhile
         self._workers_ready = self.workers.start()
         self.recorder = self._open_record()  # before the priority: the live server's threads stay normal
-        raise_stream_priority()              # before connect: MAVSDK's threads inherit it
-        await self.link.connect(s.link.connect, s.link.connect_timeout_s)
+        if self.owns_link:
+            raise_stream_priority()          # before connect: MAVSDK's threads inherit it
+            await self.link.connect(s.link.connect, s.link.connect_timeout_s)
         try:
             await self._take_time_scale()
             return await self._fly()
@@ -297,7 +314,8 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
                 s, clock_now_s=self.clock.now_s, in_worker=AlternativesGate(self.in_worker), rng=self.rng,
                 engage=self.engage, send_now=self.send_now, reference=lambda: self.reference,
                 position_ned_m=lambda: self.link.telemetry.pos_ned_m, record=self.record,
-                statustext=self.send_statustext)
+                statustext=self.send_statustext, bus=self.bus,
+                keep_bus_open=self.bus is not None)
             await self.threats.start(home)
             self._open_snapshots(home)
         self._start_background()
@@ -352,4 +370,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         if self.recorder is not None:
             self.recorder.close()
         self.workers.shutdown()
-        await self.link.aclose()
+        if self._stop_link_listener is not None:
+            self._stop_link_listener()
+        if self.owns_link:
+            await self.link.aclose()

@@ -51,10 +51,22 @@ def register(subparsers) -> None:
         "(G2 by default), take off and fly it in GUIDED by 50 Hz setpoints; answer zenoh "
         "threats by replanning or switching; land or RTL as the mission says.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_flight_arguments(p)
+    p.add_argument("--mission", help=".plan or QGC WPL 110 file to upload and fly")
+    p.add_argument("--record", metavar="FILE",
+                   help="write the flight record here: MCAP (Foxglove opens it) when FILE ends in "
+                   ".mcap, else JSON Lines")
+    p.add_argument("--resume", action="store_true",
+                   help="take over a vehicle already flying its mission after a companion crash: "
+                   "fly on from its current mission item, with the threats of the --state-dir snapshot")
+    p.set_defaults(func=run)
+
+
+def add_flight_arguments(p) -> None:
+    """The options ``companion run`` and ``companion serve`` share (vehicle, zenoh, view, planners)."""
     p.add_argument("--connect", help="MAVSDK URL of the vehicle (default udpin://0.0.0.0:14540)")
     p.add_argument("--config", help="settings file (TOML); see --print-config")
     add_signing_argument(p)
-    p.add_argument("--mission", help=".plan or QGC WPL 110 file to upload and fly")
     p.add_argument("--world", help="world file with extra obstacles (local NED about home)")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", default=None,
                    help="zenoh endpoint to listen on (repeatable), e.g. tcp/0.0.0.0:7447")
@@ -64,9 +76,6 @@ def register(subparsers) -> None:
                    help="zenoh configuration file (JSON5, e.g. from `companion keys init`): mutual TLS "
                    "and access control; its endpoints replace the default ones")
     p.add_argument("--no-zenoh", action="store_true", help="fly without zenoh (no threats, no status)")
-    p.add_argument("--record", metavar="FILE",
-                   help="write the flight record here: MCAP (Foxglove opens it) when FILE ends in "
-                   ".mcap, else JSON Lines")
     p.add_argument("--foxglove", metavar="[HOST:]PORT",
                    help="serve the flight live to Foxglove (WebSocket; host 127.0.0.1 unless given): "
                    "3D scene, map, decisions, threats (view.foxglove)")
@@ -74,7 +83,8 @@ def register(subparsers) -> None:
                    help="record the MAVLink traffic with the vehicle, both ways, to this .tlog (link.tlog_file)")
     p.add_argument("--seed", type=int, help="random seed of the planners (default from settings)")
     p.add_argument("--time-scale", type=float, metavar="X",
-                   help="vehicle seconds per wall-clock second: sim-vehicle's --speedup")
+                   help="vehicle seconds per wall-clock second (default: read from the vehicle, "
+                   "its SIM_SPEEDUP; 1 without it)")
     p.add_argument("--smooth", choices=("g1", "g2", "none"), help="smoother (default g2)")
     p.add_argument("--vehicle", choices=("helicopter", "multirotor"),
                    help="vehicle profile (default helicopter: motor interlock and rotor run-up "
@@ -84,9 +94,6 @@ def register(subparsers) -> None:
                    "default) or the safety pilot's RC switch")
     p.add_argument("--adsb", action="store_true",
                    help="treat ADS-B traffic (ADSB_VEHICLE) as moving threats")
-    p.add_argument("--resume", action="store_true",
-                   help="take over a vehicle already flying its mission after a companion crash: "
-                   "fly on from its current mission item, with the threats of the --state-dir snapshot")
     p.add_argument("--state-dir", metavar="DIR",
                    help="keep the threat snapshot here (state.dir): written as threats change, "
                    "read by --resume")
@@ -95,7 +102,6 @@ def register(subparsers) -> None:
     p.add_argument("--print-config", nargs="?", const="toml", choices=("toml", "json"), metavar="FORMAT",
                    help="print the effective settings and exit, as TOML that --config reads back "
                    "(default) or as JSON")
-    p.set_defaults(func=run)
 
 
 def settings_overrides(args: argparse.Namespace) -> dict:
@@ -136,24 +142,34 @@ def settings_overrides(args: argparse.Namespace) -> dict:
     return out
 
 
-def run(args: argparse.Namespace) -> int:
-    import asyncio
-    import signal
-
+def flight_settings(args: argparse.Namespace):
+    """The settings of ``args`` (a zenoh configuration file checked); None when
+    ``--print-config`` printed them instead."""
     from companion.config import load_settings, settings_to_dict, settings_to_toml
-    from companion.daemon import CompanionDaemon
-    from companion.errors import FlightAborted, VehicleRefused
 
     settings = load_settings(args.config, settings_overrides(args))
     if args.print_config:
         text = (json.dumps(settings_to_dict(settings), indent=2) if args.print_config == "json"
                 else settings_to_toml(settings))
         sys.stdout.write(text if text.endswith("\n") else text + "\n")
-        return 0
+        return None
     if settings.zenoh.enabled and settings.zenoh.config:      # a bad file: refused before any flight
         from companion.threats.access import load_config
 
         load_config(settings.zenoh.config)
+    return settings
+
+
+def run(args: argparse.Namespace) -> int:
+    import asyncio
+    import signal
+
+    from companion.daemon import CompanionDaemon
+    from companion.errors import FlightAborted, VehicleRefused
+
+    settings = flight_settings(args)
+    if settings is None:
+        return 0
     daemon = CompanionDaemon(settings, mission_path=args.mission, world_path=args.world,
                              record_path=args.record, resume=args.resume)
 

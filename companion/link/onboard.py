@@ -37,19 +37,25 @@ class OnboardComponent:
 
     Parameters
     ----------
-    system_id : int
-        The vehicle's system id (the companion belongs to that system).
+    system_id : int or None
+        The vehicle's system id (the companion belongs to that system); None until the link
+        knows it (``set_system``): meanwhile nothing is addressed to us and no HEARTBEAT goes out.
     on_command : callable
         ``on_command(OnboardCommand) -> int``: the MAV_RESULT to answer. Called on the gate's
         thread; hand the work to the event loop and answer quickly (``MAV_RESULT_ACCEPTED``,
         ``..._TEMPORARILY_REJECTED``, ``..._UNSUPPORTED`` ...).
     """
 
-    def __init__(self, system_id: int, on_command: Callable[[OnboardCommand], int]) -> None:
-        self.system_id = system_id
+    def __init__(self, system_id: int | None, on_command: Callable[[OnboardCommand], int]) -> None:
         self.on_command = on_command
         self.active = False                            # MAV_STATE_ACTIVE while a flight runs
-        self._mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=COMPONENT_ID)
+        self.system_id: int | None = None
+        self.set_system(system_id)
+
+    def set_system(self, system_id: int | None) -> None:
+        """Belong to vehicle ``system_id`` (the link calls it once it has heard the autopilot)."""
+        self.system_id = system_id
+        self._mav = mavlink.MAVLink(None, srcSystem=system_id or 0, srcComponent=COMPONENT_ID)
 
     def addressed_to_us(self, msg) -> bool:
         """Is ``msg`` a command for this component (not a broadcast)?"""
@@ -71,8 +77,10 @@ class OnboardComponent:
                                            command.sender_component)
         return bytes(ack.pack(self._mav))
 
-    def heartbeat(self) -> bytes:
-        """Our HEARTBEAT: an onboard controller, standby or active."""
+    def heartbeat(self) -> bytes | None:
+        """Our HEARTBEAT: an onboard controller, standby or active (None before ``set_system``)."""
+        if self.system_id is None:
+            return None
         state = mavlink.MAV_STATE_ACTIVE if self.active else mavlink.MAV_STATE_STANDBY
         hb = self._mav.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID,
                                         0, 0, state)

@@ -16,6 +16,8 @@ microseconds per frame), so the asyncio loop that streams setpoints never parses
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import logging
 import select
 import socket
@@ -30,6 +32,8 @@ from mavlink_signing import SignatureCheck
 log = logging.getLogger(__name__)
 
 MAX_DATAGRAM = 65535
+#: The gate thread's longest wait for traffic (s): its own frames wait at most this long.
+SELECT_TIMEOUT_S = 0.2
 
 
 def split_url(url: str) -> tuple[str, str, int]:
@@ -147,6 +151,7 @@ class GateThread:
         self.inbound, self.outbound, self.tlog = inbound, outbound, tlog
         self.onboard_period_s = onboard_period_s
         self._heartbeat_due_s = 0.0
+        self._own: collections.deque[bytes] = collections.deque()   # post_own's, sent by the gate's thread
         self.vehicle = open_vehicle_side(url)
         self.local = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.local.bind(("127.0.0.1", 0))
@@ -164,8 +169,12 @@ class GateThread:
         return self
 
     def close(self) -> None:
+        """Stop the thread (the frames ``post_own`` still holds are sent first) and close."""
         self._stop.set()
         self._thread.join(timeout=2.0)
+        while self._own:
+            with contextlib.suppress(OSError, ValueError):
+                self.send_own(self._own.popleft())
         self.vehicle.close()
         self.local.close()
         if self.tlog is not None:
@@ -179,17 +188,26 @@ class GateThread:
             if self.tlog is not None:
                 self.tlog.write(signed)
 
+    def post_own(self, frame: bytes) -> None:
+        """Send a frame of the companion's own component from any thread (the gate's thread
+        signs and sends it within its next turn, at most ``SELECT_TIMEOUT_S``)."""
+        self._own.append(frame)
+
     def _onboard_heartbeat(self) -> None:
         now = time.monotonic()
         if self.inbound.onboard is not None and now >= self._heartbeat_due_s:
             self._heartbeat_due_s = now + self.onboard_period_s
-            self.send_own(self.inbound.onboard.heartbeat())
+            frame = self.inbound.onboard.heartbeat()
+            if frame is not None:
+                self.send_own(frame)
 
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
                 self._onboard_heartbeat()
-                ready, _, _ = select.select([self.vehicle, self.local], [], [], 0.2)
+                while self._own:
+                    self.send_own(self._own.popleft())
+                ready, _, _ = select.select([self.vehicle, self.local], [], [], SELECT_TIMEOUT_S)
             except (OSError, ValueError):
                 return                              # closed under us
             for side in ready:
@@ -217,9 +235,18 @@ class GateThread:
     def _from_mavsdk(self) -> None:
         data, self.mavsdk_address = self.local.recvfrom(MAX_DATAGRAM)
         for frame in self.outbound.convert(data):
+            if self.inbound.onboard is not None and is_heartbeat(frame):
+                continue                            # the companion component's own HEARTBEAT speaks for us
             self.vehicle.write(frame)
             if self.tlog is not None:
                 self.tlog.write(frame)
+
+
+def is_heartbeat(frame: bytes) -> bool:
+    """Is ``frame`` (one MAVLink 1 or 2 frame) a HEARTBEAT (message id 0)?"""
+    if frame[:1] == b"\xfd":
+        return frame[7:10] == b"\x00\x00\x00"
+    return frame[:1] == b"\xfe" and frame[5:6] == b"\x00"
 
 
 def open_gate(url: str, key: SigningKey | None = None, link_id: int = 0,

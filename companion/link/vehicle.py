@@ -86,6 +86,10 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         Sign everything sent and accept only frames signed with it (``companion.link.gate``).
     tlog_path : str, optional
         Record the link's traffic, both ways, to this ``.tlog`` file (``heli_common.tlog``).
+    onboard : OnboardComponent, optional
+        Speak as the companion component of the vehicle's system (``companion.link.onboard``:
+        its HEARTBEAT instead of MAVSDK's, commands addressed to it answered); it learns the
+        vehicle's system id on ``connect``.
 
     Examples
     --------
@@ -98,7 +102,7 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
 
     def __init__(self, role: str = "companion", *, streams: StreamSettings | None = None,
                  adsb: bool = False, signing_key: SigningKey | None = None,
-                 tlog_path: str | None = None) -> None:
+                 tlog_path: str | None = None, onboard=None) -> None:
         if role not in ("companion", "gcs"):
             raise LinkError(f"role must be 'companion' or 'gcs', got {role!r}")
         self.role = role
@@ -112,6 +116,7 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self.adsb = bool(adsb)
         self.signing_key = signing_key
         self.tlog_path = tlog_path or None
+        self.onboard = onboard
         self.gate: GateThread | None = None
         self.streams: StreamKeeper | None = None
         self.statustexts: collections.deque = collections.deque(maxlen=STATUSTEXT_KEEP)
@@ -150,7 +155,7 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         route_mavsdk_logs()
         kind = (ComponentType.COMPANION_COMPUTER if self.role == "companion"
                 else ComponentType.GROUND_STATION)
-        self.gate = open_gate(url, self.signing_key, tlog_path=self.tlog_path)
+        self.gate = open_gate(url, self.signing_key, tlog_path=self.tlog_path, onboard=self.onboard)
         self._mavsdk = Mavsdk(Configuration.create_with_component_type(kind))
         self._command_lock = asyncio.Lock()
         self._mission_lock = asyncio.Lock()
@@ -167,6 +172,8 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self.url = url
         self._system = system
         self.target_system = await system.get_system_id()
+        if self.onboard is not None:
+            self.onboard.set_system(self.target_system)
         self._direct = MavlinkDirectAsync(system)
         self._direct_sync = MavlinkDirect(system._system)
         self._mission = MissionRawAsync(system)
@@ -219,9 +226,11 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
     async def __aexit__(self, *exc) -> None:
         await self.aclose()
 
-    def on_link_change(self, callback: Callable[[bool], None]) -> None:
-        """Call ``callback(connected)`` on the loop when the heartbeat is lost or is back."""
+    def on_link_change(self, callback: Callable[[bool], None]) -> Callable[[], None]:
+        """Call ``callback(connected)`` on the loop when the heartbeat is lost or is back;
+        returns the function that stops it."""
         self._link_listeners.append(callback)
+        return lambda: self._link_listeners.remove(callback) if callback in self._link_listeners else None
 
     @property
     def connected(self) -> bool:

@@ -120,4 +120,4 @@ class BackgroundTasks:
             coros.append(self._watch_zenoh())
         for coro in coros:
             self._tasks.append(loop.create_task(coro, name=coro.__name__))
-        self.link.on_link_change(self._on_link_change)
+        self._stop_link_listener = self.link.on_link_change(self._on_link_change)

@@ -205,6 +205,18 @@ class ThreatBus(ThreatInbound, CompanionOutbound, ThreatClient):
         self._publishers.clear()
         session.close()
 
+    def unsubscribe(self) -> None:
+        """Undeclare the threat subscription and the threat list (``subscribe``,
+        ``serve_threats``); the session stays open for the next flight's."""
+        for ent in (self._subscriber, self._queryable):
+            if ent is not None:
+                try:
+                    ent.undeclare()
+                except Exception as exc:   # the session is closing
+                    log.debug("undeclare: %s", exc)
+        self._subscriber = self._queryable = None
+        self._handler = self._loop = None
+
     def __enter__(self) -> "ThreatBus":
         return self.open()
 

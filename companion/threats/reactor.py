@@ -96,7 +96,11 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
     statustext : callable (text, severity_name) or None
         Sends a STATUSTEXT to the ground stations (through the vehicle); None: not told.
     bus : ThreatBus, optional
-        Default ``ThreatBus.from_settings(settings.zenoh, clock=clock_now_s)``.
+        Default ``ThreatBus.from_settings(settings.zenoh, clock=clock_now_s)``; stamped with
+        this clock, opened at ``start``.
+    keep_bus_open : bool
+        The bus outlives this flight (``companion serve``'s session): ``stop`` only
+        unsubscribes, it does not close it.
     manager_factory : callable (leg) -> ThreatManager, optional
         Builds the flight's manager at the first leg (default: a ``ThreatManager`` from
         ``settings``).
@@ -111,7 +115,8 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
                  engage: Callable, send_now: Callable[[], None], reference: Callable,
                  position_ned_m: Callable, record: Callable, statustext: Callable | None = None,
                  bus: ThreatBus | None = None, manager_factory: Callable | None = None,
-                 monitor_period_s: float = MONITOR_PERIOD_S, on_table_change: Callable | None = None):
+                 monitor_period_s: float = MONITOR_PERIOD_S, on_table_change: Callable | None = None,
+                 keep_bus_open: bool = False):
         self.settings = settings
         self.clock_now_s = clock_now_s
         self.in_worker = in_worker
@@ -122,7 +127,9 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         self.position_ned_m = position_ned_m
         self.record = record
         self.statustext = statustext
+        self.keep_bus_open = keep_bus_open
         self.bus = bus if bus is not None else ThreatBus.from_settings(settings.zenoh, clock=clock_now_s)
+        self.bus.clock = clock_now_s
         self.manager_factory = manager_factory or self._default_manager
         self.monitor_period_s = float(monitor_period_s)
         self.on_table_change = on_table_change
@@ -159,12 +166,15 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
             self._tasks.append(loop.create_task(coro, name=coro.__name__))
 
     async def stop(self) -> None:
-        """Stop the background tasks and close the bus."""
+        """Stop the background tasks and close the bus (a bus given is only unsubscribed)."""
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         self._tasks.clear()
-        self.bus.close()
+        if self.keep_bus_open:
+            self.bus.unsubscribe()
+        else:
+            self.bus.close()
 
     def publish_status(self, status: dict) -> None:
         """Publish ``status`` (``uav/<sysid>/status``) with the number of threats held."""

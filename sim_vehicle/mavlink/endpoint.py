@@ -32,7 +32,7 @@ COMPONENT_ID = 1
 RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
 STATUSTEXT_CHUNK = 50
 #: Broadcast messages of other components forwarded between links (:meth:`Endpoint.route`), as ArduPilot does.
-ROUTED = frozenset({"STATUSTEXT"})
+ROUTED = frozenset({"STATUSTEXT", "HEARTBEAT"})
 
 Address = tuple[str, int]
 
@@ -118,6 +118,8 @@ class Endpoint:
         self.signing = VehicleSigning(self.mav, signing_key, accept_signing_setup)
         self.outs: list[Address] = [resolve(a) for a in outs]
         self.peers: dict[Address, float] = {}
+        #: Where each other component was last heard: (system, component) -> address (routing).
+        self.routes: dict[tuple[int, int], Address] = {}
         self._deliver = deliver
         self._statustext_id = 0
         self._tlog = TlogWriter(tlog_path) if tlog_path else None
@@ -160,18 +162,35 @@ class Endpoint:
         self._transmit(buf, targets, "send")
 
     def route(self, msg: Any, came_from: Address) -> None:
-        """Forward a broadcast message of another component to every other destination.
+        """Forward another component's message, as ArduPilot's MAVLink routing does
+        (``GCS_MAVLink/MAVLink_routing.cpp``), never back where it came from, never our own.
 
-        ArduPilot's MAVLink routing (``GCS_MAVLink/MAVLink_routing.cpp``) forwards a message
-        without a target to all its links but the one it came in on, so a companion's
-        STATUSTEXT shows on every ground station. Only the types in :data:`ROUTED` are
-        forwarded here (unchanged, with the sender's ids), never back to the sender, never our own.
+        - A message addressed to another component (``target_system`` / ``target_component``,
+          e.g. a ground station's MISSION_START to the companion, 191, or the companion's
+          COMMAND_ACK back to that ground station) goes to the link where that component was
+          last heard (:attr:`routes`; ``target_component`` 0 of another system: every component
+          heard of it). Unlike ArduPilot, a message to our own system with ``target_component``
+          0 is handled here only, not also forwarded to the companion.
+        - A broadcast of a type in :data:`ROUTED` (STATUSTEXT, HEARTBEAT) goes to every other
+          destination, so a ground station sees the companion component and its texts.
         """
-        if msg.get_type() not in ROUTED or (msg.get_srcSystem(), msg.get_srcComponent()) == \
-                (self.sysid, COMPONENT_ID):
+        source = (msg.get_srcSystem(), msg.get_srcComponent())
+        if source == (self.sysid, COMPONENT_ID):
             return
-        targets = [dest for dest in self.destinations() if dest != came_from]
-        self._transmit(bytes(msg.get_msgbuf()), targets, "forward")
+        target_system = getattr(msg, "target_system", 0)
+        target_component = getattr(msg, "target_component", 0)
+        if target_system:
+            if target_system == self.sysid and target_component in (0, COMPONENT_ID):
+                return
+            targets = {address for (sysid, compid), address in self.routes.items()
+                       if sysid == target_system and target_component in (0, compid)}
+        elif msg.get_type() in ROUTED:
+            targets = set(self.destinations())
+        else:
+            return
+        targets.discard(came_from)
+        if targets:
+            self._transmit(bytes(msg.get_msgbuf()), sorted(targets), "forward")
 
     def _transmit(self, buf: bytes, targets: Iterable[Address], what: str) -> None:
         for address in targets:
@@ -249,6 +268,7 @@ class Endpoint:
     def _accept(self, msg: Any, address: Address) -> None:
         self.stats.messages_in += 1
         self.peers[address] = self.wall_s()  # before dispatch: a reply broadcast (STATUSTEXT) reaches it too
+        self.routes[(msg.get_srcSystem(), msg.get_srcComponent())] = address
         if self._tlog is not None:
             self._record(bytes(msg.get_msgbuf()))
         try:

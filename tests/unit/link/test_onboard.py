@@ -72,3 +72,26 @@ def test_the_gate_answers_commands_for_the_companion_signed_and_keeps_them_from_
     assert (ack.get_srcSystem(), ack.get_srcComponent()) == (3, COMPONENT_ID)
     assert identity == Identity(system=1, component=195)         # our own frames teach nothing
     assert OutboundSigner(Identity()).sign(onboard.heartbeat()) == onboard.heartbeat()   # no key: as is
+
+
+def test_the_component_learns_its_system_and_is_silent_before():
+    onboard = OnboardComponent(None, lambda cmd: 0)
+    assert onboard.heartbeat() is None
+    assert not onboard.addressed_to_us(gcs_command(COMPONENT_ID))
+    onboard.set_system(3)
+    assert (parse(onboard.heartbeat()).get_srcSystem(), onboard.addressed_to_us(gcs_command(COMPONENT_ID))) == (3, True)
+
+
+def test_heartbeats_are_told_from_other_frames_in_both_versions():
+    from pymavlink.dialects.v10 import ardupilotmega as mavlink1
+
+    from companion.link.transport import is_heartbeat
+
+    v2 = mavlink.MAVLink(None, srcSystem=1, srcComponent=195)
+    v1 = mavlink1.MAVLink(None, srcSystem=1, srcComponent=195)
+    for mav in (v2, v1):
+        hb = mav.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        assert is_heartbeat(bytes(hb.pack(mav)))
+        text = mav.statustext_encode(mavlink.MAV_SEVERITY_INFO, b"x")
+        assert not is_heartbeat(bytes(text.pack(mav)))
+    assert not is_heartbeat(b"") and not is_heartbeat(b"\x00" * 12)
