@@ -332,6 +332,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
                 await self.restore_mission(previous)
             raise
         self.streamer = SetpointStreamer(self.link.send_setpoint, rate_hz=s.link.setpoint_rate_hz)
+        self.recorder.pace(self.streamer.after_next_tick)     # the record is written between sends
         self.hold_here(self.link.telemetry.pos_ned_m,
                        "joined in the air" if self.summary.joined else "takeoff complete")
         self.streamer.start()

@@ -39,10 +39,10 @@ async def connect(url: str, within_s: float):
             await asyncio.sleep(0.2)
 
 
-async def collect(port: int, topics: set[str], seconds: float, host: str = "127.0.0.1",
+async def collect(port: int, topics: set[str] | None, seconds: float, host: str = "127.0.0.1",
                   until=None, connect_within_s: float = 30.0) -> Received:
-    """Subscribe to ``topics`` (as soon as they are advertised) and collect for ``seconds``, or
-    until ``until()`` is true (polled every 0.2 s) or the server closes."""
+    """Subscribe to ``topics`` (None: every topic; as soon as they are advertised) and collect
+    for ``seconds``, or until ``until()`` is true (polled every 0.2 s) or the server closes."""
     got = Received()
     subscribed: dict[int, str] = {}                              # subscription id -> topic
     ws = await connect(f"ws://{host}:{port}", connect_within_s)
@@ -64,7 +64,7 @@ async def collect(port: int, topics: set[str], seconds: float, host: str = "127.
                 wanted = []
                 for channel in message["channels"]:
                     got.channels[channel["id"]] = channel
-                    if channel["topic"] in topics and channel["id"] not in subscribed:
+                    if (topics is None or channel["topic"] in topics) and channel["id"] not in subscribed:
                         subscribed[channel["id"]] = channel["topic"]
                         wanted.append({"id": channel["id"], "channelId": channel["id"]})
                 if wanted:
@@ -82,3 +82,18 @@ def _data(frame: bytes, subscribed: dict[int, str], got: Received) -> None:
     channel = next(c for c in got.channels.values() if c["topic"] == topic)
     payload = frame[13:]
     got.messages.setdefault(topic, []).append(json.loads(payload) if channel["encoding"] == "json" else payload)
+
+
+def main(argv=None) -> int:
+    """``python foxglove_client.py PORT SECONDS``: subscribe to every topic for SECONDS and
+    print ``{topic: messages received}`` as JSON (a viewer in another process, for benchmarks)."""
+    import sys
+
+    port, seconds = (sys.argv[1:] if argv is None else argv)[:2]
+    got = asyncio.run(collect(int(port), None, float(seconds)))
+    print(json.dumps({topic: len(messages) for topic, messages in sorted(got.messages.items())}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -5,6 +5,8 @@ deliver them at a steady rate whatever else it is doing (planning, smoothing, th
 ``SetpointStreamer`` is an asyncio task that sends one setpoint per period on absolute
 deadlines of the monotonic clock (``t_k = t_0 + k * period``: no drift, a late wake-up does not
 delay the next one; a deadline missed by more than a period is skipped, never sent in a burst).
+On Linux the deadlines are a kernel periodic timer the loop waits on (``companion.link.timerfd``:
+asyncio's own timers wake up to 1 ms late, rounded to epoll's milliseconds).
 
 The setpoint comes from a callable ``setpoint_at(t_monotonic_s) -> Setpoint`` that the daemon
 replaces atomically with ``set_source`` (a single attribute store) when a new trajectory is
@@ -31,6 +33,8 @@ from array import array
 from typing import Callable, NamedTuple
 
 import numpy as np
+
+from companion.link.timerfd import PeriodicTimer
 
 log = logging.getLogger(__name__)
 
@@ -218,6 +222,7 @@ class SetpointStreamer:
         self.missed = 0
         self.sent = 0
         self.send_errors = 0
+        self._tick_waiters: list[asyncio.Future] = []
 
     # ---------------------------------------------------------------- control
 
@@ -245,6 +250,23 @@ class SetpointStreamer:
             except asyncio.CancelledError:
                 pass
             self._task = None
+        self._release_tick_waiters()
+
+    def after_next_tick(self) -> asyncio.Future:
+        """A future done right after the next scheduled send (at once when not streaming): work
+        started there has a whole period before the next send, so it never delays one."""
+        future = asyncio.get_running_loop().create_future()
+        if self.running:
+            self._tick_waiters.append(future)
+        else:
+            future.set_result(None)
+        return future
+
+    def _release_tick_waiters(self) -> None:
+        waiters, self._tick_waiters = self._tick_waiters, []
+        for future in waiters:
+            if not future.done():
+                future.set_result(None)
 
     @property
     def running(self) -> bool:
@@ -253,14 +275,38 @@ class SetpointStreamer:
     # ---------------------------------------------------------------- loop
 
     async def run(self) -> None:
-        """Stream until cancelled."""
+        """Stream until cancelled: on a kernel periodic timer (``companion.link.timerfd``,
+        Linux) when there is one and ``spin_s`` is 0, else on the loop's timer."""
         t0 = time.monotonic()
+        timer = PeriodicTimer.open(t0 + self.period_s, self.period_s) if self._spin_s == 0 else None
+        if timer is None:
+            await self._run_on_loop_timer(t0)
+            return
+        loop = asyncio.get_running_loop()
+
+        def on_expiry() -> None:
+            periods = timer.expirations()
+            if periods:
+                self.missed += periods - 1        # deadlines already passed are skipped, never bursts
+                self.tick(time.monotonic())
+                self._release_tick_waiters()
+
+        self.tick(t0)
+        loop.add_reader(timer.fileno(), on_expiry)
+        try:
+            await loop.create_future()            # until cancelled
+        finally:
+            loop.remove_reader(timer.fileno())
+            timer.close()
+
+    async def _run_on_loop_timer(self, t0: float) -> None:
         k = 0
         while True:
             deadline = t0 + k * self.period_s
             await self.wait_until(deadline)
             now = time.monotonic()
             self.tick(now)
+            self._release_tick_waiters()
             k += 1
             # skip deadlines already missed by more than one period (no bursts)
             behind = int((time.monotonic() - (t0 + k * self.period_s)) // self.period_s)

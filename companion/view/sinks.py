@@ -2,11 +2,18 @@
 
 ``open_record_sinks`` picks by the record's suffix (``.mcap``: MCAP, else JSON Lines) and adds
 the live server when asked; ``RecordSinks`` gives them the one ``write`` / ``close`` interface.
+
+Writing a line costs the event loop up to a few milliseconds (the scene's entities, JSON, the
+MCAP chunk): ``RecordSinks.pace`` makes the lines wait for the setpoint stream's next send and
+be written right after it, so that writing never delays a send (the jitter benchmark's
+``process_fifo_daemon_foxglove``).
 """
 
 from __future__ import annotations
 
+import asyncio
 import logging
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 from companion.errors import ConfigError
@@ -23,12 +30,44 @@ class RecordSinks:
 
     def __init__(self, sinks: list) -> None:
         self.sinks = sinks
+        self._after_tick: Callable[[], Awaitable] | None = None
+        self._pending: list[tuple[str, dict]] = []
+        self._flushing: asyncio.Task | None = None
+
+    def pace(self, after_next_tick: Callable[[], Awaitable] | None) -> None:
+        """From now on, write each line after the stream's next send (``after_next_tick``:
+        ``SetpointStreamer.after_next_tick``; call ``write`` on the event loop); None: at once."""
+        self._after_tick = after_next_tick
+        if after_next_tick is None:
+            self.flush()
 
     def write(self, line_type: str, /, **fields) -> None:
+        if self._after_tick is None:
+            self._write(line_type, fields)
+            return
+        self._pending.append((line_type, fields))
+        if self._flushing is None or self._flushing.done():
+            self._flushing = asyncio.get_running_loop().create_task(self._flush_after_tick())
+
+    async def _flush_after_tick(self) -> None:
+        await self._after_tick()
+        self.flush()
+
+    def flush(self) -> None:
+        """Write the lines waiting for the stream's next send now."""
+        pending, self._pending = self._pending, []
+        for line_type, fields in pending:
+            self._write(line_type, fields)
+
+    def _write(self, line_type: str, fields: dict) -> None:
         for sink in self.sinks:
             sink.write(line_type, **fields)
 
     def close(self) -> None:
+        """Write what waits, then close every sink."""
+        if self._flushing is not None:
+            self._flushing.cancel()
+        self.flush()
         for sink in self.sinks:
             try:
                 sink.close()
