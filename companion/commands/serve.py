@@ -36,6 +36,9 @@ def register(subparsers) -> None:
     add_flight_arguments(p)
     p.add_argument("--record-dir", metavar="DIR",
                    help="write each flight's MCAP record here (flight-<n>-<UTC time>.mcap)")
+    p.add_argument("--resume", action="store_true",
+                   help="on start, take over a vehicle left hovering in GUIDED (the companion crashed "
+                   "or was restarted mid-flight): fly on from its current item, threats from --state-dir")
     p.add_argument("--flights", type=positive_int, metavar="N",
                    help="exit after N flights (default: serve until stopped)")
     p.set_defaults(func=serve)
@@ -61,7 +64,7 @@ def serve(args: argparse.Namespace) -> int:
     if settings is None:
         return 0
     service = CompanionService(settings, world_path=args.world, record_dir=args.record_dir,
-                               max_flights=args.flights)
+                               max_flights=args.flights, resume=args.resume)
 
     async def main() -> int:
         task = asyncio.current_task()

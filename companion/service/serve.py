@@ -19,6 +19,10 @@ One ``CompanionService`` per vehicle, for the life of the companion computer:
 5. **stop**: the flight ends as ``companion run``'s does, including the moment a pilot changes
    the mode away from GUIDED (the companion stops commanding); then back to 3.
 
+With ``resume`` (``--resume``, the systemd unit's), a service that finds the vehicle hovering in
+GUIDED when it starts (its predecessor crashed or was killed mid-flight) takes it over first and
+flies on from the vehicle's current item (``companion run --resume``).
+
 A command while a flight runs is answered TEMPORARILY_REJECTED; MISSION_START with a first or
 last item (params 1 and 2 other than 0) is DENIED: the service flies whole missions.
 """
@@ -40,6 +44,7 @@ from companion.daemon import CompanionDaemon, companion_link
 from companion.errors import CompanionError, FlightAborted, LinkError, MissionError, VehicleRefused
 from companion.link.onboard import OnboardCommand, OnboardComponent
 from companion.link.setpoints import raise_stream_priority
+from companion.link.startup import is_airborne, left_guided
 from companion.link.vehicle import check_url
 
 log = logging.getLogger(__name__)
@@ -56,9 +61,11 @@ PRESENCE_PERIOD_S = 1.0
 
 @dataclasses.dataclass(frozen=True)
 class FlightRequest:
-    """A request to fly the stored mission, and who sent it (``MAVLink 255/190``, ``zenoh``)."""
+    """A request to fly the stored mission, and who sent it (``MAVLink 255/190``, ``zenoh``);
+    ``resume``: fly on from the vehicle's current item (``CompanionDaemon``'s ``resume``)."""
 
     source: str
+    resume: bool = False
 
 
 class CompanionService:
@@ -73,16 +80,21 @@ class CompanionService:
         Each flight's record goes here (``flight-<n>-<UTC time>.mcap``).
     max_flights : int, optional
         Return after this many flights (default: serve until stopped).
+    resume : bool
+        On start, take over a vehicle that hovers in GUIDED (a companion that stopped, e.g. a
+        crash that systemd restarted): fly on from its current mission item with the threats
+        of the ``state.dir`` snapshot, as ``companion run --resume`` does.
     workers : str
         ``CompanionDaemon``'s ``workers``.
     """
 
     def __init__(self, settings: Settings, *, world_path=None, record_dir=None,
-                 max_flights: int | None = None, workers: str = "process") -> None:
+                 max_flights: int | None = None, workers: str = "process", resume: bool = False) -> None:
         self.settings = settings
         self.world_path = world_path
         self.record_dir = Path(record_dir) if record_dir else None
         self.max_flights = max_flights
+        self.resume = resume
         self.workers = workers
         self.onboard = OnboardComponent(None, self._on_command)
         self.link = companion_link(settings, onboard=self.onboard)
@@ -111,6 +123,9 @@ class CompanionService:
                 presence = self._loop.create_task(self._publish_presence(), name="presence")
             await self._wait_for_vehicle()
             self.link.on_link_change(self._on_link_change)
+            if self.resume and await self._left_hovering():
+                self._busy = True
+                await self._fly(FlightRequest("resumed after a restart", resume=True))
             while self.max_flights is None or self.flights < self.max_flights:
                 self._ready()
                 await self._fly(await self._requests.get())
@@ -130,6 +145,20 @@ class CompanionService:
             except CompanionError as exc:
                 log.warning("%s; waiting for the vehicle", exc)
 
+    async def _left_hovering(self) -> bool:
+        """Does the vehicle hover in GUIDED, as a companion that stopped mid-flight leaves it?"""
+        try:
+            await self.link.wait_ready(self.settings.link.connect_timeout_s)
+        except CompanionError as exc:
+            log.warning("--resume: %s; not taking over", exc)
+            return False
+        tele = self.link.telemetry
+        hovering = not left_guided(tele) and tele.mode is not None and is_airborne(
+            tele, self.settings.startup.join_min_height_m)
+        log.info("--resume: the vehicle is %s", "hovering in GUIDED: taking it over" if hovering
+                 else f"not hovering in GUIDED ({tele.mode_name}): nothing to resume")
+        return hovering
+
     async def _fly(self, request: FlightRequest) -> None:
         """One flight of the stored mission, then ready again."""
         self.flights += 1
@@ -137,7 +166,7 @@ class CompanionService:
         self.onboard.active = True
         self._say(mavlink.MAV_SEVERITY_INFO, f"companion: flight {self.flights} ({request.source})")
         self.daemon = CompanionDaemon(self.settings, world_path=self.world_path, record_path=self._record_path(),
-                                      workers=self.workers, link=self.link, bus=self.bus)
+                                      resume=request.resume, workers=self.workers, link=self.link, bus=self.bus)
         verdict, reason = "completed", ""
         try:
             await self.daemon.run()

@@ -171,3 +171,43 @@ def hand_the_next_flight_to_the_pilot(gcs: GroundStation, track: TrackListener, 
     time.sleep(2.0)
     assert track.mode == loiter, "the companion took the vehicle back from the pilot"
     assert np.isfinite(track.positions()[-1]).all()
+
+
+def test_serve_resume_takes_over_the_hovering_vehicle_after_a_crash(tmp_path):
+    """SIGKILL mid-leg (what systemd restarts): ``serve --resume`` finds the vehicle hovering in
+    GUIDED, flies on from its current item and lands it home (the vehicle's own track)."""
+    mission = tmp_path / "north.waypoints"
+    mission.write_text(MISSION)
+    mav_port, vehicle_port = free_port(), free_port()
+    args = ["companion.cli", "-v", "serve", "--connect", f"udpin://127.0.0.1:{mav_port}", "--no-zenoh",
+            "--state-dir", str(tmp_path / "state"), "--resume", "--flights", "1"]
+    with TrackListener() as track:
+        vehicle = sim_vehicle(tmp_path, vehicle_port, mav_port, "sim_vehicle", track)
+        first = second = None
+        try:
+            wait_until(lambda: run_companion("upload", str(mission), "--connect",
+                                             f"udpout://127.0.0.1:{vehicle_port}").returncode == 0, 60.0, "the upload")
+            first = spawn(args, tmp_path / "serve_1.log")
+            with GroundStation(vehicle_port) as gcs:
+                gcs.wait_for_text("companion ready", 60.0)
+                ack = mission_start(gcs)
+                assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED, ack
+                gcs.wait_while(lambda: len(track.track) > 20 and track.positions()[-1, 0] > 8.0, 120.0,
+                               "the vehicle on its way north")
+                first.kill()                                          # a crash: no goodbye
+                first.wait(10.0)
+                assert "companion: service stopped" not in gcs.texts
+                second = spawn(args, tmp_path / "serve_2.log")
+                texts = gcs.wait_for_text("companion: flight 1 completed", 150.0, len(gcs.texts))
+                assert "companion: flight 1 (resumed after a restart)" in texts, texts
+            second.wait(30.0)
+        finally:
+            for proc in (first, second, vehicle):
+                if proc is not None:
+                    stop(proc)
+    assert second.returncode == 0
+    summary = last_json_line(tmp_path / "serve_2.log")
+    assert summary["outcome"] == "completed" and summary["resumed_at_seq"] is not None, summary
+    _, pos = track.samples()
+    assert pos[:, 0].max() > NORTH_M - 1.5, "the waypoint north was never reached"
+    assert track.armed is False and np.hypot(*pos[-1, :2]) < 1.5 and -pos[-1, 2] < 0.5, pos[-1]
