@@ -99,7 +99,8 @@ class ReferenceTable:
 
     def _chunk(self, index: int) -> tuple:
         """Knot times (K,), positions, velocities, accelerations (K, d), yaw (unwrapped) and
-        yaw rate (K,) of chunk ``index``."""
+        yaw rate (K,) of chunk ``index``, as Python lists (one query is a handful of float
+        operations: numpy's per-call cost would be most of it)."""
         chunk = self._chunks.get(index)
         if chunk is None:
             first = index * self.chunk_knots
@@ -108,7 +109,7 @@ class ReferenceTable:
             pos, vel, acc = (np.asarray(v, dtype=float) for v in self.trajectory.sample(tau))
             yaw = np.unwrap(np.asarray(self.trajectory.yaw_rad(tau), dtype=float))
             rate = np.asarray(self.trajectory.yaw_rate_rad_s(tau), dtype=float)
-            chunk = (tau, pos, vel, acc, yaw, rate)
+            chunk = tuple(a.tolist() for a in (tau, pos, vel, acc, yaw, rate))
             if len(self._chunks) >= 2:
                 self._chunks.pop(next(iter(self._chunks)))
             self._chunks[index] = chunk
@@ -118,27 +119,29 @@ class ReferenceTable:
         """Position, velocity, acceleration, yaw (wrapped) and yaw rate at trajectory time
         ``tau_s`` (clamped to [0, duration])."""
         tau_s = min(max(float(tau_s), 0.0), self.duration_s)
-        index = min(int(tau_s / (self.step_s * self.chunk_knots)), int(self.duration_s / (self.step_s * self.chunk_knots)))
+        span_s = self.step_s * self.chunk_knots
+        index = min(int(tau_s / span_s), int(self.duration_s / span_s))
         tau, pos, vel, acc, yaw, rate = self._chunk(index)
         i = min(max(int((tau_s - tau[0]) / self.step_s), 0), len(tau) - 1)
         while i > 0 and tau[i] > tau_s:
             i -= 1
         if i == len(tau) - 1 or tau[i + 1] <= tau[i]:
-            return pos[i].copy(), vel[i].copy(), acc[i].copy(), wrap_pi(float(yaw[i])), float(rate[i])
+            return (np.array(pos[i]), np.array(vel[i]), np.array(acc[i]), wrap_pi(yaw[i]), rate[i])
         h = tau[i + 1] - tau[i]
         u = (tau_s - tau[i]) / h
-        p = _hermite(pos[i], pos[i + 1], vel[i] * h, vel[i + 1] * h, u)
-        v = _hermite(vel[i], vel[i + 1], acc[i] * h, acc[i + 1] * h, u)
-        a = acc[i] + u * (acc[i + 1] - acc[i])
-        return (p, v, a, wrap_pi(float(yaw[i] + u * (yaw[i + 1] - yaw[i]))),
-                float(rate[i] + u * (rate[i + 1] - rate[i])))
+        p = _hermite(pos[i], pos[i + 1], vel[i], vel[i + 1], h, u)
+        v = _hermite(vel[i], vel[i + 1], acc[i], acc[i + 1], h, u)
+        a = [a0 + u * (a1 - a0) for a0, a1 in zip(acc[i], acc[i + 1])]
+        return (np.array(p), np.array(v), np.array(a), wrap_pi(yaw[i] + u * (yaw[i + 1] - yaw[i])),
+                rate[i] + u * (rate[i + 1] - rate[i]))
 
 
-def _hermite(p0: np.ndarray, p1: np.ndarray, m0: np.ndarray, m1: np.ndarray, u: float) -> np.ndarray:
-    """Cubic Hermite interpolation at ``u`` in [0, 1] (tangents ``m`` scaled to the interval)."""
+def _hermite(p0: list, p1: list, d0: list, d1: list, h: float, u: float) -> list:
+    """Cubic Hermite interpolation at ``u`` in [0, 1] between values ``p0``, ``p1`` with
+    derivatives ``d0``, ``d1`` over an interval of length ``h``."""
     u2, u3 = u * u, u * u * u
-    return ((2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * m0 + (-2 * u3 + 3 * u2) * p1
-            + (u3 - u2) * m1)
+    c0, c1, c2, c3 = 2 * u3 - 3 * u2 + 1, (u3 - 2 * u2 + u) * h, -2 * u3 + 3 * u2, (u3 - u2) * h
+    return [c0 * a + c1 * da + c2 * b + c3 * db for a, b, da, db in zip(p0, p1, d0, d1)]
 
 
 class ActiveReference:

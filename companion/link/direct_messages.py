@@ -1,14 +1,18 @@
-"""MavlinkDirect traffic of the link: raw messages in (``messages``), and messages out without
-waiting (``send_message``, the GUIDED setpoint, STATUSTEXT to the ground stations).
+"""The link's raw traffic: messages in (``messages``), and messages out without waiting
+(``send_message``, the GUIDED setpoint, STATUSTEXT to the ground stations).
 
-Sends use ``MavlinkDirect.send_message`` of MAVSDK's synchronous plugin (a ~20 us ctypes call),
-so they never block the event loop: SET_POSITION_TARGET_LOCAL_NED (position + velocity +
-acceleration + yaw, type_mask from what is given) and STATUSTEXT (broadcast, routed by the
-autopilot to its other links).
+Messages in come from the gate, which parses every frame anyway (``companion.link.gate``): the
+types someone reads are handed to the loop in batches as field dicts, without MAVSDK's JSON
+round trip. The 50 Hz SET_POSITION_TARGET_LOCAL_NED (position + velocity + acceleration + yaw,
+type_mask from what is given) is encoded here and written by the gate
+(``GateThread.send_message``); the rare sends (``send_message``, STATUSTEXT: broadcast, routed
+by the autopilot to its other links) use ``MavlinkDirect.send_message`` of MAVSDK's synchronous
+plugin (a ~20 us ctypes call). None of them blocks the event loop.
 """
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 import math
@@ -16,6 +20,7 @@ import time
 from typing import AsyncIterator
 
 import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from heli_common.mavlink_ids import (TYPEMASK_IGNORE_ACCELERATION, TYPEMASK_IGNORE_POSITION,
                                      TYPEMASK_IGNORE_VELOCITY, enum_names, mavlink)
@@ -55,6 +60,17 @@ def setpoint_type_mask(pos, vel, acc, yaw, yaw_rate=None) -> int:
     return mask
 
 
+def three_finite(value) -> list[float] | None:
+    """``value`` (a sequence or array of 3 numbers) as 3 floats, or None if it is not 3 finite numbers."""
+    try:
+        values = [float(v) for v in (value.tolist() if isinstance(value, np.ndarray) else value)]
+    except (TypeError, ValueError):
+        return None
+    if len(values) != 3 or not all(map(math.isfinite, values)):
+        return None
+    return values
+
+
 def setpoint_fields(time_boot_ms: int, target_system: int, target_component: int,
                     pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
                     yaw_rate_rad_s=None) -> dict:
@@ -80,10 +96,10 @@ def setpoint_fields(time_boot_ms: int, target_system: int, target_component: int
         if value is None:
             fields.update({k: 0.0 for k in keys})
             continue
-        vec = np.asarray(value, dtype=np.float64).reshape(-1)
-        if vec.shape != (3,) or not np.all(np.isfinite(vec)):
+        values = three_finite(value)          # plain floats: numpy's per-call cost is most of it
+        if values is None:
             raise LinkError(f"setpoint {name} must be 3 finite numbers, got {value!r}")
-        fields.update({k: float(v) for k, v in zip(keys, vec)})
+        fields.update(zip(keys, values))
     for name, value, key in (("yaw_rad", yaw_rad, "yaw"),
                              ("yaw_rate_rad_s", yaw_rate_rad_s, "yaw_rate")):
         if value is None:
@@ -107,6 +123,8 @@ class DirectMessages:
     _direct: object
     _direct_sync: object
     _t0: float
+    _readers: dict
+    gate: object
 
     def _require_connected(self) -> None:
         if self._system is None or self._mavsdk is None:
@@ -119,18 +137,37 @@ class DirectMessages:
         """Raw MAVLink messages named ``name`` (e.g. ``"SERVO_OUTPUT_RAW"``) as field dicts.
 
         Each dict has the message fields plus ``"_sysid"``, ``"_compid"`` and ``"_t_s"``
-        (monotonic arrival time).
+        (monotonic arrival time). They come straight from the gate (``companion.link.gate``:
+        the frames it admits, parsed once on its thread, ``tapped_fields``), not through MAVSDK;
+        every reader of a type gets the same dict: read it, do not change it.
         """
         self._require_connected()
-        async for msg in self._direct.subscribe_message(name):
+        queue: asyncio.Queue[dict] = asyncio.Queue()
+        readers = self._readers.setdefault(name, set())
+        readers.add(queue)
+        self.gate.inbound.tapped.add(name)
+        try:
+            while True:
+                yield await queue.get()
+        finally:
+            readers.discard(queue)
+            if not readers and self.gate is not None:
+                self.gate.inbound.tapped.discard(name)
+
+    def _hand_over(self, batch: list[tuple[str, dict]]) -> None:
+        """On the loop: the messages the gate read, to their readers (``messages``)."""
+        for name, fields in batch:
+            for queue in self._readers.get(name, ()):
+                queue.put_nowait(fields)
+
+    def _tap_from_gate_thread(self, loop: asyncio.AbstractEventLoop):
+        """The gate's ``on_tap``: hand each batch over to ``loop``."""
+        def on_tap(batch: list) -> None:
             try:
-                fields = json.loads(msg.fields_json)
-            except json.JSONDecodeError:
-                continue
-            fields["_sysid"] = msg.system_id
-            fields["_compid"] = msg.component_id
-            fields["_t_s"] = time.monotonic()
-            yield fields
+                loop.call_soon_threadsafe(self._hand_over, batch)
+            except RuntimeError:           # the loop is closed: the link is closing
+                pass
+        return on_tap
 
     def send_message(self, name: str, fields: dict) -> None:
         """Send one MAVLink message ``name`` with ``fields`` now (non-blocking)."""
@@ -146,19 +183,23 @@ class DirectMessages:
 
         ``None`` fields are masked out in ``type_mask``. Raises ``LinkError`` for non-finite
         values (nothing is sent then). ``pos_ned_m`` is about the planning home and is sent
-        in the vehicle's local frame (``frames.to_origin``).
+        in the vehicle's local frame (``frames.to_origin``). It goes out through the gate
+        directly (``GateThread.send_message``: encoded and signed here, from MAVSDK's address),
+        through MAVSDK only before the gate knows that address.
         """
-        from mavsdk.plugins.mavlink_direct import MavlinkMessage
-
         self._require_connected()
         if pos_ned_m is not None:
             pos_ned_m = self.frames.to_origin(pos_ned_m)
         time_boot_ms = int((time.monotonic() - self._t0) * 1000.0)
         fields = setpoint_fields(time_boot_ms, self.target_system, self.target_component,
                                  pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s)
-        message = MavlinkMessage("SET_POSITION_TARGET_LOCAL_NED", 0, 0, self.target_system,
-                                 self.target_component, json.dumps(fields))
-        self._direct_sync.send_message(message)
+        if self.gate is not None and self.gate.send_message(
+                mavlink.MAVLink_set_position_target_local_ned_message(**fields)):
+            return
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        self._direct_sync.send_message(MavlinkMessage("SET_POSITION_TARGET_LOCAL_NED", 0, 0, self.target_system,
+                                                      self.target_component, json.dumps(fields)))
 
     def send_statustext(self, text: str, severity: int | str = "NOTICE") -> None:
         """Send one STATUSTEXT to the ground stations (non-blocking; call from the loop thread).

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import time
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -88,6 +89,15 @@ class Identity:
         return target_component not in (0, self.component)
 
 
+def tapped_fields(msg) -> dict:
+    """A message's fields by name (text decoded), with ``_sysid``, ``_compid`` and ``_t_s``
+    (monotonic arrival time): what ``VehicleLink.messages`` yields."""
+    fields = msg.to_dict()
+    del fields["mavpackettype"]
+    fields["_sysid"], fields["_compid"], fields["_t_s"] = msg.get_srcSystem(), msg.get_srcComponent(), time.monotonic()
+    return fields
+
+
 def new_parser() -> mavlink.MAVLink:
     """A pymavlink parser that returns BAD_DATA for garbage instead of raising."""
     parser = mavlink.MAVLink(None)
@@ -117,6 +127,9 @@ class InboundFilter:
 
     Attributes
     ----------
+    tapped : set of str
+        Message types the link reads itself (``VehicleLink.messages``): each admitted one is
+        also kept in ``taps`` as ``(type, fields)`` (``tapped_fields``) for the gate to hand over.
     counts : dict of str to int
         ``passed``, ``not_for_us``, ``onboard``, ``malformed`` and, with a key, each refused
         ``Verdict`` value (``unsigned``, ``bad_signature``, ``replayed``, ``stale``).
@@ -129,6 +142,8 @@ class InboundFilter:
         self.stream = stream
         self.onboard = onboard                  # companion.link.onboard.OnboardComponent or None
         self.replies: list[bytes] = []          # its answers, for the gate to send
+        self.tapped: set[str] = set()           # message types the link reads (``taps``)
+        self.taps: list[tuple[str, dict]] = []  # admitted messages of those types, as fields
         self.parser = new_parser()
         self.autopilot_heard = False
         self.counts: dict[str, int] = {PASSED: 0, NOT_FOR_US: 0, ONBOARD: 0, MALFORMED: 0}
@@ -168,8 +183,10 @@ class InboundFilter:
         if self.identity.addressed_elsewhere(msg):
             return self._count(NOT_FOR_US)
         self.counts[PASSED] += 1
-        self.autopilot_heard |= (msg.get_type() == "HEARTBEAT"
-                                 and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID)
+        kind = msg.get_type()
+        self.autopilot_heard |= kind == "HEARTBEAT" and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID
+        if kind in self.tapped:
+            self.taps.append((kind, tapped_fields(msg)))
         return True
 
     def _count(self, outcome: str) -> bool:
@@ -197,6 +214,21 @@ class OutboundSigner:
         self.identity = identity
         self.encoder = None if key is None else signing_encoder(key, link_id, 0, 0)
         self.unsignable = 0
+        self._own_encoder = mavlink.MAVLink(None)        # our own messages without a key
+        self._own_seq = 0
+
+    def pack_own(self, msg) -> bytes | None:
+        """Our own message ``msg`` (a pymavlink message object, e.g. a setpoint) as a frame from
+        MAVSDK's address with a sequence of our own, signed when there is a key; None until
+        MAVSDK's address is known."""
+        if self.identity.system is None:
+            return None
+        enc = self.encoder if self.encoder is not None else self._own_encoder
+        enc.srcSystem, enc.srcComponent, enc.seq = self.identity.system, self.identity.component, self._own_seq
+        self._own_seq = (self._own_seq + 1) % 256
+        if enc.signing.sign_outgoing:
+            enc.signing.timestamp = max(enc.signing.timestamp, signing_timestamp_now())
+        return bytes(msg.pack(enc))
 
     def convert(self, data: bytes) -> list[bytes]:
         """The frames to send to the vehicle for the datagram MAVSDK sent."""

@@ -23,6 +23,7 @@ import select
 import socket
 import threading
 import time
+from collections.abc import Callable
 
 from companion.errors import LinkError
 from companion.link.gate import Identity, InboundFilter, OutboundSigner, SigningKey
@@ -152,6 +153,9 @@ class GateThread:
         self.onboard_period_s = onboard_period_s
         self._heartbeat_due_s = 0.0
         self._own: collections.deque[bytes] = collections.deque()   # post_own's, sent by the gate's thread
+        self._send_lock = threading.Lock()       # the encoder and the vehicle side, shared with the loop
+        #: ``on_tap(batch)`` on the gate's thread with the ``inbound.taps`` of each read (the link's)
+        self.on_tap: Callable[[list], None] | None = None
         self.vehicle = open_vehicle_side(url)
         self.local = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.local.bind(("127.0.0.1", 0))
@@ -182,11 +186,24 @@ class GateThread:
 
     def send_own(self, frame: bytes) -> None:
         """Send a frame of the companion's own component (signed with the link's key)."""
-        signed = self.outbound.sign(frame)
-        if signed is not None:
-            self.vehicle.write(signed)
-            if self.tlog is not None:
-                self.tlog.write(signed)
+        with self._send_lock:
+            signed = self.outbound.sign(frame)
+            if signed is not None:
+                self._write(signed)
+
+    def send_message(self, msg) -> bool:
+        """Send a pymavlink message from MAVSDK's address now, from any thread (the setpoint
+        stream's: no trip through MAVSDK); False until that address is known."""
+        with self._send_lock:
+            frame = self.outbound.pack_own(msg)
+            if frame is not None:
+                self._write(frame)
+        return frame is not None
+
+    def _write(self, frame: bytes) -> None:
+        self.vehicle.write(frame)
+        if self.tlog is not None:
+            self.tlog.write(frame)
 
     def post_own(self, frame: bytes) -> None:
         """Send a frame of the companion's own component from any thread (the gate's thread
@@ -222,6 +239,10 @@ class GateThread:
 
     def _from_vehicle(self) -> None:
         frames = self.inbound.filter(self.vehicle.read())
+        if self.inbound.taps:
+            taps, self.inbound.taps = self.inbound.taps, []
+            if self.on_tap is not None:
+                self.on_tap(taps)
         while self.inbound.replies:
             self.send_own(self.inbound.replies.pop(0))
         if self.inbound.autopilot_heard:
@@ -234,12 +255,11 @@ class GateThread:
 
     def _from_mavsdk(self) -> None:
         data, self.mavsdk_address = self.local.recvfrom(MAX_DATAGRAM)
-        for frame in self.outbound.convert(data):
-            if self.inbound.onboard is not None and is_heartbeat(frame):
-                continue                            # the companion component's own HEARTBEAT speaks for us
-            self.vehicle.write(frame)
-            if self.tlog is not None:
-                self.tlog.write(frame)
+        with self._send_lock:
+            for frame in self.outbound.convert(data):
+                if self.inbound.onboard is not None and is_heartbeat(frame):
+                    continue                        # the companion component's own HEARTBEAT speaks for us
+                self._write(frame)
 
 
 def is_heartbeat(frame: bytes) -> bool:

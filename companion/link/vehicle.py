@@ -134,6 +134,7 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self._command_lock: asyncio.Lock | None = None
         self._in_flight: set[asyncio.Future] = set()      # MAVSDK command calls still running
         self._mission_lock: asyncio.Lock | None = None
+        self._readers: dict[str, set[asyncio.Queue]] = {}  # message type -> the queues of messages()
 
     # ----------------------------------------------------------------- connection
 
@@ -156,6 +157,7 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         kind = (ComponentType.COMPANION_COMPUTER if self.role == "companion"
                 else ComponentType.GROUND_STATION)
         self.gate = open_gate(url, self.signing_key, tlog_path=self.tlog_path, onboard=self.onboard)
+        self.gate.on_tap = self._tap_from_gate_thread(asyncio.get_running_loop())
         self._mavsdk = Mavsdk(Configuration.create_with_component_type(kind))
         self._command_lock = asyncio.Lock()
         self._mission_lock = asyncio.Lock()
