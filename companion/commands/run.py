@@ -160,9 +160,18 @@ def flight_settings(args: argparse.Namespace):
     return settings
 
 
-def run(args: argparse.Namespace) -> int:
+def cancel_on_signals() -> None:
+    """SIGINT and SIGTERM cancel the running task (call it from that task)."""
     import asyncio
     import signal
+
+    task, loop = asyncio.current_task(), asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, task.cancel)
+
+
+def run(args: argparse.Namespace) -> int:
+    import asyncio
 
     from companion.daemon import CompanionDaemon
     from companion.errors import FlightAborted, VehicleRefused
@@ -174,10 +183,7 @@ def run(args: argparse.Namespace) -> int:
                              record_path=args.record, resume=args.resume)
 
     async def main() -> int:
-        task = asyncio.current_task()
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, task.cancel)
+        cancel_on_signals()
         try:
             await daemon.run()
             status = 0

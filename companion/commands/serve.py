@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from companion.commands.run import add_flight_arguments, flight_settings
+from companion.commands.run import add_flight_arguments, cancel_on_signals, flight_settings
 
 EPILOG = """examples:
   companion serve --connect serial:///dev/ttyAMA0:921600 --record-dir /var/lib/companion/flights
@@ -56,7 +56,6 @@ def positive_int(text: str) -> int:
 
 def serve(args: argparse.Namespace) -> int:
     import asyncio
-    import signal
 
     from companion.service.serve import CompanionService
 
@@ -67,10 +66,7 @@ def serve(args: argparse.Namespace) -> int:
                                max_flights=args.flights, resume=args.resume)
 
     async def main() -> int:
-        task = asyncio.current_task()
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, task.cancel)
+        cancel_on_signals()
         try:
             await service.run()
         except asyncio.CancelledError:
