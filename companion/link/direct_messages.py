@@ -20,7 +20,6 @@ import time
 from typing import AsyncIterator
 
 import numpy as np
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from heli_common.mavlink_ids import (TYPEMASK_IGNORE_ACCELERATION, TYPEMASK_IGNORE_POSITION,
                                      TYPEMASK_IGNORE_VELOCITY, enum_names, mavlink)

@@ -166,7 +166,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
             self._tasks.append(loop.create_task(coro, name=coro.__name__))
 
     async def stop(self) -> None:
-        """Stop the background tasks and close the bus (a bus given is only unsubscribed)."""
+        """Stop the background tasks; close the bus, or only unsubscribe with ``keep_bus_open``."""
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
