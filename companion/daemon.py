@@ -64,7 +64,7 @@ from companion.errors import FlightAborted, LinkError, MissionError, VehicleRefu
 from companion.flight_plan import LegPlan
 from companion.reference import ActiveReference, VehicleClock
 from companion.link.gate import SigningKey
-from companion.link.setpoints import SetpointStreamer, hold_position, raise_stream_priority
+from companion.link.setpoints import SetpointStreamer, hold_position, normal_priority, raise_stream_priority
 from companion.link.startup import is_airborne
 from companion.link.vehicle import VehicleLink
 from companion.view.sinks import RecordSinks, open_record_sinks, parse_foxglove_address
@@ -173,7 +173,8 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         """The record's sinks: ``--record`` (MCAP or JSON Lines) and the live Foxglove server."""
         s = self.settings
         foxglove = parse_foxglove_address(s.view.foxglove, "view.foxglove") if s.view.foxglove else None
-        sinks = open_record_sinks(self.record_path, foxglove, s.threats.horizon_s, s.threats.uncertainty_m_s)
+        with normal_priority():              # the live server's threads never at the stream's priority
+            sinks = open_record_sinks(self.record_path, foxglove, s.threats.horizon_s, s.threats.uncertainty_m_s)
         for sink in sinks.sinks:
             if getattr(sink, "port", None):
                 log.info("Foxglove live view: ws://%s:%d (Foxglove: open connection, Foxglove WebSocket)",
@@ -254,7 +255,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         # the workers start before the stream's priority is raised and before any thread of
         # the link exists (the forkserver is exec'd from here); they warm up meanwhile
         self._workers_ready = self.workers.start()
-        self.recorder = self._open_record()  # before the priority: the live server's threads stay normal
+        self.recorder = self._open_record()
         if self.owns_link:
             raise_stream_priority()          # before connect: MAVSDK's threads inherit it
             await self.link.connect(s.link.connect, s.link.connect_timeout_s)
@@ -316,7 +317,8 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
                 position_ned_m=lambda: self.link.telemetry.pos_ned_m, record=self.record,
                 statustext=self.send_statustext, bus=self.bus,
                 keep_bus_open=self.bus is not None)
-            await self.threats.start(home)
+            with normal_priority():          # zenoh's threads never at the stream's priority
+                await self.threats.start(home)
             self._open_snapshots(home)
         self._start_background()
         await self.wait_vehicle_clock(s.link.connect_timeout_s)

@@ -25,6 +25,7 @@ GIL switch interval hands the GIL back to the stream quickly from the process's 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import logging
 import math
@@ -97,6 +98,30 @@ def restore_normal_priority() -> None:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except (AttributeError, OSError, PermissionError):
         pass
+
+
+@contextlib.contextmanager
+def normal_priority():
+    """Run the block at the normal policy, then give the calling thread its own back: threads
+    started inside (a Foxglove server's, zenoh's) do not inherit the stream's SCHED_FIFO."""
+    import os
+
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    except (AttributeError, OSError):
+        yield
+        return
+    if policy != getattr(os, "SCHED_FIFO", None):
+        yield
+        return
+    restore_normal_priority()
+    try:
+        yield
+    finally:
+        try:
+            os.sched_setscheduler(0, policy, param)
+        except (OSError, PermissionError):
+            log.warning("could not give the setpoint stream its SCHED_FIFO priority back")
 
 
 class Setpoint(NamedTuple):

@@ -115,12 +115,12 @@ class CompanionService:
         self._loop = asyncio.get_running_loop()
         self._requests = asyncio.Queue()
         check_url(self.settings.link.connect)
-        raise_stream_priority()                  # before connect: MAVSDK's threads inherit it
         presence = None
         try:
-            if self.settings.zenoh.enabled:
+            if self.settings.zenoh.enabled:     # before the priority: zenoh's threads stay normal
                 self._open_presence()
                 presence = self._loop.create_task(self._publish_presence(), name="presence")
+            raise_stream_priority()              # before connect: MAVSDK's threads inherit it
             await self._wait_for_vehicle()
             self.link.on_link_change(self._on_link_change)
             if self.resume and await self._left_hovering():

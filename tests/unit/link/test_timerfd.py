@@ -62,3 +62,29 @@ def test_paced_record_lines_are_written_right_after_a_send_and_flushed_at_close(
         assert streamer.stats().count >= 3
 
     asyncio.run(main())
+
+
+def test_threads_started_under_normal_priority_do_not_inherit_the_streams_fifo():
+    import os
+    import threading
+
+    from companion.link.setpoints import normal_priority, raise_stream_priority
+
+    seen = {}
+
+    def stream_thread() -> None:
+        if raise_stream_priority() != "fifo":
+            seen["skip"] = True
+            return
+        child = threading.Thread(target=lambda: seen.setdefault("child", os.sched_getscheduler(0)))
+        with normal_priority():
+            child.start()
+            child.join()
+        seen["after"] = os.sched_getscheduler(0)
+
+    thread = threading.Thread(target=stream_thread)
+    thread.start()
+    thread.join()
+    if seen.get("skip"):
+        pytest.skip("SCHED_FIFO is not allowed here")
+    assert (seen["child"], seen["after"]) == (os.SCHED_OTHER, os.SCHED_FIFO)
