@@ -30,7 +30,10 @@ import functools
 import importlib
 import logging
 import multiprocessing
+import multiprocessing.connection
+import os
 import pickle
+import threading
 import time
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 
@@ -48,10 +51,28 @@ _MISSING = object()
 
 
 def worker_init(niceness: int, log_level: int, log_format: str | None) -> None:
-    """A planning process starts: normal scheduling policy, niced (``planning_worker_init``),
-    and logging as in the companion (its lines go to the companion's stderr)."""
+    """A planning process starts: it ends with its parent (``exit_with_parent``), normal
+    scheduling policy, niced (``planning_worker_init``), and logging as in the companion (its
+    lines go to the companion's stderr)."""
+    exit_with_parent()
     planning_worker_init(niceness)
     logging.basicConfig(level=log_level, format=log_format)
+
+
+def exit_with_parent() -> None:
+    """End this worker when the companion that asked for it ends. A companion killed with
+    SIGKILL (a crash, the kernel's OOM killer) would otherwise leave its workers behind, blocked
+    forever on a queue whose ends they hold themselves. ``multiprocessing.parent_process()`` is
+    the companion (not the forkserver) and its ``sentinel`` turns readable when it is gone."""
+    parent = multiprocessing.parent_process()
+    if parent is None or parent.sentinel is None:
+        return
+
+    def watch() -> None:
+        multiprocessing.connection.wait([parent.sentinel])
+        os._exit(0)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
 def _log_format() -> str | None:
