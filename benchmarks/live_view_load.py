@@ -1,8 +1,8 @@
 """The live Foxglove view's load, for ``benchmarks/setpoint_jitter.py`` (issue 14).
 
 ``LiveViewLoad`` does what ``companion run --foxglove PORT`` adds to a flight: a Foxglove
-WebSocket server (``companion.view``, foxglove-sdk, started before the stream's priority is
-raised, as the daemon starts it), fed the flight record as the daemon feeds it (header, world
+WebSocket server (``companion.view``, foxglove-sdk, its threads at the normal policy, as the
+daemon starts it), fed the flight record as the daemon feeds it (header, world
 and plan once; a sample at ``link.record_rate_hz`` with the vehicle moving along the plan; a
 threat and a decision at each replan), with a viewer connected and subscribed to every channel:
 ``tests/foxglove_client.py`` in another process, as Foxglove would be.
@@ -22,10 +22,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 
 from companion.config import LinkSettings  # noqa: E402
+from companion.demo import DEMO_HOME  # noqa: E402
 from companion.view.sinks import open_record_sinks  # noqa: E402
 from companion.world.io import world_to_dict  # noqa: E402
 
-HOME_LLA = (47.397742, 8.545594, 488.0)
 CONNECT_S = 2.0            # the viewer's time to connect and subscribe before the stream starts
 
 
@@ -39,7 +39,7 @@ class LiveViewLoad:
         self.path_ned_m = np.array([[*bench.start[:2], -10.0], [*bench.goal[:2], -10.0]])
         self.sinks = open_record_sinks(None, ("127.0.0.1", 0))
         self.port = next(sink.port for sink in self.sinks.sinks if getattr(sink, "port", None))
-        self.sinks.write("header", home_lla=HOME_LLA, seed=0)
+        self.sinks.write("header", home_lla=DEMO_HOME, seed=0)
         self.sinks.write("world", **world_to_dict(bench.world))
         self.sinks.write("plan", leg=0, seq=1, path_id="leg0", path_ned_m=self.path_ned_m)
         self.client = subprocess.Popen(

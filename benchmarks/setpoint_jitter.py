@@ -183,7 +183,7 @@ async def run_scenario(name: str, send, seconds: float, view=None) -> dict:
     executor = None
     workers = None
     old_switch = sys.getswitchinterval()
-    if name.endswith("_daemon") or name.endswith("_daemon_foxglove"):
+    if "_daemon" in name:
         # what companion.daemon does: PlanningWorkers, GIL switch interval 0.5 ms
         workers = PlanningWorkers("thread" if name.startswith("thread") else "process")
         await workers.start()
@@ -247,8 +247,8 @@ async def run_all(seconds: float, sitl: bool, only=None) -> list[dict]:
     with contextlib.ExitStack() as stack:
         sim = stack.enter_context(sim_vehicle()) if sitl else None
         for name in scenarios:
-            # the live server before the priority (as the daemon), then the priority: threads
-            # created afterwards (MAVSDK's) inherit it
+            # the live server at the normal policy (as the daemon opens it), then the priority:
+            # threads created afterwards (MAVSDK's) inherit it
             view = LiveViewLoad(seconds) if name.endswith("_foxglove") else None
             if "fifo" in name:
                 raise_stream_priority()

@@ -119,7 +119,6 @@ class DirectMessages:
     frames: LinkFrames
     _mavsdk: object
     _system: object
-    _direct: object
     _direct_sync: object
     _t0: float
     _readers: dict

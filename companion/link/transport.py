@@ -176,9 +176,8 @@ class GateThread:
         """Stop the thread (the frames ``post_own`` still holds are sent first) and close."""
         self._stop.set()
         self._thread.join(timeout=2.0)
-        while self._own:
-            with contextlib.suppress(OSError, ValueError):
-                self.send_own(self._own.popleft())
+        with contextlib.suppress(OSError, ValueError):
+            self._send_posted()
         self.vehicle.close()
         self.local.close()
         if self.tlog is not None:
@@ -210,6 +209,10 @@ class GateThread:
         signs and sends it within its next turn, at most ``SELECT_TIMEOUT_S``)."""
         self._own.append(frame)
 
+    def _send_posted(self) -> None:
+        while self._own:
+            self.send_own(self._own.popleft())
+
     def _onboard_heartbeat(self) -> None:
         now = time.monotonic()
         if self.inbound.onboard is not None and now >= self._heartbeat_due_s:
@@ -222,8 +225,7 @@ class GateThread:
         while not self._stop.is_set():
             try:
                 self._onboard_heartbeat()
-                while self._own:
-                    self.send_own(self._own.popleft())
+                self._send_posted()
                 ready, _, _ = select.select([self.vehicle, self.local], [], [], SELECT_TIMEOUT_S)
             except (OSError, ValueError):
                 return                              # closed under us

@@ -122,8 +122,7 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self.statustexts: collections.deque = collections.deque(maxlen=STATUSTEXT_KEEP)
         self._mavsdk = None
         self._system = None
-        self._direct = None        # MavlinkDirectAsync (commands, subscriptions)
-        self._direct_sync = None   # MavlinkDirect (non-blocking sends from the loop)
+        self._direct_sync = None   # MavlinkDirect (commands, rare sends; telemetry and setpoints: the gate)
         self._mission = None
         self._telemetry_plugin = None
         self._state = TelemetryState()
@@ -147,7 +146,6 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
             Bad URL, the URL cannot be opened, or no autopilot within ``timeout_s``.
         """
         from mavsdk.asyncio import ComponentType, Configuration, Mavsdk, MavsdkConnectionError
-        from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
         from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
         from mavsdk.plugins.mavlink_direct import MavlinkDirect
@@ -176,7 +174,6 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self.target_system = await system.get_system_id()
         if self.onboard is not None:
             self.onboard.set_system(self.target_system)
-        self._direct = MavlinkDirectAsync(system)
         self._direct_sync = MavlinkDirect(system._system)
         self._mission = MissionRawAsync(system)
         self._telemetry_plugin = TelemetryAsync(system)
@@ -194,12 +191,12 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self._tasks.clear()
         # MAVSDK aborts the process if it is destroyed while a plugin or a System it handed out
         # is alive: release them first, newest first
-        for owned in (self._telemetry_plugin, self._mission, self._direct_sync, self._direct,
+        for owned in (self._telemetry_plugin, self._mission, self._direct_sync,
                       getattr(self._system, "_system", None)):
             if owned is not None:
                 with contextlib.suppress(Exception):
                     owned.destroy()
-        self._telemetry_plugin = self._mission = self._direct_sync = self._direct = self._system = None
+        self._telemetry_plugin = self._mission = self._direct_sync = self._system = None
         if self._mavsdk is not None:
             with contextlib.suppress(Exception):
                 self._mavsdk.destroy()

@@ -44,7 +44,8 @@ from companion.daemon import CompanionDaemon, companion_link
 from companion.errors import CompanionError, FlightAborted, LinkError, MissionError, VehicleRefused
 from companion.link.onboard import OnboardCommand, OnboardComponent
 from companion.link.setpoints import raise_stream_priority
-from companion.link.startup import is_airborne, left_guided
+from companion.link.startup import is_airborne
+from companion.service.legs import GUIDED
 from companion.link.vehicle import check_url
 
 log = logging.getLogger(__name__)
@@ -124,7 +125,8 @@ class CompanionService:
             await self._wait_for_vehicle()
             self.link.on_link_change(self._on_link_change)
             if self.resume and await self._left_hovering():
-                self._busy = True
+                with self._lock:
+                    self._busy = True
                 await self._fly(FlightRequest("resumed after a restart", resume=True))
             while self.max_flights is None or self.flights < self.max_flights:
                 self._ready()
@@ -153,8 +155,7 @@ class CompanionService:
             log.warning("--resume: %s; not taking over", exc)
             return False
         tele = self.link.telemetry
-        hovering = not left_guided(tele) and tele.mode is not None and is_airborne(
-            tele, self.settings.startup.join_min_height_m)
+        hovering = tele.mode == GUIDED and is_airborne(tele, self.settings.startup.join_min_height_m)
         log.info("--resume: the vehicle is %s", "hovering in GUIDED: taking it over" if hovering
                  else f"not hovering in GUIDED ({tele.mode_name}): nothing to resume")
         return hovering
@@ -203,6 +204,9 @@ class CompanionService:
     def _ready(self) -> None:
         with self._lock:
             self._busy = False
+        self._announce_ready()
+
+    def _announce_ready(self) -> None:
         self._set_state("ready")
         self._say(mavlink.MAV_SEVERITY_INFO, READY_TEXT)
 
@@ -216,8 +220,8 @@ class CompanionService:
             self.link.gate.post_own(self.onboard.statustext(severity, text))
 
     def _on_link_change(self, connected: bool) -> None:
-        if connected and self.state == "ready":
-            self._ready()                        # the vehicle is back (a reboot): tell its ground stations
+        if connected and self.state == "ready":  # the vehicle is back (a reboot): tell its ground stations
+            self._announce_ready()               # (a start already queued stays queued)
 
     def _open_presence(self) -> None:
         from companion.threats.bus import ThreatBus

@@ -19,7 +19,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.threats.bus import ThreatBus
-from flight_support import TrackListener, free_port, last_json_line, run_companion, spawn, stop, wait_until
+from companion.geo import LocalFrame
+from flight_support import DEMO_HOME, TrackListener, free_port, last_json_line, run_companion, spawn, stop, wait_until
 from heli_common.mavlink_ids import COPTER_MODES
 from support import MavlinkPeer
 
@@ -27,12 +28,13 @@ pytestmark = pytest.mark.integration
 
 SPEEDUP = 4.0
 COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
-HOME = (47.397742, 8.545594)
+HOME = DEMO_HOME
 NORTH_M = 30.0                  # out 30 m north and back home
+NORTH_LAT = float(np.ravel(LocalFrame(*HOME).to_lla(NORTH_M, 0.0, 0.0)[0])[0])
 MISSION = f"""QGC WPL 110
-0\t1\t0\t16\t0\t0\t0\t0\t{HOME[0]}\t{HOME[1]}\t488.0\t1
+0\t1\t0\t16\t0\t0\t0\t0\t{HOME[0]}\t{HOME[1]}\t{HOME[2]}\t1
 1\t0\t3\t22\t0\t0\t0\t0\t0\t0\t10.0\t1
-2\t0\t3\t16\t0\t1.0\t0\tnan\t{HOME[0] + NORTH_M / 111194.9:.8f}\t{HOME[1]}\t10.0\t1
+2\t0\t3\t16\t0\t1.0\t0\tnan\t{NORTH_LAT:.8f}\t{HOME[1]}\t10.0\t1
 3\t0\t3\t16\t0\t1.0\t0\tnan\t{HOME[0]}\t{HOME[1]}\t10.0\t1
 4\t0\t3\t21\t0\t0\t0\tnan\t{HOME[0]}\t{HOME[1]}\t0.0\t1
 """
