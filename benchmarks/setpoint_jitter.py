@@ -217,7 +217,7 @@ async def run_scenario(name: str, send, seconds: float, view=None) -> dict:
 
     streamer.start()
     if view is not None:
-        view.sinks.pace(streamer.after_next_tick)          # as companion.daemon writes its record
+        view.sinks.pace(streamer.call_after_next_tick)          # as companion.daemon writes its record
     feeding = asyncio.get_running_loop().create_task(view.feed(stop_at)) if view is not None else None
     try:
         if executor is not None or workers is not None:

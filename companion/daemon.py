@@ -218,7 +218,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
                               previous=self.reference if later else None)
         self.reference = ref
         if self.streamer is not None:
-            self.streamer.set_source(ref.setpoint_at)
+            self.streamer.set_source(ref.setpoint_at, prepare=ref.prepare)
         if self.threats is not None:
             self.threats.set_active(ref)
         return ref
@@ -242,6 +242,13 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         if self.streamer is not None:
             self.streamer.set_source(hold_position(pos_ned_m, yaw))
         self.event("hold", reason=reason, pos_ned_m=np.asarray(pos_ned_m))
+
+    def pause(self, delay_s: float):
+        """Sleep ``delay_s`` (the phase machine's and the record's periods): in the setpoint
+        stream's wake-ups while it runs (``SetpointStreamer.sleep``)."""
+        if self.streamer is not None:
+            return self.streamer.sleep(delay_s)
+        return asyncio.sleep(delay_s)
 
     def _current_yaw(self) -> float:
         att = self.link.telemetry.attitude_rad
@@ -334,7 +341,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
                 await self.restore_mission(previous)
             raise
         self.streamer = SetpointStreamer(self.link.send_setpoint, rate_hz=s.link.setpoint_rate_hz)
-        self.recorder.pace(self.streamer.after_next_tick)     # the record is written between sends
+        self.recorder.pace(self.streamer.call_after_next_tick)     # the record is written between sends
         self.hold_here(self.link.telemetry.pos_ned_m,
                        "joined in the air" if self.summary.joined else "takeoff complete")
         self.streamer.start()

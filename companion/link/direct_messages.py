@@ -187,7 +187,7 @@ class DirectMessages:
         """
         self._require_connected()
         if pos_ned_m is not None:
-            pos_ned_m = self.frames.to_origin(pos_ned_m)
+            pos_ned_m = self.frames.to_origin_floats(pos_ned_m)
         time_boot_ms = int((time.monotonic() - self._t0) * 1000.0)
         fields = setpoint_fields(time_boot_ms, self.target_system, self.target_component,
                                  pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s)

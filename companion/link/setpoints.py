@@ -129,7 +129,7 @@ class Setpoint(NamedTuple):
 
     Attributes
     ----------
-    pos_ned_m, vel_ned_m_s, acc_ned_m_s2 : ndarray (3,) or None
+    pos_ned_m, vel_ned_m_s, acc_ned_m_s2 : ndarray (3,), sequence of 3 floats, or None
     yaw_rad : float or None
     yaw_rate_rad_s : float or None
         With ``yaw_rad``: the heading's rate of change, a feed-forward for the yaw loop.
@@ -236,6 +236,7 @@ class SetpointStreamer:
             raise ValueError(f"spin_s must be in [0, period), got {spin_s}")
         self._send = send
         self._source = source
+        self._prepare: Callable[[], None] | None = None
         self._source_failed = False
         self.period_s = 1.0 / rate_hz
         self._on_sent = on_sent
@@ -247,13 +248,19 @@ class SetpointStreamer:
         self.missed = 0
         self.sent = 0
         self.send_errors = 0
-        self._tick_waiters: list[asyncio.Future] = []
+        self._tick_callbacks: list[Callable[[], None]] = []
+        self._sleepers: list[tuple[float, asyncio.Future]] = []   # (wake at, future) of sleep()
 
     # ---------------------------------------------------------------- control
 
-    def set_source(self, source: SetpointSource | None) -> None:
-        """Replace the setpoint source; effective at the next tick (None pauses sending)."""
+    def set_source(self, source: SetpointSource | None,
+                   prepare: Callable[[], None] | None = None) -> None:
+        """Replace the setpoint source; effective at the next tick (None pauses sending).
+
+        ``prepare()``, when given, is called right after each scheduled send: work the source
+        can do ahead (e.g. ``ActiveReference.prepare``) then never delays a send."""
         self._source = source
+        self._prepare = prepare
         self._source_failed = False
 
     @property
@@ -275,23 +282,58 @@ class SetpointStreamer:
             except asyncio.CancelledError:
                 pass
             self._task = None
-        self._release_tick_waiters()
+        self._run_tick_callbacks()
+        self._wake_sleepers(math.inf)
 
-    def after_next_tick(self) -> asyncio.Future:
-        """A future done right after the next scheduled send (at once when not streaming): work
-        started there has a whole period before the next send, so it never delays one."""
-        future = asyncio.get_running_loop().create_future()
+    def call_after_next_tick(self, callback: Callable[[], None]) -> None:
+        """Call ``callback()`` on the loop right after the next scheduled send (soon when not
+        streaming), in the same wake-up as the send: no task, no future, warm caches."""
         if self.running:
-            self._tick_waiters.append(future)
+            self._tick_callbacks.append(callback)
         else:
-            future.set_result(None)
-        return future
+            asyncio.get_running_loop().call_soon(callback)
 
-    def _release_tick_waiters(self) -> None:
-        waiters, self._tick_waiters = self._tick_waiters, []
-        for future in waiters:
+    async def sleep(self, delay_s: float) -> None:
+        """Sleep about ``delay_s``, waking right after the first send that follows (while
+        streaming: the periodic work of the flight then shares the stream's wake-up of the
+        process instead of adding its own); ``asyncio.sleep`` when not streaming."""
+        if not self.running:
+            await asyncio.sleep(delay_s)
+            return
+        future = asyncio.get_running_loop().create_future()
+        self._sleepers.append((time.monotonic() + delay_s - 0.5 * self.period_s, future))
+        try:
+            await future
+        finally:
             if not future.done():
-                future.set_result(None)
+                future.cancel()
+
+    def _wake_sleepers(self, now_s: float) -> None:
+        due = [f for t, f in self._sleepers if t <= now_s]
+        if due:
+            self._sleepers = [(t, f) for t, f in self._sleepers if t > now_s and not f.done()]
+            for future in due:
+                if not future.done():
+                    future.set_result(None)
+
+    def _after_tick(self) -> None:
+        """Right after a scheduled send: the source's work ahead, then the tick's callbacks."""
+        if self._prepare is not None:
+            try:
+                self._prepare()
+            except Exception:  # noqa: BLE001 - the send path evaluates again if needed
+                log.exception("setpoint source's prepare failed")
+                self._prepare = None
+        self._run_tick_callbacks()
+        self._wake_sleepers(time.monotonic())
+
+    def _run_tick_callbacks(self) -> None:
+        callbacks, self._tick_callbacks = self._tick_callbacks, []
+        for callback in callbacks:
+            try:
+                callback()
+            except Exception:  # noqa: BLE001 - the stream goes on
+                log.exception("after-tick callback %r failed", callback)
 
     @property
     def running(self) -> bool:
@@ -314,7 +356,7 @@ class SetpointStreamer:
             if periods:
                 self.missed += periods - 1        # deadlines already passed are skipped, never bursts
                 self.tick(time.monotonic())
-                self._release_tick_waiters()
+                self._after_tick()
 
         self.tick(t0)
         loop.add_reader(timer.fileno(), on_expiry)
@@ -331,7 +373,7 @@ class SetpointStreamer:
             await self.wait_until(deadline)
             now = time.monotonic()
             self.tick(now)
-            self._release_tick_waiters()
+            self._after_tick()
             k += 1
             # skip deadlines already missed by more than one period (no bursts)
             behind = int((time.monotonic() - (t0 + k * self.period_s)) // self.period_s)

@@ -35,6 +35,10 @@ log = logging.getLogger(__name__)
 MAX_DATAGRAM = 65535
 #: The gate thread's longest wait for traffic (s): its own frames wait at most this long.
 SELECT_TIMEOUT_S = 0.2
+#: The messages the link reads (``inbound.taps``) are handed to the event loop in one batch at
+#: most this often (s): each hand-over wakes the loop, and the vehicle's telemetry streams
+#: (10 Hz at most) arrive as about 40 datagrams a second. Their arrival times are stamped here.
+TAP_HANDOVER_PERIOD_S = 0.1
 
 
 def split_url(url: str) -> tuple[str, str, int]:
@@ -154,8 +158,10 @@ class GateThread:
         self._heartbeat_due_s = 0.0
         self._own: collections.deque[bytes] = collections.deque()   # post_own's, sent by the gate's thread
         self._send_lock = threading.Lock()       # the encoder and the vehicle side, shared with the loop
-        #: ``on_tap(batch)`` on the gate's thread with the ``inbound.taps`` of each read (the link's)
+        #: ``on_tap(batch)`` on the gate's thread with the ``inbound.taps`` read since the last
+        #: hand-over, at most every ``TAP_HANDOVER_PERIOD_S`` (the link's)
         self.on_tap: Callable[[list], None] | None = None
+        self._handover_due_s = 0.0
         self.vehicle = open_vehicle_side(url)
         self.local = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.local.bind(("127.0.0.1", 0))
@@ -226,7 +232,7 @@ class GateThread:
             try:
                 self._onboard_heartbeat()
                 self._send_posted()
-                ready, _, _ = select.select([self.vehicle, self.local], [], [], SELECT_TIMEOUT_S)
+                ready, _, _ = select.select([self.vehicle, self.local], [], [], self._select_timeout_s())
             except (OSError, ValueError):
                 return                              # closed under us
             for side in ready:
@@ -238,13 +244,26 @@ class GateThread:
                     log.debug("gate: %s", exc)
                 except Exception:                    # never let the gate die silently
                     log.exception("gate: unexpected error (the link goes on)")
+            self._hand_over_taps()
+
+    def _select_timeout_s(self) -> float:
+        """Until the next hand-over of the messages read (``_hand_over_taps``) when some wait."""
+        if not self.inbound.taps:
+            return SELECT_TIMEOUT_S
+        return min(SELECT_TIMEOUT_S, max(self._handover_due_s - time.monotonic(), 0.0))
+
+    def _hand_over_taps(self) -> None:
+        """Hand the messages read to ``on_tap`` in one batch, at most every ``TAP_HANDOVER_PERIOD_S``."""
+        now = time.monotonic()
+        if not self.inbound.taps or now < self._handover_due_s:
+            return
+        self._handover_due_s = now + TAP_HANDOVER_PERIOD_S
+        taps, self.inbound.taps = self.inbound.taps, []
+        if self.on_tap is not None:
+            self.on_tap(taps)
 
     def _from_vehicle(self) -> None:
         frames = self.inbound.filter(self.vehicle.read())
-        if self.inbound.taps:
-            taps, self.inbound.taps = self.inbound.taps, []
-            if self.on_tap is not None:
-                self.on_tap(taps)
         while self.inbound.replies:
             self.send_own(self.inbound.replies.pop(0))
         if self.inbound.autopilot_heard:

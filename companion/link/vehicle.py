@@ -124,7 +124,6 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self._system = None
         self._direct_sync = None   # MavlinkDirect (commands, rare sends; telemetry and setpoints: the gate)
         self._mission = None
-        self._telemetry_plugin = None
         self._state = TelemetryState()
         self._tasks: list[asyncio.Task] = []
         self._t0 = time.monotonic()
@@ -147,7 +146,6 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         """
         from mavsdk.asyncio import ComponentType, Configuration, Mavsdk, MavsdkConnectionError
         from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
-        from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
         from mavsdk.plugins.mavlink_direct import MavlinkDirect
 
         check_url(url)
@@ -176,7 +174,6 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
             self.onboard.set_system(self.target_system)
         self._direct_sync = MavlinkDirect(system._system)
         self._mission = MissionRawAsync(system)
-        self._telemetry_plugin = TelemetryAsync(system)
         self._state.heartbeat_t = time.monotonic()
         self._was_connected = True
         if self.stream_settings is not None:
@@ -191,12 +188,12 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self._tasks.clear()
         # MAVSDK aborts the process if it is destroyed while a plugin or a System it handed out
         # is alive: release them first, newest first
-        for owned in (self._telemetry_plugin, self._mission, self._direct_sync,
+        for owned in (self._mission, self._direct_sync,
                       getattr(self._system, "_system", None)):
             if owned is not None:
                 with contextlib.suppress(Exception):
                     owned.destroy()
-        self._telemetry_plugin = self._mission = self._direct_sync = self._system = None
+        self._mission = self._direct_sync = self._system = None
         if self._mavsdk is not None:
             with contextlib.suppress(Exception):
                 self._mavsdk.destroy()

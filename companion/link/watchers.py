@@ -1,8 +1,8 @@
 """The link's telemetry subscriptions: each received message kept in the ``TelemetryState``.
 
-Raw LOCAL_POSITION_NED, EXTENDED_SYS_STATE, HOME_POSITION, GPS_GLOBAL_ORIGIN, RPM, SYS_STATUS,
-STATUSTEXT and HEARTBEAT come through MavlinkDirect (``messages``); attitude, armed and global
-position through MAVSDK's Telemetry plugin. A message from another system, or one with a
+Every message comes from the signing gate (``messages``: parsed once on its thread, handed
+over in batches), not through MAVSDK's Telemetry plugin, whose callbacks cost a loop wake-up
+each. The armed state is the HEARTBEAT's. A message from another system, or one with a
 missing, null or non-finite field (``finite_fields``), is dropped; a subscription that fails is
 logged and restarted (``_guarded``), so a telemetry glitch never stops the link.
 """
@@ -42,7 +42,7 @@ def degrees_lla(lla_int) -> tuple[float, float, float] | None:
 
 class TelemetryWatchers:
     """The subscriptions of a ``VehicleLink`` (a part of it: it uses the link's ``messages``,
-    ``_from_vehicle``, ``connected`` and telemetry plugin)."""
+    ``_from_vehicle`` and ``connected``)."""
 
     url: str | None
     target_system: int
@@ -51,14 +51,13 @@ class TelemetryWatchers:
     statustexts: collections.deque
     _state: TelemetryState
     _tasks: list[asyncio.Task]
-    _telemetry_plugin: object
     _link_listeners: list[Callable[[bool], None]]
     _was_connected: bool
 
     def _start_subscriptions(self) -> None:
         loop = asyncio.get_running_loop()
         coros = [self._watch_heartbeat(), self._watch_link(), self._watch_local_position(),
-                 self._watch_attitude(), self._watch_armed(), self._watch_landed_state(),
+                 self._watch_attitude(), self._watch_landed_state(),
                  self._watch_home(), self._watch_origin(), self._watch_global_position(),
                  self._watch_statustext(), self._watch_rpm(), self._watch_sys_status()]
         if self.streams is not None:
@@ -131,18 +130,13 @@ class TelemetryWatchers:
         await self._guarded("LOCAL_POSITION_NED", lambda: self.messages("LOCAL_POSITION_NED"), apply)
 
     async def _watch_attitude(self) -> None:
-        def apply(att) -> None:
-            values = finite_fields(att, "roll_deg", "pitch_deg", "yaw_deg")
-            if values is None:
+        def apply(fields: dict) -> None:
+            values = finite_fields(fields, "roll", "pitch", "yaw")
+            if not self._from_vehicle(fields) or values is None:
                 return
-            self._state.values["attitude_rad"] = np.radians(values)
+            self._state.values["attitude_rad"] = np.array(values)
             self._note("ATTITUDE")
-        await self._guarded("attitude", self._telemetry_plugin.subscribe_attitude_euler, apply)
-
-    async def _watch_armed(self) -> None:
-        def apply(armed) -> None:
-            self._state.values["armed"] = bool(armed)
-        await self._guarded("armed", self._telemetry_plugin.subscribe_armed, apply)
+        await self._guarded("ATTITUDE", lambda: self.messages("ATTITUDE"), apply)
 
     async def _watch_landed_state(self) -> None:
         def apply(fields: dict) -> None:
@@ -212,11 +206,12 @@ class TelemetryWatchers:
         await self._guarded("HOME_POSITION", lambda: self.messages("HOME_POSITION"), apply)
 
     async def _watch_global_position(self) -> None:
-        def apply(pos) -> None:
-            values = finite_fields(pos, "latitude_deg", "longitude_deg", "absolute_altitude_m",
-                                   "relative_altitude_m")
-            if values is None:
+        def apply(fields: dict) -> None:
+            values = finite_fields(fields, "lat", "lon", "alt", "relative_alt")
+            if not self._from_vehicle(fields) or values is None:
                 return
-            self._state.values.update(zip(("lat_deg", "lon_deg", "alt_amsl_m", "rel_alt_m"), values))
+            lat, lon, alt_mm, rel_mm = values
+            self._state.values.update(lat_deg=lat / 1e7, lon_deg=lon / 1e7, alt_amsl_m=alt_mm / 1e3,
+                                      rel_alt_m=rel_mm / 1e3)
             self._note("GLOBAL_POSITION_INT")
-        await self._guarded("position", self._telemetry_plugin.subscribe_position, apply)
+        await self._guarded("GLOBAL_POSITION_INT", lambda: self.messages("GLOBAL_POSITION_INT"), apply)

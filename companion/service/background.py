@@ -57,7 +57,7 @@ class BackgroundTasks:
     async def _record_samples(self) -> None:
         period = 1.0 / self.settings.link.record_rate_hz
         while True:
-            await asyncio.sleep(period)
+            await self.pause(period)
             tele = self.link.telemetry
             if tele.pos_ned_m is None or self.reference is None:
                 continue

@@ -23,6 +23,9 @@ log = logging.getLogger(__name__)
 __all__ = ["LegTasks", "GUIDED"]
 
 GUIDED = COPTER_MODES["GUIDED"]
+#: Wall-clock period of the leg's phase machine (``leg_step``): the vehicle's position arrives at
+#: 10 Hz, so stepping faster only repeats the same observation.
+PHASE_STEP_PERIOD_S = 0.1
 
 
 class LegTasks:
@@ -108,7 +111,7 @@ class LegTasks:
             self.threats.on_leg_started(leg, ref)
         state = LegState()
         while True:
-            await asyncio.sleep(0.05)
+            await self.pause(PHASE_STEP_PERIOD_S)
             state, action = leg_step(state, self.observe(leg))
             if action.kind is ActionKind.ABORT:
                 raise FlightAborted(action.reason)

@@ -11,9 +11,8 @@ be written right after it, so that writing never delays a send (the jitter bench
 
 from __future__ import annotations
 
-import asyncio
 import logging
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable
 from pathlib import Path
 
 from companion.errors import ConfigError
@@ -30,28 +29,24 @@ class RecordSinks:
 
     def __init__(self, sinks: list) -> None:
         self.sinks = sinks
-        self._after_tick: Callable[[], Awaitable] | None = None
+        self._after_tick: Callable[[Callable[[], None]], None] | None = None
         self._pending: list[tuple[str, dict]] = []
-        self._flushing: asyncio.Task | None = None
 
-    def pace(self, after_next_tick: Callable[[], Awaitable] | None) -> None:
-        """From now on, write each line after the stream's next send (``after_next_tick``:
-        ``SetpointStreamer.after_next_tick``; call ``write`` on the event loop); None: at once."""
-        self._after_tick = after_next_tick
-        if after_next_tick is None:
+    def pace(self, call_after_next_tick: Callable[[Callable[[], None]], None] | None) -> None:
+        """From now on, write each line right after the stream's next send
+        (``call_after_next_tick``: ``SetpointStreamer.call_after_next_tick``; call ``write`` on
+        the event loop); None: at once."""
+        self._after_tick = call_after_next_tick
+        if call_after_next_tick is None:
             self.flush()
 
     def write(self, line_type: str, /, **fields) -> None:
         if self._after_tick is None:
             self._write(line_type, fields)
             return
+        if not self._pending:
+            self._after_tick(self.flush)
         self._pending.append((line_type, fields))
-        if self._flushing is None or self._flushing.done():
-            self._flushing = asyncio.get_running_loop().create_task(self._flush_after_tick())
-
-    async def _flush_after_tick(self) -> None:
-        await self._after_tick()
-        self.flush()
 
     def flush(self) -> None:
         """Write the lines waiting for the stream's next send now."""
@@ -65,8 +60,6 @@ class RecordSinks:
 
     def close(self) -> None:
         """Write what waits, then close every sink."""
-        if self._flushing is not None:
-            self._flushing.cancel()
         self.flush()
         for sink in self.sinks:
             try:

@@ -1,11 +1,11 @@
 """Property-based fuzz of the companion's MAVLink input: the telemetry watchers of ``VehicleLink``.
 
 What passes the gate (``companion.link.gate``, fuzzed in ``test_gate_input.py``) reaches the
-companion through MAVSDK; this fuzzes the companion's own parsing of what MAVSDK hands it: each
-watcher of :class:`~companion.link.vehicle.VehicleLink` (``companion.link.watchers``: HEARTBEAT,
-LOCAL_POSITION_NED, EXTENDED_SYS_STATE, GPS_GLOBAL_ORIGIN, HOME_POSITION, STATUSTEXT, SYS_STATUS, RPM from
-MavlinkDirect as JSON field dicts; attitude, armed and position from MAVSDK's telemetry
-plugin) runs on its own event loop, fed by a stand-in subscription with hypothesis field dicts:
+companion's watchers as field dicts (``tapped_fields``); this fuzzes the companion's own parsing
+of them: each watcher of :class:`~companion.link.vehicle.VehicleLink` (``companion.link.watchers``:
+HEARTBEAT, LOCAL_POSITION_NED, ATTITUDE, GLOBAL_POSITION_INT, EXTENDED_SYS_STATE, GPS_GLOBAL_ORIGIN,
+HOME_POSITION, STATUSTEXT, SYS_STATUS, RPM) runs on its own event loop, fed by a stand-in
+subscription with hypothesis field dicts:
 fields missing, NaN, infinite, out of range, from the vehicle or from another system.
 
 Properties: nothing raises out of a watcher's ``apply`` (a raise would be caught by
@@ -23,7 +23,6 @@ import asyncio
 import collections
 import logging
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -39,12 +38,7 @@ VEHICLE = 1
 DIRECT = {"HEARTBEAT": "_watch_heartbeat", "LOCAL_POSITION_NED": "_watch_local_position",
           "EXTENDED_SYS_STATE": "_watch_landed_state", "GPS_GLOBAL_ORIGIN": "_watch_origin",
           "HOME_POSITION": "_watch_home", "STATUSTEXT": "_watch_statustext", "SYS_STATUS": "_watch_sys_status",
-          "RPM": "_watch_rpm"}
-#: Telemetry-plugin watchers: subscription -> (watcher, attributes of the objects it yields).
-PLUGIN = {"subscribe_attitude_euler": ("_watch_attitude", ("roll_deg", "pitch_deg", "yaw_deg")),
-          "subscribe_armed": ("_watch_armed", ()),
-          "subscribe_position": ("_watch_global_position", ("latitude_deg", "longitude_deg", "absolute_altitude_m",
-                                                            "relative_altitude_m"))}
+          "RPM": "_watch_rpm", "ATTITUDE": "_watch_attitude", "GLOBAL_POSITION_INT": "_watch_global_position"}
 
 
 class Failures(logging.Handler):
@@ -59,7 +53,7 @@ class Failures(logging.Handler):
 
 
 class FakeSubscriptions:
-    """Stands in for MavlinkDirect and the telemetry plugin: one queue per subscription.
+    """Stands in for the link's ``messages``: one queue per subscription.
 
     A subscription yields its queue and then waits; ``drained`` is set when every queue is empty
     and each watcher has asked for its next value (so it has applied the previous one).
@@ -84,17 +78,13 @@ class FakeSubscriptions:
     def messages(self, name: str):
         return self._source(name)
 
-    def plugin(self):
-        return SimpleNamespace(**{sub: (lambda sub=sub: self._source(sub)) for sub in PLUGIN})
-
 
 async def drive(inputs: list[tuple[str, object]]) -> tuple[VehicleLink, list[logging.LogRecord]]:
     """Run every watcher of a fresh link on ``inputs`` ((subscription, value) pairs, in order)."""
     link = VehicleLink("companion")
     subs = FakeSubscriptions()
     link.messages = subs.messages
-    link._telemetry_plugin = subs.plugin()
-    names = [*DIRECT.values(), *(w for w, _ in PLUGIN.values())]
+    names = list(DIRECT.values())
     failures = Failures()
     logger = logging.getLogger("companion.link")   # the watchers and every other part of the link
     logger.addHandler(failures)
@@ -105,7 +95,7 @@ async def drive(inputs: list[tuple[str, object]]) -> tuple[VehicleLink, list[log
             subs.wake.set()
             for _ in range(100):  # until every subscription is waiting again (a restart takes 0.5 s)
                 await asyncio.sleep(0)
-                if not any(subs.queues.values()) and len(subs.waiting) == len(DIRECT) + len(PLUGIN):
+                if not any(subs.queues.values()) and len(subs.waiting) == len(DIRECT):
                     break
             else:
                 await asyncio.sleep(0.6)
@@ -151,17 +141,9 @@ def fields_dicts(name: str, nullable: bool = False):
     return st.fixed_dictionaries(header, optional=values)
 
 
-def plugin_values(sub: str):
-    _, attrs = PLUGIN[sub]
-    if not attrs:
-        return st.booleans()
-    return st.builds(lambda vals: SimpleNamespace(**dict(zip(attrs, vals))), st.tuples(*[F32] * len(attrs)))
-
-
 def inputs(nullable: bool = False):
     return st.lists(st.one_of(
-        *[st.tuples(st.just(name), fields_dicts(name, nullable)) for name in DIRECT],
-        *[st.tuples(st.just(sub), plugin_values(sub)) for sub in PLUGIN]), min_size=1, max_size=15)
+        *[st.tuples(st.just(name), fields_dicts(name, nullable)) for name in DIRECT]), min_size=1, max_size=15)
 
 
 def finite_telemetry(link: VehicleLink) -> list[str]:
@@ -198,9 +180,9 @@ def test_telemetry_stays_finite(received):
                             "vx": 0.0, "vy": 0.0, "vz": 0.0, "time_boot_ms": 1000}),
     ("LOCAL_POSITION_NED", {"_sysid": VEHICLE, "_compid": 1, "x": 0.0, "y": 0.0, "z": -10.0,
                             "vx": math.inf, "vy": 0.0, "vz": 0.0, "time_boot_ms": 1000}),
-    ("subscribe_attitude_euler", SimpleNamespace(roll_deg=0.0, pitch_deg=0.0, yaw_deg=math.nan)),
-    ("subscribe_position", SimpleNamespace(latitude_deg=math.nan, longitude_deg=8.5, absolute_altitude_m=500.0,
-                                           relative_altitude_m=10.0)),
+    ("ATTITUDE", {"_sysid": VEHICLE, "_compid": 1, "roll": 0.0, "pitch": 0.0, "yaw": math.nan}),
+    ("GLOBAL_POSITION_INT", {"_sysid": VEHICLE, "_compid": 1, "lat": 473977420, "lon": 85455940,
+                             "alt": math.inf, "relative_alt": 10000}),
     ("RPM", {"_sysid": VEHICLE, "_compid": 1, "rpm1": math.inf, "rpm2": 0.0}),
 ])
 def test_reproducers_non_finite_telemetry(sub, value):

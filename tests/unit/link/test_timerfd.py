@@ -46,7 +46,7 @@ def test_paced_record_lines_are_written_right_after_a_send_and_flushed_at_close(
         sinks = RecordSinks([sink])
         sinks.write("header")                                       # not paced: at once
         streamer.start()
-        sinks.pace(streamer.after_next_tick)
+        sinks.pace(streamer.call_after_next_tick)
         await asyncio.sleep(0.005)
         before = len(sent)
         sinks.write("sample")
@@ -60,6 +60,51 @@ def test_paced_record_lines_are_written_right_after_a_send_and_flushed_at_close(
         sinks.close()
         assert sink.lines[-1][0] == "summary"
         assert streamer.stats().count >= 3
+
+    asyncio.run(main())
+
+
+def test_sleep_wakes_right_after_a_send_once_the_delay_has_passed():
+    async def main():
+        sent = []
+        streamer = SetpointStreamer(lambda **kw: sent.append(time.monotonic()), hold_position([0, 0, -10], 0.0))
+        t0 = time.monotonic()
+        await streamer.sleep(0.01)                        # not streaming: a plain sleep
+        assert time.monotonic() - t0 >= 0.0095 and not sent
+        streamer.start()
+        await asyncio.sleep(0.03)
+        for delay in (0.005, 0.05, 0.1):
+            start = time.monotonic()
+            await streamer.sleep(delay)
+            woke = time.monotonic()
+            assert woke - start >= delay - 0.5 * streamer.period_s   # not before its time (half a period early at most)
+            assert woke - start <= delay + 2 * streamer.period_s + 0.05
+            assert 0.0 <= woke - sent[-1] < 0.005                # in the wake-up of a send, right after it
+        waiting = asyncio.get_running_loop().create_task(streamer.sleep(10.0))
+        await asyncio.sleep(0.03)
+        await streamer.stop()                                   # stopping wakes every sleeper
+        await asyncio.wait_for(waiting, 1.0)
+
+    asyncio.run(main())
+
+
+def test_after_tick_callbacks_run_in_the_sends_wake_up_and_at_stop():
+    async def main():
+        sent, called = [], []
+        streamer = SetpointStreamer(lambda **kw: sent.append(time.monotonic()), hold_position([0, 0, -10], 0.0))
+        streamer.call_after_next_tick(lambda: called.append(("idle", len(sent))))
+        await asyncio.sleep(0)
+        assert called == [("idle", 0)]                           # not streaming: soon
+        streamer.start()
+        await asyncio.sleep(0.03)
+        streamer.call_after_next_tick(lambda: called.append(("next", len(sent))))
+        streamer.call_after_next_tick(lambda: 1 / 0)             # a failing callback is logged, no more
+        before = len(sent)
+        await asyncio.sleep(0.05)
+        assert called[1] == ("next", before + 1)
+        streamer.call_after_next_tick(lambda: called.append(("stop", None)))
+        await streamer.stop()
+        assert called[-1] == ("stop", None)
 
     asyncio.run(main())
 
