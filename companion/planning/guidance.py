@@ -4,13 +4,18 @@ Inside an inflated obstacle the sample is repelled to just outside the surface (
 ``repel_offset_m``); outside, each obstacle within ``influence_m`` attracts it towards its
 surface with a force ``k / c`` inversely proportional to the clearance ``c`` (capped at ``c / 2``
 so it never crosses the surface); the goal always attracts it by ``goal_gain_m``. The total
-displacement is capped at ``max_guidance_m``. Below 128 obstacles every obstacle is scanned with
-plain floats; with more, only those listed for the sample's grid cell.
+displacement is capped at ``max_guidance_m``. Below 128 obstacles every obstacle is scanned; with
+more, only those listed for the sample's grid cell. A world of few discs/spheres only (the usual
+case) is scanned by one compiled kernel (numba, :func:`attract_to_balls`) doing the scalar
+code's floating-point operations in the same order, so the guided sample is the same.
 """
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
+from numba import njit
 
 from companion.planning.settings import GartSettings
 
@@ -43,10 +48,16 @@ class Guidance:
         self.balls = tuple(b[:-2] + ((b[-1] + influence) * (b[-1] + influence), b[-1])
                            for b in world.inflated_balls)
         self.others = world.non_ball_obstacles
+        self.compiled = self.scan_all and not self.others
+        self.ball_rows = np.array(self.balls, dtype=float).reshape(-1, self.dim + 2)
 
     def attract(self, p: tuple) -> tuple:
         """Sample ``p`` moved by the potential, clamped to the bounds."""
         s = self.s
+        if self.compiled:
+            out = attract_to_balls(p, self.goal, self.lo, self.hi, self.ball_rows, s.obstacle_gain_m2,
+                                   s.repel_offset_m, s.goal_gain_m, s.max_guidance_m)
+            return tuple(out.tolist())
         force = [0.0] * self.dim
         if self.scan_all:
             balls, others = self.balls, self.others   # few obstacles: a plain scan is cheapest
@@ -121,3 +132,54 @@ class Guidance:
                 force[2] += mag * dz / n
             else:
                 force[0] += mag
+
+
+@njit(cache=True)
+def attract_to_balls(p, goal, lo, hi, balls: np.ndarray, gain: float, repel: float, goal_gain: float,
+                     max_guidance: float) -> np.ndarray:
+    """:meth:`Guidance.attract` for a world of discs/spheres only: the moved sample, shape (d,).
+
+    ``balls`` (N, d + 2) rows ``(centre..., (r + influence)^2, r)``; the arithmetic is that of
+    the scalar methods, term by term.
+    """
+    d = balls.shape[1] - 2
+    force = np.zeros(d)
+    delta = np.empty(d)
+    for j in range(balls.shape[0]):
+        delta[0] = p[0] - balls[j, 0]
+        d2 = delta[0] * delta[0]
+        for k in range(1, d):
+            delta[k] = p[k] - balls[j, k]
+            d2 += delta[k] * delta[k]
+        if d2 >= balls[j, d]:
+            continue
+        n = math.sqrt(d2)
+        c = n - balls[j, d + 1]
+        mag = -c + repel if c <= 0.0 else -min(gain / c, 0.5 * c)
+        if n > 1e-12:
+            for k in range(d):
+                force[k] += mag * delta[k] / n
+        else:
+            force[0] += mag
+    for k in range(d):
+        delta[k] = goal[k] - p[k]
+    s2 = delta[0] * delta[0]
+    for k in range(1, d):
+        s2 += delta[k] * delta[k]
+    dist_goal = math.sqrt(s2)
+    if dist_goal > 1e-9:
+        g = min(goal_gain, dist_goal) / dist_goal
+        for k in range(d):
+            force[k] += g * delta[k]
+    f2 = force[0] * force[0]
+    for k in range(1, d):
+        f2 += force[k] * force[k]
+    norm = math.sqrt(f2)
+    if norm > max_guidance:
+        scale = max_guidance / norm
+        for k in range(d):
+            force[k] = force[k] * scale
+    out = np.empty(d)
+    for k in range(d):
+        out[k] = min(max(p[k] + force[k], lo[k]), hi[k])
+    return out

@@ -4,9 +4,10 @@ RRT* asks for the nearest node and for the nodes within a radius on every iterat
 tree grows by one node; rebuilding a KD-tree each time costs more than the whole iteration
 (``ANCHORS.md``: cKDTree build 88 us for 1k nodes, query 10-15 us). Buckets of node ids keyed
 by flat integer cell indices are updated in O(1) and searched ring by ring (Chebyshev rings of
-cells around the query); a small tree is scanned linearly. Plain floats and ints only, except
-above ``_VECTOR_FROM`` nodes, where one numpy pass over all nodes
-(:class:`~companion.planning.node_arrays.NodeArrays`) answers the same queries in the same order.
+cells around the query); a small tree is scanned linearly. From ``_VECTOR_FROM`` nodes (by
+default always) one compiled pass over all nodes
+(:class:`~companion.planning.node_arrays.NodeArrays`, numba) answers the same queries in the same
+order; the bucket walk stays as the reference the tests compare it with.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from companion.planning.node_arrays import NodeArrays
 __all__ = ["NodeGrid", "listed_within"]
 
 _LINEAR_SCAN_BELOW = 40
-_VECTOR_FROM = 256
+_VECTOR_FROM = 0  # compiled queries from this many nodes (the bucket walk is the reference)
 
 
 class NodeGrid:
@@ -45,7 +46,7 @@ class NodeGrid:
         self.active: list[int] = []  # ids in the structure, for linear scans
         self.where: dict[int, int] = {}  # id -> position in active
         self._rings: list[list[tuple]] = [[(0,) * self.dim]]
-        self.arrays = NodeArrays(points, self.lo, self.inv, self.shape)
+        self.arrays = NodeArrays(self.dim)
 
     # ------------------------------------------------------------------ cells
     def _index(self, p: tuple) -> tuple:
@@ -77,7 +78,9 @@ class NodeGrid:
     # ------------------------------------------------------------------ updates
     def add(self, node: int) -> None:
         """Insert node ``node`` (its position is ``points[node]``)."""
-        key = self._flat(self._index(self.points[node]))
+        p = self.points[node]
+        key = self._flat(self._index(p))
+        self.arrays.append(node, p, key)
         bucket = self.buckets.get(key)
         if bucket is None:
             self.buckets[key] = [node]
@@ -125,10 +128,10 @@ class NodeGrid:
 
     def nearest(self, p: tuple) -> int:
         """Id of the point nearest to ``p`` (-1 when empty)."""
-        if len(self.active) < _LINEAR_SCAN_BELOW:
-            return self._scan(p, self.active)[0]
         if len(self.active) >= _VECTOR_FROM:
             return self.arrays.nearest(p, self.arrays.sync(self.where))
+        if len(self.active) < _LINEAR_SCAN_BELOW:
+            return self._scan(p, self.active)[0]
         idx = self._index(p)
         shape = self.shape
         buckets = self.buckets

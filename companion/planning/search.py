@@ -18,7 +18,8 @@ Cost-to-come includes the corner (tracking) term at the parent, so it depends on
 rewiring compares the neighbour's own cost (the standard RRT* rule), which with a tracking weight
 may leave descendants' corner costs slightly suboptimal. The tree is kept in plain lists of
 floats and tuples: at the sizes of a first path (tens to hundreds of nodes) Python's scalar
-operations cost less than numpy's per-call overhead.
+operations cost less than numpy's per-call overhead. The loops over all nodes or all obstacles
+(nearest and radius queries, exact segment tests, guidance) are compiled with numba.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from companion.planning.sampling import RandomStream, Sampler
 from companion.planning.settings import GartSettings
 from companion.planning.simplify import CornerRule
 from companion.world import World
+from companion.world.segments import segment_test
 
 __all__ = ["GartSearch"]
 
@@ -64,6 +66,7 @@ class GartSearch:
         self.dim = d = world.dim
         self.rule = CornerRule(settings, world)
         self.ec = EdgeCost(world, settings.cost)
+        self.segment_free = segment_test(world)  # world.segment_free, compiled for worlds of balls
         self.sampler = Sampler(world, start, goal, settings.goal_bias, settings.informed, RandomStream(rng))
         self.guidance = Guidance(world, goal, settings) if settings.guidance else None
         # cost = energy weight * length: the inner loop skips the general cost terms
@@ -141,7 +144,7 @@ class GartSearch:
                 cands.append((cost[i] + ec.edge(p, x_new, dist, dens[i], dens_new) + ec.corner(u_in[i], u), i, dist))
         cands.sort()
         ok = self.rule.ok
-        free = self.world.segment_free
+        free = self.segment_free
         for c, i, dist in cands:
             p = pts[i]
             u = tuple((b - a) / dist for a, b in zip(p, x_new))
@@ -174,7 +177,7 @@ class GartSearch:
         c_new = cost[node]
         u_node, len_node = u_in[node], len_in[node]
         ec, ok = self.ec, self.rule.ok
-        free = self.world.segment_free
+        free = self.segment_free
         energy = self.s.cost.energy
         skip = self.parent[node]
         changed = False
@@ -235,7 +238,7 @@ class GartSearch:
         u = tuple((b - a) / dist for a, b in zip(p, self.goal))
         if not self.rule.ok(self.u_in[node], self.len_in[node], u, dist):
             return False
-        if not self.world.segment_free(p, self.goal):
+        if not self.segment_free(p, self.goal):
             return False
         if not self.rule.ok(self.u_in[node], self.len_in[node], u, dist, p):
             return False
