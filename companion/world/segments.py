@@ -24,7 +24,6 @@ from numba import njit
 __all__ = ["segments_free_from", "segment_test"]
 
 _MEMO_KEY = ("segments_free_from", "balls")
-_TEST_KEY = ("segment_test",)
 _COMPILED_UP_TO_BALLS = 256  # above, the grid walk visits fewer obstacles than a full scan
 
 
@@ -59,6 +58,11 @@ def segments_free_from(world, a: tuple, ends: list) -> list[bool]:
     """
     if not ends:
         return []
+    if _compiled_for(world):   # a world of balls: compiled
+        centres, r2 = _ball_arrays(world)
+        lo, hi = _bounds(world)
+        free = segments_clear_of_balls(a, np.array(ends, dtype=float).reshape(-1, world.dim), lo, hi, centres, r2)
+        return free.tolist()
     if not world.in_bounds(a):
         return [False] * len(ends)
     d = world.dim
@@ -125,21 +129,35 @@ def segment_clear_of_balls(a, b, lo, hi, centres: np.ndarray, r2: np.ndarray) ->
     return True
 
 
+@njit(cache=True)
+def segments_clear_of_balls(a, ends: np.ndarray, lo, hi, centres: np.ndarray, r2: np.ndarray) -> np.ndarray:
+    """:func:`segment_clear_of_balls` from ``a`` to each row of ``ends`` (K, d): (K,) bool."""
+    out = np.empty(ends.shape[0], dtype=np.bool_)
+    for i in range(ends.shape[0]):
+        out[i] = segment_clear_of_balls(a, ends[i], lo, hi, centres, r2)
+    return out
+
+
+def _bounds(world) -> tuple[tuple, tuple]:
+    return tuple(world.bounds_min.tolist()), tuple(world.bounds_max.tolist())
+
+
 def segment_test(world) -> Callable[[tuple, tuple], bool]:
     """``world.segment_free`` for tuples of d floats, compiled when the world has only balls.
 
     Worlds with other obstacles, or with more than 256 balls, get ``world.segment_free`` itself.
-    Memoised per world.
+    (The ball arrays are memoised per world, the returned function is not: worlds may be pickled.)
     """
-    found = world._memo.get(_TEST_KEY)
-    if found is None:
-        if world.non_ball_obstacles or len(world.inflated_balls) > _COMPILED_UP_TO_BALLS:
-            found = world.segment_free
-        else:
-            centres, r2 = _ball_arrays(world)
-            lo, hi = tuple(world.bounds_min.tolist()), tuple(world.bounds_max.tolist())
+    if not _compiled_for(world):
+        return world.segment_free
+    centres, r2 = _ball_arrays(world)
+    lo, hi = _bounds(world)
 
-            def found(a: tuple, b: tuple) -> bool:
-                return segment_clear_of_balls(a, b, lo, hi, centres, r2)
-        world._memo[_TEST_KEY] = found
-    return found
+    def segment_free(a: tuple, b: tuple) -> bool:
+        return segment_clear_of_balls(a, b, lo, hi, centres, r2)
+
+    return segment_free
+
+
+def _compiled_for(world) -> bool:
+    return not world.non_ball_obstacles and len(world.inflated_balls) <= _COMPILED_UP_TO_BALLS
