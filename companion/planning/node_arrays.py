@@ -121,6 +121,10 @@ class NodeArrays:
         """Id of the active node nearest to ``p`` (-1 when none); ``n`` from :meth:`sync`."""
         return nearest_kernel(self.coords, self.active, n, p)
 
+    def within_arrays(self, p: tuple, radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`within` as arrays: ids (m,) int64 and distances (m,) in the same order."""
+        return within_kernel(self.coords, self.keys, self.active, self.count, p, radius_m * radius_m)
+
     def within(self, p: tuple, radius_m: float, n: int) -> list[tuple[int, float]]:
         """``(id, distance)`` of the active nodes within ``radius_m`` of ``p``, by bucket then id."""
         ids, dist = within_kernel(self.coords, self.keys, self.active, n, p, radius_m * radius_m)

@@ -31,12 +31,13 @@ import numpy as np
 from companion.planning.cost import EdgeCost
 from companion.planning.guidance import Guidance
 from companion.planning.nearest import NodeGrid, listed_within
+from companion.planning.parent_choice import ParentArrays, first_valid_parent
 from companion.planning.result import Tree
 from companion.planning.sampling import RandomStream, Sampler
 from companion.planning.settings import GartSettings
 from companion.planning.simplify import CornerRule
 from companion.world import World
-from companion.world.segments import segment_test
+from companion.world.segments import ball_arrays, compiled_for, segment_test
 
 __all__ = ["GartSearch"]
 
@@ -92,6 +93,12 @@ class GartSearch:
         self.forbidden: list[bool] = [False]
         self.nn = NodeGrid(tuple(lo), tuple(hi), max(self.r_max, 1e-3), self.pts)
         self.nn.add(0)
+        # step 4 compiled for the plain length cost in a world of balls (else the Python loop)
+        self.fast = None
+        if self.simple_cost and self.rule.world is None and compiled_for(world):
+            self.fast = ParentArrays(d)
+            self.fast.set(0, 0.0, None)
+            self.fast_world = (tuple(lo), tuple(hi)) + ball_arrays(world)
         # goal links: node -> (edge cost, u, length)
         self.goal_links: dict[int, tuple[float, tuple, float]] = {}
         self.best_node = -1
@@ -153,6 +160,18 @@ class GartSearch:
                 return i, c, e, u, dist
         return None
 
+    def choose_parent_compiled(self, x_new: tuple, ids: np.ndarray, dists: np.ndarray):
+        """:meth:`choose_parent` in one compiled call (plain length cost, world of balls)."""
+        energy = self.s.cost.energy
+        fast = self.fast
+        pos = first_valid_parent(ids, dists, fast.cost, fast.u, fast.has_u, self.nn.arrays.coords, x_new,
+                                 energy, self.rule.cos_max, *self.fast_world)
+        if pos < 0:
+            return None
+        i, dist = int(ids[pos]), float(dists[pos])
+        u = tuple((b - a) / dist for a, b in zip(self.pts[i], x_new))
+        return i, self.cost[i] + energy * dist, energy * dist, u, dist
+
     def add_node(self, x_new: tuple, parent: int, cost: float, edge: float, u: tuple, length: float,
                  dens_new: float) -> int:
         """Append a node and link it to ``parent``."""
@@ -168,6 +187,8 @@ class GartSearch:
         self.forbidden.append(False)
         self.children[parent].append(node)
         self.nn.add(node)
+        if self.fast is not None:
+            self.fast.set(node, cost, u)
         return node
 
     def rewire(self, node: int, neighbours: list) -> bool:
@@ -210,6 +231,8 @@ class GartSearch:
             self.parent[i] = node
             self.children[node].append(i)
             self.edge_in[i], self.u_in[i], self.len_in[i], cost[i] = e, u, dist, c
+            if self.fast is not None:
+                self.fast.set(i, c, u)
             self.propagate(i)
             changed = True
         return changed
@@ -218,11 +241,14 @@ class GartSearch:
         """Recompute cost-to-come below ``root`` after it changed parent."""
         cost, u_in, edge_in, children = self.cost, self.u_in, self.edge_in, self.children
         corner = self.ec.corner
+        mirror = self.fast.cost if self.fast is not None else None
         stack = [root]
         while stack:
             n = stack.pop()
             for ch in children[n]:
                 cost[ch] = cost[n] + edge_in[ch] + corner(u_in[n], u_in[ch])
+                if mirror is not None:
+                    mirror[ch] = cost[ch]
                 stack.append(ch)
 
     def connect_goal(self, node: int) -> bool:
@@ -277,11 +303,19 @@ class GartSearch:
         if x_new is None or not self.world.point_free(x_new):
             return -1
         radius = self.radius()
-        neighbours = self.nn.within(x_new, radius)
-        if not listed_within(self.pts[near], x_new, radius):
-            neighbours.append((near, math.dist(self.pts[near], x_new)))
+        listed = listed_within(self.pts[near], x_new, radius)
         dens_new = self.ec.threat_density(x_new) if self.ec.uses_threat else 0.0
-        chosen = self.choose_parent(x_new, neighbours, dens_new)
+        if self.fast is not None:
+            ids, dists = self.nn.arrays.within_arrays(x_new, radius)
+            if not listed:
+                ids, dists = np.append(ids, near), np.append(dists, math.dist(self.pts[near], x_new))
+            neighbours = list(zip(ids.tolist(), dists.tolist()))
+            chosen = self.choose_parent_compiled(x_new, ids, dists)
+        else:
+            neighbours = self.nn.within(x_new, radius)
+            if not listed:
+                neighbours.append((near, math.dist(self.pts[near], x_new)))
+            chosen = self.choose_parent(x_new, neighbours, dens_new)
         if chosen is None:
             return -1
         parent, c, e, u, dist = chosen

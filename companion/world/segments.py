@@ -21,13 +21,13 @@ from typing import Callable
 import numpy as np
 from numba import njit
 
-__all__ = ["segments_free_from", "segment_test"]
+__all__ = ["segments_free_from", "segment_test", "segment_clear_of_balls", "ball_arrays", "compiled_for"]
 
 _MEMO_KEY = ("segments_free_from", "balls")
 _COMPILED_UP_TO_BALLS = 256  # above, the grid walk visits fewer obstacles than a full scan
 
 
-def _ball_arrays(world) -> tuple[np.ndarray, np.ndarray]:
+def ball_arrays(world) -> tuple[np.ndarray, np.ndarray]:
     """``(centres (N, d), r_inflated^2 (N,))`` of the world's discs/spheres, memoised per world."""
     found = world._memo.get(_MEMO_KEY)
     if found is None:
@@ -58,15 +58,15 @@ def segments_free_from(world, a: tuple, ends: list) -> list[bool]:
     """
     if not ends:
         return []
-    if _compiled_for(world):   # a world of balls: compiled
-        centres, r2 = _ball_arrays(world)
+    if compiled_for(world):   # a world of balls: compiled
+        centres, r2 = ball_arrays(world)
         lo, hi = _bounds(world)
         free = segments_clear_of_balls(a, np.array(ends, dtype=float).reshape(-1, world.dim), lo, hi, centres, r2)
         return free.tolist()
     if not world.in_bounds(a):
         return [False] * len(ends)
     d = world.dim
-    centres, r2 = _ball_arrays(world)
+    centres, r2 = ball_arrays(world)
     b = np.array(ends, dtype=float).reshape(-1, d)
     delta = [(b[:, k] - a[k])[:, None] for k in range(d)]          # (K, 1) per axis
     l2 = delta[0] * delta[0]
@@ -148,9 +148,9 @@ def segment_test(world) -> Callable[[tuple, tuple], bool]:
     Worlds with other obstacles, or with more than 256 balls, get ``world.segment_free`` itself.
     (The ball arrays are memoised per world, the returned function is not: worlds may be pickled.)
     """
-    if not _compiled_for(world):
+    if not compiled_for(world):
         return world.segment_free
-    centres, r2 = _ball_arrays(world)
+    centres, r2 = ball_arrays(world)
     lo, hi = _bounds(world)
 
     def segment_free(a: tuple, b: tuple) -> bool:
@@ -159,5 +159,6 @@ def segment_test(world) -> Callable[[tuple, tuple], bool]:
     return segment_free
 
 
-def _compiled_for(world) -> bool:
+def compiled_for(world) -> bool:
+    """True when the compiled tests apply: only discs/spheres, at most 256 of them."""
     return not world.non_ball_obstacles and len(world.inflated_balls) <= _COMPILED_UP_TO_BALLS
