@@ -7,7 +7,8 @@ tree's cost-to-come and incoming unit directions as arrays (written wherever the
 writes its lists), and :func:`first_valid_parent` runs that loop in one call, with the
 arithmetic of :meth:`~companion.planning.search.GartSearch.choose_parent`,
 :meth:`~companion.planning.simplify.CornerRule.ok` and the exact segment test, in the same
-order, so it picks the same parent.
+order, so it picks the same parent. :func:`rewire_candidates` applies step 5's first test (can
+the new node shorten a neighbour at all?) to every neighbour at once.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from numba import njit
 
 from companion.world.segments import segment_clear_of_balls
 
-__all__ = ["ParentArrays", "first_valid_parent"]
+__all__ = ["ParentArrays", "first_valid_parent", "rewire_candidates"]
 
 _FIRST_CAPACITY = 1024
 
@@ -103,3 +104,23 @@ def first_valid_parent(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, u_i
         if segment_clear_of_balls(coords[i], x_new, lo, hi, centres, r2):
             return a
     return -1
+
+
+@njit(cache=True)
+def rewire_candidates(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, c_new: float, energy: float,
+                      skip: int) -> np.ndarray:
+    """Positions in ``ids`` of the neighbours that the new node (cost ``c_new``) may shorten.
+
+    Those with ``c_new + dist * energy < cost`` that are neither the root, nor ``skip`` (the new
+    node's parent), nor at ``dist < 1e-9``, in the order given. Rewiring only lowers costs, so
+    a neighbour left out here stays out while the others are rewired.
+    """
+    out = np.empty(ids.shape[0], dtype=np.int64)
+    m = 0
+    for a in range(ids.shape[0]):
+        i = ids[a]
+        if c_new + dists[a] * energy >= cost[i] or i == 0 or i == skip or dists[a] < 1e-9:
+            continue
+        out[m] = a
+        m += 1
+    return out[:m]

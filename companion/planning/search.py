@@ -31,7 +31,7 @@ import numpy as np
 from companion.planning.cost import EdgeCost
 from companion.planning.guidance import Guidance
 from companion.planning.nearest import NodeGrid, listed_within
-from companion.planning.parent_choice import ParentArrays, first_valid_parent
+from companion.planning.parent_choice import ParentArrays, first_valid_parent, rewire_candidates
 from companion.planning.result import Tree
 from companion.planning.sampling import RandomStream, Sampler
 from companion.planning.settings import GartSettings
@@ -309,7 +309,6 @@ class GartSearch:
             ids, dists = self.nn.arrays.within_arrays(x_new, radius)
             if not listed:
                 ids, dists = np.append(ids, near), np.append(dists, math.dist(self.pts[near], x_new))
-            neighbours = list(zip(ids.tolist(), dists.tolist()))
             chosen = self.choose_parent_compiled(x_new, ids, dists)
         else:
             neighbours = self.nn.within(x_new, radius)
@@ -320,6 +319,9 @@ class GartSearch:
             return -1
         parent, c, e, u, dist = chosen
         node = self.add_node(x_new, parent, c, e, u, dist, dens_new)
+        if self.fast is not None:
+            pos = rewire_candidates(ids, dists, self.fast.cost, c, self.s.cost.energy, parent).tolist()
+            neighbours = [(int(ids[k]), float(dists[k])) for k in pos]
         self.rewire(node, neighbours)
         self.connect_goal(node)
         return node
