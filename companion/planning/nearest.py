@@ -46,7 +46,7 @@ class NodeGrid:
         self.active: list[int] = []  # ids in the structure, for linear scans
         self.where: dict[int, int] = {}  # id -> position in active
         self._rings: list[list[tuple]] = [[(0,) * self.dim]]
-        self.arrays = NodeArrays(self.dim)
+        self.arrays = NodeArrays(self.lo, self.inv, self.shape)
 
     # ------------------------------------------------------------------ cells
     def _index(self, p: tuple) -> tuple:
@@ -78,9 +78,7 @@ class NodeGrid:
     # ------------------------------------------------------------------ updates
     def add(self, node: int) -> None:
         """Insert node ``node`` (its position is ``points[node]``)."""
-        p = self.points[node]
-        key = self._flat(self._index(p))
-        self.arrays.append(node, p, key)
+        key = self.arrays.append(node, self.points[node])   # = self._flat(self._index(p))
         bucket = self.buckets.get(key)
         if bucket is None:
             self.buckets[key] = [node]

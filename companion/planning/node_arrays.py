@@ -76,36 +76,60 @@ def within_kernel(coords: np.ndarray, keys: np.ndarray, active: np.ndarray, n: i
     return ids[:m], np.sqrt(d2s[:m])
 
 
+@njit(cache=True)
+def append_kernel(coords: np.ndarray, keys: np.ndarray, active: np.ndarray, node: int, p, lo, inv_cell: float,
+                  shape) -> int:
+    """Write row ``node`` (position ``p``), mark it active; returns its bucket key.
+
+    The key is that of :class:`~companion.planning.nearest.NodeGrid`: per axis the truncation
+    of ``(x - lo) / cell`` clamped to the grid, flattened row-major.
+    """
+    key = 0
+    for k in range(coords.shape[1]):
+        coords[node, k] = p[k]
+        i = int((p[k] - lo[k]) * inv_cell)
+        i = 0 if i < 0 else (shape[k] - 1 if i >= shape[k] else i)
+        key = key * shape[k] + i
+    keys[node] = key
+    active[node] = True
+    return key
+
+
 class NodeArrays:
     """Coordinates, bucket keys and active flags of the nodes, as numpy arrays.
 
     Parameters
     ----------
-    dim : int
-        2 or 3.
+    lo : tuple of d floats
+        Lower corner of the bucket grid.
+    inv_cell : float
+        1 / bucket edge (1/m).
+    shape : tuple of d ints
+        Buckets per axis.
     """
 
-    def __init__(self, dim: int):
-        self.dim = dim
+    def __init__(self, lo: tuple, inv_cell: float, shape: tuple):
+        self.dim = dim = len(lo)
+        self.lo = lo
+        self.inv_cell = inv_cell
+        self.shape = shape
         self.count = 0
         self.coords = np.empty((_FIRST_CAPACITY, dim))
         self.keys = np.empty(_FIRST_CAPACITY, dtype=np.int64)
         self.active = np.zeros(_FIRST_CAPACITY, dtype=np.bool_)
 
     # ------------------------------------------------------------------ updates
-    def append(self, node: int, p: tuple, key: int) -> None:
-        """Write node ``node`` (position ``p``, bucket ``key``) and mark it active."""
+    def append(self, node: int, p: tuple) -> int:
+        """Write node ``node`` (position ``p``) and mark it active; returns its bucket key."""
         cap = self.keys.shape[0]
         if node >= cap:
             cap = max(node + 1, 2 * cap)
             self.coords = np.concatenate([self.coords, np.empty((cap - self.coords.shape[0], self.dim))])
             self.keys = np.concatenate([self.keys, np.empty(cap - self.keys.shape[0], dtype=np.int64)])
             self.active = np.concatenate([self.active, np.zeros(cap - self.active.shape[0], dtype=np.bool_)])
-        self.coords[node] = p
-        self.keys[node] = key
-        self.active[node] = True
         if node >= self.count:
             self.count = node + 1
+        return append_kernel(self.coords, self.keys, self.active, node, p, self.lo, self.inv_cell, self.shape)
 
     def set_active(self, node: int, value: bool) -> None:
         """Mark ``node`` as in (True) or out of (False) the structure."""

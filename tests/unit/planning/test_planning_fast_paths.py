@@ -28,6 +28,7 @@ def test_node_arrays_answer_as_the_bucket_grid_in_the_same_order(dim):
     grid = NodeGrid((0.0,) * dim, (100.0,) * dim, 40.0, pts)
     for i in range(len(pts)):
         grid.add(i)
+        assert grid.arrays.keys[i] == grid._flat(grid._index(pts[i]))   # compiled bucket key
     for i in range(0, 600, 7):
         grid.remove(i)
     queries = [tuple(q) for q in rs.uniform(-5, 105, (60, dim)).tolist()]
