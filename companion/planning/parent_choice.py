@@ -8,7 +8,9 @@ writes its lists), and :func:`first_valid_parent` runs that loop in one call, wi
 arithmetic of :meth:`~companion.planning.search.GartSearch.choose_parent`,
 :meth:`~companion.planning.simplify.CornerRule.ok` and the exact segment test, in the same
 order, so it picks the same parent. :func:`rewire_candidates` applies step 5's first test (can
-the new node shorten a neighbour at all?) to every neighbour at once.
+the new node shorten a neighbour at all?) to every neighbour at once; :func:`extend` runs the
+point test, the radius query and step 4 for a steered point in one call. (numba's cache notices
+edits of a kernel's own file only: after editing a kernel it calls, clear ``__pycache__``.)
 """
 
 from __future__ import annotations
@@ -16,9 +18,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from companion.planning.node_arrays import within_kernel
 from companion.world.segments import segment_clear_of_balls
 
-__all__ = ["ParentArrays", "first_valid_parent", "rewire_candidates"]
+__all__ = ["ParentArrays", "first_valid_parent", "rewire_candidates", "extend"]
 
 _FIRST_CAPACITY = 1024
 
@@ -124,3 +127,47 @@ def rewire_candidates(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, c_ne
         out[m] = a
         m += 1
     return out[:m]
+
+
+@njit(cache=True)
+def point_clear_of_balls(x, lo, hi, centres: np.ndarray, r2: np.ndarray) -> bool:
+    """``World.point_free`` for a world of balls: inside the bounds and outside every ball."""
+    d = centres.shape[1]
+    for k in range(d):
+        if not (lo[k] <= x[k] and x[k] <= hi[k]):
+            return False
+    for j in range(centres.shape[0]):
+        dx = x[0] - centres[j, 0]
+        d2 = dx * dx
+        for k in range(1, d):
+            dk = x[k] - centres[j, k]
+            d2 += dk * dk
+        if d2 <= r2[j]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def extend(x_new, near: int, near_dist: float, radius_m: float, coords: np.ndarray, keys: np.ndarray,
+           active: np.ndarray, n: int, cost: np.ndarray, u_in: np.ndarray, has_u: np.ndarray, energy: float,
+           cos_max: float, lo, hi, centres: np.ndarray, r2: np.ndarray):
+    """Point test, neighbours and parent of the steered point ``x_new`` in one call.
+
+    Returns ``(free, pos, ids, dists)``: whether ``x_new`` is free, the position in ``ids`` of
+    its parent (-1: none), and the neighbours within ``radius_m`` (m) by bucket then id, the
+    nearest node ``near`` (at ``near_dist``) appended when the radius leaves it out.
+    """
+    if not point_clear_of_balls(x_new, lo, hi, centres, r2):
+        return False, -1, np.empty(0, dtype=np.int64), np.empty(0)
+    rr = radius_m * radius_m
+    ids, dists = within_kernel(coords, keys, active, n, x_new, rr)
+    dx = coords[near, 0] - x_new[0]
+    d2 = dx * dx
+    for k in range(1, coords.shape[1]):
+        dk = coords[near, k] - x_new[k]
+        d2 += dk * dk
+    if not d2 <= rr:   # listed_within(pts[near], x_new, radius_m)
+        ids = np.append(ids, near)
+        dists = np.append(dists, near_dist)
+    pos = first_valid_parent(ids, dists, cost, u_in, has_u, coords, x_new, energy, cos_max, lo, hi, centres, r2)
+    return True, pos, ids, dists

@@ -31,7 +31,7 @@ import numpy as np
 from companion.planning.cost import EdgeCost
 from companion.planning.guidance import Guidance
 from companion.planning.nearest import NodeGrid, listed_within
-from companion.planning.parent_choice import ParentArrays, first_valid_parent, rewire_candidates
+from companion.planning.parent_choice import ParentArrays, extend, rewire_candidates
 from companion.planning.result import Tree
 from companion.planning.sampling import RandomStream, Sampler
 from companion.planning.settings import GartSettings
@@ -159,18 +159,6 @@ class GartSearch:
                 e = energy * dist if simple else ec.edge(p, x_new, dist, dens[i], dens_new)
                 return i, c, e, u, dist
         return None
-
-    def choose_parent_compiled(self, x_new: tuple, ids: np.ndarray, dists: np.ndarray):
-        """:meth:`choose_parent` in one compiled call (plain length cost, world of balls)."""
-        energy = self.s.cost.energy
-        fast = self.fast
-        pos = first_valid_parent(ids, dists, fast.cost, fast.u, fast.has_u, self.nn.arrays.coords, x_new,
-                                 energy, self.rule.cos_max, *self.fast_world)
-        if pos < 0:
-            return None
-        i, dist = int(ids[pos]), float(dists[pos])
-        u = tuple((b - a) / dist for a, b in zip(self.pts[i], x_new))
-        return i, self.cost[i] + energy * dist, energy * dist, u, dist
 
     def add_node(self, x_new: tuple, parent: int, cost: float, edge: float, u: tuple, length: float,
                  dens_new: float) -> int:
@@ -300,29 +288,41 @@ class GartSearch:
         if near < 0:
             return -1
         x_new = self.steer(self.pts[near], x_rand)
-        if x_new is None or not self.world.point_free(x_new):
+        if x_new is None:
+            return -1
+        if self.fast is not None:
+            return self.extend_compiled(near, x_new)
+        if not self.world.point_free(x_new):
             return -1
         radius = self.radius()
         listed = listed_within(self.pts[near], x_new, radius)
         dens_new = self.ec.threat_density(x_new) if self.ec.uses_threat else 0.0
-        if self.fast is not None:
-            ids, dists = self.nn.arrays.within_arrays(x_new, radius)
-            if not listed:
-                ids, dists = np.append(ids, near), np.append(dists, math.dist(self.pts[near], x_new))
-            chosen = self.choose_parent_compiled(x_new, ids, dists)
-        else:
-            neighbours = self.nn.within(x_new, radius)
-            if not listed:
-                neighbours.append((near, math.dist(self.pts[near], x_new)))
-            chosen = self.choose_parent(x_new, neighbours, dens_new)
+        neighbours = self.nn.within(x_new, radius)
+        if not listed:
+            neighbours.append((near, math.dist(self.pts[near], x_new)))
+        chosen = self.choose_parent(x_new, neighbours, dens_new)
         if chosen is None:
             return -1
         parent, c, e, u, dist = chosen
         node = self.add_node(x_new, parent, c, e, u, dist, dens_new)
-        if self.fast is not None:
-            pos = rewire_candidates(ids, dists, self.fast.cost, c, self.s.cost.energy, parent).tolist()
-            neighbours = [(int(ids[k]), float(dists[k])) for k in pos]
         self.rewire(node, neighbours)
+        self.connect_goal(node)
+        return node
+
+    def extend_compiled(self, near: int, x_new: tuple) -> int:
+        """Steps 4 to 6 from the steered ``x_new`` (plain length cost, world of balls)."""
+        fast, arrays, energy = self.fast, self.nn.arrays, self.s.cost.energy
+        free, pos, ids, dists = extend(x_new, near, math.dist(self.pts[near], x_new), self.radius(), arrays.coords,
+                                       arrays.keys, arrays.active, arrays.count, fast.cost, fast.u, fast.has_u,
+                                       energy, self.rule.cos_max, *self.fast_world)
+        if pos < 0:
+            return -1
+        parent, dist = int(ids[pos]), float(dists[pos])
+        u = tuple((b - a) / dist for a, b in zip(self.pts[parent], x_new))
+        c = self.cost[parent] + energy * dist
+        node = self.add_node(x_new, parent, c, energy * dist, u, dist, 0.0)
+        cands = rewire_candidates(ids, dists, fast.cost, c, energy, parent).tolist()
+        self.rewire(node, [(int(ids[k]), float(dists[k])) for k in cands])
         self.connect_goal(node)
         return node
 
