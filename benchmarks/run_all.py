@@ -22,6 +22,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
 REPO = Path(__file__).resolve().parents[1]
 
 #: name -> extra arguments; the order is the order of docs/BENCHMARKS.md.
@@ -82,9 +85,15 @@ def main() -> int:
     args = parser.parse_args()
     failed = []
     if not args.assemble_only:
-        for name in args.only or BENCHMARKS:
-            if not run(name, args.quick):
-                failed.append(name)
+        names = args.only or list(BENCHMARKS)
+        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                      TimeElapsedColumn(), console=Console(stderr=True)) as progress:
+            task = progress.add_task("benchmarks", total=len(names))
+            for name in names:
+                progress.update(task, description=f"benchmark {name}")
+                if not run(name, args.quick):
+                    failed.append(name)
+                progress.advance(task)
     (REPO / "docs" / "BENCHMARKS.md").write_text(assemble())
     print(f"\nwrote docs/BENCHMARKS.md{'; failed: ' + ', '.join(failed) if failed else ''}")
     return 1 if failed else 0

@@ -8,10 +8,11 @@ Goals (issue 2):
 - ``simulate_closed_loop`` on a 60 s trajectory well under 100 ms (the companion's
   feasibility check runs it per candidate trajectory).
 
-What is timed: the vehicle numerics of one ``sim-vehicle`` (flight controller update, four RK4
-steps and the gust model per control period), not the MAVLink I/O around them. The circle
-starts from hover with a smooth 5 s speed ramp; the error is measured over the whole flight,
-ramp included, on the full loop (``FlightController`` + ``step_rk4``).
+What is timed: the vehicle numerics of one ``sim-vehicle`` (the pure vehicle update
+``VehicleUpdate.update(state, command, dt)`` of :mod:`sim_vehicle.vehicle_update`: one flight
+controller step and four RK4 steps per control period, and the gust model), not the MAVLink I/O
+around them. The circle starts from hover with a smooth 5 s speed ramp; the error is measured
+over the whole flight, ramp included, on the full loop (the same pure update).
 
 Usage::
 
@@ -40,6 +41,7 @@ sys.path.insert(0, str(REPO))
 from sim_vehicle import dynamics  # noqa: E402
 from sim_vehicle.control import ControllerSettings, FlightController, Setpoint, simulate_closed_loop  # noqa: E402
 from sim_vehicle.model import HeliModel  # noqa: E402
+from sim_vehicle.vehicle_update import VehicleCommand, VehicleUpdate  # noqa: E402
 from sim_vehicle.wind import WindModel, WindSettings  # noqa: E402
 
 PHYSICS_HZ = 400
@@ -64,21 +66,23 @@ def measure_realtime(model: HeliModel, sim_s: float, gusts: bool, repeats: int =
 
 def run_realtime_once(model: HeliModel, sim_s: float, gusts: bool) -> dict:
     """Wall time of the SITL numerics for ``sim_s`` of flight (GUIDED moves between targets)."""
-    controller = FlightController(model)
-    x = dynamics.hover_state(model, (0.0, 0.0, -10.0))
-    controller.reset(x)
-    wind = WindModel(WindSettings((3.0, 1.0, 0.0), 1.5 if gusts else 0.0, 2.0), np.random.default_rng(0))
     physics_dt = 1.0 / PHYSICS_HZ
     control_dt = 1.0 / CONTROL_HZ
+    vehicle = VehicleUpdate.build(model, ControllerSettings(control_dt_s=control_dt), physics_dt)
+    state = vehicle.hover_state((0.0, 0.0, -10.0))
+    wind = WindModel(WindSettings((3.0, 1.0, 0.0), 1.5 if gusts else 0.0, 2.0), np.random.default_rng(0))
     per_control = PHYSICS_HZ // CONTROL_HZ
+    winds = np.zeros((per_control, 3))            # the gusts of each RK4 sub-step of a control period
     n = int(round(sim_s * CONTROL_HZ))
     targets = [Setpoint(pos_ned_m=(20.0 * math.cos(0.3 * k), 20.0 * math.sin(0.3 * k), -15.0), yaw_rad=0.3 * k)
                for k in range(8)]
     t0, c0 = time.perf_counter(), time.process_time()
     for k in range(n):
-        delta = controller.update(x, targets[(k // 1000) % len(targets)], control_dt)
-        for _ in range(per_control):
-            x = dynamics.step_rk4(model, x, delta, physics_dt, wind.step(physics_dt) if gusts else None)
+        if gusts:
+            for i in range(per_control):
+                winds[i] = wind.step(physics_dt)
+        command = VehicleCommand(targets[(k // 1000) % len(targets)], winds if gusts else None)
+        state = vehicle.update(state, command, control_dt)
     wall = time.perf_counter() - t0
     cpu = time.process_time() - c0
     return {"sim_s": sim_s, "wall_s": wall, "cpu_s": cpu, "rtf": sim_s / cpu, "rtf_wall": sim_s / wall,
@@ -86,7 +90,7 @@ def run_realtime_once(model: HeliModel, sim_s: float, gusts: bool) -> dict:
 
 
 def measure_kernels(model: HeliModel, reps: int) -> dict:
-    """CPU microseconds per ``step_rk4`` and per ``FlightController.update``."""
+    """CPU microseconds per ``step_rk4``, per ``FlightController.update`` and per control period of the update."""
     x = dynamics.hover_state(model, (0.0, 0.0, -10.0))
     delta = np.array([0.1, -0.1, 0.05, 0.02])
     dynamics.step_rk4(model, x, delta, 1.0 / PHYSICS_HZ)
@@ -101,7 +105,14 @@ def measure_kernels(model: HeliModel, reps: int) -> dict:
     for _ in range(reps):
         controller.update(x, sp, 1.0 / CONTROL_HZ)
     update_us = (time.process_time() - t0) / reps * 1e6
-    return {"step_rk4_us": step_us, "controller_update_us": update_us}
+    vehicle = VehicleUpdate.build(model, physics_dt_s=1.0 / PHYSICS_HZ)
+    state = vehicle.hover_state((0.0, 0.0, -10.0))
+    command = VehicleCommand(sp)
+    t0 = time.process_time()
+    for _ in range(reps):
+        state = vehicle.update(state, command, 1.0 / CONTROL_HZ)
+    period_us = (time.process_time() - t0) / reps * 1e6
+    return {"step_rk4_us": step_us, "controller_update_us": update_us, "vehicle_update_us": period_us}
 
 
 def measure_circle(model: HeliModel, duration_s: float, heading: str) -> dict:
@@ -109,19 +120,16 @@ def measure_circle(model: HeliModel, duration_s: float, heading: str) -> dict:
     control_dt = 1.0 / CONTROL_HZ
     t = np.arange(0.0, duration_s + control_dt / 2, control_dt)
     pos, vel, acc, yaw = circle_reference(t, heading=heading)
-    controller = FlightController(model)
-    x = dynamics.hover_state(model, pos[0], yaw[0])
-    controller.reset(x)
-    flown = [dynamics.pos_ned_m(x)]
+    vehicle = VehicleUpdate.build(model, ControllerSettings(control_dt_s=control_dt), 1.0 / PHYSICS_HZ)
+    state = vehicle.hover_state(pos[0], yaw[0])
+    flown = [dynamics.pos_ned_m(state.x)]
     max_delta = 0.0
     saturated = False
     for k in range(t.size - 1):
-        delta = controller.update(x, Setpoint(pos[k], vel[k], acc[k], yaw[k]), control_dt)
-        max_delta = max(max_delta, float(np.max(np.abs(controller.delta_unclipped))))
-        saturated |= controller.saturated
-        for _ in range(PHYSICS_HZ // CONTROL_HZ):
-            x = dynamics.step_rk4(model, x, delta, 1.0 / PHYSICS_HZ)
-        flown.append(dynamics.pos_ned_m(x))
+        state = vehicle.update(state, VehicleCommand(Setpoint(pos[k], vel[k], acc[k], yaw[k])), control_dt)
+        max_delta = max(max_delta, float(np.max(np.abs(state.controller.delta_unclipped))))
+        saturated |= state.controller.saturated
+        flown.append(dynamics.pos_ned_m(state.x))
     err = np.linalg.norm(np.array(flown) - pos, axis=1)
     pred = simulate_closed_loop(model, t, pos, vel, acc, yaw)
     return {"heading": heading, "duration_s": duration_s, "rms_m": float(np.sqrt(np.mean(err**2))),
@@ -169,6 +177,7 @@ def markdown(result: dict) -> str:
     step_ok = "yes" if k["step_rk4_us"] <= 40 else "NO"
     lines.append(f"| `step_rk4` (CPU) | {k['step_rk4_us']:.1f} us | <= 40 us | {step_ok} |")
     lines.append(f"| `FlightController.update` (CPU) | {k['controller_update_us']:.1f} us | | |")
+    lines.append(f"| `VehicleUpdate.update`, one control period (CPU) | {k['vehicle_update_us']:.1f} us | | |")
     for c in result["circle"]:
         ok = c["rms_m"] <= GOAL_RMS_M and c["max_m"] <= GOAL_MAX_M and not c["saturated"]
         lines.append(

@@ -329,7 +329,7 @@ def vehicle_cost(frames, log_dir: Path) -> dict:
     """
     from sim_vehicle.autopilot import Autopilot
     from sim_vehicle.config import VehicleSettings, replace_path
-    from sim_vehicle.mavlink_server import MavlinkServer
+    from sim_vehicle.mavlink import MavlinkServer
     from sim_vehicle.model import HeliModel
 
     settings = replace_path(VehicleSettings(), "link.out", ())

@@ -18,7 +18,7 @@ import sys
 from companion.errors import CompanionError
 from companion.geo import GeoError
 
-COMMAND_MODULES = ("run", "mission_io", "plan", "threat", "keys", "router", "report", "demo")
+COMMAND_MODULES = ("run", "serve", "mission_io", "plan", "threat", "keys", "router", "report", "demo")
 
 log = logging.getLogger(__name__)
 

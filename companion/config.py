@@ -20,11 +20,13 @@ Tree (``companion run --config FILE``; ``companion run --print-config`` shows it
     threats     threat-manager policy (companion.threats.settings.ThreatSettings)
     adsb        ADS-B traffic as threats (companion.threats.adsb.AdsbSettings)
     state       where the threat snapshot is kept for a resume after a crash (companion.state)
+    view        the live Foxglove server (companion.view)
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -38,6 +40,7 @@ from companion.planning import GartSettings
 from companion.smoothing import FeasibilitySettings, SmoothingSettings
 from companion.threats.adsb import AdsbSettings
 from companion.threats.settings import ThreatSettings, ZenohSettings
+from companion.view.sinks import parse_foxglove_address
 from sim_vehicle.typed_config import from_dict, load_toml, require_numbers
 
 
@@ -53,9 +56,11 @@ class LinkSettings:
         How long to wait for an autopilot at start (wall-clock seconds).
     setpoint_rate_hz : float
         GUIDED setpoint stream rate (default 50 Hz).
-    time_scale : float
-        Simulated seconds per wall-clock second: set it to ``sim-vehicle --speedup`` so that the
-        reference advances at the vehicle's pace (1 for a real vehicle).
+    time_scale : float or None
+        Vehicle seconds per wall-clock second, so that the reference advances at the vehicle's
+        pace. None (default): read from the vehicle at connection, its ``SIM_SPEEDUP``
+        parameter (``sim-vehicle --speedup``, ArduPilot SITL's ``--speedup``), 1 for a vehicle
+        without one (a real helicopter). ``--time-scale`` sets it.
     leg_timeout_margin_s : float
         A leg not reached this long (mission time) after its trajectory ended is an error: the
         vehicle is held and the flight ends.
@@ -74,12 +79,15 @@ class LinkSettings:
     signing_key_file : str
         MAVLink 2 signing key file (64 hex digits or a passphrase; ``--signing-key``): sign
         everything sent, accept only frames signed with it. Empty: no signing.
+    tlog_file : str
+        Record the companion's MAVLink traffic with the vehicle, both ways, to this ``.tlog``
+        file (``--tlog``; pymavlink, MAVExplorer and QGroundControl read it). Empty: none.
     """
 
     connect: str = "udpin://0.0.0.0:14540"
     connect_timeout_s: float = 30.0
     setpoint_rate_hz: float = 50.0
-    time_scale: float = 1.0
+    time_scale: float | None = None
     leg_timeout_margin_s: float = 30.0
     on_interrupt: Literal["hold", "land", "rtl"] = "hold"
     record_rate_hz: float = 10.0
@@ -87,13 +95,33 @@ class LinkSettings:
     origin_timeout_s: float = 5.0
     streams: StreamSettings = StreamSettings()
     signing_key_file: str = ""
+    tlog_file: str = ""
 
     def __post_init__(self) -> None:
         require_numbers(ConfigError, "link", self, positive=(
-            "connect_timeout_s", "setpoint_rate_hz", "time_scale",
-            "leg_timeout_margin_s", "record_rate_hz", "status_rate_hz", "origin_timeout_s"))
+            "connect_timeout_s", "setpoint_rate_hz", "leg_timeout_margin_s", "record_rate_hz",
+            "status_rate_hz", "origin_timeout_s") + (() if self.time_scale is None else ("time_scale",)))
         if self.setpoint_rate_hz > 200:
             raise ConfigError(f"link.setpoint_rate_hz: at most 200, got {self.setpoint_rate_hz}")
+
+
+@dataclass(frozen=True)
+class ViewSettings:
+    """The operator's live view (``companion.view``).
+
+    Parameters
+    ----------
+    foxglove : str
+        Serve the flight live over the Foxglove WebSocket protocol on ``[HOST:]PORT``
+        (``--foxglove``; host 127.0.0.1 unless given, port 0 picks a free one): the 3D scene,
+        the map, the record's channels. Empty (default): no server.
+    """
+
+    foxglove: str = ""
+
+    def __post_init__(self) -> None:
+        if self.foxglove:
+            parse_foxglove_address(self.foxglove, "view.foxglove")
 
 
 @dataclass(frozen=True)
@@ -119,7 +147,15 @@ class StateSettings:
 
 @dataclass(frozen=True)
 class Settings:
-    """The whole companion settings tree (see the module docstring)."""
+    """The whole companion settings tree (see the module docstring).
+
+    Parameters
+    ----------
+    seed : int
+        Random seed of every planner run (logged, so that any flight can be replayed).
+    link, startup, zenoh, mission, flight, planning, smoothing, feasibility, threats, adsb, state, view
+        The tables of the tree (their keys are documented by their own classes).
+    """
 
     seed: int = 0
     link: LinkSettings = LinkSettings()
@@ -133,6 +169,7 @@ class Settings:
     threats: ThreatSettings = ThreatSettings()
     adsb: AdsbSettings = AdsbSettings()
     state: StateSettings = StateSettings()
+    view: ViewSettings = ViewSettings()
 
     def __post_init__(self) -> None:
         if self.seed < 0:
@@ -166,3 +203,38 @@ def load_settings(path: str | Path | None = None, overrides: dict | None = None)
 def settings_to_dict(settings) -> dict:
     """The settings tree as plain data (for logs, the flight record and ``--print-config``)."""
     return dataclasses.asdict(settings)
+
+
+def settings_to_toml(settings) -> str:
+    """The settings tree as a TOML file that ``--config`` reads back to the same settings.
+
+    Unset keys (None) have no TOML value: they are written as comments.
+    """
+    return "\n".join(_toml_table(settings_to_dict(settings), "")).strip() + "\n"
+
+
+def _toml_table(data: dict, name: str) -> list[str]:
+    lines = [f"[{name}]"] if name else []
+    tables = []
+    for key, value in data.items():
+        if isinstance(value, dict):
+            tables.append((key, value))
+        elif value is None:
+            lines.append(f"# {key} = (unset)")
+        else:
+            lines.append(f"{key} = {_toml_value(value)}")
+    for key, value in tables:
+        lines += ["", *_toml_table(value, f"{name}.{key}" if name else key)]
+    return lines
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)                  # a JSON string is a valid TOML basic string
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"no TOML form for {value!r}")

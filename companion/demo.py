@@ -47,6 +47,8 @@ log = logging.getLogger(__name__)
 
 #: ``sim-vehicle``'s default home (lat, lon, alt AMSL): the origin of the demo's global threats.
 DEMO_HOME = (47.397742, 8.545594, 488.0)
+#: The demo's flight record, in its output directory: MCAP, which Foxglove opens.
+DEMO_RECORD = "flight.mcap"
 #: The demo's mission, package data of ``companion`` (``mission_files/`` links to it).
 DEMO_MISSION_RESOURCE = "data/exclusion_zones.plan"
 
@@ -87,8 +89,9 @@ class Injection:
     speed_m_s : float
         Moving threats move at this speed ...
     heading : str
-        ... ``across`` the path (towards it, perpendicular) or ``head_on`` (back along it,
-        towards the vehicle).
+        ... ``across`` the path (towards it, perpendicular) or ``head_on`` (straight at the
+        vehicle: from the meeting point towards the reference position now, level, so that on
+        a curving leg too it comes at the vehicle and a hover in its way is no escape).
     frame : str
         ``local_ned`` or ``global`` (the threat is sent as lat/lon/alt about ``DEMO_HOME``).
     ttl_s : float
@@ -124,8 +127,9 @@ DEMO_INJECTIONS = (DEMO_HEAD_ON, DEMO_POPUP, DEMO_INVALID)
 class FlightWatcher:
     """Follows a companion's ``status``, ``path`` and ``events`` over zenoh (thread-safe)."""
 
-    def __init__(self, bus: ThreatBus):
+    def __init__(self, bus: ThreatBus, listener=None):
         self.bus = bus
+        self.listener = listener                 # on_status(msg) / on_event(msg), e.g. FlightProgress
         self._lock = threading.Lock()
         self.status: dict | None = None
         self.path: dict | None = None
@@ -137,6 +141,8 @@ class FlightWatcher:
     def _on_status(self, key, msg) -> None:
         with self._lock:
             self.status = msg
+        if self.listener is not None and isinstance(msg, dict):
+            self.listener.on_status(msg)
 
     def _on_path(self, key, msg) -> None:
         with self._lock:
@@ -145,10 +151,8 @@ class FlightWatcher:
     def _on_event(self, key, msg) -> None:
         with self._lock:
             self.events.append(msg)
-
-    def events_of(self, kind: str) -> list[dict]:
-        with self._lock:
-            return [e for e in self.events if e and e.get("event") == kind]
+        if self.listener is not None and isinstance(msg, dict):
+            self.listener.on_event(msg)
 
     def reference_at(self, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
         """Reference position and unit direction of travel at mission time ``t_s``."""
@@ -185,7 +189,11 @@ def place(injection: Injection, watcher: FlightWatcher) -> Threat:
     meet = pos + injection.lateral_m * right
     velocity = np.zeros(3)
     if injection.speed_m_s > 0 and injection.heading == "head_on":
-        velocity = -injection.speed_m_s * np.append(direction[:2], 0.0) / max(np.linalg.norm(direction[:2]), 1e-9)
+        here = watcher.reference_at(now)[0]
+        towards = np.append(here[:2] - meet[:2], 0.0)
+        norm = np.linalg.norm(towards)
+        towards = towards / norm if norm > 1e-6 else -np.append(direction[:2], 0.0)
+        velocity = injection.speed_m_s * towards
     elif injection.speed_m_s > 0:
         velocity = -np.sign(injection.lateral_m or 1.0) * injection.speed_m_s * right
     position = tuple(map(float, meet))
@@ -261,11 +269,13 @@ class FlightProcesses:
 
 @contextlib.contextmanager
 def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
-                     gcs_out: str | None = None, extra_args=(), sim_args=(), env: dict | None = None):
+                     gcs_out: str | None = None, extra_args=(), sim_args=(), env: dict | None = None,
+                     record_name: str = "flight.jsonl"):
     """Start ``sim-vehicle`` and ``companion run --mission`` on free loopback ports.
 
     ``extra_args`` go to ``companion run``, ``sim_args`` to ``sim-vehicle`` (e.g. wind); ``env``
-    is the processes' environment (default: this one's).
+    is the processes' environment (default: this one's); the record is ``out_dir/record_name``
+    (``.mcap``: MCAP).
     Yields ``FlightProcesses``; both processes are stopped on exit (SIGTERM, then SIGKILL).
     """
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -274,9 +284,9 @@ def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
     outs = ["--out", f"127.0.0.1:{mav_port}"] + (["--out", gcs_out] if gcs_out else [])
     sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(speedup), *sim_args],
                 out_dir / "sim_vehicle.log", env)
-    record, log_path = out_dir / "flight.jsonl", out_dir / "companion.log"
+    record, log_path = out_dir / record_name, out_dir / "companion.log"
     companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
-                       "--mission", str(mission), "--time-scale", str(speedup),
+                       "--mission", str(mission),           # the time scale: the vehicle's SIM_SPEEDUP
                        "--zenoh-listen", endpoint, "--record", str(record), *extra_args], log_path, env)
     try:
         yield FlightProcesses(sim, companion, vehicle_port, endpoint, record, log_path)
@@ -286,17 +296,19 @@ def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
 
 
 def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
-        timeout_s: float = 300.0, gcs_out: str | None = None, extra_args=(), env: dict | None = None) -> dict:
+        timeout_s: float = 300.0, gcs_out: str | None = None, extra_args=(), env: dict | None = None,
+        listener=None, record_name: str = "flight.jsonl") -> dict:
     """Fly ``mission`` with a fresh ``sim-vehicle`` and ``companion run`` (separate processes).
 
-    This process watches the flight over zenoh and puts the ``injections`` when they are due,
-    then removes them. Returns the companion's summary plus ``events`` (seen on zenoh) and
+    This process watches the flight over zenoh (telling ``listener`` every status and event
+    message, e.g. a ``companion.progress.FlightProgress``) and puts the ``injections`` when they
+    are due, then removes them. Returns the companion's summary plus ``events`` (seen on zenoh) and
     ``record`` (the flight record's path).
     """
     with flight_processes(out_dir, mission, speedup=speedup, gcs_out=gcs_out,
-                          extra_args=extra_args, env=env) as flight:
+                          extra_args=extra_args, env=env, record_name=record_name) as flight:
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
-            watcher = FlightWatcher(bus)
+            watcher = FlightWatcher(bus, listener)
             if injections:
                 sent = inject(watcher, injections, timeout_s, done=lambda: flight.companion.poll() is not None)
                 time.sleep(2.0)
@@ -312,7 +324,9 @@ def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
     return summary
 
 
-def run_demo(out_dir: Path, *, speedup: float = 4.0, gcs_out: str | None = "127.0.0.1:14550") -> dict:
+def run_demo(out_dir: Path, *, speedup: float = 4.0, gcs_out: str | None = "127.0.0.1:14550",
+             listener=None) -> dict:
     """The demo flight: the demo mission (``demo_mission``) with ``DEMO_INJECTIONS``."""
     with demo_mission() as mission:
-        return fly(out_dir, mission, speedup=speedup, injections=DEMO_INJECTIONS, gcs_out=gcs_out)
+        return fly(out_dir, mission, speedup=speedup, injections=DEMO_INJECTIONS, gcs_out=gcs_out,
+                   listener=listener, record_name=DEMO_RECORD)

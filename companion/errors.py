@@ -38,6 +38,10 @@ class ThreatPayloadError(CompanionError, ValueError):
     """A threat payload is invalid; the message names the field."""
 
 
+class ThreatBusError(CompanionError):
+    """The zenoh session cannot be opened or used (bad endpoint, port in use, closed)."""
+
+
 class LinkError(CompanionError):
     """The vehicle link failed (no autopilot, refused command, upload failed)."""
 

@@ -1,5 +1,8 @@
 """Flight record: one JSON object per line (JSON Lines), written as the flight goes.
 
+``companion run --record FILE.mcap`` writes the same content as MCAP channels instead
+(``companion.view``); this format stays for ``--record FILE.jsonl`` and for old records.
+
 A record survives a crash up to its last flushed line (every half second) and can be read
 while it is written. Every line has ``type``; the fields below are the ones ``companion run``
 writes (``companion.daemon``, ``companion.threats.reactor``). Times ``t_s`` are mission time
@@ -14,8 +17,8 @@ writes (``companion.daemon``, ``companion.threats.reactor``). Times ``t_s`` are 
               ``reference_ne`` (the smoothed reference, north-east, 5 samples/s), ``tree``
               (GART's ``nodes`` and ``parents``, or None) and the planner's ``summary``
 ``sample``    ``t_s``, ``ref_pos_ned_m``, ``ref_vel_ned_m_s``, ``pos_ned_m``, ``vel_ned_m_s``
-              (the vehicle's), ``servo_us`` (SERVO_OUTPUT_RAW, or None), ``tracking_error_m``,
-              ``leg``, ``path_id``
+              and ``euler_rad`` (the vehicle's roll, pitch, yaw), ``servo_us``
+              (SERVO_OUTPUT_RAW, or None), ``tracking_error_m``, ``leg``, ``path_id``
 ``decision``  a threat-manager decision: ``kind``, ``reason``, ``label``, ``path_id``,
               ``path_ned_m`` (the new path), ``trigger``, ``latency_ms`` (threat to the first
               setpoint of the new reference), ``decide_ms``, ``plan_ms``, ``candidates``,
@@ -52,18 +55,20 @@ from companion.errors import CompanionError
 log = logging.getLogger(__name__)
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
+    """``value`` as plain JSON data: arrays as lists, floats rounded to 6 decimals, non-finite
+    numbers as None."""
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return jsonable(value.tolist())
     if isinstance(value, (np.floating, float)):
         v = float(value)
         return round(v, 6) if math.isfinite(v) else None
     if isinstance(value, np.integer):
         return int(value)
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     return value
 
 
@@ -84,7 +89,7 @@ class FlightRecorder:
     def write(self, line_type: str, /, **fields: Any) -> None:
         if self._fh is None:
             return
-        self._fh.write(json.dumps({"type": line_type, **_jsonable(fields)}, separators=(",", ":")))
+        self._fh.write(json.dumps({"type": line_type, **jsonable(fields)}, separators=(",", ":")))
         self._fh.write("\n")
         now = time.monotonic()
         if now - self._flushed_at >= self.flush_period_s:
@@ -168,12 +173,16 @@ def load_record(path: str | Path) -> FlightRecord:
             record.summary = item
         elif kind == "event":
             record.events.append(item)
-    if columns["t_s"]:
-        for key, values in columns.items():
-            column = _column(values)
-            if column is not None:
-                record.samples[key] = column
+    record.samples = samples_from_columns(columns)
     return record
+
+
+def samples_from_columns(columns: dict[str, list]) -> dict[str, np.ndarray]:
+    """Sample columns (key -> one value per sample) as arrays; empty when there is no sample."""
+    if not columns.get("t_s"):
+        return {}
+    arrays = {key: _column(values) for key, values in columns.items()}
+    return {key: column for key, column in arrays.items() if column is not None}
 
 
 def _column(values: list) -> np.ndarray | None:

@@ -4,6 +4,16 @@
 and decision is on one clock whatever the link's latency and the SITL speed-up.
 ``ActiveReference`` is a trajectory engaged from a mission time: it turns on the spot first when
 asked, holds its end point after its end, and notes when the stream first sampled it (latency).
+
+The stream (50 Hz), the tracking error (every LOCAL_POSITION_NED) and the record's samples ask
+the reference for its state about a hundred times a wall-clock second. Evaluating the smoothed
+trajectory for one instant costs about a millisecond of numpy overhead, so ``ReferenceTable``
+evaluates it for a whole second of knots at once (``TABLE_STEP_S`` apart) and interpolates
+between them: cubic Hermite for the position (from the velocity) and the velocity (from the
+acceleration), linear for the acceleration, the yaw (unwrapped) and the yaw rate. At the knots
+the values are the trajectory's own; between them, on the demo mission's legs, the position is
+within 5 micrometres and the velocity within 1 mm/s; an acceleration or yaw rate that steps
+(where the speed profile changes phase) is ramped over the 20 ms interval that holds the step.
 """
 
 from __future__ import annotations
@@ -17,7 +27,12 @@ import numpy as np
 from companion.link.setpoints import Setpoint
 from companion.trajectory import FlyableReference
 
-__all__ = ["VehicleClock", "ActiveReference", "wrap_pi"]
+__all__ = ["VehicleClock", "ActiveReference", "ReferenceTable", "wrap_pi"]
+
+#: Spacing of the knots of ``ReferenceTable`` (trajectory s).
+TABLE_STEP_S = 0.02
+#: Knots evaluated at once (one second of trajectory at ``TABLE_STEP_S``).
+TABLE_CHUNK_KNOTS = 50
 
 
 class VehicleClock:
@@ -61,6 +76,74 @@ class VehicleClock:
         return self._last
 
 
+class ReferenceTable:
+    """A trajectory's state at any time in [0, duration], from knots evaluated a chunk at a
+    time (see the module docstring).
+
+    Parameters
+    ----------
+    trajectory : FlyableReference
+    step_s : float
+        Knot spacing (trajectory s).
+    chunk_knots : int
+        Knots per evaluated chunk; the two chunks used last are kept.
+    """
+
+    def __init__(self, trajectory: FlyableReference, step_s: float = TABLE_STEP_S,
+                 chunk_knots: int = TABLE_CHUNK_KNOTS):
+        self.trajectory = trajectory
+        self.duration_s = float(trajectory.duration_s)
+        self.step_s = float(step_s)
+        self.chunk_knots = int(chunk_knots)
+        self._chunks: dict[int, tuple] = {}
+
+    def _chunk(self, index: int) -> tuple:
+        """Knot times (K,), positions, velocities, accelerations (K, d), yaw (unwrapped) and
+        yaw rate (K,) of chunk ``index``, as Python lists (one query is a handful of float
+        operations: numpy's per-call cost would be most of it)."""
+        chunk = self._chunks.get(index)
+        if chunk is None:
+            first = index * self.chunk_knots
+            tau = np.minimum((first + np.arange(self.chunk_knots + 1)) * self.step_s, self.duration_s)
+            tau = np.unique(tau)
+            pos, vel, acc = (np.asarray(v, dtype=float) for v in self.trajectory.sample(tau))
+            yaw = np.unwrap(np.asarray(self.trajectory.yaw_rad(tau), dtype=float))
+            rate = np.asarray(self.trajectory.yaw_rate_rad_s(tau), dtype=float)
+            chunk = tuple(a.tolist() for a in (tau, pos, vel, acc, yaw, rate))
+            if len(self._chunks) >= 2:
+                self._chunks.pop(next(iter(self._chunks)))
+            self._chunks[index] = chunk
+        return chunk
+
+    def state(self, tau_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+        """Position, velocity, acceleration, yaw (wrapped) and yaw rate at trajectory time
+        ``tau_s`` (clamped to [0, duration])."""
+        tau_s = min(max(float(tau_s), 0.0), self.duration_s)
+        span_s = self.step_s * self.chunk_knots
+        index = min(int(tau_s / span_s), int(self.duration_s / span_s))
+        tau, pos, vel, acc, yaw, rate = self._chunk(index)
+        i = min(max(int((tau_s - tau[0]) / self.step_s), 0), len(tau) - 1)
+        while i > 0 and tau[i] > tau_s:
+            i -= 1
+        if i == len(tau) - 1 or tau[i + 1] <= tau[i]:
+            return (np.array(pos[i]), np.array(vel[i]), np.array(acc[i]), wrap_pi(yaw[i]), rate[i])
+        h = tau[i + 1] - tau[i]
+        u = (tau_s - tau[i]) / h
+        p = _hermite(pos[i], pos[i + 1], vel[i], vel[i + 1], h, u)
+        v = _hermite(vel[i], vel[i + 1], acc[i], acc[i + 1], h, u)
+        a = [a0 + u * (a1 - a0) for a0, a1 in zip(acc[i], acc[i + 1])]
+        return (np.array(p), np.array(v), np.array(a), wrap_pi(yaw[i] + u * (yaw[i + 1] - yaw[i])),
+                rate[i] + u * (rate[i + 1] - rate[i]))
+
+
+def _hermite(p0: list, p1: list, d0: list, d1: list, h: float, u: float) -> list:
+    """Cubic Hermite interpolation at ``u`` in [0, 1] between values ``p0``, ``p1`` with
+    derivatives ``d0``, ``d1`` over an interval of length ``h``."""
+    u2, u3 = u * u, u * u * u
+    c0, c1, c2, c3 = 2 * u3 - 3 * u2 + 1, (u3 - 2 * u2 + u) * h, -2 * u3 + 3 * u2, (u3 - u2) * h
+    return [c0 * a + c1 * da + c2 * b + c3 * db for a, b, da, db in zip(p0, p1, d0, d1)]
+
+
 class ActiveReference:
     """A trajectory flown from mission time ``t0_s``; after its end it holds the end point.
 
@@ -93,6 +176,8 @@ class ActiveReference:
         self.turn_start_s = t0_s
         self.t0_s = t0_s + turn_s
         self.t_end_s = self.t0_s + trajectory.duration_s
+        self.table = ReferenceTable(trajectory)
+        self._end_pos_ned_m: np.ndarray | None = None
 
     def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
         """Position, velocity, acceleration (NED), yaw and yaw rate at mission time ``t_s``."""
@@ -100,16 +185,13 @@ class ActiveReference:
             if t_s < self.turn_start_s:
                 return self.previous.state(t_s)
             self.previous = None
-        tau = min(max(t_s - self.t0_s, 0.0), self.trajectory.duration_s)
-        at = np.array([tau])
-        pos, vel, acc = (v[0] for v in self.trajectory.sample(at))
+        pos, vel, acc, yaw, rate = self.table.state(t_s - self.t0_s)
         if t_s < self.t0_s and self.turn_from_yaw_rad is not None:
             yaw = self.turn_from_yaw_rad + self.turn_rate_rad_s * max(t_s - self.turn_start_s, 0.0)
             return pos, np.zeros(3), np.zeros(3), wrap_pi(yaw), self.turn_rate_rad_s
-        yaw = float(self.trajectory.yaw_rad(at)[0])
         if t_s >= self.t_end_s:
             return pos, np.zeros(3), np.zeros(3), yaw, 0.0
-        return pos, vel, acc, yaw, float(self.trajectory.yaw_rate_rad_s(at)[0])
+        return pos, vel, acc, yaw, rate
 
     def setpoint_at(self, monotonic_s: float) -> Setpoint:
         """The setpoint streamed at ``monotonic_s`` (the yaw rate as feed-forward)."""
@@ -123,7 +205,9 @@ class ActiveReference:
 
     def end_gap_m(self, goal_ned_m: np.ndarray) -> float:
         """Distance from the trajectory's end point to ``goal_ned_m`` (m, common axes)."""
-        end = np.asarray(self.trajectory.end_pos_ned_m, dtype=float)
+        if self._end_pos_ned_m is None:          # evaluated once: asked every phase step
+            self._end_pos_ned_m = np.asarray(self.trajectory.end_pos_ned_m, dtype=float)
+        end = self._end_pos_ned_m
         n = min(end.shape[0], goal_ned_m.shape[0])
         return float(np.linalg.norm(end[:n] - goal_ned_m[:n]))
 

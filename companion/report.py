@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from companion.record import FlightRecord
+from companion.report_scene import plot_scene, scene_instant
 from companion.smoothing.feasibility import describe
 
 log = logging.getLogger(__name__)
@@ -252,6 +253,10 @@ def render_report(record: FlightRecord, out_dir: str | Path) -> list[Path]:
     if record.has_samples and "servo_us" in record.samples:
         written.append(out / "actuators.png")
         _plot_actuators(plt, record, written[-1])
+    instant = scene_instant(record)
+    if instant is not None:
+        written.append(out / "scene.png")
+        plot_scene(plt, record, written[-1], instant)
     summary = dict(record.summary or {})
     summary.update(tracking_statistics(record))
     summary["decisions"] = [{k: d.get(k) for k in ("kind", "reason", "latency_ms", "t_s")}

@@ -216,8 +216,9 @@ def run(args: argparse.Namespace) -> int:
     from sim_vehicle.adsb import TrafficModel
     from sim_vehicle.autopilot import Autopilot
     from sim_vehicle.config import SimConfigError
-    from sim_vehicle.mavlink_server import MavlinkServer
+    from sim_vehicle.mavlink import MavlinkServer
     from sim_vehicle.model import HeliModel, ModelError
+    from sim_vehicle.realtime import RealtimeLoop
 
     if not 0 <= args.instance <= 200:
         raise SimConfigError(f"--instance: expected 0..200, got {args.instance}")
@@ -248,10 +249,11 @@ def run(args: argparse.Namespace) -> int:
                                signing_key=signing_key, accept_signing_setup=args.accept_signing_setup)
     except OSError as exc:
         raise SimConfigError(f"cannot use UDP port {port} ({exc.strerror or exc}); pick another with --port") from None
+    loop = RealtimeLoop(server)
 
     def on_signal(signum: int, frame: object) -> None:
         log.info("signal %d: shutting down", signum)
-        server.stop()
+        loop.stop()
 
     signal.signal(signal.SIGINT, on_signal)  # from now on a signal ends the main loop cleanly
     signal.signal(signal.SIGTERM, on_signal)
@@ -265,7 +267,7 @@ def run(args: argparse.Namespace) -> int:
         log.info("ADS-B traffic: %d aircraft crossing %g m around home at %g +- %g m", settings.adsb.count,
                  settings.adsb.radius_m, settings.adsb.alt_m, settings.adsb.alt_spread_m)
     try:
-        server.run()
+        loop.run()
     finally:
         server.close()
     log.info("stopped after %.1f s of simulated time", vehicle.time_s)

@@ -222,6 +222,11 @@ class StreamGroupRates:
 
     ArduCopter's defaults are 0 for every group: nothing but HEARTBEAT until a ground station
     asks (see :mod:`sim_vehicle.streams`). REQUEST_DATA_STREAM writes the rate it sets here.
+
+    Parameters
+    ----------
+    raw_sens, ext_stat, rc_chan, raw_ctrl, position, extra1, extra2, extra3, params, adsb : int
+        Rate (Hz) of the group of that name (``MAVn_RAW_SENS`` ... ``MAVn_ADSB``); 0: off.
     """
 
     raw_sens: int = 0
@@ -297,6 +302,11 @@ class VehicleSettings:
     the simulated ADS-B traffic (:mod:`sim_vehicle.adsb`). ``controller`` is the flight controller's own settings (:class:`sim_vehicle.control.
     ControllerSettings`: LQI weights, PID gains, limits); its ``control_dt_s`` is replaced by
     ``1 / timing.control_rate_hz`` when the vehicle is built.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the simulated disturbances (wind gusts, ADS-B traffic): a run can be replayed.
     """
 
     seed: int = 0

@@ -99,11 +99,6 @@ def vel_ned_m_s(x: np.ndarray) -> np.ndarray:
     return np.array([c * u - s * v, s * u + c * v, w])
 
 
-def vel_body_m_s(x: np.ndarray) -> np.ndarray:
-    """Body FRD velocity ``[u, v, w]``, (3,) m/s."""
-    return np.array(x[0:3], dtype=float)
-
-
 def euler_rad(x: np.ndarray) -> np.ndarray:
     """Roll, pitch, yaw ``[phi, theta, psi]``, (3,) rad; yaw is wrapped to (-pi, pi]."""
     psi = math.remainder(float(x[IDX_PSI]), 2.0 * math.pi)
@@ -268,7 +263,10 @@ def step_rk4(model: HeliModel, x: np.ndarray, delta, dt_s: float, wind_ned_m_s=N
     lag = n_core > N_STATES
     if n_total != STATE_SIZE + (N_INPUTS if lag else 0):
         _check_state(model, np.asarray(x, dtype=float))
-    d0, d1, d2, d3 = (float(v) for v in delta) if np.ndim(delta) == 1 and len(delta) == 4 else _bad_delta(delta)
+    if type(delta) is np.ndarray and delta.shape == (4,):
+        d0, d1, d2, d3 = delta.tolist()  # the fast path of the line below (the controller's output)
+    else:
+        d0, d1, d2, d3 = (float(v) for v in delta) if np.ndim(delta) == 1 and len(delta) == 4 else _bad_delta(delta)
     if not (d0 - d0 == 0.0 and d1 - d1 == 0.0 and d2 - d2 == 0.0 and d3 - d3 == 0.0):
         raise DynamicsError(f"delta: expected 4 finite inputs, got {list(delta)!r}")
     d0 = -1.0 if d0 < -1.0 else (1.0 if d0 > 1.0 else d0)
@@ -289,7 +287,10 @@ def step_rk4(model: HeliModel, x: np.ndarray, delta, dt_s: float, wind_ned_m_s=N
     if wind_ned_m_s is None:
         vec[n_core + 4:] = 0.0
     else:
-        wn, we, wd = (float(v) for v in wind_ned_m_s)
+        if type(wind_ned_m_s) is np.ndarray and wind_ned_m_s.shape == (3,):
+            wn, we, wd = wind_ned_m_s.tolist()  # the fast path of the line below
+        else:
+            wn, we, wd = (float(v) for v in wind_ned_m_s)
         if not (wn - wn == 0.0 and we - we == 0.0 and wd - wd == 0.0):
             raise DynamicsError(f"wind_ned_m_s: expected 3 finite numbers, got {list(wind_ned_m_s)!r}")
         vec[n_core + 4] = c1 * wn + s1 * we

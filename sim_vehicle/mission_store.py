@@ -50,6 +50,9 @@ FRAME_GLOBAL_TERRAIN_ALT_INT = mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT
 SUPPORTED_FRAMES = frozenset({FRAME_GLOBAL, FRAME_LOCAL_NED, FRAME_MISSION, FRAME_GLOBAL_RELATIVE_ALT,
                               FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT_INT, FRAME_GLOBAL_TERRAIN_ALT,
                               FRAME_GLOBAL_TERRAIN_ALT_INT})
+#: the frames whose x, y are latitude and longitude (degE7 in MISSION_ITEM_INT, degrees in MISSION_ITEM)
+GLOBAL_FRAMES = frozenset({FRAME_GLOBAL, FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT,
+                           FRAME_GLOBAL_TERRAIN_ALT, FRAME_GLOBAL_TERRAIN_ALT_INT})
 
 
 #: one stored item: the project's one ``MISSION_ITEM_INT`` record
@@ -65,8 +68,7 @@ def validate_item(item: MissionItem) -> MissionResult:
             return MissionResult(MissionResult.INVALID_PARAM1 + index)
     if not math.isfinite(item.z):
         return MissionResult.INVALID_PARAM7
-    if item.frame in (FRAME_GLOBAL, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT_INT,
-                      FRAME_GLOBAL_TERRAIN_ALT, FRAME_GLOBAL_TERRAIN_ALT_INT):
+    if item.frame in GLOBAL_FRAMES:
         if not (item.x == 0 and item.y == 0):  # (0, 0) = "no position" (e.g. DO commands, RTL)
             if abs(item.x) > 900_000_000:
                 return MissionResult.INVALID_PARAM5_X

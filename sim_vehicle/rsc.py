@@ -28,10 +28,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
-AUX_FUNCTION_MOTOR_INTERLOCK = 32
-"""RCx_OPTION / DO_AUX_FUNCTION number of the motor interlock."""
-SWITCH_LOW, SWITCH_MIDDLE, SWITCH_HIGH = 0, 1, 2
-"""Aux switch positions (``RC_Channel::AuxSwitchPos``; DO_AUX_FUNCTION param2)."""
+from heli_common.ardupilot_ids import AUX_FUNCTION_MOTOR_INTERLOCK, SWITCH_HIGH, SWITCH_LOW, SWITCH_MIDDLE
+
 SWITCH_NAMES = {SWITCH_LOW: "LOW", SWITCH_MIDDLE: "MIDDLE", SWITCH_HIGH: "HIGH"}
 SWITCH_LOW_MAX_US = 1200
 """An RC input below this is LOW (``AUX_SWITCH_PWM_TRIGGER_LOW``)."""

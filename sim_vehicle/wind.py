@@ -93,11 +93,6 @@ class WindModel:
         self._decay = 1.0
         self._drive = 0.0
 
-    @property
-    def gust_ned_m_s(self) -> np.ndarray:
-        """Current gust component, (3,) m/s (a copy)."""
-        return np.array(self._gust)
-
     def current(self) -> np.ndarray:
         """Wind velocity now, (3,) NED m/s, without advancing the process."""
         s, g = self._steady, self._gust

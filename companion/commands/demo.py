@@ -27,21 +27,21 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from companion.demo import run_demo
+    from companion.demo import DEMO_RECORD, run_demo
     from companion.errors import CompanionError
-    from companion.record import load_record
+    from companion.progress import FlightProgress
     from companion.report import render_report
+    from companion.view.mcap_record import load_flight
 
     if not 0.5 <= args.speedup <= 10:
         raise CompanionError(f"--speedup: between 0.5 and 10, got {args.speedup}")
     out = Path(args.out)
     print(f"demo: flying exclusion_zones.plan at {args.speedup:g}x; logs in {out}")
-    summary = run_demo(out, speedup=args.speedup, gcs_out=None if args.no_gcs else "127.0.0.1:14550")
-    for e in summary.pop("events"):
-        if e.get("event") not in (None, "none"):
-            latency = e.get("latency_ms")
-            print(f"  {e['event']:8s} {'' if latency is None else f'{latency:6.1f} ms'}  {e.get('reason')}")
-    record = load_record(out / "flight.jsonl")
+    with FlightProgress(title="demo") as progress:
+        summary = run_demo(out, speedup=args.speedup, gcs_out=None if args.no_gcs else "127.0.0.1:14550",
+                           listener=progress)
+    summary.pop("events")
+    record = load_flight(out / DEMO_RECORD)
     ratios = detour_ratios(record)
     if ratios:
         print(f"longest way back to the mission: {max(ratios):.2f} x the direct distance "

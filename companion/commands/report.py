@@ -13,16 +13,16 @@ def register(subparsers) -> None:
         "actuator inputs; and a summary.json.",
         epilog="Example: companion report out/flight.jsonl --out out/report",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("record", help="flight record file (.jsonl)")
+    p.add_argument("record", help="flight record file (.mcap, or the JSON Lines .jsonl)")
     p.add_argument("--out", required=True, help="output directory for the plots")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from companion.record import load_record
     from companion.report import render_report
+    from companion.view.mcap_record import load_flight
 
-    for path in render_report(load_record(args.record), args.out):
+    for path in render_report(load_flight(args.record), args.out):
         print(path)
         if path.name == "summary.txt":
             print(path.read_text(), end="")

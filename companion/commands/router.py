@@ -39,7 +39,8 @@ def open_router(listen, connect=()):
     """Open and return a zenoh router session (``ThreatBusError`` when it cannot listen)."""
     import zenoh
 
-    from companion.threats.bus import ThreatBusError, session_config
+    from companion.errors import ThreatBusError
+    from companion.threats.bus import session_config
 
     config = session_config(mode="router", listen=listen, connect=connect)
     try:

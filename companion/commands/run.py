@@ -24,6 +24,7 @@ EPILOG = """examples:
       --time-scale 8                             # ArduPilot's arducopter-heli SITL at --speedup 8
   companion run --connect serial:///dev/ttyAMA0:921600 --interlock pilot --adsb   # a real helicopter
   companion run --state-dir /var/lib/companion --resume   # take over after a crash, threats kept
+  companion run --record out/flight.mcap --foxglove 8765 --tlog out/flight.tlog   # watch it in Foxglove
 
 start-up: a helicopter (H_RSC_* parameters) is armed with its motor interlock low, the interlock
 is engaged after the arming delay (--interlock command, default; or by the pilot's RC switch,
@@ -50,10 +51,22 @@ def register(subparsers) -> None:
         "(G2 by default), take off and fly it in GUIDED by 50 Hz setpoints; answer zenoh "
         "threats by replanning or switching; land or RTL as the mission says.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_flight_arguments(p)
+    p.add_argument("--mission", help=".plan or QGC WPL 110 file to upload and fly")
+    p.add_argument("--record", metavar="FILE",
+                   help="write the flight record here: MCAP (Foxglove opens it) when FILE ends in "
+                   ".mcap, else JSON Lines")
+    p.add_argument("--resume", action="store_true",
+                   help="take over a vehicle already flying its mission after a companion crash: "
+                   "fly on from its current mission item, with the threats of the --state-dir snapshot")
+    p.set_defaults(func=run)
+
+
+def add_flight_arguments(p) -> None:
+    """The options ``companion run`` and ``companion serve`` share (vehicle, zenoh, view, planners)."""
     p.add_argument("--connect", help="MAVSDK URL of the vehicle (default udpin://0.0.0.0:14540)")
     p.add_argument("--config", help="settings file (TOML); see --print-config")
     add_signing_argument(p)
-    p.add_argument("--mission", help=".plan or QGC WPL 110 file to upload and fly")
     p.add_argument("--world", help="world file with extra obstacles (local NED about home)")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", default=None,
                    help="zenoh endpoint to listen on (repeatable), e.g. tcp/0.0.0.0:7447")
@@ -63,10 +76,15 @@ def register(subparsers) -> None:
                    help="zenoh configuration file (JSON5, e.g. from `companion keys init`): mutual TLS "
                    "and access control; its endpoints replace the default ones")
     p.add_argument("--no-zenoh", action="store_true", help="fly without zenoh (no threats, no status)")
-    p.add_argument("--record", metavar="FILE", help="write the flight record (JSON Lines) here")
+    p.add_argument("--foxglove", metavar="[HOST:]PORT",
+                   help="serve the flight live to Foxglove (WebSocket; host 127.0.0.1 unless given): "
+                   "3D scene, map, decisions, threats (view.foxglove)")
+    p.add_argument("--tlog", metavar="FILE",
+                   help="record the MAVLink traffic with the vehicle, both ways, to this .tlog (link.tlog_file)")
     p.add_argument("--seed", type=int, help="random seed of the planners (default from settings)")
     p.add_argument("--time-scale", type=float, metavar="X",
-                   help="vehicle seconds per wall-clock second: sim-vehicle's --speedup")
+                   help="vehicle seconds per wall-clock second (default: read from the vehicle, "
+                   "its SIM_SPEEDUP; 1 without it)")
     p.add_argument("--smooth", choices=("g1", "g2", "none"), help="smoother (default g2)")
     p.add_argument("--vehicle", choices=("helicopter", "multirotor"),
                    help="vehicle profile (default helicopter: motor interlock and rotor run-up "
@@ -76,17 +94,14 @@ def register(subparsers) -> None:
                    "default) or the safety pilot's RC switch")
     p.add_argument("--adsb", action="store_true",
                    help="treat ADS-B traffic (ADSB_VEHICLE) as moving threats")
-    p.add_argument("--resume", action="store_true",
-                   help="take over a vehicle already flying its mission after a companion crash: "
-                   "fly on from its current mission item, with the threats of the --state-dir snapshot")
     p.add_argument("--state-dir", metavar="DIR",
                    help="keep the threat snapshot here (state.dir): written as threats change, "
                    "read by --resume")
     p.add_argument("--no-feasibility", action="store_true", dest="no_feasibility",
                    help="do not check the legs on the helicopter's closed loop (feasibility.enabled = false)")
-    p.add_argument("--print-config", action="store_true",
-                   help="print the effective settings as JSON and exit")
-    p.set_defaults(func=run)
+    p.add_argument("--print-config", nargs="?", const="toml", choices=("toml", "json"), metavar="FORMAT",
+                   help="print the effective settings and exit, as TOML that --config reads back "
+                   "(default) or as JSON")
 
 
 def settings_overrides(args: argparse.Namespace) -> dict:
@@ -118,35 +133,57 @@ def settings_overrides(args: argparse.Namespace) -> dict:
         out.setdefault("zenoh", {})["config"] = args.zenoh_config
     if getattr(args, "state_dir", None):
         out.setdefault("state", {})["dir"] = args.state_dir
+    if getattr(args, "foxglove", None):
+        out.setdefault("view", {})["foxglove"] = args.foxglove
+    if getattr(args, "tlog", None):
+        out.setdefault("link", {})["tlog_file"] = args.tlog
     if args.no_zenoh:
         out.setdefault("zenoh", {})["enabled"] = False
     return out
 
 
-def run(args: argparse.Namespace) -> int:
-    import asyncio
-    import signal
-
-    from companion.config import load_settings, settings_to_dict
-    from companion.daemon import CompanionDaemon
-    from companion.errors import FlightAborted, VehicleRefused
+def flight_settings(args: argparse.Namespace):
+    """The settings of ``args`` (a zenoh configuration file checked); None when
+    ``--print-config`` printed them instead."""
+    from companion.config import load_settings, settings_to_dict, settings_to_toml
 
     settings = load_settings(args.config, settings_overrides(args))
     if args.print_config:
-        print(json.dumps(settings_to_dict(settings), indent=2))
-        return 0
+        text = (json.dumps(settings_to_dict(settings), indent=2) if args.print_config == "json"
+                else settings_to_toml(settings))
+        sys.stdout.write(text if text.endswith("\n") else text + "\n")
+        return None
     if settings.zenoh.enabled and settings.zenoh.config:      # a bad file: refused before any flight
         from companion.threats.access import load_config
 
         load_config(settings.zenoh.config)
+    return settings
+
+
+def cancel_on_signals() -> None:
+    """SIGINT and SIGTERM cancel the running task (call it from that task)."""
+    import asyncio
+    import signal
+
+    task, loop = asyncio.current_task(), asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, task.cancel)
+
+
+def run(args: argparse.Namespace) -> int:
+    import asyncio
+
+    from companion.daemon import CompanionDaemon
+    from companion.errors import FlightAborted, VehicleRefused
+
+    settings = flight_settings(args)
+    if settings is None:
+        return 0
     daemon = CompanionDaemon(settings, mission_path=args.mission, world_path=args.world,
                              record_path=args.record, resume=args.resume)
 
     async def main() -> int:
-        task = asyncio.current_task()
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.add_signal_handler(sig, task.cancel)
+        cancel_on_signals()
         try:
             await daemon.run()
             status = 0

@@ -1,9 +1,12 @@
 """The vehicle link: MAVSDK 4.x connection, telemetry, missions, commands and the 50 Hz
 GUIDED setpoint stream (DESIGN.md section 5).
 
-Modules: ``vehicle`` (VehicleLink), ``streams`` (the telemetry asked for), ``frames`` (home vs
-the vehicle's EKF origin), ``startup`` (arming, motor interlock, rotor run-up, takeoff, joining),
-``setpoints`` (the 50 Hz stream).
+Modules: ``vehicle`` (VehicleLink: the connection, made of ``watchers`` (telemetry
+subscriptions), ``waits``, ``vehicle_commands`` (COMMAND_LONG, parameters), ``direct_messages``
+(raw messages in, setpoints and STATUSTEXT out) and ``mission_transfer``), ``telemetry`` (the
+snapshot), ``streams`` (the telemetry asked for), ``frames`` (home vs the vehicle's EKF origin),
+``startup`` (arming, motor interlock, rotor run-up, takeoff, joining), ``setpoints`` (the 50 Hz
+stream), ``gate`` and ``transport`` (MAVLink signing in front of MAVSDK).
 
 MAVSDK is imported lazily (inside ``VehicleLink.connect``), so importing this package is cheap.
 """
@@ -11,8 +14,10 @@ MAVSDK is imported lazily (inside ``VehicleLink.connect``), so importing this pa
 from companion.link.setpoints import (JitterStats, Setpoint, SetpointStreamer, hold_position,
                                       jitter_stats, planning_worker_init, raise_stream_priority,
                                       restore_normal_priority)
-from companion.link.vehicle import (COPTER_MODES, DEFAULT_URL, Telemetry, VehicleLink, check_url,
-                                    setpoint_fields, setpoint_type_mask)
+from companion.link.direct_messages import setpoint_fields, setpoint_type_mask
+from companion.link.telemetry import Telemetry
+from companion.link.vehicle import DEFAULT_URL, VehicleLink, check_url
+from companion.link.vehicle_commands import COPTER_MODES
 
 __all__ = ["COPTER_MODES", "DEFAULT_URL", "JitterStats", "Setpoint", "SetpointStreamer",
            "Telemetry", "VehicleLink", "check_url", "hold_position", "jitter_stats",

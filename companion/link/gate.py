@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import time
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -32,7 +33,7 @@ from mavlink_signing.keys import key_fingerprint
 log = logging.getLogger(__name__)
 
 #: Inbound outcomes counted besides the signature verdicts.
-PASSED, NOT_FOR_US, MALFORMED = "passed", "not_for_us", "malformed"
+PASSED, NOT_FOR_US, ONBOARD, MALFORMED = "passed", "not_for_us", "onboard", "malformed"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,6 +89,15 @@ class Identity:
         return target_component not in (0, self.component)
 
 
+def tapped_fields(msg) -> dict:
+    """A message's fields by name (text decoded), with ``_sysid``, ``_compid`` and ``_t_s``
+    (monotonic arrival time): what ``VehicleLink.messages`` yields."""
+    fields = msg.to_dict()
+    del fields["mavpackettype"]
+    fields["_sysid"], fields["_compid"], fields["_t_s"] = msg.get_srcSystem(), msg.get_srcComponent(), time.monotonic()
+    return fields
+
+
 def new_parser() -> mavlink.MAVLink:
     """A pymavlink parser that returns BAD_DATA for garbage instead of raising."""
     parser = mavlink.MAVLink(None)
@@ -111,19 +121,32 @@ class InboundFilter:
 
     Attributes
     ----------
+    onboard : OnboardComponent, optional
+        The companion's own component: commands addressed to it are answered by it (the
+        answers wait in ``replies``) and never reach MAVSDK.
+
+    Attributes
+    ----------
+    tapped : set of str
+        Message types the link reads itself (``VehicleLink.messages``): each admitted one is
+        also kept in ``taps`` as ``(type, fields)`` (``tapped_fields``) for the gate to hand over.
     counts : dict of str to int
-        ``passed``, ``not_for_us``, ``malformed`` and, with a key, each refused ``Verdict`` value
-        (``unsigned``, ``bad_signature``, ``replayed``, ``stale``).
+        ``passed``, ``not_for_us``, ``onboard``, ``malformed`` and, with a key, each refused
+        ``Verdict`` value (``unsigned``, ``bad_signature``, ``replayed``, ``stale``).
     """
 
     def __init__(self, identity: Identity, check: SignatureCheck | None = None,
-                 stream: bool = False) -> None:
+                 stream: bool = False, onboard=None) -> None:
         self.identity = identity
         self.check = check
         self.stream = stream
+        self.onboard = onboard                  # companion.link.onboard.OnboardComponent or None
+        self.replies: list[bytes] = []          # its answers, for the gate to send
+        self.tapped: set[str] = set()           # message types the link reads (``taps``)
+        self.taps: list[tuple[str, dict]] = []  # admitted messages of those types, as fields
         self.parser = new_parser()
         self.autopilot_heard = False
-        self.counts: dict[str, int] = {PASSED: 0, NOT_FOR_US: 0, MALFORMED: 0}
+        self.counts: dict[str, int] = {PASSED: 0, NOT_FOR_US: 0, ONBOARD: 0, MALFORMED: 0}
         if check is not None:
             self.counts.update({v.value: 0 for v in Verdict if v is not Verdict.ACCEPTED})
 
@@ -154,17 +177,22 @@ class InboundFilter:
                                        msg.get_srcComponent())
             if verdict is not Verdict.ACCEPTED:
                 return self._count(verdict.value)
+        if self.onboard is not None and self.onboard.addressed_to_us(msg):
+            self.replies.append(self.onboard.handle(msg))
+            return self._count(ONBOARD)
         if self.identity.addressed_elsewhere(msg):
             return self._count(NOT_FOR_US)
         self.counts[PASSED] += 1
-        self.autopilot_heard |= (msg.get_type() == "HEARTBEAT"
-                                 and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID)
+        kind = msg.get_type()
+        self.autopilot_heard |= kind == "HEARTBEAT" and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID
+        if kind in self.tapped:
+            self.taps.append((kind, tapped_fields(msg)))
         return True
 
     def _count(self, outcome: str) -> bool:
         """Count a dropped frame; log the first of each kind, then every 1000th."""
         n = self.counts[outcome] = self.counts[outcome] + 1
-        if outcome != NOT_FOR_US and (n == 1 or n % 1000 == 0):
+        if outcome not in (NOT_FOR_US, ONBOARD) and (n == 1 or n % 1000 == 0):
             log.warning("dropping frames from the vehicle link: %s (%d so far)", outcome, n)
         return False
 
@@ -186,6 +214,21 @@ class OutboundSigner:
         self.identity = identity
         self.encoder = None if key is None else signing_encoder(key, link_id, 0, 0)
         self.unsignable = 0
+        self._own_encoder = mavlink.MAVLink(None)        # our own messages without a key
+        self._own_seq = 0
+
+    def pack_own(self, msg) -> bytes | None:
+        """Our own message ``msg`` (a pymavlink message object, e.g. a setpoint) as a frame from
+        MAVSDK's address with a sequence of our own, signed when there is a key; None until
+        MAVSDK's address is known."""
+        if self.identity.system is None:
+            return None
+        enc = self.encoder if self.encoder is not None else self._own_encoder
+        enc.srcSystem, enc.srcComponent, enc.seq = self.identity.system, self.identity.component, self._own_seq
+        self._own_seq = (self._own_seq + 1) % 256
+        if enc.signing.sign_outgoing:
+            enc.signing.timestamp = max(enc.signing.timestamp, signing_timestamp_now())
+        return bytes(msg.pack(enc))
 
     def convert(self, data: bytes) -> list[bytes]:
         """The frames to send to the vehicle for the datagram MAVSDK sent."""
@@ -199,6 +242,14 @@ class OutboundSigner:
         if self.encoder is None:
             return [bytes(data)] if known else []
         return [frame for frame in map(self._signed, known) if frame is not None]
+
+    def sign(self, frame: bytes) -> bytes | None:
+        """One frame of our own (not MAVSDK's: it teaches nothing about who MAVSDK is), signed
+        when there is a key."""
+        if self.encoder is None:
+            return frame
+        messages = [m for m in new_parser().parse_buffer(frame) or [] if m.get_type() != "BAD_DATA"]
+        return self._signed(messages[0]) if len(messages) == 1 else None
 
     def _learn_identity(self, msg) -> None:
         if self.identity.system is None and msg.get_type() == "HEARTBEAT":

@@ -5,6 +5,8 @@ deliver them at a steady rate whatever else it is doing (planning, smoothing, th
 ``SetpointStreamer`` is an asyncio task that sends one setpoint per period on absolute
 deadlines of the monotonic clock (``t_k = t_0 + k * period``: no drift, a late wake-up does not
 delay the next one; a deadline missed by more than a period is skipped, never sent in a burst).
+On Linux the deadlines are a kernel periodic timer the loop waits on (``companion.link.timerfd``:
+asyncio's own timers wake up to 1 ms late, rounded to epoll's milliseconds).
 
 The setpoint comes from a callable ``setpoint_at(t_monotonic_s) -> Setpoint`` that the daemon
 replaces atomically with ``set_source`` (a single attribute store) when a new trajectory is
@@ -13,18 +15,17 @@ is repeated and the error logged (once per source).
 
 What ``companion run`` does (``companion.daemon``): the event-loop thread that streams is given
 priority with ``raise_stream_priority`` (SCHED_FIFO when allowed) before the link connects;
-planning, threat decisions and M-GART refreshes run in a two-thread ``ThreadPoolExecutor``
-(``FlightDaemon.in_worker``) whose threads go back to normal priority
-(``restore_normal_priority``), so the threat manager's state stays in one process; and a short
-GIL switch interval hands the GIL back to the stream quickly. ``planning_worker_init`` is the
-initializer for planning in a niced worker *process* instead, the alternative measured in
-``docs/benchmarks/setpoint_jitter.md`` (``benchmarks/setpoint_jitter.py``), which the daemon
-does not use.
+planning, threat decisions and M-GART refreshes run in two warm worker *processes*
+(``companion.workers.PlanningWorkers``, started before the priority is raised and niced by
+``planning_worker_init``), so they compete with the stream for a core, never for the GIL; a short
+GIL switch interval hands the GIL back to the stream quickly from the process's own threads.
+``docs/BENCHMARKS.md`` (``benchmarks/setpoint_jitter.py``) compares it with planning in threads.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import logging
 import math
@@ -33,6 +34,8 @@ from array import array
 from typing import Callable, NamedTuple
 
 import numpy as np
+
+from companion.link.timerfd import PeriodicTimer
 
 log = logging.getLogger(__name__)
 
@@ -95,6 +98,30 @@ def restore_normal_priority() -> None:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except (AttributeError, OSError, PermissionError):
         pass
+
+
+@contextlib.contextmanager
+def normal_priority():
+    """Run the block at the normal policy, then give the calling thread its own back: threads
+    started inside (a Foxglove server's, zenoh's) do not inherit the stream's SCHED_FIFO."""
+    import os
+
+    try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    except (AttributeError, OSError):
+        yield
+        return
+    if policy != getattr(os, "SCHED_FIFO", None):
+        yield
+        return
+    restore_normal_priority()
+    try:
+        yield
+    finally:
+        try:
+            os.sched_setscheduler(0, policy, param)
+        except (OSError, PermissionError):
+            log.warning("could not give the setpoint stream its SCHED_FIFO priority back")
 
 
 class Setpoint(NamedTuple):
@@ -220,6 +247,7 @@ class SetpointStreamer:
         self.missed = 0
         self.sent = 0
         self.send_errors = 0
+        self._tick_waiters: list[asyncio.Future] = []
 
     # ---------------------------------------------------------------- control
 
@@ -247,6 +275,23 @@ class SetpointStreamer:
             except asyncio.CancelledError:
                 pass
             self._task = None
+        self._release_tick_waiters()
+
+    def after_next_tick(self) -> asyncio.Future:
+        """A future done right after the next scheduled send (at once when not streaming): work
+        started there has a whole period before the next send, so it never delays one."""
+        future = asyncio.get_running_loop().create_future()
+        if self.running:
+            self._tick_waiters.append(future)
+        else:
+            future.set_result(None)
+        return future
+
+    def _release_tick_waiters(self) -> None:
+        waiters, self._tick_waiters = self._tick_waiters, []
+        for future in waiters:
+            if not future.done():
+                future.set_result(None)
 
     @property
     def running(self) -> bool:
@@ -255,14 +300,38 @@ class SetpointStreamer:
     # ---------------------------------------------------------------- loop
 
     async def run(self) -> None:
-        """Stream until cancelled."""
+        """Stream until cancelled: on a kernel periodic timer (``companion.link.timerfd``,
+        Linux) when there is one and ``spin_s`` is 0, else on the loop's timer."""
         t0 = time.monotonic()
+        timer = PeriodicTimer.open(t0 + self.period_s, self.period_s) if self._spin_s == 0 else None
+        if timer is None:
+            await self._run_on_loop_timer(t0)
+            return
+        loop = asyncio.get_running_loop()
+
+        def on_expiry() -> None:
+            periods = timer.expirations()
+            if periods:
+                self.missed += periods - 1        # deadlines already passed are skipped, never bursts
+                self.tick(time.monotonic())
+                self._release_tick_waiters()
+
+        self.tick(t0)
+        loop.add_reader(timer.fileno(), on_expiry)
+        try:
+            await loop.create_future()            # until cancelled
+        finally:
+            loop.remove_reader(timer.fileno())
+            timer.close()
+
+    async def _run_on_loop_timer(self, t0: float) -> None:
         k = 0
         while True:
             deadline = t0 + k * self.period_s
             await self.wait_until(deadline)
             now = time.monotonic()
             self.tick(now)
+            self._release_tick_waiters()
             k += 1
             # skip deadlines already missed by more than one period (no bursts)
             behind = int((time.monotonic() - (t0 + k * self.period_s)) // self.period_s)

@@ -29,7 +29,9 @@ With the interlock off it disarms after DISARM_DELAY (10 s).
 7. :func:`take_off` with bounded retries, then the climb.
 
 A start that fails is undone by :func:`abandon_start`: a vehicle on the ground is disarmed
-(interlock low again), one that left the ground holds where it is (LOITER). A refusal raises
+(interlock low again), one that left the ground holds where it is (LOITER), unless a pilot or
+the autopilot took it out of GUIDED (:func:`left_guided`, also watched during the climb): then
+nothing more is commanded. A refusal raises
 ``VehicleRefused`` (``companion run`` exits 3), a start that ends in the air ``FlightAborted``
 (exit 4).
 
@@ -49,6 +51,9 @@ from typing import Callable, Literal
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import ConfigError, FlightAborted, LinkError, VehicleRefused
+from heli_common.ardupilot_ids import AUX_FUNCTION_MOTOR_INTERLOCK as AUX_MOTOR_INTERLOCK
+from heli_common.ardupilot_ids import SWITCH_HIGH, SWITCH_LOW
+from heli_common.mavlink_ids import COPTER_MODES
 from sim_vehicle.typed_config import require_int, require_numbers
 
 __all__ = ["StartupSettings", "RotorPlan", "rotor_plan", "is_airborne", "start_vehicle",
@@ -58,9 +63,6 @@ __all__ = ["StartupSettings", "RotorPlan", "rotor_plan", "is_airborne", "start_v
 
 log = logging.getLogger(__name__)
 
-#: RC_Channel aux function MOTOR_INTERLOCK (ArduPilot's RC_Channel::AUX_FUNC 32).
-AUX_MOTOR_INTERLOCK = 32
-SWITCH_LOW, SWITCH_HIGH = 0, 2
 #: H_RSC_MODE 1: the rotor follows the RC8 input directly (DO_AUX_FUNCTION does not drive it).
 RSC_MODE_PASSTHROUGH = 1
 RSC_PARAMETERS = ("H_RSC_MODE", "H_RSC_RUNUP_TIME", "ARMING_DELAY_SEC")
@@ -163,6 +165,13 @@ def rotor_plan(settings: StartupSettings, params: dict) -> RotorPlan:
         return RotorPlan("pilot", delay, runup, "H_RSC_MODE 1 (RC passthrough): the rotor follows "
                          "the pilot's RC8, DO_AUX_FUNCTION cannot engage it")
     return RotorPlan(settings.interlock, delay, runup, f"H_RSC_MODE {mode}")
+
+
+def left_guided(tele) -> bool:
+    """Has the vehicle left GUIDED (a pilot's or the autopilot's mode change: the companion's
+    commands stop at once)? False while the mode is not known yet."""
+    mode = getattr(tele, "mode", None)
+    return mode is not None and mode != COPTER_MODES["GUIDED"]
 
 
 def is_airborne(tele, min_height_m: float = 1.0) -> bool:
@@ -370,6 +379,8 @@ async def abandon_start(link, interlock_commanded: bool, reason: str,
         tele = link.telemetry
         if not tele.connected or not tele.armed:
             outcome = "left disarmed on the ground"
+        elif is_airborne(tele, min_height_m) and left_guided(tele):
+            outcome = f"left in {tele.mode_name}: a pilot's or the autopilot's mode, not commanded further"
         elif is_airborne(tele, min_height_m):
             await link.set_mode("LOITER")
             outcome = "holding in the air (LOITER)"
@@ -465,9 +476,11 @@ async def start_vehicle(link, settings: StartupSettings, alt_m: float, now_s: Ca
     if plan.interlock == "pilot":
         wait_vehicle += plan.runup_time_s + settings.runup_margin_s
     try:
-        await link.wait_for(lambda t: t.height_m is not None and t.pos_ned_m is not None
-                            and -t.pos_ned_m[2] >= alt_m - 0.5,
+        await link.wait_for(lambda t: left_guided(t) or (t.height_m is not None and t.pos_ned_m is not None
+                                                          and -t.pos_ned_m[2] >= alt_m - 0.5),
                             10.0 + wait_vehicle / time_scale, f"the takeoff to {alt_m:.1f} m")
+        if left_guided(link.telemetry):
+            raise LinkError(f"the vehicle left GUIDED during the takeoff (now {link.telemetry.mode_name})")
     except (LinkError, asyncio.CancelledError) as exc:
         outcome = await asyncio.shield(abandon_start(link, commanded, str(exc) or "interrupted",
                                                      settings.join_min_height_m))

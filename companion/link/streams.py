@@ -20,7 +20,7 @@ the link comes back after a loss, or when a core stream (position, attitude) has
 for ``stale_after_s`` while heartbeats arrive. The message ids and MAV_DATA_STREAM groups are
 pymavlink's constants.
 
-Which messages, and why (``companion.daemon``, ``companion.link.vehicle``):
+Which messages, and why (``companion.daemon``, ``companion.link.watchers``):
 GLOBAL_POSITION_INT (altitude above home), LOCAL_POSITION_NED (position, velocity, the vehicle
 clock), ATTITUDE (heading), EXTENDED_SYS_STATE (landed / in air), HOME_POSITION and
 GPS_GLOBAL_ORIGIN (the two frames), SYS_STATUS (health), SERVO_OUTPUT_RAW (the flight record),

@@ -16,18 +16,25 @@ microseconds per frame), so the asyncio loop that streams setpoints never parses
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import logging
 import select
 import socket
 import threading
+import time
+from collections.abc import Callable
 
 from companion.errors import LinkError
 from companion.link.gate import Identity, InboundFilter, OutboundSigner, SigningKey
+from heli_common.tlog import TlogWriter
 from mavlink_signing import SignatureCheck
 
 log = logging.getLogger(__name__)
 
 MAX_DATAGRAM = 65535
+#: The gate thread's longest wait for traffic (s): its own frames wait at most this long.
+SELECT_TIMEOUT_S = 0.2
 
 
 def split_url(url: str) -> tuple[str, str, int]:
@@ -133,10 +140,22 @@ class GateThread:
         The vehicle's MAVSDK URL.
     inbound : InboundFilter
     outbound : OutboundSigner
+    tlog : TlogWriter, optional
+        Records every frame accepted from the vehicle and every frame sent to it (closed with
+        the gate).
+    onboard_period_s : float
+        With ``inbound.onboard`` (the companion's own component): its HEARTBEAT period.
     """
 
-    def __init__(self, url: str, inbound: InboundFilter, outbound: OutboundSigner) -> None:
-        self.inbound, self.outbound = inbound, outbound
+    def __init__(self, url: str, inbound: InboundFilter, outbound: OutboundSigner,
+                 tlog: TlogWriter | None = None, onboard_period_s: float = 1.0) -> None:
+        self.inbound, self.outbound, self.tlog = inbound, outbound, tlog
+        self.onboard_period_s = onboard_period_s
+        self._heartbeat_due_s = 0.0
+        self._own: collections.deque[bytes] = collections.deque()   # post_own's, sent by the gate's thread
+        self._send_lock = threading.Lock()       # the encoder and the vehicle side, shared with the loop
+        #: ``on_tap(batch)`` on the gate's thread with the ``inbound.taps`` of each read (the link's)
+        self.on_tap: Callable[[list], None] | None = None
         self.vehicle = open_vehicle_side(url)
         self.local = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.local.bind(("127.0.0.1", 0))
@@ -154,15 +173,60 @@ class GateThread:
         return self
 
     def close(self) -> None:
+        """Stop the thread (the frames ``post_own`` still holds are sent first) and close."""
         self._stop.set()
         self._thread.join(timeout=2.0)
+        with contextlib.suppress(OSError, ValueError):
+            self._send_posted()
         self.vehicle.close()
         self.local.close()
+        if self.tlog is not None:
+            self.tlog.close()
+
+    def send_own(self, frame: bytes) -> None:
+        """Send a frame of the companion's own component (signed with the link's key)."""
+        with self._send_lock:
+            signed = self.outbound.sign(frame)
+            if signed is not None:
+                self._write(signed)
+
+    def send_message(self, msg) -> bool:
+        """Send a pymavlink message from MAVSDK's address now, from any thread (the setpoint
+        stream's: no trip through MAVSDK); False until that address is known."""
+        with self._send_lock:
+            frame = self.outbound.pack_own(msg)
+            if frame is not None:
+                self._write(frame)
+        return frame is not None
+
+    def _write(self, frame: bytes) -> None:
+        self.vehicle.write(frame)
+        if self.tlog is not None:
+            self.tlog.write(frame)
+
+    def post_own(self, frame: bytes) -> None:
+        """Send a frame of the companion's own component from any thread (the gate's thread
+        signs and sends it within its next turn, at most ``SELECT_TIMEOUT_S``)."""
+        self._own.append(frame)
+
+    def _send_posted(self) -> None:
+        while self._own:
+            self.send_own(self._own.popleft())
+
+    def _onboard_heartbeat(self) -> None:
+        now = time.monotonic()
+        if self.inbound.onboard is not None and now >= self._heartbeat_due_s:
+            self._heartbeat_due_s = now + self.onboard_period_s
+            frame = self.inbound.onboard.heartbeat()
+            if frame is not None:
+                self.send_own(frame)
 
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
-                ready, _, _ = select.select([self.vehicle, self.local], [], [], 0.2)
+                self._onboard_heartbeat()
+                self._send_posted()
+                ready, _, _ = select.select([self.vehicle, self.local], [], [], SELECT_TIMEOUT_S)
             except (OSError, ValueError):
                 return                              # closed under us
             for side in ready:
@@ -177,23 +241,48 @@ class GateThread:
 
     def _from_vehicle(self) -> None:
         frames = self.inbound.filter(self.vehicle.read())
+        if self.inbound.taps:
+            taps, self.inbound.taps = self.inbound.taps, []
+            if self.on_tap is not None:
+                self.on_tap(taps)
+        while self.inbound.replies:
+            self.send_own(self.inbound.replies.pop(0))
         if self.inbound.autopilot_heard:
             self.vehicle.accepted_from_last()
-        if self.mavsdk_address is not None:
-            for frame in frames:
+        for frame in frames:
+            if self.tlog is not None:
+                self.tlog.write(frame)
+            if self.mavsdk_address is not None:
                 self.local.sendto(frame, self.mavsdk_address)
 
     def _from_mavsdk(self) -> None:
         data, self.mavsdk_address = self.local.recvfrom(MAX_DATAGRAM)
-        for frame in self.outbound.convert(data):
-            self.vehicle.write(frame)
+        with self._send_lock:
+            for frame in self.outbound.convert(data):
+                if self.inbound.onboard is not None and is_heartbeat(frame):
+                    continue                        # the companion component's own HEARTBEAT speaks for us
+                self._write(frame)
 
 
-def open_gate(url: str, key: SigningKey | None = None, link_id: int = 0) -> GateThread:
-    """Open the vehicle side of ``url`` and start the gate (signing with ``key`` if given)."""
+def is_heartbeat(frame: bytes) -> bool:
+    """Is ``frame`` (one MAVLink 1 or 2 frame) a HEARTBEAT (message id 0)?"""
+    if frame[:1] == b"\xfd":
+        return frame[7:10] == b"\x00\x00\x00"
+    return frame[:1] == b"\xfe" and frame[5:6] == b"\x00"
+
+
+def open_gate(url: str, key: SigningKey | None = None, link_id: int = 0,
+              tlog_path: str | None = None, onboard=None) -> GateThread:
+    """Open the vehicle side of ``url`` and start the gate (signing with ``key`` if given;
+    recording the traffic to the ``.tlog`` file ``tlog_path`` if given; speaking as the
+    companion component ``onboard``, a ``companion.link.onboard.OnboardComponent``, if given)."""
     identity = Identity()
     check = None if key is None else SignatureCheck(key.key)
     outbound = OutboundSigner(identity, None if key is None else key.key, link_id)
-    gate = GateThread(url, InboundFilter(identity, check), outbound)
+    try:
+        tlog = TlogWriter(tlog_path) if tlog_path else None
+    except OSError as exc:
+        raise LinkError(f"--tlog: cannot write {tlog_path} ({exc.strerror or exc})") from None
+    gate = GateThread(url, InboundFilter(identity, check, onboard=onboard), outbound, tlog)
     gate.inbound.stream = not isinstance(gate.vehicle, UdpVehicleSide)
     return gate.start()

@@ -22,9 +22,10 @@ import math
 
 import numpy as np
 
-from companion.smoothing.bezier import BezierPath, bernstein, curvature_from_derivatives
+from companion.smoothing.bezier_maths import bernstein, curvature_from_derivatives
+from companion.smoothing.bezier_path import BezierPath
 from companion.smoothing.g2 import check_kappa
-from companion.smoothing.polyline import assemble_stacked, clean_path, corner_geometry
+from companion.smoothing.polyline import assemble_stacked, prepare_path
 from companion.smoothing.repair import repair_corners
 
 __all__ = ["smooth_g1", "midpoint_quartics"]
@@ -79,8 +80,7 @@ def smooth_g1(path, *, world=None, kappa_max_1_m: float | None = None, max_halvi
         Fewer than 2 nodes, NaN, bad shape, K_max <= 0.
     """
     kappa = None if kappa_max_1_m is None else check_kappa(kappa_max_1_m)
-    nodes, index = clean_path(path)
-    corners = corner_geometry(nodes)
+    nodes, index, corners = prepare_path(path)
     turn = corners.kind == "turn"
     kind = np.where(turn, 2, np.where(corners.kind == "reversal", 1, 0))
     turn_ids = np.nonzero(turn)[0]
@@ -127,8 +127,9 @@ def smooth_g1(path, *, world=None, kappa_max_1_m: float | None = None, max_halvi
                 notes.append(f"corner {index[i + 1]}: G1 curvature {k:.4g} 1/m > K_max {kappa:.4g} 1/m "
                              f"(use G2 to bound it)")
     tight = sorted(set(tight))
-    for note in notes:
-        logger.info("smooth_g1: %s", note)
+    if logger.isEnabledFor(logging.INFO):
+        for note in notes:
+            logger.info("smooth_g1: %s", note)
     ctrl, degrees = assemble_stacked(nodes, kind, curves)
     return BezierPath.from_stacked(ctrl, degrees, kappa_ok=not tight, notes=notes, tight_corners=tight,
                                    kappa_max_1_m=kappa)

@@ -34,8 +34,8 @@ import math
 import numpy as np
 
 from companion.errors import SmoothingError
-from companion.smoothing.bezier import BezierPath
-from companion.smoothing.polyline import assemble_stacked, clean_path, corner_geometry
+from companion.smoothing.bezier_path import BezierPath
+from companion.smoothing.polyline import assemble_stacked, prepare_path
 from companion.smoothing.repair import repair_corners
 
 __all__ = ["smooth_g2", "C1", "C2", "C3", "C4", "spiral_pair", "spiral_pairs", "spiral_distance_m",
@@ -53,6 +53,23 @@ _C_JOINT = (2.0 / 3.0) * C3 / (1.0 - C3 * (1.0 + C2)) ** 2
 def _fmt_point(p: np.ndarray) -> str:
     """A node as ``[n, e(, d)]`` with 3 decimals (for notes)."""
     return "[" + ", ".join(f"{float(x):.3f}" for x in p) + "]"
+
+
+def _tight_notes(ids: np.ndarray, index: np.ndarray, corners, d_need: np.ndarray, d_fit: np.ndarray,
+                 sizes: np.ndarray, kappa_1_m: np.ndarray, kappa_max_1_m: float) -> list[str]:
+    """One note per corner ``ids`` (C',) whose spirals are smaller than K_max needs.
+
+    ``index`` maps cleaned nodes to the input polyline, ``corners`` is the ``Corners`` of the
+    cleaned path, ``d_need``/``d_fit``/``sizes`` (C,) the sizes needed, fitted to the segments
+    and built, ``kappa_1_m`` (C',) the resulting curvature. The columns are converted to
+    Python values once, and the notes formatted in one comprehension.
+    """
+    reasons = np.where(sizes[ids] == d_fit[ids], "the adjacent segments are too short", "obstacles")
+    rows = zip(index[ids + 1].tolist(), corners.point[ids].tolist(), np.degrees(corners.turn_rad[ids]).tolist(),
+               d_need[ids].tolist(), sizes[ids].tolist(), reasons.tolist(), kappa_1_m.tolist())
+    return [f"corner {node} at {_fmt_point(p)}: heading change {turn:.1f} deg needs d = {need:.3f} m, got "
+            f"{got:.3f} m ({why}); curvature {k:.4g} 1/m > K_max {kappa_max_1_m:.4g} 1/m"
+            for node, p, turn, need, got, why, k in rows]
 
 
 def check_kappa(kappa_max_1_m) -> float:
@@ -101,10 +118,12 @@ def spiral_pairs(corner: np.ndarray, u_in: np.ndarray, u_out: np.ndarray, d_m: n
     e0 = corner + d * u_out
     e1 = e0 - C2 * C3 * d * u_out
     e2 = e1 - C3 * d * u_out
-    joint = 0.5 * (b2 + e2)
-    first = np.stack([b0, b1, b2, joint], axis=1)
-    second = np.stack([joint, e2, e1, e0], axis=1)
-    return np.stack([first, second], axis=1)
+    out = np.empty((corner.shape[0], 2, 4, corner.shape[1]))
+    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = b0, b1, b2
+    out[:, 1, 1], out[:, 1, 2], out[:, 1, 3] = e2, e1, e0
+    np.multiply(0.5, b2 + e2, out=out[:, 0, 3])
+    out[:, 1, 0] = out[:, 0, 3]
+    return out
 
 
 def spiral_pair(corner: np.ndarray, u_in: np.ndarray, u_out: np.ndarray, d_m: float) -> list[np.ndarray]:
@@ -174,8 +193,7 @@ def smooth_g2(path, kappa_max_1_m: float, *, world=None, max_halvings: int = 12)
         Fewer than 2 nodes, NaN, bad shape, K_max <= 0.
     """
     kappa = check_kappa(kappa_max_1_m)
-    nodes, index = clean_path(path)
-    corners = corner_geometry(nodes)
+    nodes, index, corners = prepare_path(path)
     turn = corners.kind == "turn"
     d_need = np.where(turn, spiral_distance_m(np.where(turn, corners.turn_rad, 0.0), kappa), 0.0)
     d_fit = allocate_segments(d_need, corners.len_in, corners.len_out)
@@ -213,15 +231,18 @@ def smooth_g2(path, kappa_max_1_m: float, *, world=None, max_halvings: int = 12)
                      f"vehicle stops and turns there")
     smooth_ids = turn_ids[kind[turn_ids] == 2]
     true_kappa = spiral_curvature_1_m(corners.turn_rad[smooth_ids], sizes[smooth_ids])
-    for i, k in zip(smooth_ids[true_kappa > kappa * (1.0 + 1e-9)], true_kappa[true_kappa > kappa * (1.0 + 1e-9)]):
-        tight.append(int(index[i + 1]))
-        reason = "the adjacent segments are too short" if sizes[i] == d_fit[i] else "obstacles"
-        notes.append(f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: heading "
-                     f"change {math.degrees(corners.turn_rad[i]):.1f} deg needs d = {d_need[i]:.3f} m, "
-                     f"got {sizes[i]:.3f} m ({reason}); curvature {k:.4g} 1/m > K_max {kappa:.4g} 1/m")
+    over = true_kappa > kappa * (1.0 + 1e-9)
+    tight.extend(index[smooth_ids[over] + 1].tolist())
     tight = sorted(set(tight))
-    for note in notes:
-        logger.info("smooth_g2: %s", note)
+    tight_ids = smooth_ids[over]
+
+    def all_notes() -> list[str]:
+        return notes + _tight_notes(tight_ids, index, corners, d_need, d_fit, sizes, true_kappa[over], kappa)
+
     ctrl, degrees = assemble_stacked(nodes, kind, curves)
-    return BezierPath.from_stacked(ctrl, degrees, kappa_ok=not tight, notes=notes, tight_corners=tight,
+    curve = BezierPath.from_stacked(ctrl, degrees, kappa_ok=not tight, notes=all_notes, tight_corners=tight,
                                    kappa_max_1_m=kappa, peaks_at_joints=True)
+    if logger.isEnabledFor(logging.INFO):
+        for note in curve.notes:
+            logger.info("smooth_g2: %s", note)
+    return curve

@@ -16,38 +16,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.smoothing.bezier import elevate_lines
+from companion.smoothing.bezier_maths import elevate_lines
 
 from companion.errors import SmoothingError
 
-__all__ = ["Corners", "clean_path", "corner_geometry", "assemble_stacked"]
+__all__ = ["Corners", "clean_path", "prepare_path", "corner_geometry", "assemble_stacked"]
 
 STRAIGHT_RAD = 1e-7
 REVERSAL_RAD = 1e-3
 
 
-def clean_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
-    """Validate a polyline and drop repeated consecutive nodes.
-
-    Parameters
-    ----------
-    path : array_like, shape (M, d)
-        Nodes, d = 2 (north-east) or 3 (NED), M >= 2.
-    name : str
-        Argument name used in error messages.
-
-    Returns
-    -------
-    nodes : ndarray, shape (M', d)
-        Nodes without consecutive repeats (M' >= 2).
-    index : ndarray of int, shape (M',)
-        Index of every kept node in the input.
-
-    Raises
-    ------
-    SmoothingError
-        Wrong shape, fewer than 2 nodes, NaN/inf, or every node at the same place.
-    """
+def _distinct_nodes(path, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Validate a polyline (M, d) and index its nodes without consecutive repeats: (array, index)."""
     try:
         arr = np.asarray(path, dtype=float)
     except (TypeError, ValueError):
@@ -65,8 +45,56 @@ def clean_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
     index = np.nonzero(keep)[0]
     if index.size < 2:
         raise SmoothingError(f"{name}: all {arr.shape[0]} nodes are at the same place; nothing to smooth")
+    return arr, index
+
+
+def clean_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
+    """Validate a polyline, drop repeated consecutive nodes and nodes where it runs straight on.
+
+    Parameters
+    ----------
+    path : array_like, shape (M, d)
+        Nodes, d = 2 (north-east) or 3 (NED), M >= 2.
+    name : str
+        Argument name used in error messages.
+
+    Returns
+    -------
+    nodes : ndarray, shape (M', d)
+        Nodes without consecutive repeats or straight-on nodes (M' >= 2).
+    index : ndarray of int, shape (M',)
+        Index of every kept node in the input.
+
+    Raises
+    ------
+    SmoothingError
+        Wrong shape, fewer than 2 nodes, NaN/inf, or every node at the same place.
+    """
+    arr, index = _distinct_nodes(path, name)
     index = drop_straight_nodes(arr, index)
     return arr[index], index
+
+
+def prepare_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray, "Corners"]:
+    """``clean_path`` and ``corner_geometry`` in one pass (what the G1 and G2 smoothers need).
+
+    The corner geometry of the distinct nodes also tells whether any node runs straight on
+    (heading change below twice ``STRAIGHT_RAD``, a margin over the sequential rule of
+    ``drop_straight_nodes``); only then are nodes dropped and the geometry computed again.
+
+    Returns
+    -------
+    nodes : ndarray, shape (M', d)
+    index : ndarray of int, shape (M',)
+    corners : Corners
+        Geometry of the M' - 2 corners of ``nodes``.
+    """
+    arr, index = _distinct_nodes(path, name)
+    corners = corner_geometry(arr[index])
+    if np.any(corners.turn_rad < 2.0 * STRAIGHT_RAD):
+        index = drop_straight_nodes(arr, index)
+        corners = corner_geometry(arr[index])
+    return arr[index], index, corners
 
 
 def drop_straight_nodes(arr: np.ndarray, index: np.ndarray) -> np.ndarray:
@@ -74,18 +102,67 @@ def drop_straight_nodes(arr: np.ndarray, index: np.ndarray) -> np.ndarray:
 
     Two straight pieces meeting there would carry that (numerically tiny) tangent jump; one
     straight piece through them has none and stays within ``STRAIGHT_RAD`` times its length
-    of the node.
+    of the node. The heading change at a node is measured from the last node kept, so the
+    rule is sequential; it is evaluated for all nodes at once against their direct neighbours,
+    and the exact sequential rule (``_straight_at``) is applied only to nodes within a factor 2
+    of the threshold and to the nodes that follow a dropped one: the same nodes are kept as by
+    a node-by-node walk.
+
+    Parameters
+    ----------
+    arr : ndarray, shape (M, d)
+    index : ndarray of int, shape (M',)
+        Nodes of ``arr`` to consider, in order (no consecutive repeats).
+
+    Returns
+    -------
+    ndarray of int, shape (M'',)
+        The subset of ``index`` that is kept (first and last always).
     """
-    keep = list(index[:1])
-    for i, j in zip(index[1:-1], index[2:]):
-        a, b = arr[i] - arr[keep[-1]], arr[j] - arr[i]
-        cos = float(np.dot(a, b)) / (np.linalg.norm(a) * np.linalg.norm(b))
-        sin = float(np.linalg.norm(np.cross(a, b) if a.size == 3 else a[0] * b[1] - a[1] * b[0]))
-        sin /= np.linalg.norm(a) * np.linalg.norm(b)
-        if math.atan2(sin, cos) >= STRAIGHT_RAD:
-            keep.append(i)
-    keep.append(index[-1])
-    return np.asarray(keep)
+    if index.size < 3:
+        return index
+    seg = np.diff(arr[index], axis=0)
+    a, b = seg[:-1], seg[1:]
+    cos = np.einsum("ij,ij->i", a, b)
+    sin = _cross_norm(a, b)
+    check = np.nonzero(np.arctan2(sin, cos) < 2.0 * STRAIGHT_RAD)[0] + 1   # positions in index
+    if check.size == 0:
+        return index
+    kept = np.ones(index.size, dtype=bool)
+    todo = sorted(check.tolist())
+    anchor = 0
+    while todo:
+        pos = todo.pop(0)
+        if kept[pos - 1]:
+            anchor = pos - 1
+        if not _straight_at(arr, index[anchor], index[pos], index[pos + 1]):
+            continue
+        kept[pos] = False
+        if pos + 1 < index.size - 1 and (not todo or todo[0] != pos + 1):
+            todo.insert(0, pos + 1)
+    return index[kept]
+
+
+def _straight_at(arr: np.ndarray, prev: int, node: int, nxt: int) -> bool:
+    """Whether the heading change at ``node`` (from ``prev``, to ``nxt``) is below ``STRAIGHT_RAD``."""
+    a, b = arr[node] - arr[prev], arr[nxt] - arr[node]
+    cos = float(np.dot(a, b)) / (np.linalg.norm(a) * np.linalg.norm(b))
+    sin = float(np.linalg.norm(np.cross(a, b) if a.size == 3 else a[0] * b[1] - a[1] * b[0]))
+    sin /= np.linalg.norm(a) * np.linalg.norm(b)
+    return math.atan2(sin, cos) < STRAIGHT_RAD
+
+
+def _cross_norm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """|a x b| of the rows of (K, 2) or (K, 3) arrays -> (K,) (the components written out:
+    the same values as ``numpy.linalg.norm(numpy.cross(a, b), axis=1)``, without its overhead)."""
+    if a.shape[1] == 2:
+        return np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    x, y, z = a[:, 0], a[:, 1], a[:, 2]
+    u, v, w = b[:, 0], b[:, 1], b[:, 2]
+    cx = y * w - z * v
+    cy = z * u - x * w
+    cz = x * v - y * u
+    return np.sqrt(cx * cx + cy * cy + cz * cz)
 
 
 @dataclass(frozen=True)
@@ -126,12 +203,7 @@ def corner_geometry(nodes: np.ndarray) -> Corners:
     t_out = unit[1:]
     cos_turn = np.clip(np.sum(t_in * t_out, axis=1), -1.0, 1.0)
     # atan2(|a x b|, a.b) is accurate at both ends of [0, pi], unlike arccos
-    cross = np.sqrt(np.maximum(np.sum(t_in * t_in, 1) * np.sum(t_out * t_out, 1) - cos_turn**2, 0.0))
-    if nodes.shape[1] == 2:
-        cross = np.abs(t_in[:, 0] * t_out[:, 1] - t_in[:, 1] * t_out[:, 0])
-    elif nodes.shape[1] == 3:
-        cross = np.linalg.norm(np.cross(t_in, t_out), axis=1)
-    turn = np.arctan2(cross, cos_turn)
+    turn = np.arctan2(_cross_norm(t_in, t_out), cos_turn)
     kind = np.where(turn < STRAIGHT_RAD, "straight", np.where(turn > np.pi - REVERSAL_RAD, "reversal", "turn"))
     return Corners(point=nodes[1:-1], u_in=-t_in, u_out=t_out, len_in=seg_len[:-1],
                    len_out=seg_len[1:], turn_rad=turn, kind=kind)

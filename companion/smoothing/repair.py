@@ -23,7 +23,7 @@ from typing import Callable
 
 import numpy as np
 
-from companion.smoothing.bezier import bernstein
+from companion.smoothing.bezier_maths import bernstein
 
 __all__ = ["corners_clear", "repair_corners"]
 

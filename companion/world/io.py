@@ -37,7 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from companion.errors import WorldError
-from companion.world.obstacles import Box, Cylinder, Disc, Obstacle, Prism, Sphere
+from companion.world.obstacles import Obstacle
+from companion.world.polyhedral_obstacles import Box, Prism
+from companion.world.round_obstacles import Cylinder, Disc, Sphere
 from companion.world.world import World
 
 __all__ = ["WorldFile", "load_world", "read_world_file", "world_from_dict", "world_to_dict", "dumps_world_toml"]

@@ -24,8 +24,10 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from companion.errors import WorldError
+from companion.world.ball_clearance import ball_clearance_kdtree
 from companion.world.index import UniformGrid
-from companion.world.obstacles import Disc, Obstacle, Sphere
+from companion.world.obstacles import Obstacle
+from companion.world.round_obstacles import Disc, Sphere
 
 __all__ = ["World"]
 
@@ -428,31 +430,6 @@ class World:
         return best
 
     # ------------------------------------------------------------------ vectorised queries
-    def _ball_clearance_kdtree(self, pts: np.ndarray, centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
-        """Exact min over balls of ``|p - c| - r`` using a KD-tree of the centres (memoised).
-
-        The k nearest centres give a candidate minimum; a ball further than the k-th centre can
-        only beat it when ``|p - c_k| - r_max`` is below it, and those points fall back to a full
-        scan, so the result is exact.
-        """
-        tree = self._memo.get("kdtree")
-        if tree is None:
-            from scipy.spatial import cKDTree
-
-            tree = cKDTree(centers)
-            self._memo["kdtree"] = tree
-        k = min(16, len(radii))
-        dist, idx = tree.query(pts, k=k)
-        dist = dist.reshape(len(pts), k)
-        idx = idx.reshape(len(pts), k)
-        best = (dist - radii[idx]).min(axis=1)
-        unsure = dist[:, -1] - radii.max() < best
-        if k < len(radii) and np.any(unsure):
-            sub = pts[unsure]
-            full = np.linalg.norm(sub[:, None, :] - centers[None, :, :], axis=2) - radii[None, :]
-            best[unsure] = full.min(axis=1)
-        return best
-
     def _points(self, points, name: str = "points") -> np.ndarray:
         arr = np.asarray(points, dtype=float)
         if arr.ndim == 1 and arr.shape[0] == self._dim:
@@ -489,7 +466,7 @@ class World:
             chunk = arr[start:start + _BATCH_ROWS]
             best = np.full(chunk.shape[0], np.inf)
             if len(radii) > _KDTREE_FROM:
-                best = self._ball_clearance_kdtree(chunk, centers, radii)
+                best = ball_clearance_kdtree(chunk, centers, radii, self._memo)
             elif len(radii):
                 dist = np.linalg.norm(chunk[:, None, :] - centers[None, :, :], axis=2) - radii[None, :]
                 best = np.minimum(best, dist.min(axis=1))

@@ -12,19 +12,30 @@ pymavlink listener records the vehicle's own LOCAL_POSITION_NED. One flight of
   meet the vehicle where the path crosses its track;
 
 and the flight completes with no sample of the vehicle's own track inside any threat.
+
+The same flight checks the operator's view (issue 14): a Foxglove WebSocket client connected to
+``--foxglove`` during the flight, the MCAP record (``--record flight.mcap``) and the ``--tlog``.
 """
 
 from __future__ import annotations
 
+import asyncio
+import socket
+import threading
+
 import numpy as np
 import pytest
+from mcap.reader import make_reader
+from pymavlink import mavutil
 
 from companion.geo import LocalFrame
-from companion.record import load_record
+from companion.view import channels as ch
+from companion.view.mcap_record import load_flight
+from foxglove_client import collect
 from companion.threats.bus import ThreatBus
 from companion.threats.model import Threat
-from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, inject,
-                            last_json_line, wait_until)
+from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, free_port,
+                            inject, last_json_line, wait_until)
 from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration
@@ -36,6 +47,8 @@ HEAD_ON = Injection("headon1", "moving", leg=1, after_s=3.0, ahead_s=6.0, radius
 POPUP = Injection("popup2", "popup", leg=2, after_s=5.0, ahead_s=3.0, radius_m=3.0)
 CROSSING = Injection("cross3", "moving", leg=3, after_s=3.0, ahead_s=5.0, radius_m=3.0, speed_m_s=2.0,
                      lateral_m=-10.0, frame="global")
+LIVE_TOPICS = {"/flight/decision", "/flight/threat", ch.SCENE_WORLD, ch.SCENE_THREATS, ch.SCENE_PATHS,
+               ch.TRANSFORMS}
 HARMLESS = Threat("far1", "popup", "local_ned", (300.0, 300.0, -15.0), (0.0, 0.0, 0.0), 2.0, 60.0)
 
 
@@ -43,8 +56,15 @@ HARMLESS = Threat("far1", "popup", "local_ned", (300.0, 300.0, -15.0), (0.0, 0.0
 def flight(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("threat_flight")
     seen = {"threats": []}
+    live: dict = {}
+    fox_port, tlog = free_port(socket.SOCK_STREAM), tmp / "companion.tlog"
+    view_args = ["--foxglove", f"127.0.0.1:{fox_port}", "--tlog", str(tlog)]
     with TrackListener() as track, \
-            flight_processes(tmp, MISSION, speedup=SPEEDUP, gcs_out=track.address) as flight:
+            flight_processes(tmp, MISSION, speedup=SPEEDUP, gcs_out=track.address, extra_args=view_args,
+                             record_name="flight.mcap") as flight:
+        watch = threading.Thread(target=lambda: live.update(got=asyncio.run(collect(
+            fox_port, LIVE_TOPICS, 600.0, until=lambda: flight.companion.poll() is not None))), daemon=True)
+        watch.start()
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             watcher = FlightWatcher(bus)
             running = lambda: flight.companion.poll() is not None   # noqa: E731
@@ -61,9 +81,10 @@ def flight(tmp_path_factory):
             flight.companion.wait(300)
             seen["events"] = list(watcher.events)
         track_t, track_pos = track.samples()
+        watch.join(30)
     yield {"rc": flight.companion.returncode, "summary": last_json_line(flight.log), "seen": seen,
-           "record": load_record(flight.record), "log": flight.log.read_text(),
-           "track_t_s": track_t, "track_ned_m": track_pos}
+           "record": load_flight(flight.record), "mcap": flight.record, "tlog": tlog, "live": live.get("got"),
+           "log": flight.log.read_text(), "track_t_s": track_t, "track_ned_m": track_pos}
 
 
 def first_decision(flight, threat_id):
@@ -86,6 +107,7 @@ def separation_m(flight, threat_id) -> float:
 
 def test_the_flight_completes_despite_the_threats(flight):
     assert flight["rc"] == 0, flight["log"][-3000:]
+    assert f"time scale {SPEEDUP:g} (the vehicle's SIM_SPEEDUP)" in flight["log"]     # no --time-scale given
     assert flight["summary"]["outcome"] == "completed"
     assert flight["summary"]["landed"] is True
     assert flight["summary"]["legs_reached"] == flight["summary"]["legs_planned"]
@@ -133,3 +155,44 @@ def test_an_invalid_payload_is_rejected_naming_the_field(flight):
 def test_delete_removes_a_threat(flight):
     assert "far1" in flight["seen"]["listed"]
     assert "far1" not in flight["seen"]["listed_after_delete"]
+
+
+def test_a_live_foxglove_client_saw_the_scene_the_threats_and_every_decision(flight):
+    live = flight["live"]
+    assert live is not None, "the WebSocket client never connected"
+    assert LIVE_TOPICS <= live.topics()
+    for topic in (ch.SCENE_WORLD, ch.SCENE_THREATS, ch.SCENE_PATHS, ch.TRANSFORMS, "/flight/threat"):
+        assert live.messages.get(topic), topic
+    seen = [(d["kind"], d["reason"]) for d in live.messages["/flight/decision"]]
+    assert seen == [(d["kind"], d["reason"]) for d in flight["record"].decisions]
+    assert {kind for kind, _ in seen} >= {"rejected"} and len(seen) >= 4
+
+
+def test_the_mcap_record_has_every_channel_with_its_schema_and_monotonic_times(flight):
+    with open(flight["mcap"], "rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        times: dict[str, list[int]] = {}
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            times.setdefault(channel.topic, []).append(message.log_time)
+    schemas = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
+    expected = {topic for topic, _ in ch.RECORD_TOPICS.values()} | set(ch.SAMPLE_TOPICS) | {
+        ch.SCENE_WORLD, ch.SCENE_PATHS, ch.SCENE_THREATS, ch.SCENE_VEHICLE, ch.TRANSFORMS, ch.LOCATION, ch.LOG}
+    assert expected <= set(schemas) and expected <= set(times)
+    assert all(schema.data and schema.name for schema in schemas.values())
+    assert all(stamps == sorted(stamps) for stamps in times.values())
+    record = flight["record"]
+    assert record.summary["outcome"] == "completed" and len(record.samples["t_s"]) > 300
+
+
+def test_the_tlog_holds_the_setpoints_sent_and_the_vehicles_telemetry(flight):
+    log = mavutil.mavlink_connection(str(flight["tlog"]))
+    counts: dict[str, int] = {}
+    stamps = []
+    while (msg := log.recv_match()) is not None:
+        counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
+        stamps.append(msg._timestamp)
+    assert counts.get("SET_POSITION_TARGET_LOCAL_NED", 0) > 1000         # 50 Hz for minutes
+    assert counts.get("LOCAL_POSITION_NED", 0) > 500 and counts.get("HEARTBEAT", 0) > 50
+    assert counts.get("COMMAND_LONG", 0) and counts.get("COMMAND_ACK", 0)
+    assert stamps == sorted(stamps)

@@ -119,7 +119,7 @@ def test_no_feasibility_option_turns_the_check_off(capsys):
 
     from companion.cli import main
 
-    assert main(["run", "--no-feasibility", "--print-config"]) == 0
+    assert main(["run", "--no-feasibility", "--print-config", "json"]) == 0
     assert json.loads(capsys.readouterr().out)["feasibility"]["enabled"] is False
 
 

@@ -2,8 +2,8 @@
 
 What passes the gate (``companion.link.gate``, fuzzed in ``test_gate_input.py``) reaches the
 companion through MAVSDK; this fuzzes the companion's own parsing of what MAVSDK hands it: each
-watcher of :class:`~companion.link.vehicle.VehicleLink` (HEARTBEAT, LOCAL_POSITION_NED,
-EXTENDED_SYS_STATE, GPS_GLOBAL_ORIGIN, HOME_POSITION, STATUSTEXT, SYS_STATUS, RPM from
+watcher of :class:`~companion.link.vehicle.VehicleLink` (``companion.link.watchers``: HEARTBEAT,
+LOCAL_POSITION_NED, EXTENDED_SYS_STATE, GPS_GLOBAL_ORIGIN, HOME_POSITION, STATUSTEXT, SYS_STATUS, RPM from
 MavlinkDirect as JSON field dicts; attitude, armed and position from MAVSDK's telemetry
 plugin) runs on its own event loop, fed by a stand-in subscription with hypothesis field dicts:
 fields missing, NaN, infinite, out of range, from the vehicle or from another system.
@@ -14,7 +14,7 @@ meanwhile); the telemetry snapshot stays finite (positions, velocities, attitude
 
 The fuzz found both broken at first (NaN stored as it came; a null field raised out of
 ``apply``); the reproducers stay below as fixed cases. A message whose fields are null or not
-finite is now dropped whole (``companion.link.vehicle.finite_fields``).
+finite is now dropped whole (``companion.link.telemetry.finite_fields``).
 """
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ async def drive(inputs: list[tuple[str, object]]) -> tuple[VehicleLink, list[log
     link._telemetry_plugin = subs.plugin()
     names = [*DIRECT.values(), *(w for w, _ in PLUGIN.values())]
     failures = Failures()
-    logger = logging.getLogger("companion.link.vehicle")
+    logger = logging.getLogger("companion.link")   # the watchers and every other part of the link
     logger.addHandler(failures)
     tasks = [asyncio.get_running_loop().create_task(getattr(link, name)()) for name in names]
     try:

@@ -1,6 +1,6 @@
 """Property-based fuzz of ``sim-vehicle``'s MAVLink input (issue 11).
 
-The vehicle's :class:`~sim_vehicle.mavlink_server.MavlinkServer` runs in-process, flying in
+The vehicle's :class:`~sim_vehicle.mavlink.MavlinkServer` runs in-process, flying in
 GUIDED at 10 m with a stored three-item mission, its socket replaced by a queue so that every
 hypothesis-generated datagram goes through ``_receive`` and ``_handle_datagram`` exactly as a
 UDP datagram would. Datagrams: random bytes, valid frames with one byte changed (bad CRC or a
@@ -140,7 +140,7 @@ def upload(server, rows, mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION) -
 @pytest.fixture(scope="module")
 def flying():
     """A server whose vehicle hovers at 10 m in GUIDED with MISSION stored (shared by the examples)."""
-    from sim_vehicle.mavlink_server import MavlinkServer
+    from sim_vehicle.mavlink import MavlinkServer
 
     vehicle_settings = replace_path(VehicleSettings(), "link.out", ())
     vehicle = Autopilot(HeliModel.default(), vehicle_settings, HOME, np.random.default_rng(0))

@@ -48,7 +48,7 @@ def test_answers_to_other_senders_never_reach_mavsdk():
     assert gate.filter(ack_to(255, 190)) == []                 # a ground station's answer
     assert gate.filter(ack_to(US[0], 190)) == []               # our system, another component
     assert gate.filter(heartbeat()) != []                      # broadcast
-    assert gate.counts == {"passed": 3, "not_for_us": 2, "malformed": 0}
+    assert gate.counts == {"passed": 3, "not_for_us": 2, "onboard": 0, "malformed": 0}
 
 
 def test_before_mavsdk_spoke_only_broadcasts_pass():
@@ -109,3 +109,36 @@ def test_garbage_never_raises_and_never_passes_a_signed_gate(chunks, cut):
     assert datagrams.filter(signed) == [signed]
     assert stream.filter(bytes(300)) == []                     # (zeros resynchronise a stream)
     assert stream.filter(signed[:cut]) + stream.filter(signed[cut:]) == [signed]
+
+
+def test_the_types_the_link_reads_are_tapped_as_fields_once_admitted():
+    gate = learned_filter(SignatureCheck(KEY))
+    gate.tapped.add("HEARTBEAT")
+    gate.filter(heartbeat(key=KEY))
+    gate.filter(heartbeat(key=OTHER_KEY))                       # refused: never tapped
+    gate.filter(ack_to(*US, key=KEY))                           # admitted, not a tapped type
+    assert [kind for kind, _ in gate.taps] == ["HEARTBEAT"]
+    fields = gate.taps[0][1]
+    assert (fields["type"], fields["autopilot"], fields["_sysid"], fields["_compid"]) == (
+        mavlink.MAV_TYPE_HELICOPTER, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, *VEHICLE)
+    assert "mavpackettype" not in fields and fields["_t_s"] > 0
+
+
+def setpoint():
+    return mavlink.MAVLink_set_position_target_local_ned_message(
+        1000, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0, 1.0, 2.0, -10.0, 0, 0, 0, 0, 0, 0, 0.5, 0)
+
+
+def test_own_messages_go_out_from_mavsdks_address_with_their_own_sequence_signed_with_the_key():
+    identity = Identity()
+    for key in (None, KEY):
+        signer = OutboundSigner(identity, key)
+        assert identity.system is not None or signer.pack_own(setpoint()) is None   # address unknown yet
+        signer.convert(heartbeat(US))
+        frames = [signer.pack_own(setpoint()) for _ in range(3)]
+        parsed = [mavlink.MAVLink(None).parse_buffer(frame)[0] for frame in frames]
+        assert [(m.get_srcSystem(), m.get_srcComponent()) for m in parsed] == [US] * 3
+        assert [m.get_seq() for m in parsed] == [0, 1, 2] and parsed[0].x == 1.0
+        if key is not None:
+            check = SignatureCheck(KEY)
+            assert [check.check(m.get_msgbuf(), m.get_msgId(), *US) for m in parsed] == [Verdict.ACCEPTED] * 3

@@ -2,7 +2,7 @@
 
 import math
 
-from companion.link.vehicle import from_mavsdk_item, to_mavsdk_item
+from companion.link.mission_transfer import from_mavsdk_item, to_mavsdk_item
 from companion.mission import load_mission_file
 from companion.mission.raw import fence_to_raw, mission_to_raw, rally_to_raw
 from pathlib import Path

@@ -9,7 +9,7 @@ import pytest
 from companion.errors import LinkError
 from companion.link import (Setpoint, SetpointStreamer, check_url, hold_position, jitter_stats,
                             setpoint_fields, setpoint_type_mask)
-from companion.link.vehicle import mode_number
+from companion.link.vehicle_commands import mode_number
 
 
 def test_type_mask_bits():

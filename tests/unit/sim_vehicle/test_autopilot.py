@@ -446,7 +446,7 @@ def fuzz_message(mavlink, rng: np.random.Generator, gcs) -> bytes | None:
 def test_server_survives_fuzzed_messages_while_flying(model, caplog):
     from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-    from sim_vehicle.mavlink_server import MavlinkServer
+    from sim_vehicle.mavlink import MavlinkServer
 
     link_settings = replace_path(VehicleSettings(), "link.out", ())
     vehicle = make_vehicle(model, link_settings)

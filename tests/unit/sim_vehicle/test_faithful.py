@@ -324,7 +324,7 @@ def decode(sent: list[tuple[tuple, bytes]], to: tuple | None = None) -> list:
 
 @pytest.fixture
 def server(model):
-    from sim_vehicle.mavlink_server import MavlinkServer
+    from sim_vehicle.mavlink import MavlinkServer
 
     settings_ = replace_path(VehicleSettings(), "link.out", (f"{OUT[0]}:{OUT[1]}",))
     vehicle = make_vehicle(model, settings_)

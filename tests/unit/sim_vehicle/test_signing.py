@@ -134,7 +134,7 @@ def test_a_bad_key_file_is_one_line_naming_it_and_exit_status_2(tmp_path, capsys
 def test_every_drop_reason_has_a_link_counter_next_to_the_malformed_ones():
     import dataclasses
 
-    from sim_vehicle.mavlink_server import LinkStats
+    from sim_vehicle.mavlink import LinkStats
     from sim_vehicle.signing import DROP_REASONS
 
     fields = {f.name for f in dataclasses.fields(LinkStats)}

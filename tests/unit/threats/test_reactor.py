@@ -14,9 +14,10 @@ import pytest
 
 from companion.config import Settings
 from companion.errors import LinkError
-from companion.threats.bus import ThreatUpdate
 from companion.threats.model import Threat, payload_error
-from companion.threats.reactor import STATUSTEXT_MAX_CHARS, ThreatReactor, statustext_for
+from companion.threats.reactor import ThreatReactor
+from companion.threats.statustext import STATUSTEXT_MAX_CHARS, statustext_for
+from companion.threats.update import ThreatUpdate
 
 HOME = (47.397742, 8.545594, 488.0)
 

@@ -1,0 +1,232 @@
+"""The link's raw traffic: messages in (``messages``), and messages out without waiting
+(``send_message``, the GUIDED setpoint, STATUSTEXT to the ground stations).
+
+Messages in come from the gate, which parses every frame anyway (``companion.link.gate``): the
+types someone reads are handed to the loop in batches as field dicts, without MAVSDK's JSON
+round trip. The 50 Hz SET_POSITION_TARGET_LOCAL_NED (position + velocity + acceleration + yaw,
+type_mask from what is given) is encoded here and written by the gate
+(``GateThread.send_message``); the rare sends (``send_message``, STATUSTEXT: broadcast, routed
+by the autopilot to its other links) use ``MavlinkDirect.send_message`` of MAVSDK's synchronous
+plugin (a ~20 us ctypes call). None of them blocks the event loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import time
+from typing import AsyncIterator
+
+import numpy as np
+
+from heli_common.mavlink_ids import (TYPEMASK_IGNORE_ACCELERATION, TYPEMASK_IGNORE_POSITION,
+                                     TYPEMASK_IGNORE_VELOCITY, enum_names, mavlink)
+
+from companion.errors import LinkError
+from companion.link.frames import LinkFrames
+
+log = logging.getLogger(__name__)
+
+MAV_FRAME_LOCAL_NED = mavlink.MAV_FRAME_LOCAL_NED
+# SET_POSITION_TARGET type_mask bits (POSITION_TARGET_TYPEMASK)
+IGNORE_POS = TYPEMASK_IGNORE_POSITION
+IGNORE_VEL = TYPEMASK_IGNORE_VELOCITY
+IGNORE_ACC = TYPEMASK_IGNORE_ACCELERATION
+IGNORE_YAW = mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE
+IGNORE_YAW_RATE = mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+
+#: MAV_SEVERITY names by value (MAVLink common.xml: pymavlink's ``mavutil.mavlink.MAV_SEVERITY_*``).
+MAV_SEVERITY_NAMES = tuple(enum_names("MAV_SEVERITY").values())
+#: STATUSTEXT.text is char[50].
+STATUSTEXT_MAX_CHARS = 50
+
+
+def setpoint_type_mask(pos, vel, acc, yaw, yaw_rate=None) -> int:
+    """SET_POSITION_TARGET type_mask: a field group is ignored when it is None."""
+    mask = 0
+    if pos is None:
+        mask |= IGNORE_POS
+    if vel is None:
+        mask |= IGNORE_VEL
+    if acc is None:
+        mask |= IGNORE_ACC
+    if yaw is None:
+        mask |= IGNORE_YAW
+    if yaw_rate is None:
+        mask |= IGNORE_YAW_RATE
+    return mask
+
+
+def three_finite(value) -> list[float] | None:
+    """``value`` (a sequence or array of 3 numbers) as 3 floats, or None if it is not 3 finite numbers."""
+    try:
+        values = [float(v) for v in (value.tolist() if isinstance(value, np.ndarray) else value)]
+    except (TypeError, ValueError):
+        return None
+    if len(values) != 3 or not all(map(math.isfinite, values)):
+        return None
+    return values
+
+
+def setpoint_fields(time_boot_ms: int, target_system: int, target_component: int,
+                    pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
+                    yaw_rate_rad_s=None) -> dict:
+    """Fields of a SET_POSITION_TARGET_LOCAL_NED message (frame LOCAL_NED).
+
+    Parameters
+    ----------
+    pos_ned_m, vel_ned_m_s, acc_ned_m_s2 : (3,) array_like or None
+    yaw_rad, yaw_rate_rad_s : float or None
+
+    Raises
+    ------
+    LinkError
+        A given vector is not 3 finite numbers, or yaw is not finite.
+    """
+    fields = {"time_boot_ms": int(time_boot_ms) & 0xFFFFFFFF, "target_system": target_system,
+              "target_component": target_component, "coordinate_frame": MAV_FRAME_LOCAL_NED,
+              "type_mask": setpoint_type_mask(pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad,
+                                              yaw_rate_rad_s)}
+    for name, value, keys in (("pos_ned_m", pos_ned_m, ("x", "y", "z")),
+                              ("vel_ned_m_s", vel_ned_m_s, ("vx", "vy", "vz")),
+                              ("acc_ned_m_s2", acc_ned_m_s2, ("afx", "afy", "afz"))):
+        if value is None:
+            fields.update({k: 0.0 for k in keys})
+            continue
+        values = three_finite(value)          # plain floats: numpy's per-call cost is most of it
+        if values is None:
+            raise LinkError(f"setpoint {name} must be 3 finite numbers, got {value!r}")
+        fields.update(zip(keys, values))
+    for name, value, key in (("yaw_rad", yaw_rad, "yaw"),
+                             ("yaw_rate_rad_s", yaw_rate_rad_s, "yaw_rate")):
+        if value is None:
+            fields[key] = 0.0
+        elif not math.isfinite(float(value)):
+            raise LinkError(f"setpoint {name} must be finite, got {value!r}")
+        else:
+            fields[key] = float(value)
+    return fields
+
+
+class DirectMessages:
+    """The MavlinkDirect traffic of a ``VehicleLink`` (a part of it: it uses the link's MAVSDK
+    handles and frames, set by ``connect`` and ``set_planning_home``)."""
+
+    target_system: int
+    target_component: int
+    frames: LinkFrames
+    _mavsdk: object
+    _system: object
+    _direct_sync: object
+    _t0: float
+    _readers: dict
+    gate: object
+
+    def _require_connected(self) -> None:
+        if self._system is None or self._mavsdk is None:
+            raise LinkError("the link is not connected (call connect() first)")
+
+    def _from_vehicle(self, fields: dict) -> bool:
+        return fields.get("_sysid") == self.target_system
+
+    async def messages(self, name: str) -> AsyncIterator[dict]:
+        """Raw MAVLink messages named ``name`` (e.g. ``"SERVO_OUTPUT_RAW"``) as field dicts.
+
+        Each dict has the message fields plus ``"_sysid"``, ``"_compid"`` and ``"_t_s"``
+        (monotonic arrival time). They come straight from the gate (``companion.link.gate``:
+        the frames it admits, parsed once on its thread, ``tapped_fields``), not through MAVSDK;
+        every reader of a type gets the same dict: read it, do not change it.
+        """
+        self._require_connected()
+        queue: asyncio.Queue[dict] = asyncio.Queue()
+        readers = self._readers.setdefault(name, set())
+        readers.add(queue)
+        self.gate.inbound.tapped.add(name)
+        try:
+            while True:
+                yield await queue.get()
+        finally:
+            readers.discard(queue)
+            if not readers and self.gate is not None:
+                self.gate.inbound.tapped.discard(name)
+
+    def _hand_over(self, batch: list[tuple[str, dict]]) -> None:
+        """On the loop: the messages the gate read, to their readers (``messages``)."""
+        for name, fields in batch:
+            for queue in self._readers.get(name, ()):
+                queue.put_nowait(fields)
+
+    def _tap_from_gate_thread(self, loop: asyncio.AbstractEventLoop):
+        """The gate's ``on_tap``: hand each batch over to ``loop``."""
+        def on_tap(batch: list) -> None:
+            try:
+                loop.call_soon_threadsafe(self._hand_over, batch)
+            except RuntimeError:           # the loop is closed: the link is closing
+                pass
+        return on_tap
+
+    def send_message(self, name: str, fields: dict) -> None:
+        """Send one MAVLink message ``name`` with ``fields`` now (non-blocking)."""
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        self._require_connected()
+        self._direct_sync.send_message(MavlinkMessage(name, 0, 0, self.target_system,
+                                                      self.target_component, json.dumps(fields)))
+
+    def send_setpoint(self, pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
+                      yaw_rate_rad_s=None) -> None:
+        """Send one SET_POSITION_TARGET_LOCAL_NED now (non-blocking; call from the loop thread).
+
+        ``None`` fields are masked out in ``type_mask``. Raises ``LinkError`` for non-finite
+        values (nothing is sent then). ``pos_ned_m`` is about the planning home and is sent
+        in the vehicle's local frame (``frames.to_origin``). It goes out through the gate
+        directly (``GateThread.send_message``: encoded and signed here, from MAVSDK's address),
+        through MAVSDK only before the gate knows that address.
+        """
+        self._require_connected()
+        if pos_ned_m is not None:
+            pos_ned_m = self.frames.to_origin(pos_ned_m)
+        time_boot_ms = int((time.monotonic() - self._t0) * 1000.0)
+        fields = setpoint_fields(time_boot_ms, self.target_system, self.target_component,
+                                 pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s)
+        if self.gate is not None and self.gate.send_message(
+                mavlink.MAVLink_set_position_target_local_ned_message(**fields)):
+            return
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        self._direct_sync.send_message(MavlinkMessage("SET_POSITION_TARGET_LOCAL_NED", 0, 0, self.target_system,
+                                                      self.target_component, json.dumps(fields)))
+
+    def send_statustext(self, text: str, severity: int | str = "NOTICE") -> None:
+        """Send one STATUSTEXT to the ground stations (non-blocking; call from the loop thread).
+
+        STATUSTEXT has no target: the autopilot forwards it to its other links (ArduPilot's
+        MAVLink routing; ``sim-vehicle`` does the same), so QGroundControl and MAVProxy show it.
+
+        Parameters
+        ----------
+        text : str
+            Cut to ``STATUSTEXT_MAX_CHARS`` (50) characters; non-ASCII characters become ``?``.
+        severity : int or str
+            A MAV_SEVERITY value (pymavlink's ``mavutil.mavlink.MAV_SEVERITY_NOTICE`` ...) or its
+            name with or without the prefix (``"NOTICE"``, ``"MAV_SEVERITY_WARNING"``).
+
+        Raises
+        ------
+        LinkError
+            Not connected, or an unknown severity (nothing is sent then).
+        """
+        from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+        self._require_connected()
+        name = severity.upper().removeprefix("MAV_SEVERITY_") if isinstance(severity, str) else None
+        level = MAV_SEVERITY_NAMES.index(name) if name in MAV_SEVERITY_NAMES else severity
+        if not (isinstance(level, int) and not isinstance(level, bool) and 0 <= level < len(MAV_SEVERITY_NAMES)):
+            raise LinkError(f"severity: expected a MAV_SEVERITY value 0..7 or one of "
+                            f"{', '.join(MAV_SEVERITY_NAMES)}, got {severity!r}")
+        body = str(text).encode("ascii", "replace").decode("ascii")[:STATUSTEXT_MAX_CHARS]
+        fields = {"severity": level, "text": body, "id": 0, "chunk_seq": 0}
+        self._direct_sync.send_message(MavlinkMessage("STATUSTEXT", 0, 0, 0, 0, json.dumps(fields)))
+        log.debug("STATUSTEXT %d %r sent", level, body)

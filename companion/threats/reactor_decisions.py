@@ -1,0 +1,163 @@
+"""The reactor's decisions (DESIGN 7.3 to 7.5): one at a time in a worker thread, updates that
+arrive meanwhile folded into the next one; the >= 10 Hz monitor of the active reference; a way
+back to the mission on request (``resume``); a decision engaged, its latency measured from the
+trigger to the first setpoint of the new trajectory, then published, recorded and told."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from typing import Callable
+
+from companion.errors import CompanionError
+from companion.threats.model import ThreatTable
+from companion.threats.statustext import statustext_for
+
+log = logging.getLogger(__name__)
+
+#: How long to wait for the first setpoint of a new reference (latency measurement, s).
+FIRST_SETPOINT_WAIT_S = 1.0
+
+
+class ReactorDecisions:
+    """The decisions of a ``ThreatReactor`` (a part of it: it uses the reactor's table, manager,
+    leg, callables and bus, and ``set_active``, ``publish_path`` and ``refresh_alternatives``)."""
+
+    settings: object
+    table: ThreatTable
+    manager: object
+    leg: object
+    leg_index: int
+    decisions: int
+    latencies_ms: dict[str, list[float]]
+    monitor_period_s: float
+    clock_now_s: Callable[[], float]
+    in_worker: Callable
+    engage: Callable
+    send_now: Callable[[], None]
+    reference: Callable
+    position_ned_m: Callable
+    record: Callable
+    statustext: Callable | None
+    _busy: bool
+    _resume_waiting: bool
+    _pending: tuple[float, str] | None
+
+    def schedule(self, trigger_mono_s: float, trigger: str = "threat") -> None:
+        """Decide now, or right after the decision under way (with the newest threats).
+
+        Outside a leg, or without an active reference (the daemon holds where the vehicle is
+        after a link loss), nothing is decided: the next reference is checked when engaged.
+        """
+        if self.manager is None or self.leg is None or self.reference() is None:
+            return
+        if self._busy:
+            if self._pending is None:
+                self._pending = (trigger_mono_s, trigger)
+            return
+        self._busy = True
+        asyncio.get_running_loop().create_task(self._decide(trigger_mono_s, trigger), name="threat-decision")
+
+    async def resume(self):
+        """Ask the manager for a way back to the leg's goal (the reference ended short of it).
+
+        Waits for the decision under way, if any. Returns the manager's Decision (kind ``none``
+        with ``resume`` True when there is no clear way back yet: ask again later), or None
+        outside a leg.
+        """
+        if self.manager is None or self.leg is None or self.reference() is None:
+            return None
+        self._resume_waiting = True
+        try:
+            while self._busy:
+                await asyncio.sleep(0.005)
+        finally:
+            self._resume_waiting = False
+        self._busy = True
+        return await self._decide(time.monotonic(), "resume", resume=True)
+
+    async def _decide(self, trigger_mono_s: float, trigger: str, resume: bool = False):
+        """Decisions one after the other until no update is pending; returns the first one."""
+        first = None
+        try:
+            while True:
+                leg, ref, t = self.leg, self.reference(), self.clock_now_s()
+                self.table.expire(t)
+                decide = self.manager.resume if resume else self.manager.on_threats
+                decision = await self.in_worker(decide, self.table.snapshot(t), t)
+                first = decision if first is None else first
+                if leg is not None and leg is self.leg and ref is not None and ref is self.reference():
+                    await self.apply(decision, trigger_mono_s, trigger)
+                elif self.reference() is not None:      # the daemon changed the reference meanwhile
+                    log.info("decision %s dropped: the reference changed while deciding", decision.kind)
+                    self.set_active(self.reference())
+                if self._pending is None:
+                    break
+                (trigger_mono_s, trigger), self._pending = self._pending, None
+                resume = False
+        except Exception:  # noqa: BLE001 - a failed decision must not stop the flight
+            log.exception("threat decision failed; the current reference is kept")
+        finally:
+            self._busy = False
+        return first
+
+    async def apply(self, decision, trigger_mono_s: float, trigger: str) -> None:
+        """Engage the decision's trajectory, measure its latency, publish, record and tell it.
+
+        Only decisions with a trajectory, and ``rejected``, are published; ``none`` (keep, or no
+        way back yet) and a decision without a new reference are logged only.
+        """
+        if decision.trajectory is None and decision.kind != "rejected":
+            log.debug("threat check (%s): %s %s (%.1f ms)", trigger, decision.kind, decision.reason,
+                      decision.decide_ms)
+            return
+        latency_ms = None
+        if decision.trajectory is not None:
+            ref = self.engage(decision.trajectory, decision.path_id, t0_s=decision.start_t_s,
+                              resume=bool(decision.resume))
+            self.send_now()
+            deadline = time.monotonic() + FIRST_SETPOINT_WAIT_S
+            while ref.first_sent_monotonic_s is None and time.monotonic() < deadline:
+                await asyncio.sleep(0.001)
+            if ref.first_sent_monotonic_s is not None:
+                latency_ms = (ref.first_sent_monotonic_s - trigger_mono_s) * 1000.0
+                self.latencies_ms.setdefault(decision.kind, []).append(latency_ms)
+        label = getattr(decision, "label", None) or decision.kind
+        event = {**decision.as_event(), "label": label, "trigger": trigger, "latency_ms": latency_ms,
+                 "t_s": self.clock_now_s(), "pos_ned_m": self.position_ned_m(), "leg": self.leg_index}
+        if "threat_id" in event:
+            event["source"] = self.source_of(event["threat_id"])
+        self.decisions += 1
+        log.warning("decision %s (%s, %s): %s (latency %s ms, decide %.1f ms, plan %.1f ms, seed %d)",
+                    decision.kind, label, trigger, decision.reason,
+                    "n/a" if latency_ms is None else f"{latency_ms:.1f}", decision.decide_ms,
+                    decision.plan_ms, self.settings.seed)
+        self.bus.publish_event(event)
+        self.record("decision", kind=decision.kind, path_ned_m=decision.path_ned_m, **event)
+        threat_id = decision.conflict.threat_id if decision.conflict is not None else None
+        self._tell(*statustext_for(decision.kind, label, threat_id, latency_ms))
+        self.publish_path()
+        self.refresh_alternatives()
+
+    def _tell(self, text: str, severity: str) -> None:
+        if self.statustext is None:
+            return
+        try:
+            self.statustext(text, severity)
+        except CompanionError as exc:            # e.g. the link is down: the event is published
+            log.info("STATUSTEXT %r not sent: %s", text, exc)
+
+    async def _monitor(self) -> None:
+        """Re-check the active reference every ``monitor_period_s`` (wall clock) while a leg is
+        flown and a threat is known; skip a tick while a decision is under way."""
+        next_s = time.monotonic()
+        while True:
+            next_s = max(next_s + self.monitor_period_s, time.monotonic())
+            await asyncio.sleep(next_s - time.monotonic())
+            if self.manager is None or self.leg is None or self._busy or self._resume_waiting \
+                    or self.reference() is None:
+                continue
+            self.table.expire(self.clock_now_s())
+            if len(self.table):
+                self.schedule(time.monotonic(), "monitor")
