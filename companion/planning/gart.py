@@ -17,6 +17,7 @@ import time
 import numpy as np
 
 from companion.errors import PlanningError
+from companion.planning.compiled_search import CompiledGart, compiled_case, grow_compiled
 from companion.planning.cost import path_cost, path_length_m
 from companion.planning.problem import failed_result, validate_problem
 from companion.planning.result import PlanResult
@@ -80,9 +81,14 @@ def gart(world: World, start, goal, *, rng: np.random.Generator, max_time_s: flo
         max_time_s = settings.time_budget_s
     deadline = t0 + max_time_s if max_time_s is not None else math.inf
     iter_limit = max_iterations if max_iterations is not None else math.inf
-    search = GartSearch(world, start_t, goal_t, settings, rng)
-    history, first_s = grow(search, t0, deadline, iter_limit, stop_at_first)
-    tree = search.tree()
+    if compiled_case(world, settings):   # the whole iteration compiled (numba), the tree in arrays
+        search = CompiledGart(world, start_t, goal_t, settings, rng)
+        history, first_s = grow_compiled(search, t0, deadline, iter_limit, stop_at_first)
+        tree = search.tree_snapshot()
+    else:
+        search = GartSearch(world, start_t, goal_t, settings, rng)
+        history, first_s = grow(search, t0, deadline, iter_limit, stop_at_first)
+        tree = search.tree()
     if search.best_node < 0:
         return failed_result("timeout", t0, search.iterations, tree)
     path, cost, length = finish_path(world, search.path_to_goal(search.best_node), settings)

@@ -42,14 +42,27 @@ class Guidance:
         self.lo = tuple(world.bounds_min.tolist())
         self.hi = tuple(world.bounds_max.tolist())
         self.margin = world.margin_m
-        self.scan_all = len(world.obstacles) <= _SCAN_ALL_OBSTACLES_BELOW
-        influence = settings.influence_m
-        # (centre..., reach^2, r) with reach = r + influence: the skip test without arithmetic
-        self.balls = tuple(b[:-2] + ((b[-1] + influence) * (b[-1] + influence), b[-1])
-                           for b in world.inflated_balls)
+        self.scan_all = len(world.obstacles) <= self.SCAN_ALL_BELOW
         self.others = world.non_ball_obstacles
         self.compiled = self.scan_all and not self.others
-        self.ball_rows = np.array(self.balls, dtype=float).reshape(-1, self.dim + 2)
+        self.ball_rows = self.ball_rows_of(world, settings.influence_m)
+        self.balls = tuple(tuple(row) for row in self.ball_rows.tolist())
+
+    SCAN_ALL_BELOW = _SCAN_ALL_OBSTACLES_BELOW
+
+    @staticmethod
+    def ball_rows_of(world, influence_m: float) -> np.ndarray:
+        """(N, d + 2) rows ``(centre..., reach^2, r)`` of the inflated balls, reach = r + influence.
+
+        The skip test needs no arithmetic then; memoised per world and influence.
+        """
+        key = ("guidance_ball_rows", influence_m)
+        rows = world._memo.get(key)
+        if rows is None:
+            rows = np.array([b[:-2] + ((b[-1] + influence_m) * (b[-1] + influence_m), b[-1])
+                             for b in world.inflated_balls], dtype=float).reshape(-1, world.dim + 2)
+            world._memo[key] = rows
+        return rows
 
     def attract(self, p: tuple) -> tuple:
         """Sample ``p`` moved by the potential, clamped to the bounds."""

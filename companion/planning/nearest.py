@@ -16,10 +16,15 @@ import math
 
 from companion.planning.node_arrays import NodeArrays
 
-__all__ = ["NodeGrid", "listed_within"]
+__all__ = ["NodeGrid", "listed_within", "grid_shape"]
 
 _LINEAR_SCAN_BELOW = 40
 _VECTOR_FROM = 0  # compiled queries from this many nodes (the bucket walk is the reference)
+
+
+def grid_shape(lo: tuple, hi: tuple, inv_cell: float) -> tuple:
+    """Buckets per axis over ``[lo, hi]`` for buckets of edge ``1 / inv_cell``."""
+    return tuple(max(1, int(math.ceil((h - l) * inv_cell))) for l, h in zip(lo, hi))
 
 
 class NodeGrid:
@@ -40,7 +45,7 @@ class NodeGrid:
         self.lo = tuple(lo)
         self.cell_m = cell_m
         self.inv = 1.0 / cell_m
-        self.shape = tuple(max(1, int(math.ceil((h - l) * self.inv))) for l, h in zip(lo, hi))
+        self.shape = grid_shape(lo, hi, self.inv)
         self.points = points
         self.buckets: dict[int, list[int]] = {}
         self.active: list[int] = []  # ids in the structure, for linear scans

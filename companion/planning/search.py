@@ -39,7 +39,22 @@ from companion.planning.simplify import CornerRule
 from companion.world import World
 from companion.world.segments import ball_arrays, compiled_for, segment_test
 
-__all__ = ["GartSearch"]
+__all__ = ["GartSearch", "rrt_star_gamma", "simple_cost"]
+
+
+def rrt_star_gamma(lo: list, hi: list, rewire_factor: float) -> float:
+    """RRT*'s gamma for the box ``[lo, hi]`` (d = 2 or 3): radius = gamma (log n / n)^(1/d)."""
+    d = len(lo)
+    volume = 1.0
+    for l, h in zip(lo, hi):
+        volume *= h - l
+    unit_ball = math.pi if d == 2 else 4.0 / 3.0 * math.pi
+    return rewire_factor * 2.0 * (1.0 + 1.0 / d) ** (1.0 / d) * (volume / unit_ball) ** (1.0 / d)
+
+
+def simple_cost(ec: EdgeCost) -> bool:
+    """True when the cost is energy weight x length (no threat, climb or tracking term)."""
+    return not (ec.uses_threat or ec.uses_climb or ec.uses_tracking)
 
 
 class GartSearch:
@@ -71,16 +86,12 @@ class GartSearch:
         self.sampler = Sampler(world, start, goal, settings.goal_bias, settings.informed, RandomStream(rng))
         self.guidance = Guidance(world, goal, settings) if settings.guidance else None
         # cost = energy weight * length: the inner loop skips the general cost terms
-        self.simple_cost = not (self.ec.uses_threat or self.ec.uses_climb or self.ec.uses_tracking)
+        self.simple_cost = simple_cost(self.ec)
         self.step = settings.step_m
         self.goal_radius = settings.goal_radius_m or settings.step_m
         self.r_max = settings.max_rewire_radius_m or 2.0 * settings.step_m
         lo, hi = world.bounds_min.tolist(), world.bounds_max.tolist()
-        volume = 1.0
-        for l, h in zip(lo, hi):
-            volume *= h - l
-        unit_ball = math.pi if d == 2 else 4.0 / 3.0 * math.pi
-        self.gamma = settings.rewire_factor * 2.0 * (1.0 + 1.0 / d) ** (1.0 / d) * (volume / unit_ball) ** (1.0 / d)
+        self.gamma = rrt_star_gamma(lo, hi, settings.rewire_factor)
         # tree
         self.pts: list[tuple] = [start]
         self.parent: list[int] = [-1]

@@ -1,0 +1,221 @@
+"""GART with the whole iteration compiled, for the common case; the tree lives in numpy arrays.
+
+:func:`compiled_case` says whether a problem is the common case: the plain length cost
+(energy weight x length), no K_max corner clearance, a world of at most 256 discs/spheres (at
+most 128 with guidance, the guidance kernel's limit). :class:`CompiledGart` then holds the tree
+in preallocated arrays (doubled when full) and :func:`grow_compiled` runs the iterations in
+batches through :func:`~companion.planning.iteration_kernel.grow_batch`, returning to Python
+when the best cost goes down, when the stream of uniform numbers needs its next batch, and
+between batches to look at the clock. The uniform numbers are the batches of the planner's
+:class:`~companion.planning.sampling.RandomStream` (same sizes, same order), so the tree, the
+path and the generator's state after the call are those of
+:class:`~companion.planning.search.GartSearch`'s Python iteration for the same seed. Everything
+else (M-GART, other costs or obstacles, K_max) keeps :class:`GartSearch`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from companion.planning import iteration_kernel as kernel
+from companion.planning.cost import EdgeCost
+from companion.planning.guidance import Guidance
+from companion.planning.nearest import grid_shape
+from companion.planning.node_arrays import append_kernel
+from companion.planning.result import Tree
+from companion.planning.sampling import RandomStream, ellipse_frame
+from companion.planning.search import rrt_star_gamma, simple_cost
+from companion.planning.settings import GartSettings
+from companion.world import World
+from companion.world.segments import ball_arrays, compiled_for
+
+__all__ = ["CompiledGart", "compiled_case", "grow_compiled"]
+
+_FIRST_CAPACITY = 256
+_FIRST_BATCH = 32            # iterations per call; adapted so that a call lasts about _SLICE_S
+_MAX_BATCH = 4096
+_SLICE_S = 1e-3
+
+
+def compiled_case(world: World, settings: GartSettings) -> bool:
+    """True when :class:`CompiledGart` applies (see the module docstring)."""
+    if settings.kappa_max_1_m is not None or not compiled_for(world):
+        return False
+    if not simple_cost(EdgeCost(world, settings.cost)):
+        return False
+    return not settings.guidance or len(world.obstacles) <= Guidance.SCAN_ALL_BELOW
+
+
+class CompiledGart:
+    """The GART tree in arrays and the constants of the compiled iteration.
+
+    Parameters
+    ----------
+    world : World
+        A world of the compiled case (:func:`compiled_case`).
+    start, goal : tuple of d floats
+    settings : GartSettings
+    rng : numpy.random.Generator
+    """
+
+    def __init__(self, world: World, start: tuple, goal: tuple, settings: GartSettings, rng: np.random.Generator):
+        self.world, self.start, self.goal, self.s = world, start, goal, settings
+        self.dim = d = world.dim
+        self.stream = RandomStream(rng)
+        self.rand = np.empty(0)
+        lo, hi = world.bounds_min.tolist(), world.bounds_max.tolist()
+        step = settings.step_m
+        r_max = settings.max_rewire_radius_m or 2.0 * step
+        inv_cell = 1.0 / max(r_max, 1e-3)
+        centres, r2 = ball_arrays(world)
+        ellipse = ellipse_frame(start, goal)
+        c_min, basis, centre = ellipse if ellipse is not None else (0.0, np.zeros((0, d)), start)
+        guide = Guidance.ball_rows_of(world, settings.influence_m) if settings.guidance else np.zeros((0, d + 2))
+        self.problem = (np.array(goal), np.array(lo), np.array(hi), np.array([h - l for l, h in zip(lo, hi)]),
+                        centres, r2, guide, np.array(basis, dtype=float).reshape(-1, d), np.array(centre),
+                        inv_cell, np.array(grid_shape(lo, hi, inv_cell), dtype=np.int64))
+        self.energy = settings.cost.energy
+        self.params = (float(settings.goal_bias), float(step), float(settings.goal_radius_m or step), float(r_max),
+                       rrt_star_gamma(lo, hi, settings.rewire_factor), float(self.energy),
+                       math.cos(settings.max_heading_change_rad), float(c_min), float(settings.obstacle_gain_m2),
+                       float(settings.repel_offset_m), float(settings.goal_gain_m), float(settings.max_guidance_m),
+                       bool(settings.guidance), bool(settings.informed), ellipse is not None)
+        self.counters = np.array([1, 0, -1, 0, 0], dtype=np.int64)
+        self.best = np.array([math.inf])
+        self._allocate(_FIRST_CAPACITY)
+        self.coords[0] = start
+        self.parent[0], self.cost[0], self.first_child[0], self.link_of[0] = -1, 0.0, -1, -1
+        append_kernel(self.coords, self.keys, self.active, 0, np.array(start), self.problem[1], inv_cell,
+                      self.problem[10])
+
+    def _allocate(self, cap: int) -> None:
+        """(Re)allocate every array with room for ``cap`` nodes, keeping the rows written."""
+        d = self.dim
+        old = getattr(self, "tree", None)
+        n = int(self.counters[kernel.N_NODES]) if old is not None else 0
+
+        def grown(a: np.ndarray, fill=None) -> np.ndarray:
+            out = np.empty((cap,) + a.shape[1:], dtype=a.dtype) if fill is None else \
+                np.full((cap,) + a.shape[1:], fill, dtype=a.dtype)
+            out[:n] = a[:n]
+            return out
+
+        if old is None:
+            f, i, b = np.empty(0), np.empty(0, dtype=np.int64), np.zeros(0, dtype=np.bool_)
+            fd = np.empty((0, d))
+            old = (fd, i, b, i, f, fd, b, f, f, i, i, i)
+            old_links = (i, i, f, fd, f)
+        else:
+            old_links = self.links
+        tree = tuple(grown(a, False if a.dtype == np.bool_ else None) for a in old)
+        links = tuple(grown(a) for a in old_links)
+        self.tree, self.links = tree, links
+        (self.coords, self.keys, self.active, self.parent, self.cost, self.u, self.has_u, self.length, self.edge,
+         self.first_child, self.next_sib, self.prev_sib) = tree
+        self.link_of = links[0]
+
+    # ------------------------------------------------------------------ state read by gart()
+    @property
+    def iterations(self) -> int:
+        return int(self.counters[kernel.ITERATIONS])
+
+    @property
+    def best_node(self) -> int:
+        return int(self.counters[kernel.BEST_NODE])
+
+    @property
+    def best_cost(self) -> float:
+        return float(self.best[0])
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.counters[kernel.N_NODES])
+
+    # ------------------------------------------------------------------ growth
+    def link_straight_line(self) -> None:
+        """The trivial problem: the start's straight edge to the goal as goal link (node 0)."""
+        dist = math.dist(self.start, self.goal)
+        _, gl_node, gl_e, gl_u, gl_len = self.links
+        gl_node[0], gl_e[0], gl_len[0] = 0, dist * self.energy, dist
+        self.link_of[0] = 0
+        self.counters[kernel.N_LINKS] = 1
+        self.counters[kernel.BEST_NODE] = 0
+        self.best[0] = self.cost[0] + gl_e[0]
+
+    def run(self, max_iterations: int) -> int:
+        """At most ``max_iterations`` iterations; the kernel's status (IMPROVED or BATCH_DONE)."""
+        need = self.n_nodes + max_iterations
+        if need > self.coords.shape[0]:
+            self._allocate(max(need, 2 * self.coords.shape[0]))
+        stop = self.counters[kernel.ITERATIONS] + max_iterations
+        while True:
+            if self.counters[kernel.RANDOM_POS] >= self.rand.shape[0]:
+                self.more_random()
+            status = kernel.grow_batch(self.tree, self.links, self.counters, self.best, self.rand, self.problem,
+                                       self.params, int(stop - self.counters[kernel.ITERATIONS]))
+            if status != kernel.NEED_RANDOM:
+                return status
+            self.more_random()   # (at least one iteration is left: a sample needed more numbers)
+
+    def more_random(self) -> None:
+        """Append the stream's next batch to the unread uniform numbers."""
+        pos = int(self.counters[kernel.RANDOM_POS])
+        self.rand = np.concatenate([self.rand[pos:], self.stream.draw_batch()])
+        self.counters[kernel.RANDOM_POS] = 0
+
+    # ------------------------------------------------------------------ output
+    def branch(self, node: int) -> list[int]:
+        """Node ids from the root to ``node``."""
+        ids = []
+        parent = self.parent
+        while node >= 0:
+            ids.append(node)
+            node = int(parent[node])
+        return ids[::-1]
+
+    def path_to_goal(self, node: int) -> np.ndarray:
+        """(M, d) path root -> ``node`` -> goal."""
+        pts = self.coords[self.branch(node)]
+        if pts.shape[0] == 1 or math.dist(pts[-1].tolist(), self.goal) > 1e-9:
+            pts = np.vstack([pts, np.array(self.goal)])
+        return pts
+
+    def tree_snapshot(self) -> Tree:
+        """The tree as arrays (copies)."""
+        n = self.n_nodes
+        return Tree(nodes=self.coords[:n].copy(), parents=self.parent[:n].copy(), forbidden=np.zeros(n, dtype=bool))
+
+
+def grow_compiled(search: CompiledGart, t0: float, deadline: float, iter_limit: float,
+                  stop_at_first: bool) -> tuple[list[tuple[float, float]], float | None]:
+    """:func:`companion.planning.gart.grow` for a :class:`CompiledGart`: same budgets, same history."""
+    history: list[tuple[float, float]] = []
+    first_s = None
+    clock = time.perf_counter
+    if search.world.segment_free(search.start, search.goal):  # trivial problem: the straight line
+        search.link_straight_line()
+        first_s = clock() - t0
+        history.append((first_s, search.best_cost))
+    batch = _FIRST_BATCH
+    while first_s is None or not stop_at_first:
+        left = iter_limit - search.iterations
+        if left <= 0:
+            break
+        t_call = clock()
+        if t_call >= deadline:
+            break
+        size = int(min(left, batch))
+        status = search.run(size)
+        now = clock()
+        if status == kernel.IMPROVED:
+            if first_s is None:
+                first_s = now - t0
+            history.append((now - t0, search.best_cost))
+        elif now - t_call < 0.5 * _SLICE_S:
+            batch = min(2 * batch, _MAX_BATCH)
+        elif now - t_call > 2.0 * _SLICE_S and batch > 1:
+            batch //= 2
+    return history, first_s
