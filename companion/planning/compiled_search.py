@@ -23,14 +23,13 @@ import numpy as np
 from companion.planning import iteration_kernel as kernel
 from companion.planning.cost import EdgeCost
 from companion.planning.guidance import Guidance
-from companion.planning.nearest import grid_shape
-from companion.planning.node_arrays import append_kernel
+from companion.planning.nearest import bucket_key, grid_shape
 from companion.planning.result import Tree
 from companion.planning.sampling import RandomStream, ellipse_frame
 from companion.planning.search import rrt_star_gamma, simple_cost
 from companion.planning.settings import GartSettings
 from companion.world import World
-from companion.world.segments import ball_arrays, compiled_for
+from companion.world.segments import ball_arrays, compiled_for, segment_clear_of_balls
 
 __all__ = ["CompiledGart", "compiled_case", "grow_compiled"]
 
@@ -47,6 +46,28 @@ def compiled_case(world: World, settings: GartSettings) -> bool:
     if not simple_cost(EdgeCost(world, settings.cost)):
         return False
     return not settings.guidance or len(world.obstacles) <= Guidance.SCAN_ALL_BELOW
+
+
+def _world_arrays(world: World, r_max: float, influence_m: float | None) -> tuple:
+    """``(lo, hi, 1/bucket edge, bucket shape, arrays)`` of a world, memoised per world and radii.
+
+    ``arrays``: bounds lo, hi, span (d,), balls' centres (N, d), inflated r^2 (N,), guidance
+    rows (N, d + 2) (none without guidance), bucket shape (d,).
+    """
+    key = ("compiled_gart", r_max, influence_m)
+    found = world._memo.get(key)
+    if found is None:
+        d = world.dim
+        lo, hi = world.bounds_min.tolist(), world.bounds_max.tolist()
+        inv_cell = 1.0 / max(r_max, 1e-3)
+        shape = grid_shape(lo, hi, inv_cell)
+        centres, r2 = ball_arrays(world)
+        guide = Guidance.ball_rows_of(world, influence_m) if influence_m is not None else np.zeros((0, d + 2))
+        arrays = (np.array(lo), np.array(hi), np.array([h - l for l, h in zip(lo, hi)]), centres, r2, guide,
+                  np.array(shape, dtype=np.int64))
+        found = (lo, hi, inv_cell, shape, arrays)
+        world._memo[key] = found
+    return found
 
 
 class CompiledGart:
@@ -66,52 +87,41 @@ class CompiledGart:
         self.dim = d = world.dim
         self.stream = RandomStream(rng)
         self.rand = np.empty(0)
-        lo, hi = world.bounds_min.tolist(), world.bounds_max.tolist()
         step = settings.step_m
         r_max = settings.max_rewire_radius_m or 2.0 * step
-        inv_cell = 1.0 / max(r_max, 1e-3)
-        centres, r2 = ball_arrays(world)
+        lo, hi, inv_cell, shape, world_arrays = _world_arrays(world, r_max, settings.influence_m if settings.guidance else None)
         ellipse = ellipse_frame(start, goal)
         c_min, basis, centre = ellipse if ellipse is not None else (0.0, np.zeros((0, d)), start)
-        guide = Guidance.ball_rows_of(world, settings.influence_m) if settings.guidance else np.zeros((0, d + 2))
-        self.problem = (np.array(goal), np.array(lo), np.array(hi), np.array([h - l for l, h in zip(lo, hi)]),
-                        centres, r2, guide, np.array(basis, dtype=float).reshape(-1, d), np.array(centre),
-                        inv_cell, np.array(grid_shape(lo, hi, inv_cell), dtype=np.int64))
+        goal_arr, self.start_arr = np.array(goal), np.array(start)
+        self.problem = (goal_arr,) + world_arrays[:6] + (np.array(basis, dtype=float).reshape(-1, d), np.array(centre),
+                                                         inv_cell, world_arrays[6])
         self.energy = settings.cost.energy
         self.params = (float(settings.goal_bias), float(step), float(settings.goal_radius_m or step), float(r_max),
                        rrt_star_gamma(lo, hi, settings.rewire_factor), float(self.energy),
                        math.cos(settings.max_heading_change_rad), float(c_min), float(settings.obstacle_gain_m2),
                        float(settings.repel_offset_m), float(settings.goal_gain_m), float(settings.max_guidance_m),
                        bool(settings.guidance), bool(settings.informed), ellipse is not None)
-        self.counters = np.array([1, 0, -1, 0, 0], dtype=np.int64)
+        self.counters = np.array([0, 0, -1, 0, 0], dtype=np.int64)
         self.best = np.array([math.inf])
         self._allocate(_FIRST_CAPACITY)
-        self.coords[0] = start
+        self.coords[0] = start   # the root, bucket key as NodeGrid's
+        self.keys[0], self.active[0] = bucket_key(start, lo, inv_cell, shape), True
         self.parent[0], self.cost[0], self.first_child[0], self.link_of[0] = -1, 0.0, -1, -1
-        append_kernel(self.coords, self.keys, self.active, 0, np.array(start), self.problem[1], inv_cell,
-                      self.problem[10])
+        self.counters[kernel.N_NODES] = 1
 
     def _allocate(self, cap: int) -> None:
         """(Re)allocate every array with room for ``cap`` nodes, keeping the rows written."""
-        d = self.dim
+        d, n = self.dim, self.n_nodes
+        f, i, b = np.float64, np.int64, np.bool_
+        shapes = ((cap, d), f), ((cap,), i), ((cap,), b), ((cap,), i), ((cap,), f), ((cap, d), f), ((cap,), b), \
+            ((cap,), f), ((cap,), f), ((cap,), i), ((cap,), i), ((cap,), i)
+        link_shapes = ((cap,), i), ((cap,), i), ((cap,), f), ((cap, d), f), ((cap,), f)
         old = getattr(self, "tree", None)
-        n = int(self.counters[kernel.N_NODES]) if old is not None else 0
-
-        def grown(a: np.ndarray, fill=None) -> np.ndarray:
-            out = np.empty((cap,) + a.shape[1:], dtype=a.dtype) if fill is None else \
-                np.full((cap,) + a.shape[1:], fill, dtype=a.dtype)
-            out[:n] = a[:n]
-            return out
-
-        if old is None:
-            f, i, b = np.empty(0), np.empty(0, dtype=np.int64), np.zeros(0, dtype=np.bool_)
-            fd = np.empty((0, d))
-            old = (fd, i, b, i, f, fd, b, f, f, i, i, i)
-            old_links = (i, i, f, fd, f)
-        else:
-            old_links = self.links
-        tree = tuple(grown(a, False if a.dtype == np.bool_ else None) for a in old)
-        links = tuple(grown(a) for a in old_links)
+        tree = tuple(np.zeros(shape, dtype) if dtype is b else np.empty(shape, dtype) for shape, dtype in shapes)
+        links = tuple(np.empty(shape, dtype) for shape, dtype in link_shapes)
+        if old is not None:
+            for new, before in zip(tree + links, old + self.links):
+                new[:n] = before[:n]
         self.tree, self.links = tree, links
         (self.coords, self.keys, self.active, self.parent, self.cost, self.u, self.has_u, self.length, self.edge,
          self.first_child, self.next_sib, self.prev_sib) = tree
@@ -195,7 +205,8 @@ def grow_compiled(search: CompiledGart, t0: float, deadline: float, iter_limit: 
     history: list[tuple[float, float]] = []
     first_s = None
     clock = time.perf_counter
-    if search.world.segment_free(search.start, search.goal):  # trivial problem: the straight line
+    goal, lo, hi, _, centres, r2 = search.problem[:6]
+    if segment_clear_of_balls(search.start_arr, goal, lo, hi, centres, r2):  # trivial problem: the straight line
         search.link_straight_line()
         first_s = clock() - t0
         history.append((first_s, search.best_cost))

@@ -23,6 +23,7 @@ from companion.planning.problem import failed_result, validate_problem
 from companion.planning.result import PlanResult
 from companion.planning.search import GartSearch
 from companion.planning.settings import GartSettings
+from companion.planning.shortcut_kernel import shortcut_and_cost, shortcut_case
 from companion.planning.simplify import shortcut_path
 from companion.world import World
 
@@ -33,6 +34,9 @@ log = logging.getLogger(__name__)
 
 def finish_path(world: World, path: np.ndarray, settings: GartSettings) -> tuple[np.ndarray, float, float]:
     """Shortcut (if enabled) and cost a found path: (path, cost, length_m)."""
+    if shortcut_case(world, settings):   # compiled, the same answer
+        path, cost = shortcut_and_cost(world, path, settings)
+        return path, cost, path_length_m(path)
     if settings.simplify.enabled and path.shape[0] > 2:
         path = shortcut_path(world, path, settings)
     return path, path_cost(world, path, settings.cost), path_length_m(path)

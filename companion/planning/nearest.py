@@ -16,7 +16,7 @@ import math
 
 from companion.planning.node_arrays import NodeArrays
 
-__all__ = ["NodeGrid", "listed_within", "grid_shape"]
+__all__ = ["NodeGrid", "listed_within", "grid_shape", "bucket_key"]
 
 _LINEAR_SCAN_BELOW = 40
 _VECTOR_FROM = 0  # compiled queries from this many nodes (the bucket walk is the reference)
@@ -25,6 +25,15 @@ _VECTOR_FROM = 0  # compiled queries from this many nodes (the bucket walk is th
 def grid_shape(lo: tuple, hi: tuple, inv_cell: float) -> tuple:
     """Buckets per axis over ``[lo, hi]`` for buckets of edge ``1 / inv_cell``."""
     return tuple(max(1, int(math.ceil((h - l) * inv_cell))) for l, h in zip(lo, hi))
+
+
+def bucket_key(p: tuple, lo: tuple, inv_cell: float, shape: tuple) -> int:
+    """Flat bucket key of point ``p`` (:meth:`NodeGrid._flat` of :meth:`NodeGrid._index`)."""
+    key = 0
+    for x, l, n in zip(p, lo, shape):
+        i = int((x - l) * inv_cell)
+        key = key * n + (0 if i < 0 else (n - 1 if i >= n else i))
+    return key
 
 
 class NodeGrid:
