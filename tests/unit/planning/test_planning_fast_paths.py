@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import math
 import sys
 from pathlib import Path
@@ -96,3 +97,79 @@ def test_large_tree_runs_are_deterministic():
             for _ in range(2)]
     assert runs[0].tree.nodes.shape[0] > 300  # the numpy queries were used
     assert np.array_equal(runs[0].path, runs[1].path) and np.array_equal(runs[0].tree.nodes, runs[1].tree.nodes)
+
+
+# ---------------------------------------------------------------------- the compiled iteration
+def test_python_dist_is_math_dist_to_the_bit():
+    from companion.planning.exact_dist import python_dist
+
+    rs = np.random.default_rng(5)
+    for dim in (2, 3):
+        for scale in (1e-12, 1e-3, 1.0, 40.0, 1e6):
+            a = rs.uniform(-scale, scale, (3000, dim))
+            b = a + rs.normal(0.0, scale, (3000, dim)) * rs.uniform(0.0, 1.0, (3000, 1))
+            b[:10] = a[:10]  # equal points
+            for p, q in zip(a.tolist(), b.tolist()):
+                assert python_dist(np.array(p), np.array(q)) == math.dist(p, q)
+
+
+def _python_gart(monkeypatch, *args, **kwargs):
+    """gart() through GartSearch's Python iteration and the Python shortcut."""
+    gart_module = importlib.import_module("companion.planning.gart")   # (the package exports the function)
+    with monkeypatch.context() as m:
+        m.setattr(gart_module, "compiled_case", lambda world, settings: False)
+        m.setattr(gart_module, "shortcut_case", lambda world, settings: False)
+        return gart(*args, **kwargs)
+
+
+def _same_result(a, b):
+    assert a.status == b.status and a.iterations == b.iterations
+    assert np.array_equal(a.path, b.path) and a.cost == b.cost and a.length_m == b.length_m
+    assert [c for _, c in a.cost_history] == [c for _, c in b.cost_history]
+    assert np.array_equal(a.tree.nodes, b.tree.nodes) and np.array_equal(a.tree.parents, b.tree.parents)
+
+
+@pytest.mark.parametrize("world,seed", [("2d", 0), ("2d", 7), ("3d_dense", 2), ("3d_dense", 8)])
+@pytest.mark.parametrize("guidance", [True, False])
+def test_compiled_iteration_gives_the_python_iteration_result(monkeypatch, world, seed, guidance):
+    from companion.planning.compiled_search import compiled_case
+
+    b = make_world(world, seed)
+    settings = GartSettings(cost=CostWeights.length_only(), guidance=guidance)
+    assert compiled_case(b.world, settings)
+    for budget in ({"stop_at_first": True, "max_time_s": 60.0}, {"max_iterations": 700}):
+        rng_c, rng_p = np.random.default_rng(seed), np.random.default_rng(seed)
+        compiled = gart(b.world, b.start, b.goal, rng=rng_c, settings=settings, **budget)
+        python = _python_gart(monkeypatch, b.world, b.start, b.goal, rng=rng_p, settings=settings, **budget)
+        _same_result(compiled, python)
+        assert rng_c.random() == rng_p.random()  # the generator is left in the same state
+    assert compiled.tree.nodes.shape[0] > 256  # the tree arrays were grown
+
+
+def test_compiled_iteration_handles_a_straight_line_and_other_settings(monkeypatch):
+    world = World([Disc((50.0, 80.0), 5.0)], (0, 0), (100, 100), margin_m=0.5)
+    settings = GartSettings(cost=CostWeights.length_only(), informed=False, step_m=7.0, goal_bias=0.3)
+    for goal in ((90.0, 10.0), (50.0, 95.0)):   # free straight line; behind the disc
+        runs = [f(world, (10.0, 10.0), goal, rng=np.random.default_rng(4), max_iterations=300, settings=settings)
+                for f in (gart, lambda *a, **k: _python_gart(monkeypatch, *a, **k))]
+        _same_result(*runs)
+
+
+def test_compiled_shortcut_gives_the_python_shortcut_and_cost():
+    from companion.planning.cost import path_cost
+    from companion.planning.shortcut_kernel import shortcut_and_cost
+    from companion.planning.simplify import shortcut_path
+
+    rs = np.random.default_rng(9)
+    for dim in (2, 3):
+        balls = [(Disc if dim == 2 else Sphere)(c, r) for c, r in zip(rs.uniform(0, 100, (25, dim)), rs.uniform(2, 8, 25))]
+        world = World(balls, (0,) * dim, (100,) * dim, margin_m=0.5)
+        settings = GartSettings(cost=CostWeights.length_only(), max_heading_change_rad=0.6 * math.pi)
+        free = [tuple(p) for p in rs.uniform(0, 100, (400, dim)).tolist() if world.point_free(tuple(p))]
+        for k in range(60):
+            path = np.array(free[k:k + 3 + k % 9])
+            if k % 5 == 0:
+                path = np.vstack([path[:2], path[1:2], path[2:]])   # a repeated waypoint
+            out, cost = shortcut_and_cost(world, path, settings)
+            expected = shortcut_path(world, path, settings)
+            assert np.array_equal(out, expected) and cost == path_cost(world, expected, settings.cost)
