@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from companion.planning.settings import GartSettings
+from companion.world.segments import ball_table
 
 __all__ = ["Guidance"]
 
@@ -59,8 +60,10 @@ class Guidance:
         key = ("guidance_ball_rows", influence_m)
         rows = world._memo.get(key)
         if rows is None:
-            rows = np.array([b[:-2] + ((b[-1] + influence_m) * (b[-1] + influence_m), b[-1])
-                             for b in world.inflated_balls], dtype=float).reshape(-1, world.dim + 2)
+            d = world.dim
+            rows = ball_table(world).copy()   # (centre..., r^2, r)
+            reach = rows[:, d + 1] + influence_m
+            rows[:, d] = reach * reach
             world._memo[key] = rows
         return rows
 

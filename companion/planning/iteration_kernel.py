@@ -16,7 +16,9 @@ The tree arrays, rows indexed by node id (n nodes, capacity ``cap``, dimension d
 doubly linked lists ``first_child``, ``next_sib``, ``prev_sib`` (cap,). Goal links, in the order
 they were made: ``link_of`` (cap,) node -> link or -1, ``gl_node``, ``gl_e`` (edge cost),
 ``gl_u`` (cap, d), ``gl_len``. ``counters`` (int64): node count, iterations, best node, link
-count, position in the block of uniform numbers; ``best`` (1,): best cost.
+count, position in the block of uniform numbers; ``best`` (1,): best cost. (numba's cache
+notices edits of a kernel's own file only: after editing a kernel this one calls, clear
+``__pycache__``.)
 """
 
 from __future__ import annotations

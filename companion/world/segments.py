@@ -16,14 +16,16 @@ arithmetic in the same order (no fused multiply-add), so its answers are the sam
 
 from __future__ import annotations
 
+import itertools
 from typing import Callable
 
 import numpy as np
 from numba import njit
 
-__all__ = ["segments_free_from", "segment_test", "segment_clear_of_balls", "ball_arrays", "compiled_for"]
+__all__ = ["segments_free_from", "segment_test", "segment_clear_of_balls", "ball_arrays", "ball_table", "compiled_for"]
 
 _MEMO_KEY = ("segments_free_from", "balls")
+_TABLE_KEY = ("segments", "ball_table")
 _COMPILED_UP_TO_BALLS = 256  # above, the grid walk visits fewer obstacles than a full scan
 
 
@@ -31,12 +33,21 @@ def ball_arrays(world) -> tuple[np.ndarray, np.ndarray]:
     """``(centres (N, d), r_inflated^2 (N,))`` of the world's discs/spheres, memoised per world."""
     found = world._memo.get(_MEMO_KEY)
     if found is None:
-        balls = world.inflated_balls
         d = world.dim
-        centres = np.array([b[:d] for b in balls], dtype=float).reshape(-1, d)
-        r2 = np.array([b[d] for b in balls], dtype=float)
-        found = (centres, r2)
+        rows = ball_table(world)
+        found = (np.ascontiguousarray(rows[:, :d]), np.ascontiguousarray(rows[:, d]))
         world._memo[_MEMO_KEY] = found
+    return found
+
+
+def ball_table(world) -> np.ndarray:
+    """The world's inflated discs/spheres as rows ``(centre..., r^2, r)``, (N, d + 2), memoised (read it only)."""
+    found = world._memo.get(_TABLE_KEY)
+    if found is None:
+        balls = world.inflated_balls
+        flat = np.fromiter(itertools.chain.from_iterable(balls), dtype=float, count=len(balls) * (world.dim + 2))
+        found = flat.reshape(-1, world.dim + 2)
+        world._memo[_TABLE_KEY] = found
     return found
 
 
