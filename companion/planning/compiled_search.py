@@ -116,13 +116,13 @@ class CompiledGart:
         shapes = ((cap, d), f), ((cap,), i), ((cap,), b), ((cap,), i), ((cap,), f), ((cap, d), f), ((cap,), b), \
             ((cap,), f), ((cap,), f), ((cap,), i), ((cap,), i), ((cap,), i)
         link_shapes = ((cap,), i), ((cap,), i), ((cap,), f), ((cap, d), f), ((cap,), f)
-        old = getattr(self, "tree", None)
+        old = getattr(self, "tree_arrays", None)
         tree = tuple(np.zeros(shape, dtype) if dtype is b else np.empty(shape, dtype) for shape, dtype in shapes)
         links = tuple(np.empty(shape, dtype) for shape, dtype in link_shapes)
         if old is not None:
             for new, before in zip(tree + links, old + self.links):
                 new[:n] = before[:n]
-        self.tree, self.links = tree, links
+        self.tree_arrays, self.links = tree, links
         (self.coords, self.keys, self.active, self.parent, self.cost, self.u, self.has_u, self.length, self.edge,
          self.first_child, self.next_sib, self.prev_sib) = tree
         self.link_of = links[0]
@@ -155,8 +155,8 @@ class CompiledGart:
         self.counters[kernel.BEST_NODE] = 0
         self.best[0] = self.cost[0] + gl_e[0]
 
-    def run(self, max_iterations: int) -> int:
-        """At most ``max_iterations`` iterations; the kernel's status (IMPROVED or BATCH_DONE)."""
+    def run(self, max_iterations: int, mode: int = kernel.GART) -> int:
+        """At most ``max_iterations`` iterations; the kernel's status (BATCH_DONE, IMPROVED or NEW_NODE)."""
         need = self.n_nodes + max_iterations
         if need > self.coords.shape[0]:
             self._allocate(max(need, 2 * self.coords.shape[0]))
@@ -164,8 +164,8 @@ class CompiledGart:
         while True:
             if self.counters[kernel.RANDOM_POS] >= self.rand.shape[0]:
                 self.more_random()
-            status = kernel.grow_batch(self.tree, self.links, self.counters, self.best, self.rand, self.problem,
-                                       self.params, int(stop - self.counters[kernel.ITERATIONS]))
+            status = kernel.grow_batch(self.tree_arrays, self.links, self.counters, self.best, self.rand, self.problem,
+                                       self.params, int(stop - self.counters[kernel.ITERATIONS]), mode)
             if status != kernel.NEED_RANDOM:
                 return status
             self.more_random()   # (at least one iteration is left: a sample needed more numbers)

@@ -34,10 +34,12 @@ from companion.planning.node_arrays import append_kernel, nearest_kernel
 from companion.planning.parent_choice import extend
 from companion.world.segments import segment_clear_of_balls
 
-__all__ = ["grow_batch", "BATCH_DONE", "IMPROVED", "NEED_RANDOM", "N_NODES", "ITERATIONS", "BEST_NODE",
+__all__ = ["grow_batch", "BATCH_DONE", "IMPROVED", "NEED_RANDOM", "NEW_NODE", "GART", "MGART_LINKS", "MGART_NODES",
+           "N_NODES", "ITERATIONS", "BEST_NODE",
            "N_LINKS", "RANDOM_POS"]
 
-BATCH_DONE, IMPROVED, NEED_RANDOM = 0, 1, 2          # why grow_batch returned
+BATCH_DONE, IMPROVED, NEED_RANDOM, NEW_NODE = 0, 1, 2, 3          # why grow_batch returned
+GART, MGART_LINKS, MGART_NODES = 0, 1, 2      # modes: stop at a lower best cost, at a goal link, at every node
 N_NODES, ITERATIONS, BEST_NODE, N_LINKS, RANDOM_POS = 0, 1, 2, 3, 4   # counters
 _INFORMED_TRIES = 20
 
@@ -245,8 +247,8 @@ def update_best(cost, links, counters, best) -> bool:
 
 
 @njit(cache=True)
-def grow_batch(tree, links, counters, best, rand, problem, params, max_iterations: int) -> int:
-    """Up to ``max_iterations`` GART iterations; returns BATCH_DONE, IMPROVED or NEED_RANDOM.
+def grow_batch(tree, links, counters, best, rand, problem, params, max_iterations: int, mode: int) -> int:
+    """Up to ``max_iterations`` GART iterations; returns BATCH_DONE, IMPROVED, NEW_NODE or NEED_RANDOM.
 
     Parameters
     ----------
@@ -265,8 +267,13 @@ def grow_batch(tree, links, counters, best, rand, problem, params, max_iteration
         goal_bias, step, goal radius, r_max, gamma, energy, cos_max, c_min, obstacle gain, repel
         offset, goal gain, max guidance (floats), guided, informed, has_ellipse (bools).
 
-    Returns IMPROVED right after an iteration that lowered the best cost, NEED_RANDOM (that
-    iteration not started) when ``rand`` ran out.
+    max_iterations, mode : int
+        ``mode`` GART: the best goal cost is kept up to date and the call returns IMPROVED right
+        after an iteration that lowered it. MGART_LINKS: no best cost (M-GART never asks for one,
+        so sampling stays uniform); returns NEW_NODE right after a node got a goal link (the
+        caller removes the link). MGART_NODES: returns NEW_NODE after every new node.
+
+    Returns NEED_RANDOM (that iteration not started) when ``rand`` ran out.
     """
     coords, keys, active, parent, cost, u, has_u, length, edge, first_child, next_sib, prev_sib = tree
     goal, lo, hi, span, centres, r2, ball_rows, basis, centre, inv_cell, shape = problem
@@ -306,6 +313,9 @@ def grow_batch(tree, links, counters, best, rand, problem, params, max_iteration
         counters[N_NODES] = n + 1
         rewire(tree, links[0], links[3], n, ids, dists, energy, cos_max, lo, hi, centres, r2, stack)
         connect_goal(tree, links, counters, n, goal, goal_radius, energy, cos_max, lo, hi, centres, r2)
-        if counters[N_LINKS] > 0 and update_best(cost, links, counters, best):
-            return IMPROVED
+        if mode == GART:
+            if counters[N_LINKS] > 0 and update_best(cost, links, counters, best):
+                return IMPROVED
+        elif mode == MGART_NODES or counters[N_LINKS] > 0:
+            return NEW_NODE
     return BATCH_DONE

@@ -29,6 +29,8 @@ import time
 import numpy as np
 
 from companion.errors import PlanningError
+from companion.planning.compiled_mgart import CompiledMgartSearch
+from companion.planning.compiled_search import compiled_case
 from companion.planning.cost import path_cost, path_length_m
 from companion.planning.gart import finish_path
 from companion.planning.portals import GoalPortals
@@ -117,7 +119,8 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
         return [PlanResult(status=status, path=None, cost=math.inf, length_m=math.inf, iterations=0,
                            elapsed_s=time.perf_counter() - t0, time_to_first_s=None, tree=None)]
     deadline = t0 + (max_time_s if max_time_s is not None else settings.time_budget_s)
-    search = GartSearch(world, start_t, goal_t, gs, rng)
+    compiled = compiled_case(world, gs)   # the whole iteration compiled (numba), the tree in arrays
+    search = (CompiledMgartSearch if compiled else GartSearch)(world, start_t, goal_t, gs, rng)
     portals = GoalPortals(search, settings.portal_zone_m)
     found: list[tuple[np.ndarray, float, float, float]] = []  # path, cost, length, t_found
     clock = time.perf_counter
@@ -141,7 +144,7 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
     if world.segment_free(start_t, goal_t):
         consider(np.array([start_t, goal_t]))
     while len(found) < k and clock() < deadline:
-        node = search.iterate()
+        node = search.iterate(bool(portals.items)) if compiled else search.iterate()
         if node < 0:
             continue
         raw = search.path_to_goal(node) if node in search.goal_links else portals.join(node)

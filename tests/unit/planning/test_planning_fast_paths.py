@@ -173,3 +173,22 @@ def test_compiled_shortcut_gives_the_python_shortcut_and_cost():
             out, cost = shortcut_and_cost(world, path, settings)
             expected = shortcut_path(world, path, settings)
             assert np.array_equal(out, expected) and cost == path_cost(world, expected, settings.cost)
+
+
+@pytest.mark.parametrize("world,seed", [("2d", 3), ("3d_dense", 8)])
+def test_compiled_mgart_gives_the_python_mgart_result(monkeypatch, world, seed):
+    b = make_world(world, seed)
+    ms = MgartSettings(gart=LENGTH)
+    rng_c, rng_p = np.random.default_rng(seed), np.random.default_rng(seed)
+    compiled = mgart(b.world, b.start, b.goal, 8, rng=rng_c, max_time_s=60.0, settings=ms)
+    with monkeypatch.context() as m:
+        m.setattr(importlib.import_module("companion.planning.mgart"), "compiled_case", lambda world, settings: False)
+        m.setattr(importlib.import_module("companion.planning.gart"), "shortcut_case", lambda world, settings: False)
+        python = mgart(b.world, b.start, b.goal, 8, rng=rng_p, max_time_s=60.0, settings=ms)
+    assert len(compiled) == len(python) == 8
+    for a, p in zip(compiled, python):
+        assert np.array_equal(a.path, p.path) and a.cost == p.cost and a.iterations == p.iterations
+    tree_c, tree_p = compiled[0].tree, python[0].tree
+    assert np.array_equal(tree_c.nodes, tree_p.nodes) and np.array_equal(tree_c.parents, tree_p.parents)
+    assert np.array_equal(tree_c.forbidden, tree_p.forbidden) and tree_c.forbidden.any()
+    assert rng_c.random() == rng_p.random()
