@@ -33,13 +33,14 @@ from companion.planning.compiled_mgart import CompiledMgartSearch
 from companion.planning.compiled_search import compiled_case
 from companion.planning.cost import path_cost, path_length_m
 from companion.planning.gart import finish_path
+from companion.planning.hausdorff_kernel import UNSURE, separated_kernel
 from companion.planning.portals import GoalPortals
 from companion.planning.problem import validate_problem
 from companion.planning.search import GartSearch
 from companion.planning.result import PlanResult
 from companion.planning.settings import MgartSettings
 
-__all__ = ["mgart", "hausdorff_m", "resample_path"]
+__all__ = ["mgart", "hausdorff_m", "resample_path", "separated"]
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +61,16 @@ def hausdorff_m(path_a: np.ndarray, path_b: np.ndarray, step_m: float = 1.0) -> 
     b = resample_path(np.asarray(path_b, dtype=float), step_m)
     d = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
     return float(max(d.min(axis=1).max(), d.min(axis=0).max()))
+
+
+def separated(path_a: np.ndarray, path_b: np.ndarray, step_m: float, threshold_m: float) -> bool:
+    """``hausdorff_m(path_a, path_b, step_m) >= threshold_m``, compiled where the answer is sure."""
+    a = np.ascontiguousarray(path_a, dtype=float)
+    b = np.ascontiguousarray(path_b, dtype=float)
+    answer = separated_kernel(a, b, float(step_m), float(threshold_m))
+    if answer == UNSURE:
+        return hausdorff_m(a, b, step_m) >= threshold_m
+    return bool(answer)
 
 
 def forbid_branch(search: GartSearch, node: int, keep_near_root_m: float, tube_m: float) -> int:
@@ -126,7 +137,7 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
     clock = time.perf_counter
 
     def distinct(path: np.ndarray) -> bool:
-        return all(hausdorff_m(path, other[0], settings.separation_sample_m) >= settings.min_separation_m
+        return all(separated(path, other[0], settings.separation_sample_m, settings.min_separation_m)
                    for other in found)
 
     def consider(raw: np.ndarray) -> None:

@@ -192,3 +192,22 @@ def test_compiled_mgart_gives_the_python_mgart_result(monkeypatch, world, seed):
     assert np.array_equal(tree_c.nodes, tree_p.nodes) and np.array_equal(tree_c.parents, tree_p.parents)
     assert np.array_equal(tree_c.forbidden, tree_p.forbidden) and tree_c.forbidden.any()
     assert rng_c.random() == rng_p.random()
+
+
+def test_compiled_separation_test_answers_as_numpy_hausdorff():
+    from companion.planning.hausdorff_kernel import UNSURE, separated_kernel
+    from companion.planning.mgart import separated
+
+    rs = np.random.default_rng(12)
+    unsure = 0
+    for dim in (2, 3):
+        for k in range(150):
+            a = np.cumsum(rs.uniform(-10, 20, (3 + k % 6, dim)), axis=0)
+            b = a + rs.normal(0.0, 1.0 + k % 7, a.shape)
+            h = hausdorff_m(a, b, 1.0)
+            for threshold in (h, np.nextafter(h, 0.0), np.nextafter(h, np.inf)):   # numpy decides these
+                assert separated(a, b, 1.0, threshold) == (h >= threshold)
+            for threshold in (4.0, 0.5 * h, 2.0 * h):
+                assert separated(a, b, 1.0, threshold) == (h >= threshold)
+                unsure += separated_kernel(a, b, 1.0, threshold) == UNSURE
+    assert unsure <= 0.02 * 2 * 150 * 3   # away from the threshold the compiled test decides
