@@ -1,14 +1,13 @@
 """M-GART's distinctness test compiled (numba), with the numpy answer wherever it could differ.
 
-:func:`~companion.planning.mgart.hausdorff_m` resamples both paths (``resample_path``) and takes
-the discrete Hausdorff distance with numpy; M-GART only asks whether it reaches
-``min_separation_m``. :func:`separated_kernel` answers that from the same resampled points (the same
-count per edge, the same ``a + t (b - a)`` arithmetic) with distances summed left to right, which
-can differ from numpy's in the last bits only. So the compiled answer is taken when the distance
-is clearly on one side of the threshold, and the numpy function decides the rare cases within
-1e-9 (relative) of it, or an edge whose length is within 1e-9 of a whole number of samples
-(where the sample count itself could differ): :func:`~companion.planning.mgart.separated`
-returns numpy's answer, always.
+:func:`~companion.planning.mgart.hausdorff_m` resamples both paths
+(:func:`~companion.planning.mgart.resample_path`, whose points :func:`resample_points` computes
+with the same arithmetic) and takes the discrete Hausdorff distance with numpy; M-GART only asks
+whether it reaches ``min_separation_m``. :func:`separated_kernel` answers that from the
+resampled points with distances summed left to right, which can differ from numpy's in the last
+bits only: its answer is taken when the distance is clearly on one side of the threshold, and
+:func:`~companion.planning.mgart.separated` lets numpy decide the rare cases within 1e-9
+(relative) of it, so the answers are numpy's, always.
 """
 
 from __future__ import annotations
@@ -18,29 +17,20 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["separated_kernel", "UNSURE"]
+__all__ = ["resample_points", "separated_kernel", "UNSURE"]
 
 UNSURE = -1
 _TOLERANCE = 1e-9
 
 
 @njit(cache=True)
-def _resample(path, step_m):
-    """``resample_path`` of the path (M, d): (K, d) points, or an empty array when a count is unsure."""
+def resample_points(path, counts):
+    """Points of ``path`` (M, d): its first point, then ``counts[k]`` (M-1,) points per edge k.
+
+    Edge k's points are ``a + (i / n) (b - a)``, i = 1 .. n, the arithmetic of ``resample_path``.
+    """
     m, d = path.shape
-    counts = np.empty(max(m - 1, 0), dtype=np.int64)
-    total = 1
-    for k in range(m - 1):
-        s2 = 0.0
-        for j in range(d):
-            dj = path[k + 1, j] - path[k, j]
-            s2 += dj * dj
-        q = math.sqrt(s2) / step_m
-        if abs(q - round(q)) <= _TOLERANCE * max(1.0, q):
-            return np.empty((0, d))
-        counts[k] = max(1, int(math.ceil(q)))
-        total += counts[k]
-    out = np.empty((total, d))
+    out = np.empty((1 + counts.sum(), d))
     out[0] = path[0]
     row = 1
     for k in range(m - 1):
@@ -72,12 +62,9 @@ def _directed(a, b) -> float:
 
 
 @njit(cache=True)
-def separated_kernel(path_a, path_b, step_m: float, threshold_m: float) -> int:
-    """1 when the discrete Hausdorff distance is >= ``threshold_m``, 0 when below, -1 when unsure."""
-    a = _resample(path_a, step_m)
-    b = _resample(path_b, step_m)
-    if a.shape[0] == 0 or b.shape[0] == 0:
-        return UNSURE
+def separated_kernel(a, b, threshold_m: float) -> int:
+    """For resampled paths ``a`` (K, d) and ``b`` (L, d): 1 when their discrete Hausdorff
+    distance is >= ``threshold_m``, 0 when below, -1 (UNSURE) within 1e-9 (relative) of it."""
     h = max(_directed(a, b), _directed(b, a))
     if abs(h - threshold_m) <= _TOLERANCE * max(1.0, threshold_m):
         return UNSURE

@@ -194,20 +194,35 @@ def test_compiled_mgart_gives_the_python_mgart_result(monkeypatch, world, seed):
     assert rng_c.random() == rng_p.random()
 
 
-def test_compiled_separation_test_answers_as_numpy_hausdorff():
+def _numpy_resample(path: np.ndarray, step_m: float) -> np.ndarray:
+    """resample_path as numpy computes it (the reference of the compiled one)."""
+    pts = [path[0]]
+    for a, b in zip(path[:-1], path[1:]):
+        n = max(1, int(math.ceil(np.linalg.norm(b - a) / step_m)))
+        pts.extend(a + (np.arange(1, n + 1)[:, None] / n) * (b - a))
+    return np.asarray(pts)
+
+
+def test_compiled_resampling_and_separation_test_answer_as_numpy():
     from companion.planning.hausdorff_kernel import UNSURE, separated_kernel
-    from companion.planning.mgart import separated
+    from companion.planning.mgart import resample_path, separated
 
     rs = np.random.default_rng(12)
     unsure = 0
     for dim in (2, 3):
         for k in range(150):
-            a = np.cumsum(rs.uniform(-10, 20, (3 + k % 6, dim)), axis=0)
+            steps = rs.normal(0.0, 1.0, (3 + k % 6, dim))
+            steps *= (20.0 if k % 2 else rs.uniform(1, 30)) / np.linalg.norm(steps, axis=1)[:, None]  # 20 m edges
+            a = np.cumsum(steps, axis=0)
             b = a + rs.normal(0.0, 1.0 + k % 7, a.shape)
-            h = hausdorff_m(a, b, 1.0)
+            ra, rb = resample_path(a, 1.0), resample_path(b, 1.0)
+            assert np.array_equal(ra, _numpy_resample(a, 1.0)) and np.array_equal(rb, _numpy_resample(b, 1.0))
+            d = np.linalg.norm(ra[:, None, :] - rb[None, :, :], axis=2)
+            h = max(d.min(axis=1).max(), d.min(axis=0).max())
+            assert hausdorff_m(a, b, 1.0) == h
             for threshold in (h, np.nextafter(h, 0.0), np.nextafter(h, np.inf)):   # numpy decides these
-                assert separated(a, b, 1.0, threshold) == (h >= threshold)
+                assert separated(ra, rb, threshold) == (h >= threshold)
             for threshold in (4.0, 0.5 * h, 2.0 * h):
-                assert separated(a, b, 1.0, threshold) == (h >= threshold)
-                unsure += separated_kernel(a, b, 1.0, threshold) == UNSURE
+                assert separated(ra, rb, threshold) == (h >= threshold)
+                unsure += separated_kernel(ra, rb, threshold) == UNSURE
     assert unsure <= 0.02 * 2 * 150 * 3   # away from the threshold the compiled test decides
