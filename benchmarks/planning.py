@@ -52,7 +52,7 @@ RAW_ROW = "GART, tree path without shortcut (first path only)"
 
 # ---------------------------------------------------------------------- GART / M-GART
 def warm_up(settings: GartSettings) -> dict:
-    """One short GART run per dimension before the measurements: the numba kernels' one-off cost.
+    """GART and M-GART runs per dimension before the measurements: the numba kernels' one-off cost.
 
     With ``cache=True`` the kernels compile once per machine (numba's cache, beside the modules)
     and later processes only load them; either way it happens at the first call in a process,
@@ -63,6 +63,8 @@ def warm_up(settings: GartSettings) -> dict:
         bw = make_world(name, 0)
         gart(bw.world, bw.start, bw.goal, rng=np.random.default_rng(0), stop_at_first=True, max_time_s=60.0,
              settings=settings)   # to a path: every kernel of the call, the shortcut's too
+        mgart(bw.world, bw.start, bw.goal, 2, rng=np.random.default_rng(0), max_time_s=60.0,
+              settings=MgartSettings(gart=settings))   # and M-GART's distinctness test
     return {"cpu_ms": 1e3 * (time.process_time() - cpu0), "wall_ms": 1e3 * (time.perf_counter() - t0)}
 
 
@@ -313,7 +315,7 @@ def main(argv=None) -> int:
             print("ompl is not installed (pip install '.[bench]'): OMPL columns skipped", file=sys.stderr)
             use_ompl = False
     first_call = warm_up(gs)
-    print(f"first GART call in this process (numba kernels compiled or loaded from the cache): "
+    print(f"first GART and M-GART calls in this process (numba kernels compiled or loaded from the cache): "
           f"{first_call['cpu_ms']:.0f} ms CPU, {first_call['wall_ms']:.0f} ms wall", file=sys.stderr, flush=True)
     raw: dict = {}
     summaries: dict = {}
@@ -349,7 +351,7 @@ def main(argv=None) -> int:
             "OMPL checks motions by sampling (1 % resolution); 'exact-valid' counts seeds whose paths pass "
             "the exact segment check. GART's first path CPU covers the whole call (argument checks, set-up, "
             "search, shortcut, tree snapshot); OMPL's covers `solve` alone (set-up excluded, no simplifier); the "
-            "row 'tree path without shortcut' leaves GART's shortcut step out. The first GART call of the process (numba kernels compiled, or loaded "
+            "row 'tree path without shortcut' leaves GART's shortcut step out. The first GART and M-GART calls of the process (numba kernels compiled, or loaded "
             f"from numba's cache) took {first_call['cpu_ms']:.0f} ms CPU / {first_call['wall_ms']:.0f} ms wall "
             "before the measurements and is not in the figures.", ""]
     for world in worlds:
