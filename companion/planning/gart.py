@@ -5,7 +5,10 @@ moves the sample under the obstacles' and the goal's potential
 (:mod:`~companion.planning.guidance`), then steers, chooses a parent, rewires and tries the goal
 (:mod:`~companion.planning.search`). This module runs the iterations within the budgets and
 finishes the best path: shortcut by :mod:`companion.planning.simplify` (optional, separate
-step) and costed. Everything random comes from ``rng``: a fixed seed gives the same path.
+step) and costed. Everything random comes from ``rng``: a fixed seed gives the same path. In the
+common case (plain length cost, no K_max, a world of balls) the iterations, the shortcut and the
+costing run compiled (:mod:`~companion.planning.compiled_search`,
+:mod:`~companion.planning.shortcut_kernel`) with the same results.
 """
 
 from __future__ import annotations

@@ -19,7 +19,10 @@ rewiring compares the neighbour's own cost (the standard RRT* rule), which with 
 may leave descendants' corner costs slightly suboptimal. The tree is kept in plain lists of
 floats and tuples: at the sizes of a first path (tens to hundreds of nodes) Python's scalar
 operations cost less than numpy's per-call overhead. The loops over all nodes or all obstacles
-(nearest and radius queries, exact segment tests, guidance) are compiled with numba.
+(nearest and radius queries, exact segment tests, guidance) are compiled with numba. For the
+common case (plain length cost, no K_max, a world of balls) GART and M-GART run the whole
+iteration compiled instead (:mod:`~companion.planning.compiled_search`), with the same result;
+this class is the reference and serves every other case.
 """
 
 from __future__ import annotations
