@@ -89,7 +89,8 @@ class CompiledGart:
         self.rand = np.empty(0)
         step = settings.step_m
         r_max = settings.max_rewire_radius_m or 2.0 * step
-        lo, hi, inv_cell, shape, world_arrays = _world_arrays(world, r_max, settings.influence_m if settings.guidance else None)
+        influence = settings.influence_m if settings.guidance else None
+        lo, hi, inv_cell, shape, world_arrays = _world_arrays(world, r_max, influence)
         ellipse = ellipse_frame(start, goal)
         c_min, basis, centre = ellipse if ellipse is not None else (0.0, np.zeros((0, d)), start)
         goal_arr, self.start_arr = np.array(goal), np.array(start)

@@ -162,7 +162,8 @@ def test_compiled_shortcut_gives_the_python_shortcut_and_cost():
 
     rs = np.random.default_rng(9)
     for dim in (2, 3):
-        balls = [(Disc if dim == 2 else Sphere)(c, r) for c, r in zip(rs.uniform(0, 100, (25, dim)), rs.uniform(2, 8, 25))]
+        ball = Disc if dim == 2 else Sphere
+        balls = [ball(c, r) for c, r in zip(rs.uniform(0, 100, (25, dim)), rs.uniform(2, 8, 25))]
         world = World(balls, (0,) * dim, (100,) * dim, margin_m=0.5)
         settings = GartSettings(cost=CostWeights.length_only(), max_heading_change_rad=0.6 * math.pi)
         free = [tuple(p) for p in rs.uniform(0, 100, (400, dim)).tolist() if world.point_free(tuple(p))]
