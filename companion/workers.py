@@ -85,8 +85,8 @@ def _log_format() -> str | None:
 def warm_up() -> float:
     """Import the planners and run one tiny GART and M-GART (in a worker); returns the seconds it took.
 
-    The planners' numba kernels are loaded here (GART's compiled iteration and M-GART's
-    per-step kernels are different code), not at the first plan.
+    The planners' numba kernels are loaded here, not at the first plan: GART's compiled
+    iteration and shortcut, and M-GART's distinctness test (other code, loaded at its first call).
     """
     t0 = time.perf_counter()
     from companion.planning import gart, mgart
