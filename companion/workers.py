@@ -83,16 +83,22 @@ def _log_format() -> str | None:
 
 
 def warm_up() -> float:
-    """Import the planners and run one tiny GART (in a worker); returns the seconds it took."""
+    """Import the planners and run one tiny GART and M-GART (in a worker); returns the seconds it took.
+
+    The planners' numba kernels are loaded here, not at the first plan: GART's compiled
+    iteration and shortcut, and M-GART's distinctness test (other code, loaded at its first call).
+    """
     t0 = time.perf_counter()
-    from companion.planning import gart
-    from companion.world import World
+    from companion.planning import gart, mgart
+    from companion.world import Disc, World
 
     for module in ("companion.flight_plan", "companion.threats.policy", "companion.smoothing.feasibility"):
         importlib.import_module(module)      # smoothing and timing; the threat manager and M-GART
 
-    world = World([], np.zeros(2), np.full(2, 10.0))
-    gart(world, np.array([1.0, 1.0]), np.array([9.0, 9.0]), rng=np.random.default_rng(0), max_time_s=0.01)
+    world = World([Disc((5.0, 5.0), 1.5)], np.zeros(2), np.full(2, 10.0))   # no straight line: iterations run
+    start, goal = np.array([1.0, 1.0]), np.array([9.0, 9.0])
+    gart(world, start, goal, rng=np.random.default_rng(0), stop_at_first=True, max_time_s=60.0)
+    mgart(world, start, goal, 1, rng=np.random.default_rng(0), max_time_s=60.0)
     return time.perf_counter() - t0
 
 

@@ -5,7 +5,10 @@ moves the sample under the obstacles' and the goal's potential
 (:mod:`~companion.planning.guidance`), then steers, chooses a parent, rewires and tries the goal
 (:mod:`~companion.planning.search`). This module runs the iterations within the budgets and
 finishes the best path: shortcut by :mod:`companion.planning.simplify` (optional, separate
-step) and costed. Everything random comes from ``rng``: a fixed seed gives the same path.
+step) and costed. Everything random comes from ``rng``: a fixed seed gives the same path. In the
+common case (plain length cost, no K_max, a world of balls) the iterations, the shortcut and the
+costing run compiled (:mod:`~companion.planning.compiled_search`,
+:mod:`~companion.planning.shortcut_kernel`) with the same results.
 """
 
 from __future__ import annotations
@@ -17,11 +20,13 @@ import time
 import numpy as np
 
 from companion.errors import PlanningError
+from companion.planning.compiled_search import CompiledGart, compiled_case, grow_compiled
 from companion.planning.cost import path_cost, path_length_m
 from companion.planning.problem import failed_result, validate_problem
 from companion.planning.result import PlanResult
 from companion.planning.search import GartSearch
 from companion.planning.settings import GartSettings
+from companion.planning.shortcut_kernel import shortcut_and_cost, shortcut_case
 from companion.planning.simplify import shortcut_path
 from companion.world import World
 
@@ -32,6 +37,9 @@ log = logging.getLogger(__name__)
 
 def finish_path(world: World, path: np.ndarray, settings: GartSettings) -> tuple[np.ndarray, float, float]:
     """Shortcut (if enabled) and cost a found path: (path, cost, length_m)."""
+    if shortcut_case(world, settings):   # compiled, the same answer
+        path, cost = shortcut_and_cost(world, path, settings)
+        return path, cost, path_length_m(path)
     if settings.simplify.enabled and path.shape[0] > 2:
         path = shortcut_path(world, path, settings)
     return path, path_cost(world, path, settings.cost), path_length_m(path)
@@ -80,9 +88,14 @@ def gart(world: World, start, goal, *, rng: np.random.Generator, max_time_s: flo
         max_time_s = settings.time_budget_s
     deadline = t0 + max_time_s if max_time_s is not None else math.inf
     iter_limit = max_iterations if max_iterations is not None else math.inf
-    search = GartSearch(world, start_t, goal_t, settings, rng)
-    history, first_s = grow(search, t0, deadline, iter_limit, stop_at_first)
-    tree = search.tree()
+    if compiled_case(world, settings):   # the whole iteration compiled (numba), the tree in arrays
+        search = CompiledGart(world, start_t, goal_t, settings, rng)
+        history, first_s = grow_compiled(search, t0, deadline, iter_limit, stop_at_first)
+        tree = search.tree_snapshot()
+    else:
+        search = GartSearch(world, start_t, goal_t, settings, rng)
+        history, first_s = grow(search, t0, deadline, iter_limit, stop_at_first)
+        tree = search.tree()
     if search.best_node < 0:
         return failed_result("timeout", t0, search.iterations, tree)
     path, cost, length = finish_path(world, search.path_to_goal(search.best_node), settings)

@@ -4,15 +4,21 @@ Inside an inflated obstacle the sample is repelled to just outside the surface (
 ``repel_offset_m``); outside, each obstacle within ``influence_m`` attracts it towards its
 surface with a force ``k / c`` inversely proportional to the clearance ``c`` (capped at ``c / 2``
 so it never crosses the surface); the goal always attracts it by ``goal_gain_m``. The total
-displacement is capped at ``max_guidance_m``. Below 128 obstacles every obstacle is scanned with
-plain floats; with more, only those listed for the sample's grid cell.
+displacement is capped at ``max_guidance_m``. Below 128 obstacles every obstacle is scanned; with
+more, only those listed for the sample's grid cell. A world of few discs/spheres only (the usual
+case) is scanned by one compiled kernel (numba, :func:`attract_to_balls`) doing the scalar
+code's floating-point operations in the same order, so the guided sample is the same.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+from numba import njit
+
 from companion.planning.settings import GartSettings
+from companion.world.segments import ball_table
 
 __all__ = ["Guidance"]
 
@@ -37,16 +43,37 @@ class Guidance:
         self.lo = tuple(world.bounds_min.tolist())
         self.hi = tuple(world.bounds_max.tolist())
         self.margin = world.margin_m
-        self.scan_all = len(world.obstacles) <= _SCAN_ALL_OBSTACLES_BELOW
-        influence = settings.influence_m
-        # (centre..., reach^2, r) with reach = r + influence: the skip test without arithmetic
-        self.balls = tuple(b[:-2] + ((b[-1] + influence) * (b[-1] + influence), b[-1])
-                           for b in world.inflated_balls)
+        self.scan_all = len(world.obstacles) <= self.SCAN_ALL_BELOW
         self.others = world.non_ball_obstacles
+        self.compiled = self.scan_all and not self.others
+        self.ball_rows = self.ball_rows_of(world, settings.influence_m)
+        self.balls = tuple(tuple(row) for row in self.ball_rows.tolist())
+
+    SCAN_ALL_BELOW = _SCAN_ALL_OBSTACLES_BELOW
+
+    @staticmethod
+    def ball_rows_of(world, influence_m: float) -> np.ndarray:
+        """(N, d + 2) rows ``(centre..., reach^2, r)`` of the inflated balls, reach = r + influence.
+
+        The skip test needs no arithmetic then; memoised per world and influence.
+        """
+        key = ("guidance_ball_rows", influence_m)
+        rows = world._memo.get(key)
+        if rows is None:
+            d = world.dim
+            rows = ball_table(world).copy()   # (centre..., r^2, r)
+            reach = rows[:, d + 1] + influence_m
+            rows[:, d] = reach * reach
+            world._memo[key] = rows
+        return rows
 
     def attract(self, p: tuple) -> tuple:
         """Sample ``p`` moved by the potential, clamped to the bounds."""
         s = self.s
+        if self.compiled:
+            out = attract_to_balls(p, self.goal, self.lo, self.hi, self.ball_rows, s.obstacle_gain_m2,
+                                   s.repel_offset_m, s.goal_gain_m, s.max_guidance_m)
+            return tuple(out.tolist())
         force = [0.0] * self.dim
         if self.scan_all:
             balls, others = self.balls, self.others   # few obstacles: a plain scan is cheapest
@@ -121,3 +148,54 @@ class Guidance:
                 force[2] += mag * dz / n
             else:
                 force[0] += mag
+
+
+@njit(cache=True)
+def attract_to_balls(p, goal, lo, hi, balls: np.ndarray, gain: float, repel: float, goal_gain: float,
+                     max_guidance: float) -> np.ndarray:
+    """:meth:`Guidance.attract` for a world of discs/spheres only: the moved sample, shape (d,).
+
+    ``balls`` (N, d + 2) rows ``(centre..., (r + influence)^2, r)``; the arithmetic is that of
+    the scalar methods, term by term.
+    """
+    d = balls.shape[1] - 2
+    force = np.zeros(d)
+    delta = np.empty(d)
+    for j in range(balls.shape[0]):
+        delta[0] = p[0] - balls[j, 0]
+        d2 = delta[0] * delta[0]
+        for k in range(1, d):
+            delta[k] = p[k] - balls[j, k]
+            d2 += delta[k] * delta[k]
+        if d2 >= balls[j, d]:
+            continue
+        n = math.sqrt(d2)
+        c = n - balls[j, d + 1]
+        mag = -c + repel if c <= 0.0 else -min(gain / c, 0.5 * c)
+        if n > 1e-12:
+            for k in range(d):
+                force[k] += mag * delta[k] / n
+        else:
+            force[0] += mag
+    for k in range(d):
+        delta[k] = goal[k] - p[k]
+    s2 = delta[0] * delta[0]
+    for k in range(1, d):
+        s2 += delta[k] * delta[k]
+    dist_goal = math.sqrt(s2)
+    if dist_goal > 1e-9:
+        g = min(goal_gain, dist_goal) / dist_goal
+        for k in range(d):
+            force[k] += g * delta[k]
+    f2 = force[0] * force[0]
+    for k in range(1, d):
+        f2 += force[k] * force[k]
+    norm = math.sqrt(f2)
+    if norm > max_guidance:
+        scale = max_guidance / norm
+        for k in range(d):
+            force[k] = force[k] * scale
+    out = np.empty(d)
+    for k in range(d):
+        out[k] = min(max(p[k] + force[k], lo[k]), hi[k])
+    return out

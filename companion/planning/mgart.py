@@ -29,35 +29,50 @@ import time
 import numpy as np
 
 from companion.errors import PlanningError
+from companion.planning.compiled_mgart import CompiledMgartSearch
+from companion.planning.compiled_search import compiled_case
 from companion.planning.cost import path_cost, path_length_m
 from companion.planning.gart import finish_path
+from companion.planning.hausdorff_kernel import UNSURE, resample_points, separated_kernel
 from companion.planning.portals import GoalPortals
 from companion.planning.problem import validate_problem
 from companion.planning.search import GartSearch
 from companion.planning.result import PlanResult
 from companion.planning.settings import MgartSettings
 
-__all__ = ["mgart", "hausdorff_m", "resample_path"]
+__all__ = ["mgart", "hausdorff_m", "hausdorff_of_points", "resample_path", "separated"]
 
 log = logging.getLogger(__name__)
 
 
 def resample_path(path: np.ndarray, step_m: float) -> np.ndarray:
-    """Points along ``path`` (M, d) every ``step_m`` or closer, ends included: (K, d)."""
-    pts = [path[0]]
-    for a, b in zip(path[:-1], path[1:]):
-        n = max(1, int(math.ceil(np.linalg.norm(b - a) / step_m)))
-        t = np.arange(1, n + 1)[:, None] / n
-        pts.extend(a + t * (b - a))
-    return np.asarray(pts)
+    """Points along ``path`` (M, d) every ``step_m`` or closer, ends included: (K, d).
+
+    Each edge gets ``n = max(1, ceil(|b - a| / step_m))`` points ``a + (i / n) (b - a)``,
+    i = 1 .. n (|b - a| as ``numpy.linalg.norm`` computes it: the square root of the dot product).
+    """
+    path = np.ascontiguousarray(path, dtype=float)
+    counts = [max(1, int(math.ceil(math.sqrt(e.dot(e)) / step_m))) for e in np.diff(path, axis=0)]
+    return resample_points(path, np.array(counts, dtype=np.int64))
 
 
 def hausdorff_m(path_a: np.ndarray, path_b: np.ndarray, step_m: float = 1.0) -> float:
     """Discrete Hausdorff distance (m) between two polylines resampled every ``step_m``."""
-    a = resample_path(np.asarray(path_a, dtype=float), step_m)
-    b = resample_path(np.asarray(path_b, dtype=float), step_m)
+    return hausdorff_of_points(resample_path(path_a, step_m), resample_path(path_b, step_m))
+
+
+def hausdorff_of_points(a: np.ndarray, b: np.ndarray) -> float:
+    """Discrete Hausdorff distance (m) between the point sets ``a`` (K, d) and ``b`` (L, d)."""
     d = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
     return float(max(d.min(axis=1).max(), d.min(axis=0).max()))
+
+
+def separated(a: np.ndarray, b: np.ndarray, threshold_m: float) -> bool:
+    """``hausdorff_of_points(a, b) >= threshold_m`` for resampled paths; compiled where the answer is sure."""
+    answer = separated_kernel(a, b, float(threshold_m))
+    if answer == UNSURE:
+        return hausdorff_of_points(a, b) >= threshold_m
+    return bool(answer)
 
 
 def forbid_branch(search: GartSearch, node: int, keep_near_root_m: float, tube_m: float) -> int:
@@ -117,20 +132,21 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
         return [PlanResult(status=status, path=None, cost=math.inf, length_m=math.inf, iterations=0,
                            elapsed_s=time.perf_counter() - t0, time_to_first_s=None, tree=None)]
     deadline = t0 + (max_time_s if max_time_s is not None else settings.time_budget_s)
-    search = GartSearch(world, start_t, goal_t, gs, rng)
+    compiled = compiled_case(world, gs)   # the whole iteration compiled (numba), the tree in arrays
+    search = (CompiledMgartSearch if compiled else GartSearch)(world, start_t, goal_t, gs, rng)
     portals = GoalPortals(search, settings.portal_zone_m)
     found: list[tuple[np.ndarray, float, float, float]] = []  # path, cost, length, t_found
     clock = time.perf_counter
 
-    def distinct(path: np.ndarray) -> bool:
-        return all(hausdorff_m(path, other[0], settings.separation_sample_m) >= settings.min_separation_m
-                   for other in found)
+    kept_points: list[np.ndarray] = []   # the paths found, resampled for the distinctness test
 
     def consider(raw: np.ndarray) -> None:
         # the shortcut path if it is distinct; else the branch as grown (shortcutting can pull
         # a new branch back onto an earlier path, e.g. onto a free straight line)
         for path, cost, length in (finish_path(world, raw, gs), raw_costed(raw)):
-            if distinct(path):
+            points = resample_path(path, settings.separation_sample_m)
+            if all(separated(points, other, settings.min_separation_m) for other in kept_points):
+                kept_points.append(points)
                 found.append((path, cost, length, clock() - t0))
                 log.debug("mgart: path %d after %d iterations, cost %.2f", len(found), search.iterations, cost)
                 return
@@ -141,7 +157,7 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
     if world.segment_free(start_t, goal_t):
         consider(np.array([start_t, goal_t]))
     while len(found) < k and clock() < deadline:
-        node = search.iterate()
+        node = search.iterate(bool(portals.items)) if compiled else search.iterate()
         if node < 0:
             continue
         raw = search.path_to_goal(node) if node in search.goal_links else portals.join(node)

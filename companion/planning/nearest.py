@@ -4,9 +4,10 @@ RRT* asks for the nearest node and for the nodes within a radius on every iterat
 tree grows by one node; rebuilding a KD-tree each time costs more than the whole iteration
 (``ANCHORS.md``: cKDTree build 88 us for 1k nodes, query 10-15 us). Buckets of node ids keyed
 by flat integer cell indices are updated in O(1) and searched ring by ring (Chebyshev rings of
-cells around the query); a small tree is scanned linearly. Plain floats and ints only, except
-above ``_VECTOR_FROM`` nodes, where one numpy pass over all nodes
-(:class:`~companion.planning.node_arrays.NodeArrays`) answers the same queries in the same order.
+cells around the query); a small tree is scanned linearly. From ``_VECTOR_FROM`` nodes (by
+default always) one compiled pass over all nodes
+(:class:`~companion.planning.node_arrays.NodeArrays`, numba) answers the same queries in the same
+order; the bucket walk stays as the reference the tests compare it with.
 """
 
 from __future__ import annotations
@@ -15,10 +16,24 @@ import math
 
 from companion.planning.node_arrays import NodeArrays
 
-__all__ = ["NodeGrid", "listed_within"]
+__all__ = ["NodeGrid", "listed_within", "grid_shape", "bucket_key"]
 
 _LINEAR_SCAN_BELOW = 40
-_VECTOR_FROM = 256
+_VECTOR_FROM = 0  # compiled queries from this many nodes (the bucket walk is the reference)
+
+
+def grid_shape(lo: tuple, hi: tuple, inv_cell: float) -> tuple:
+    """Buckets per axis over ``[lo, hi]`` for buckets of edge ``1 / inv_cell``."""
+    return tuple(max(1, int(math.ceil((h - l) * inv_cell))) for l, h in zip(lo, hi))
+
+
+def bucket_key(p: tuple, lo: tuple, inv_cell: float, shape: tuple) -> int:
+    """Flat bucket key of point ``p`` (:meth:`NodeGrid._flat` of :meth:`NodeGrid._index`)."""
+    key = 0
+    for x, l, n in zip(p, lo, shape):
+        i = int((x - l) * inv_cell)
+        key = key * n + (0 if i < 0 else (n - 1 if i >= n else i))
+    return key
 
 
 class NodeGrid:
@@ -39,13 +54,13 @@ class NodeGrid:
         self.lo = tuple(lo)
         self.cell_m = cell_m
         self.inv = 1.0 / cell_m
-        self.shape = tuple(max(1, int(math.ceil((h - l) * self.inv))) for l, h in zip(lo, hi))
+        self.shape = grid_shape(lo, hi, self.inv)
         self.points = points
         self.buckets: dict[int, list[int]] = {}
         self.active: list[int] = []  # ids in the structure, for linear scans
         self.where: dict[int, int] = {}  # id -> position in active
         self._rings: list[list[tuple]] = [[(0,) * self.dim]]
-        self.arrays = NodeArrays(points, self.lo, self.inv, self.shape)
+        self.arrays = NodeArrays(self.lo, self.inv, self.shape)
 
     # ------------------------------------------------------------------ cells
     def _index(self, p: tuple) -> tuple:
@@ -77,7 +92,7 @@ class NodeGrid:
     # ------------------------------------------------------------------ updates
     def add(self, node: int) -> None:
         """Insert node ``node`` (its position is ``points[node]``)."""
-        key = self._flat(self._index(self.points[node]))
+        key = self.arrays.append(node, self.points[node])   # = self._flat(self._index(p))
         bucket = self.buckets.get(key)
         if bucket is None:
             self.buckets[key] = [node]
@@ -125,10 +140,10 @@ class NodeGrid:
 
     def nearest(self, p: tuple) -> int:
         """Id of the point nearest to ``p`` (-1 when empty)."""
-        if len(self.active) < _LINEAR_SCAN_BELOW:
-            return self._scan(p, self.active)[0]
         if len(self.active) >= _VECTOR_FROM:
             return self.arrays.nearest(p, self.arrays.sync(self.where))
+        if len(self.active) < _LINEAR_SCAN_BELOW:
+            return self._scan(p, self.active)[0]
         idx = self._index(p)
         shape = self.shape
         buckets = self.buckets

@@ -40,9 +40,14 @@ class RandomStream:
 
     def refill(self) -> None:
         """Replace the consumed batch by the next one (twice as long, up to 8192 values)."""
-        self.values = self.rng.random(self.batch).tolist()
+        self.values = self.draw_batch().tolist()
         self.next = 0
+
+    def draw_batch(self) -> np.ndarray:
+        """The next batch of the stream, (64, 128, ... 8192,) floats; the compiled planner reads it as an array."""
+        values = self.rng.random(self.batch)
         self.batch = min(2 * self.batch, _MAX_BATCH)
+        return values
 
     def __call__(self) -> float:
         """The next uniform number."""

@@ -18,7 +18,11 @@ Cost-to-come includes the corner (tracking) term at the parent, so it depends on
 rewiring compares the neighbour's own cost (the standard RRT* rule), which with a tracking weight
 may leave descendants' corner costs slightly suboptimal. The tree is kept in plain lists of
 floats and tuples: at the sizes of a first path (tens to hundreds of nodes) Python's scalar
-operations cost less than numpy's per-call overhead.
+operations cost less than numpy's per-call overhead. The loops over all nodes or all obstacles
+(nearest and radius queries, exact segment tests, guidance) are compiled with numba. For the
+common case (plain length cost, no K_max, a world of balls) GART and M-GART run the whole
+iteration compiled instead (:mod:`~companion.planning.compiled_search`), with the same result;
+this class is the reference and serves every other case.
 """
 
 from __future__ import annotations
@@ -30,13 +34,30 @@ import numpy as np
 from companion.planning.cost import EdgeCost
 from companion.planning.guidance import Guidance
 from companion.planning.nearest import NodeGrid, listed_within
+from companion.planning.parent_choice import ParentArrays, extend, rewire_candidates
 from companion.planning.result import Tree
 from companion.planning.sampling import RandomStream, Sampler
 from companion.planning.settings import GartSettings
 from companion.planning.simplify import CornerRule
 from companion.world import World
+from companion.world.segments import ball_arrays, compiled_for, segment_test
 
-__all__ = ["GartSearch"]
+__all__ = ["GartSearch", "rrt_star_gamma", "simple_cost"]
+
+
+def rrt_star_gamma(lo: list, hi: list, rewire_factor: float) -> float:
+    """RRT*'s gamma for the box ``[lo, hi]`` (d = 2 or 3): radius = gamma (log n / n)^(1/d)."""
+    d = len(lo)
+    volume = 1.0
+    for l, h in zip(lo, hi):
+        volume *= h - l
+    unit_ball = math.pi if d == 2 else 4.0 / 3.0 * math.pi
+    return rewire_factor * 2.0 * (1.0 + 1.0 / d) ** (1.0 / d) * (volume / unit_ball) ** (1.0 / d)
+
+
+def simple_cost(ec: EdgeCost) -> bool:
+    """True when the cost is energy weight x length (no threat, climb or tracking term)."""
+    return not (ec.uses_threat or ec.uses_climb or ec.uses_tracking)
 
 
 class GartSearch:
@@ -64,19 +85,16 @@ class GartSearch:
         self.dim = d = world.dim
         self.rule = CornerRule(settings, world)
         self.ec = EdgeCost(world, settings.cost)
+        self.segment_free = segment_test(world)  # world.segment_free, compiled for worlds of balls
         self.sampler = Sampler(world, start, goal, settings.goal_bias, settings.informed, RandomStream(rng))
         self.guidance = Guidance(world, goal, settings) if settings.guidance else None
         # cost = energy weight * length: the inner loop skips the general cost terms
-        self.simple_cost = not (self.ec.uses_threat or self.ec.uses_climb or self.ec.uses_tracking)
+        self.simple_cost = simple_cost(self.ec)
         self.step = settings.step_m
         self.goal_radius = settings.goal_radius_m or settings.step_m
         self.r_max = settings.max_rewire_radius_m or 2.0 * settings.step_m
         lo, hi = world.bounds_min.tolist(), world.bounds_max.tolist()
-        volume = 1.0
-        for l, h in zip(lo, hi):
-            volume *= h - l
-        unit_ball = math.pi if d == 2 else 4.0 / 3.0 * math.pi
-        self.gamma = settings.rewire_factor * 2.0 * (1.0 + 1.0 / d) ** (1.0 / d) * (volume / unit_ball) ** (1.0 / d)
+        self.gamma = rrt_star_gamma(lo, hi, settings.rewire_factor)
         # tree
         self.pts: list[tuple] = [start]
         self.parent: list[int] = [-1]
@@ -89,6 +107,12 @@ class GartSearch:
         self.forbidden: list[bool] = [False]
         self.nn = NodeGrid(tuple(lo), tuple(hi), max(self.r_max, 1e-3), self.pts)
         self.nn.add(0)
+        # step 4 compiled for the plain length cost in a world of balls (else the Python loop)
+        self.fast = None
+        if self.simple_cost and self.rule.world is None and compiled_for(world):
+            self.fast = ParentArrays(d)
+            self.fast.set(0, 0.0, None)
+            self.fast_world = (tuple(lo), tuple(hi)) + ball_arrays(world)
         # goal links: node -> (edge cost, u, length)
         self.goal_links: dict[int, tuple[float, tuple, float]] = {}
         self.best_node = -1
@@ -141,7 +165,7 @@ class GartSearch:
                 cands.append((cost[i] + ec.edge(p, x_new, dist, dens[i], dens_new) + ec.corner(u_in[i], u), i, dist))
         cands.sort()
         ok = self.rule.ok
-        free = self.world.segment_free
+        free = self.segment_free
         for c, i, dist in cands:
             p = pts[i]
             u = tuple((b - a) / dist for a, b in zip(p, x_new))
@@ -165,6 +189,8 @@ class GartSearch:
         self.forbidden.append(False)
         self.children[parent].append(node)
         self.nn.add(node)
+        if self.fast is not None:
+            self.fast.set(node, cost, u)
         return node
 
     def rewire(self, node: int, neighbours: list) -> bool:
@@ -174,7 +200,7 @@ class GartSearch:
         c_new = cost[node]
         u_node, len_node = u_in[node], len_in[node]
         ec, ok = self.ec, self.rule.ok
-        free = self.world.segment_free
+        free = self.segment_free
         energy = self.s.cost.energy
         skip = self.parent[node]
         changed = False
@@ -207,6 +233,8 @@ class GartSearch:
             self.parent[i] = node
             self.children[node].append(i)
             self.edge_in[i], self.u_in[i], self.len_in[i], cost[i] = e, u, dist, c
+            if self.fast is not None:
+                self.fast.set(i, c, u)
             self.propagate(i)
             changed = True
         return changed
@@ -215,11 +243,14 @@ class GartSearch:
         """Recompute cost-to-come below ``root`` after it changed parent."""
         cost, u_in, edge_in, children = self.cost, self.u_in, self.edge_in, self.children
         corner = self.ec.corner
+        mirror = self.fast.cost if self.fast is not None else None
         stack = [root]
         while stack:
             n = stack.pop()
             for ch in children[n]:
                 cost[ch] = cost[n] + edge_in[ch] + corner(u_in[n], u_in[ch])
+                if mirror is not None:
+                    mirror[ch] = cost[ch]
                 stack.append(ch)
 
     def connect_goal(self, node: int) -> bool:
@@ -235,7 +266,7 @@ class GartSearch:
         u = tuple((b - a) / dist for a, b in zip(p, self.goal))
         if not self.rule.ok(self.u_in[node], self.len_in[node], u, dist):
             return False
-        if not self.world.segment_free(p, self.goal):
+        if not self.segment_free(p, self.goal):
             return False
         if not self.rule.ok(self.u_in[node], self.len_in[node], u, dist, p):
             return False
@@ -271,19 +302,41 @@ class GartSearch:
         if near < 0:
             return -1
         x_new = self.steer(self.pts[near], x_rand)
-        if x_new is None or not self.world.point_free(x_new):
+        if x_new is None:
+            return -1
+        if self.fast is not None:
+            return self.extend_compiled(near, x_new)
+        if not self.world.point_free(x_new):
             return -1
         radius = self.radius()
-        neighbours = self.nn.within(x_new, radius)
-        if not listed_within(self.pts[near], x_new, radius):
-            neighbours.append((near, math.dist(self.pts[near], x_new)))
+        listed = listed_within(self.pts[near], x_new, radius)
         dens_new = self.ec.threat_density(x_new) if self.ec.uses_threat else 0.0
+        neighbours = self.nn.within(x_new, radius)
+        if not listed:
+            neighbours.append((near, math.dist(self.pts[near], x_new)))
         chosen = self.choose_parent(x_new, neighbours, dens_new)
         if chosen is None:
             return -1
         parent, c, e, u, dist = chosen
         node = self.add_node(x_new, parent, c, e, u, dist, dens_new)
         self.rewire(node, neighbours)
+        self.connect_goal(node)
+        return node
+
+    def extend_compiled(self, near: int, x_new: tuple) -> int:
+        """Steps 4 to 6 from the steered ``x_new`` (plain length cost, world of balls)."""
+        fast, arrays, energy = self.fast, self.nn.arrays, self.s.cost.energy
+        free, pos, ids, dists = extend(x_new, near, math.dist(self.pts[near], x_new), self.radius(), arrays.coords,
+                                       arrays.keys, arrays.active, arrays.count, fast.cost, fast.u, fast.has_u,
+                                       energy, self.rule.cos_max, *self.fast_world)
+        if pos < 0:
+            return -1
+        parent, dist = int(ids[pos]), float(dists[pos])
+        u = tuple((b - a) / dist for a, b in zip(self.pts[parent], x_new))
+        c = self.cost[parent] + energy * dist
+        node = self.add_node(x_new, parent, c, energy * dist, u, dist, 0.0)
+        cands = rewire_candidates(ids, dists, fast.cost, c, energy, parent).tolist()
+        self.rewire(node, [(int(ids[k]), float(dists[k])) for k in cands])
         self.connect_goal(node)
         return node
 

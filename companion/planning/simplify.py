@@ -15,7 +15,7 @@ import numpy as np
 from companion.planning.cost import EdgeCost
 from companion.planning.settings import G2_CORNER_COEFF, GartSettings
 from companion.world import World
-from companion.world.segments import segments_free_from
+from companion.world.segments import segment_test, segments_free_from
 
 __all__ = ["CornerRule", "shortcut_path"]
 
@@ -35,6 +35,7 @@ class CornerRule:
         self.kappa = settings.kappa_max_1_m
         self.fraction = settings.corner_fraction
         self.world = world if settings.kappa_max_1_m is not None else None
+        self.segment_free = segment_test(world) if self.world is not None else None
 
     def ok(self, u_in: tuple | None, len_in: float, u_out: tuple, len_out: float,
            corner: tuple | None = None) -> bool:
@@ -58,7 +59,7 @@ class CornerRule:
         b0 = tuple(w - need * u for w, u in zip(corner, u_in))
         e0 = tuple(w + need * u for w, u in zip(corner, u_out))
         mid = tuple(0.5 * (x + y) for x, y in zip(b0, e0))
-        free = self.world.segment_free
+        free = self.segment_free
         return free(b0, e0) and free(corner, mid)
 
 

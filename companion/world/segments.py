@@ -1,4 +1,4 @@
-"""Batched exact segment test: many segments from one point, in one numpy pass.
+"""Exact segment tests outside the world's grid walk: batched (numpy) and compiled (numba).
 
 Path shortcutting asks, from each waypoint, whether each later waypoint can be joined by a free
 straight edge. The scalar :meth:`~companion.world.world.World.segment_free` walks the index grid
@@ -7,27 +7,47 @@ world; here every segment is tested against every disc/sphere at once, with the 
 distance (closest point clamped to the segment) and the same floating-point operations, so the
 answers equal the scalar ones exactly. Other obstacles (boxes, cylinders, prisms) are tested
 with their own exact ``segment_distance`` on the segments that clear the balls.
+
+The planner's inner loop asks one segment at a time; :func:`segment_test` gives it a compiled
+test against every disc/sphere (numba), which at tens of obstacles costs less than the Python
+grid walk of :meth:`~companion.world.world.World.segment_free`. It uses the scalar method's
+arithmetic in the same order (no fused multiply-add), so its answers are the same booleans.
 """
 
 from __future__ import annotations
 
-import numpy as np
+import itertools
+from typing import Callable
 
-__all__ = ["segments_free_from"]
+import numpy as np
+from numba import njit
+
+__all__ = ["segments_free_from", "segment_test", "segment_clear_of_balls", "ball_arrays", "ball_table", "compiled_for"]
 
 _MEMO_KEY = ("segments_free_from", "balls")
+_TABLE_KEY = ("segments", "ball_table")
+_COMPILED_UP_TO_BALLS = 256  # above, the grid walk visits fewer obstacles than a full scan
 
 
-def _ball_arrays(world) -> tuple[np.ndarray, np.ndarray]:
+def ball_arrays(world) -> tuple[np.ndarray, np.ndarray]:
     """``(centres (N, d), r_inflated^2 (N,))`` of the world's discs/spheres, memoised per world."""
     found = world._memo.get(_MEMO_KEY)
     if found is None:
-        balls = world.inflated_balls
         d = world.dim
-        centres = np.array([b[:d] for b in balls], dtype=float).reshape(-1, d)
-        r2 = np.array([b[d] for b in balls], dtype=float)
-        found = (centres, r2)
+        rows = ball_table(world)
+        found = (np.ascontiguousarray(rows[:, :d]), np.ascontiguousarray(rows[:, d]))
         world._memo[_MEMO_KEY] = found
+    return found
+
+
+def ball_table(world) -> np.ndarray:
+    """The world's inflated discs/spheres as rows ``(centre..., r^2, r)``, (N, d + 2), memoised (read it only)."""
+    found = world._memo.get(_TABLE_KEY)
+    if found is None:
+        balls = world.inflated_balls
+        flat = np.fromiter(itertools.chain.from_iterable(balls), dtype=float, count=len(balls) * (world.dim + 2))
+        found = flat.reshape(-1, world.dim + 2)
+        world._memo[_TABLE_KEY] = found
     return found
 
 
@@ -49,10 +69,15 @@ def segments_free_from(world, a: tuple, ends: list) -> list[bool]:
     """
     if not ends:
         return []
+    if compiled_for(world):   # a world of balls: compiled
+        centres, r2 = ball_arrays(world)
+        lo, hi = _bounds(world)
+        free = segments_clear_of_balls(a, np.array(ends, dtype=float).reshape(-1, world.dim), lo, hi, centres, r2)
+        return free.tolist()
     if not world.in_bounds(a):
         return [False] * len(ends)
     d = world.dim
-    centres, r2 = _ball_arrays(world)
+    centres, r2 = ball_arrays(world)
     b = np.array(ends, dtype=float).reshape(-1, d)
     delta = [(b[:, k] - a[k])[:, None] for k in range(d)]          # (K, 1) per axis
     l2 = delta[0] * delta[0]
@@ -78,3 +103,73 @@ def segments_free_from(world, a: tuple, ends: list) -> list[bool]:
             ok = all(ob.segment_distance(a, end) > margin for ob in others)
         out.append(ok)
     return out
+
+
+@njit(cache=True)
+def segment_clear_of_balls(a, b, lo, hi, centres: np.ndarray, r2: np.ndarray) -> bool:
+    """True when segment ``a b`` (d floats each) lies in ``[lo, hi]`` and clear of every ball.
+
+    ``centres`` (N, d) and ``r2`` (N,) are the inflated balls; the arithmetic is that of
+    :meth:`~companion.world.world.World.segment_free` (closest point clamped to the segment).
+    """
+    d = centres.shape[1]
+    for k in range(d):
+        if not (lo[k] <= a[k] and a[k] <= hi[k] and lo[k] <= b[k] and b[k] <= hi[k]):
+            return False
+    delta = np.empty(d)
+    for k in range(d):
+        delta[k] = b[k] - a[k]
+    l2 = delta[0] * delta[0]
+    for k in range(1, d):
+        l2 += delta[k] * delta[k]
+    for j in range(centres.shape[0]):
+        t = 0.0
+        if l2 > 0.0:
+            num = (centres[j, 0] - a[0]) * delta[0]
+            for k in range(1, d):
+                num += (centres[j, k] - a[k]) * delta[k]
+            t = num / l2
+            t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+        q = a[0] + t * delta[0] - centres[j, 0]
+        q2 = q * q
+        for k in range(1, d):
+            q = a[k] + t * delta[k] - centres[j, k]
+            q2 += q * q
+        if q2 <= r2[j]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def segments_clear_of_balls(a, ends: np.ndarray, lo, hi, centres: np.ndarray, r2: np.ndarray) -> np.ndarray:
+    """:func:`segment_clear_of_balls` from ``a`` to each row of ``ends`` (K, d): (K,) bool."""
+    out = np.empty(ends.shape[0], dtype=np.bool_)
+    for i in range(ends.shape[0]):
+        out[i] = segment_clear_of_balls(a, ends[i], lo, hi, centres, r2)
+    return out
+
+
+def _bounds(world) -> tuple[tuple, tuple]:
+    return tuple(world.bounds_min.tolist()), tuple(world.bounds_max.tolist())
+
+
+def segment_test(world) -> Callable[[tuple, tuple], bool]:
+    """``world.segment_free`` for tuples of d floats, compiled when the world has only balls.
+
+    Worlds with other obstacles, or with more than 256 balls, get ``world.segment_free`` itself.
+    (The ball arrays are memoised per world, the returned function is not: worlds may be pickled.)
+    """
+    if not compiled_for(world):
+        return world.segment_free
+    centres, r2 = ball_arrays(world)
+    lo, hi = _bounds(world)
+
+    def segment_free(a: tuple, b: tuple) -> bool:
+        return segment_clear_of_balls(a, b, lo, hi, centres, r2)
+
+    return segment_free
+
+
+def compiled_for(world) -> bool:
+    """True when the compiled tests apply: only discs/spheres, at most 256 of them."""
+    return not world.non_ball_obstacles and len(world.inflated_balls) <= _COMPILED_UP_TO_BALLS
