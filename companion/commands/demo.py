@@ -32,11 +32,14 @@ def run(args: argparse.Namespace) -> int:
     from companion.progress import FlightProgress
     from companion.report import render_report
     from companion.view.mcap_record import load_flight
+    from companion.workers import warm_up
 
     if not 0.5 <= args.speedup <= 10:
         raise CompanionError(f"--speedup: between 0.5 and 10, got {args.speedup}")
     out = Path(args.out)
-    print(f"demo: flying exclusion_zones.plan at {args.speedup:g}x; logs in {out}")
+    seconds = warm_up()          # compiles the planners' kernels once per machine (about 20 s)
+    print(f"demo: planners ready in {seconds:.1f} s; flying exclusion_zones.plan at {args.speedup:g}x; "
+          f"logs in {out}")
     with FlightProgress(title="demo") as progress:
         summary = run_demo(out, speedup=args.speedup, gcs_out=None if args.no_gcs else "127.0.0.1:14550",
                            listener=progress)
