@@ -98,6 +98,13 @@ def tapped_fields(msg) -> dict:
     return fields
 
 
+#: Telemetry the link reads itself (``VehicleLink.messages``) and MAVSDK has no use for (the
+#: companion creates no MAVSDK Telemetry plugin): the gate does not forward it to MAVSDK (a wake-up
+#: of its threads for each of about 30 frames a second). The tlog still has every frame.
+LINK_ONLY_MESSAGES = frozenset({"LOCAL_POSITION_NED", "ATTITUDE", "GLOBAL_POSITION_INT",
+                                "SERVO_OUTPUT_RAW", "RPM", "ADSB_VEHICLE"})
+
+
 def new_parser() -> mavlink.MAVLink:
     """A pymavlink parser that returns BAD_DATA for garbage instead of raising."""
     parser = mavlink.MAVLink(None)
@@ -124,9 +131,8 @@ class InboundFilter:
     onboard : OnboardComponent, optional
         The companion's own component: commands addressed to it are answered by it (the
         answers wait in ``replies``) and never reach MAVSDK.
-
-    Attributes
-    ----------
+    kinds : list of str
+        The message types of the frames the last ``filter`` returned, in the same order.
     tapped : set of str
         Message types the link reads itself (``VehicleLink.messages``): each admitted one is
         also kept in ``taps`` as ``(type, fields)`` (``tapped_fields``) for the gate to hand over.
@@ -146,6 +152,7 @@ class InboundFilter:
         self.taps: list[tuple[str, dict]] = []  # admitted messages of those types, as fields
         self.parser = new_parser()
         self.autopilot_heard = False
+        self.kinds: list[str] = []
         self.counts: dict[str, int] = {PASSED: 0, NOT_FOR_US: 0, ONBOARD: 0, MALFORMED: 0}
         if check is not None:
             self.counts.update({v.value: 0 for v in Verdict if v is not Verdict.ACCEPTED})
@@ -164,10 +171,13 @@ class InboundFilter:
         except Exception:  # pymavlink raises odd errors on some garbage: drop, never stop
             self.parser = new_parser()
             self._count(MALFORMED)
+            self.kinds = []
             return []
         if not self.stream and self.parser.buf_len() > 0:
             self._count(MALFORMED)                # a datagram that ends inside a frame
-        return [bytes(msg.get_msgbuf()) for msg in messages if self._admits(msg)]
+        admitted = [msg for msg in messages if self._admits(msg)]
+        self.kinds = [msg.get_type() for msg in admitted]
+        return [bytes(msg.get_msgbuf()) for msg in admitted]
 
     def _admits(self, msg) -> bool:
         if msg.get_type() == "BAD_DATA" or isinstance(msg, mavlink.MAVLink_unknown):

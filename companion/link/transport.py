@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 
 from companion.errors import LinkError
-from companion.link.gate import Identity, InboundFilter, OutboundSigner, SigningKey
+from companion.link.gate import LINK_ONLY_MESSAGES, Identity, InboundFilter, OutboundSigner, SigningKey
 from heli_common.tlog import TlogWriter
 from mavlink_signing import SignatureCheck
 
@@ -268,10 +268,10 @@ class GateThread:
             self.send_own(self.inbound.replies.pop(0))
         if self.inbound.autopilot_heard:
             self.vehicle.accepted_from_last()
-        for frame in frames:
+        for frame, kind in zip(frames, self.inbound.kinds):
             if self.tlog is not None:
                 self.tlog.write(frame)
-            if self.mavsdk_address is not None:
+            if self.mavsdk_address is not None and kind not in LINK_ONLY_MESSAGES:
                 self.local.sendto(frame, self.mavsdk_address)
 
     def _from_mavsdk(self) -> None:
