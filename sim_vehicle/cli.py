@@ -24,7 +24,8 @@ examples:
                                                 # telemetry to 127.0.0.1:14550 (GCS) and :14540 (companion)
   mavproxy.py --master=udpout:127.0.0.1:14555   # then: mode guided / arm throttle / takeoff 10
   sim-vehicle --speedup 5 --out 127.0.0.1:14560 # 5x faster, telemetry to one address only
-  sim-vehicle --instance 1                      # a second vehicle: port 14565, sysid 2
+  sim-vehicle --instance 1                      # a second vehicle: port 14565, sysid 2, telemetry
+                                                # to :14550 and :14541 (companion run --instance 1)
   sim-vehicle --home 46.5197,6.6323,372,90 --wind-speed 5 --wind-dir 270 --gust 1 --tlog flight.tlog
   sim-vehicle --origin 47.3970,8.5450,480 --adsb-traffic 3 --seed 7   # EKF origin away from home, traffic
   sim-vehicle --signing-key key.txt             # MAVLink 2 signing; MAVProxy: signing key PASSPHRASE
@@ -122,7 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--instance", type=int, default=0, metavar="N",
-                        help="vehicle number: system id 1+N, default port 14555+10*N (default 0)")
+                        help="vehicle number: system id 1+N, default port 14555+10*N, telemetry to "
+                        "127.0.0.1:14550 and the companion's 127.0.0.1:<14540+N> (default 0)")
     parser.add_argument("--home", type=_home, default=None, metavar="LAT,LON,ALT,YAW",
                         help="home: degrees, metres AMSL, heading in degrees "
                         "(default 47.397742,8.545594,488,0: PX4's SITL field)")
@@ -136,7 +138,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="run X times faster than real time (heartbeats stay at 1 Hz wall clock; default 1)")
     parser.add_argument("--out", type=_address, action="append", default=None, metavar="HOST:PORT",
                         help="send telemetry to this address (repeatable; replaces the defaults "
-                        "127.0.0.1:14550 and 127.0.0.1:14540)")
+                        "127.0.0.1:14550 and 127.0.0.1:<14540+instance>)")
     parser.add_argument("--no-default-out", action="store_true",
                         help="no --out addresses at all: only peers that send to the vehicle get telemetry")
     parser.add_argument("--port", type=int, default=None, metavar="N", help="UDP port to bind (default 14555+10*N)")
@@ -165,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _settings_from_args(args: argparse.Namespace):
-    from sim_vehicle.config import load_settings, replace_path
+    from sim_vehicle.config import LinkSettings, instance_out, load_settings, replace_path
 
     settings = load_settings(args.config)
     if args.speedup is not None:
@@ -178,6 +180,8 @@ def _settings_from_args(args: argparse.Namespace):
         settings = replace_path(settings, "adsb.count", args.adsb_traffic)
     if args.out is not None or args.no_default_out:
         settings = replace_path(settings, "link.out", tuple(args.out or ()))
+    elif args.instance and settings.link.out == LinkSettings.out:     # the defaults, not a file's
+        settings = replace_path(settings, "link.out", instance_out(args.instance))
     if args.bind is not None:
         settings = replace_path(settings, "link.bind_host", args.bind)
     if args.wind_speed is not None or args.wind_dir is not None or args.gust is not None:

@@ -17,7 +17,7 @@ log = logging.getLogger(__name__)
 
 EPILOG = """examples:
   companion router --listen tcp/0.0.0.0:7447
-  companion run --zenoh-connect tcp/127.0.0.1:7447 --zenoh-listen tcp/127.0.0.1:7448 ...
+  companion run --zenoh-connect tcp/127.0.0.1:7447 ...   # listens on 7447 + sysid as well
 
 It runs until SIGINT or SIGTERM."""
 

@@ -8,6 +8,7 @@ import logging
 import sys
 
 from companion.commands.mission_io import add_signing_argument
+from companion.errors import ConfigError
 
 log = logging.getLogger(__name__)
 
@@ -65,11 +66,16 @@ def register(subparsers) -> None:
 def add_flight_arguments(p) -> None:
     """The options ``companion run`` and ``companion serve`` share (vehicle, zenoh, view, planners)."""
     p.add_argument("--connect", help="MAVSDK URL of the vehicle (default udpin://0.0.0.0:14540)")
+    p.add_argument("--instance", type=int, metavar="N",
+                   help="the companion of `sim-vehicle --instance N` (as PX4 SITL numbers them): "
+                   "--connect udpin://0.0.0.0:<14540+N>, zenoh prefix uav/<N+1> and endpoint "
+                   "tcp/127.0.0.1:<7448+N> (--connect and the --zenoh options still win)")
     p.add_argument("--config", help="settings file (TOML); see --print-config")
     add_signing_argument(p)
     p.add_argument("--world", help="world file with extra obstacles (local NED about home)")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", default=None,
-                   help="zenoh endpoint to listen on (repeatable), e.g. tcp/0.0.0.0:7447")
+                   help="zenoh endpoint to listen on (repeatable; default tcp/127.0.0.1:<7447+sysid>), "
+                   "e.g. tcp/0.0.0.0:7448")
     p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", default=None,
                    help="zenoh endpoint to connect to (repeatable)")
     p.add_argument("--zenoh-config", metavar="FILE",
@@ -104,9 +110,19 @@ def add_flight_arguments(p) -> None:
                    "(default) or as JSON")
 
 
+def instance_overrides(instance: int) -> dict:
+    """The settings of the companion of ``sim-vehicle --instance N``: its UDP port 14540 + N,
+    system id N + 1 (the zenoh prefix ``uav/<N+1>``; the zenoh endpoint follows it)."""
+    if not 0 <= instance <= 200:
+        raise ConfigError(f"--instance: expected 0..200, got {instance}")
+    return {"link": {"connect": f"udpin://0.0.0.0:{14540 + instance}"}, "zenoh": {"sysid": instance + 1}}
+
+
 def settings_overrides(args: argparse.Namespace) -> dict:
     """The command-line options as a nested settings mapping."""
     out: dict = {}
+    if getattr(args, "instance", None) is not None:
+        out.update(instance_overrides(args.instance))
     if args.connect:
         out.setdefault("link", {})["connect"] = args.connect
     if args.signing_key:

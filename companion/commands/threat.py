@@ -18,7 +18,6 @@ from companion.errors import ThreatPayloadError
 
 log = logging.getLogger(__name__)
 
-DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 NEGATIVE_VECTOR = re.compile(r"^-\.?\d")    # -1,1,0 or -.5,2,3: a value, not an option
 
 EPILOG = """\
@@ -31,14 +30,16 @@ Examples:
   companion threat list                                  # threats the companion holds now
   companion threat list --scenario mission_files/threats/demo.toml
   companion threat play mission_files/threats/demo.toml --time-scale 5
+  companion threat add --id p1 --pos 75,75,-20 --radius 5 --sysid 2     # the companion of system 2
   companion threat add --id p1 --pos 75,75,-20 --radius 5 --sysid 2 --zenoh-connect tcp/10.0.0.5:7447
   companion threat add --zenoh-config deploy/radar1.json5 --id p1 --pos 75,75,-20 --radius 5
                                        # an authenticated source (companion keys init): key
                                        # uav/<sysid>/threats/radar1/p1
 
 Positions are local NED metres about the vehicle's home (north,east,down: -20 is 20 m up) or
-WGS-84 --lat/--lon/--alt (altitude AMSL, m). The companion (`companion run`) listens on
-tcp/127.0.0.1:7447 by default; this command connects to it (or to a zenoh router). With
+WGS-84 --lat/--lon/--alt (altitude AMSL, m). The companion of system N (`companion run`)
+listens on tcp/127.0.0.1:<7447+N> by default (7448 for system 1); this command connects there
+for --sysid N (default 1), or to --zenoh-connect (another machine, a zenoh router). With
 --zenoh-config (a source's file from `companion keys init`) it connects over mutual TLS and puts
 on uav/<sysid>/threats/<source>/<id>, <source> being its certificate's name."""
 
@@ -64,7 +65,8 @@ def _vector(text: str, option: str) -> tuple:
 def _add_bus_options(p) -> None:
     p.add_argument("--sysid", type=int, default=1, help="vehicle system id: key prefix uav/<sysid> (default 1)")
     p.add_argument("--zenoh-connect", dest="zenoh_connect", nargs="+", metavar="ENDPOINT",
-                   help=f"zenoh endpoints to connect to (default {DEFAULT_CONNECT})")
+                   help="zenoh endpoints to connect to (default tcp/127.0.0.1:<7447 + --sysid>, the "
+                   "companion's own default)")
     p.add_argument("--zenoh-listen", dest="zenoh_listen", nargs="+", metavar="ENDPOINT", default=[],
                    help="zenoh endpoints to listen on as well (default none)")
     p.add_argument("--zenoh-config", dest="zenoh_config", metavar="FILE",
@@ -188,7 +190,10 @@ def _open_bus(args):
     if getattr(args, "zenoh_config", None):
         return ThreatBus(args.sysid, listen=args.zenoh_listen or None, connect=args.zenoh_connect or None,
                          zenoh_config=args.zenoh_config, source=args.source).open()
-    connect = args.zenoh_connect if args.zenoh_connect else ([] if args.zenoh_listen else [DEFAULT_CONNECT])
+    from companion.threats.settings import default_listen
+
+    connect = args.zenoh_connect if args.zenoh_connect else ([] if args.zenoh_listen else
+                                                             list(default_listen(args.sysid)))
     return ThreatBus(args.sysid, listen=args.zenoh_listen, connect=connect, source=args.source).open()
 
 

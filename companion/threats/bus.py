@@ -42,7 +42,7 @@ from companion.errors import ThreatBusError
 from companion.threats.bus_client import ThreatClient
 from companion.threats.bus_inbound import ThreatInbound, check_source
 from companion.threats.bus_outbound import CompanionOutbound
-from companion.threats.settings import check_endpoint
+from companion.threats.settings import check_endpoint, default_listen
 from companion.threats.update import ThreatUpdate
 
 __all__ = ["ThreatBus", "ThreatUpdate", "ThreatBusError", "session_config"]
@@ -93,7 +93,8 @@ class ThreatBus(ThreatInbound, CompanionOutbound, ThreatClient):
     sysid : int
         Key prefix ``uav/<sysid>``.
     listen, connect : sequence of str, optional
-        zenoh endpoints (default: listen on ``tcp/127.0.0.1:7447``, connect to none; with
+        zenoh endpoints (default: listen on ``default_listen(sysid)``, loopback port 7447 + sysid,
+        connect to none; with
         ``zenoh_config``: the file's, replaced by these when given).
     mode : str
         ``peer`` (default), ``client`` (through a router) or ``router``; with ``zenoh_config``
@@ -137,7 +138,7 @@ class ThreatBus(ThreatInbound, CompanionOutbound, ThreatClient):
             self.connect = tuple(json.loads(self._config.get_json("connect/endpoints"))
                                  if connect is None else connect)
         else:
-            self.listen = ("tcp/127.0.0.1:7447",) if listen is None else tuple(listen)
+            self.listen = default_listen(sysid) if listen is None else tuple(listen)
             self.connect = () if connect is None else tuple(connect)
             self.mode = mode
             self._config = session_config(mode=mode, listen=self.listen, connect=self.connect)
@@ -164,10 +165,10 @@ class ThreatBus(ThreatInbound, CompanionOutbound, ThreatClient):
     def from_settings(cls, settings, *, clock=None) -> "ThreatBus":
         """Build from ``companion.threats.settings.ZenohSettings`` (not opened yet)."""
         if getattr(settings, "config", None):
-            if settings.connect or tuple(settings.listen) != ("tcp/127.0.0.1:7447",):
+            if settings.connect or settings.listen is not None:
                 log.warning("zenoh.listen/connect ignored: the endpoints of %s are used", settings.config)
             return cls(settings.sysid, clock=clock, zenoh_config=settings.config)
-        return cls(settings.sysid, listen=settings.listen, connect=settings.connect,
+        return cls(settings.sysid, listen=settings.listen_endpoints, connect=settings.connect,
                    mode=settings.mode, clock=clock)
 
     # ------------------------------------------------------------------ session

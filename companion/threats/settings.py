@@ -33,6 +33,17 @@ __all__ = ["ThreatSettings", "ZenohSettings"]
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream)/\S+$")
 
 
+#: zenoh's own default port: a zenoh router (``companion router``) listens on it.
+ZENOH_ROUTER_PORT = 7447
+
+
+def default_listen(sysid: int) -> tuple[str, ...]:
+    """A companion's zenoh endpoint when none is given: loopback port ``7447 + sysid`` (7448 for
+    system 1), so a router on 7447 and the companions of other systems on the same machine
+    never collide; ``companion threat --sysid N`` connects there by default."""
+    return (f"tcp/127.0.0.1:{ZENOH_ROUTER_PORT + int(sysid)}",)
+
+
 def check_endpoint(endpoint: str, name: str = "endpoint") -> str:
     """Return ``endpoint`` if it looks like a zenoh locator (``tcp/HOST:PORT`` ...).
 
@@ -58,9 +69,10 @@ class ZenohSettings:
         System id of the key prefix ``uav/<sysid>``. Default 1 (``sim-vehicle`` instance 0).
     mode : str
         ``peer`` (default) or ``client`` (through a zenoh router only).
-    listen : tuple of str
-        Endpoints this session listens on. Default ``("tcp/127.0.0.1:7447",)``; empty to only
-        connect.
+    listen : tuple of str or None
+        Endpoints this session listens on; empty to only connect. Default None:
+        ``tcp/127.0.0.1:<7447 + sysid>`` (``default_listen``; 7448 for system 1: a zenoh
+        router keeps 7447).
     connect : tuple of str
         Endpoints (peers or a router) this session connects to. Default none.
     config : str or None
@@ -74,7 +86,7 @@ class ZenohSettings:
     enabled: bool = True
     sysid: int = 1
     mode: str = "peer"
-    listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    listen: tuple[str, ...] | None = None
     connect: tuple[str, ...] = ()
     config: str | None = None
 
@@ -84,16 +96,22 @@ class ZenohSettings:
         require_int(ConfigError, "zenoh", "sysid", self.sysid, 1, 255)
         if self.mode not in ("peer", "client"):
             raise ConfigError(f"zenoh.mode: expected 'peer' or 'client', got {self.mode!r}")
-        object.__setattr__(self, "listen", tuple(self.listen))
+        if self.listen is not None:
+            object.__setattr__(self, "listen", tuple(self.listen))
         object.__setattr__(self, "connect", tuple(self.connect))
-        for i, ep in enumerate(self.listen):
+        for i, ep in enumerate(self.listen_endpoints):
             check_endpoint(ep, f"zenoh.listen[{i}]")
         for i, ep in enumerate(self.connect):
             check_endpoint(ep, f"zenoh.connect[{i}]")
-        if self.enabled and not self.listen and not self.connect:
+        if self.enabled and not self.listen_endpoints and not self.connect:
             raise ConfigError("zenoh.listen: give at least one listen or connect endpoint")
         if self.mode == "client" and not self.connect:
             raise ConfigError("zenoh.connect: client mode needs a router endpoint to connect to")
+
+    @property
+    def listen_endpoints(self) -> tuple[str, ...]:
+        """``listen``, or ``default_listen(sysid)`` when it is not set."""
+        return default_listen(self.sysid) if self.listen is None else self.listen
 
 
 @dataclass(frozen=True)
