@@ -26,6 +26,7 @@ from heli_common.mavlink_ids import (TYPEMASK_IGNORE_ACCELERATION, TYPEMASK_IGNO
 
 from companion.errors import LinkError
 from companion.link.frames import LinkFrames
+from companion.link.transport import TAP_HANDOVER_PERIOD_S
 
 log = logging.getLogger(__name__)
 
@@ -151,6 +152,13 @@ class DirectMessages:
             readers.discard(queue)
             if not readers and self.gate is not None:
                 self.gate.inbound.tapped.discard(name)
+
+    def batch_reads(self, on: bool) -> None:
+        """While ``on``, the gate reads the vehicle's datagrams in batches, every
+        ``TAP_HANDOVER_PERIOD_S`` (``GateThread.batch_reads``): the companion does it while it
+        streams setpoints, when about 40 telemetry datagrams a second would each wake it."""
+        if self.gate is not None:
+            self.gate.batch_reads(TAP_HANDOVER_PERIOD_S if on else 0.0)
 
     def _hand_over(self, batch: list[tuple[str, dict]]) -> None:
         """On the loop: the messages the gate read, to their readers (``messages``)."""

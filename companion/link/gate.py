@@ -89,12 +89,13 @@ class Identity:
         return target_component not in (0, self.component)
 
 
-def tapped_fields(msg) -> dict:
+def tapped_fields(msg, arrival_s: float | None = None) -> dict:
     """A message's fields by name (text decoded), with ``_sysid``, ``_compid`` and ``_t_s``
-    (monotonic arrival time): what ``VehicleLink.messages`` yields."""
+    (monotonic arrival time: ``arrival_s``, else now): what ``VehicleLink.messages`` yields."""
     fields = msg.to_dict()
     del fields["mavpackettype"]
-    fields["_sysid"], fields["_compid"], fields["_t_s"] = msg.get_srcSystem(), msg.get_srcComponent(), time.monotonic()
+    fields["_sysid"], fields["_compid"] = msg.get_srcSystem(), msg.get_srcComponent()
+    fields["_t_s"] = time.monotonic() if arrival_s is None else arrival_s
     return fields
 
 
@@ -152,18 +153,21 @@ class InboundFilter:
         self.taps: list[tuple[str, dict]] = []  # admitted messages of those types, as fields
         self.parser = new_parser()
         self.autopilot_heard = False
+        self._arrival_s: float | None = None
         self.kinds: list[str] = []
         self.counts: dict[str, int] = {PASSED: 0, NOT_FOR_US: 0, ONBOARD: 0, MALFORMED: 0}
         if check is not None:
             self.counts.update({v.value: 0 for v in Verdict if v is not Verdict.ACCEPTED})
 
-    def filter(self, data: bytes) -> list[bytes]:
+    def filter(self, data: bytes, arrival_s: float | None = None) -> list[bytes]:
         """The complete frames of ``data`` (a datagram, or a piece of a byte stream: partial
-        frames wait for the next call) that MAVSDK may see, in order.
+        frames wait for the next call) that MAVSDK may see, in order; ``arrival_s``: when
+        ``data`` arrived (monotonic; None: now), the ``_t_s`` of the messages tapped.
 
         ``autopilot_heard`` tells whether an accepted frame of ``data`` was an autopilot's
         HEARTBEAT (the gate answers only such a sender on a listening link)."""
         self.autopilot_heard = False
+        self._arrival_s = arrival_s
         if not self.stream:
             self.parser = new_parser()
         try:
@@ -196,7 +200,7 @@ class InboundFilter:
         kind = msg.get_type()
         self.autopilot_heard |= kind == "HEARTBEAT" and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID
         if kind in self.tapped:
-            self.taps.append((kind, tapped_fields(msg)))
+            self.taps.append((kind, tapped_fields(msg, self._arrival_s)))
         return True
 
     def _count(self, outcome: str) -> bool:

@@ -21,6 +21,8 @@ import contextlib
 import logging
 import select
 import socket
+import struct
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -39,6 +41,12 @@ SELECT_TIMEOUT_S = 0.2
 #: most this often (s): each hand-over wakes the loop, and the vehicle's telemetry streams
 #: (10 Hz at most) arrive as about 40 datagrams a second. Their arrival times are stamped here.
 TAP_HANDOVER_PERIOD_S = 0.1
+#: Linux's SO_TIMESTAMP (= SCM_TIMESTAMP; Python's socket module does not name it): the kernel
+#: stamps each datagram's arrival (wall clock, struct timeval), so a datagram read in a batch keeps
+#: its true arrival time (the vehicle clock's estimate rests on it).
+SO_TIMESTAMP = 29 if sys.platform.startswith("linux") else None
+#: Most datagrams read in one batch (``GateThread.batch_reads``): the rest wait for the next.
+MAX_BATCH_DATAGRAMS = 256
 
 
 def split_url(url: str) -> tuple[str, str, int]:
@@ -71,12 +79,27 @@ class UdpVehicleSide:
             raise LinkError(f"cannot open {scheme}://{host}:{port}: {exc}") from None
         self.fixed_peer = self.peer is not None
         self.sock.setblocking(False)
+        #: Monotonic arrival time of the last datagram read (kernel-stamped; None: not known)
+        self.arrival_s: float | None = None
+        self._stamped = False
+        if SO_TIMESTAMP is not None:
+            with contextlib.suppress(OSError):
+                self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMP, 1)
+                self._stamped = True
 
     def fileno(self) -> int:
         return self.sock.fileno()
 
     def read(self) -> bytes:
-        data, self.last_from = self.sock.recvfrom(MAX_DATAGRAM)
+        if not self._stamped:
+            data, self.last_from = self.sock.recvfrom(MAX_DATAGRAM)
+            return data
+        data, ancillary, _, self.last_from = self.sock.recvmsg(MAX_DATAGRAM, 64)
+        self.arrival_s = None
+        for level, kind, value in ancillary:
+            if level == socket.SOL_SOCKET and kind == SO_TIMESTAMP and len(value) >= 16:
+                sec, usec = struct.unpack("qq", value[:16])
+                self.arrival_s = sec + usec * 1e-6 - (time.time() - time.monotonic())
         return data
 
     def accepted_from_last(self) -> None:
@@ -162,6 +185,9 @@ class GateThread:
         #: hand-over, at most every ``TAP_HANDOVER_PERIOD_S`` (the link's)
         self.on_tap: Callable[[list], None] | None = None
         self._handover_due_s = 0.0
+        #: > 0: the vehicle's datagrams are read in batches this often (``batch_reads``)
+        self.read_period_s = 0.0
+        self._vehicle_due_s = 0.0
         self.vehicle = open_vehicle_side(url)
         self.local = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.local.bind(("127.0.0.1", 0))
@@ -227,17 +253,26 @@ class GateThread:
             if frame is not None:
                 self.send_own(frame)
 
+    def batch_reads(self, period_s: float) -> None:
+        """Read the vehicle's datagrams every ``period_s`` (all that wait, at once) instead of
+        as each arrives; 0: as each arrives. The companion batches while its setpoint stream
+        runs: about 40 telemetry datagrams a second then cost 10 wake-ups of this thread
+        instead of 40; MAVSDK's frames to the vehicle still go at once."""
+        self.read_period_s = max(float(period_s), 0.0)
+
     def _run(self) -> None:
         while not self._stop.is_set():
             try:
                 self._onboard_heartbeat()
                 self._send_posted()
-                ready, _, _ = select.select([self.vehicle, self.local], [], [], self._select_timeout_s())
+                now = time.monotonic()
+                watched = [self.local, self.vehicle] if now >= self._vehicle_due_s else [self.local]
+                ready, _, _ = select.select(watched, [], [], self._select_timeout_s(now))
             except (OSError, ValueError):
                 return                              # closed under us
             for side in ready:
                 try:
-                    self._from_vehicle() if side is self.vehicle else self._from_mavsdk()
+                    self._read_vehicle() if side is self.vehicle else self._from_mavsdk()
                 except (BlockingIOError, InterruptedError):
                     continue
                 except OSError as exc:
@@ -246,11 +281,25 @@ class GateThread:
                     log.exception("gate: unexpected error (the link goes on)")
             self._hand_over_taps()
 
-    def _select_timeout_s(self) -> float:
-        """Until the next hand-over of the messages read (``_hand_over_taps``) when some wait."""
-        if not self.inbound.taps:
-            return SELECT_TIMEOUT_S
-        return min(SELECT_TIMEOUT_S, max(self._handover_due_s - time.monotonic(), 0.0))
+    def _select_timeout_s(self, now: float) -> float:
+        """Until the next batch of the vehicle's datagrams or hand-over of the messages read
+        (``_hand_over_taps``), when one is due sooner than ``SELECT_TIMEOUT_S``."""
+        timeout = SELECT_TIMEOUT_S
+        if now < self._vehicle_due_s:
+            timeout = min(timeout, self._vehicle_due_s - now)
+        if self.inbound.taps:
+            timeout = min(timeout, self._handover_due_s - now)
+        return max(timeout, 0.0)
+
+    def _read_vehicle(self) -> None:
+        """One datagram (or read of a byte stream); with ``read_period_s``, every datagram that
+        waits, and the next read not before ``read_period_s``."""
+        if self.read_period_s <= 0.0:
+            self._from_vehicle()
+            return
+        self._vehicle_due_s = time.monotonic() + self.read_period_s
+        for _ in range(MAX_BATCH_DATAGRAMS if isinstance(self.vehicle, UdpVehicleSide) else 1):
+            self._from_vehicle()                  # BlockingIOError when none is left
 
     def _hand_over_taps(self) -> None:
         """Hand the messages read to ``on_tap`` in one batch, at most every ``TAP_HANDOVER_PERIOD_S``."""
@@ -263,7 +312,8 @@ class GateThread:
             self.on_tap(taps)
 
     def _from_vehicle(self) -> None:
-        frames = self.inbound.filter(self.vehicle.read())
+        data = self.vehicle.read()
+        frames = self.inbound.filter(data, getattr(self.vehicle, "arrival_s", None))
         while self.inbound.replies:
             self.send_own(self.inbound.replies.pop(0))
         if self.inbound.autopilot_heard:

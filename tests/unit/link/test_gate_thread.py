@@ -80,3 +80,38 @@ def test_link_only_telemetry_reaches_the_tlog_and_the_link_but_not_mavsdk(tmp_pa
     assert len(batches) <= 2                                          # four datagrams, at most two wake-ups
     if len(batches) == 2:
         assert batches[1][0] - batches[0][0] >= TAP_HANDOVER_PERIOD_S * 0.9
+
+
+def test_batched_reads_keep_each_datagrams_kernel_arrival_time():
+    vehicle = udp_socket()
+    identity = Identity()
+    gate = GateThread(f"udpout://127.0.0.1:{vehicle.getsockname()[1]}", InboundFilter(identity),
+                      OutboundSigner(identity))
+    batches = []
+    gate.on_tap = lambda batch: batches.append((time.monotonic(), [(k, f["_t_s"]) for k, f in batch]))
+    gate.inbound.tapped.update({"ATTITUDE", "LOCAL_POSITION_NED"})
+    gate.batch_reads(0.4)
+    gate.start()
+    try:
+        mav = mavlink.MAVLink(None, srcSystem=VEHICLE[0], srcComponent=VEHICLE[1])
+        gate.vehicle.write(b"\0")                                  # binds the gate's side (udpout)
+        gate_address = ("127.0.0.1", gate.vehicle.sock.getsockname()[1])
+        sent = {}
+        hb = mav.heartbeat_encode(mavlink.MAV_TYPE_HELICOPTER, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 4, 4)
+        vehicle.sendto(hb.pack(mav), gate_address)                  # read at once; the next batch in 0.4 s
+        time.sleep(0.05)
+        for kind, msg in (("ATTITUDE", mav.attitude_encode(1000, 0.1, 0.2, 0.3, 0, 0, 0)),
+                          ("LOCAL_POSITION_NED", mav.local_position_ned_encode(1000, 1.0, 2.0, -10.0, 0, 0, 0))):
+            sent[kind] = time.monotonic()
+            vehicle.sendto(msg.pack(mav), gate_address)
+            time.sleep(0.15)
+        deadline = time.monotonic() + 2.0
+        while not batches and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        gate.close()
+    handed_at, taps = batches[0]
+    assert [kind for kind, _ in taps] == ["ATTITUDE", "LOCAL_POSITION_NED"]   # one batch, both
+    assert handed_at - sent["ATTITUDE"] >= 0.2                                  # read late, together
+    for kind, t_s in taps:
+        assert abs(t_s - sent[kind]) < 0.02, (kind, t_s - sent[kind])          # stamped on arrival
