@@ -40,6 +40,10 @@ from companion.link.timerfd import PeriodicTimer
 log = logging.getLogger(__name__)
 
 
+#: The interpreter's switch interval while the stream runs (s; ``raise_stream_priority``).
+STREAM_SWITCH_INTERVAL_S = 0.0005
+
+
 def raise_stream_priority(fifo_priority: int = 10, nice_increment: int = -5) -> str:
     """Give the calling thread (the event loop streaming setpoints) scheduling priority.
 
@@ -52,12 +56,20 @@ def raise_stream_priority(fifo_priority: int = 10, nice_increment: int = -5) -> 
     runs long computations: start planning threads with ``restore_normal_priority`` (as the
     daemon does) or planning processes with ``planning_worker_init``.
 
+    It also shortens the interpreter's switch interval to ``STREAM_SWITCH_INTERVAL_S``: a
+    thread waiting for the GIL asks its holder to drop it after that long (Python's default is
+    5 ms), so the stream waits at most about that for a callback of another thread (the gate,
+    MAVSDK, zenoh, the planning pool's result thread) that holds the GIL when its timer fires.
+
     Returns
     -------
     str
         ``"fifo"``, ``"nice"`` or ``"normal"``: what was obtained.
     """
     import os
+    import sys
+
+    sys.setswitchinterval(STREAM_SWITCH_INTERVAL_S)
 
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(fifo_priority)))

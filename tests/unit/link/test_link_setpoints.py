@@ -131,14 +131,19 @@ def test_send_errors_do_not_stop_the_stream():
 
 def test_priority_helpers_report_what_they_got():
     import os
+    import sys
     from companion.link import raise_stream_priority, restore_normal_priority
+    from companion.link.setpoints import STREAM_SWITCH_INTERVAL_S
+    interval = sys.getswitchinterval()
     got = raise_stream_priority()
     try:
         assert got in ("fifo", "nice", "normal")
         if got == "fifo":
             assert os.sched_getscheduler(0) == os.SCHED_FIFO
+        assert sys.getswitchinterval() == pytest.approx(STREAM_SWITCH_INTERVAL_S)   # GIL waits bounded
     finally:
         restore_normal_priority()
+        sys.setswitchinterval(interval)
     if hasattr(os, "sched_getscheduler"):
         assert os.sched_getscheduler(0) == os.SCHED_OTHER
 
