@@ -195,7 +195,7 @@ class ActiveReference:
         self.t0_s = t0_s + turn_s
         self.t_end_s = self.t0_s + trajectory.duration_s
         self.table = ReferenceTable(trajectory)
-        self._end_pos_ned_m: np.ndarray | None = None
+        self._end_gap: tuple[tuple, float] | None = None     # (goal, end_gap_m)
         self._last_sampled_s: float | None = None
 
     def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
@@ -235,12 +235,14 @@ class ActiveReference:
         return t_s >= self.t_end_s
 
     def end_gap_m(self, goal_ned_m: np.ndarray) -> float:
-        """Distance from the trajectory's end point to ``goal_ned_m`` (m, common axes)."""
-        if self._end_pos_ned_m is None:          # evaluated once: asked every phase step
-            self._end_pos_ned_m = np.asarray(self.trajectory.end_pos_ned_m, dtype=float)
-        end = self._end_pos_ned_m
-        n = min(end.shape[0], goal_ned_m.shape[0])
-        return float(np.linalg.norm(end[:n] - goal_ned_m[:n]))
+        """Distance from the trajectory's end point to ``goal_ned_m`` (m, common axes);
+        computed once per goal (the phase machine asks at every step)."""
+        key = tuple(np.asarray(goal_ned_m, dtype=float).tolist())
+        if self._end_gap is None or self._end_gap[0] != key:
+            end = np.asarray(self.trajectory.end_pos_ned_m, dtype=float).tolist()
+            n = min(len(end), len(key))
+            self._end_gap = (key, math.dist(end[:n], key[:n]))
+        return self._end_gap[1]
 
 
 def wrap_pi(angle_rad: float) -> float:

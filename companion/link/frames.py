@@ -87,6 +87,12 @@ class LinkFrames:
         """A position (3,) or positions (K, 3) of the home frame in the vehicle's local frame."""
         return np.asarray(pos_home_ned_m, dtype=np.float64) + self.home_in_origin_ned_m
 
+    def to_home_floats(self, pos_origin_ned_m) -> list[float]:
+        """``to_home`` of one position (a sequence of 3 numbers) as a list of 3 floats."""
+        n, e, d = self.home_in_origin_ned_m.tolist()
+        x, y, z = pos_origin_ned_m
+        return [x - n, y - e, z - d]
+
     def to_origin_floats(self, pos_home_ned_m) -> list[float]:
         """``to_origin`` of one position (a sequence of 3 numbers) as a list of 3 floats (the
         setpoint stream's fast path: no numpy call)."""

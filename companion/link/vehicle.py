@@ -264,10 +264,6 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
                      np.round(self.frames.home_in_origin_ned_m, 3).tolist())
         return self.frames
 
-    def to_home_frame(self, pos_origin_ned_m) -> np.ndarray:
-        """A LOCAL_POSITION_NED position (vehicle frame) in the planning home's frame."""
-        return self.frames.to_home(pos_origin_ned_m)
-
 
 def route_mavsdk_logs() -> None:
     """Send MAVSDK's C++ log lines to Python logging (logger ``mavsdk``) instead of stderr."""

@@ -4,9 +4,9 @@ the zenoh router watch and link loss (``companion.daemon``)."""
 from __future__ import annotations
 
 import asyncio
+import math
 import logging
 
-import numpy as np
 
 from companion.errors import CompanionError
 from companion.geo import LocalFrame
@@ -31,9 +31,9 @@ class BackgroundTasks:
             boot_s = fields.get("time_boot_ms", 0) / 1000.0
             self.clock.observe(boot_s, fields["_t_s"])
             if self.reference is not None:
-                pos = self.link.to_home_frame([fields["x"], fields["y"], fields["z"]])
-                ref_pos = self.reference.state(boot_s)[0]      # mission time is vehicle time
-                self._errors_m.append(float(np.linalg.norm(pos - ref_pos)))
+                pos = self.link.frames.to_home_floats((fields["x"], fields["y"], fields["z"]))
+                ref_pos = self.reference.state_lists(boot_s)[0]   # mission time is vehicle time
+                self._errors_m.append(math.dist(pos, ref_pos))
 
     async def _watch_servos(self) -> None:
         async for fields in self.link.messages("SERVO_OUTPUT_RAW"):

@@ -94,7 +94,7 @@ class LegTasks:
             guided=None if tele.mode is None else tele.mode == GUIDED, mode_name=tele.mode_name,
             relink_pending=self._resume_needed,
             dist_to_goal_m=math.inf if tele.pos_ned_m is None else
-            float(np.linalg.norm(tele.pos_ned_m - leg.goal_ned_m)),
+            math.dist(tele.pos_ned_m.tolist(), leg.goal_ned_m.tolist()),
             acceptance_radius_m=radius, ref_end_t_s=None if ref is None else ref.t_end_s,
             ref_ends_short=ref is not None and ref.end_gap_m(leg.goal_ned_m) > radius,
             ref_resume=ref is not None and ref.resume,
