@@ -42,6 +42,14 @@ log = logging.getLogger(__name__)
 
 #: The interpreter's switch interval while the stream runs (s; ``raise_stream_priority``).
 STREAM_SWITCH_INTERVAL_S = 0.0005
+#: ``SetpointStreamer.sleep`` wakes on the loop's timer this long after its delay if no send
+#: woke it (s).
+SLEEP_BACKSTOP_S = 1.0
+
+
+def _wake(future: asyncio.Future) -> None:
+    if not future.done():
+        future.set_result(None)
 
 
 def raise_stream_priority(fifo_priority: int = 10, nice_increment: int = -5) -> str:
@@ -312,11 +320,15 @@ class SetpointStreamer:
         if not self.running:
             await asyncio.sleep(delay_s)
             return
-        future = asyncio.get_running_loop().create_future()
+        loop = asyncio.get_running_loop()
+        future = loop.create_future()
         self._sleepers.append((time.monotonic() + delay_s - 0.5 * self.period_s, future))
+        # a stream that stopped ticking without stop() must not hold the sleeper for ever
+        backstop = loop.call_later(delay_s + SLEEP_BACKSTOP_S, _wake, future)
         try:
             await future
         finally:
+            backstop.cancel()
             if not future.done():
                 future.cancel()
 

@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from companion.link.setpoints import SetpointStreamer, hold_position
+from companion.link.setpoints import SLEEP_BACKSTOP_S, SetpointStreamer, hold_position
 from companion.link.timerfd import PeriodicTimer
 from companion.view.sinks import RecordSinks
 
@@ -84,6 +84,14 @@ def test_sleep_wakes_right_after_a_send_once_the_delay_has_passed():
         await asyncio.sleep(0.03)
         await streamer.stop()                                   # stopping wakes every sleeper
         await asyncio.wait_for(waiting, 1.0)
+        streamer.start()
+        await asyncio.sleep(0.03)
+        streamer.set_source(None)                               # nothing sent: no tick wakes it...
+        streamer._after_tick = lambda: None                     # ...nor anything after a tick
+        start = time.monotonic()
+        await streamer.sleep(0.05)                              # the loop's timer does, late
+        assert 0.05 + SLEEP_BACKSTOP_S - 0.1 <= time.monotonic() - start <= 0.05 + SLEEP_BACKSTOP_S + 0.5
+        await streamer.stop()
 
     asyncio.run(main())
 
