@@ -9,13 +9,14 @@ The stream (50 Hz), the tracking error (every LOCAL_POSITION_NED) and the record
 the reference for its state about a hundred times a wall-clock second. Evaluating the smoothed
 trajectory for one instant costs about a millisecond of numpy overhead, so ``ReferenceTable``
 evaluates it for ten seconds of knots at once (``TABLE_STEP_S`` apart: 2.2 ms of CPU, against
-1.6 ms for one second) and interpolates between them: cubic Hermite for the position (from the velocity) and the velocity (from the
-acceleration), linear for the acceleration, the yaw (unwrapped) and the yaw rate. At the knots
-the values are the trajectory's own; between them, on the demo mission's legs, the position is
-within 5 micrometres and the velocity within 1 mm/s; an acceleration or yaw rate that steps
-(where the speed profile changes phase) is ramped over the 20 ms interval that holds the step.
-The stream evaluates the next chunk ahead of need, right after a send (``ActiveReference.prepare``),
-so a chunk's evaluation never delays a setpoint.
+1.6 ms for one second) and interpolates between them: cubic Hermite for the position (from the
+velocity) and the velocity (from the acceleration), linear for the acceleration, the yaw
+(unwrapped) and the yaw rate. At the knots the values are the trajectory's own; between them, on
+the demo mission's legs, the position is within 5 micrometres and the velocity within 1 mm/s; an
+acceleration or yaw rate that steps (where the speed profile changes phase) is ramped over the
+20 ms interval that holds the step.
+The stream evaluates the next chunk ahead of need, right after a send
+(``ActiveReference.prepare``), so a chunk's evaluation never delays a setpoint.
 """
 
 from __future__ import annotations
@@ -38,9 +39,9 @@ TABLE_CHUNK_KNOTS = 500
 #: Chunks kept: the stream's, the next one (``prepare``), the record's or the tracking error's
 #: (a little behind), and the M-GART refresh's start (a little ahead).
 TABLE_CHUNKS_KEPT = 3
-_ZERO3 = (0.0, 0.0, 0.0)
 #: ``ActiveReference.prepare`` evaluates the chunk this far ahead of the last setpoint (s).
 PREPARE_AHEAD_S = 1.0
+_ZERO3 = (0.0, 0.0, 0.0)
 
 
 class VehicleClock:

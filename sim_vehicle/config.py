@@ -29,6 +29,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from heli_common.ports import GCS_PORT, companion_port
 from sim_vehicle.adsb import AdsbSettings
 from sim_vehicle.control import ControllerSettings
 from sim_vehicle.rsc import RscSettings
@@ -250,6 +251,13 @@ class StreamGroupRates:
         return {f.name.upper(): getattr(self, f.name) for f in dataclasses.fields(self)}
 
 
+def instance_out(instance: int) -> tuple[str, ...]:
+    """The default telemetry addresses of vehicle ``instance``: the ground station on
+    127.0.0.1:14550 and its companion on 127.0.0.1:<14540 + instance> (as PX4 SITL numbers
+    them; ``companion run --instance N`` listens there)."""
+    return (f"127.0.0.1:{GCS_PORT}", f"127.0.0.1:{companion_port(instance)}")
+
+
 @dataclasses.dataclass(frozen=True)
 class LinkSettings:
     """The MAVLink endpoint.
@@ -275,7 +283,7 @@ class LinkSettings:
 
     port: int = 0
     bind_host: str = "0.0.0.0"
-    out: tuple[str, ...] = ("127.0.0.1:14550", "127.0.0.1:14540")   # instance N: 14540 + N (instance_out)
+    out: tuple[str, ...] = instance_out(0)          # instance N: ``instance_out(N)``
     peer_timeout_s: float = 10.0
     mission_upload_timeout_s: float = 5.0
     mav1: StreamGroupRates = dataclasses.field(default_factory=StreamGroupRates)
@@ -317,13 +325,6 @@ class VehicleSettings:
     rsc: RscSettings = dataclasses.field(default_factory=RscSettings)
     adsb: AdsbSettings = dataclasses.field(default_factory=AdsbSettings)
     controller: ControllerSettings = dataclasses.field(default_factory=ControllerSettings)
-
-
-def instance_out(instance: int) -> tuple[str, ...]:
-    """The default telemetry addresses of vehicle ``instance``: the ground station on
-    127.0.0.1:14550 and its companion on 127.0.0.1:<14540 + instance> (as PX4 SITL numbers
-    them; ``companion run --instance N`` listens there)."""
-    return ("127.0.0.1:14550", f"127.0.0.1:{14540 + int(instance)}")
 
 
 def parse_host_port(text: str, what: str = "address") -> tuple[str, int]:

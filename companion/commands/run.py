@@ -115,7 +115,9 @@ def instance_overrides(instance: int) -> dict:
     system id N + 1 (the zenoh prefix ``uav/<N+1>``; the zenoh endpoint follows it)."""
     if not 0 <= instance <= 200:
         raise ConfigError(f"--instance: expected 0..200, got {instance}")
-    return {"link": {"connect": f"udpin://0.0.0.0:{14540 + instance}"}, "zenoh": {"sysid": instance + 1}}
+    from heli_common.ports import companion_port
+
+    return {"link": {"connect": f"udpin://0.0.0.0:{companion_port(instance)}"}, "zenoh": {"sysid": instance + 1}}
 
 
 def settings_overrides(args: argparse.Namespace) -> dict:

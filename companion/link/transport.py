@@ -135,6 +135,9 @@ class StreamVehicleSide:
     def fileno(self) -> int:
         return self.conn.fd if getattr(self.conn, "fd", None) is not None else self.conn.port.fileno()
 
+    #: Arrival times are not known on a byte stream: the gate stamps what it reads when it reads it.
+    arrival_s = None
+
     def read(self) -> bytes:
         return bytes(self.conn.recv(MAX_DATAGRAM) or b"")
 
@@ -313,7 +316,7 @@ class GateThread:
 
     def _from_vehicle(self) -> None:
         data = self.vehicle.read()
-        frames = self.inbound.filter(data, getattr(self.vehicle, "arrival_s", None))
+        frames = self.inbound.filter(data, self.vehicle.arrival_s)
         while self.inbound.replies:
             self.send_own(self.inbound.replies.pop(0))
         if self.inbound.autopilot_heard:

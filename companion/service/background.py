@@ -4,9 +4,8 @@ the zenoh router watch and link loss (``companion.daemon``)."""
 from __future__ import annotations
 
 import asyncio
-import math
 import logging
-
+import math
 
 from companion.errors import CompanionError
 from companion.geo import LocalFrame

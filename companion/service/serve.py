@@ -45,8 +45,8 @@ from companion.errors import CompanionError, FlightAborted, LinkError, MissionEr
 from companion.link.onboard import OnboardCommand, OnboardComponent
 from companion.link.setpoints import raise_stream_priority
 from companion.link.startup import is_airborne
-from companion.service.legs import GUIDED
 from companion.link.vehicle import check_url
+from companion.service.legs import GUIDED
 
 log = logging.getLogger(__name__)
 
