@@ -345,11 +345,9 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         self.hold_here(self.link.telemetry.pos_ned_m,
                        "joined in the air" if self.summary.joined else "takeoff complete")
         self.streamer.start()
-        self.link.batch_reads(True)                               # telemetry in 10 Hz batches
         for leg in self.legs:
             await self.fly_leg(leg)
         self.hold_here(self.link.telemetry.pos_ned_m, "mission legs done")
-        self.link.batch_reads(False)
         await self.streamer.stop()
         await self.finish(self.local_mission.end_action)
         self.summary.outcome = "completed"
@@ -358,7 +356,6 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
     async def shutdown(self) -> None:
         """Stop streaming and background tasks, write the summary, close the link."""
         if self.streamer is not None:
-            self.link.batch_reads(False)
             await self.streamer.stop()
             jitter = self.streamer.stats()
             self.record("event", name="setpoint_jitter", **jitter.as_dict())

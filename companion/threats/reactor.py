@@ -147,7 +147,6 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         self._alt_dirty = False
         self._local_seq = 0
         self._tasks: list[asyncio.Task] = []
-        self._threats_held = asyncio.Event()      # the monitor sleeps on it while none is held
 
     def _default_manager(self, leg) -> ThreatManager:
         s = self.settings
@@ -213,9 +212,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         self.schedule(update.received_mono_s, "threat")
 
     def table_changed(self) -> None:
-        """Tell ``on_table_change`` (the snapshot) the threats now held; wake the monitor."""
-        if len(self.table):
-            self._threats_held.set()
+        """Tell ``on_table_change`` (the snapshot) the threats now held."""
         if self.on_table_change is None:
             return
         now = self.clock_now_s()

@@ -43,7 +43,6 @@ class ReactorDecisions:
     _busy: bool
     _resume_waiting: bool
     _pending: tuple[float, str] | None
-    _threats_held: asyncio.Event
 
     def schedule(self, trigger_mono_s: float, trigger: str = "threat") -> None:
         """Decide now, or right after the decision under way (with the newest threats).
@@ -151,19 +150,14 @@ class ReactorDecisions:
 
     async def _monitor(self) -> None:
         """Re-check the active reference every ``monitor_period_s`` (wall clock) while a leg is
-        flown and a threat is known; skip a tick while a decision is under way. With no threat
-        held it sleeps until one is (``table_changed``): a new threat is decided on at once."""
+        flown and a threat is known; skip a tick while a decision is under way."""
         next_s = time.monotonic()
         while True:
             next_s = max(next_s + self.monitor_period_s, time.monotonic())
             await asyncio.sleep(next_s - time.monotonic())
-            self.table.expire(self.clock_now_s())
-            if not len(self.table):               # nothing to re-check until a threat is held
-                self._threats_held.clear()
-                await self._threats_held.wait()
-                next_s = time.monotonic()
-                continue
             if self.manager is None or self.leg is None or self._busy or self._resume_waiting \
                     or self.reference() is None:
                 continue
-            self.schedule(time.monotonic(), "monitor")
+            self.table.expire(self.clock_now_s())
+            if len(self.table):
+                self.schedule(time.monotonic(), "monitor")
