@@ -80,9 +80,11 @@ def test_a_killed_companion_leaves_a_hover_and_resume_finishes_the_mission_with_
                 watcher = FlightWatcher(bus)
                 wait_until(lambda: watcher.status and watcher.status["leg"] >= 0 and watcher.status["path_id"],
                            180, "leg 0 flown")
-                wait_until(lambda: 6 in _plans(tmp_path / "first.jsonl"), 30, "the plans in the record")
+                wait_until(lambda: 7 in _plans(tmp_path / "first.jsonl"), 30, "the plans in the record")
                 plans = _plans(tmp_path / "first.jsonl")
-                centre = midpoint_of(plans[6]["path_ned_m"])          # the leg from item 5 to item 6
+                # on the return leg (item 6 to home): a straight line whichever way GART took around
+                # the exclusion zones, so the resumed companion's own plan meets it too
+                centre = midpoint_of(plans[7]["path_ned_m"])
                 threat = Threat("keep1", "popup", "local_ned", tuple(map(float, centre)), (0.0, 0.0, 0.0),
                                 THREAT_RADIUS_M, THREAT_TTL_S)
                 assert bus.wait_for_subscriber(10.0, threat.id)
