@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Literal
 
 from companion.errors import ConfigError
+from companion.fleet.settings import FleetSettings
 from companion.flight_plan import FlightPlanSettings
 from companion.link.startup import StartupSettings
 from companion.link.streams import StreamSettings
@@ -153,7 +154,7 @@ class Settings:
     ----------
     seed : int
         Random seed of every planner run (logged, so that any flight can be replayed).
-    link, startup, zenoh, mission, flight, planning, smoothing, feasibility, threats, adsb, state, view
+    link, startup, zenoh, mission, flight, planning, smoothing, feasibility, threats, adsb, state, view, fleet
         The tables of the tree (their keys are documented by their own classes).
     """
 
@@ -170,6 +171,7 @@ class Settings:
     adsb: AdsbSettings = AdsbSettings()
     state: StateSettings = StateSettings()
     view: ViewSettings = ViewSettings()
+    fleet: FleetSettings = FleetSettings()
 
     def __post_init__(self) -> None:
         if self.seed < 0:

@@ -196,7 +196,8 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         """The status message of ``uav/<sysid>/status``."""
         tele = self.link.telemetry
         ref = self.reference
-        return {"t_s": round(self.clock.now_s(), 3), "mode": tele.mode_name, "armed": tele.armed,
+        return {"t_s": round(self.clock.now_s(), 3), "sysid": self.settings.zenoh.sysid,
+                "home_lla": self.home_lla, "mode": tele.mode_name, "armed": tele.armed,
                 "leg": self.leg_index, "legs": len(self.legs),
                 "path_id": ref.path_id if ref else None,
                 "pos_ned_m": None if tele.pos_ned_m is None else [round(float(v), 3) for v in tele.pos_ned_m],

@@ -103,6 +103,10 @@ def add_flight_arguments(p) -> None:
     p.add_argument("--state-dir", metavar="DIR",
                    help="keep the threat snapshot here (state.dir): written as threats change, "
                    "read by --resume")
+    p.add_argument("--no-fleet", action="store_true", dest="no_fleet",
+                   help="neither share this vehicle's trajectory nor avoid the others' (fleet.enabled = false)")
+    p.add_argument("--fleet-delay-ms", type=float, metavar="MS",
+                   help="testing: hold every trajectory message MS ms before publishing it (fleet.inject_delay_s)")
     p.add_argument("--no-feasibility", action="store_true", dest="no_feasibility",
                    help="do not check the legs on the helicopter's closed loop (feasibility.enabled = false)")
     p.add_argument("--print-config", nargs="?", const="toml", choices=("toml", "json"), metavar="FORMAT",
@@ -139,6 +143,10 @@ def settings_overrides(args: argparse.Namespace) -> dict:
         out.setdefault("startup", {})["vehicle"] = args.vehicle
     if getattr(args, "no_feasibility", False):
         out.setdefault("feasibility", {})["enabled"] = False
+    if getattr(args, "no_fleet", False):
+        out.setdefault("fleet", {})["enabled"] = False
+    if getattr(args, "fleet_delay_ms", None) is not None:
+        out.setdefault("fleet", {})["inject_delay_s"] = args.fleet_delay_ms / 1000.0
     if getattr(args, "interlock", None):
         out.setdefault("startup", {})["interlock"] = args.interlock
     if getattr(args, "adsb", False):
