@@ -18,7 +18,7 @@ import sys
 from companion.errors import CompanionError
 from companion.geo import GeoError
 
-COMMAND_MODULES = ("run", "serve", "mission_io", "plan", "threat", "keys", "router", "report", "demo")
+COMMAND_MODULES = ("run", "serve", "mission_io", "plan", "threat", "keys", "router", "report", "demo", "fleet")
 
 log = logging.getLogger(__name__)
 
