@@ -191,13 +191,18 @@ def write_missions(plans, out_dir: str | Path, stem: str = "uav") -> list[Path]:
 
 
 def planned_length_m(path: str | Path) -> float:
-    """Horizontal-and-vertical length of a mission's straight legs (takeoff climb included, the
-    landing not), from its home: the length the fleet's extra path is measured against."""
+    """Length (m, 3D) of a mission flown in straight lines from its home on the ground: the
+    climb, the legs and, when it ends with RTL or LAND, the descent to the ground; what a flown
+    track's length is compared with (its extra path)."""
     from companion.mission import load_mission_file, mission_to_local
 
     plan = load_mission_file(path)
     local = mission_to_local(plan, home_lla=mission_home(path))
     points = [np.zeros(3)] + [np.asarray(w.pos_ned_m, dtype=float) for w in local.waypoints]
+    if local.end_action == "rtl":
+        points.append(np.zeros(3))
+    elif local.end_action == "land":
+        points.insert(-1, np.array([points[-1][0], points[-1][1], points[-2][2]]))
     return float(sum(np.linalg.norm(b - a) for a, b in zip(points, points[1:])))
 
 

@@ -216,18 +216,10 @@ def path_length_m(pos) -> float:
     return float(np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1)))
 
 
-def airborne(pos, ground_down_m: float | None = None, min_height_m: float = 1.0) -> np.ndarray:
-    """Mask of the samples at least ``min_height_m`` above the ground (default ground: the
-    track's first sample's down)."""
-    p = np.asarray(pos, dtype=np.float64)
-    ground = p[0, 2] if ground_down_m is None else ground_down_m
-    return (ground - p[:, 2]) >= min_height_m
-
-
 def fleet_separation(tlogs, sysids=None, step_s: float = GRID_STEP_S) -> dict:
     """The fleet's numbers from its simulators' tlogs: minimum pairwise separation (and the
-    pair by system id, the time), every pair's minimum, each vehicle's flown length (airborne
-    samples) and the tracks' sample counts.
+    pair by system id, the time), every pair's minimum, each vehicle's flown length (the whole
+    track: takeoff and landing included) and the tracks' sample counts.
 
     Parameters
     ----------
@@ -241,10 +233,7 @@ def fleet_separation(tlogs, sysids=None, step_s: float = GRID_STEP_S) -> dict:
     times, ned, _ = tracks_in_frame(tracks)
     sep = separation(times, ned, step_s)
     ids = [t.sysid for t in tracks]
-    lengths = {}
-    for tr, p in zip(tracks, ned):
-        up = airborne(p)
-        lengths[tr.sysid] = path_length_m(p[up]) if up.any() else 0.0
+    lengths = {tr.sysid: path_length_m(p) for tr, p in zip(tracks, ned)}
     return {"min_separation_m": sep.min_m,
             "closest_pair": None if sep.pair is None else [ids[sep.pair[0]], ids[sep.pair[1]]],
             "closest_t_s": sep.t_s, "common_s": sep.common_s,
