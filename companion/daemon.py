@@ -364,6 +364,9 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
             counts = self.threats.bus.stats()
             self.summary.threat_updates = counts["received"]
             self.record("event", name="threat_bus", **counts)
+            if self.threats.fleet is not None:
+                self.summary.fleet = self.threats.fleet.summary()
+                self.record("event", name="fleet", **self.summary.fleet)
             await self.threats.stop()
         if self.snapshots is not None:
             self.snapshots.close()

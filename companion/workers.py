@@ -90,15 +90,17 @@ def warm_up() -> float:
     """
     t0 = time.perf_counter()
     from companion.planning import gart, mgart
-    from companion.world import Disc, World
+    from companion.world import Disc, Sphere, World
 
     for module in ("companion.flight_plan", "companion.threats.policy", "companion.smoothing.feasibility"):
         importlib.import_module(module)      # smoothing and timing; the threat manager and M-GART
 
-    world = World([Disc((5.0, 5.0), 1.5)], np.zeros(2), np.full(2, 10.0))   # no straight line: iterations run
-    start, goal = np.array([1.0, 1.0]), np.array([9.0, 9.0])
-    gart(world, start, goal, rng=np.random.default_rng(0), stop_at_first=True, max_time_s=60.0)
-    mgart(world, start, goal, 1, rng=np.random.default_rng(0), max_time_s=60.0)
+    # 2D and 3D: numba specialises on the points' tuple length; no straight line: iterations run
+    for world in (World([Disc((5.0, 5.0), 1.5)], np.zeros(2), np.full(2, 10.0)),
+                  World([Sphere((5.0, 5.0, 5.0), 1.5)], np.zeros(3), np.full(3, 10.0))):
+        start, goal = np.full(world.dim, 1.0), np.full(world.dim, 9.0)
+        gart(world, start, goal, rng=np.random.default_rng(0), stop_at_first=True, max_time_s=60.0)
+        mgart(world, start, goal, 1, rng=np.random.default_rng(0), max_time_s=60.0)
     return time.perf_counter() - t0
 
 

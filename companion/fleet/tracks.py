@@ -11,7 +11,9 @@ of vehicles is measured on it.
   GLOBAL_POSITION_INT (source system ``sysid``, component 1).
 - ``separation(tracks_t, tracks_ned)``: the minimum 3D distance of each pair over their common
   time, the pair and the time of the closest approach (``Separation``).
-- ``path_length_m(ned)``: the flown length of a track.
+- ``path_length_m(ned)``: the flown length of a track;
+- ``achieved_speedup(track)``: the simulator's clock against the wall clock (did it keep its
+  ``--speedup``?).
 
 The numerics (``common_grid``, ``resample``, ``separation``, ``path_length_m``) take plain arrays
 and are unit-tested on synthetic tracks.
@@ -27,7 +29,7 @@ import numpy as np
 from companion.errors import ConfigError
 
 __all__ = ["Track", "Separation", "read_tlog_track", "tracks_in_frame", "common_grid", "resample", "separation",
-           "path_length_m", "fleet_separation"]
+           "path_length_m", "achieved_speedup", "fleet_separation"]
 
 #: Spacing of the common grid (wall s) added to the samples' own times.
 GRID_STEP_S = 0.05
@@ -44,11 +46,14 @@ class Track:
         Wall-clock time of each sample (s since the epoch), increasing.
     lla : ndarray, shape (K, 3)
         Latitude deg, longitude deg, altitude m AMSL.
+    boot_s : ndarray, shape (K,), optional
+        The vehicle's own clock at each sample (``time_boot_ms`` / 1000: simulated s).
     """
 
     sysid: int
     t_s: np.ndarray
     lla: np.ndarray
+    boot_s: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -110,7 +115,8 @@ def read_tlog_track(path: str | Path, sysid: int | None = None, *, component: in
                 sysid = msg.get_srcSystem()
             if msg.get_srcSystem() != sysid:
                 continue
-            rows.append((float(msg._timestamp), msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3))
+            rows.append((float(msg._timestamp), msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3,
+                         msg.time_boot_ms * 1e-3))
     finally:
         conn.close()
     if not rows:
@@ -120,7 +126,7 @@ def read_tlog_track(path: str | Path, sysid: int | None = None, *, component: in
     arr = arr[order]
     keep = np.concatenate([[True], np.diff(arr[:, 0]) > 0.0])      # one sample per stamp
     arr = arr[keep]
-    return Track(int(sysid), arr[:, 0], arr[:, 1:])
+    return Track(int(sysid), arr[:, 0], arr[:, 1:4], arr[:, 4])
 
 
 def tracks_in_frame(tracks, frame=None) -> tuple[list[np.ndarray], list[np.ndarray], object]:
@@ -216,6 +222,19 @@ def path_length_m(pos) -> float:
     return float(np.sum(np.linalg.norm(np.diff(p, axis=0), axis=1)))
 
 
+def achieved_speedup(track: Track) -> dict:
+    """How fast the vehicle's clock ran against the wall clock: ``speedup`` (simulated s per
+    wall s over the whole track) and ``max_lag_s`` (the largest wall-clock lag of a sample behind
+    the straight line through the first sample at that speed-up ... a stall of the simulator)."""
+    if track.boot_s is None or len(track) < 2 or track.t_s[-1] <= track.t_s[0]:
+        return {"speedup": float("nan"), "max_lag_s": float("nan")}
+    wall = track.t_s - track.t_s[0]
+    sim = track.boot_s - track.boot_s[0]
+    speedup = float(sim[-1] / wall[-1])
+    lag = wall - sim / speedup if speedup > 0 else np.zeros_like(wall)
+    return {"speedup": speedup, "max_lag_s": float(np.max(lag) - np.min(lag))}
+
+
 def fleet_separation(tlogs, sysids=None, step_s: float = GRID_STEP_S) -> dict:
     """The fleet's numbers from its simulators' tlogs: minimum pairwise separation (and the
     pair by system id, the time), every pair's minimum, each vehicle's flown length (the whole
@@ -234,9 +253,12 @@ def fleet_separation(tlogs, sysids=None, step_s: float = GRID_STEP_S) -> dict:
     sep = separation(times, ned, step_s)
     ids = [t.sysid for t in tracks]
     lengths = {tr.sysid: path_length_m(p) for tr, p in zip(tracks, ned)}
+    speed = {tr.sysid: achieved_speedup(tr) for tr in tracks}
     return {"min_separation_m": sep.min_m,
             "closest_pair": None if sep.pair is None else [ids[sep.pair[0]], ids[sep.pair[1]]],
             "closest_t_s": sep.t_s, "common_s": sep.common_s,
             "pair_min_m": {f"{ids[i]}-{ids[j]}": d for (i, j), d in sep.pair_min_m.items()},
             "path_length_m": lengths, "samples": {t.sysid: len(t) for t in tracks},
+            "speedup": {k: v["speedup"] for k, v in speed.items()},
+            "max_lag_s": {k: v["max_lag_s"] for k, v in speed.items()},
             "separation": sep}

@@ -24,6 +24,7 @@ class FlightSummary:
     decisions: int = 0
     min_threat_separation_m: float = math.inf
     latency_ms: dict = field(default_factory=dict)
+    fleet: dict = field(default_factory=dict)
     threat_updates: int = 0
     joined: bool = False
     resumed_at_seq: int | None = None

@@ -19,6 +19,7 @@ Pure: no I/O; randomness from ``rng``.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass
 
@@ -290,7 +291,7 @@ def static_spheres(sit: Situation, keep_free) -> list:
         if tube.speed_m_s > 0.05:
             continue
         c, r = tube.center_at(now)[0], float(tube.radius_at(now)[0])
-        if _keeps_free(c, r, keep_free, sit.dim):
+        if math.isfinite(r) and _keeps_free(c, r, keep_free, sit.dim):
             out.append(ball(c, r, sit.dim))
     return out
 
@@ -299,6 +300,8 @@ def meeting_spheres(sit: Situation, tube, t_meet_s: float, keep_free) -> list:
     """The stretch of a mover's track around the time ``t_meet_s`` a candidate would meet it."""
     times = t_meet_s + np.linspace(-MEETING_HALF_S, MEETING_HALF_S, 5)
     radius = float(tube.radius_at(np.array([t_meet_s + MEETING_HALF_S]))[0]) + 0.5
+    if not math.isfinite(radius):         # the tube has ended by then
+        return []
     return [ball(c, radius, sit.dim) for c in tube.center_at(times) if _keeps_free(c, radius, keep_free, sit.dim)]
 
 

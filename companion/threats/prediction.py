@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Tube", "predict_tubes", "STATIC_SPEED_M_S"]
+__all__ = ["Tube", "TrajectoryTube", "predict_tubes", "STATIC_SPEED_M_S"]
 
 #: A threat slower than this (m/s) counts as static: its tube does not grow.
 STATIC_SPEED_M_S = 0.05
@@ -75,6 +75,57 @@ class Tube:
         return float(np.linalg.norm(self.vel_ned_m_s))
 
 
+@dataclass(frozen=True)
+class TrajectoryTube:
+    """Another vehicle along its shared trajectory (``companion.fleet``): a ball whose centre
+    follows the samples (linearly between them; held before the first and after the last) and
+    whose radius grows with the time since the message that carried them.
+
+    Attributes
+    ----------
+    threat_id : str
+    times_s : ndarray, shape (K,)
+        Increasing sample times on the checking clock (s).
+    ned_m : ndarray, shape (K, 3)
+    radius_m : float
+        Inflated radius at ``t0_s`` (m).
+    bare_radius_m : float
+    t0_s : float
+        Time of the message (checking clock, s): the growth starts there.
+    growth_m_s, growth_max_m : float
+    expires_t_s : float
+    """
+
+    threat_id: str
+    times_s: np.ndarray
+    ned_m: np.ndarray
+    radius_m: float
+    bare_radius_m: float
+    t0_s: float
+    growth_m_s: float = 0.0
+    growth_max_m: float = 0.0
+    expires_t_s: float = math.inf
+
+    def center_at(self, t_s: np.ndarray) -> np.ndarray:
+        """Centre (K, 3) at clock times ``t_s`` (K,)."""
+        t = np.asarray(t_s, dtype=float).reshape(-1)
+        return np.stack([np.interp(t, self.times_s, self.ned_m[:, i]) for i in range(3)], axis=1)
+
+    def radius_at(self, t_s: np.ndarray) -> np.ndarray:
+        """Inflated radius (K,); -inf after ``expires_t_s``."""
+        t = np.asarray(t_s, dtype=float).reshape(-1)
+        grow = np.minimum(self.growth_max_m, self.growth_m_s * np.maximum(t - self.t0_s, 0.0))
+        return np.where(t <= self.expires_t_s, self.radius_m + grow, -np.inf)
+
+    @property
+    def speed_m_s(self) -> float:
+        """Fastest speed between two samples (0 for a hover)."""
+        if len(self.times_s) < 2:
+            return 0.0
+        step = np.linalg.norm(np.diff(self.ned_m, axis=0), axis=1) / np.diff(self.times_s)
+        return float(step.max())
+
+
 def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
                   uncertainty_max_m: float = 0.0) -> list[Tube]:
     """Tubes of ``threats`` (local-frame ``Threat`` records) for the space-time check.
@@ -94,6 +145,9 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
     """
     out = []
     for th in threats:
+        if hasattr(th, "tube"):                 # another vehicle: its own shape (companion.fleet)
+            out.append(th.tube(inflation_m))
+            continue
         vel = np.asarray(th.velocity_ned_m_s, dtype=float)
         moving = float(np.linalg.norm(vel)) > STATIC_SPEED_M_S
         out.append(Tube(th.uid, th.pos_ned_m, vel, float(th.received_t_s),

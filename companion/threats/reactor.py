@@ -147,6 +147,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         self._alt_dirty = False
         self._local_seq = 0
         self._tasks: list[asyncio.Task] = []
+        self.fleet = None
 
     def _default_manager(self, leg) -> ThreatManager:
         s = self.settings
@@ -164,6 +165,13 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         loop = asyncio.get_running_loop()
         for coro in (self._monitor(), self._refresh_alternatives_periodically()):
             self._tasks.append(loop.create_task(coro, name=coro.__name__))
+        if self.settings.fleet.enabled:
+            from companion.fleet.link import FleetLink
+
+            self.fleet = FleetLink(self.settings, self.bus.session, self.bus.sysid, home_lla,
+                                   clock_now_s=self.clock_now_s, reference=self.reference,
+                                   position_ned_m=self.position_ned_m)
+            self.fleet.start(loop)
 
     async def stop(self) -> None:
         """Stop the background tasks; close the bus, or only unsubscribe with ``keep_bus_open``."""
@@ -171,6 +179,8 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         self._tasks.clear()
+        if self.fleet is not None:
+            await self.fleet.stop()
         if self.keep_bus_open:
             self.bus.unsubscribe()
         else:
@@ -188,6 +198,15 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
                        "max": float(np.max(v))} for kind, v in self.latencies_ms.items()}
 
     # ------------------------------------------------------------------ threats in
+    def threats_now(self, t_s: float) -> list:
+        """Every threat to decide on at mission time ``t_s``: the table's and the other vehicles'."""
+        held = self.table.snapshot(t_s)
+        return held if self.fleet is None else [*held, *self.fleet.threats(t_s)]
+
+    def has_threats(self) -> bool:
+        """Anything to monitor: a threat held, or another vehicle known."""
+        return bool(len(self.table)) or (self.fleet is not None and len(self.fleet.peers) > 0)
+
     def on_update(self, update: ThreatUpdate) -> None:
         """One zenoh sample (on the loop): store it, then decide."""
         if update.action == "rejected":

@@ -40,6 +40,9 @@ class ReactorDecisions:
     position_ned_m: Callable
     record: Callable
     statustext: Callable | None
+    fleet: object
+    threats_now: Callable
+    has_threats: Callable
     _busy: bool
     _resume_waiting: bool
     _pending: tuple[float, str] | None
@@ -85,7 +88,7 @@ class ReactorDecisions:
                 leg, ref, t = self.leg, self.reference(), self.clock_now_s()
                 self.table.expire(t)
                 decide = self.manager.resume if resume else self.manager.on_threats
-                decision = await self.in_worker(decide, self.table.snapshot(t), t)
+                decision = await self.in_worker(decide, self.threats_now(t), t)
                 first = decision if first is None else first
                 if leg is not None and leg is self.leg and ref is not None and ref is self.reference():
                     await self.apply(decision, trigger_mono_s, trigger)
@@ -113,6 +116,13 @@ class ReactorDecisions:
                       decision.decide_ms)
             return
         latency_ms = None
+        if decision.trajectory is not None and self.fleet is not None:
+            current = self.reference()
+            if not await self.fleet.delay_check(decision.trajectory, decision.start_t_s, decision.path_id):
+                return                     # another vehicle's new trajectory conflicts: decide again
+            if self.reference() is not current:
+                log.info("decision %s dropped: the reference changed during the delay check", decision.kind)
+                return
         if decision.trajectory is not None:
             ref = self.engage(decision.trajectory, decision.path_id, t0_s=decision.start_t_s,
                               resume=bool(decision.resume))
@@ -159,5 +169,5 @@ class ReactorDecisions:
                     or self.reference() is None:
                 continue
             self.table.expire(self.clock_now_s())
-            if len(self.table):
+            if self.has_threats():
                 self.schedule(time.monotonic(), "monitor")

@@ -28,6 +28,9 @@ class LegsAndAlternatives:
     manager_factory: Callable
     leg: object
     leg_index: int
+    fleet: object
+    threats_now: Callable
+    has_threats: Callable
     rng: np.random.Generator
     clock_now_s: Callable[[], float]
     in_worker: Callable
@@ -38,7 +41,9 @@ class LegsAndAlternatives:
 
     def set_active(self, ref) -> None:
         """The daemon engaged ``ref`` (any reference): the manager checks that one now
-        (``ref.resume``: it ends short of the goal on purpose)."""
+        (``ref.resume``: it ends short of the goal on purpose); the other vehicles are told."""
+        if self.fleet is not None:
+            self.fleet.publish()
         if self.manager is not None:
             self.manager.set_active(ref.trajectory, ref.t0_s, ref.path_id,
                                     ends_short=bool(getattr(ref, "resume", False)))
@@ -54,7 +59,7 @@ class LegsAndAlternatives:
         self.publish_path()
         self.refresh_alternatives()
         self.table.expire(self.clock_now_s())
-        if len(self.table):
+        if self.has_threats():
             self.schedule(time.monotonic(), "monitor")
 
     def on_leg_ended(self) -> None:
@@ -87,7 +92,7 @@ class LegsAndAlternatives:
                 leg, t = self.leg, self.clock_now_s()
                 if leg is None:
                     break
-                threats = self.table.snapshot(t)
+                threats = self.threats_now(t)
                 rng = np.random.default_rng(self.rng.integers(2**63))
                 ref = self.reference()
                 start = None if ref is None else ref.state(t + f.alternatives_lead_s)[0]
