@@ -114,7 +114,7 @@ def _integer(value, field: str, lo: int, hi: int) -> int:
 
 def _object(value, field: str, keys: tuple) -> dict:
     if not isinstance(value, dict):
-        raise payload_error(field, f"expected an object, got {type(value).__name__}")
+        raise payload_error(field or "payload", f"expected an object, got {type(value).__name__}")
     unknown = sorted(set(value) - set(keys))
     if unknown:
         raise payload_error(f"{field}.{unknown[0]}" if field else unknown[0], "unknown field")

@@ -74,8 +74,21 @@ class VehicleThreat:
         return pos[0] if t.ndim == 0 else pos
 
     def tube(self, inflation_m: float) -> TrajectoryTube:
-        return TrajectoryTube(self.uid, self.times_s, self.ned_m, self.radius_m + inflation_m, self.radius_m,
-                              self.received_t_s, self.growth_m_s, self.growth_max_m, self.expires_t_s)
+        """Its tube, ``inflation_m`` wider, plus ``bend_m``: the check treats the centre as linear
+        between its own times, which may straddle a sample (a corner of the polyline)."""
+        return TrajectoryTube(self.uid, self.times_s, self.ned_m, self.radius_m + inflation_m + self.bend_m,
+                              self.radius_m, self.received_t_s, self.growth_m_s, self.growth_max_m,
+                              self.expires_t_s)
+
+    @property
+    def bend_m(self) -> float:
+        """Largest distance from the chord of an interval no longer than one sample step (m):
+        |change of velocity at a corner| x step / 4."""
+        if len(self.times_s) < 3:
+            return 0.0
+        dt = np.diff(self.times_s)
+        vel = np.diff(self.ned_m, axis=0) / dt[:, None]
+        return float(np.linalg.norm(np.diff(vel, axis=0), axis=1).max() * dt.max() / 4.0)
 
 
 @dataclass
