@@ -300,9 +300,18 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         self.clock.scale = float(scale)
         log.info("time scale %g (%s)", scale, source)
 
+    def resolve_sysid(self) -> None:
+        """The zenoh prefix ``uav/<sysid>`` follows the vehicle's system id unless it was set."""
+        zenoh = self.settings.zenoh.for_vehicle(self.link.target_system)
+        if zenoh is not self.settings.zenoh:
+            self.settings = dataclasses.replace(self.settings, zenoh=zenoh)
+            log.info("zenoh prefix uav/%d: the vehicle's system id", zenoh.sysid)
+
     async def _fly(self) -> FlightSummary:
         s = self.settings
         await self.link.wait_ready(s.link.connect_timeout_s)
+        self.resolve_sysid()
+        s = self.settings
         home = await self.link.wait_home(s.link.connect_timeout_s)
         await self.link.wait_origin(s.link.origin_timeout_s)
         frames = self.link.set_planning_home(home)

@@ -47,6 +47,7 @@ from companion.link.setpoints import raise_stream_priority
 from companion.link.startup import is_airborne
 from companion.link.vehicle import check_url
 from companion.service.legs import GUIDED
+from companion.threats.settings import DEFAULT_SYSID
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +92,8 @@ class CompanionService:
 
     def __init__(self, settings: Settings, *, world_path=None, record_dir=None,
                  max_flights: int | None = None, workers: str = "process", resume: bool = False) -> None:
-        self.settings = settings
+        # the session opens before any vehicle answers: its prefix cannot wait for the vehicle's id
+        self.settings = dataclasses.replace(settings, zenoh=settings.zenoh.for_vehicle(DEFAULT_SYSID))
         self.world_path = world_path
         self.record_dir = Path(record_dir) if record_dir else None
         self.max_flights = max_flights

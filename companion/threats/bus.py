@@ -167,8 +167,8 @@ class ThreatBus(ThreatInbound, CompanionOutbound, ThreatClient):
         if getattr(settings, "config", None):
             if settings.connect or settings.listen is not None:
                 log.warning("zenoh.listen/connect ignored: the endpoints of %s are used", settings.config)
-            return cls(settings.sysid, clock=clock, zenoh_config=settings.config)
-        return cls(settings.sysid, listen=settings.listen_endpoints, connect=settings.connect,
+            return cls(settings.prefix_sysid, clock=clock, zenoh_config=settings.config)
+        return cls(settings.prefix_sysid, listen=settings.listen_endpoints, connect=settings.connect,
                    mode=settings.mode, clock=clock)
 
     # ------------------------------------------------------------------ session

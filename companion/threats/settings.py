@@ -21,6 +21,7 @@ Why these defaults (paper section 3.3, Fig. 5 and Fig. 8; R-50-class helicopter 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass
@@ -33,6 +34,8 @@ __all__ = ["ThreatSettings", "ZenohSettings"]
 _ENDPOINT = re.compile(r"^(tcp|udp|tls|quic|ws|unixsock-stream)/\S+$")
 
 
+#: The system id of the prefix when neither the settings nor a vehicle give one.
+DEFAULT_SYSID = 1
 #: zenoh's own default port: a zenoh router (``companion router``) listens on it.
 ZENOH_ROUTER_PORT = 7447
 
@@ -65,8 +68,10 @@ class ZenohSettings:
     ----------
     enabled : bool
         Open a zenoh session (threats, status, events, path). Default True.
-    sysid : int
-        System id of the key prefix ``uav/<sysid>``. Default 1 (``sim-vehicle`` instance 0).
+    sysid : int or None
+        System id of the key prefix ``uav/<sysid>``. Default None: the vehicle's MAVLink system
+        id, read when ``companion run`` connects (``companion serve``, whose session opens before
+        any vehicle answers, and tools without a vehicle use 1).
     mode : str
         ``peer`` (default) or ``client`` (through a zenoh router only).
     listen : tuple of str or None
@@ -84,7 +89,7 @@ class ZenohSettings:
     """
 
     enabled: bool = True
-    sysid: int = 1
+    sysid: int | None = None
     mode: str = "peer"
     listen: tuple[str, ...] | None = None
     connect: tuple[str, ...] = ()
@@ -93,7 +98,8 @@ class ZenohSettings:
     def __post_init__(self) -> None:
         if self.config is not None and (not isinstance(self.config, str) or not self.config.strip()):
             raise ConfigError(f"zenoh.config: expected the path of a zenoh configuration file, got {self.config!r}")
-        require_int(ConfigError, "zenoh", "sysid", self.sysid, 1, 255)
+        if self.sysid is not None:
+            require_int(ConfigError, "zenoh", "sysid", self.sysid, 1, 255)
         if self.mode not in ("peer", "client"):
             raise ConfigError(f"zenoh.mode: expected 'peer' or 'client', got {self.mode!r}")
         if self.listen is not None:
@@ -111,7 +117,16 @@ class ZenohSettings:
     @property
     def listen_endpoints(self) -> tuple[str, ...]:
         """``listen``, or ``default_listen(sysid)`` when it is not set."""
-        return default_listen(self.sysid) if self.listen is None else self.listen
+        return default_listen(self.prefix_sysid) if self.listen is None else self.listen
+
+    @property
+    def prefix_sysid(self) -> int:
+        """The system id of the prefix: ``sysid``, or ``DEFAULT_SYSID`` while it is unresolved."""
+        return DEFAULT_SYSID if self.sysid is None else self.sysid
+
+    def for_vehicle(self, vehicle_sysid: int) -> "ZenohSettings":
+        """These settings with ``sysid`` resolved to ``vehicle_sysid`` when it was not set."""
+        return self if self.sysid is not None else dataclasses.replace(self, sysid=int(vehicle_sysid))
 
 
 @dataclass(frozen=True)

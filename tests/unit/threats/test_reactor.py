@@ -165,8 +165,9 @@ class Harness:
     """A reactor wired to doubles of the daemon's callables."""
 
     def __init__(self, *, alternatives_k=0, monitor_period_s=0.01, statustext_error=None):
-        s = Settings()
-        self.settings = dataclasses.replace(s, flight=dataclasses.replace(s.flight, alternatives_k=alternatives_k))
+        s = Settings()                   # the fleet needs a zenoh session: not this bus in memory
+        self.settings = dataclasses.replace(s, flight=dataclasses.replace(s.flight, alternatives_k=alternatives_k),
+                                            fleet=dataclasses.replace(s.fleet, enabled=False))
         self.manager = ScriptedManager()
         self.bus = MemoryBus()
         self.reference = SimpleNamespace(trajectory=Line(), t0_s=0.0, path_id="leg0", first_sent_monotonic_s=None,
