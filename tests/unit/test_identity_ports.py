@@ -61,3 +61,13 @@ def test_explicit_options_win_over_the_instance_shortcut():
 def test_an_instance_out_of_range_is_named():
     with pytest.raises(ConfigError, match="--instance: expected 0..200, got 201"):
         companion_settings("--instance", "201")
+
+
+def test_the_prefix_follows_the_vehicles_system_id_unless_set():
+    from companion.threats.settings import ZenohSettings
+
+    unset = ZenohSettings()
+    assert unset.sysid is None and unset.prefix_sysid == 1
+    got = unset.for_vehicle(3)
+    assert got.sysid == 3 and got.listen_endpoints == ("tcp/127.0.0.1:7450",)
+    assert ZenohSettings(sysid=2).for_vehicle(3).sysid == 2                 # set: kept
