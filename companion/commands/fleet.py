@@ -32,7 +32,8 @@ examples:
   companion fleet up --vehicles 3 --mission-dir mission_files/fleet/crossing3 --trajectory-delay-ms 150
 
 Vehicle i (system id i+1) flies the i-th mission file of DIR (*.plan, *.waypoints, sorted by
-name) from that file's home. Logs, tlogs (sim<i>.tlog: the vehicles' own tracks), flight records
+name) from that file's home. The vehicles start together: their pre-arm checks are held
+failing until every companion is ready to arm (--no-sync-start: each goes when ready). Logs, tlogs (sim<i>.tlog: the vehicles' own tracks), flight records
 (uav<sysid>.jsonl) and fleet.json go to --logs (default out/fleet-<UTC time>). Ctrl-C interrupts
 the companions (each brings its vehicle to a safe stop), then stops the simulators and the
 router. Exit status 0 when every mission completed, 1 otherwise, 2 for bad arguments."""
@@ -75,6 +76,9 @@ def register(subparsers) -> None:
     up.add_argument("--gcs", default="127.0.0.1:14550", metavar="HOST:PORT",
                     help="every simulator also sends telemetry here (a ground station; default "
                     "127.0.0.1:14550; 'none' for no ground station)")
+    up.add_argument("--no-sync-start", action="store_false", dest="sync_start",
+                    help="let each vehicle take off as soon as its companion is ready (default: hold every "
+                    "vehicle's pre-arm checks until all companions are ready, then start them together)")
     up.add_argument("--timeout", type=float, metavar="S", help="stop the fleet after S wall seconds")
     up.add_argument("--json", action="store_true", help="print the summary as JSON")
     up.set_defaults(func=run_up)
@@ -121,7 +125,8 @@ def run_up(args: argparse.Namespace) -> int:
     logs = Path(args.logs) if args.logs else default_logs_dir()
     gcs = None if str(args.gcs).lower() == "none" else args.gcs
     fleet = Fleet(missions, logs, speedup=args.speedup, share=not args.no_share,
-                  trajectory_delay_ms=args.trajectory_delay_ms, seed=args.seed, gcs_out=gcs)
+                  trajectory_delay_ms=args.trajectory_delay_ms, seed=args.seed, gcs_out=gcs,
+                  sync_start=args.sync_start)
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     interrupted = False

@@ -31,6 +31,26 @@ no process is left behind. The children run in their own process groups so that 
 the terminal reaches the launcher only, which stops them in that order; they get SIGTERM if
 the launcher dies (``PR_SET_PDEATHSIG``).
 
+Synchronised start (``sync_start``, the default): a fleet's companions get ready at different
+times (each plans its mission with its own workers while the others do: seconds apart on a
+shared machine), and vehicles meant to meet at a crossing would then miss each other. As a
+ground operator holds a fleet's take-off until every crew is ready, the launcher holds every
+vehicle's pre-arm checks failing (``SIM_PREARM_FAIL = 1`` from the simulator's start, its
+``--config``) until every companion waits to arm (its vehicle in GUIDED, disarmed), then clears
+them on all at once (PARAM_SET over MAVLink, as a ground station: ``StartGate``). How long a
+companion waits for its vehicle's pre-arm checks depends on the vehicle:
+
+- one that reports them in SYS_STATUS (``MAV_SYS_STATUS_PREARM_CHECK``, as ArduPilot does) is
+  waited for up to ``startup.prearm_timeout_s`` (30 vehicle s; ``wait_prearm``), and the
+  companions then arm within a SYS_STATUS period of each other;
+- one that does not (``sim-vehicle`` today) is armed at once, and a refusal is retried
+  ``startup.arm_attempts`` times ``retry_interval_s`` apart: the gate then holds at most
+  ``HOLD_FRACTION`` of those retries, and the companions arm within one retry interval of each
+  other (2 vehicle s).
+
+The gate reads the vehicles' SYS_STATUS to tell which, and never holds a companion past its
+budget: one that is not ready by then starts late, as without the gate.
+
 The crossing missions of ``mission_files/fleet/`` and of the benchmark come from
 ``crossing_missions`` (homes on a circle, each flying through the centre to the far side and
 back to its home at one altitude).
@@ -48,6 +68,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -74,6 +95,13 @@ PROCESS_STOP_S = 10.0
 #: How long a companion's planning workers may take to exit after it (wall s).
 LEFTOVER_GRACE_S = 5.0
 PR_SET_PDEATHSIG = 1
+#: The start gate releases the vehicles after this fraction of a companion's pre-arm wait
+#: (``StartupSettings.prearm_timeout_s``, vehicle s) even if not every companion waits yet.
+HOLD_FRACTION = 0.5
+#: MAV_SYS_STATUS_PREARM_CHECK (common.xml MAV_SYS_STATUS_SENSOR).
+PREARM_CHECK_BIT = 0x10000000
+#: The simulators' settings while the start is held: pre-arm checks failing.
+HOLD_CONFIG = "# written by companion fleet up: pre-arm checks fail until the start gate opens\n[flight]\nprearm_fail = 1\n"
 
 
 # ------------------------------------------------------------------------------------ missions
@@ -361,6 +389,146 @@ def last_json_line(path: Path) -> dict | None:
     return None
 
 
+class StartGate:
+    """Holds the fleet's start until every companion waits to arm, then releases all at once
+    (see the module docstring). A thread speaking MAVLink to each simulator's port as a ground
+    station (system 255, component 190).
+
+    Parameters
+    ----------
+    vehicles : sequence of (sysid, sim port, still_running: callable () -> bool)
+    speedup : float
+        Vehicle seconds per wall second (the hold's limit is in vehicle seconds).
+    """
+
+    GUIDED = 4
+    ARMED_FLAG = 128
+
+    def __init__(self, vehicles, speedup: float) -> None:
+        from companion.link.startup import StartupSettings
+
+        startup = StartupSettings()
+        self.vehicles = list(vehicles)
+        #: wall s a companion waits while its vehicle reports pre-arm checks failing ...
+        self.prearm_hold_s = HOLD_FRACTION * startup.prearm_timeout_s / speedup
+        #: ... and while its arming is refused by one that does not report them (0.3 s after
+        #: each refusal, then the retry interval in vehicle s)
+        self.retry_hold_s = HOLD_FRACTION * (startup.arm_attempts - 1) * (0.3 + startup.retry_interval_s / speedup)
+        self.reports_prearm: dict[int, bool] = {}             # sysid -> SYS_STATUS has the pre-arm bit
+        self.state: dict[int, tuple[int, bool]] = {}          # sysid -> (custom mode, armed)
+        self.confirmed: set[int] = set()
+        self.released_wall_s: float | None = None
+        self.first_waiting_s: float | None = None
+        self.waiting_at_release: list[int] = []
+        self.held_s: float | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="fleet-start-gate", daemon=True)
+
+    def start(self) -> "StartGate":
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(5.0)
+
+    def waiting(self) -> list[int]:
+        """System ids whose vehicle is in GUIDED and disarmed: its companion waits to arm."""
+        return [sysid for sysid, (mode, armed) in self.state.items() if mode == self.GUIDED and not armed]
+
+    @property
+    def max_hold_s(self) -> float:
+        """How long the gate may hold (wall s): the shorter budget unless every vehicle is known
+        to report its pre-arm checks."""
+        known = [self.reports_prearm.get(sysid) for sysid, _, _ in self.vehicles]
+        return self.prearm_hold_s if known and all(known) else self.retry_hold_s
+
+    def describe(self) -> dict:
+        return {"released": self.released_wall_s is not None, "held_s": self.held_s,
+                "waiting_at_release": self.waiting_at_release, "confirmed": sorted(self.confirmed),
+                "max_hold_s": round(self.max_hold_s, 1), "vehicles_report_prearm": self.reports_prearm}
+
+    def _run(self) -> None:
+        from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind(("127.0.0.1", 0))
+        sock.settimeout(0.05)
+        mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+        mav.robust_parsing = True
+        ports = {sysid: port for sysid, port, _ in self.vehicles}
+        last_beat = last_set = 0.0
+        try:
+            while not self._stop.is_set():
+                now = time.monotonic()
+                if now - last_beat >= 1.0:           # a peer the simulators answer (heard in 10 s)
+                    beat = mav.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                    for sysid, port in ports.items():
+                        _send(sock, beat.pack(mav), port)
+                        if sysid not in self.reports_prearm:      # SYS_STATUS on this link, 2 Hz
+                            ask = mav.command_long_encode(sysid, 1, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                                          mavlink2.MAVLINK_MSG_ID_SYS_STATUS, 500000, 0, 0, 0, 0, 0)
+                            _send(sock, ask.pack(mav), port)
+                    last_beat = now
+                self._read(sock, mav)
+                live = [sysid for sysid, _, running in self.vehicles if running()]
+                if self.released_wall_s is None:
+                    waiting = self.waiting()
+                    if waiting and self.first_waiting_s is None:
+                        self.first_waiting_s = now
+                    everyone = bool(live) and all(sysid in waiting for sysid in live)
+                    too_long = self.first_waiting_s is not None and now - self.first_waiting_s > self.max_hold_s
+                    if everyone or too_long:
+                        self.released_wall_s = now
+                        self.held_s = round(now - self.first_waiting_s, 2)
+                        self.waiting_at_release = sorted(waiting)
+                        log.info("start gate: releasing %s after %.1f s (waiting: %s)", sorted(ports),
+                                 self.held_s, sorted(waiting))
+                if self.released_wall_s is not None:
+                    pending = [s for s in ports if s not in self.confirmed]
+                    if not pending or now - self.released_wall_s > 10.0:
+                        if pending:
+                            log.warning("start gate: no PARAM_VALUE SIM_PREARM_FAIL = 0 from %s", pending)
+                        return
+                    if now - last_set >= 0.3:
+                        for sysid in pending:
+                            msg = mav.param_set_encode(sysid, 1, b"SIM_PREARM_FAIL", 0.0,
+                                                       mavlink2.MAV_PARAM_TYPE_INT8)
+                            _send(sock, msg.pack(mav), ports[sysid])
+                        last_set = now
+                if not live:
+                    return
+        finally:
+            sock.close()
+
+    def _read(self, sock, mav) -> None:
+        try:
+            data, _ = sock.recvfrom(65535)
+        except (socket.timeout, OSError):
+            return
+        for msg in mav.parse_buffer(data) or []:
+            kind = msg.get_type()
+            if msg.get_srcComponent() != 1:
+                continue
+            if kind == "HEARTBEAT":
+                self.state[msg.get_srcSystem()] = (msg.custom_mode, bool(msg.base_mode & self.ARMED_FLAG))
+            elif kind == "SYS_STATUS":
+                self.reports_prearm[msg.get_srcSystem()] = bool(msg.onboard_control_sensors_present
+                                                                & PREARM_CHECK_BIT)
+            elif kind == "PARAM_VALUE" and self.released_wall_s is not None:
+                name = msg.param_id.decode() if isinstance(msg.param_id, bytes) else msg.param_id
+                if name.rstrip("\x00") == "SIM_PREARM_FAIL" and msg.param_value == 0.0:
+                    self.confirmed.add(msg.get_srcSystem())
+
+
+def _send(sock, data: bytes, port: int) -> None:
+    try:
+        sock.sendto(data, ("127.0.0.1", port))
+    except OSError:
+        pass
+
+
 class Fleet:
     """A zenoh router, N ``sim-vehicle`` and N ``companion run`` (see the module docstring).
 
@@ -383,13 +551,16 @@ class Fleet:
     env : dict, optional
         The children's environment (default: this process's).
     companion_args, sim_args : sequence of str
-        More arguments of every ``companion run`` / ``sim-vehicle``.
+        More arguments of every ``companion run`` / ``sim-vehicle`` (with ``sync_start`` the
+        simulators' ``--config`` is the launcher's).
+    sync_start : bool
+        Hold every vehicle's start until every companion is ready (``StartGate``).
     """
 
     def __init__(self, missions, logs_dir, *, speedup: float = 1.0, share: bool = True,
                  trajectory_delay_ms: float | None = None, seed: int | None = None,
                  gcs_out: str | None = DEFAULT_GCS_OUT, env: dict | None = None,
-                 companion_args=(), sim_args=()) -> None:
+                 companion_args=(), sim_args=(), sync_start: bool = True) -> None:
         if not (isinstance(speedup, (int, float)) and math.isfinite(speedup) and speedup > 0):
             raise ConfigError(f"--speedup: expected a number > 0, got {speedup!r}")
         if trajectory_delay_ms is not None and not (math.isfinite(trajectory_delay_ms) and trajectory_delay_ms >= 0):
@@ -406,6 +577,8 @@ class Fleet:
         self.env = env
         self.companion_args = tuple(companion_args)
         self.sim_args = tuple(sim_args)
+        self.sync_start = bool(sync_start)
+        self.gate: StartGate | None = None
         self.router: subprocess.Popen | None = None
         self.router_endpoint = ""
         self.vehicles = [self._vehicle(i, m) for i, m in enumerate(missions)]
@@ -434,7 +607,8 @@ class Fleet:
         """What ``fleet.json`` holds."""
         return {"router": self.router_endpoint, "router_pid": self.router.pid if self.router else None,
                 "speedup": self.speedup, "share": self.share, "trajectory_delay_ms": self.trajectory_delay_ms,
-                "seed": self.seed, "launcher_pid": os.getpid(),
+                "seed": self.seed, "launcher_pid": os.getpid(), "sync_start": self.sync_start,
+                "start_gate": self.gate.describe() if self.gate is not None else None,
                 "vehicles": [v.describe() for v in self.vehicles]}
 
     # -------------------------------------------------------------------------- start
@@ -452,7 +626,14 @@ class Fleet:
         args += ["--speedup", f"{self.speedup:g}", "--tlog", str(v.tlog)]
         if self.seed is not None:
             args += ["--seed", str(self.seed + v.instance)]
+        if self.sync_start:
+            args += ["--config", str(self.hold_config)]
         return args + list(self.sim_args)
+
+    @property
+    def hold_config(self) -> Path:
+        """The simulators' settings while the start is held (``sync_start``)."""
+        return self.logs_dir / "sim_hold_start.toml"
 
     def companion_command(self, v: FleetVehicle) -> list[str]:
         args = ["companion.cli", "run", "--instance", str(v.instance),
@@ -476,6 +657,8 @@ class Fleet:
         self._started_s = time.monotonic()
         try:
             self._start_router()
+            if self.sync_start:
+                self.hold_config.write_text(HOLD_CONFIG)
             for v in self.vehicles:
                 v.sim_port, v.companion_port = free_port(), free_port()
                 v.zenoh_listen = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
@@ -483,6 +666,9 @@ class Fleet:
                 v.companion = self._spawn(self.companion_command(v), v.companion_log)
                 log.info("vehicle %d: sim-vehicle pid %d, companion pid %d, mission %s", v.sysid, v.sim.pid,
                          v.companion.pid, v.mission.name)
+            if self.sync_start:
+                self.gate = StartGate([(v.sysid, v.sim_port, _running(v)) for v in self.vehicles],
+                                      self.speedup).start()
             self.write_description()
         except BaseException:
             self.stop()
@@ -573,6 +759,8 @@ class Fleet:
         left behind. Idempotent; returns the result."""
         if self._stopped:
             return self._result or self.result()
+        if self.gate is not None:
+            self.gate.stop()
         for v in self.vehicles:
             self._note_workers(v)
         live = [v for v in self.vehicles if v.companion is not None and v.companion.poll() is None]
@@ -592,6 +780,8 @@ class Fleet:
             _wait_or_kill(proc, max(deadline - time.monotonic(), 0.1))
         self._end_leftovers()
         self._stopped = True
+        if self._started_s is not None and self.logs_dir.is_dir():
+            self.write_description()            # with the start gate's account
         return self._result
 
     def _end_leftovers(self) -> None:
@@ -616,6 +806,10 @@ class Fleet:
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+
+def _running(v: FleetVehicle):
+    return lambda: v.companion is not None and v.companion.poll() is None
 
 
 def _signal(proc: subprocess.Popen, sig: int) -> None:
