@@ -5,7 +5,7 @@ vehicles meet through a zenoh router and share their committed trajectories):
 
 - one ``companion router --listen tcp/127.0.0.1:<free>``;
 - for vehicle ``i`` (system id ``i + 1``) flying the ``i``-th mission file of a directory:
-  ``sim-vehicle --instance i --home <the file's home> --port <free> --out 127.0.0.1:<companion
+  ``sim-vehicle --instance i --home <the file's home>,<heading to its first waypoint> --port <free> --out 127.0.0.1:<companion
   port> --out <GCS> --speedup X --tlog LOGS/sim<i>.tlog`` and ``companion run --instance i
   --connect udpin://127.0.0.1:<companion port> --mission FILE --zenoh-connect <router>
   --zenoh-listen tcp/127.0.0.1:<free> --record LOGS/uav<i+1>.jsonl --time-scale X`` (with
@@ -77,7 +77,8 @@ import numpy as np
 
 from companion.errors import ConfigError, MissionError
 
-__all__ = ["Fleet", "FleetResult", "FleetVehicle", "VehicleResult", "crossing_missions", "head_on_missions",
+__all__ = ["Fleet", "FleetResult", "FleetVehicle", "StartGate", "VehicleResult", "crossing_missions",
+           "first_leg_heading_deg", "head_on_missions",
            "mission_home", "select_missions", "write_missions", "default_logs_dir", "MISSION_SUFFIXES"]
 
 log = logging.getLogger(__name__)
@@ -142,6 +143,20 @@ def mission_home(path: str | Path) -> tuple[float, float, float]:
         raise MissionError(f"{path}: the mission gives no home (plannedHomePosition, or item 0 of a "
                            f"QGC WPL file): the fleet starts each vehicle at its mission's home")
     return plan.planned_home
+
+
+def first_leg_heading_deg(path: str | Path) -> float:
+    """Bearing (degrees from north, 0-360) from a mission's home to its first waypoint away from
+    home (more than 1 m horizontally); 0 when there is none. The fleet parks each vehicle
+    facing it."""
+    from companion.mission import load_mission_file, mission_to_local
+
+    local = mission_to_local(load_mission_file(path), home_lla=mission_home(path))
+    for w in local.waypoints:
+        n, e = float(w.pos_ned_m[0]), float(w.pos_ned_m[1])
+        if math.hypot(n, e) > 1.0:
+            return math.degrees(math.atan2(e, n)) % 360.0
+    return 0.0
 
 
 def _mission_plan(home_lla, waypoints_ned_m, *, alt_m: float, speed_m_s: float):
@@ -300,6 +315,7 @@ class FleetVehicle:
     instance: int
     mission: Path
     home_lla: tuple[float, float, float]
+    heading_deg: float
     sim_port: int
     companion_port: int
     zenoh_listen: str
@@ -317,7 +333,7 @@ class FleetVehicle:
 
     def describe(self) -> dict:
         return {"instance": self.instance, "sysid": self.sysid, "mission": str(self.mission),
-                "home_lla": list(self.home_lla), "sim_port": self.sim_port,
+                "home_lla": list(self.home_lla), "heading_deg": self.heading_deg, "sim_port": self.sim_port,
                 "companion_port": self.companion_port, "zenoh_listen": self.zenoh_listen,
                 "pids": {"sim": self.sim.pid if self.sim else None,
                          "companion": self.companion.pid if self.companion else None},
@@ -555,12 +571,16 @@ class Fleet:
         simulators' ``--config`` is the launcher's).
     sync_start : bool
         Hold every vehicle's start until every companion is ready (``StartGate``).
+    face_first_leg : bool
+        Park each vehicle facing its first waypoint (``sim-vehicle --home ...,YAW``), so that
+        none spends longer than the others turning before its first leg (a helicopter turns to
+        its direction of travel at its yaw rate); else every vehicle faces north.
     """
 
     def __init__(self, missions, logs_dir, *, speedup: float = 1.0, share: bool = True,
                  trajectory_delay_ms: float | None = None, seed: int | None = None,
                  gcs_out: str | None = DEFAULT_GCS_OUT, env: dict | None = None,
-                 companion_args=(), sim_args=(), sync_start: bool = True) -> None:
+                 companion_args=(), sim_args=(), sync_start: bool = True, face_first_leg: bool = True) -> None:
         if not (isinstance(speedup, (int, float)) and math.isfinite(speedup) and speedup > 0):
             raise ConfigError(f"--speedup: expected a number > 0, got {speedup!r}")
         if trajectory_delay_ms is not None and not (math.isfinite(trajectory_delay_ms) and trajectory_delay_ms >= 0):
@@ -579,6 +599,7 @@ class Fleet:
         self.sim_args = tuple(sim_args)
         self.sync_start = bool(sync_start)
         self.gate: StartGate | None = None
+        self.face_first_leg = bool(face_first_leg)
         self.router: subprocess.Popen | None = None
         self.router_endpoint = ""
         self.vehicles = [self._vehicle(i, m) for i, m in enumerate(missions)]
@@ -588,7 +609,9 @@ class Fleet:
 
     def _vehicle(self, i: int, mission: Path) -> FleetVehicle:
         d = self.logs_dir
+        heading = first_leg_heading_deg(mission) if self.face_first_leg else 0.0
         return FleetVehicle(instance=i, mission=mission.resolve(), home_lla=mission_home(mission),
+                            heading_deg=round(heading, 1),
                             sim_port=0, companion_port=0, zenoh_listen="",
                             sim_log=d / f"sim{i}.log", companion_log=d / f"uav{i + 1}.log",
                             tlog=d / f"sim{i}.tlog", record=d / f"uav{i + 1}.jsonl")
@@ -618,7 +641,8 @@ class Fleet:
                                     stdin=subprocess.DEVNULL, env=self.env, preexec_fn=_die_with_parent)
 
     def sim_command(self, v: FleetVehicle) -> list[str]:
-        home = ",".join(f"{x:.8f}".rstrip("0").rstrip(".") for x in v.home_lla[:2]) + f",{v.home_lla[2]:g},0"
+        home = (",".join(f"{x:.8f}".rstrip("0").rstrip(".") for x in v.home_lla[:2])
+                + f",{v.home_lla[2]:g},{v.heading_deg:g}")
         args = ["sim_vehicle.cli", "--instance", str(v.instance), "--home", home, "--port", str(v.sim_port),
                 "--out", f"127.0.0.1:{v.companion_port}"]
         if self.gcs_out:

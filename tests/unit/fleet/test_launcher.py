@@ -131,11 +131,12 @@ def test_fleet_command_lines(tmp_path):
     sim = fleet.sim_command(v)
     assert sim[:3] == ["sim_vehicle.cli", "--instance", "1"]
     home = sim[sim.index("--home") + 1].split(",")
-    assert [float(x) for x in home] == pytest.approx([*mission_home(files[1]), 0.0])
+    assert [float(x) for x in home] == pytest.approx([*mission_home(files[1]), 300.0])   # facing its first leg
     assert sim[sim.index("--port") + 1] == "40001" and sim.count("--out") == 1
     assert sim[sim.index("--out") + 1] == "127.0.0.1:40002"
     assert sim[sim.index("--tlog") + 1] == str(tmp_path / "sim1.tlog")
     assert sim[sim.index("--speedup") + 1] == "2" and sim[sim.index("--seed") + 1] == "8"
+    assert sim[sim.index("--config") + 1] == str(tmp_path / "sim_hold_start.toml")      # the start gate
     comp = fleet.companion_command(v)
     assert comp[:4] == ["companion.cli", "run", "--instance", "1"]
     assert comp[comp.index("--connect") + 1] == "udpin://127.0.0.1:40002"
@@ -145,7 +146,9 @@ def test_fleet_command_lines(tmp_path):
     assert comp[comp.index("--time-scale") + 1] == "2"
     assert "--no-fleet" in comp and comp[comp.index("--fleet-delay-ms") + 1] == "150"
     assert v.sysid == 2 and fleet.paths["vehicles"][2]["tlog"] == tmp_path / "sim1.tlog"
-    shared = Fleet(files, tmp_path, gcs_out="127.0.0.1:14550")
+    shared = Fleet(files, tmp_path, gcs_out="127.0.0.1:14550", sync_start=False, face_first_leg=False)
+    assert "--config" not in shared.sim_command(shared.vehicles[0])
+    assert shared.sim_command(shared.vehicles[0])[4].endswith(",0")
     assert "--no-fleet" not in shared.companion_command(shared.vehicles[0])
     assert "--fleet-delay-ms" not in shared.companion_command(shared.vehicles[0])
     assert shared.sim_command(shared.vehicles[0]).count("--out") == 2
