@@ -33,10 +33,12 @@ examples:
 
 Vehicle i (system id i+1) flies the i-th mission file of DIR (*.plan, *.waypoints, sorted by
 name) from that file's home. The vehicles start together: their pre-arm checks are held
-failing until every companion is ready to arm (--no-sync-start: each goes when ready). Logs, tlogs (sim<i>.tlog: the vehicles' own tracks), flight records
-(uav<sysid>.jsonl) and fleet.json go to --logs (default out/fleet-<UTC time>). Ctrl-C interrupts
-the companions (each brings its vehicle to a safe stop), then stops the simulators and the
-router. Exit status 0 when every mission completed, 1 otherwise, 2 for bad arguments."""
+failing until every companion is ready to arm (--no-sync-start: each goes when ready), each
+parked facing its first waypoint. Logs, tlogs (sim<i>.tlog: the vehicles' own tracks), flight
+records (uav<sysid>.jsonl), fleet.json and summary.json go to --logs (default
+out/fleet-<UTC time>). Ctrl-C interrupts the companions (each brings its vehicle to a safe stop),
+then stops the simulators and the router. Exit status 0 when every mission completed, 1
+otherwise, 2 for bad arguments, 130 when interrupted."""
 
 STATUS_EPILOG = """\
 examples:
@@ -51,8 +53,8 @@ vehicle was heard."""
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("fleet", help="fly several simulated vehicles through one zenoh router; watch them",
-                              description="Fly several simulated helicopters, each with its companion, through one zenoh "
-                              "router (up), and watch them (status).", epilog=EPILOG,
+                              description="Fly several simulated helicopters, each with its companion, through "
+                              "one zenoh router (up), and watch them (status).", epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="fleet_command", metavar="SUBCOMMAND")
     sub.required = True

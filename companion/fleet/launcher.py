@@ -5,8 +5,8 @@ vehicles meet through a zenoh router and share their committed trajectories):
 
 - one ``companion router --listen tcp/127.0.0.1:<free>``;
 - for vehicle ``i`` (system id ``i + 1``) flying the ``i``-th mission file of a directory:
-  ``sim-vehicle --instance i --home <the file's home>,<heading to its first waypoint> --port <free> --out 127.0.0.1:<companion
-  port> --out <GCS> --speedup X --tlog LOGS/sim<i>.tlog`` and ``companion run --instance i
+  ``sim-vehicle --instance i --home <the file's home>,<heading to its first waypoint> --port <free>
+  --out 127.0.0.1:<companion port> --out <GCS> --speedup X --tlog LOGS/sim<i>.tlog`` and ``companion run --instance i
   --connect udpin://127.0.0.1:<companion port> --mission FILE --zenoh-connect <router>
   --zenoh-listen tcp/127.0.0.1:<free> --record LOGS/uav<i+1>.jsonl --time-scale X`` (with
   ``--no-fleet`` for the baseline without sharing, ``--fleet-delay-ms`` to delay the shared
@@ -102,7 +102,8 @@ HOLD_FRACTION = 0.5
 #: MAV_SYS_STATUS_PREARM_CHECK (common.xml MAV_SYS_STATUS_SENSOR).
 PREARM_CHECK_BIT = 0x10000000
 #: The simulators' settings while the start is held: pre-arm checks failing.
-HOLD_CONFIG = "# written by companion fleet up: pre-arm checks fail until the start gate opens\n[flight]\nprearm_fail = 1\n"
+HOLD_CONFIG = ("# written by companion fleet up: pre-arm checks fail until the start gate opens\n"
+               "[flight]\nprearm_fail = 1\n")
 
 
 # ------------------------------------------------------------------------------------ missions

@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["FleetView", "VehicleRow", "sysid_of_key", "record_decisions", "positions_lla", "nearest_separation", "vehicle_rows",
+__all__ = ["FleetView", "VehicleRow", "sysid_of_key", "record_decisions", "positions_lla", "nearest_separation",
+           "vehicle_rows",
            "format_table", "rows_json"]
 
 #: Events on ``uav/<sysid>/events`` that are not decisions (``companion serve``'s commands).
