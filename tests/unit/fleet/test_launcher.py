@@ -215,3 +215,107 @@ def test_wait_returns_once_every_companion_has_exited(tmp_path):
     assert [(v.sysid, v.exit_code, v.legs_reached) for v in result.vehicles] == [(1, 0, 2), (2, 0, 2)]
     assert result.as_dict()["completed"] is True
     assert all(v.sim.poll() is not None for v in fleet.vehicles) and fleet.router.poll() is not None
+
+
+class FakeVehicle:
+    """A UDP MAVLink vehicle for the start gate: HEARTBEATs (GUIDED, disarmed once ``waiting``)
+    to whoever sent it something, SYS_STATUS without the pre-arm bit, PARAM_SET answered."""
+
+    def __init__(self, sysid: int) -> None:
+        import socket
+        import threading
+
+        from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+        self.sysid = sysid
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.05)
+        self.port = self.sock.getsockname()[1]
+        self.mav = mavlink2.MAVLink(None, srcSystem=sysid, srcComponent=1)
+        self.mav.robust_parsing = True
+        self.waiting = False
+        self.prearm_fail = 1.0
+        self.param_sets: list[tuple[float, bool]] = []     # (value, was waiting then)
+        self.peer = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import time
+
+        last = 0.0
+        while not self._stop.is_set():
+            try:
+                data, self.peer = self.sock.recvfrom(65535)
+                for msg in self.mav.parse_buffer(data) or []:
+                    if msg.get_type() == "PARAM_SET" and msg.target_system == self.sysid:
+                        self.prearm_fail = msg.param_value
+                        self.param_sets.append((msg.param_value, self.waiting))
+                        self.sock.sendto(self.mav.param_value_encode(b"SIM_PREARM_FAIL", msg.param_value, 2, 1, 0)
+                                         .pack(self.mav), self.peer)
+            except OSError:
+                pass
+            if self.peer is not None and time.monotonic() - last > 0.1:
+                last = time.monotonic()
+                mode = 4 if self.waiting else 0
+                self.sock.sendto(self.mav.heartbeat_encode(4, 3, 1, mode, 3).pack(self.mav), self.peer)
+                self.sock.sendto(self.mav.sys_status_encode(1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(self.mav),
+                                 self.peer)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.sock.close()
+
+
+def test_the_start_gate_releases_every_vehicle_once_all_wait_to_arm():
+    import time
+
+    from companion.fleet.launcher import StartGate
+
+    vehicles = [FakeVehicle(1), FakeVehicle(2)]
+    try:
+        gate = StartGate([(v.sysid, v.port, lambda: True) for v in vehicles], speedup=1.0).start()
+        vehicles[0].waiting = True
+        time.sleep(1.0)                                   # the other is not ready: held
+        assert all(not v.param_sets for v in vehicles)
+        assert gate.waiting() == [1]
+        vehicles[1].waiting = True
+        wait = time.monotonic() + 5.0
+        while any(v.prearm_fail != 0.0 for v in vehicles) and time.monotonic() < wait:
+            time.sleep(0.05)
+        gate.stop()
+        assert [v.prearm_fail for v in vehicles] == [0.0, 0.0]
+        assert all(was_waiting for v in vehicles for _, was_waiting in v.param_sets)
+        info = gate.describe()
+        assert info["released"] and info["waiting_at_release"] == [1, 2] and info["confirmed"] == [1, 2]
+        assert info["vehicles_report_prearm"] == {1: False, 2: False}
+        assert info["max_hold_s"] == pytest.approx(gate.retry_hold_s, abs=0.06)   # they do not report pre-arm
+    finally:
+        for v in vehicles:
+            v.close()
+
+
+def test_the_start_gate_never_holds_a_ready_companion_past_its_arm_retries():
+    import time
+
+    from companion.fleet.launcher import StartGate
+
+    vehicles = [FakeVehicle(1), FakeVehicle(2)]
+    try:
+        gate = StartGate([(v.sysid, v.port, lambda: True) for v in vehicles], speedup=100.0)
+        assert gate.retry_hold_s < 1.0 < gate.prearm_hold_s * 100
+        gate.start()
+        vehicles[0].waiting = True                          # vehicle 2 is never ready
+        wait = time.monotonic() + 5.0
+        while vehicles[0].prearm_fail != 0.0 and time.monotonic() < wait:
+            time.sleep(0.05)
+        gate.stop()
+        assert vehicles[0].prearm_fail == 0.0 and vehicles[1].prearm_fail == 0.0
+        assert gate.describe()["waiting_at_release"] == [1]
+        assert gate.held_s <= gate.retry_hold_s + 0.5
+    finally:
+        for v in vehicles:
+            v.close()
