@@ -13,7 +13,8 @@ Reported per flight, judged from the simulators' own tlogs (``companion.fleet.tr
 
 - minimum pairwise separation and losses of separation (pairs that came closer than
   ``FleetSettings().separation_m``);
-- missions completed;
+- missions completed, and the companions' largest tracking error (their summaries: a companion
+  that cannot keep up tracks worse);
 - extra path: flown length over the planned straight length (climb, legs, descent), per vehicle;
 - CPU per vehicle: the companion and its planning workers (``/proc``, sampled), as % of one core
   over the fleet's wall time, and the simulator's;
@@ -183,6 +184,8 @@ def fly(n: int, mode: str, missions: list[Path], out_dir: Path, speedup: float, 
     comp_cpu = sampler.companion_cpu_s()
     msgs = {s: (counter.counts.get(s, 0) if counter else 0) / wall for s in planned}
     decisions = {v.sysid: (v.summary or {}).get("decisions") for v in result.vehicles}
+    tracking = [(v.summary or {}).get("max_tracking_error_m") for v in result.vehicles]
+    tracking = [t for t in tracking if isinstance(t, (int, float)) and np.isfinite(t)]
     speeds = numbers["speedup"]
     slow = {s: sp for s, sp in speeds.items() if not sp >= speedup * (1 - SLOW_TOLERANCE)}
     lagged = {s: lag for s, lag in numbers["max_lag_s"].items() if not lag <= MAX_LAG_S}
@@ -197,7 +200,7 @@ def fly(n: int, mode: str, missions: list[Path], out_dir: Path, speedup: float, 
         "extra_path": extra, "extra_path_mean": float(np.mean(list(extra.values()))),
         "extra_path_max": float(np.max(list(extra.values()))),
         "planned_m": planned, "flown_m": numbers["path_length_m"],
-        "decisions": decisions,
+        "decisions": decisions, "max_tracking_error_m": max(tracking) if tracking else None,
         "companion_cpu_s": comp_cpu, "sim_cpu_s": sampler.sim_cpu, "router_cpu_s": sampler.router_cpu,
         "companion_cpu_per_s": {s: c / wall for s, c in comp_cpu.items()},
         "companion_cpu_mean": float(np.mean(list(comp_cpu.values()))) / wall,
@@ -229,14 +232,15 @@ def table(rows: list[dict], meta: dict) -> str:
              f"simulators' own tlogs. CPU: % of one core over the fleet's wall time (companion with its "
              f"planning workers; simulator). zenoh: samples on uav/** per second per vehicle.", "",
              "| N | mode | completed | min separation (m) | losses (pairs) | extra path mean / max | "
-             "decisions | companion CPU | sim CPU | fleet cores | zenoh msg/s/vehicle | real time | wall (s) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "decisions | max tracking error (m) | companion CPU | sim CPU | fleet cores | zenoh msg/s/vehicle | "
+             "real time | wall (s) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         decisions = sum(d for d in r["decisions"].values() if isinstance(d, int))
         lines.append(
             f"| {r['n']} | {r['mode']} | {r['completed']}/{r['n']} | {fmt(r['min_separation_m'])} | "
             f"{r['losses']}/{r['pairs']} | {100 * r['extra_path_mean']:.1f} % / {100 * r['extra_path_max']:.1f} % | "
-            f"{decisions} | {100 * r['companion_cpu_mean']:.1f} % | {100 * r['sim_cpu_mean']:.1f} % | "
+            f"{decisions} | {fmt(r.get('max_tracking_error_m'))} | {100 * r['companion_cpu_mean']:.1f} % | {100 * r['sim_cpu_mean']:.1f} % | "
             f"{r['fleet_cores']:.2f} | {r['zenoh_msgs_mean']:.1f} | {'yes' if r['real_time'] else 'no'} | "
             f"{r['wall_s']:.0f} |")
     for note in meta.get("notes", []):
