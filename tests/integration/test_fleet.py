@@ -10,9 +10,10 @@ pair, lengths flown, the simulators' achieved speed-up, the CPU of the whole fle
 assertion's message.
 
 The launcher starts the vehicles together and parks them facing their first waypoint (see
-``companion.fleet.launcher``): without sharing (``--no-share``) crossing3's vehicles then came
-within 0.5 m of each other at the centre in two runs of three. ``headon2`` (two vehicles along one
-corridor, head-on and back) is a conflict whatever the timing (0.03 m without sharing).
+``companion.fleet.launcher``): without sharing (``--no-share``, speed-up 2) crossing3's vehicles
+then came within 0.23-1.19 m of each other at the centre in four runs of four (0.47, 1.19, 0.23,
+0.58 m). ``headon2`` (two vehicles along one corridor, head-on and back) is a conflict whatever
+the timing (0.03 m without sharing).
 
 Speed-up 2: three companions and three simulators on two cores keep it (the simulators' clocks
 ran at 2.000x the wall clock, samples within 20 ms of it; the fleet used about half a core on
