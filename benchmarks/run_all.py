@@ -38,6 +38,7 @@ BENCHMARKS = {
     "threats_sitl": [],
     "threat_storm": [],
     "soak": [],
+    "fleet": [],
 }
 
 
