@@ -1,7 +1,7 @@
 """Fleet: N helicopters crossing at one point, with and without trajectory sharing (DESIGN 6, 7).
 
 For each N (``--vehicles 2,3,5,8``) this generates N crossing missions on a circle
-(``companion.fleet.launcher.crossing_missions``: homes ``--radius`` m from a common centre, each
+(``companion.fleet.missions.crossing_missions``: homes ``--radius`` m from a common centre, each
 flying through the centre to the far side and back home, at one altitude and speed, so that all
 meet at the centre at about the same time) in a temporary directory, and flies them twice with
 ``companion.fleet.launcher.Fleet`` (one zenoh router, N ``sim-vehicle``, N ``companion run``):
@@ -53,8 +53,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from companion.fleet.launcher import (Fleet, crossing_missions, descendants, planned_length_m,  # noqa: E402
-                                      write_missions)
+from companion.fleet.launcher import Fleet  # noqa: E402
+from companion.fleet.missions import crossing_missions, planned_length_m, write_missions  # noqa: E402
+from companion.fleet.processes import descendants  # noqa: E402
 from companion.fleet.settings import FleetSettings  # noqa: E402
 from companion.fleet.tracks import fleet_separation  # noqa: E402
 

@@ -120,7 +120,8 @@ def run_up(args: argparse.Namespace) -> int:
     import signal
     import threading
 
-    from companion.fleet.launcher import Fleet, default_logs_dir, select_missions
+    from companion.fleet.launcher import Fleet, default_logs_dir
+    from companion.fleet.missions import select_missions
 
     check_up_args(args)
     missions = select_missions(args.mission_dir, args.vehicles)

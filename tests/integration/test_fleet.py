@@ -32,7 +32,8 @@ from pathlib import Path
 
 import pytest
 
-from companion.fleet.launcher import Fleet, select_missions
+from companion.fleet.launcher import Fleet
+from companion.fleet.missions import select_missions
 from companion.fleet.settings import FleetSettings
 from companion.fleet.tracks import fleet_separation
 from flight_support import checkout_env, wait_until

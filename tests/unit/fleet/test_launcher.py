@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from companion.errors import ConfigError, MissionError
-from companion.fleet.launcher import (Fleet, crossing_missions, head_on_missions, mission_home, planned_length_m,
+from companion.fleet.launcher import Fleet
+from companion.fleet.missions import (crossing_missions, head_on_missions, mission_home, planned_length_m,
                                       select_missions, write_missions)
 from companion.mission import load_mission_file, mission_to_local
 from heli_common.frames import LocalFrame
@@ -273,7 +274,7 @@ class FakeVehicle:
 def test_the_start_gate_releases_every_vehicle_once_all_wait_to_arm():
     import time
 
-    from companion.fleet.launcher import StartGate
+    from companion.fleet.start_gate import StartGate
 
     vehicles = [FakeVehicle(1), FakeVehicle(2)]
     try:
@@ -301,7 +302,7 @@ def test_the_start_gate_releases_every_vehicle_once_all_wait_to_arm():
 def test_the_start_gate_never_holds_a_ready_companion_past_its_arm_retries():
     import time
 
-    from companion.fleet.launcher import StartGate
+    from companion.fleet.start_gate import StartGate
 
     vehicles = [FakeVehicle(1), FakeVehicle(2)]
     try:
