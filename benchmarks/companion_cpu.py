@@ -42,6 +42,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from companion import demo  # noqa: E402
+from companion.fleet.processes import descendants  # noqa: E402
 from companion.threats.bus import ThreatBus  # noqa: E402
 
 log = logging.getLogger("companion_cpu")
@@ -61,26 +62,6 @@ def process_cpu_s(pid: int) -> tuple[float, float]:
     return (utime + stime) / CLOCK_TICKS_S, (cutime + cstime) / CLOCK_TICKS_S
 
 
-def children_of(pid: int) -> list[int]:
-    """Every descendant process of ``pid``."""
-    out, todo = [], [pid]
-    while todo:
-        parent = todo.pop()
-        try:
-            tasks = os.listdir(f"/proc/{parent}/task")
-        except FileNotFoundError:
-            continue
-        for tid in tasks:
-            try:
-                with open(f"/proc/{parent}/task/{tid}/children", encoding="ascii") as fh:
-                    kids = [int(v) for v in fh.read().split()]
-            except FileNotFoundError:
-                continue
-            out += kids
-            todo += kids
-    return out
-
-
 class CpuSampler:
     """Samples (wall s, own CPU s, children's CPU s) of a process, and a phase flag, in a thread."""
 
@@ -96,7 +77,7 @@ class CpuSampler:
         self._thread = threading.Thread(target=self._run, name="cpu-sampler", daemon=True)
 
     def _children_cpu_s(self, waited_s: float) -> float:
-        for kid in children_of(self.pid):
+        for kid in descendants(self.pid):
             try:
                 self._children[kid] = process_cpu_s(kid)[0]
             except (FileNotFoundError, ProcessLookupError):

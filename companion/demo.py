@@ -42,6 +42,7 @@ from companion.errors import CompanionError
 from companion.geo import LocalFrame
 from companion.threats.bus import ThreatBus
 from companion.threats.model import Threat
+from heli_common.ports import free_port
 
 log = logging.getLogger(__name__)
 
@@ -59,13 +60,6 @@ def demo_mission():
     resource = importlib.resources.files("companion").joinpath(DEMO_MISSION_RESOURCE)
     with importlib.resources.as_file(resource) as path:
         yield Path(path)
-
-
-def free_port(kind: int = socket.SOCK_DGRAM) -> int:
-    """A loopback port that is free now (UDP by default)."""
-    with socket.socket(socket.AF_INET, kind) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 @dataclass(frozen=True)

@@ -55,10 +55,10 @@ from pathlib import Path
 
 from companion.errors import ConfigError
 from companion.fleet.missions import first_leg_heading_deg, mission_home
-from companion.fleet.processes import (descendants, free_port, process_state, send_signal, spawn, start_time,
-                                       wait_or_kill)
+from companion.fleet.processes import descendants, process_state, send_signal, spawn, start_time, wait_or_kill
 from companion.fleet.results import FleetResult, VehicleResult, last_json_line
 from companion.fleet.start_gate import HOLD_CONFIG, StartGate
+from heli_common.ports import free_port
 
 __all__ = ["Fleet", "FleetVehicle", "default_logs_dir", "DEFAULT_GCS_OUT"]
 

@@ -7,23 +7,15 @@ import ctypes
 import logging
 import os
 import signal
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["free_port", "spawn", "start_time", "process_state", "descendants", "send_signal", "wait_or_kill"]
+__all__ = ["spawn", "start_time", "process_state", "descendants", "send_signal", "wait_or_kill"]
 
 log = logging.getLogger(__name__)
 
 PR_SET_PDEATHSIG = 1
-
-
-def free_port(kind: int = socket.SOCK_DGRAM) -> int:
-    """A loopback port that is free now (UDP by default)."""
-    with socket.socket(socket.AF_INET, kind) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def spawn(module_args: list[str], log_path: Path, env: dict | None = None) -> subprocess.Popen:
