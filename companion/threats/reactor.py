@@ -8,9 +8,13 @@
   companion learns itself (an ADS-B report, ``companion.threats.adsb``) goes through
   :meth:`ThreatReactor.on_local_threat`: the very same path as a PUT, then it is republished on
   ``uav/<sysid>/threats/<id>`` for the other processes (never back to this one).
-- **Monitor** (DESIGN 7.3). While a leg is flown and any threat is known, the active reference
-  is re-checked every ``monitor_period_s`` of wall-clock time (default 0.1 s, >= 10 Hz), on the
-  same path as a threat update; a tick is skipped while a decision is under way.
+- **Other vehicles** (``fleet.enabled``; ``companion.fleet``). ``FleetLink`` publishes the
+  active reference on ``uav/<sysid>/trajectory`` whenever one is engaged and twice a second, and
+  turns the others' into threats: ``threats_now`` is the table's threats plus theirs.
+- **Monitor** (DESIGN 7.3). While a leg is flown and any threat or other vehicle is known, the
+  active reference is re-checked every ``monitor_period_s`` of wall-clock time (default 0.1 s,
+  >= 10 Hz), in this process (``manager.check``); only a conflict goes to a worker for a
+  decision. A tick is skipped while a decision is under way.
 - **One decision at a time**, in a worker thread (``in_worker``): updates that arrive meanwhile
   are folded into the next decision (the newest table always wins). A decision of kind
   ``none`` (the reference stays clear, or no way back yet) publishes nothing.
@@ -18,6 +22,8 @@
   active reference has ended short of the leg's goal (an ``evade`` or ``hold``), the daemon's
   flight-phase logic (``companion.phases``) calls :meth:`ThreatReactor.resume`, which asks
   ``manager.resume`` for a way back to the mission.
+- **Delay check.** With other vehicles known, a decision's trajectory is first published as
+  pending and flown only if it still clears them after the communication delay (RMADER).
 - **Tell** (DESIGN 7.5). A decision with a trajectory becomes the active reference from the
   manager's start time (``engage``), so the setpoint does not jump; its latency runs from the
   trigger (threat receipt on the zenoh thread, monitor tick, or resume request) to the first
