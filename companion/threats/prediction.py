@@ -111,11 +111,8 @@ class TrajectoryTube:
         t = np.asarray(t_s, dtype=float).reshape(-1)
         return np.stack([np.interp(t, self.times_s, self.ned_m[:, i]) for i in range(3)], axis=1)
 
-    def radius_at(self, t_s: np.ndarray) -> np.ndarray:
-        """Inflated radius (K,); -inf after ``expires_t_s``."""
-        t = np.asarray(t_s, dtype=float).reshape(-1)
-        grow = np.minimum(self.growth_max_m, self.growth_m_s * np.maximum(t - self.t0_s, 0.0))
-        return np.where(t <= self.expires_t_s, self.radius_m + grow, -np.inf)
+    #: The same growth and end as a threat's tube (the same attributes).
+    radius_at = Tube.radius_at
 
     @property
     def speed_m_s(self) -> float:
