@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.threats.codec import finite_number, parse_json
 from companion.threats.model import payload_error
 
 __all__ = ["TrajectoryMessage", "SampledPath", "encode", "decode", "VERSION", "MAX_PAYLOAD_BYTES"]
@@ -99,11 +100,10 @@ def encode(msg: TrajectoryMessage) -> bytes:
 
 
 def _number(value, field: str, *, lo: float = -math.inf, hi: float = math.inf) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise payload_error(field, f"expected a finite number, got {value!r}"[:120])
+    value = finite_number(value, field)
     if not lo <= value <= hi:
         raise payload_error(field, f"must be in [{lo:g}, {hi:g}], got {value!r}")
-    return float(value)
+    return value
 
 
 def _integer(value, field: str, lo: int, hi: int) -> int:
@@ -144,13 +144,7 @@ def _path(value, field: str) -> SampledPath | None:
 
 def decode(payload: bytes) -> TrajectoryMessage:
     """Parse and validate one message (``ThreatPayloadError`` naming the field at fault)."""
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise payload_error("payload", f"{len(payload)} bytes, at most {MAX_PAYLOAD_BYTES}")
-    try:
-        data = json.loads(payload.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise payload_error("payload", f"not UTF-8 JSON: {exc}") from None
-    d = _object(data, "", FIELDS)
+    d = _object(parse_json(payload, MAX_PAYLOAD_BYTES), "", FIELDS)
     if d["v"] != VERSION:
         raise payload_error("v", f"expected {VERSION}, got {d['v']!r}")
     lla = d["origin_lla"]

@@ -32,7 +32,7 @@ from companion.fleet.clock_sync import ClockOffset
 from companion.fleet.message import SampledPath, TrajectoryMessage
 from companion.fleet.settings import FleetSettings
 from companion.geo import LocalFrame
-from companion.threats.prediction import TrajectoryTube
+from companion.threats.prediction import TrajectoryTube, along_samples
 
 __all__ = ["PeerTable", "VehicleThreat", "FLEET_SOURCE"]
 
@@ -69,9 +69,8 @@ class VehicleThreat:
 
     def position_at(self, t_s) -> np.ndarray:
         """Position (3,) or (K, 3) at clock time(s) ``t_s``."""
-        t = np.asarray(t_s, dtype=float)
-        pos = np.stack([np.interp(t.reshape(-1), self.times_s, self.ned_m[:, i]) for i in range(3)], axis=1)
-        return pos[0] if t.ndim == 0 else pos
+        pos = along_samples(self.times_s, self.ned_m, t_s)
+        return pos[0] if np.ndim(t_s) == 0 else pos
 
     def tube(self, inflation_m: float) -> TrajectoryTube:
         """Its tube, ``inflation_m`` wider, plus ``bend_m``: the check treats the centre as linear

@@ -28,7 +28,7 @@ import time
 
 from companion.threats.model import FRAMES, KINDS, Threat, payload_error
 
-__all__ = ["decode", "encode", "to_dict", "MAX_PAYLOAD_BYTES", "check_id", "VERSION"]
+__all__ = ["decode", "encode", "to_dict", "MAX_PAYLOAD_BYTES", "check_id", "VERSION", "finite_number", "parse_json"]
 
 VERSION = 1
 MAX_PAYLOAD_BYTES = 4096
@@ -75,7 +75,8 @@ def _key_name(key: str) -> str:
     return key if NAME_PATTERN.match(key) else json.dumps(key[:64])
 
 
-def _number(value, field: str) -> float:
+def finite_number(value, field: str) -> float:
+    """``value`` as a float, or a ``ThreatPayloadError`` naming ``field`` (also for NaN/inf literals)."""
     if isinstance(value, _NonFinite):
         raise payload_error(field, f"must be a finite number, got {value.text}")
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -91,7 +92,7 @@ def _vector3(value, field: str, limit: float) -> tuple:
         raise payload_error(field, f"expected a list of 3 numbers, got {_type_name(value)}")
     if len(value) != 3:
         raise payload_error(field, f"expected 3 numbers, got {len(value)}")
-    out = tuple(_number(v, f"{field}[{i}]") for i, v in enumerate(value))
+    out = tuple(finite_number(v, f"{field}[{i}]") for i, v in enumerate(value))
     for i, v in enumerate(out):
         if abs(v) > limit:
             raise payload_error(f"{field}[{i}]", f"magnitude must be <= {limit:g}, got {v!r}")
@@ -108,9 +109,9 @@ def _global_position(value) -> tuple:
     for key in GLOBAL_KEYS:
         if key not in value:
             raise payload_error(f"position.{key}", "missing")
-    lat = _number(value["lat"], "position.lat")
-    lon = _number(value["lon"], "position.lon")
-    alt = _number(value["alt_m"], "position.alt_m")
+    lat = finite_number(value["lat"], "position.lat")
+    lon = finite_number(value["lon"], "position.lon")
+    alt = finite_number(value["alt_m"], "position.alt_m")
     if not -90.0 <= lat <= 90.0:
         raise payload_error("position.lat", f"must be in [-90, 90] degrees, got {lat!r}")
     if not -180.0 <= lon <= 180.0:
@@ -129,14 +130,16 @@ def _pairs_hook(pairs: list) -> dict:
     return out
 
 
-def _parse_json(payload) -> dict:
+def parse_json(payload, max_bytes: int = MAX_PAYLOAD_BYTES) -> dict:
+    """A JSON object from ``payload`` (bytes or str): at most ``max_bytes``, UTF-8, no duplicate
+    field; a ``ThreatPayloadError`` naming ``payload`` (or the duplicate field) otherwise."""
     if isinstance(payload, str):
         payload = payload.encode("utf-8")
     if not isinstance(payload, (bytes, bytearray, memoryview)):
         raise payload_error("payload", f"expected bytes, got {type(payload).__name__}")
     raw = bytes(payload)
-    if len(raw) > MAX_PAYLOAD_BYTES:
-        raise payload_error("payload", f"too large: {len(raw)} bytes (at most {MAX_PAYLOAD_BYTES})")
+    if len(raw) > max_bytes:
+        raise payload_error("payload", f"too large: {len(raw)} bytes (at most {max_bytes})")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -177,7 +180,7 @@ def decode(payload, *, received_t_s: float | None = None, key_id: str | None = N
         ``frame``, ``position[1]``, ``position.lat``, ``velocity_ned_m_s[0]``, ``radius_m``,
         ``ttl_s`` or the unknown field's name); ``exc.field`` holds it.
     """
-    data = _parse_json(payload)
+    data = parse_json(payload)
     for key in data:
         if key not in REQUIRED and key not in OPTIONAL:
             raise payload_error(_key_name(key), f"unknown field (known: {', '.join(REQUIRED + OPTIONAL)})")
@@ -206,12 +209,12 @@ def decode(payload, *, received_t_s: float | None = None, key_id: str | None = N
     if kind == "popup" and any(v != 0.0 for v in velocity):
         raise payload_error("velocity_ned_m_s", "a popup threat is static (all zero); "
                             "use kind 'moving' for a moving threat")
-    radius = _number(data["radius_m"], "radius_m")
+    radius = finite_number(data["radius_m"], "radius_m")
     if not 0.0 < radius <= MAX_RADIUS_M:
         raise payload_error("radius_m", f"must be > 0 and <= {MAX_RADIUS_M:g}, got {radius!r}")
     ttl = data.get("ttl_s")
     if ttl is not None:
-        ttl = _number(ttl, "ttl_s")
+        ttl = finite_number(ttl, "ttl_s")
         if not 0.0 < ttl <= MAX_TTL_S:
             raise payload_error("ttl_s", f"must be > 0 and <= {MAX_TTL_S:g} (or null: until "
                                 f"deleted), got {ttl!r}")

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Tube", "TrajectoryTube", "predict_tubes", "STATIC_SPEED_M_S"]
+__all__ = ["Tube", "TrajectoryTube", "along_samples", "predict_tubes", "STATIC_SPEED_M_S"]
 
 #: A threat slower than this (m/s) counts as static: its tube does not grow.
 STATIC_SPEED_M_S = 0.05
@@ -75,6 +75,13 @@ class Tube:
         return float(np.linalg.norm(self.vel_ned_m_s))
 
 
+def along_samples(times_s: np.ndarray, ned_m: np.ndarray, t_s) -> np.ndarray:
+    """Positions (K, 3) at times ``t_s`` (K,) on the polyline ``ned_m`` (N, 3) sampled at
+    ``times_s`` (N,): linear between samples, held before the first and after the last."""
+    t = np.asarray(t_s, dtype=float).reshape(-1)
+    return np.stack([np.interp(t, times_s, ned_m[:, i]) for i in range(3)], axis=1)
+
+
 @dataclass(frozen=True)
 class TrajectoryTube:
     """Another vehicle along its shared trajectory (``companion.fleet``): a ball whose centre
@@ -108,8 +115,7 @@ class TrajectoryTube:
 
     def center_at(self, t_s: np.ndarray) -> np.ndarray:
         """Centre (K, 3) at clock times ``t_s`` (K,)."""
-        t = np.asarray(t_s, dtype=float).reshape(-1)
-        return np.stack([np.interp(t, self.times_s, self.ned_m[:, i]) for i in range(3)], axis=1)
+        return along_samples(self.times_s, self.ned_m, t_s)
 
     #: The same growth and end as a threat's tube (the same attributes).
     radius_at = Tube.radius_at
