@@ -54,6 +54,18 @@ CLOCK_TICKS_S = os.sysconf("SC_CLK_TCK")
 GOAL_LEGS_CPU = 0.05
 
 
+def voluntary_switches(pid: int, tid) -> int:
+    """A thread's voluntary context switches so far (``/proc/<pid>/task/<tid>/status``)."""
+    try:
+        with open(f"/proc/{pid}/task/{tid}/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("voluntary_ctxt_switches:"):
+                    return int(line.split()[1])
+    except FileNotFoundError:
+        pass
+    return 0
+
+
 def process_cpu_s(pid: int) -> tuple[float, float]:
     """(own, waited-for children's) CPU seconds of ``pid`` (``/proc/<pid>/stat``)."""
     with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
@@ -73,6 +85,10 @@ class CpuSampler:
         self.threads: dict[int, tuple[str, float]] = {}
         self.legs_threads_first: dict | None = None
         self.legs_threads_last: dict | None = None
+        self.wakeups: dict[int, int] = {}
+        self.legs_wakeups_first: dict | None = None
+        self.legs_wakeups_last: dict | None = None
+        self.legs_wall_s: list[float] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="cpu-sampler", daemon=True)
 
@@ -94,9 +110,10 @@ class CpuSampler:
             self.samples.append((time.monotonic(), own, self._children_cpu_s(waited), legs))
             self._sample_threads()
             if legs:
-                self.legs_threads_last = dict(self.threads)
+                self.legs_threads_last, self.legs_wakeups_last = dict(self.threads), dict(self.wakeups)
+                self.legs_wall_s.append(time.monotonic())
                 if self.legs_threads_first is None:
-                    self.legs_threads_first = dict(self.threads)
+                    self.legs_threads_first, self.legs_wakeups_first = dict(self.threads), dict(self.wakeups)
             self._stop.wait(SAMPLE_PERIOD_S)
 
     def _sample_threads(self) -> None:
@@ -114,12 +131,23 @@ class CpuSampler:
             name = text[text.index("(") + 1:text.rindex(")")]
             fields = text.rsplit(")", 1)[1].split()
             self.threads[int(tid)] = (name, (int(fields[11]) + int(fields[12])) / CLOCK_TICKS_S)
+            self.wakeups[int(tid)] = voluntary_switches(self.pid, tid)
 
     def thread_cpu_s(self) -> dict[str, float]:
         """CPU seconds per thread over the legs ("name/tid", the largest first)."""
         first, last = self.legs_threads_first or {}, self.legs_threads_last or {}
         out = {f"{name}/{tid}": cpu - first.get(tid, (name, 0.0))[1] for tid, (name, cpu) in last.items()}
         return dict(sorted(((k, round(v, 2)) for k, v in out.items() if v > 0.0), key=lambda kv: -kv[1]))
+
+    def thread_wakeups_per_s(self) -> dict[str, float]:
+        """Voluntary context switches (wake-ups after a wait) per second of each thread over
+        the legs ("name/tid", the most first)."""
+        if len(self.legs_wall_s) < 2:
+            return {}
+        wall = self.legs_wall_s[-1] - self.legs_wall_s[0]
+        first, last, names = self.legs_wakeups_first or {}, self.legs_wakeups_last or {}, self.legs_threads_last or {}
+        out = {f"{names.get(tid, ('?',))[0]}/{tid}": (n - first.get(tid, 0)) / wall for tid, n in last.items()}
+        return dict(sorted(((k, round(v, 1)) for k, v in out.items() if v >= 0.5), key=lambda kv: -kv[1]))
 
     def __enter__(self) -> "CpuSampler":
         self._thread.start()
@@ -144,7 +172,8 @@ class CpuSampler:
         return out
 
 
-def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path | None) -> dict:
+def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path | None,
+                    companion_args=()) -> dict:
     """One flight of the demo mission; its CPU figures and summary."""
     injections = demo.DEMO_INJECTIONS if name == "threats" else ()
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -155,7 +184,8 @@ def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path 
         demo.spawn = lambda args, log_path, env=None: spawn(
             ["cProfile", "-o", prof, "-m", *args] if args[0] == "companion.cli" else args, log_path, env)
     try:
-        with demo.flight_processes(out_dir, MISSION, speedup=speedup, env=env) as flight:
+        with demo.flight_processes(out_dir, MISSION, speedup=speedup, env=env,
+                                   extra_args=companion_args) as flight:
             with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
                 watcher = demo.FlightWatcher(bus)
 
@@ -176,7 +206,8 @@ def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path 
         demo.spawn = spawn
     return {"flight": name, "speedup": speedup, "rc": flight.companion.returncode,
             "outcome": summary.get("outcome"), "decisions": summary.get("decisions"),
-            **sampler.rates(), "threads_cpu_s": sampler.thread_cpu_s()}
+            **sampler.rates(), "threads_cpu_s": sampler.thread_cpu_s(),
+            "threads_wakeups_per_s": sampler.thread_wakeups_per_s()}
 
 
 def table(results: list[dict]) -> str:
@@ -197,16 +228,19 @@ def main(argv=None) -> int:
     parser.add_argument("--speedup", type=float, default=4.0, help="SITL speed-up (and --time-scale)")
     parser.add_argument("--flights", nargs="+", default=["plain", "threats"], choices=["plain", "threats"])
     parser.add_argument("--profile", type=Path, default=None, help="cProfile the companion into DIR")
+    parser.add_argument("--companion-args", default="",
+                        help="more arguments for companion run (one string, split on spaces)")
     parser.add_argument("--out", default=str(REPO / "out" / "bench" / "companion_cpu.json"))
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     out = Path(args.out)
-    results = [fly_and_measure(name, out.parent / f"companion_cpu_{name}", args.speedup, args.profile)
-               for name in args.flights]
+    results = [fly_and_measure(name, out.parent / f"companion_cpu_{name}", args.speedup, args.profile,
+                               args.companion_args.split()) for name in args.flights]
     meta = {"cpus": os.cpu_count(), "load_average_1min": os.getloadavg()[0], "mission": MISSION.name}
     print(table(results))
     for r in results:
         print(f"{r['flight']}: CPU s per thread over the legs {r['threads_cpu_s']}")
+        print(f"{r['flight']}: wake-ups per second per thread over the legs {r['threads_wakeups_per_s']}")
     print(f"{meta['cpus']} CPUs shared; 1-min load average {meta['load_average_1min']:.2f} at the end")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=2) + "\n")

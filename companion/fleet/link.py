@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import logging
+import math
 import time
 from typing import Callable
 
@@ -26,7 +27,7 @@ from companion.fleet.message import SampledPath, TrajectoryMessage, decode, enco
 from companion.fleet.peers import PeerTable
 from companion.fleet.settings import FleetSettings
 
-__all__ = ["FleetLink", "sample_reference"]
+__all__ = ["FleetLink", "ReferenceGrid", "sample_reference"]
 
 log = logging.getLogger(__name__)
 
@@ -36,16 +37,41 @@ DELAY_MARGIN_S = 0.05
 BAD_LOG_PERIOD_S = 5.0
 
 
-def sample_reference(ref, now_t_s: float, settings: FleetSettings, hover_ned_m=None) -> SampledPath:
-    """``ref`` (an active reference, or None: a hover at ``hover_ned_m``) from ``now_t_s`` over
-    the published horizon; after its end, its last point."""
+class ReferenceGrid:
+    """A reference's positions every ``step_s`` of its own time from its start, to its end
+    point: evaluated once per reference (a Bezier evaluation of a whole horizon at every
+    publication was most of the fleet's cost), sliced at each publication."""
+
+    def __init__(self, step_s: float) -> None:
+        self.step_s = float(step_s)
+        self._of: tuple | None = None          # (trajectory, t0_s) the positions are of
+        self._ned_m = np.zeros((0, 3))
+
+    def positions(self, ref) -> np.ndarray:
+        """``ref.trajectory`` at ``min(k * step_s, duration)``, k = 0 .. ceil(duration / step_s); (K, 3)."""
+        if self._of is None or self._of[0] is not ref.trajectory or self._of[1] != ref.t0_s:
+            duration_s = ref.trajectory.duration_s
+            tau = np.minimum(self.step_s * np.arange(math.ceil(duration_s / self.step_s) + 1), duration_s)
+            self._ned_m = np.atleast_2d(ref.trajectory.sample(tau)[0])
+            self._of = (ref.trajectory, ref.t0_s)
+        return self._ned_m
+
+
+def sample_reference(ref, now_t_s: float, settings: FleetSettings, hover_ned_m=None,
+                     grid: ReferenceGrid | None = None) -> SampledPath:
+    """``ref`` (an active reference, or None: a hover at ``hover_ned_m``) over the published
+    horizon, on its own grid (``grid``, kept by the caller between publications): from the last
+    grid time at or before ``now_t_s``; before its start, its start point; after its end, its end
+    point."""
+    step_s = settings.sample_step_s
     if ref is None:
-        return SampledPath("hover", now_t_s, settings.sample_step_s, np.atleast_2d(np.asarray(hover_ned_m, float)))
-    end = max(now_t_s, min(ref.t0_s + ref.trajectory.duration_s, now_t_s + settings.horizon_s))
-    n = int(np.floor((end - now_t_s) / settings.sample_step_s)) + 1
-    t = now_t_s + settings.sample_step_s * np.arange(max(n, 1))
-    tau = np.clip(t - ref.t0_s, 0.0, ref.trajectory.duration_s)
-    return SampledPath(ref.path_id, now_t_s, settings.sample_step_s, np.atleast_2d(ref.trajectory.sample(tau)[0]))
+        return SampledPath("hover", now_t_s, step_s, np.atleast_2d(np.asarray(hover_ned_m, float)))
+    ned_m = (grid or ReferenceGrid(step_s)).positions(ref)
+    first = math.floor((now_t_s - ref.t0_s) / step_s)
+    first -= ref.t0_s + first * step_s > now_t_s           # rounding: the first is never after now
+    last = max(min(first + int(settings.horizon_s / step_s), len(ned_m) - 1), first)
+    rows = np.clip(np.arange(first, last + 1), 0, len(ned_m) - 1)
+    return SampledPath(ref.path_id, ref.t0_s + first * step_s, step_s, ned_m[rows])
 
 
 class FleetLink:
@@ -84,11 +110,13 @@ class FleetLink:
         self._subscriber = None
         self._bad_logged_s = -float("inf")
         self._task = None
+        self._grid = ReferenceGrid(self.fleet.sample_step_s)
+        self._own_key = f"uav/{sysid}/trajectory"
 
     # ------------------------------------------------------------------ lifecycle
     def start(self, loop) -> None:
         self._loop = loop
-        self._publisher = self.session.declare_publisher(f"uav/{self.sysid}/trajectory")
+        self._publisher = self.session.declare_publisher(self._own_key)
         self._subscriber = self.session.declare_subscriber("uav/*/trajectory", self._on_sample)
         self._task = loop.create_task(self._publish_periodically(), name="fleet-publish")
         log.info("fleet: sharing uav/%d/trajectory, avoiding uav/*/trajectory (every %.1f s%s)", self.sysid,
@@ -109,8 +137,11 @@ class FleetLink:
 
     # ------------------------------------------------------------------ in
     def _on_sample(self, sample) -> None:
-        """zenoh thread: decode and keep (a bad message is counted, the flight goes on)."""
+        """zenoh thread: decode and keep (a bad message is counted, the flight goes on); our
+        own messages come back too and are not decoded."""
         received = time.time()
+        if str(sample.key_expr) == self._own_key:
+            return
         try:
             self.peers.receive(decode(sample.payload.to_bytes()), received)
         except ThreatPayloadError as exc:
@@ -141,7 +172,7 @@ class FleetLink:
         self._seq += 1
         msg = TrajectoryMessage(self.sysid, self._seq, self.fleet.rotor_radius_m, self.home_lla, now, time.time(),
                                 float(self.settings.link.time_scale or 1.0), 0.0,
-                                sample_reference(ref, now, self.fleet, pos), self.pending)
+                                sample_reference(ref, now, self.fleet, pos, self._grid), self.pending)
         if self.fleet.inject_delay_s > 0:
             self._loop.call_later(self.fleet.inject_delay_s, self._put, msg)
         else:

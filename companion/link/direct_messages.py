@@ -15,28 +15,17 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import math
 import time
 from typing import AsyncIterator
 
-import numpy as np
-
-from heli_common.mavlink_ids import (TYPEMASK_IGNORE_ACCELERATION, TYPEMASK_IGNORE_POSITION,
-                                     TYPEMASK_IGNORE_VELOCITY, enum_names, mavlink)
+from heli_common.mavlink_ids import enum_names
 
 from companion.errors import LinkError
 from companion.link.frames import LinkFrames
+from companion.link.setpoint_frame import SETPOINT_MESSAGE, SetpointFrame, setpoint_values
 from companion.link.transport import TAP_HANDOVER_PERIOD_S
 
 log = logging.getLogger(__name__)
-
-MAV_FRAME_LOCAL_NED = mavlink.MAV_FRAME_LOCAL_NED
-# SET_POSITION_TARGET type_mask bits (POSITION_TARGET_TYPEMASK)
-IGNORE_POS = TYPEMASK_IGNORE_POSITION
-IGNORE_VEL = TYPEMASK_IGNORE_VELOCITY
-IGNORE_ACC = TYPEMASK_IGNORE_ACCELERATION
-IGNORE_YAW = mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE
-IGNORE_YAW_RATE = mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 
 #: MAV_SEVERITY names by value (MAVLink common.xml: pymavlink's ``mavutil.mavlink.MAV_SEVERITY_*``).
 MAV_SEVERITY_NAMES = tuple(enum_names("MAV_SEVERITY").values())
@@ -44,71 +33,13 @@ MAV_SEVERITY_NAMES = tuple(enum_names("MAV_SEVERITY").values())
 STATUSTEXT_MAX_CHARS = 50
 
 
-def setpoint_type_mask(pos, vel, acc, yaw, yaw_rate=None) -> int:
-    """SET_POSITION_TARGET type_mask: a field group is ignored when it is None."""
-    mask = 0
-    if pos is None:
-        mask |= IGNORE_POS
-    if vel is None:
-        mask |= IGNORE_VEL
-    if acc is None:
-        mask |= IGNORE_ACC
-    if yaw is None:
-        mask |= IGNORE_YAW
-    if yaw_rate is None:
-        mask |= IGNORE_YAW_RATE
-    return mask
-
-
-def three_finite(value) -> list[float] | None:
-    """``value`` (a sequence or array of 3 numbers) as 3 floats, or None if it is not 3 finite numbers."""
-    try:
-        values = [float(v) for v in (value.tolist() if isinstance(value, np.ndarray) else value)]
-    except (TypeError, ValueError):
-        return None
-    if len(values) != 3 or not all(map(math.isfinite, values)):
-        return None
-    return values
-
-
 def setpoint_fields(time_boot_ms: int, target_system: int, target_component: int,
                     pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
                     yaw_rate_rad_s=None) -> dict:
-    """Fields of a SET_POSITION_TARGET_LOCAL_NED message (frame LOCAL_NED).
-
-    Parameters
-    ----------
-    pos_ned_m, vel_ned_m_s, acc_ned_m_s2 : (3,) array_like or None
-    yaw_rad, yaw_rate_rad_s : float or None
-
-    Raises
-    ------
-    LinkError
-        A given vector is not 3 finite numbers, or yaw is not finite.
-    """
-    fields = {"time_boot_ms": int(time_boot_ms) & 0xFFFFFFFF, "target_system": target_system,
-              "target_component": target_component, "coordinate_frame": MAV_FRAME_LOCAL_NED,
-              "type_mask": setpoint_type_mask(pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad,
-                                              yaw_rate_rad_s)}
-    for name, value, keys in (("pos_ned_m", pos_ned_m, ("x", "y", "z")),
-                              ("vel_ned_m_s", vel_ned_m_s, ("vx", "vy", "vz")),
-                              ("acc_ned_m_s2", acc_ned_m_s2, ("afx", "afy", "afz"))):
-        if value is None:
-            fields.update({k: 0.0 for k in keys})
-            continue
-        values = three_finite(value)          # plain floats: numpy's per-call cost is most of it
-        if values is None:
-            raise LinkError(f"setpoint {name} must be 3 finite numbers, got {value!r}")
-        fields.update(zip(keys, values))
-    for name, value, key in (("yaw_rad", yaw_rad, "yaw"),
-                             ("yaw_rate_rad_s", yaw_rate_rad_s, "yaw_rate")):
-        if value is None:
-            fields[key] = 0.0
-        elif not math.isfinite(float(value)):
-            raise LinkError(f"setpoint {name} must be finite, got {value!r}")
-        else:
-            fields[key] = float(value)
-    return fields
+    """``setpoint_values`` by field name (MAVSDK's MavlinkDirect takes a JSON object)."""
+    return dict(zip(SETPOINT_MESSAGE.ordered_fieldnames,
+                    setpoint_values(time_boot_ms, target_system, target_component, pos_ned_m,
+                                    vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s)))
 
 
 class DirectMessages:
@@ -196,15 +127,15 @@ class DirectMessages:
         self._require_connected()
         if pos_ned_m is not None:
             pos_ned_m = self.frames.to_origin_floats(pos_ned_m)
-        time_boot_ms = int((time.monotonic() - self._t0) * 1000.0)
-        fields = setpoint_fields(time_boot_ms, self.target_system, self.target_component,
-                                 pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s)
-        if self.gate is not None and self.gate.send_message(
-                mavlink.MAVLink_set_position_target_local_ned_message(**fields)):
+        values = setpoint_values(int((time.monotonic() - self._t0) * 1000.0), self.target_system,
+                                 self.target_component, pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad,
+                                 yaw_rate_rad_s)
+        if self.gate is not None and self.gate.send_message(SetpointFrame(values)):
             return
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
-        self._direct_sync.send_message(MavlinkMessage("SET_POSITION_TARGET_LOCAL_NED", 0, 0, self.target_system,
+        fields = dict(zip(SETPOINT_MESSAGE.ordered_fieldnames, values))
+        self._direct_sync.send_message(MavlinkMessage(SETPOINT_MESSAGE.msgname, 0, 0, self.target_system,
                                                       self.target_component, json.dumps(fields)))
 
     def send_statustext(self, text: str, severity: int | str = "NOTICE") -> None:
