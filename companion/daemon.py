@@ -333,7 +333,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
                 engage=self.engage, send_now=self.send_now, reference=lambda: self.reference,
                 position_ned_m=lambda: self.link.telemetry.pos_ned_m, record=self.record,
                 statustext=self.send_statustext, bus=self.bus,
-                keep_bus_open=self.bus is not None)
+                keep_bus_open=self.bus is not None, pause=self.pause)
             with normal_priority():          # zenoh's threads never at the stream's priority
                 await self.threats.start(home)
             self._open_snapshots(home)
@@ -355,9 +355,11 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         self.hold_here(self.link.telemetry.pos_ned_m,
                        "joined in the air" if self.summary.joined else "takeoff complete")
         self.streamer.start()
+        self.link.batch_reads(self.streamer)                      # telemetry taken at the stream's ticks
         for leg in self.legs:
             await self.fly_leg(leg)
         self.hold_here(self.link.telemetry.pos_ned_m, "mission legs done")
+        self.link.batch_reads(None)
         await self.streamer.stop()
         await self.finish(self.local_mission.end_action)
         self.summary.outcome = "completed"
@@ -366,6 +368,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
     async def shutdown(self) -> None:
         """Stop streaming and background tasks, write the summary, close the link."""
         if self.streamer is not None:
+            self.link.batch_reads(None)
             await self.streamer.stop()
             jitter = self.streamer.stats()
             self.record("event", name="setpoint_jitter", **jitter.as_dict())

@@ -58,6 +58,13 @@ log = logging.getLogger(__name__)
 def jsonable(value: Any) -> Any:
     """``value`` as plain JSON data: arrays as lists, floats rounded to 6 decimals, non-finite
     numbers as None."""
+    kind = type(value)                     # the common types first: a sample line is ~40 numbers
+    if kind is float:
+        return round(value, 6) if math.isfinite(value) else None
+    if kind is list or kind is tuple:
+        return [jsonable(v) for v in value]
+    if kind is int or kind is str or value is None:
+        return value
     if isinstance(value, np.ndarray):
         return jsonable(value.tolist())
     if isinstance(value, (np.floating, float)):

@@ -88,10 +88,12 @@ class FleetLink:
         Our mission time.
     reference, position_ned_m : callable
         The active reference (or None) and the vehicle's position (or None).
+    pause : callable (delay_s) -> awaitable
+        How the periodic publication waits (default ``asyncio.sleep``).
     """
 
     def __init__(self, settings, session, sysid: int, home_lla, *, clock_now_s: Callable[[], float],
-                 reference: Callable, position_ned_m: Callable) -> None:
+                 reference: Callable, position_ned_m: Callable, pause: Callable = asyncio.sleep) -> None:
         self.settings = settings
         self.fleet: FleetSettings = settings.fleet
         self.session = session
@@ -100,6 +102,7 @@ class FleetLink:
         self.clock_now_s = clock_now_s
         self.reference = reference
         self.position_ned_m = position_ned_m
+        self.pause = pause
         self.peers = PeerTable(sysid, self.fleet, self.home_lla)
         self.pending: SampledPath | None = None
         self.counts = {"published": 0, "rejected": 0, "delay_checks": 0, "refused": 0}
@@ -157,7 +160,7 @@ class FleetLink:
     # ------------------------------------------------------------------ out
     async def _publish_periodically(self) -> None:
         while True:
-            await asyncio.sleep(self.fleet.publish_period_s)
+            await self.pause(self.fleet.publish_period_s)
             self.publish()
 
     def publish(self) -> None:

@@ -13,6 +13,7 @@ plugin (a ~20 us ctypes call). None of them blocks the event loop.
 from __future__ import annotations
 
 import asyncio
+import collections
 import json
 import logging
 import time
@@ -54,6 +55,8 @@ class DirectMessages:
     _direct_sync: object
     _t0: float
     _readers: dict
+    _tap_batches: collections.deque       # batches of (type, fields) the gate read, for the loop
+    _taps_streamer: object                # the setpoint stream that takes them (``batch_reads``)
     gate: object
 
     def _require_connected(self) -> None:
@@ -84,26 +87,41 @@ class DirectMessages:
             if not readers and self.gate is not None:
                 self.gate.inbound.tapped.discard(name)
 
-    def batch_reads(self, on: bool) -> None:
-        """While ``on``, the gate reads the vehicle's datagrams in batches, every
-        ``TAP_HANDOVER_PERIOD_S`` (``GateThread.batch_reads``): the companion does it while it
-        streams setpoints, when about 40 telemetry datagrams a second would each wake it."""
-        if self.gate is not None:
-            self.gate.batch_reads(TAP_HANDOVER_PERIOD_S if on else 0.0)
+    def batch_reads(self, streamer=None) -> None:
+        """While the setpoint ``streamer`` runs (None: from now on, no longer), the gate reads
+        the vehicle's datagrams in batches every ``TAP_HANDOVER_PERIOD_S``
+        (``GateThread.batch_reads``) and the messages it read are taken at the stream's next
+        tick (``SetpointStreamer.tick_hooks``) instead of waking the loop: the companion's about
+        40 telemetry datagrams a second then cost the gate 10 wake-ups and the loop none."""
+        if self.gate is None:
+            return
+        if self._taps_streamer is not None:
+            self._taps_streamer.tick_hooks.remove(self._take_taps)
+        self._taps_streamer = streamer
+        if streamer is not None:
+            streamer.tick_hooks.append(self._take_taps)
+        self.gate.batch_reads(TAP_HANDOVER_PERIOD_S if streamer is not None else 0.0)
+        self._take_taps()
 
-    def _hand_over(self, batch: list[tuple[str, dict]]) -> None:
+    def _take_taps(self) -> None:
         """On the loop: the messages the gate read, to their readers (``messages``)."""
-        for name, fields in batch:
-            for queue in self._readers.get(name, ()):
-                queue.put_nowait(fields)
+        batches = self._tap_batches
+        while batches:
+            for name, fields in batches.popleft():
+                for queue in self._readers.get(name, ()):
+                    queue.put_nowait(fields)
 
     def _tap_from_gate_thread(self, loop: asyncio.AbstractEventLoop):
-        """The gate's ``on_tap``: hand each batch over to ``loop``."""
+        """The gate's ``on_tap``: keep each batch for the loop, and wake the loop for it unless
+        the setpoint stream's next tick takes it (``batch_reads``)."""
         def on_tap(batch: list) -> None:
-            try:
-                loop.call_soon_threadsafe(self._hand_over, batch)
-            except RuntimeError:           # the loop is closed: the link is closing
-                pass
+            self._tap_batches.append(batch)
+            streamer = self._taps_streamer
+            if streamer is None or not streamer.running:     # a stream that stopped takes none
+                try:
+                    loop.call_soon_threadsafe(self._take_taps)
+                except RuntimeError:           # the loop is closed: the link is closing
+                    pass
         return on_tap
 
     def send_message(self, name: str, fields: dict) -> None:

@@ -269,7 +269,11 @@ class SetpointStreamer:
         self.sent = 0
         self.send_errors = 0
         self._tick_callbacks: list[Callable[[], None]] = []
+        #: Called right after every scheduled send (e.g. the link taking the telemetry the gate
+        #: read: ``VehicleLink.batch_reads``); each must be quick and must not raise.
+        self.tick_hooks: list[Callable[[], None]] = []
         self._sleepers: list[tuple[float, asyncio.Future]] = []   # (wake at, future) of sleep()
+        self._first_wake_s = math.inf                               # the earliest of them
 
     # ---------------------------------------------------------------- control
 
@@ -322,7 +326,9 @@ class SetpointStreamer:
             return
         loop = asyncio.get_running_loop()
         future = loop.create_future()
-        self._sleepers.append((time.monotonic() + delay_s - 0.5 * self.period_s, future))
+        wake_s = time.monotonic() + delay_s - 0.5 * self.period_s
+        self._sleepers.append((wake_s, future))
+        self._first_wake_s = min(self._first_wake_s, wake_s)
         # a stream that stopped ticking without stop() must not hold the sleeper for ever
         backstop = loop.call_later(delay_s + SLEEP_BACKSTOP_S, _wake, future)
         try:
@@ -333,9 +339,12 @@ class SetpointStreamer:
                 future.cancel()
 
     def _wake_sleepers(self, now_s: float) -> None:
+        if now_s < self._first_wake_s:
+            return
         due = [f for t, f in self._sleepers if t <= now_s]
         if due:
             self._sleepers = [(t, f) for t, f in self._sleepers if t > now_s and not f.done()]
+            self._first_wake_s = min((t for t, _ in self._sleepers), default=math.inf)
             for future in due:
                 if not future.done():
                     future.set_result(None)
@@ -348,6 +357,8 @@ class SetpointStreamer:
             except Exception:  # noqa: BLE001 - the send path evaluates again if needed
                 log.exception("setpoint source's prepare failed")
                 self._prepare = None
+        for hook in self.tick_hooks:
+            hook()
         self._run_tick_callbacks()
         self._wake_sleepers(time.monotonic())
 

@@ -133,6 +133,8 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self._in_flight: set[asyncio.Future] = set()      # MAVSDK command calls still running
         self._mission_lock: asyncio.Lock | None = None
         self._readers: dict[str, set[asyncio.Queue]] = {}  # message type -> the queues of messages()
+        self._tap_batches: collections.deque = collections.deque()
+        self._taps_streamer = None
 
     # ----------------------------------------------------------------- connection
 

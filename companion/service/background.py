@@ -74,7 +74,7 @@ class BackgroundTasks:
     async def _publish_status(self) -> None:
         period = 1.0 / self.settings.link.status_rate_hz
         while True:
-            await asyncio.sleep(period)
+            await self.pause(period)
             if self.threats is not None:
                 self.threats.publish_status(self.status())
 
@@ -85,7 +85,7 @@ class BackgroundTasks:
         the threats already held."""
         had = None
         while True:
-            await asyncio.sleep(ZENOH_WATCH_PERIOD_S)
+            await self.pause(ZENOH_WATCH_PERIOD_S)
             try:
                 now = self.threats.bus.connected_peers() > 0
             except Exception as exc:  # noqa: BLE001 - the session is closing

@@ -112,6 +112,9 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         ``settings``).
     monitor_period_s : float
         See :data:`MONITOR_PERIOD_S`.
+    pause : callable (delay_s) -> awaitable, optional
+        How the monitor and the fleet's publication wait (default ``asyncio.sleep``; the daemon
+        gives ``CompanionDaemon.pause``: in the setpoint stream's wake-ups while it runs).
     on_table_change : callable (threats, now_t_s), optional
         Called on the loop after every PUT or DELETE (and a restore) with the threats held and
         the mission time: the daemon's threat snapshot (``companion.state``).
@@ -122,7 +125,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
                  position_ned_m: Callable, record: Callable, statustext: Callable | None = None,
                  bus: ThreatBus | None = None, manager_factory: Callable | None = None,
                  monitor_period_s: float = MONITOR_PERIOD_S, on_table_change: Callable | None = None,
-                 keep_bus_open: bool = False):
+                 keep_bus_open: bool = False, pause: Callable = asyncio.sleep):
         self.settings = settings
         self.clock_now_s = clock_now_s
         self.in_worker = in_worker
@@ -138,6 +141,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         self.bus.clock = clock_now_s
         self.manager_factory = manager_factory or self._default_manager
         self.monitor_period_s = float(monitor_period_s)
+        self.pause = pause
         self.on_table_change = on_table_change
         self.table = ThreatTable()
         self.manager = None
@@ -176,7 +180,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
 
             self.fleet = FleetLink(self.settings, self.bus.session, self.bus.sysid, home_lla,
                                    clock_now_s=self.clock_now_s, reference=self.reference,
-                                   position_ned_m=self.position_ned_m)
+                                   position_ned_m=self.position_ned_m, pause=self.pause)
             self.fleet.start(loop)
 
     async def stop(self) -> None:

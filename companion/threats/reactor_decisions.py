@@ -32,6 +32,7 @@ class ReactorDecisions:
     decisions: int
     latencies_ms: dict[str, list[float]]
     monitor_period_s: float
+    pause: Callable
     clock_now_s: Callable[[], float]
     in_worker: Callable
     engage: Callable
@@ -178,7 +179,7 @@ class ReactorDecisions:
         next_s = time.monotonic()
         while True:
             next_s = max(next_s + self.monitor_period_s, time.monotonic())
-            await asyncio.sleep(next_s - time.monotonic())
+            await self.pause(next_s - time.monotonic())
             if self.manager is None or self.leg is None or self._busy or self._resume_waiting \
                     or self.reference() is None:
                 continue

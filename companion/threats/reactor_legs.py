@@ -32,6 +32,7 @@ class LegsAndAlternatives:
     threats_now: Callable
     has_threats: Callable
     rng: np.random.Generator
+    pause: Callable
     clock_now_s: Callable[[], float]
     in_worker: Callable
     reference: Callable
@@ -81,7 +82,7 @@ class LegsAndAlternatives:
         """Keep the alternatives starting just ahead of the vehicle."""
         s = self.settings
         while True:
-            await asyncio.sleep(s.flight.alternatives_period_s / s.link.time_scale)
+            await self.pause(s.flight.alternatives_period_s / s.link.time_scale)
             self.refresh_alternatives()
 
     async def _alternatives_loop(self) -> None:
