@@ -45,6 +45,10 @@ STREAM_SWITCH_INTERVAL_S = 0.0005
 #: ``SetpointStreamer.sleep`` wakes on the loop's timer this long after its delay if no send
 #: woke it (s).
 SLEEP_BACKSTOP_S = 1.0
+#: The stream's housekeeping (the source's work ahead, the after-tick callbacks, the sleepers)
+#: follows a send about this often (s), not every send: the flight's periodic work (the phase
+#: machine, the monitor, the record: 10 Hz) needs no more, and each turn costs the loop.
+HOUSEKEEPING_PERIOD_S = 0.1
 
 
 def _wake(future: asyncio.Future) -> None:
@@ -259,6 +263,8 @@ class SetpointStreamer:
         self._prepare: Callable[[], None] | None = None
         self._source_failed = False
         self.period_s = 1.0 / rate_hz
+        self._housekeeping_ticks = max(1, int(HOUSEKEEPING_PERIOD_S / self.period_s + 1e-9))
+        self._ticks = 0
         self._on_sent = on_sent
         self._spin_s = spin_s
         self._max_records = int(max_records)
@@ -281,7 +287,8 @@ class SetpointStreamer:
                    prepare: Callable[[], None] | None = None) -> None:
         """Replace the setpoint source; effective at the next tick (None pauses sending).
 
-        ``prepare()``, when given, is called right after each scheduled send: work the source
+        ``prepare()``, when given, is called in the stream's housekeeping (right after a send,
+        every ``HOUSEKEEPING_PERIOD_S``): work the source
         can do ahead (e.g. ``ActiveReference.prepare``) then never delays a send."""
         self._source = source
         self._prepare = prepare
@@ -310,7 +317,8 @@ class SetpointStreamer:
         self._wake_sleepers(math.inf)
 
     def call_after_next_tick(self, callback: Callable[[], None]) -> None:
-        """Call ``callback()`` on the loop right after the next scheduled send (soon when not
+        """Call ``callback()`` on the loop in the stream's next housekeeping, right after a
+        scheduled send (at most ``HOUSEKEEPING_PERIOD_S`` away; soon when not
         streaming), in the same wake-up as the send: no task, no future, warm caches."""
         if self.running:
             self._tick_callbacks.append(callback)
@@ -318,7 +326,7 @@ class SetpointStreamer:
             asyncio.get_running_loop().call_soon(callback)
 
     async def sleep(self, delay_s: float) -> None:
-        """Sleep about ``delay_s``, waking right after the first send that follows (while
+        """Sleep about ``delay_s``, waking in the first housekeeping that follows (while
         streaming: the periodic work of the flight then shares the stream's wake-up of the
         process instead of adding its own); ``asyncio.sleep`` when not streaming."""
         if not self.running:
@@ -326,7 +334,7 @@ class SetpointStreamer:
             return
         loop = asyncio.get_running_loop()
         future = loop.create_future()
-        wake_s = time.monotonic() + delay_s - 0.5 * self.period_s
+        wake_s = time.monotonic() + delay_s - 0.5 * self.housekeeping_period_s
         self._sleepers.append((wake_s, future))
         self._first_wake_s = min(self._first_wake_s, wake_s)
         # a stream that stopped ticking without stop() must not hold the sleeper for ever
@@ -350,15 +358,19 @@ class SetpointStreamer:
                     future.set_result(None)
 
     def _after_tick(self) -> None:
-        """Right after a scheduled send: the source's work ahead, then the tick's callbacks."""
+        """Right after a scheduled send: the tick hooks; every ``HOUSEKEEPING_PERIOD_S``, also
+        the source's work ahead, the after-tick callbacks and the sleepers that are due."""
+        for hook in self.tick_hooks:
+            hook()
+        self._ticks += 1
+        if self._ticks % self._housekeeping_ticks:
+            return
         if self._prepare is not None:
             try:
                 self._prepare()
             except Exception:  # noqa: BLE001 - the send path evaluates again if needed
                 log.exception("setpoint source's prepare failed")
                 self._prepare = None
-        for hook in self.tick_hooks:
-            hook()
         self._run_tick_callbacks()
         self._wake_sleepers(time.monotonic())
 
@@ -369,6 +381,11 @@ class SetpointStreamer:
                 callback()
             except Exception:  # noqa: BLE001 - the stream goes on
                 log.exception("after-tick callback %r failed", callback)
+
+    @property
+    def housekeeping_period_s(self) -> float:
+        """How often the housekeeping follows a send (s; ``HOUSEKEEPING_PERIOD_S``, whole ticks)."""
+        return self._housekeeping_ticks * self.period_s
 
     @property
     def running(self) -> bool:

@@ -39,6 +39,7 @@ class Sink:
 
 
 def test_paced_record_lines_are_written_right_after_a_send_and_flushed_at_close():
+    """In the stream's next housekeeping: right after one of the next sends."""
     async def main():
         sent = []
         streamer = SetpointStreamer(lambda **kw: sent.append(time.monotonic()), hold_position([0, 0, -10], 0.0))
@@ -51,10 +52,11 @@ def test_paced_record_lines_are_written_right_after_a_send_and_flushed_at_close(
         before = len(sent)
         sinks.write("sample")
         sinks.write("event")
-        assert [line for line, _ in sink.lines] == ["header"]       # waiting for the next send
-        await asyncio.sleep(0.05)
+        assert [line for line, _ in sink.lines] == ["header"]       # waiting for the housekeeping
+        await asyncio.sleep(streamer.housekeeping_period_s + 0.05)
         assert [line for line, _ in sink.lines] == ["header", "sample", "event"]
-        assert sink.lines[1][1] == before + 1                       # right after the next send
+        ticks = round(streamer.housekeeping_period_s / streamer.period_s)
+        assert before + 1 <= sink.lines[1][1] <= before + ticks + 1  # right after a send, within one housekeeping period
         sinks.write("summary")
         await streamer.stop()
         sinks.close()
@@ -77,8 +79,9 @@ def test_sleep_wakes_right_after_a_send_once_the_delay_has_passed():
             start = time.monotonic()
             await streamer.sleep(delay)
             woke = time.monotonic()
-            assert woke - start >= delay - 0.5 * streamer.period_s   # not before its time (half a period early at most)
-            assert woke - start <= delay + 2 * streamer.period_s + 0.05
+            house_s = streamer.housekeeping_period_s
+            assert woke - start >= delay - 0.5 * house_s   # not before its time (half a housekeeping period early at most)
+            assert woke - start <= delay + house_s + 2 * streamer.period_s + 0.05
             assert 0.0 <= woke - sent[-1] < 0.005                # in the wake-up of a send, right after it
         waiting = asyncio.get_running_loop().create_task(streamer.sleep(10.0))
         await asyncio.sleep(0.03)
@@ -108,8 +111,9 @@ def test_after_tick_callbacks_run_in_the_sends_wake_up_and_at_stop():
         streamer.call_after_next_tick(lambda: called.append(("next", len(sent))))
         streamer.call_after_next_tick(lambda: 1 / 0)             # a failing callback is logged, no more
         before = len(sent)
-        await asyncio.sleep(0.05)
-        assert called[1] == ("next", before + 1)
+        await asyncio.sleep(streamer.housekeeping_period_s + 0.05)
+        ticks = round(streamer.housekeeping_period_s / streamer.period_s)
+        assert called[1][0] == "next" and before + 1 <= called[1][1] <= before + ticks + 1   # right after a send
         streamer.call_after_next_tick(lambda: called.append(("stop", None)))
         await streamer.stop()
         assert called[-1] == ("stop", None)
