@@ -18,7 +18,9 @@ processes (the planning pool's workers), every ``SAMPLE_PERIOD_S``. Reported per
   state the goal is about (<= 5 % of one core with no threat).
 
 ``--profile DIR`` runs the companion under ``cProfile`` (``python -m cProfile -o``; the
-event-loop thread only) and writes ``DIR/<flight>.prof``.
+event-loop thread only) and writes ``DIR/<flight>.prof``. ``--account`` runs it under
+``benchmarks/loop_account.py`` and reports the event-loop thread's CPU over the legs per
+callback (its own CPU clock: far closer to the truth than cProfile for small calls).
 
 Usage::
 
@@ -33,6 +35,7 @@ import argparse
 import json
 import logging
 import os
+import signal
 import sys
 import threading
 import time
@@ -77,9 +80,11 @@ def process_cpu_s(pid: int) -> tuple[float, float]:
 class CpuSampler:
     """Samples (wall s, own CPU s, children's CPU s) of a process, and a phase flag, in a thread."""
 
-    def __init__(self, pid: int, in_legs) -> None:
+    def __init__(self, pid: int, in_legs, on_legs=None) -> None:
         self.pid = pid
         self.in_legs = in_legs
+        self.on_legs = on_legs          # on_legs(True) when the legs begin, on_legs(False) when they end
+        self._legs_state: bool | None = None
         self.samples: list[tuple[float, float, float, bool]] = []
         self._children: dict[int, float] = {}
         self.threads: dict[int, tuple[str, float]] = {}
@@ -107,6 +112,9 @@ class CpuSampler:
             except (FileNotFoundError, ProcessLookupError):
                 return
             legs = bool(self.in_legs())
+            if self.on_legs is not None and legs is not self._legs_state and (legs or self._legs_state):
+                self._legs_state = legs                   # None (before) -> True -> False (after)
+                self.on_legs(legs)
             self.samples.append((time.monotonic(), own, self._children_cpu_s(waited), legs))
             self._sample_threads()
             if legs:
@@ -173,7 +181,7 @@ class CpuSampler:
 
 
 def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path | None,
-                    companion_args=()) -> dict:
+                    companion_args=(), account: bool = False) -> dict:
     """One flight of the demo mission; its CPU figures and summary."""
     injections = demo.DEMO_INJECTIONS if name == "threats" else ()
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -183,6 +191,12 @@ def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path 
         prof = str(profile_dir / f"{name}.prof")
         demo.spawn = lambda args, log_path, env=None: spawn(
             ["cProfile", "-o", prof, "-m", *args] if args[0] == "companion.cli" else args, log_path, env)
+    accounts = out_dir / "loop_account.json"
+    if account:
+        env["PYTHONPATH"] = str(REPO / "benchmarks") + os.pathsep + env["PYTHONPATH"]
+        accounts.unlink(missing_ok=True)
+        demo.spawn = lambda args, log_path, env=None: spawn(
+            ["loop_account", str(accounts), *args] if args[0] == "companion.cli" else args, log_path, env)
     try:
         with demo.flight_processes(out_dir, MISSION, speedup=speedup, env=env,
                                    extra_args=companion_args) as flight:
@@ -193,7 +207,9 @@ def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path 
                     st = watcher.status
                     return bool(st) and st.get("leg", -1) >= 0 and st.get("mode") == "GUIDED"
 
-                with CpuSampler(flight.companion.pid, in_legs) as sampler:
+                signal_legs = (lambda legs: os.kill(flight.companion.pid, signal.SIGUSR1 if legs else signal.SIGUSR2)) \
+                    if account else None
+                with CpuSampler(flight.companion.pid, in_legs, signal_legs) as sampler:
                     done = lambda: flight.companion.poll() is not None  # noqa: E731
                     sent = demo.inject(watcher, injections, 300, done=done) if injections else []
                     if sent:
@@ -207,7 +223,8 @@ def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path 
     return {"flight": name, "speedup": speedup, "rc": flight.companion.returncode,
             "outcome": summary.get("outcome"), "decisions": summary.get("decisions"),
             **sampler.rates(), "threads_cpu_s": sampler.thread_cpu_s(),
-            "threads_wakeups_per_s": sampler.thread_wakeups_per_s()}
+            "threads_wakeups_per_s": sampler.thread_wakeups_per_s(),
+            "loop_account": json.loads(accounts.read_text()) if account and accounts.exists() else None}
 
 
 def table(results: list[dict]) -> str:
@@ -228,6 +245,8 @@ def main(argv=None) -> int:
     parser.add_argument("--speedup", type=float, default=4.0, help="SITL speed-up (and --time-scale)")
     parser.add_argument("--flights", nargs="+", default=["plain", "threats"], choices=["plain", "threats"])
     parser.add_argument("--profile", type=Path, default=None, help="cProfile the companion into DIR")
+    parser.add_argument("--account", action="store_true",
+                        help="the event loop's CPU over the legs per callback (benchmarks/loop_account.py)")
     parser.add_argument("--companion-args", default="",
                         help="more arguments for companion run (one string, split on spaces)")
     parser.add_argument("--out", default=str(REPO / "out" / "bench" / "companion_cpu.json"))
@@ -235,12 +254,15 @@ def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     out = Path(args.out)
     results = [fly_and_measure(name, out.parent / f"companion_cpu_{name}", args.speedup, args.profile,
-                               args.companion_args.split()) for name in args.flights]
+                               args.companion_args.split(), args.account) for name in args.flights]
     meta = {"cpus": os.cpu_count(), "load_average_1min": os.getloadavg()[0], "mission": MISSION.name}
     print(table(results))
     for r in results:
         print(f"{r['flight']}: CPU s per thread over the legs {r['threads_cpu_s']}")
         print(f"{r['flight']}: wake-ups per second per thread over the legs {r['threads_wakeups_per_s']}")
+        if r["loop_account"]:
+            top = list(r["loop_account"]["by"].items())[:12]
+            print(f"{r['flight']}: event loop over the legs, % of a core and calls/s, largest first: {top}")
     print(f"{meta['cpus']} CPUs shared; 1-min load average {meta['load_average_1min']:.2f} at the end")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=2) + "\n")

@@ -116,7 +116,8 @@ def workload_kind() -> str:
 # ----------------------------------------------------------------------------- senders
 
 class UdpSender:
-    """pymavlink SET_POSITION_TARGET_LOCAL_NED to a local UDP sink (the per-tick work)."""
+    """SET_POSITION_TARGET_LOCAL_NED to a local UDP sink, packed as the companion packs it (the
+    per-tick work)."""
 
     def __init__(self) -> None:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink2
@@ -130,13 +131,10 @@ class UdpSender:
 
     def __call__(self, pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
                  yaw_rate_rad_s=None):
-        from companion.link.direct_messages import setpoint_fields
-        f = setpoint_fields(int((time.monotonic() - self.t0) * 1e3), 1, 1, pos_ned_m,
-                            vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s)
-        msg = self.mav.set_position_target_local_ned_encode(
-            f["time_boot_ms"], 1, 1, 1, f["type_mask"], f["x"], f["y"], f["z"], f["vx"],
-            f["vy"], f["vz"], f["afx"], f["afy"], f["afz"], f["yaw"], f["yaw_rate"])
-        self.sock.sendto(msg.pack(self.mav), self.addr)
+        from companion.link.setpoint_frame import SetpointFrame, setpoint_values
+        values = setpoint_values(int((time.monotonic() - self.t0) * 1e3), 1, 1, pos_ned_m,
+                                 vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s)
+        self.sock.sendto(SetpointFrame(values).pack(self.mav), self.addr)   # as the companion's gate packs it
         with contextlib.suppress(BlockingIOError):
             while True:
                 self.sink.recv(4096)
