@@ -33,6 +33,7 @@ BENCHMARKS = {
     "smoothing": [],
     "sitl_realtime": [],
     "setpoint_jitter": ["--sitl"],
+    "companion_cpu": ["--speedup", "1"],
     "flight_tracking": [],
     "threats": [],
     "threats_sitl": [],
@@ -74,6 +75,9 @@ def assemble() -> str:
             if text.startswith("# "):
                 text = "#" + text            # one level down
             parts += [text, ""]
+        notes = REPO / "docs" / "benchmarks" / f"{name}.notes.md"     # hand-written: analysis, history
+        if notes.exists():
+            parts += [notes.read_text().strip(), ""]
     return "\n".join(parts)
 
 
