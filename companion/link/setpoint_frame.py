@@ -1,8 +1,9 @@
 """The 50 Hz SET_POSITION_TARGET_LOCAL_NED frame, packed in one step (pure: numbers in, bytes out).
 
 pymavlink builds a message object from keyword fields, then packs it through its generic
-``MAVLink_message._pack`` (header object, byte array, CRC object, signature): about 120 us a
-setpoint on a small board, most of the stream's cost. ``SetpointFrame.pack`` writes the same
+``MAVLink_message._pack`` (header object, byte array, CRC object, signature): with the field
+dictionary before it, about 75 us of the event loop per setpoint in flight on the benchmark's
+machine (``benchmarks/companion_cpu.py --account``). ``SetpointFrame.pack`` writes the same
 bytes directly from the field values in wire order: the payload with pymavlink's own
 ``struct.Struct`` for the message, MAVLink 2's trailing-zero truncation, the header, the
 CRC-16/MCRF4XX with the message's CRC extra (pymavlink's ``x25crc``) and, when the encoder
