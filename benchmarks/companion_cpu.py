@@ -90,13 +90,9 @@ class CpuSampler:
         self._legs_state: bool | None = None
         self.samples: list[tuple[float, float, float, bool]] = []
         self._children: dict[int, float] = {}
-        self.threads: dict[int, tuple[str, float]] = {}
-        self.legs_threads_first: dict | None = None
-        self.legs_threads_last: dict | None = None
-        self.wakeups: dict[int, int] = {}
-        self.legs_wakeups_first: dict | None = None
-        self.legs_wakeups_last: dict | None = None
-        self.legs_wall_s: list[float] = []
+        self.threads: dict[int, tuple[str, float, int]] = {}   # tid -> (name, CPU s, wake-ups)
+        self.legs_first: tuple[float, dict] | None = None     # (monotonic s, threads) at the legs' start
+        self.legs_last: tuple[float, dict] | None = None      # ... and at their latest sample
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="cpu-sampler", daemon=True)
 
@@ -121,14 +117,12 @@ class CpuSampler:
             self.samples.append((time.monotonic(), own, self._children_cpu_s(waited), legs))
             self._sample_threads()
             if legs:
-                self.legs_threads_last, self.legs_wakeups_last = dict(self.threads), dict(self.wakeups)
-                self.legs_wall_s.append(time.monotonic())
-                if self.legs_threads_first is None:
-                    self.legs_threads_first, self.legs_wakeups_first = dict(self.threads), dict(self.wakeups)
+                self.legs_last = (time.monotonic(), dict(self.threads))
+                self.legs_first = self.legs_first or self.legs_last
             self._stop.wait(SAMPLE_PERIOD_S)
 
     def _sample_threads(self) -> None:
-        """CPU seconds of each of the companion's threads (by name, ``/proc/<pid>/task``)."""
+        """CPU seconds and wake-ups of each of the companion's threads (``/proc/<pid>/task``)."""
         try:
             tids = os.listdir(f"/proc/{self.pid}/task")
         except FileNotFoundError:
@@ -141,24 +135,31 @@ class CpuSampler:
                 continue
             name = text[text.index("(") + 1:text.rindex(")")]
             fields = text.rsplit(")", 1)[1].split()
-            self.threads[int(tid)] = (name, (int(fields[11]) + int(fields[12])) / CLOCK_TICKS_S)
-            self.wakeups[int(tid)] = voluntary_switches(self.pid, tid)
+            self.threads[int(tid)] = (name, (int(fields[11]) + int(fields[12])) / CLOCK_TICKS_S,
+                                      voluntary_switches(self.pid, tid))
+
+    def _legs_delta(self, column: int) -> tuple[dict[str, float], float]:
+        """Each thread's increase of ``column`` (1: CPU s, 2: wake-ups) over the legs, by
+        "name/tid", and the legs' wall time (s)."""
+        if self.legs_first is None or self.legs_last is None:
+            return {}, 0.0
+        (t0, first), (t1, last) = self.legs_first, self.legs_last
+        return {f"{row[0]}/{tid}": row[column] - first.get(tid, (0, 0, 0))[column]
+                for tid, row in last.items()}, t1 - t0
 
     def thread_cpu_s(self) -> dict[str, float]:
         """CPU seconds per thread over the legs ("name/tid", the largest first)."""
-        first, last = self.legs_threads_first or {}, self.legs_threads_last or {}
-        out = {f"{name}/{tid}": cpu - first.get(tid, (name, 0.0))[1] for tid, (name, cpu) in last.items()}
+        out, _ = self._legs_delta(1)
         return dict(sorted(((k, round(v, 2)) for k, v in out.items() if v > 0.0), key=lambda kv: -kv[1]))
 
     def thread_wakeups_per_s(self) -> dict[str, float]:
         """Voluntary context switches (wake-ups after a wait) per second of each thread over
         the legs ("name/tid", the most first)."""
-        if len(self.legs_wall_s) < 2:
+        out, wall_s = self._legs_delta(2)
+        if wall_s <= 0.0:
             return {}
-        wall = self.legs_wall_s[-1] - self.legs_wall_s[0]
-        first, last, names = self.legs_wakeups_first or {}, self.legs_wakeups_last or {}, self.legs_threads_last or {}
-        out = {f"{names.get(tid, ('?',))[0]}/{tid}": (n - first.get(tid, 0)) / wall for tid, n in last.items()}
-        return dict(sorted(((k, round(v, 1)) for k, v in out.items() if v >= 0.5), key=lambda kv: -kv[1]))
+        return dict(sorted(((k, round(v / wall_s, 1)) for k, v in out.items() if v / wall_s >= 0.5),
+                           key=lambda kv: -kv[1]))
 
     def __enter__(self) -> "CpuSampler":
         self._thread.start()

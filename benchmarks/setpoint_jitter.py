@@ -24,9 +24,9 @@ The companion streams GUIDED setpoints at 50 Hz from an asyncio task
 
 The replan is ``companion.planning.gart`` on the ANCHORS "2d" world (seed 0, 1 s budget) when
 the planner is available, else a pure-Python RRT-style nearest-neighbour loop of similar size.
-Sends go through a real ``VehicleLink`` (MAVSDK MavlinkDirect) to a real ``sim-vehicle`` when
-``--sitl`` is given, else through pymavlink on a UDP socket to a local sink (the same per-tick
-work: build and send one SET_POSITION_TARGET_LOCAL_NED).
+Sends go through a real ``VehicleLink`` (its signing gate) to a real ``sim-vehicle`` when
+``--sitl`` is given, else on a UDP socket to a local sink (the same per-tick work: pack one
+SET_POSITION_TARGET_LOCAL_NED as the companion's gate does, ``SetpointFrame``, and send it).
 
 Usage::
 
@@ -337,8 +337,8 @@ def main(argv=None) -> int:
     meta = {"quick": args.quick, "sitl": args.sitl, "seconds": seconds,
             "workload": workload_kind(), "cpus": os.cpu_count(),
             "load_average_1min": os.getloadavg()[0],
-            "sender": "VehicleLink (MAVSDK MavlinkDirect) to sim-vehicle" if args.sitl
-            else "pymavlink over UDP to a local sink", "goal_p99_ms": GOAL_P99_MS}
+            "sender": "VehicleLink (its signing gate) to sim-vehicle" if args.sitl
+            else "SetpointFrame over UDP to a local sink", "goal_p99_ms": GOAL_P99_MS}
     print(table(results))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
