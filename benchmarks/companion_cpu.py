@@ -48,7 +48,7 @@ sys.path.insert(0, str(REPO))
 
 from companion import demo  # noqa: E402
 from companion.fleet.processes import descendants  # noqa: E402
-from companion.threats.bus import ThreatBus  # noqa: E402
+from companion.threats.transport.bus import ThreatBus  # noqa: E402
 
 log = logging.getLogger("companion_cpu")
 

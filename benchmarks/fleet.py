@@ -130,7 +130,7 @@ class ZenohCounter:
     """Counts every sample on ``uav/**`` by the sysid of its key (a client session on the router)."""
 
     def __init__(self, router: str) -> None:
-        from companion.threats.bus import ThreatBus
+        from companion.threats.transport.bus import ThreatBus
 
         self.bus = ThreatBus(255, listen=(), connect=(router,), mode="client").open()
         self.counts: dict[int, int] = {}

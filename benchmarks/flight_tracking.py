@@ -26,7 +26,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
-from companion.record import load_record  # noqa: E402
+from companion.record.flight_record import load_record  # noqa: E402
 from flight_support import fly  # noqa: E402
 
 MISSIONS = ("exclusion_zones.plan", "square.waypoints", "paper_cluttered_100m.plan")

@@ -9,7 +9,7 @@ Goals (issue 2):
   feasibility check runs it per candidate trajectory).
 
 What is timed: the vehicle numerics of one ``sim-vehicle`` (the pure vehicle update
-``VehicleUpdate.update(state, command, dt)`` of :mod:`sim_vehicle.vehicle_update`: one flight
+``VehicleUpdate.update(state, command, dt)`` of :mod:`heli_model.vehicle_update`: one flight
 controller step and four RK4 steps per control period, and the gust model), not the MAVLink I/O
 around them. The circle starts from hover with a smooth 5 s speed ramp; the error is measured
 over the whole flight, ramp included, on the full loop (the same pure update).
@@ -38,11 +38,11 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from sim_vehicle import dynamics  # noqa: E402
-from sim_vehicle.control import ControllerSettings, FlightController, Setpoint, simulate_closed_loop  # noqa: E402
-from sim_vehicle.model import HeliModel  # noqa: E402
-from sim_vehicle.vehicle_update import VehicleCommand, VehicleUpdate  # noqa: E402
-from sim_vehicle.wind import WindModel, WindSettings  # noqa: E402
+from heli_model import dynamics  # noqa: E402
+from heli_model.control import ControllerSettings, FlightController, Setpoint, simulate_closed_loop  # noqa: E402
+from heli_model.model import HeliModel  # noqa: E402
+from heli_model.vehicle_update import VehicleCommand, VehicleUpdate  # noqa: E402
+from heli_model.wind import WindModel, WindSettings  # noqa: E402
 
 PHYSICS_HZ = 400
 CONTROL_HZ = 100

@@ -63,9 +63,9 @@ sys.path.insert(0, str(REPO / "tests"))
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from companion.demo import FlightWatcher, last_json_line  # noqa: E402
-from companion.record import load_record  # noqa: E402
-from companion.threats import codec  # noqa: E402
-from companion.threats.bus import ThreatBus  # noqa: E402
+from companion.record.flight_record import load_record  # noqa: E402
+from companion.threats.transport import codec  # noqa: E402
+from companion.threats.transport.bus import ThreatBus  # noqa: E402
 from companion.threats.model import Threat  # noqa: E402
 from flight_support import DEMO_MISSION, TrackListener, flight_processes  # noqa: E402
 from support import MavlinkPeer  # noqa: E402
@@ -330,7 +330,7 @@ def vehicle_cost(frames, log_dir: Path) -> dict:
     from sim_vehicle.autopilot import Autopilot
     from sim_vehicle.config import VehicleSettings, replace_path
     from sim_vehicle.mavlink import MavlinkServer
-    from sim_vehicle.model import HeliModel
+    from heli_model.model import HeliModel
 
     settings = replace_path(VehicleSettings(), "link.out", ())
     vehicle = Autopilot(HeliModel.default(), settings, (47.397742, 8.545594, 488.0, 0.0), np.random.default_rng(0))

@@ -28,8 +28,8 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
 from companion.demo import FlightWatcher, last_json_line  # noqa: E402
-from companion.record import load_record  # noqa: E402
-from companion.threats.bus import ThreatBus  # noqa: E402
+from companion.record.flight_record import load_record  # noqa: E402
+from companion.threats.transport.bus import ThreatBus  # noqa: E402
 from companion.threats.model import Threat  # noqa: E402
 from flight_support import DEMO_MISSION, flight_processes  # noqa: E402
 

@@ -35,7 +35,7 @@ Paper section 3.3 (Fig. 5, Fig. 8) and DESIGN section 7. Two parts:
    radius + inflation + the largest prediction uncertainty + 5 m until it gets there (every
    further call would answer ``none``; this skips most calls after the threats have passed).
    The composed setpoint stream (from 1 s before the encounter, the helicopter trimmed on
-   it) is flown by the helicopter's closed loop (``sim_vehicle.control.simulate_closed_loop``,
+   it) is flown by the helicopter's closed loop (``heli_model.control.simulate_closed_loop``,
    LQI + PID on the R-50 model) and judged on the simulated positions: *success* = no sample
    inside a threat's bare radius and none inside a static obstacle (no safety margin);
    *completion* = success and within 3 m of the goal at the end (at most 60 s + 3 s after the
@@ -104,9 +104,9 @@ QUIET_EXTRA_M = 5.0
 
 
 def manager_class():
-    """``ThreatManager`` from its new home (``companion.threats.policy``) or its old one."""
+    """``ThreatManager`` from its new home (``companion.threats.decision.policy``) or its old one."""
     try:
-        from companion.threats.policy import ThreatManager
+        from companion.threats.decision.policy import ThreatManager
     except ImportError:
         from companion.threats.manager import ThreatManager
     return ThreatManager
@@ -128,7 +128,7 @@ def leg_of(world_kind: str, seed: int):
 @functools.lru_cache(maxsize=None)
 def heli_model():
     """The helicopter model (cached per worker: its closed loop is built on first use)."""
-    from sim_vehicle.model import HeliModel
+    from heli_model.model import HeliModel
 
     return HeliModel.default()
 
@@ -199,7 +199,7 @@ def make_manager(leg, settings, mode: str, rng: np.random.Generator):
 
 def fly_encounter(leg, enc, alternatives, strategy: str, settings, seed: int, model) -> dict:
     """Fly one encounter with one strategy, emulating the daemon; judge it in closed loop."""
-    from sim_vehicle.control import simulate_closed_loop
+    from heli_model.control import simulate_closed_loop
 
     wall0 = time.perf_counter()
     nominal = leg.trajectory
@@ -428,7 +428,7 @@ def free_tcp_port() -> int:
 
 def run_storm(duration_s: float, rate_hz: float = 1000.0, ids: int = 50) -> dict:
     """PUT ``rate_hz`` threats per second for ``duration_s`` into a ThreatBus on an asyncio loop."""
-    from companion.threats.bus import ThreatBus
+    from companion.threats.transport.bus import ThreatBus
 
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     n = int(round(duration_s * rate_hz))

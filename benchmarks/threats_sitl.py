@@ -44,7 +44,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from benchmarks.threat_oracle import label_encounter  # noqa: E402
 from companion.demo import DEMO_HOME, FlightWatcher, last_json_line  # noqa: E402
 from companion.geo import LocalFrame  # noqa: E402
-from companion.threats.bus import ThreatBus  # noqa: E402
+from companion.threats.transport.bus import ThreatBus  # noqa: E402
 from companion.threats.model import Threat  # noqa: E402
 from flight_support import TrackListener, flight_processes  # noqa: E402
 

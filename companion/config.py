@@ -10,7 +10,7 @@ Tree (``companion run --config FILE``; ``companion run --print-config`` shows it
     link        vehicle connection, setpoint rate, time scale, timeouts; link.streams: the
                 telemetry rates asked for (companion.link.streams.StreamSettings)
     startup     arming, motor interlock, rotor run-up, takeoff, joining a flying vehicle
-                (companion.link.startup.StartupSettings)
+                (companion.service.startup.StartupSettings)
     zenoh       session endpoints and the key prefix's system id
     mission     mission -> local NED + world (margin, padding, ceiling)
     flight      per-leg planning budget, planning slab, climb and descent, M-GART alternatives
@@ -18,8 +18,8 @@ Tree (``companion run --config FILE``; ``companion run --print-config`` shows it
     smoothing   G1/G2, K_max, speed/acceleration/jerk limits
     feasibility closed-loop check on the helicopter model
     threats     threat-manager policy (companion.threats.settings.ThreatSettings)
-    adsb        ADS-B traffic as threats (companion.threats.adsb.AdsbSettings)
-    state       where the threat snapshot is kept for a resume after a crash (companion.state)
+    adsb        ADS-B traffic as threats (companion.threats.transport.adsb.AdsbSettings)
+    state       where the threat snapshot is kept for a resume after a crash (companion.threats.snapshot)
     view        the live Foxglove server (companion.view)
 """
 
@@ -33,16 +33,16 @@ from typing import Literal
 
 from companion.errors import ConfigError
 from companion.fleet.settings import FleetSettings
-from companion.flight_plan import FlightPlanSettings
-from companion.link.startup import StartupSettings
+from companion.flight.plan import FlightPlanSettings
+from companion.service.startup import StartupSettings
 from companion.link.streams import StreamSettings
 from companion.mission.convert import ConversionSettings
 from companion.planning import GartSettings
 from companion.smoothing import FeasibilitySettings, SmoothingSettings
-from companion.threats.adsb import AdsbSettings
+from companion.threats.transport.adsb import AdsbSettings
 from companion.threats.settings import ThreatSettings, ZenohSettings
 from companion.view.sinks import parse_foxglove_address
-from sim_vehicle.typed_config import from_dict, load_toml, require_numbers
+from heli_common.typed_config import from_dict, load_toml, require_numbers
 
 
 @dataclass(frozen=True)
@@ -127,7 +127,7 @@ class ViewSettings:
 
 @dataclass(frozen=True)
 class StateSettings:
-    """The companion's state on disk (``companion.state``).
+    """The companion's state on disk (``companion.threats.snapshot``).
 
     Parameters
     ----------

@@ -9,13 +9,13 @@
    station shows it) or the one stored on the vehicle (a mission uploaded by any ground station
    gets flown);
 3. convert it to local NED and a world (exclusion zones, inclusion fence, world file) and plan
-   every leg before takeoff (GART -> G2/G1 -> speed profile, ``companion.flight_plan``): an
+   every leg before takeoff (GART -> G2/G1 -> speed profile, ``companion.flight.plan``): an
    unreachable waypoint is an error before anything moves;
-4. start the vehicle (``companion.link.startup``: GUIDED, motor interlock low, arm, interlock
+4. start the vehicle (``companion.service.startup``: GUIDED, motor interlock low, arm, interlock
    after the arming delay, rotor run-up, take off), or *join* it where it flies (armed and in
    the air: no arming, no takeoff); a start that fails leaves the vehicle disarmed on the
    ground or holding in the air; stream the reference at 50 Hz (``SetpointStreamer``) leg after leg,
-   each leg flown by the pure phase machine of ``companion.phases`` (observe, step, act): done
+   each leg flown by the pure phase machine of ``companion.flight.phases`` (observe, step, act): done
    when its reference has ended and the vehicle is within the acceptance radius, then the hold
    time; a reference that ended short of the goal (an evasion or a hold) is followed by a plan
    back to the mission;
@@ -24,18 +24,18 @@
 Around it: zenoh status at 2 Hz and on every event, the threat reactor
 (``companion.threats.reactor``: threats in, a >= 10 Hz monitor, decisions that swap the active
 reference, events, path and STATUSTEXT out), ADS-B traffic as threats (``[adsb] enabled``,
-``companion.threats.adsb``), the flight record, link-loss handling (keep
+``companion.threats.transport.adsb``), the flight record, link-loss handling (keep
 streaming; when the link returns, hold and replan the leg from where the vehicle is), a pilot
 taking over (mode changed away from GUIDED: the companion stops commanding and ends the flight),
 and SIGINT/SIGTERM (hold, land or RTL per ``link.on_interrupt``, then exit).
 
 Crash and restart (``resume=True``, ``companion run --resume``): the vehicle's current mission
 item is kept at the goal of the leg flown (DO_SET_MISSION_CURRENT at every leg) and the threats
-held are written to a snapshot as they change (``companion.state``, ``state.dir``); a companion
+held are written to a snapshot as they change (``companion.threats.snapshot``, ``state.dir``); a companion
 started with ``resume`` joins the hovering vehicle, reads MISSION_CURRENT, plans from where it
-is to that item and on (``companion.resume``) and puts the snapshot's live threats back before
+is to that item and on (``companion.flight.resume``) and puts the snapshot's live threats back before
 the first leg. zenoh router loss: events ``zenoh_lost`` / ``zenoh_back``; the session reconnects
-by itself (``companion.threats.bus.CONNECT_RETRY``).
+by itself (``companion.threats.transport.bus.CONNECT_RETRY``).
 
 The jobs live in ``companion.service``: the background tasks (``background``), the mission
 before and the landing after the legs (``mission``), the legs (``legs``) and the summary
@@ -61,18 +61,18 @@ import numpy as np
 
 from companion.config import Settings
 from companion.errors import FlightAborted, LinkError, MissionError, VehicleRefused
-from companion.flight_plan import LegPlan
-from companion.reference import ActiveReference, VehicleClock
+from companion.flight.plan import LegPlan
+from companion.flight.reference import ActiveReference, VehicleClock
 from companion.link.gate import SigningKey
 from companion.link.setpoints import SetpointStreamer, hold_position, normal_priority, raise_stream_priority
-from companion.link.startup import is_airborne
+from companion.service.startup import is_airborne
 from companion.link.vehicle import VehicleLink
 from companion.view.sinks import RecordSinks, open_record_sinks, parse_foxglove_address
 from companion.service.background import ZENOH_WATCH_PERIOD_S, BackgroundTasks
 from companion.service.legs import GUIDED, LegTasks
 from companion.service.mission import MissionTasks
 from companion.service.summary import FlightSummary, feasibility_totals, make_checker
-from companion.state import SnapshotWriter
+from companion.threats.snapshot import SnapshotWriter
 from companion.threats.reactor import ThreatReactor
 from companion.workers import AlternativesGate, PlanningWorkers
 
@@ -111,7 +111,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
     resume : bool
         Take over a vehicle that is already flying its mission (a previous companion crashed):
         the vehicle's mission from its current item (MISSION_CURRENT), the threats of the
-        snapshot in ``state.dir`` (``companion.state``). Refused (``MissionError``) without a
+        snapshot in ``state.dir`` (``companion.threats.snapshot``). Refused (``MissionError``) without a
         mission on the vehicle or with the vehicle on the ground.
     workers : str
         Where planning runs (``companion.workers.PlanningWorkers``): ``"process"`` (default)

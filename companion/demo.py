@@ -40,7 +40,7 @@ import numpy as np
 
 from companion.errors import CompanionError
 from companion.geo import LocalFrame
-from companion.threats.bus import ThreatBus
+from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat
 from heli_common.ports import free_port
 

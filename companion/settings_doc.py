@@ -143,10 +143,13 @@ JSON). Units follow the key's suffix (`_m`, `_s`, `_m_s`, `_hz` ...). Times are 
 """
 
 
-def reference_markdown() -> str:
-    """The whole ``docs/SETTINGS.md``: the companion's tree, then ``sim-vehicle``'s."""
-    from companion.config import Settings
-    from sim_vehicle.config import VehicleSettings
+def reference_markdown(trees) -> str:
+    """The whole ``docs/SETTINGS.md``: the introduction, then each settings tree.
 
-    return "\n".join((INTRO, settings_markdown(Settings, "The companion (`companion run --config`)"),
-                      settings_markdown(VehicleSettings, "The simulator (`sim-vehicle --config`)")))
+    Parameters
+    ----------
+    trees : sequence of (dataclass type, str)
+        Each tree's root class and its section title (``tools/settings_doc.py`` gives the
+        companion's and ``sim-vehicle``'s).
+    """
+    return "\n".join((INTRO, *(settings_markdown(tree, title) for tree, title in trees)))

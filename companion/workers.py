@@ -92,7 +92,7 @@ def warm_up() -> float:
     from companion.planning import gart, mgart
     from companion.world import Disc, Sphere, World
 
-    for module in ("companion.flight_plan", "companion.threats.policy", "companion.smoothing.feasibility"):
+    for module in ("companion.flight.plan", "companion.threats.decision.policy", "companion.smoothing.feasibility"):
         importlib.import_module(module)      # smoothing and timing; the threat manager and M-GART
 
     # 2D and 3D: numba specialises on the points' tuple length; no straight line: iterations run

@@ -221,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
     from sim_vehicle.autopilot import Autopilot
     from sim_vehicle.config import SimConfigError
     from sim_vehicle.mavlink import MavlinkServer
-    from sim_vehicle.model import HeliModel, ModelError
+    from heli_model.model import HeliModel, ModelError
     from sim_vehicle.realtime import RealtimeLoop
 
     if not 0 <= args.instance <= 200:

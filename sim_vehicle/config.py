@@ -1,6 +1,6 @@
 """The settings tree of ``sim-vehicle``: frozen dataclasses, every default here, TOML overrides.
 
-Loaded with :func:`sim_vehicle.typed_config.from_dict`; a wrong key or value raises
+Loaded with :func:`heli_common.typed_config.from_dict`; a wrong key or value raises
 :class:`SimConfigError` naming the dotted key (e.g. ``flight.wp_speed_m_s: expected a number``).
 The MAVLink parameters (``sim_vehicle.params``) are views onto this tree, in ArduPilot units.
 
@@ -31,9 +31,9 @@ from typing import Any
 
 from heli_common.ports import GCS_PORT, companion_port
 from sim_vehicle.adsb import AdsbSettings
-from sim_vehicle.control import ControllerSettings
+from heli_model.control import ControllerSettings
 from sim_vehicle.rsc import RscSettings
-from sim_vehicle.typed_config import from_dict, load_toml
+from heli_common.typed_config import from_dict, load_toml
 
 
 class SimConfigError(ValueError):
@@ -307,7 +307,7 @@ class VehicleSettings:
     """The whole ``sim-vehicle`` settings tree.
 
     ``rsc`` is the rotor speed controller and motor interlock (:mod:`sim_vehicle.rsc`), ``adsb``
-    the simulated ADS-B traffic (:mod:`sim_vehicle.adsb`). ``controller`` is the flight controller's own settings (:class:`sim_vehicle.control.
+    the simulated ADS-B traffic (:mod:`sim_vehicle.adsb`). ``controller`` is the flight controller's own settings (:class:`heli_model.control.
     ControllerSettings`: LQI weights, PID gains, limits); its ``control_dt_s`` is replaced by
     ``1 / timing.control_rate_hz`` when the vehicle is built.
 

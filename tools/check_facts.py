@@ -31,7 +31,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("companion", "sim_vehicle", "heli_common", "mavlink_signing")
+PACKAGES = ("companion", "sim_vehicle", "heli_model", "heli_common", "mavlink_signing")
 MODE_NAMES = ("STABILIZE", "ACRO", "ALT_HOLD", "AUTO", "GUIDED", "LOITER", "RTL", "CIRCLE", "LAND",
               "POSHOLD", "BRAKE", "SMART_RTL")
 _MODES = "|".join(MODE_NAMES)
@@ -45,12 +45,12 @@ ARDUPILOT_NUMBER_RE = re.compile(r"^\s*(FORCE_DISARM_MAGIC|AUX_\w*MOTOR_INTERLOC
 MAX_LINES = 500
 SIZE_CHECKED = ("companion/", "sim_vehicle/")
 #: Modules (prefixes) that must compute only: numbers in, numbers out.
-NUMERICS = ("companion.planning", "companion.smoothing", "companion.world", "companion.threats.prediction",
-            "companion.threats.spacetime", "companion.threats.evasion", "companion.threats.retime",
-            "companion.threats.join", "companion.threats.alternatives", "companion.threats.candidates",
-            "companion.threats.decision", "companion.trajectory", "companion.phases",
-            "companion.view.geometry", "sim_vehicle.dynamics", "sim_vehicle.model", "sim_vehicle.control",
-            "sim_vehicle.wind", "sim_vehicle.rsc", "sim_vehicle.autopilot", "sim_vehicle.vehicle_update",
+NUMERICS = ("companion.planning", "companion.smoothing", "companion.world", "companion.threats.decision.prediction",
+            "companion.threats.decision.spacetime", "companion.threats.decision.evasion", "companion.threats.decision.retime",
+            "companion.threats.decision.join", "companion.threats.decision.alternatives", "companion.threats.decision.candidates",
+            "companion.threats.decision.choice", "companion.flight.trajectory", "companion.flight.phases",
+            "companion.view.geometry", "heli_model.dynamics", "heli_model.model", "heli_model.control",
+            "heli_model.wind", "sim_vehicle.rsc", "sim_vehicle.autopilot", "heli_model.vehicle_update",
             "heli_common.geometry", "heli_common.frames")
 #: Top-level modules that do I/O (network, processes, MAVLink transports, logs on disk).
 IO_LIBRARIES = ("socket", "asyncio", "selectors", "subprocess", "zenoh", "mavsdk", "pymavlink",

@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from companion.demo import DEMO_RECORD, run_demo
     from companion.errors import CompanionError
     from companion.progress import FlightProgress
-    from companion.report import render_report
+    from companion.record.report import render_report
     from companion.view.mcap_record import load_flight
     from companion.workers import warm_up
 

@@ -177,7 +177,7 @@ def listen_fleet(router: str, seconds: float):
     import time
 
     from companion.fleet.status_view import FleetView
-    from companion.threats.bus import ThreatBus
+    from companion.threats.transport.bus import ThreatBus
 
     view = FleetView()
     with ThreatBus(255, listen=(), connect=(router,), mode="client") as bus:

@@ -141,7 +141,7 @@ def time_and_check(args, smoothed) -> list:
     checker = None
     if not args.no_feasibility:
         from companion.smoothing.feasibility import FeasibilityChecker
-        from sim_vehicle.model import HeliModel
+        from heli_model.model import HeliModel
 
         checker = FeasibilityChecker(HeliModel.default())
         checker.warm_up()          # the one-off LQI design is not any path's check time

@@ -19,7 +19,7 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from companion.report import render_report
+    from companion.record.report import render_report
     from companion.view.mcap_record import load_flight
 
     for path in render_report(load_flight(args.record), args.out):

@@ -4,7 +4,7 @@ Companions (``companion run --zenoh-connect ENDPOINT``, peer or client mode) and
 (``companion threat ... --zenoh-connect ENDPOINT``) meet through it instead of connecting to each
 other. It only routes: it keeps no threats and answers no query itself. When it stops and comes
 back on the same endpoint, the sessions connected to it reconnect by themselves (zenoh's
-``connect/retry``, ``companion.threats.bus.session_config``) and redeclare their subscriptions:
+``connect/retry``, ``companion.threats.transport.bus.session_config``) and redeclare their subscriptions:
 a companion flies on meanwhile on the threats it already holds.
 """
 
@@ -40,7 +40,7 @@ def open_router(listen, connect=()):
     import zenoh
 
     from companion.errors import ThreatBusError
-    from companion.threats.bus import session_config
+    from companion.threats.transport.bus import session_config
 
     config = session_config(mode="router", listen=listen, connect=connect)
     try:

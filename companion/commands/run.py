@@ -180,7 +180,7 @@ def flight_settings(args: argparse.Namespace):
         sys.stdout.write(text if text.endswith("\n") else text + "\n")
         return None
     if settings.zenoh.enabled and settings.zenoh.config:      # a bad file: refused before any flight
-        from companion.threats.access import load_config
+        from companion.threats.transport.access import load_config
 
         load_config(settings.zenoh.config)
     return settings

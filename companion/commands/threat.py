@@ -138,7 +138,7 @@ def threat_from_args(args, previous=None):
     """The threat described by ``add`` / ``move`` options (``previous``: what ``move`` changes)."""
     from dataclasses import replace
 
-    from companion.threats import codec
+    from companion.threats.transport import codec
     from companion.threats.model import Threat
 
     codec.check_id(args.id, "--id")
@@ -185,7 +185,7 @@ def describe(threat) -> str:
 
 # ---------------------------------------------------------------------------- commands
 def _open_bus(args):
-    from companion.threats.bus import ThreatBus
+    from companion.threats.transport.bus import ThreatBus
 
     if getattr(args, "zenoh_config", None):
         return ThreatBus(args.sysid, listen=args.zenoh_listen or None, connect=args.zenoh_connect or None,
@@ -243,7 +243,7 @@ def run(args) -> int:
             print(f"PUT {bus.key(bus.threat_leaf(threat.id))}: {describe(threat)}")
             return 0 if ok else 1
         if action == "remove":
-            from companion.threats import codec
+            from companion.threats.transport import codec
 
             codec.check_id(args.id, "--id")
             ok = _wait_subscriber(bus, args, args.id)
@@ -263,7 +263,7 @@ def _full_move(args):
 def list_held(bus, args) -> int:
     import json
 
-    from companion.threats import codec
+    from companion.threats.transport import codec
 
     threats = bus.list_threats(args.wait)
     if args.json:

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from companion.threats.prediction import predict_tubes
-from companion.threats.spacetime import BatchCheck, check_candidates, sample_times
+from companion.threats.decision.prediction import predict_tubes
+from companion.threats.decision.spacetime import BatchCheck, check_candidates, sample_times
 
 __all__ = ["fleet_check", "refuses", "WORSE_BY_M"]
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.threats.codec import finite_number, parse_json
+from companion.threats.transport.codec import finite_number, parse_json
 from companion.threats.model import payload_error
 
 __all__ = ["TrajectoryMessage", "SampledPath", "encode", "decode", "VERSION", "MAX_PAYLOAD_BYTES"]

@@ -32,7 +32,7 @@ from companion.fleet.clock_sync import ClockOffset
 from companion.fleet.message import SampledPath, TrajectoryMessage
 from companion.fleet.settings import FleetSettings
 from companion.geo import LocalFrame
-from companion.threats.prediction import TrajectoryTube, along_samples
+from companion.threats.decision.prediction import TrajectoryTube, along_samples
 
 __all__ = ["PeerTable", "VehicleThreat", "FLEET_SOURCE"]
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from companion.errors import ConfigError
-from sim_vehicle.typed_config import require_numbers
+from heli_common.typed_config import require_numbers
 
 __all__ = ["FleetSettings"]
 

@@ -66,7 +66,7 @@ class StartGate:
     ARMED_FLAG = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 
     def __init__(self, vehicles, speedup: float) -> None:
-        from companion.link.startup import StartupSettings
+        from companion.service.startup import StartupSettings
 
         startup = StartupSettings()
         self.vehicles = list(vehicles)

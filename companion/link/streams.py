@@ -39,7 +39,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import ConfigError
-from sim_vehicle.typed_config import require_numbers
+from heli_common.typed_config import require_numbers
 
 __all__ = ["StreamSettings", "StreamKeeper", "StreamRequest", "stream_requests", "DATA_STREAM_OF",
            "CORE_STREAMS", "data_stream_rates"]

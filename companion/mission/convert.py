@@ -27,7 +27,7 @@ from heli_common.geometry import point_in_polygon  # noqa: F401  (re-exported)
 
 from companion.errors import MissionError
 from companion.geo import LocalFrame
-from sim_vehicle.typed_config import require_numbers
+from heli_common.typed_config import require_numbers
 from companion.mission.model import (AMSL_FRAMES, MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LAND,
                                      MAV_CMD_NAV_RETURN_TO_LAUNCH, MAV_CMD_NAV_TAKEOFF,
                                      MAV_CMD_NAV_WAYPOINT, LocalMission, LocalWaypoint,

@@ -19,8 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from companion.security import keys
-from companion.threats import access
-
+from companion.threats.transport import access
 __all__ = ["Deployment", "init_deployment"]
 
 log = logging.getLogger(__name__)

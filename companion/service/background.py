@@ -9,7 +9,7 @@ import math
 
 from companion.errors import CompanionError
 from companion.geo import LocalFrame
-from companion.threats.adsb import threat_from_adsb
+from companion.threats.transport.adsb import threat_from_adsb
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +40,7 @@ class BackgroundTasks:
                 self._servo_us = [fields.get(f"servo{i}_raw", 1500) for i in range(1, 5)]
 
     async def _watch_adsb(self) -> None:
-        """ADSB_VEHICLE reports become threats, treated as zenoh PUTs (``companion.threats.adsb``)."""
+        """ADSB_VEHICLE reports become threats, treated as zenoh PUTs (``companion.threats.transport.adsb``)."""
         home = LocalFrame(*self.home_lla)
         async for fields in self.link.messages("ADSB_VEHICLE"):
             if fields.get("_sysid") != self.link.target_system or self.threats is None:

@@ -1,5 +1,5 @@
 """The daemon's legs: start or join, then fly each leg with the phase machine of
-``companion.phases``; replans after a link loss and ways back after an evasion (``companion.daemon``)."""
+``companion.flight.phases``; replans after a link loss and ways back after an evasion (``companion.daemon``)."""
 
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from heli_common.mavlink_ids import COPTER_MODES
 
 from companion.errors import CompanionError, FlightAborted, LinkError
-from companion.flight_plan import LegPlan, plan_leg
-from companion.link.startup import is_airborne, read_rotor_parameters, rotor_plan, start_vehicle
-from companion.phases import ActionKind, LegObservation, LegState, leg_step
+from companion.flight.plan import LegPlan, plan_leg
+from companion.service.startup import is_airborne, read_rotor_parameters, rotor_plan, start_vehicle
+from companion.flight.phases import ActionKind, LegObservation, LegState, leg_step
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +38,7 @@ class LegTasks:
 
     async def start_or_join(self, alt_m: float) -> None:
         """Join a flying vehicle where it is (GUIDED, no arming, no takeoff), or start it
-        (``companion.link.startup.start_vehicle``) and climb to ``alt_m`` above home."""
+        (``companion.service.startup.start_vehicle``) and climb to ``alt_m`` above home."""
         tele = self.link.telemetry
         st = self.settings.startup
         if is_airborne(tele, st.join_min_height_m):
@@ -86,7 +86,7 @@ class LegTasks:
                      "no decision" if decision is None else decision.reason)
 
     def observe(self, leg: LegPlan) -> LegObservation:
-        """What the leg's state machine (``companion.phases.leg_step``) sees now."""
+        """What the leg's state machine (``companion.flight.phases.leg_step``) sees now."""
         tele, ref = self.link.telemetry, self.reference
         radius = leg.waypoint.acceptance_radius_m
         return LegObservation(
@@ -101,7 +101,7 @@ class LegTasks:
             timeout_margin_s=self.settings.link.leg_timeout_margin_s)
 
     async def fly_leg(self, leg: LegPlan) -> None:
-        """Fly one leg: observe, step the phase machine (``companion.phases``), act; until the
+        """Fly one leg: observe, step the phase machine (``companion.flight.phases``), act; until the
         reference has ended and the vehicle is within the acceptance radius."""
         self.leg_index = leg.index
         self._tasks.append(asyncio.get_running_loop().create_task(

@@ -10,13 +10,13 @@ import numpy as np
 
 from companion.config import settings_to_dict
 from companion.errors import CompanionError, MissionError
-from companion.flight_plan import LegPlan, plan_mission
-from companion.link.startup import AUX_MOTOR_INTERLOCK, is_airborne
+from companion.flight.plan import LegPlan, plan_mission
+from companion.service.startup import AUX_MOTOR_INTERLOCK, is_airborne
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
-from companion.resume import resume_mission, resume_refusal
+from companion.flight.resume import resume_mission, resume_refusal
 from companion.service.summary import CheckerHandle, feasibility_totals, make_checker, warm_process_checker
-from companion.state import SnapshotWriter, load_live_threats, snapshot_path
+from companion.threats.snapshot import SnapshotWriter, load_live_threats, snapshot_path
 from companion.world import world_to_dict
 
 log = logging.getLogger(__name__)
@@ -47,7 +47,7 @@ class MissionTasks:
         """Convert and plan every leg (in a worker thread); errors name the mission item.
 
         With ``current_seq`` (a resume) only the goals from that mission item on are planned
-        (``companion.resume.resume_mission``), the first from where the vehicle is.
+        (``companion.flight.resume.resume_mission``), the first from where the vehicle is.
         Returns the takeoff altitude (m above home): the mission's takeoff item, or where the
         vehicle already flies.
         """
@@ -116,7 +116,7 @@ class MissionTasks:
 
     # ------------------------------------------------------------------ threat snapshot
     def _open_snapshots(self, home) -> None:
-        """Write the threat snapshot from now on when ``state.dir`` is set (``companion.state``)."""
+        """Write the threat snapshot from now on when ``state.dir`` is set (``companion.threats.snapshot``)."""
         if not self.settings.state.dir or self.threats is None:
             return
         path = snapshot_path(self.settings.state.dir, self.settings.zenoh.sysid)

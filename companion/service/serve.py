@@ -44,7 +44,7 @@ from companion.daemon import CompanionDaemon, companion_link
 from companion.errors import CompanionError, FlightAborted, LinkError, MissionError, VehicleRefused
 from companion.link.onboard import OnboardCommand, OnboardComponent
 from companion.link.setpoints import raise_stream_priority
-from companion.link.startup import is_airborne
+from companion.service.startup import is_airborne
 from companion.link.vehicle import check_url
 from companion.service.legs import GUIDED
 from companion.threats.settings import DEFAULT_SYSID
@@ -226,7 +226,7 @@ class CompanionService:
             self._announce_ready()               # (a start already queued stays queued)
 
     def _open_presence(self) -> None:
-        from companion.threats.bus import ThreatBus
+        from companion.threats.transport.bus import ThreatBus
 
         self.bus = ThreatBus.from_settings(self.settings.zenoh).open()
         self._token = self.bus.session.liveliness().declare_token(self.bus.key("companion"))

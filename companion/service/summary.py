@@ -44,7 +44,7 @@ def make_checker(settings):
     """The closed-loop checker of every leg, on the default (R-50-class) model, its LQI
     designed now (python-control, about 2.5 s once; cached on the model)."""
     from companion.smoothing.feasibility import FeasibilityChecker
-    from sim_vehicle.model import HeliModel
+    from heli_model.model import HeliModel
 
     checker = FeasibilityChecker(HeliModel.default(), settings)
     log.info("feasibility: closed-loop model ready in %.2f s", checker.warm_up())

@@ -3,7 +3,7 @@
 - ``smooth_g1(path)``: quartic midpoint interpolation, tangent-continuous (``g1.py``).
 - ``smooth_g2(path, kappa_max_1_m, *, world=None)``: cubic Bezier spiral pairs,
   curvature-continuous and bounded by K_max (``g2.py``).
-- ``time_parameterize(curve, limits)`` -> ``companion.trajectory.Trajectory`` (``timing.py``).
+- ``time_parameterize(curve, limits)`` -> ``companion.flight.trajectory.Trajectory`` (``timing.py``).
 - ``feasibility.check_and_stretch(trajectory)``: closed-loop check on the helicopter model.
 """
 

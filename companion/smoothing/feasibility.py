@@ -4,7 +4,7 @@ The paper treats the vehicle's dynamics as a constraint on the smoothed path and
 duration" until the helicopter can follow it. Here the check is done on the same model and
 flight controller that ``sim-vehicle`` flies: the trajectory is sampled at the setpoint rate
 (position, velocity, acceleration, yaw and, by default, yaw rate, as the companion streams
-them) and ``sim_vehicle.control.simulate_closed_loop`` predicts the vehicle's response with
+them) and ``heli_model.control.simulate_closed_loop`` predicts the vehicle's response with
 the LQI of paper section 2.2 (eqs. 5-7) on the 13-state hover model.
 
 A trajectory is *feasible* when no rotor input would clip (|delta| <= 1), the largest input
@@ -25,7 +25,7 @@ import numpy as np
 
 from companion.errors import SmoothingError
 from companion.smoothing.settings import FeasibilitySettings
-from companion.trajectory import Trajectory
+from companion.flight.trajectory import Trajectory
 
 __all__ = ["CHANNELS", "FeasibilityReport", "FeasibilityChecker", "check", "check_and_stretch"]
 
@@ -142,16 +142,16 @@ class FeasibilityChecker:
 
     Parameters
     ----------
-    model : sim_vehicle.model.HeliModel, optional
+    model : heli_model.model.HeliModel, optional
         Default: ``HeliModel.default()`` (the R-50-class hover model).
     settings : FeasibilitySettings, optional
-    controller_settings : sim_vehicle.control.ControllerSettings, optional
+    controller_settings : heli_model.control.ControllerSettings, optional
         The flight controller's settings (default: the vehicle's defaults).
     """
 
     def __init__(self, model=None, settings: FeasibilitySettings | None = None, controller_settings=None) -> None:
         if model is None:
-            from sim_vehicle.model import HeliModel
+            from heli_model.model import HeliModel
 
             model = HeliModel.default()
         self.model = model
@@ -163,7 +163,7 @@ class FeasibilityChecker:
     def warm_up(self) -> float:
         """Design the LQI and build the closed loop now (about 2.5 s once per model, with the
         import of python-control) rather than in the first check; returns the seconds taken."""
-        from sim_vehicle.control import simulate_closed_loop
+        from heli_model.control import simulate_closed_loop
 
         start = time.perf_counter()
         t = np.array([0.0, 1.0 / self.settings.sample_rate_hz])
@@ -205,8 +205,8 @@ class FeasibilityChecker:
         return t_traj[keep], pos[keep], vel[keep], acc[keep], yaw[keep], rate[keep]
 
     def simulate(self, trajectory: Trajectory):
-        """Closed-loop prediction of ``trajectory``: a ``sim_vehicle.control.ClosedLoopResult``."""
-        from sim_vehicle.control import simulate_closed_loop
+        """Closed-loop prediction of ``trajectory``: a ``heli_model.control.ClosedLoopResult``."""
+        from heli_model.control import simulate_closed_loop
 
         t, pos, vel, acc, yaw, rate = self.reference(trajectory)
         return simulate_closed_loop(self.model, t, pos, vel, acc, yaw, self.controller_settings,
@@ -279,7 +279,7 @@ def check_and_stretch(trajectory: Trajectory, model=None,
     ----------
     trajectory : Trajectory
         2D (flown at ``settings.down_m``) or 3D NED.
-    model : sim_vehicle.model.HeliModel, optional
+    model : heli_model.model.HeliModel, optional
         Pass the same model object on every call: its LQI design is cached on it (the first
         design costs about a second).
     settings : FeasibilitySettings, optional

@@ -1,9 +1,9 @@
 """Settings of the smoothing and timing stage (paper section 3.2 and the duration adjustment).
 
 Every default lives here and is documented; ``companion/config.py`` composes these frozen
-dataclasses into the settings tree (``sim_vehicle.typed_config.from_dict``).
+dataclasses into the settings tree (``heli_common.typed_config.from_dict``).
 
-Why these defaults fit the R-50-class hover model (``sim_vehicle/profiles``, the default vehicle):
+Why these defaults fit the R-50-class hover model (``heli_model/profiles``, the default vehicle):
 
 - ``speed_m_s = 8``: a third of the R-50's ~25 m/s envelope, and the speed at which the hover
   linearisation the LQI is designed on still holds (body rates and attitudes stay small).
@@ -28,7 +28,7 @@ import math
 from dataclasses import dataclass
 
 from companion.errors import SmoothingError
-from sim_vehicle.typed_config import require_numbers
+from heli_common.typed_config import require_numbers
 
 __all__ = ["TrajectoryLimits", "SmoothingSettings", "FeasibilitySettings"]
 

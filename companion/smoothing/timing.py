@@ -32,7 +32,7 @@ import numpy as np
 from companion.errors import SmoothingError
 from companion.smoothing.bezier import BezierPath
 from companion.smoothing.settings import TrajectoryLimits
-from companion.trajectory import RawProfile, Trajectory
+from companion.flight.trajectory import RawProfile, Trajectory
 
 __all__ = ["time_parameterize", "retime", "arc_grid", "speed_limit_sq", "erode", "forward_backward"]
 

@@ -5,7 +5,7 @@
 
 - **Threats in.** zenoh samples arrive on the event loop (``ThreatBus.subscribe(loop=...)``);
   every PUT or DELETE updates the table and asks the manager for a decision. A threat the
-  companion learns itself (an ADS-B report, ``companion.threats.adsb``) goes through
+  companion learns itself (an ADS-B report, ``companion.threats.transport.adsb``) goes through
   :meth:`ThreatReactor.on_local_threat`: the very same path as a PUT, then it is republished on
   ``uav/<sysid>/threats/<id>`` for the other processes (never back to this one).
 - **Other vehicles** (``fleet.enabled``; ``companion.fleet``). ``FleetLink`` publishes the
@@ -20,7 +20,7 @@
   ``none`` (the reference stays clear, or no way back yet) publishes nothing.
 - **Resume** (DESIGN 7.4). The reactor never asks the same question again by itself: when the
   active reference has ended short of the leg's goal (an ``evade`` or ``hold``), the daemon's
-  flight-phase logic (``companion.phases``) calls :meth:`ThreatReactor.resume`, which asks
+  flight-phase logic (``companion.flight.phases``) calls :meth:`ThreatReactor.resume`, which asks
   ``manager.resume`` for a way back to the mission.
 - **Delay check.** With other vehicles known, a decision's trajectory is first published as
   pending and flown only if it still clears them after the communication delay (RMADER).
@@ -52,13 +52,13 @@ import numpy as np
 
 from companion.errors import CompanionError
 from companion.geo import GeoError, LocalFrame
-from companion.threats.bus import ThreatBus
+from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import ThreatTable
-from companion.threats.policy import ThreatManager
+from companion.threats.decision.policy import ThreatManager
 from companion.threats.reactor_decisions import ReactorDecisions
 from companion.threats.reactor_legs import LegsAndAlternatives
 from companion.threats.statustext import statustext_for
-from companion.threats.update import ThreatUpdate, rejected_event
+from companion.threats.transport.update import ThreatUpdate, rejected_event
 
 #: At most one STATUSTEXT about rejected threat samples per this many seconds (wall clock): a
 #: flood of junk must not flood the vehicle's links (every rejection is still published and
@@ -117,7 +117,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         gives ``CompanionDaemon.pause``: in the setpoint stream's wake-ups while it runs).
     on_table_change : callable (threats, now_t_s), optional
         Called on the loop after every PUT or DELETE (and a restore) with the threats held and
-        the mission time: the daemon's threat snapshot (``companion.state``).
+        the mission time: the daemon's threat snapshot (``companion.threats.snapshot``).
     """
 
     def __init__(self, settings, *, clock_now_s: Callable[[], float], in_worker, rng: np.random.Generator,
@@ -251,7 +251,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
             log.exception("threat table change handler failed")
 
     def restore(self, threats) -> list[str]:
-        """Put threats known before a restart (``companion.state``) back in the table, times
+        """Put threats known before a restart (``companion.threats.snapshot``) back in the table, times
         unchanged (the remaining TTL is kept); recorded with ``restored=True``. Returns their ids.
         Decided on at the next leg start (``on_leg_started``), like any threat held then."""
         ids = []

@@ -37,7 +37,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from companion.errors import ThreatPayloadError
-from companion.threats import codec
+from companion.threats.transport import codec
 from companion.threats.model import Threat
 
 __all__ = ["ScenarioEvent", "Scenario", "load_scenario", "scenario_from_dict", "ScenarioError"]

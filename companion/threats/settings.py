@@ -27,7 +27,7 @@ import re
 from dataclasses import dataclass
 
 from companion.errors import ConfigError
-from sim_vehicle.typed_config import require_int, require_numbers
+from heli_common.typed_config import require_int, require_numbers
 
 __all__ = ["ThreatSettings", "ZenohSettings"]
 

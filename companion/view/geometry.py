@@ -40,7 +40,7 @@ def threat_tube(position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray, radius
 
     Constant velocity from the report, ``age_s`` ago, every ``step_s`` up to ``horizon_s`` ahead
     of now; a mover's radius grows by ``uncertainty_m_s`` per second since the report (as
-    ``companion.threats.prediction`` predicts it). A threat at rest is one sphere, its own size.
+    ``companion.threats.decision.prediction`` predicts it). A threat at rest is one sphere, its own size.
     """
     if np.linalg.norm(velocity_ned_m_s) <= 1e-6:
         return position_ned_m[None, :].astype(float), np.array([float(radius_m)])

@@ -2,7 +2,7 @@
 
 Only the companion's JSON channels are read (``companion.view.channels``); the scene channels
 are for Foxglove. ``load_flight`` opens either format by its suffix: ``.mcap``, or the JSON
-Lines record of ``companion.record``.
+Lines record of ``companion.record.flight_record``.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
 
 from companion.errors import CompanionError
-from companion.record import SAMPLE_KEYS, FlightRecord, load_record, samples_from_columns
+from companion.record.flight_record import SAMPLE_KEYS, FlightRecord, load_record, samples_from_columns
 from companion.view import channels as ch
 
 __all__ = ["load_mcap_record", "load_flight"]

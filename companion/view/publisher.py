@@ -1,7 +1,7 @@
 """The flight as Foxglove channels: to an MCAP file, to a live WebSocket server, or both.
 
 ``FlightView`` takes the flight record's lines (``write(line_type, **fields)``, the interface of
-``companion.record.FlightRecorder``), logs their content on typed JSON channels and draws the
+``companion.record.flight_record.FlightRecorder``), logs their content on typed JSON channels and draws the
 scene: the static world, the active path, the planned legs and the M-GART alternatives, the
 threats as spheres moving along their predicted tubes, the helicopter, and a map fix. Both sinks
 share one ``foxglove.Context``, so a live client and the MCAP file see the same messages.
@@ -24,7 +24,7 @@ from foxglove.mcap import MCAPWriteOptions
 from foxglove.messages import (LocationFix, Log, LogLevel, SceneEntityDeletion,
                                SceneEntityDeletionType, SceneUpdate)
 
-from companion.record import jsonable
+from companion.record.flight_record import jsonable
 from companion.view import channels as ch
 from companion.view import scene
 from heli_common.frames import LocalFrame
@@ -92,7 +92,7 @@ class FlightView:
 
     # -- the record interface -------------------------------------------------------------
     def write(self, line_type: str, /, **fields) -> None:
-        """Publish one record line (see ``companion.record``)."""
+        """Publish one record line (see ``companion.record.flight_record``)."""
         fields = jsonable(fields)
         with self._lock:
             now_ns = self._now_ns()

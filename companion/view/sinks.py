@@ -16,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from companion.errors import ConfigError
-from companion.record import FlightRecorder
+from companion.record.flight_record import FlightRecorder
 
 __all__ = ["RecordSinks", "open_record_sinks", "parse_foxglove_address"]
 

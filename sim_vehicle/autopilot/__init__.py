@@ -4,7 +4,7 @@ Behaves like ArduCopter (https://ardupilot.org/copter/docs/flight-modes.html) wi
 numbers of DESIGN section 5 (STABILIZE 0, ALT_HOLD 2, AUTO 3, GUIDED 4, LOITER 5, RTL 6,
 LAND 9, BRAKE 17; taken from pymavlink through :mod:`heli_common.mavlink_ids`); with no RC pilot, STABILIZE and ALT_HOLD hold position like LOITER. The
 flight controller is the paper's LQI with the PID position loop (section 2.2,
-:mod:`sim_vehicle.control`); this package only decides *what* it tracks:
+:mod:`heli_model.control`); this package only decides *what* it tracks:
 
 * **Legs.** AUTO waypoints, takeoff, RTL and GUIDED position-only targets are flown as straight
   legs with a trapezoidal speed profile (WPNAV_SPEED horizontally, WPNAV_SPEED_UP/DN
@@ -27,9 +27,9 @@ flight controller is the paper's LQI with the PID position loop (section 2.2,
   refused until it has, and a vehicle told to climb waits on the ground until the rotor has run
   up (H_RSC_RUNUP_TIME).
 
-Physics runs at ``timing.physics_rate_hz`` (400 Hz) with RK4 (:mod:`sim_vehicle.dynamics`)
+Physics runs at ``timing.physics_rate_hz`` (400 Hz) with RK4 (:mod:`heli_model.dynamics`)
 and the controller at ``timing.control_rate_hz`` (100 Hz), both in the pure vehicle update
-(:mod:`sim_vehicle.vehicle_update`). Pure simulation: no I/O.
+(:mod:`heli_model.vehicle_update`). Pure simulation: no I/O.
 
 The package, modelled on ArduCopter's sources:
 

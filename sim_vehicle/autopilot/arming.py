@@ -15,7 +15,8 @@ import numpy as np
 
 from heli_common.mavlink_ids import mavlink
 
-from sim_vehicle import dynamics, rsc
+from heli_model import dynamics
+from sim_vehicle import rsc
 from sim_vehicle.autopilot.mode import mode_name
 
 log = logging.getLogger(__name__)

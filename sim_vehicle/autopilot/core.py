@@ -7,7 +7,7 @@ mode switching and the simulation ticks are here, the rest in the mixins it is m
 :mod:`~sim_vehicle.autopilot.fence`, :mod:`~sim_vehicle.autopilot.ground_contact`,
 :mod:`~sim_vehicle.autopilot.navigation`) and in the mode objects (``mode_*.py``).
 The vehicle itself (controller and RK4 physics) is the pure update of
-:mod:`sim_vehicle.vehicle_update`.
+:mod:`heli_model.vehicle_update`.
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ from typing import Sequence
 
 import numpy as np
 
-from sim_vehicle import dynamics, rsc
+from heli_model import dynamics
+from sim_vehicle import rsc
 from sim_vehicle.autopilot.arming import ArmingMixin
 from sim_vehicle.autopilot.fence import Fence, FenceMixin
 from sim_vehicle.autopilot.ground_contact import GroundContactMixin
@@ -35,12 +36,12 @@ from sim_vehicle.autopilot.mode_rtl import ModeRTL
 from sim_vehicle.autopilot.mode_stabilize import ModeAltHold, ModeStabilize
 from sim_vehicle.autopilot.navigation import NavigationMixin
 from sim_vehicle.config import VehicleSettings
-from sim_vehicle.control import ControlLaw, Setpoint, initial_controller_state
+from heli_model.control import ControlLaw, Setpoint, initial_controller_state
 from sim_vehicle.frames import Frames
 from sim_vehicle.mission_store import MissionItem
-from sim_vehicle.model import HeliModel
-from sim_vehicle.vehicle_update import VehicleCommand, VehicleState, VehicleUpdate
-from sim_vehicle.wind import WindModel, WindSettings
+from heli_model.model import HeliModel
+from heli_model.vehicle_update import VehicleCommand, VehicleState, VehicleUpdate
+from heli_model.wind import WindModel, WindSettings
 
 log = logging.getLogger(__name__)
 
@@ -75,7 +76,7 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
     time_s : float
         Simulated time since start.
     x : ndarray, shape (17,) or (21,)
-        Simulation state (see :mod:`sim_vehicle.dynamics`).
+        Simulation state (see :mod:`heli_model.dynamics`).
     delta : ndarray, shape (4,)
         Last rotor inputs ``[d_lat, d_lon, d_ped, d_col]`` in [-1, 1].
     mission_current : int
@@ -156,7 +157,7 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
     # ------------------------------------------------------------------ vehicle
     @property
     def x(self) -> np.ndarray:
-        """Simulation state, (17,) or (21,) (see :mod:`sim_vehicle.dynamics`)."""
+        """Simulation state, (17,) or (21,) (see :mod:`heli_model.dynamics`)."""
         return self.vehicle_state.x
 
     @x.setter

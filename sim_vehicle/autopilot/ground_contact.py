@@ -1,7 +1,7 @@
 """Ground contact: lift-off, touchdown, sitting on the ground and ArduCopter heli's auto-disarm.
 
 Flat ground at the start altitude (``down = 0`` of the ground frame, :mod:`sim_vehicle.frames`):
-the vehicle cannot go below it (the pure update stops it, :mod:`sim_vehicle.vehicle_update`),
+the vehicle cannot go below it (the pure update stops it, :mod:`heli_model.vehicle_update`),
 sits still on it while disarmed or idle, and a landing disarms on touchdown. A vehicle told to
 climb waits on the ground until the rotor has run up (H_RSC_RUNUP_TIME).
 """
@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from sim_vehicle import dynamics
+from heli_model import dynamics
 from sim_vehicle.autopilot.mode import AUTO
 
 log = logging.getLogger(__name__)

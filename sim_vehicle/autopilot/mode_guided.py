@@ -18,7 +18,7 @@ import numpy as np
 
 from sim_vehicle.autopilot.legs import Stage
 from sim_vehicle.autopilot.mode import GUIDED, Mode, QuietRefusal, mode_name
-from sim_vehicle.control import Setpoint
+from heli_model.control import Setpoint
 
 if TYPE_CHECKING:
     from sim_vehicle.autopilot.core import Autopilot

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 from sim_vehicle.autopilot.legs import Stage
 from sim_vehicle.autopilot.mode import LAND, Mode
-from sim_vehicle.control import Setpoint
+from heli_model.control import Setpoint
 
 if TYPE_CHECKING:
     from sim_vehicle.autopilot.core import Autopilot

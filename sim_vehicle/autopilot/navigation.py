@@ -3,7 +3,7 @@
 Every control tick the current stage is started (its leg built from where the reference is),
 finished when done (a leg when its profile has arrived within the acceptance radius, a hold
 after its time, a direct GUIDED stage after GUID_TIMEOUT without a setpoint) and turned into the
-:class:`~sim_vehicle.control.Setpoint` the flight controller tracks. Holds keep the heading in
+:class:`~heli_model.control.Setpoint` the flight controller tracks. Holds keep the heading in
 ``_yaw_hold_rad``; a vehicle told to stop brakes at ``brake_accel_m_s2``.
 """
 
@@ -19,7 +19,7 @@ from sim_vehicle.autopilot.legs import Leg, Stage
 from sim_vehicle.autopilot.mode import AUTO
 from sim_vehicle.autopilot.mode_guided import integrate_target
 from sim_vehicle.autopilot.mode_land import land_setpoint
-from sim_vehicle.control import Setpoint
+from heli_model.control import Setpoint
 
 log = logging.getLogger(__name__)
 

@@ -22,7 +22,7 @@ from heli_common.ardupilot_ids import FORCE_DISARM_MAGIC
 from sim_vehicle import autopilot as ap
 from sim_vehicle import rsc
 from sim_vehicle.autopilot import Autopilot, QuietRefusal
-from sim_vehicle.control import Setpoint
+from heli_model.control import Setpoint
 from sim_vehicle.mavlink.endpoint import Address, Endpoint
 from sim_vehicle.mavlink.stream_sender import StreamSender
 from sim_vehicle.mission_store import (

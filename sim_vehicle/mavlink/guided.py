@@ -4,7 +4,7 @@ As ArduCopter's ``GCS_MAVLINK_Copter::handle_set_position_target_*``: the ``type
 which of position, velocity, acceleration, yaw and yaw rate the sender sets; local targets are
 in metres from the EKF origin (LOCAL_NED), from the vehicle (LOCAL_OFFSET_NED) or in body axes
 (BODY_NED, BODY_OFFSET_NED); global ones in 1e-7 degrees with the altitude AMSL or above home.
-A target is a :class:`sim_vehicle.control.Setpoint` in the vehicle's NED frame.
+A target is a :class:`heli_model.control.Setpoint` in the vehicle's NED frame.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from heli_common.mavlink_ids import (
     TYPEMASK_IGNORE_ACCELERATION, TYPEMASK_IGNORE_POSITION, TYPEMASK_IGNORE_VELOCITY, mavlink,
 )
 from sim_vehicle.autopilot import Autopilot
-from sim_vehicle.control import Setpoint
+from heli_model.control import Setpoint
 from sim_vehicle.mavlink.endpoint import Address, LogThrottle
 from sim_vehicle.mission_store import FRAME_GLOBAL, FRAME_GLOBAL_INT, GLOBAL_FRAMES
 

@@ -33,8 +33,8 @@ from ardupilot_support import ardupilot_unavailable, start_ardupilot
 from companion.geo import LocalFrame
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
-from companion.record import load_record
-from companion.threats.bus import ThreatBus
+from companion.record.flight_record import load_record
+from companion.threats.transport.bus import ThreatBus
 from companion.world import World
 from support import REPO_ROOT, free_tcp_port
 

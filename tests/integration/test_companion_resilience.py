@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from companion.record import load_record
-from companion.threats.bus import ThreatBus
+from companion.record.flight_record import load_record
+from companion.threats.transport.bus import ThreatBus
 from flight_support import FlightWatcher, flight_processes, last_json_line, wait_until
 from support import REPO_ROOT, MavlinkPeer
 

@@ -14,9 +14,9 @@ import time
 import numpy as np
 import pytest
 
-from companion.record import load_record
-from companion.state import read_snapshot, snapshot_path
-from companion.threats.bus import ThreatBus
+from companion.record.flight_record import load_record
+from companion.threats.snapshot import read_snapshot, snapshot_path
+from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat
 from flight_support import (FlightWatcher, Injection, TrackListener, free_port, inject, last_json_line, spawn,
                             stop, wait_until)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from companion.threats.bus import ThreatBus
+from companion.threats.transport.bus import ThreatBus
 from companion.geo import LocalFrame
 from flight_support import DEMO_HOME, TrackListener, free_port, last_json_line, run_companion, spawn, stop, wait_until
 from heli_common.mavlink_ids import COPTER_MODES

@@ -14,8 +14,8 @@ import json
 import numpy as np
 import pytest
 
-from companion.record import load_record
-from companion.report import servo_us_to_delta
+from companion.record.flight_record import load_record
+from companion.record.report import servo_us_to_delta
 from flight_support import TrackListener, run_companion, wait_until
 from support import free_udp_port, start_sim_vehicle
 

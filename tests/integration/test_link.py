@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.link.startup import StartupSettings, start_vehicle
-from companion.reference import VehicleClock
+from companion.service.startup import StartupSettings, start_vehicle
+from companion.flight.reference import VehicleClock
 from companion.errors import LinkError
 from companion.link import COPTER_MODES, SetpointStreamer, VehicleLink, hold_position
 

@@ -15,8 +15,9 @@ import pytest
 
 from companion.security import keys
 from companion.security.deployment import init_deployment
-from companion.threats import access, codec
-from companion.threats.bus import ThreatBus
+from companion.threats.transport import access
+from companion.threats.transport import codec
+from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat, ThreatTable
 from tests.support import free_tcp_port
 from tests.integration.test_threat_bus import companion, wait_for

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from companion.geo import LocalFrame
-from companion.record import load_record
+from companion.record.flight_record import load_record
 from companion.security.deployment import init_deployment
-from companion.threats.bus import ThreatBus
+from companion.threats.transport.bus import ThreatBus
 from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, inject,
                             place, wait_until)
 from support import REPO_ROOT, free_tcp_port

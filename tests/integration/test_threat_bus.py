@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from companion.threats.bus import ThreatBus
+from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import ThreatTable
 from tests.support import REPO_ROOT, free_tcp_port, stop_process
 
@@ -84,7 +84,7 @@ def test_add_remove_and_list_between_processes(listener):
 def test_invalid_payload_from_another_process_is_rejected_naming_the_field(listener):
     endpoint, bus, updates, _ = listener
     script = textwrap.dedent(f"""
-        from companion.threats.bus import ThreatBus
+        from companion.threats.transport.bus import ThreatBus
         with ThreatBus(7, listen=[], connect=["{endpoint}"]) as bus:
             bus.wait_for_subscriber(10.0, "bad")
             bus.put_raw("bad", b'{{"v": 1, "id": "bad", "kind": "popup", "frame": "local_ned", '
@@ -134,7 +134,7 @@ def test_through_a_router_and_into_an_asyncio_loop(tmp_path):
     router_ep = f"tcp/127.0.0.1:{free_tcp_port()}"
     script = textwrap.dedent(f"""
         import sys, time
-        from companion.threats.bus import ThreatBus
+        from companion.threats.transport.bus import ThreatBus
         bus = ThreatBus(3, listen=["{router_ep}"], mode="router").open()
         print("ready", flush=True)
         sys.stdin.readline()

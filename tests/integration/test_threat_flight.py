@@ -32,7 +32,7 @@ from companion.geo import LocalFrame
 from companion.view import channels as ch
 from companion.view.mcap_record import load_flight
 from foxglove_client import collect
-from companion.threats.bus import ThreatBus
+from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat
 from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, free_port,
                             inject, last_json_line, wait_until)

@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 
 from companion.errors import SmoothingError
-from companion.flight_plan import FlightPlanSettings, plan_leg, plan_mission
+from companion.flight.plan import FlightPlanSettings, plan_leg, plan_mission
 from companion.mission.model import LocalWaypoint
 from companion.planning import GartSettings
 from companion.smoothing import SmoothingSettings, TrajectoryLimits
 from companion.smoothing.feasibility import CHANNELS, FeasibilityChecker
 from companion.smoothing.settings import FeasibilitySettings
 from companion.world import World
-from sim_vehicle import dynamics as D
-from sim_vehicle.control import FlightController, Setpoint
-from sim_vehicle.model import HeliModel
+from heli_model import dynamics as D
+from heli_model.control import FlightController, Setpoint
+from heli_model.model import HeliModel
 
 WORLD = World([], np.array([-50.0, -50.0, -60.0]), np.array([150.0, 150.0, 0.0]), 3.0)
 GOAL = LocalWaypoint(seq=2, kind="waypoint", pos_ned_m=np.array([80.0, 30.0, -20.0]),
@@ -125,8 +125,8 @@ def test_no_feasibility_option_turns_the_check_off(capsys):
 
 def test_the_flight_report_lists_each_legs_figures(checker, tmp_path):
     from companion.daemon import feasibility_totals
-    from companion.record import FlightRecord
-    from companion.report import leg_feasibility, summary_text
+    from companion.record.flight_record import FlightRecord
+    from companion.record.report import leg_feasibility, summary_text
 
     legs = [leg(AGGRESSIVE, checker), leg(SmoothingSettings(), checker), leg(SmoothingSettings())]
     totals = feasibility_totals(legs)

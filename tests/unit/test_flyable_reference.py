@@ -8,12 +8,12 @@ import sys
 
 import numpy as np
 
-from companion.flight_plan import TrajectoryChain
-from companion.reference import ActiveReference, VehicleClock
+from companion.flight.plan import TrajectoryChain
+from companion.flight.reference import ActiveReference, VehicleClock
 from companion.smoothing import smooth_g2, time_parameterize
-from companion.threats.evasion import EscapeLimits, escape_library
-from companion.threats.retime import RetimedTrajectory
-from companion.trajectory import FlyableReference, Trajectory
+from companion.threats.decision.evasion import EscapeLimits, escape_library
+from companion.threats.decision.retime import RetimedTrajectory
+from companion.flight.trajectory import FlyableReference, Trajectory
 
 
 def _trajectory() -> Trajectory:
@@ -66,7 +66,7 @@ def test_a_partial_reference_is_not_flyable():
 
 
 def test_trajectory_does_not_import_the_timing():
-    code = ("import sys, companion.trajectory; "
+    code = ("import sys, companion.flight.trajectory; "
             "assert not any(m.startswith('companion.smoothing') for m in sys.modules), "
             "sorted(m for m in sys.modules if m.startswith('companion'))")
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -8,7 +8,7 @@ import pytest
 from companion.cli import build_parser as companion_parser
 from companion.commands.run import flight_settings
 from companion.errors import ConfigError
-from companion.threats.bus import ThreatBus
+from companion.threats.transport.bus import ThreatBus
 from companion.threats.settings import ZENOH_ROUTER_PORT, ZenohSettings, default_listen
 from sim_vehicle.cli import _settings_from_args
 from sim_vehicle.cli import build_parser as sim_parser

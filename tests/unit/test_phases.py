@@ -1,4 +1,4 @@
-"""The leg's flight-phase state machine (companion.phases): every transition, no vehicle."""
+"""The leg's flight-phase state machine (companion.flight.phases): every transition, no vehicle."""
 
 import dataclasses
 import math
@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from companion.phases import (RESUME_AFTER_S, RESUME_RETRY_S, ActionKind, LegAction, LegObservation, LegPhase,
+from companion.flight.phases import (RESUME_AFTER_S, RESUME_RETRY_S, ActionKind, LegAction, LegObservation, LegPhase,
                               LegState, leg_step)
 
 RADIUS = 2.0

@@ -1,4 +1,4 @@
-"""The pure steps of ``companion run --resume`` (companion.resume, issue 11)."""
+"""The pure steps of ``companion run --resume`` (companion.flight.resume, issue 11)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from companion.mission.model import LocalMission, LocalWaypoint
-from companion.resume import remaining_waypoints, resume_mission, resume_refusal
+from companion.flight.resume import remaining_waypoints, resume_mission, resume_refusal
 
 
 def wp(seq, kind="waypoint"):

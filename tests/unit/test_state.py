@@ -1,4 +1,4 @@
-"""The threat snapshot (companion.state): written atomically, read back with the TTL kept,
+"""The threat snapshot (companion.threats.snapshot): written atomically, read back with the TTL kept,
 forgiving of a bad file (issue 11)."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import math
 import pytest
 
 from companion.geo import LocalFrame
-from companion.state import (SnapshotError, SnapshotWriter, ThreatSnapshot, live_threats, load_live_threats,
+from companion.threats.snapshot import (SnapshotError, SnapshotWriter, ThreatSnapshot, live_threats, load_live_threats,
                              read_snapshot, snapshot_from_dict, snapshot_path, snapshot_to_dict, write_snapshot)
 from companion.threats.model import Threat
 
@@ -84,7 +84,7 @@ def test_a_corrupt_or_missing_snapshot_never_stops_a_resume(tmp_path, caplog):
     path = tmp_path / "threats-uav1.json"
     assert load_live_threats(path, 130.0, sysid=1) == []
     path.write_bytes(b"\x00\xff truncated")
-    with caplog.at_level(logging.ERROR, logger="companion.state"):
+    with caplog.at_level(logging.ERROR, logger="companion.threats.snapshot"):
         assert load_live_threats(path, 130.0, sysid=1) == []
     assert "resuming without the threats" in caplog.text
 
@@ -104,7 +104,7 @@ def test_a_write_that_fails_is_logged_not_raised(tmp_path, caplog):
     blocker = tmp_path / "file"
     blocker.write_text("")
     writer = SnapshotWriter(blocker / "sub" / "threats-uav1.json", sysid=1, home_lla=HOME)
-    with caplog.at_level(logging.ERROR, logger="companion.state"):
+    with caplog.at_level(logging.ERROR, logger="companion.threats.snapshot"):
         writer.save([POPUP], 120.0)
         writer.close()
     assert writer.failures == 1 and "not written" in caplog.text

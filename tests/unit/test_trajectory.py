@@ -1,11 +1,11 @@
-"""companion.trajectory.Trajectory: sampling by time, shapes, errors, derived trajectories."""
+"""companion.flight.trajectory.Trajectory: sampling by time, shapes, errors, derived trajectories."""
 
 import numpy as np
 import pytest
 
 from companion.errors import TrajectoryError
 from companion.smoothing import smooth_g2, time_parameterize
-from companion.trajectory import RawProfile, Trajectory
+from companion.flight.trajectory import RawProfile, Trajectory
 
 PATH = np.array([[0.0, 0.0], [40.0, 0.0], [40.0, 30.0]])
 

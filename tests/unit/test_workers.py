@@ -7,7 +7,7 @@ import pickle
 
 import numpy as np
 
-from companion.reference import ReferenceTable
+from companion.flight.reference import ReferenceTable
 from companion.workers import AlternativesGate, PlanningWorkers, adopt_changes, call_method
 from companion.world import World
 

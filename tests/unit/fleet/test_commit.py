@@ -9,7 +9,7 @@ from hypothesis import given, settings, strategies as st
 
 from companion.fleet.commit import fleet_check, refuses
 from companion.fleet.peers import VehicleThreat
-from companion.threats.spacetime import BatchCheck, check_candidates
+from companion.threats.decision.spacetime import BatchCheck, check_candidates
 
 coord = st.floats(-30.0, 30.0, allow_nan=False)
 step = st.floats(-4.0, 4.0, allow_nan=False)

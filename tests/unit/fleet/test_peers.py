@@ -11,7 +11,7 @@ from companion.fleet.message import SampledPath, TrajectoryMessage
 from companion.fleet.peers import PeerTable
 from companion.fleet.settings import FleetSettings
 from companion.geo import LocalFrame
-from companion.threats.prediction import predict_tubes
+from companion.threats.decision.prediction import predict_tubes
 
 HOME = (47.397742, 8.545594, 488.0)
 S = FleetSettings()

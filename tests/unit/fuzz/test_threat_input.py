@@ -24,8 +24,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from companion.errors import ThreatPayloadError
-from companion.threats import codec
-from companion.threats.bus import ThreatBus
+from companion.threats.transport import codec
+from companion.threats.transport.bus import ThreatBus
 
 zenoh = pytest.importorskip("zenoh")
 

@@ -39,7 +39,7 @@ from sim_vehicle import autopilot as ap
 from sim_vehicle import rsc
 from sim_vehicle.autopilot import Autopilot
 from sim_vehicle.config import VehicleSettings, replace_path
-from sim_vehicle.model import HeliModel
+from heli_model.model import HeliModel
 
 HOME = (47.397742, 8.545594, 488.0, 0.0)
 GCS = ("127.0.0.1", 40001)

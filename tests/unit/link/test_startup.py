@@ -1,4 +1,4 @@
-"""companion.link.startup: the helicopter start-up sequence against a scripted vehicle.
+"""companion.service.startup: the helicopter start-up sequence against a scripted vehicle.
 
 ``FakeHeli`` behaves as ArduCopter's helicopter does (see the module under test): arming is
 refused with the interlock engaged, the interlock cannot be engaged during the arming delay
@@ -17,7 +17,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import ConfigError, VehicleRefused
-from companion.link.startup import (RotorPlan, StartupSettings, is_airborne, rotor_plan, rpm_settled,
+from companion.service.startup import (RotorPlan, StartupSettings, is_airborne, rotor_plan, rpm_settled,
                                     start_vehicle)
 
 ACCEPTED, FAILED = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_FAILED

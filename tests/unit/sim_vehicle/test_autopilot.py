@@ -14,9 +14,9 @@ from sim_vehicle import rsc
 from sim_vehicle.autopilot import Autopilot, Leg
 from sim_vehicle.clock import SimClock, WallTimer
 from sim_vehicle.config import VehicleSettings, replace_path
-from sim_vehicle.control import Setpoint
+from heli_model.control import Setpoint
 from sim_vehicle.mission_store import MissionItem
-from sim_vehicle.model import HeliModel
+from heli_model.model import HeliModel
 
 HOME = (47.397742, 8.545594, 488.0, 0.0)
 

@@ -20,9 +20,9 @@ from sim_vehicle import rsc
 from sim_vehicle.adsb import AdsbSettings, RoundRobin, TrafficModel
 from sim_vehicle.autopilot import Autopilot, QuietRefusal
 from sim_vehicle.config import VehicleSettings, replace_path
-from sim_vehicle.control import Setpoint
+from heli_model.control import Setpoint
 from sim_vehicle.frames import Frames
-from sim_vehicle.model import HeliModel
+from heli_model.model import HeliModel
 from sim_vehicle.streams import GROUPS, LinkStreams, StreamTable, decode_interval
 
 HOME = (47.397742, 8.545594, 488.0, 0.0)

@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 from sim_vehicle import autopilot as ap
 from sim_vehicle.autopilot import TARGET_INTEGRATION_MAX_S, Autopilot, _integrate_target
 from sim_vehicle.config import VehicleSettings, replace_path
-from sim_vehicle.control import Setpoint
-from sim_vehicle.model import HeliModel
+from heli_model.control import Setpoint
+from heli_model.model import HeliModel
 
 HOME = (47.397742, 8.545594, 488.0, 0.0)
 finite = st.floats(-20, 20)

@@ -11,7 +11,7 @@ from sim_vehicle.autopilot import Autopilot
 from sim_vehicle.config import (
     SimConfigError, VehicleSettings, get_path, load_settings, parse_host_port, replace_path, settings_from_dict,
 )
-from sim_vehicle.model import HeliModel
+from heli_model.model import HeliModel
 from sim_vehicle.params import MAV_PARAM_TYPE_INT8, MAV_PARAM_TYPE_REAL32, ParameterTable
 
 

@@ -7,7 +7,7 @@ from companion.errors import SmoothingError
 from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
 from companion.smoothing.feasibility import FeasibilityChecker, check_and_stretch
 from companion.smoothing.settings import FeasibilitySettings
-from sim_vehicle.model import HeliModel
+from heli_model.model import HeliModel
 
 PATH = np.array([[0.0, 0.0], [60.0, 0.0], [60.0, 60.0], [0.0, 80.0], [-20.0, 20.0]])
 

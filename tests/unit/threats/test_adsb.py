@@ -1,4 +1,4 @@
-"""companion.threats.adsb: ADSB_VEHICLE reports as moving threats."""
+"""companion.threats.transport.adsb: ADSB_VEHICLE reports as moving threats."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from companion.config import load_settings
 from companion.errors import ConfigError
 from companion.geo import LocalFrame
-from companion.threats import codec
-from companion.threats.adsb import AdsbSettings, adsb_threat_id, emitter_radius_m, threat_from_adsb
+from companion.threats.transport import codec
+from companion.threats.transport.adsb import AdsbSettings, adsb_threat_id, emitter_radius_m, threat_from_adsb
 from companion.threats.model import ThreatTable
 
 HOME = LocalFrame(47.397742, 8.545594, 488.0)

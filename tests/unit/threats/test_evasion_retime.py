@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
-from companion.threats.evasion import EscapeLimits, escape_library
-from companion.threats.retime import RetimedTrajectory, ramp_time_s
+from companion.threats.decision.evasion import EscapeLimits, escape_library
+from companion.threats.decision.retime import RetimedTrajectory, ramp_time_s
 from companion.world import World
 
 LIM = EscapeLimits(speed_m_s=5.0, accel_m_s2=2.5, climb_m_s=2.5, descent_m_s=1.5, vertical_accel_m_s2=1.5)

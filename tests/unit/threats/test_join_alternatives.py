@@ -8,10 +8,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
-from companion.threats.alternatives import Alternative, switch_candidates
-from companion.threats.join import HOVER_SPEED_M_S, join_trajectory
+from companion.threats.decision.alternatives import Alternative, switch_candidates
+from companion.threats.decision.join import HOVER_SPEED_M_S, join_trajectory
 from companion.threats.model import Threat
-from companion.threats.policy import ThreatManager
+from companion.threats.decision.policy import ThreatManager
 from companion.threats.settings import ThreatSettings
 from companion.world import World
 

@@ -11,7 +11,7 @@ import pytest
 
 from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
 from companion.threats.model import Threat
-from companion.threats.policy import ThreatManager, ThreatManagerError
+from companion.threats.decision.policy import ThreatManager, ThreatManagerError
 from companion.threats.settings import ThreatSettings
 from companion.world import World
 

@@ -17,7 +17,7 @@ from companion.errors import LinkError
 from companion.threats.model import Threat, payload_error
 from companion.threats.reactor import ThreatReactor
 from companion.threats.statustext import STATUSTEXT_MAX_CHARS, statustext_for
-from companion.threats.update import ThreatUpdate
+from companion.threats.transport.update import ThreatUpdate
 
 HOME = (47.397742, 8.545594, 488.0)
 

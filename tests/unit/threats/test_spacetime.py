@@ -8,8 +8,8 @@ import numpy as np
 from hypothesis import given, settings, strategies as st
 
 from companion.threats.model import Threat
-from companion.threats.prediction import predict_tubes
-from companion.threats.spacetime import STATIC_ID, check_candidates, sample_times, segment_min_distance
+from companion.threats.decision.prediction import predict_tubes
+from companion.threats.decision.spacetime import STATIC_ID, check_candidates, sample_times, segment_min_distance
 from companion.world import Disc, Sphere, World
 
 coord = st.floats(-50.0, 50.0, allow_nan=False)
@@ -103,7 +103,7 @@ def test_expired_tube_is_gone():
 @settings(max_examples=30, deadline=None)
 @given(st.integers(0, 10_000))
 def test_static_clearance_is_exact_near_obstacles_and_a_lower_bound_far(seed):
-    from companion.threats.spacetime import STATIC_REACH_M, _obstacle_clearance
+    from companion.threats.decision.spacetime import STATIC_REACH_M, _obstacle_clearance
     from companion.world import Cylinder, Prism
 
     rng = np.random.default_rng(seed)

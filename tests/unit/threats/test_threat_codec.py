@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from companion.errors import ThreatPayloadError
-from companion.threats.codec import MAX_PAYLOAD_BYTES, decode, encode
+from companion.threats.transport.codec import MAX_PAYLOAD_BYTES, decode, encode
 from companion.threats.model import Threat
 
 EXAMPLE = {"v": 1, "id": "t1", "kind": "popup", "frame": "local_ned",

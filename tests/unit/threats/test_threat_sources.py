@@ -9,9 +9,9 @@ import pytest
 
 from companion.errors import ConfigError, ThreatPayloadError
 from companion.security.deployment import init_deployment
-from companion.threats.bus import ThreatBus
+from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat, ThreatTable
-from companion.threats.update import ThreatUpdate, rejected_event
+from companion.threats.transport.update import ThreatUpdate, rejected_event
 from tests.unit.threats.test_reactor import Harness, run, trajectory_decision, until
 
 

@@ -7,7 +7,7 @@ import pytest
 from mcap.reader import make_reader
 
 from companion.errors import CompanionError
-from companion.record import FlightRecorder, load_record
+from companion.record.flight_record import FlightRecorder, load_record
 from companion.view import channels as ch
 from companion.view.mcap_record import load_flight
 from companion.view.publisher import FlightView

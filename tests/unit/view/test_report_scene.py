@@ -1,8 +1,8 @@
 """The report's 3D scene: the instant, the threats known then, the path flown then (issue 14)."""
 
-from companion.record import FlightRecorder, load_record
-from companion.report import render_report
-from companion.report_scene import path_at, scene_instant, threats_known_at
+from companion.record.flight_record import FlightRecorder, load_record
+from companion.record.report import render_report
+from companion.record.report_scene import path_at, scene_instant, threats_known_at
 from tests.unit.view.test_flight_view import write_flight
 
 
