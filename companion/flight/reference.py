@@ -27,7 +27,7 @@ from collections import deque
 
 import numpy as np
 
-from companion.link.setpoints import Setpoint
+from companion.flight.setpoint import Setpoint
 from companion.flight.trajectory import FlyableReference
 
 __all__ = ["VehicleClock", "ActiveReference", "ReferenceTable", "wrap_pi"]

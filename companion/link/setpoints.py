@@ -2,16 +2,16 @@
 
 The vehicle's LQI tracks position/velocity/acceleration/yaw references; the companion must
 deliver them at a steady rate whatever else it is doing (planning, smoothing, threat handling).
-``SetpointStreamer`` is an asyncio task that sends one setpoint per period on absolute
-deadlines of the monotonic clock (``t_k = t_0 + k * period``: no drift, a late wake-up does not
-delay the next one; a deadline missed by more than a period is skipped, never sent in a burst).
-On Linux the deadlines are a kernel periodic timer the loop waits on (``companion.link.timerfd``:
-asyncio's own timers wake up to 1 ms late, rounded to epoll's milliseconds).
+``SetpointStreamer`` sends one setpoint per tick and keeps the send times (jitter). The ticks
+come on absolute deadlines of the monotonic clock from a ``PeriodicDriver``
+(``companion.link.periodic``: a kernel periodic timer on Linux): in ``companion run`` the
+driver runs the flight executor's schedule, whose first task is the stream
+(``companion.flight.executor``); a bare streamer can ``start`` a driver of its own.
 
-The setpoint comes from a callable ``setpoint_at(t_monotonic_s) -> Setpoint`` that the daemon
-replaces atomically with ``set_source`` (a single attribute store) when a new trajectory is
-ready, so a splice takes effect at the next tick. If the callable raises, the previous setpoint
-is repeated and the error logged (once per source).
+The setpoint comes from a callable ``setpoint_at(t_monotonic_s) -> Setpoint`` (the daemon's
+``ReferenceOwner.setpoint_at``, ``companion.flight.active``), so a new trajectory takes effect
+at the next tick. If the callable raises, the previous setpoint is repeated and the error
+logged (once per source).
 
 What ``companion run`` does (``companion.daemon``): the event-loop thread that streams is given
 priority with ``raise_stream_priority`` (SCHED_FIFO when allowed) before the link connects;
@@ -31,29 +31,18 @@ import logging
 import math
 import time
 from array import array
-from typing import Callable, NamedTuple
+from typing import Callable
 
 import numpy as np
 
-from companion.link.timerfd import PeriodicTimer
+from companion.flight.setpoint import Setpoint, SetpointSource, hold_position
+from companion.link.periodic import PeriodicDriver
 
 log = logging.getLogger(__name__)
 
 
 #: The interpreter's switch interval while the stream runs (s; ``raise_stream_priority``).
 STREAM_SWITCH_INTERVAL_S = 0.0005
-#: ``SetpointStreamer.sleep`` wakes on the loop's timer this long after its delay if no send
-#: woke it (s).
-SLEEP_BACKSTOP_S = 1.0
-#: The stream's housekeeping (the source's work ahead, the after-tick callbacks, the sleepers)
-#: follows a send about this often (s), not every send: the flight's periodic work (the phase
-#: machine, the monitor, the record: 10 Hz) needs no more, and each turn costs the loop.
-HOUSEKEEPING_PERIOD_S = 0.1
-
-
-def _wake(future: asyncio.Future) -> None:
-    if not future.done():
-        future.set_result(None)
 
 
 def raise_stream_priority(fifo_priority: int = 10, nice_increment: int = -5) -> str:
@@ -148,37 +137,7 @@ def normal_priority():
             log.warning("could not give the setpoint stream its SCHED_FIFO priority back")
 
 
-class Setpoint(NamedTuple):
-    """One GUIDED setpoint (None = not commanded; masked out in type_mask).
-
-    Attributes
-    ----------
-    pos_ned_m, vel_ned_m_s, acc_ned_m_s2 : ndarray (3,), sequence of 3 floats, or None
-    yaw_rad : float or None
-    yaw_rate_rad_s : float or None
-        With ``yaw_rad``: the heading's rate of change, a feed-forward for the yaw loop.
-    """
-
-    pos_ned_m: np.ndarray | None
-    vel_ned_m_s: np.ndarray | None = None
-    acc_ned_m_s2: np.ndarray | None = None
-    yaw_rad: float | None = None
-    yaw_rate_rad_s: float | None = None
-
-
-SetpointSource = Callable[[float], Setpoint]
 SetpointSender = Callable[..., None]
-
-
-def hold_position(pos_ned_m, yaw_rad: float | None = None) -> SetpointSource:
-    """A source that holds ``pos_ned_m`` with zero velocity and acceleration (a hover)."""
-    pos = np.asarray(pos_ned_m, dtype=np.float64).reshape(3).copy()
-    zero = np.zeros(3)
-
-    def setpoint_at(t_monotonic_s: float) -> Setpoint:
-        return Setpoint(pos, zero, zero, yaw_rad)
-
-    return setpoint_at
 
 
 @dataclasses.dataclass(frozen=True)
@@ -223,28 +182,32 @@ def jitter_stats(send_times_s, nominal_period_s: float, missed: int = 0) -> Jitt
 
 
 class SetpointStreamer:
-    """Send setpoints at a fixed rate on absolute monotonic deadlines.
+    """Send the setpoints of a source: one per ``tick``, with the send times kept for jitter.
+
+    It only streams: who ticks it is the flight executor's schedule (its ``setpoints`` task,
+    driven by the daemon's ``PeriodicDriver``), or, after ``start``, a driver of its own at
+    ``rate_hz`` (a stream with nothing else to do, e.g. a test).
 
     Parameters
     ----------
     send : callable
-        ``send(pos_ned_m=..., vel_ned_m_s=..., acc_ned_m_s2=..., yaw_rad=...)``, non-blocking,
-        e.g. ``VehicleLink.send_setpoint``.
+        ``send(pos_ned_m=..., vel_ned_m_s=..., acc_ned_m_s2=..., yaw_rad=..., yaw_rate_rad_s=...)``,
+        non-blocking, e.g. ``VehicleLink.direct.send_setpoint``.
     source : callable, optional
-        Initial ``setpoint_at(t_monotonic_s) -> Setpoint``; nothing is sent until one is set.
+        ``setpoint_at(t_monotonic_s) -> Setpoint or None``; nothing is sent while it is None
+        or returns None.
     rate_hz : float
-        Stream rate (default 50 Hz).
+        Nominal rate (default 50 Hz): the jitter's reference, and ``start``'s driver's.
     on_sent : callable, optional
         ``on_sent(t_monotonic_s, setpoint)`` after each send (flight record); must be quick.
     spin_s : float
-        The last ``spin_s`` before a deadline are waited by yielding to the loop in a tight
-        loop instead of a timed sleep (the loop's timer resolution is ~1 ms). 0 disables.
+        ``start``'s driver's spin (``PeriodicDriver``).
     max_records : int
         Send times kept for ``stats()`` (a ring; default one hour at 50 Hz).
 
     Examples
     --------
-    >>> streamer = SetpointStreamer(link.send_setpoint, hold_position([0, 0, -10]))  # doctest: +SKIP
+    >>> streamer = SetpointStreamer(link.direct.send_setpoint, hold_position([0, 0, -10]))  # doctest: +SKIP
     >>> task = streamer.start()
     >>> streamer.set_source(lambda t: trajectory_setpoint(t - t_start))   # atomic swap
     >>> await streamer.stop(); streamer.stats().p99_ms
@@ -260,193 +223,50 @@ class SetpointStreamer:
             raise ValueError(f"spin_s must be in [0, period), got {spin_s}")
         self._send = send
         self._source = source
-        self._prepare: Callable[[], None] | None = None
         self._source_failed = False
         self.period_s = 1.0 / rate_hz
-        self._housekeeping_ticks = max(1, int(HOUSEKEEPING_PERIOD_S / self.period_s + 1e-9))
-        self._ticks = 0
         self._on_sent = on_sent
         self._spin_s = spin_s
         self._max_records = int(max_records)
         self._times = array("d")
         self._last: Setpoint | None = None
-        self._task: asyncio.Task | None = None
-        self.missed = 0
+        self._driver: PeriodicDriver | None = None
         self.sent = 0
         self.send_errors = 0
-        self._tick_callbacks: list[Callable[[], None]] = []
-        #: Called right after every scheduled send (e.g. the link taking the telemetry the gate
-        #: read: ``VehicleLink.batch_reads``); each must be quick and must not raise.
-        self.tick_hooks: list[Callable[[], None]] = []
-        self._sleepers: list[tuple[float, asyncio.Future]] = []   # (wake at, future) of sleep()
-        self._first_wake_s = math.inf                               # the earliest of them
+        self.missed = 0              # periods its driver skipped (``start``'s, or the caller's)
 
-    # ---------------------------------------------------------------- control
-
-    def set_source(self, source: SetpointSource | None,
-                   prepare: Callable[[], None] | None = None) -> None:
-        """Replace the setpoint source; effective at the next tick (None pauses sending).
-
-        ``prepare()``, when given, is called in the stream's housekeeping (right after a send,
-        every ``HOUSEKEEPING_PERIOD_S``): work the source
-        can do ahead (e.g. ``ActiveReference.prepare``) then never delays a send."""
+    def set_source(self, source: SetpointSource | None) -> None:
+        """Replace the setpoint source; effective at the next tick (None pauses sending)."""
         self._source = source
-        self._prepare = prepare
         self._source_failed = False
 
     @property
     def source(self) -> SetpointSource | None:
         return self._source
 
+    # ---------------------------------------------------------------- its own driver
     def start(self) -> asyncio.Task:
-        """Start streaming on the running loop; returns the task."""
-        if self._task is None or self._task.done():
-            self._task = asyncio.get_running_loop().create_task(self.run(), name="setpoints")
-        return self._task
+        """Stream at ``rate_hz`` on a driver of its own (the running loop); returns its task."""
+        if self._driver is None:
+            self._driver = PeriodicDriver(1.0 / self.period_s, self.tick, spin_s=self._spin_s)
+        return self._driver.start()
 
     async def stop(self) -> None:
-        """Stop streaming (idempotent)."""
-        if self._task is not None:
-            self._task.cancel()
-            try:
-                await self._task
-            except asyncio.CancelledError:
-                pass
-            self._task = None
-        self._run_tick_callbacks()
-        self._wake_sleepers(math.inf)
-
-    def call_after_next_tick(self, callback: Callable[[], None]) -> None:
-        """Call ``callback()`` on the loop in the stream's next housekeeping, right after a
-        scheduled send (at most ``HOUSEKEEPING_PERIOD_S`` away; soon when not
-        streaming), in the same wake-up as the send: no task, no future, warm caches."""
-        if self.running:
-            self._tick_callbacks.append(callback)
-        else:
-            asyncio.get_running_loop().call_soon(callback)
-
-    async def sleep(self, delay_s: float) -> None:
-        """Sleep about ``delay_s``, waking in the first housekeeping that follows (while
-        streaming: the periodic work of the flight then shares the stream's wake-up of the
-        process instead of adding its own); ``asyncio.sleep`` when not streaming."""
-        if not self.running:
-            await asyncio.sleep(delay_s)
-            return
-        loop = asyncio.get_running_loop()
-        future = loop.create_future()
-        wake_s = time.monotonic() + delay_s - 0.5 * self.housekeeping_period_s
-        self._sleepers.append((wake_s, future))
-        self._first_wake_s = min(self._first_wake_s, wake_s)
-        # a stream that stopped ticking without stop() must not hold the sleeper for ever
-        backstop = loop.call_later(delay_s + SLEEP_BACKSTOP_S, _wake, future)
-        try:
-            await future
-        finally:
-            backstop.cancel()
-            if not future.done():
-                future.cancel()
-
-    def _wake_sleepers(self, now_s: float) -> None:
-        if now_s < self._first_wake_s:
-            return
-        due = [f for t, f in self._sleepers if t <= now_s]
-        if due:
-            self._sleepers = [(t, f) for t, f in self._sleepers if t > now_s and not f.done()]
-            self._first_wake_s = min((t for t, _ in self._sleepers), default=math.inf)
-            for future in due:
-                if not future.done():
-                    future.set_result(None)
-
-    def _after_tick(self) -> None:
-        """Right after a scheduled send: the tick hooks; every ``HOUSEKEEPING_PERIOD_S``, also
-        the source's work ahead, the after-tick callbacks and the sleepers that are due."""
-        for hook in self.tick_hooks:
-            hook()
-        self._ticks += 1
-        if self._ticks % self._housekeeping_ticks:
-            return
-        if self._prepare is not None:
-            try:
-                self._prepare()
-            except Exception:  # noqa: BLE001 - the send path evaluates again if needed
-                log.exception("setpoint source's prepare failed")
-                self._prepare = None
-        self._run_tick_callbacks()
-        self._wake_sleepers(time.monotonic())
-
-    def _run_tick_callbacks(self) -> None:
-        callbacks, self._tick_callbacks = self._tick_callbacks, []
-        for callback in callbacks:
-            try:
-                callback()
-            except Exception:  # noqa: BLE001 - the stream goes on
-                log.exception("after-tick callback %r failed", callback)
-
-    @property
-    def housekeeping_period_s(self) -> float:
-        """How often the housekeeping follows a send (s; ``HOUSEKEEPING_PERIOD_S``, whole ticks)."""
-        return self._housekeeping_ticks * self.period_s
+        """Stop its own driver (idempotent)."""
+        if self._driver is not None:
+            await self._driver.stop()
+            self.missed = self._driver.missed
 
     @property
     def running(self) -> bool:
-        return self._task is not None and not self._task.done()
+        return self._driver is not None and self._driver.running
 
-    # ---------------------------------------------------------------- loop
-
-    async def run(self) -> None:
-        """Stream until cancelled: on a kernel periodic timer (``companion.link.timerfd``,
-        Linux) when there is one and ``spin_s`` is 0, else on the loop's timer."""
-        t0 = time.monotonic()
-        timer = PeriodicTimer.open(t0 + self.period_s, self.period_s) if self._spin_s == 0 else None
-        if timer is None:
-            await self._run_on_loop_timer(t0)
-            return
-        loop = asyncio.get_running_loop()
-
-        def on_expiry() -> None:
-            periods = timer.expirations()
-            if periods:
-                self.missed += periods - 1        # deadlines already passed are skipped, never bursts
-                self.tick(time.monotonic())
-                self._after_tick()
-
-        self.tick(t0)
-        loop.add_reader(timer.fileno(), on_expiry)
-        try:
-            await loop.create_future()            # until cancelled
-        finally:
-            loop.remove_reader(timer.fileno())
-            timer.close()
-
-    async def _run_on_loop_timer(self, t0: float) -> None:
-        k = 0
-        while True:
-            deadline = t0 + k * self.period_s
-            await self.wait_until(deadline)
-            now = time.monotonic()
-            self.tick(now)
-            self._after_tick()
-            k += 1
-            # skip deadlines already missed by more than one period (no bursts)
-            behind = int((time.monotonic() - (t0 + k * self.period_s)) // self.period_s)
-            if behind > 0:
-                self.missed += behind
-                k += behind
-
-    async def wait_until(self, deadline_s: float) -> None:
-        """Sleep to ``deadline_s - spin_s`` on the loop timer, then yield until the deadline."""
-        remaining = deadline_s - time.monotonic() - self._spin_s
-        if remaining > 0:
-            await asyncio.sleep(remaining)
-        while time.monotonic() < deadline_s:
-            await asyncio.sleep(0)
-
+    # ---------------------------------------------------------------- sending
     def send_now(self) -> None:
         """Send the current source's setpoint at once, outside the schedule (a new trajectory
         reaches the vehicle without waiting for the next tick; the jitter statistics count only
         the scheduled sends)."""
-        if self.running:
-            self.tick(time.monotonic(), scheduled=False)
+        self.tick(time.monotonic(), scheduled=False)
 
     def tick(self, now_s: float, scheduled: bool = True) -> None:
         """Evaluate the source at ``now_s`` and send (one period's work)."""
@@ -482,7 +302,7 @@ class SetpointStreamer:
                 log.exception("setpoint source failed; repeating the last setpoint")
                 self._source_failed = True
             return self._last
-        if not isinstance(setpoint, Setpoint):
+        if setpoint is not None and not isinstance(setpoint, Setpoint):
             setpoint = Setpoint(*setpoint)
         return setpoint
 
@@ -494,5 +314,5 @@ class SetpointStreamer:
         return np.frombuffer(self._times, dtype=np.float64).copy()
 
     def stats(self) -> JitterStats:
-        """Period jitter of the sends so far."""
+        """Period jitter of the sends so far (``missed``: the periods its driver skipped)."""
         return jitter_stats(self.send_times_s, self.period_s, self.missed)

@@ -1,0 +1,339 @@
+"""Fast time: the flight executor flown in process against the helicopter model (ArduPilot SITL).
+
+``FastTimeFlight`` runs the very ``FlightExecutor`` that ``companion run`` runs, with other
+ports (``companion.flight.ports``):
+
+- the clock is virtual (:class:`VirtualClock`): mission time and the executor's clock are one;
+- the vehicle is the closed-loop helicopter model (:class:`ModelVehicle`:
+  ``heli_model.vehicle_update.VehicleUpdate``, the LQI flight controller and RK4 physics that
+  ``sim-vehicle`` flies), given each setpoint the executor streams;
+- jobs (decisions, replans, alternatives) run in process (:class:`InlineJobs`); each is done
+  when the virtual clock has passed its start plus its measured wall-clock duration (times
+  ``job_time_scale``), so the vehicle keeps flying the old reference meanwhile, as it does over
+  MAVLink;
+- threats arrive as the encounter says (:class:`ThreatFeed`): each update at its time, through
+  the same ``Avoidance.on_threats_changed`` a zenoh sample or an ADS-B report goes through.
+
+No sockets, no asyncio, no processes. The result (:class:`FastTimeResult`) holds the vehicle's
+own trajectory and every decision told.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import heapq
+import itertools
+import logging
+import math
+import time
+from typing import Callable, Sequence
+
+import numpy as np
+
+from heli_model import dynamics
+from heli_model.control import Setpoint as ModelSetpoint
+from heli_model.model import HeliModel
+from heli_model.vehicle_update import VehicleCommand, VehicleUpdate
+
+from companion.flight.active import ReferenceOwner
+from companion.flight.avoidance import AlternativesPlan, Avoidance
+from companion.flight.executor import FlightExecutor
+from companion.flight.legs import FlightOutcome, LegReplanner
+from companion.flight.ports import VehicleView
+from companion.threats.decision.kinds import Strategy
+from companion.threats.decision.step import DecisionPolicy, DecisionState
+from companion.threats.model import Threat, ThreatTable
+
+__all__ = ["VirtualClock", "ModelVehicle", "InlineJobs", "ThreatFeed", "FlightLog", "FastTimeResult",
+           "FastTimeFlight"]
+
+log = logging.getLogger(__name__)
+
+#: Position indices of the simulation state (``heli_model.dynamics``: 13 model states, yaw, NED).
+_POS = slice(14, 17)
+
+
+class VirtualClock:
+    """Mission time and the executor's clock in one: virtual seconds, advanced by the driver."""
+
+    scale = 1.0
+
+    def __init__(self, t0_s: float = 0.0) -> None:
+        self.t_s = float(t0_s)
+
+    def now_s(self, monotonic_s: float | None = None) -> float:
+        """Now (or the mission time of an executor instant: the same number)."""
+        return self.t_s if monotonic_s is None else float(monotonic_s)
+
+    @property
+    def synced(self) -> bool:
+        return True
+
+
+class ModelVehicle:
+    """The helicopter model flying the setpoints it is given (the fast-time ``VehiclePort``).
+
+    Parameters
+    ----------
+    update : VehicleUpdate
+    pos_ned_m : array_like, shape (3,)
+        Where it hovers at the start (trimmed).
+    yaw_rad : float
+    """
+
+    def __init__(self, update: VehicleUpdate, pos_ned_m, yaw_rad: float = 0.0) -> None:
+        self.update = update
+        self.state = update.hover_state(np.asarray(pos_ned_m, dtype=float), yaw_rad)
+        self.setpoint: ModelSetpoint | None = None
+        self.control_dt_s = update.law.settings.control_dt_s
+
+    @property
+    def pos_ned_m(self) -> np.ndarray:
+        return self.state.x[_POS].copy()
+
+    @property
+    def yaw_rad(self) -> float:
+        return float(self.state.x[dynamics.IDX_PSI])
+
+    def view(self) -> VehicleView:
+        return VehicleView(True, True, True, "GUIDED", self.pos_ned_m, self.yaw_rad)
+
+    def command(self, setpoint) -> None:
+        """The setpoint streamed (``companion.flight.setpoint.Setpoint``)."""
+        self.setpoint = ModelSetpoint(np.asarray(setpoint.pos_ned_m, dtype=float),
+                                      None if setpoint.vel_ned_m_s is None else np.asarray(setpoint.vel_ned_m_s, dtype=float),
+                                      None if setpoint.acc_ned_m_s2 is None else np.asarray(setpoint.acc_ned_m_s2, dtype=float),
+                                      setpoint.yaw_rad, setpoint.yaw_rate_rad_s)
+
+    def advance(self, dt_s: float) -> None:
+        """Fly ``dt_s`` on the last setpoint: the controller at its own period, RK4 within."""
+        n = max(1, math.ceil(dt_s / self.control_dt_s - 1e-9))
+        for _ in range(n):
+            self.state = self.update.update(self.state, VehicleCommand(self.setpoint), dt_s / n)
+
+
+@dataclasses.dataclass(order=True)
+class _Job:
+    due_s: float
+    order: int
+    outcome: Callable = dataclasses.field(compare=False)
+
+
+class InlineJobs:
+    """Jobs run in process at submission, done on the virtual clock after their measured time.
+
+    Parameters
+    ----------
+    clock : VirtualClock
+    job_time_scale : float
+        Virtual seconds per measured wall-clock second of a job (1: as long as it took here).
+    """
+
+    def __init__(self, clock: VirtualClock, job_time_scale: float = 1.0) -> None:
+        self.clock = clock
+        self.job_time_scale = float(job_time_scale)
+        self._due: list[_Job] = []
+        self._order = itertools.count()
+        self.wall_s: dict[str, list[float]] = {}
+
+    def submit(self, name: str, fn: Callable, args: tuple, done: Callable, failed: Callable) -> None:
+        t0 = time.perf_counter()
+        try:
+            result = fn(*args)
+            outcome = lambda: done(result)          # noqa: E731 - delivered later
+        except Exception as exc:  # noqa: BLE001 - a job's failure is the caller's to handle
+            outcome = lambda: failed(exc)           # noqa: E731
+        spent = time.perf_counter() - t0
+        self.wall_s.setdefault(name, []).append(spent)
+        heapq.heappush(self._due, _Job(self.clock.t_s + spent * self.job_time_scale, next(self._order), outcome))
+
+    def deliver(self, now_s: float) -> None:
+        """Hand over the results of the jobs done by ``now_s``, in order."""
+        while self._due and self._due[0].due_s <= now_s:
+            heapq.heappop(self._due).outcome()
+
+
+class ThreatFeed:
+    """An encounter's threat updates, delivered at their times (the fast-time ``ThreatSource``).
+
+    Parameters
+    ----------
+    updates : sequence of (t_s, Threat or None, str)
+        Mission time, the threat put (None: the id deleted) and its id.
+    """
+
+    def __init__(self, updates: Sequence[tuple[float, Threat | None, str]]) -> None:
+        self.table = ThreatTable()
+        self._updates = sorted(updates, key=lambda u: u[0])
+        self._next = 0
+
+    def threats_at(self, t_s: float) -> tuple:
+        return self.table.snapshot(t_s)
+
+    def any_known(self) -> bool:
+        return len(self.table) > 0
+
+    def deliver(self, now_s: float) -> bool:
+        """Put or delete the updates due by ``now_s``; True when the table changed."""
+        changed = False
+        while self._next < len(self._updates) and self._updates[self._next][0] <= now_s:
+            _, threat, threat_id = self._updates[self._next]
+            self._next += 1
+            if threat is None:
+                self.table.delete(threat_id)
+            else:
+                self.table.put(threat)
+            changed = True
+        self.table.expire(now_s)
+        return changed
+
+
+class FlightLog:
+    """The fast-time ``FlightSink``: what the flight told, kept in lists."""
+
+    def __init__(self) -> None:
+        self.events: list[dict] = []
+        self.decisions: list[dict] = []
+        self.paths = 0
+
+    def event(self, name: str, **fields) -> None:
+        self.events.append({"name": name, **fields})
+
+    def decision(self, decision, event: dict) -> None:
+        self.decisions.append(event)
+
+    def record(self, line_type: str, /, **fields) -> None:
+        if line_type == "event":
+            self.events.append(fields)
+
+    def path(self, reference, alternatives, leg_index: int) -> None:
+        self.paths += 1
+
+
+@dataclasses.dataclass(frozen=True)
+class FastTimeResult:
+    """A fast-time flight.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (K,)
+        Mission times of the samples (every executor tick).
+    pos_ned_m : ndarray, shape (K, 3)
+        The vehicle's own position (the model's).
+    ref_pos_ned_m : ndarray, shape (K, 3)
+        The setpoint's position at those times.
+    decisions : list of dict
+        Every decision told (the ``uav/<sysid>/events`` messages).
+    events : list of dict
+    outcome : FlightOutcome
+    reason : str
+    schedule : list of dict
+        The executor's schedule with what each task cost.
+    job_wall_s : dict
+        Measured wall-clock time of each job, by kind.
+    """
+
+    t_s: np.ndarray
+    pos_ned_m: np.ndarray
+    ref_pos_ned_m: np.ndarray
+    decisions: list
+    events: list
+    outcome: FlightOutcome
+    reason: str
+    schedule: list
+    job_wall_s: dict
+
+
+class FastTimeFlight:
+    """The flight executor on the virtual clock against the helicopter model.
+
+    Parameters
+    ----------
+    legs : sequence of LegPlan
+        The mission's legs (``companion.flight.plan``); the vehicle starts hovering at the
+        first leg's start.
+    settings : companion.config.Settings
+        The companion's settings, as ``companion run`` takes them.
+    threats : sequence of (t_s, Threat or None, str), optional
+        The threat updates (``ThreatFeed``); None: no threats watched (no ``Avoidance``).
+    strategy : Strategy
+    seed : int
+    start_yaw_rad : float
+    model : HeliModel, optional
+        Default ``HeliModel.default()`` with the settings' controller.
+    job_time_scale : float
+        See ``InlineJobs``.
+    world : World, optional
+        The mission's world, where a leg is planned again (default: the first leg's).
+    replanner : LegReplanner, optional
+        How a leg is planned again (default: ``LegReplanner.in_world(world, settings)``).
+    update : VehicleUpdate, optional
+        The vehicle (default: built from ``model``); give one to fly many flights on one design.
+    """
+
+    def __init__(self, legs, settings, *, threats=None, strategy: Strategy = Strategy.HYBRID, seed: int = 0,
+                 start_yaw_rad: float = 0.0, model: HeliModel | None = None, job_time_scale: float = 1.0,
+                 world=None, replanner: LegReplanner | None = None,
+                 update: VehicleUpdate | None = None) -> None:
+        self.settings = settings
+        self.clock = VirtualClock()
+        start = np.asarray(legs[0].trajectory.sample(np.array([0.0]))[0][0], dtype=float)
+        update = update or VehicleUpdate.build(model or HeliModel.default())
+        self.vehicle = ModelVehicle(update, start, start_yaw_rad)
+        self.jobs = InlineJobs(self.clock, job_time_scale)
+        self.log = FlightLog()
+        self.owner = ReferenceOwner(self.clock, turn_rate_rad_s=settings.flight.turn_rate_rad_s,
+                                    yaw_now_rad=lambda: self.vehicle.yaw_rad)
+        self.feed = ThreatFeed(threats) if threats is not None else None
+        self.avoidance = self._avoidance(strategy, seed) if self.feed is not None else None
+        s = settings
+        self.executor = FlightExecutor(
+            legs, owner=self.owner, vehicle=self.vehicle, jobs=self.jobs, sink=self.log, stream=self._stream,
+            now_s=self.clock.now_s, clock_s=self.clock.now_s, setpoint_rate_hz=s.link.setpoint_rate_hz,
+            timeout_margin_s=s.link.leg_timeout_margin_s, replanner=replanner or LegReplanner.in_world(world or legs[0].world, s),
+            avoidance=self.avoidance, monitor_rate_hz=1.0 / s.threats.monitor_period_s,
+            alternatives_rate_hz=1.0 / s.flight.alternatives_period_s, seed=seed)
+        self._refs: list[np.ndarray] = []
+
+    def _avoidance(self, strategy: Strategy, seed: int) -> Avoidance:
+        s = self.settings
+        policy = DecisionPolicy.from_settings(s, strategy)
+        f = s.flight
+        return Avoidance(policy=policy, state=DecisionState.initial(policy, seed), owner=self.owner,
+                         threats=self.feed, jobs=self.jobs, sink=self.log, now_s=self.clock.now_s,
+                         monotonic_s=self.clock.now_s, send_now=lambda: self.executor.send_now(),
+                         position_ned_m=lambda: self.vehicle.pos_ned_m,
+                         alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s,
+                                                       f.alternatives_lead_s))
+
+    def _stream(self, now_s: float, scheduled: bool) -> None:
+        setpoint = self.owner.setpoint_at(now_s)
+        if setpoint is not None:
+            self.vehicle.command(setpoint)
+
+    def run(self, max_s: float = 600.0) -> FastTimeResult:
+        """Fly until the legs are done or ``max_s`` of mission time has passed."""
+        dt = 1.0 / self.settings.link.setpoint_rate_hz
+        self.owner.hold(self.vehicle.pos_ned_m)
+        self.executor.start()
+        times, positions, refs = [], [], []
+        k = 0
+        while not self.executor.done and self.clock.t_s < max_s:
+            now = self.clock.t_s
+            if self.feed is not None and self.feed.deliver(now):
+                self.avoidance.on_threats_changed(now)
+            self.jobs.deliver(now)
+            self.executor.tick(now)
+            times.append(now)
+            positions.append(self.vehicle.pos_ned_m)
+            sp = self.vehicle.setpoint
+            refs.append(positions[-1] if sp is None else np.asarray(sp.pos_ned_m, dtype=float))
+            self.vehicle.advance(dt)
+            k += 1
+            self.clock.t_s = k * dt
+        outcome, reason = self.executor.outcome, self.executor.legs.reason
+        if not self.executor.done:
+            reason = f"not done after {max_s:g} s"
+        return FastTimeResult(np.asarray(times), np.asarray(positions), np.asarray(refs),
+                              self.log.decisions, self.log.events, outcome, reason,
+                              self.executor.schedule.report(), self.jobs.wall_s)
