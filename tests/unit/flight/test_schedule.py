@@ -80,11 +80,12 @@ def test_names_are_unique_and_rows_can_be_added_and_removed():
 
 @settings(max_examples=60, deadline=None)
 @given(rate_hz=st.floats(0.1, 50.0), dt_s=st.sampled_from([0.005, 0.01, 0.02]), t_end_s=st.floats(1.0, 30.0))
-def test_a_task_never_runs_more_often_than_its_rate_nor_misses_more_than_a_tick(rate_hz, dt_s, t_end_s):
+def test_a_task_keeps_its_rate_within_a_tick(rate_hz, dt_s, t_end_s):
     log = []
     s = Scheduler([counting("task", rate_hz, log)])
     run(s, t_end_s, dt_s)
     times = [t for _, t in log]
     gaps = [b - a for a, b in zip(times, times[1:])]
-    assert all(g >= 1.0 / rate_hz - 1e-6 for g in gaps)
+    assert all(g >= 1.0 / rate_hz - dt_s - 1e-6 for g in gaps)          # on average exactly the rate
+    assert len(times) == pytest.approx(t_end_s * rate_hz, abs=1.0)
     assert all(g <= 1.0 / rate_hz + dt_s + 1e-6 for g in gaps)
