@@ -152,7 +152,7 @@ class CompanionService:
     async def _left_hovering(self) -> bool:
         """Does the vehicle hover in GUIDED, as a companion that stopped mid-flight leaves it?"""
         try:
-            await self.link.wait_ready(self.settings.link.connect_timeout_s)
+            await self.link.waits.wait_ready(self.settings.link.connect_timeout_s)
         except CompanionError as exc:
             log.warning("--resume: %s; not taking over", exc)
             return False
