@@ -95,7 +95,7 @@ def flight(sitl, tmp_path_factory):
     config.write_text(NO_ALTERNATIVES)
     adsb_puts = []
     with ThreatBus(1, listen=(), connect=(endpoint,)) as bus:
-        bus.subscribe(lambda u: adsb_puts.append(u) if (u.threat_id or "").startswith("adsb-") else None)
+        bus.inbound.subscribe(lambda u: adsb_puts.append(u) if (u.threat_id or "").startswith("adsb-") else None)
         start_boot, t0 = obs.boot_s, time.monotonic()
         result = run_companion_process(
             companion_command(sitl, tmp / "flight.jsonl", "--zenoh-listen", endpoint, "--adsb",
