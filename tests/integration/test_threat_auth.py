@@ -60,9 +60,9 @@ def deploy(tmp_path):
 def secured(deploy):
     bus = ThreatBus(1, zenoh_config=deploy.configs["companion"]).open()
     updates: list = []
-    bus.subscribe(updates.append)
+    bus.inbound.subscribe(updates.append)
     table = ThreatTable()
-    bus.serve_threats(table.snapshot)
+    bus.outbound.serve_threats(table.snapshot)
     yield deploy, bus, updates, table
     bus.close()
 
@@ -109,8 +109,8 @@ def test_an_unauthenticated_session_cannot_put(secured):
                         "--pos", "1,2,-3", "--radius", "2", "--wait", "1")
         assert res.returncode == 1 and "no subscriber" in res.stderr
         with peer(dep, "radar1") as radar1:                                     # positive control
-            assert radar1.wait_for_subscriber(10.0, "ok")
-            radar1.put_raw("radar1/ok", popup("ok"))
+            assert radar1.client.wait_for_subscriber(10.0, "ok")
+            radar1.client.put_raw("radar1/ok", popup("ok"))
             assert wait_for(lambda: updates)
         time.sleep(0.5)
         assert [u.uid for u in updates] == ["radar1/ok"]

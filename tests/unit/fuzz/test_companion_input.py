@@ -2,7 +2,7 @@
 
 What passes the gate (``companion.link.gate``, fuzzed in ``test_gate_input.py``) reaches the
 companion's watchers as field dicts (``tapped_fields``); this fuzzes the companion's own parsing
-of them: each watcher of :class:`~companion.link.vehicle.VehicleLink` (``companion.link.watchers``:
+of them: each watcher of :class:`~companion.link.watchers.TelemetryWatchers` (``VehicleLink.watchers``:
 HEARTBEAT, LOCAL_POSITION_NED, ATTITUDE, GLOBAL_POSITION_INT, EXTENDED_SYS_STATE, GPS_GLOBAL_ORIGIN,
 HOME_POSITION, STATUSTEXT, SYS_STATUS, RPM) runs on its own event loop, fed by a stand-in
 subscription with hypothesis field dicts:
@@ -30,7 +30,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from companion.link.vehicle import VehicleLink
+from companion.link.session import LinkSession
+from companion.link.watchers import TelemetryWatchers
 
 VEHICLE = 1
 
@@ -53,7 +54,7 @@ class Failures(logging.Handler):
 
 
 class FakeSubscriptions:
-    """Stands in for the link's ``messages``: one queue per subscription.
+    """Stands in for the link's messages in (a ``MessageSource``): one queue per subscription.
 
     A subscription yields its queue and then waits; ``drained`` is set when every queue is empty
     and each watcher has asked for its next value (so it has applied the previous one).
@@ -79,11 +80,10 @@ class FakeSubscriptions:
         return self._source(name)
 
 
-async def drive(inputs: list[tuple[str, object]]) -> tuple[VehicleLink, list[logging.LogRecord]]:
-    """Run every watcher of a fresh link on ``inputs`` ((subscription, value) pairs, in order)."""
-    link = VehicleLink("companion")
+async def drive(inputs: list[tuple[str, object]]) -> tuple[TelemetryWatchers, list[logging.LogRecord]]:
+    """Run every watcher of fresh link watchers on ``inputs`` ((subscription, value) pairs, in order)."""
     subs = FakeSubscriptions()
-    link.messages = subs.messages
+    link = TelemetryWatchers(LinkSession(), subs, lambda: None)
     names = list(DIRECT.values())
     failures = Failures()
     logger = logging.getLogger("companion.link")   # the watchers and every other part of the link
@@ -146,9 +146,9 @@ def inputs(nullable: bool = False):
         *[st.tuples(st.just(name), fields_dicts(name, nullable)) for name in DIRECT]), min_size=1, max_size=15)
 
 
-def finite_telemetry(link: VehicleLink) -> list[str]:
+def finite_telemetry(link: TelemetryWatchers) -> list[str]:
     """Names of the telemetry values that are not finite."""
-    t = link._state.snapshot(0.0)
+    t = link.state.snapshot(0.0)
     bad = []
     for name in ("pos_ned_m", "vel_ned_m_s", "attitude_rad", "lat_deg", "lon_deg", "alt_amsl_m", "rel_alt_m",
                  "home_lla", "origin_lla", "boot_s", "rotor_rpm"):
@@ -165,7 +165,7 @@ def test_watchers_never_raise_on_typed_fields(received):
     """Typed values (what MAVSDK decodes from a frame), NaN and infinities included: no watcher raises."""
     link, failures = asyncio.run(drive(received))
     assert not failures, [r.getMessage() for r in failures]
-    assert link._state.values.get("mode") is None or isinstance(link._state.values["mode"], int)
+    assert link.state.values.get("mode") is None or isinstance(link.state.values["mode"], int)
 
 
 @settings(max_examples=60, deadline=None)
@@ -213,4 +213,4 @@ def test_foreign_systems_do_not_touch_the_telemetry():
                ("EXTENDED_SYS_STATE", {"_sysid": 42, "_compid": 1, "landed_state": 2})]
     link, failures = asyncio.run(drive(foreign))
     assert not failures
-    assert link._state.pos_origin is None and link._state.values == {}
+    assert link.state.pos_origin is None and link.state.values == {}
