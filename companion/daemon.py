@@ -292,7 +292,8 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         link = self.settings.link
         scale, source = link.time_scale, "given"
         if scale is None:
-            got = await self.link.commands.read_params(["SIM_SPEEDUP"], timeout_s=self.settings.startup.param_timeout_s)
+            got = await self.link.commands.read_params(["SIM_SPEEDUP"],
+                                                       timeout_s=self.settings.startup.param_timeout_s)
             value = got.get("SIM_SPEEDUP", math.nan)
             scale, source = ((value, "the vehicle's SIM_SPEEDUP") if math.isfinite(value) and value > 0
                              else (1.0, "real time: the vehicle has no SIM_SPEEDUP"))
@@ -355,7 +356,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         self.hold_here(self.link.telemetry.pos_ned_m,
                        "joined in the air" if self.summary.joined else "takeoff complete")
         self.streamer.start()
-        self.link.inbound.batch_reads(self.streamer)                      # telemetry taken at the stream's ticks
+        self.link.inbound.batch_reads(self.streamer)              # telemetry taken at the stream's ticks
         for leg in self.legs:
             await self.fly_leg(leg)
         self.hold_here(self.link.telemetry.pos_ned_m, "mission legs done")

@@ -1,7 +1,8 @@
-"""Mission, fence and rally transfer (``VehicleLink.missions``) with MAVSDK's MissionRaw (MISSION_ITEM_INT; ArduPilot's home
-at mission seq 0), like a ground station: an upload is all or nothing (a failed list restores
-the lists already replaced from a download taken before), and an empty list is cleared with
-MISSION_CLEAR_ALL confirmed by MISSION_ACK (MissionRaw refuses to upload an empty list).
+"""Mission, fence and rally transfer (``VehicleLink.missions``) with MAVSDK's MissionRaw
+(MISSION_ITEM_INT; ArduPilot's home at mission seq 0), like a ground station: an upload is all
+or nothing (a failed list restores the lists already replaced from a download taken before),
+and an empty list is cleared with MISSION_CLEAR_ALL confirmed by MISSION_ACK (MissionRaw
+refuses to upload an empty list).
 """
 
 from __future__ import annotations

@@ -3,9 +3,10 @@ the ``TelemetryState`` they own, and the vehicle's recent STATUSTEXTs.
 
 Every message comes from the signing gate (a ``MessageSource``: ``companion.link.message_tap``,
 parsed once on the gate's thread, handed over in batches), not through MAVSDK's Telemetry plugin,
-whose callbacks cost a loop wake-up each. The armed state is the HEARTBEAT's. A message from another system, or one with a
-missing, null or non-finite field (``finite_fields``), is dropped; a subscription that fails is
-logged and restarted (``_guarded``), so a telemetry glitch never stops the link.
+whose callbacks cost a loop wake-up each. The armed state is the HEARTBEAT's. A message from
+another system, or one with a missing, null or non-finite field (``finite_fields``), is dropped;
+a subscription that fails is logged and restarted (``_guarded``), so a telemetry glitch never
+stops the link.
 """
 
 from __future__ import annotations

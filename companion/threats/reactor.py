@@ -3,7 +3,7 @@
 ``ThreatReactor`` connects the zenoh ``ThreatBus``, the ``ThreatTable`` and one
 ``ThreatManager`` per flight to the daemon through a few callables (it never sees the daemon):
 
-- **Threats in.** zenoh samples arrive on the event loop (``ThreatBus.subscribe(loop=...)``);
+- **Threats in.** zenoh samples arrive on the event loop (``ThreatBus.inbound.subscribe(loop=...)``);
   every PUT or DELETE updates the table and asks the manager for a decision. A threat the
   companion learns itself (an ADS-B report, ``companion.threats.transport.adsb``) goes through
   :meth:`ThreatReactor.on_local_threat`: the very same path as a PUT, then it is republished on
