@@ -15,15 +15,16 @@
    after the arming delay, rotor run-up, take off), or *join* it where it flies (armed and in
    the air: no arming, no takeoff); a start that fails leaves the vehicle disarmed on the
    ground or holding in the air; stream the reference at 50 Hz (``SetpointStreamer``) leg after leg,
-   each leg flown by the pure phase machine of ``companion.flight.phases`` (observe, step, act): done
+   each leg flown by the pure phase machine of ``companion.flight.phases`` (observe, step, act;
+   ``companion.flight.legs``): done
    when its reference has ended and the vehicle is within the acceptance radius, then the hold
    time; a reference that ended short of the goal (an evasion or a hold) is followed by a plan
    back to the mission;
 5. land or RTL as the mission says (RTL is flown as a planned leg home, then LAND).
 
 Around it: zenoh status at 2 Hz and on every event, the threat reactor
-(``companion.threats.reactor``: threats in, a >= 10 Hz monitor, decisions that swap the active
-reference, events, path and STATUSTEXT out), ADS-B traffic as threats (``[adsb] enabled``,
+(``companion.threats.reactor``: threats in, events, path and STATUSTEXT out; the executor's
+``companion.flight.avoidance``: a >= 10 Hz monitor and decisions that swap the active reference), ADS-B traffic as threats (``[adsb] enabled``,
 ``companion.threats.transport.adsb``), the flight record, link-loss handling (keep
 streaming; when the link returns, hold and replan the leg from where the vehicle is), a pilot
 taking over (mode changed away from GUIDED: the companion stops commanding and ends the flight),
@@ -37,16 +38,21 @@ is to that item and on (``companion.flight.resume``) and puts the snapshot's liv
 the first leg. zenoh router loss: events ``zenoh_lost`` / ``zenoh_back``; the session reconnects
 by itself (``companion.threats.transport.bus.CONNECT_RETRY``).
 
-The jobs live in ``companion.service``: the background tasks (``background``), the mission
-before and the landing after the legs (``mission``), the legs (``legs``) and the summary
-(``summary``); this module puts them together. Only these, ``companion.link`` and
-``companion.threats`` (bus, reactor) do I/O. The event-loop thread that streams setpoints runs
-at real-time priority when allowed (``raise_stream_priority``); planning, smoothing, the
-feasibility check, threat decisions and M-GART refreshes run in two warm, niced worker
-processes (``companion.workers``; the threat manager's state is adopted back after each call),
-so the 50 Hz period holds while a replan runs; a short GIL switch interval hands the GIL back
-to the stream from the link's own threads. An M-GART refresh with no threat held, on the same
-leg and reference as the last one, is not run (``companion.workers.AlternativesGate``).
+The legs are flown by the flight executor (``companion.flight.executor``): the reference owner,
+the phase machine, the threat monitor and decisions, on one schedule of named tasks at declared
+rates, driven here by a 50 Hz ``PeriodicDriver`` (``companion.link.periodic``) over MAVLink;
+the same executor flies in fast time in the benchmarks and the campaign
+(``companion.flight.fast_time``). This module composes it with its real-time ports: the
+vehicle's telemetry (``companion.link``), the planning worker processes for its jobs
+(``companion.service.jobs``), the record, zenoh and STATUSTEXT for what it tells
+(``companion.service.sink``), the daemon's own rows of the schedule and the telemetry watchers
+(``companion.service.background``), and the mission before and the landing after the legs
+(``companion.service.mission``). Only these, ``companion.link`` and ``companion.threats``
+(transport, reactor) do I/O. The event-loop thread that streams setpoints runs at real-time
+priority when allowed (``raise_stream_priority``); planning, smoothing, the feasibility check,
+threat decisions and M-GART refreshes run in two warm, niced worker processes
+(``companion.workers``: values in, values out), so the 50 Hz period holds while a replan runs; a
+short GIL switch interval hands the GIL back to the stream from the link's own threads.
 """
 
 from __future__ import annotations
@@ -56,25 +62,33 @@ import dataclasses
 import logging
 import math
 import sys
+import time
 
 import numpy as np
 
 from companion.config import Settings
 from companion.errors import FlightAborted, LinkError, MissionError, VehicleRefused
-from companion.flight.plan import LegPlan
-from companion.flight.reference import ActiveReference, VehicleClock
+from companion.flight.active import ReferenceOwner
+from companion.flight.avoidance import AlternativesPlan, Avoidance
+from companion.flight.executor import FlightExecutor
+from companion.flight.legs import FlightOutcome, LegReplanner
+from companion.flight.ports import VehicleView
+from companion.flight.reference import VehicleClock
 from companion.link.gate import SigningKey
-from companion.link.setpoints import SetpointStreamer, hold_position, normal_priority, raise_stream_priority
-from companion.service.startup import is_airborne
+from companion.link.periodic import PeriodicDriver
+from companion.link.setpoints import SetpointStreamer, normal_priority, raise_stream_priority
 from companion.link.vehicle import VehicleLink
-from companion.view.sinks import RecordSinks, open_record_sinks, parse_foxglove_address
-from companion.service.background import ZENOH_WATCH_PERIOD_S, BackgroundTasks
-from companion.service.legs import GUIDED, LegTasks
-from companion.service.mission import MissionTasks
+from companion.service.background import ZENOH_WATCH_PERIOD_S, DaemonTasks, TelemetryWatchers
+from companion.service.jobs import WorkerJobs
+from companion.service.mission import GUIDED, MissionService
+from companion.service.sink import DaemonSink
+from companion.service.startup import is_airborne
 from companion.service.summary import FlightSummary, feasibility_totals, make_checker
-from companion.threats.snapshot import SnapshotWriter
+from companion.service.threat_memory import open_snapshots, restore_threats
+from companion.threats.decision.step import DecisionPolicy, DecisionState
 from companion.threats.reactor import ThreatReactor
-from companion.workers import AlternativesGate, PlanningWorkers
+from companion.view.sinks import RecordSinks, open_record_sinks, parse_foxglove_address
+from companion.workers import PlanningWorkers
 
 log = logging.getLogger(__name__)
 
@@ -95,7 +109,20 @@ def companion_link(settings: Settings, onboard=None) -> VehicleLink:
                        tlog_path=settings.link.tlog_file or None, onboard=onboard)
 
 
-class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
+class LinkVehicle:
+    """The executor's ``VehiclePort`` in real time: the link's telemetry."""
+
+    def __init__(self, link: VehicleLink) -> None:
+        self.link = link
+
+    def view(self) -> VehicleView:
+        tele = self.link.telemetry
+        att = tele.attitude_rad
+        return VehicleView(tele.connected, tele.armed, None if tele.mode is None else tele.mode == GUIDED,
+                           tele.mode_name, tele.pos_ned_m, float(att[2]) if att is not None else 0.0)
+
+
+class CompanionDaemon:
     """The companion service for one vehicle (see the module docstring).
 
     Parameters
@@ -107,12 +134,12 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
     world_path : path, optional
         A world file whose obstacles are added to the mission's exclusion zones.
     record_path : path, optional
-        Where to write the flight record (JSON Lines).
+        Where to write the flight record (JSON Lines or MCAP).
     resume : bool
         Take over a vehicle that is already flying its mission (a previous companion crashed):
         the vehicle's mission from its current item (MISSION_CURRENT), the threats of the
-        snapshot in ``state.dir`` (``companion.threats.snapshot``). Refused (``MissionError``) without a
-        mission on the vehicle or with the vehicle on the ground.
+        snapshot in ``state.dir`` (``companion.threats.snapshot``). Refused (``MissionError``)
+        without a mission on the vehicle or with the vehicle on the ground.
     workers : str
         Where planning runs (``companion.workers.PlanningWorkers``): ``"process"`` (default)
         or ``"thread"``.
@@ -132,7 +159,6 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
             raise MissionError("--resume flies the mission stored on the vehicle: leave out --mission")
         self.settings = settings
         self.resume = resume
-        self.snapshots: SnapshotWriter | None = None
         self.mission_path = mission_path
         self.world_path = world_path
         self.record_path = record_path
@@ -140,35 +166,28 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         self.owns_link = link is None
         self.link = link if link is not None else companion_link(settings)
         self.bus = bus
-        self._stop_link_listener = None
         self.clock = VehicleClock(settings.link.time_scale or 1.0)   # the vehicle's, once connected
-        self.streamer: SetpointStreamer | None = None
-        self.reference: ActiveReference | None = None
-        self.recorder: RecordSinks | None = None
+        self.owner = ReferenceOwner(self.clock, turn_rate_rad_s=settings.flight.turn_rate_rad_s,
+                                    yaw_now_rad=self._current_yaw)
         self.summary = FlightSummary()
-        self.local_mission = None
-        self.legs: list[LegPlan] = []
-        self.leg_index = -1
-        self.threats: ThreatReactor | None = None      # when zenoh is enabled
-        self._errors_m: list[float] = []
-        self._servo_us: list[float] | None = None
-        self._tasks: list[asyncio.Task] = []
-        self._link_lost_at: float | None = None
-        self._resume_needed = False
-        self.home_lla: tuple | None = None
-        self.rotor_plan = None                    # how the start-up handled the rotor
-        self.checker = None                       # closed-loop feasibility (settings.feasibility)
         self.workers = PlanningWorkers(workers)
+        self.recorder: RecordSinks | None = None
+        self.sink = DaemonSink(self)
+        self.home_lla: tuple | None = None
+        self.mission: MissionService | None = None
+        self.threats: ThreatReactor | None = None      # when zenoh is enabled
+        self.watchers: TelemetryWatchers | None = None
+        self.streamer: SetpointStreamer | None = None
+        self.driver: PeriodicDriver | None = None
+        self.executor: FlightExecutor | None = None
+        self.snapshots = None
+        self.takeoff_alt_m = 0.0
+        self._stop_link_listener = None
+        self._link_lost_at: float | None = None
         self._workers_ready: asyncio.Future | None = None
+        self._tasks: list[asyncio.Task] = []
 
-    async def in_worker(self, fn, /, *args, **kwargs):
-        """Run ``fn(*args, **kwargs)`` in a planning worker (``companion.workers``), once the
-        workers are warm."""
-        if self._workers_ready is not None:
-            await self._workers_ready
-        return await self.workers.run(fn, *args, **kwargs)
-
-    # ------------------------------------------------------------------ recording and status
+    # ------------------------------------------------------------------ what it tells
     def _open_record(self) -> RecordSinks:
         """The record's sinks: ``--record`` (MCAP or JSON Lines) and the live Foxglove server."""
         s = self.settings
@@ -181,53 +200,28 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
                          foxglove[0], sink.port)
         return sinks
 
-    def record(self, line_type: str, /, **fields) -> None:
-        if self.recorder is not None:
-            self.recorder.write(line_type, **fields)
-
-    def event(self, name: str, **fields) -> None:
-        """Log and record one event (leg reached, link lost ...) and publish the new status."""
-        log.info("%s %s", name, " ".join(f"{k}={v}" for k, v in fields.items()))
-        self.record("event", name=name, t_s=self.clock.now_s(), **fields)
-        if self.threats is not None:
-            self.threats.publish_status(self.status())
-
     def status(self) -> dict:
         """The status message of ``uav/<sysid>/status``."""
         tele = self.link.telemetry
-        ref = self.reference
+        ref = self.owner.current
+        errors = self.watchers.errors_m if self.watchers is not None else []
+        legs = self.mission.legs if self.mission is not None else []
         return {"t_s": round(self.clock.now_s(), 3), "sysid": self.settings.zenoh.sysid,
                 "home_lla": self.home_lla, "mode": tele.mode_name, "armed": tele.armed,
-                "leg": self.leg_index, "legs": len(self.legs),
+                "leg": self.leg_index, "legs": len(legs),
                 "path_id": ref.path_id if ref else None,
                 "pos_ned_m": None if tele.pos_ned_m is None else [round(float(v), 3) for v in tele.pos_ned_m],
-                "tracking_error_m": round(self._errors_m[-1], 3) if self._errors_m else None,
+                "tracking_error_m": round(errors[-1], 3) if errors else None,
                 "link": tele.connected, "outcome": self.summary.outcome}
 
-    # ------------------------------------------------------------------ reference
-    def engage(self, trajectory, path_id: str, t0_s: float | None = None, turn: bool = False,
-               resume: bool = False) -> ActiveReference:
-        """Make ``trajectory`` the active reference from mission time ``t0_s`` (default now; a
-        later ``t0_s`` keeps the current reference until then), first turning on the spot to its
-        heading if ``turn`` (a leg that starts at rest);
-        ``resume``: it stops short of the leg's goal on purpose (``ActiveReference``)."""
-        now = self.clock.now_s()
-        later = t0_s is not None and t0_s > now
-        ref = ActiveReference(trajectory, now if t0_s is None else t0_s,
-                              self.clock, path_id, turn_from_yaw_rad=self._current_yaw() if turn else None,
-                              turn_rate_rad_s=self.settings.flight.turn_rate_rad_s, resume=resume,
-                              previous=self.reference if later else None)
-        self.reference = ref
-        if self.streamer is not None:
-            self.streamer.set_source(ref.setpoint_at, prepare=ref.prepare)
-        if self.threats is not None:
-            self.threats.set_active(ref)
-        return ref
+    @property
+    def leg_index(self) -> int:
+        return self.executor.legs.index if self.executor is not None else -1
 
-    def send_now(self) -> None:
-        """Send the current setpoint at once (a new reference's first setpoint)."""
-        if self.streamer is not None:
-            self.streamer.send_now()
+    def hold_here(self, pos_ned_m, reason: str) -> None:
+        """Hover at ``pos_ned_m`` (no trajectory)."""
+        self.owner.hold(pos_ned_m)
+        self.sink.event("hold", reason=reason, pos_ned_m=np.asarray(pos_ned_m))
 
     def send_statustext(self, text: str, severity: str) -> None:
         """Tell the ground stations (STATUSTEXT through the vehicle); logged if the link is down."""
@@ -236,26 +230,11 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
             return
         self.link.direct.send_statustext(text, severity=severity)
 
-    def hold_here(self, pos_ned_m, reason: str) -> None:
-        """Hold ``pos_ned_m`` (a hover) as the active reference."""
-        yaw = self._current_yaw()
-        self.reference = None
-        if self.streamer is not None:
-            self.streamer.set_source(hold_position(pos_ned_m, yaw))
-        self.event("hold", reason=reason, pos_ned_m=np.asarray(pos_ned_m))
-
-    def pause(self, delay_s: float):
-        """Sleep ``delay_s`` (the phase machine's and the record's periods): in the setpoint
-        stream's wake-ups while it runs (``SetpointStreamer.sleep``)."""
-        if self.streamer is not None:
-            return self.streamer.sleep(delay_s)
-        return asyncio.sleep(delay_s)
-
     def _current_yaw(self) -> float:
         att = self.link.telemetry.attitude_rad
         return float(att[2]) if att is not None else 0.0
 
-    # ------------------------------------------------------------------ background tasks
+    # ------------------------------------------------------------------ the flight
     async def run(self) -> FlightSummary:
         """Fly the mission (see the module docstring); returns the summary."""
         s = self.settings
@@ -272,7 +251,8 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
             return await self._fly()
         except asyncio.CancelledError:
             self.summary.outcome = "interrupted"
-            await asyncio.shield(self.safe_stop("interrupted (SIGINT/SIGTERM)"))
+            if self.mission is not None:
+                await asyncio.shield(self.mission.safe_stop("interrupted (SIGINT/SIGTERM)"))
             raise
         except VehicleRefused as exc:
             self.summary.outcome = f"refused: {exc}"
@@ -280,8 +260,8 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         except FlightAborted as exc:
             self.summary.outcome = f"aborted: {exc}"
             log.error("flight aborted: %s", exc)
-            if self.link.telemetry.mode == GUIDED:
-                await self.safe_stop(str(exc))
+            if self.link.telemetry.mode == GUIDED and self.mission is not None:
+                await self.mission.safe_stop(str(exc))
             raise
         finally:
             await self.shutdown()
@@ -292,8 +272,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         link = self.settings.link
         scale, source = link.time_scale, "given"
         if scale is None:
-            got = await self.link.commands.read_params(["SIM_SPEEDUP"],
-                                                       timeout_s=self.settings.startup.param_timeout_s)
+            got = await self.link.commands.read_params(["SIM_SPEEDUP"], timeout_s=self.settings.startup.param_timeout_s)
             value = got.get("SIM_SPEEDUP", math.nan)
             scale, source = ((value, "the vehicle's SIM_SPEEDUP") if math.isfinite(value) and value > 0
                              else (1.0, "real time: the vehicle has no SIM_SPEEDUP"))
@@ -317,83 +296,171 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         await self.link.waits.wait_origin(s.link.origin_timeout_s)
         frames = self.link.set_planning_home(home)
         self.home_lla = home
-        tele = self.link.telemetry                   # positions about home from here on
-        self.event("frames", home_lla=home, ekf_origin_lla=frames.origin_lla,
-                   home_in_origin_ned_m=np.round(frames.home_in_origin_ned_m, 3))
-        current_seq = await self.resume_point() if self.resume else None
-        plan = await self.take_mission()
-        alt = await self.plan_flight(plan, home, tele, current_seq)
-        previous = None
-        if self.mission_path is not None:          # planned: every item is reachable
-            previous = await self.link.missions.download_plan()
-            await self.link.missions.upload_plan(plan)
-            self.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
+        self.sink.event("frames", home_lla=home, ekf_origin_lla=frames.origin_lla,
+                        home_in_origin_ned_m=np.round(frames.home_in_origin_ned_m, 3))
+        self.mission = MissionService(s, link=self.link, sink=self.sink, workers=self.workers,
+                                      workers_ready=self._workers_ready, summary=self.summary, clock=self.clock,
+                                      mission_path=self.mission_path, world_path=self.world_path,
+                                      resume=self.resume, rng=self.rng)
+        previous = await self._plan(home)
         if s.zenoh.enabled:
-            self.threats = ThreatReactor(
-                s, clock_now_s=self.clock.now_s, in_worker=AlternativesGate(self.in_worker), rng=self.rng,
-                engage=self.engage, send_now=self.send_now, reference=lambda: self.reference,
-                position_ned_m=lambda: self.link.telemetry.pos_ned_m, record=self.record,
-                statustext=self.send_statustext, bus=self.bus,
-                keep_bus_open=self.bus is not None, pause=self.pause)
-            with normal_priority():          # zenoh's threads never at the stream's priority
-                await self.threats.start(home)
-            self._open_snapshots(home)
-        self._start_background()
-        await self.wait_vehicle_clock(s.link.connect_timeout_s)
+            await self._start_threats(home)
+        self._start_watchers(home)
+        await self.mission.wait_vehicle_clock(s.link.connect_timeout_s)
         if self.resume:
-            self.restore_threats()
+            restore_threats(self)
         elif self.snapshots is not None:
             self.threats.table_changed()       # a new flight: the previous flight's threats go
         self.summary.outcome = "flying"
         try:
-            await self.start_or_join(alt)
+            await self.mission.start_or_join(self.takeoff_alt_m)
         except LinkError:
             if previous is not None and not is_airborne(self.link.telemetry, s.startup.join_min_height_m):
-                await self.restore_mission(previous)
+                await self.mission.restore_mission(previous)
             raise
-        self.streamer = SetpointStreamer(self.link.direct.send_setpoint, rate_hz=s.link.setpoint_rate_hz)
-        self.recorder.pace(self.streamer.call_after_next_tick)     # the record is written between sends
-        self.hold_here(self.link.telemetry.pos_ned_m,
-                       "joined in the air" if self.summary.joined else "takeoff complete")
-        self.streamer.start()
-        self.link.inbound.batch_reads(self.streamer)              # telemetry taken at the stream's ticks
-        for leg in self.legs:
-            await self.fly_leg(leg)
-        self.hold_here(self.link.telemetry.pos_ned_m, "mission legs done")
-        self.link.inbound.batch_reads(None)
-        await self.streamer.stop()
-        await self.finish(self.local_mission.end_action)
+        await self._fly_legs()
+        await self.mission.finish(self.mission.local_mission.end_action)
         self.summary.outcome = "completed"
         return self.summary
 
+    async def _plan(self, home):
+        """Take and plan the mission (upload it when it came from a file); returns the
+        vehicle's previous lists (None when the vehicle's own mission is flown)."""
+        tele = self.link.telemetry                   # positions about home from here on
+        current_seq = await self.mission.resume_point() if self.resume else None
+        plan = await self.mission.take_mission()
+        self.takeoff_alt_m = await self.mission.plan_flight(plan, home, tele, current_seq)
+        if self.mission_path is None:
+            return None
+        previous = await self.link.missions.download_plan()       # planned: every item is reachable
+        await self.link.missions.upload_plan(plan)
+        self.sink.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
+        return previous
+
+    async def _start_threats(self, home) -> None:
+        self.threats = ThreatReactor(self.settings, clock_now_s=self.clock.now_s, record=self.sink.record,
+                                     statustext=self.send_statustext, bus=self.bus,
+                                     keep_bus_open=self.bus is not None)
+        with normal_priority():          # zenoh's threads never at the stream's priority
+            await self.threats.start(home, reference=lambda: self.owner.current,
+                                     position_ned_m=lambda: self.link.telemetry.pos_ned_m)
+        self.owner.listen(lambda ref: self.threats.fleet_publish())
+        self.snapshots = open_snapshots(self.settings, self.threats, home)
+
+    def _start_watchers(self, home) -> None:
+        s = self.settings
+        if s.adsb.enabled and self.threats is None:
+            log.warning("ADS-B traffic is ignored: threats need zenoh (zenoh.enabled)")
+        self.watchers = TelemetryWatchers(self.link, self.clock, self.owner, reactor=self.threats,
+                                          adsb_settings=s.adsb if s.adsb.enabled else None,
+                                          home_lla=home, now_s=self.clock.now_s)
+        self.watchers.start()
+        self._stop_link_listener = self.link.on_link_change(self._on_link_change)
+
+    # ------------------------------------------------------------------ the legs
+    def _build_executor(self) -> FlightExecutor:
+        """The flight executor with its real-time ports and the daemon's rows."""
+        s = self.settings
+        loop = asyncio.get_running_loop()
+        jobs = WorkerJobs(self.workers, loop)
+        avoidance = None
+        if self.threats is not None:
+            policy = DecisionPolicy.from_settings(s)
+            f = s.flight
+            avoidance = Avoidance(
+                policy=policy, state=DecisionState.initial(policy, int(self.rng.integers(2**31))),
+                owner=self.owner, threats=self.threats, jobs=jobs, sink=self.sink, now_s=self.clock.now_s,
+                monotonic_s=time.monotonic, send_now=self.streamer.send_now,
+                position_ned_m=lambda: self.link.telemetry.pos_ned_m,
+                alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s, f.alternatives_lead_s),
+                commit_gate=self.threats.commit_gate(loop))
+            self.threats.on_change = avoidance.on_threats_changed
+        mission = self.mission
+        executor = FlightExecutor(
+            mission.legs, owner=self.owner, vehicle=LinkVehicle(self.link), jobs=jobs, sink=self.sink,
+            stream=self.streamer.tick, now_s=self.clock.now_s, clock_s=time.monotonic,
+            setpoint_rate_hz=s.link.setpoint_rate_hz, timeout_margin_s=s.link.leg_timeout_margin_s,
+            replanner=LegReplanner.in_world(mission.local_mission.world, s, mission.checker),
+            avoidance=avoidance, monitor_rate_hz=1.0 / s.threats.monitor_period_s,
+            alternatives_rate_hz=s.link.time_scale / s.flight.alternatives_period_s,
+            leg_started=self._leg_started, seed=int(self.rng.integers(2**31)),
+            slack_s=0.5 / s.link.setpoint_rate_hz)
+        tasks = DaemonTasks(s, link=self.link, owner=self.owner, watchers=self.watchers, summary=self.summary,
+                            sink=self.sink, status=self.status, reactor=self.threats, recorder=self.recorder,
+                            leg_index=lambda: self.leg_index)
+        for row in tasks.rows():
+            executor.schedule.add(row)
+        return executor
+
+    def _leg_started(self, leg) -> None:
+        """A leg starts: its goal becomes the vehicle's current mission item (in the background)."""
+        self._tasks.append(asyncio.get_running_loop().create_task(
+            self.mission.set_mission_current(leg.waypoint.seq), name="set-mission-current"))
+
+    async def _fly_legs(self) -> None:
+        """Stream and fly every leg on the executor's schedule, then hover where it ends."""
+        s = self.settings
+        self.streamer = SetpointStreamer(self.link.direct.send_setpoint, self.owner.setpoint_at,
+                                         rate_hz=s.link.setpoint_rate_hz)
+        self.executor = self._build_executor()
+        self.driver = PeriodicDriver(s.link.setpoint_rate_hz, self.executor.tick)
+        self.hold_here(self.link.telemetry.pos_ned_m,
+                       "joined in the air" if self.summary.joined else "takeoff complete")
+        self.recorder.pace(True)                                  # the record is written between sends
+        self.link.inbound.batch_reads(self.driver)                # telemetry taken at the schedule's ticks
+        self.driver.start()
+        self.executor.start()
+        await self.driver.until(lambda: self.executor.done)
+        self.summary.legs_reached = self.executor.legs.reached
+        if self.executor.outcome is FlightOutcome.ABORTED:
+            raise FlightAborted(self.executor.legs.reason)
+        self.hold_here(self.link.telemetry.pos_ned_m, "mission legs done")
+        await self._stop_streaming()
+
+    async def _stop_streaming(self) -> None:
+        if self.driver is None:
+            return
+        self.link.inbound.batch_reads(None)
+        await self.driver.stop()
+        self.streamer.missed = self.driver.missed
+        if self.recorder is not None:
+            self.recorder.pace(False)
+
+    def _on_link_change(self, connected: bool) -> None:
+        if not connected:
+            self._link_lost_at = self.clock.now_s()
+            self.sink.event("link_lost")
+            return
+        lost_s = self.clock.now_s() - (self._link_lost_at or self.clock.now_s())
+        self.sink.event("link_back", lost_s=round(lost_s, 2))
+        if self.executor is not None:
+            self.executor.legs.on_link_back(self.link.telemetry.pos_ned_m)
+
+    # ------------------------------------------------------------------ the end
     async def shutdown(self) -> None:
         """Stop streaming and background tasks, write the summary, close the link."""
         if self.streamer is not None:
-            self.link.inbound.batch_reads(None)
-            await self.streamer.stop()
-            jitter = self.streamer.stats()
-            self.record("event", name="setpoint_jitter", **jitter.as_dict())
+            await self._stop_streaming()
+            self.sink.record("event", name="setpoint_jitter", **self.streamer.stats().as_dict())
+        if self.executor is not None:
+            self.sink.record("event", name="schedule", tasks=self.executor.schedule.report())
         if self.threats is not None:
             counts = self.threats.bus.stats()
             self.summary.threat_updates = counts["received"]
-            self.record("event", name="threat_bus", **counts)
+            self.sink.record("event", name="threat_bus", **counts)
             if self.threats.fleet is not None:
                 self.summary.fleet = self.threats.fleet.summary()
-                self.record("event", name="fleet", **self.summary.fleet)
+                self.sink.record("event", name="fleet", **self.summary.fleet)
             await self.threats.stop()
         if self.snapshots is not None:
             self.snapshots.close()
+        if self.watchers is not None:
+            await self.watchers.stop()
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
-        if self.threats is not None:
-            self.summary.decisions = self.threats.decisions
-            self.summary.latency_ms = self.threats.latency_summary()
-        if self._errors_m:
-            err = np.asarray(self._errors_m)
-            self.summary.rms_tracking_error_m = float(np.sqrt(np.mean(err**2)))
-            self.summary.max_tracking_error_m = float(err.max())
-        self.record("summary", **self.summary.as_dict())
+        self._summarise()
+        self.sink.record("summary", **self.summary.as_dict())
         if self.recorder is not None:
             self.recorder.close()
         self.workers.shutdown()
@@ -401,3 +468,17 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
             self._stop_link_listener()
         if self.owns_link:
             await self.link.aclose()
+
+    def _summarise(self) -> None:
+        avoidance = self.executor.avoidance if self.executor is not None else None
+        if self.threats is not None:
+            self.summary.decisions = self.threats.rejected + (avoidance.decisions if avoidance else 0)
+        if avoidance is not None:
+            self.summary.latency_ms = {
+                kind: {"n": len(v), "p50": float(np.percentile(v, 50)), "p99": float(np.percentile(v, 99)),
+                       "max": float(np.max(v))} for kind, v in avoidance.latencies_ms.items()}
+        errors = self.watchers.errors_m if self.watchers is not None else []
+        if errors:
+            err = np.asarray(errors)
+            self.summary.rms_tracking_error_m = float(np.sqrt(np.mean(err**2)))
+            self.summary.max_tracking_error_m = float(err.max())

@@ -2,10 +2,12 @@
 
 ``FleetLink`` publishes the committed trajectory (the active reference, ``horizon_s`` of it
 every ``sample_step_s``; a hover at the vehicle's position when there is none) on
-``uav/<sysid>/trajectory`` every ``publish_period_s`` and at every change, and subscribes to
+``uav/<sysid>/trajectory`` every ``publish_period_s`` (``publish``: a task of the flight
+executor's schedule) and at every change, and subscribes to
 ``uav/*/trajectory``: each sample is decoded on the zenoh thread into the ``PeerTable`` (a bad
 one is counted and logged, never fatal). ``delay_check`` is RMADER's wait before a new
-trajectory is flown (``companion.fleet.commit``). ``fleet.inject_delay_s`` holds every message
+trajectory is flown (``companion.fleet.commit``); ``FleetCommitGate`` puts it before the
+executor engages a decision. ``fleet.inject_delay_s`` holds every message
 that long before it is put (testing the delay check). I/O only: the numbers are in ``peers``,
 ``commit`` and ``message``.
 """
@@ -27,7 +29,7 @@ from companion.fleet.message import SampledPath, TrajectoryMessage, decode, enco
 from companion.fleet.peers import PeerTable
 from companion.fleet.settings import FleetSettings
 
-__all__ = ["FleetLink", "ReferenceGrid", "sample_reference"]
+__all__ = ["FleetLink", "FleetCommitGate", "ReferenceGrid", "sample_reference"]
 
 log = logging.getLogger(__name__)
 
@@ -88,12 +90,10 @@ class FleetLink:
         Our mission time.
     reference, position_ned_m : callable
         The active reference (or None) and the vehicle's position (or None).
-    pause : callable (delay_s) -> awaitable
-        How the periodic publication waits (default ``asyncio.sleep``).
     """
 
     def __init__(self, settings, session, sysid: int, home_lla, *, clock_now_s: Callable[[], float],
-                 reference: Callable, position_ned_m: Callable, pause: Callable = asyncio.sleep) -> None:
+                 reference: Callable, position_ned_m: Callable) -> None:
         self.settings = settings
         self.fleet: FleetSettings = settings.fleet
         self.session = session
@@ -102,7 +102,6 @@ class FleetLink:
         self.clock_now_s = clock_now_s
         self.reference = reference
         self.position_ned_m = position_ned_m
-        self.pause = pause
         self.peers = PeerTable(sysid, self.fleet, self.home_lla)
         self.pending: SampledPath | None = None
         self.counts = {"published": 0, "rejected": 0, "delay_checks": 0, "refused": 0}
@@ -112,7 +111,6 @@ class FleetLink:
         self._publisher = None
         self._subscriber = None
         self._bad_logged_s = -float("inf")
-        self._task = None
         self._grid = ReferenceGrid(self.fleet.sample_step_s)
         self._own_key = f"uav/{sysid}/trajectory"
 
@@ -121,15 +119,11 @@ class FleetLink:
         self._loop = loop
         self._publisher = self.session.declare_publisher(self._own_key)
         self._subscriber = self.session.declare_subscriber("uav/*/trajectory", self._on_sample)
-        self._task = loop.create_task(self._publish_periodically(), name="fleet-publish")
         log.info("fleet: sharing uav/%d/trajectory, avoiding uav/*/trajectory (every %.1f s%s)", self.sysid,
                  self.fleet.publish_period_s,
                  f", {self.fleet.inject_delay_s * 1000:.0f} ms injected delay" if self.fleet.inject_delay_s else "")
 
     async def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            await asyncio.gather(self._task, return_exceptions=True)
         for ent in (self._subscriber, self._publisher):
             try:
                 if ent is not None:
@@ -158,11 +152,6 @@ class FleetLink:
         return self.peers.threats(t_s, time.time(), self.settings.link.time_scale or 1.0)
 
     # ------------------------------------------------------------------ out
-    async def _publish_periodically(self) -> None:
-        while True:
-            await self.pause(self.fleet.publish_period_s)
-            self.publish()
-
     def publish(self) -> None:
         """Publish what we fly (and the pending trajectory), now or after the injected delay."""
         if self._publisher is None:
@@ -233,6 +222,22 @@ class FleetLink:
         return {**self.counts, "peers": self.peers.summary(time.time()),
                 "delay_check_ms_max": round(max(d), 1) if d else None,
                 "delay_check_ms_median": round(float(np.median(d)), 1) if d else None}
+
+
+class FleetCommitGate:
+    """The executor's ``CommitGate`` (``companion.flight.avoidance``): a decision is engaged
+    only after ``FleetLink.delay_check`` says its trajectory still clears the others."""
+
+    def __init__(self, fleet: FleetLink, loop: asyncio.AbstractEventLoop) -> None:
+        self.fleet = fleet
+        self.loop = loop
+
+    def check(self, decision, proceed: Callable[[], None]) -> None:
+        async def checked() -> None:
+            if await self.fleet.delay_check(decision.trajectory, decision.start_t_s, decision.path_id):
+                proceed()
+
+        self.loop.create_task(checked(), name="fleet-delay-check")
 
 
 @dataclasses.dataclass(frozen=True)

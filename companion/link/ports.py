@@ -58,8 +58,7 @@ class VehicleTarget(Protocol):
     target_component: int
 
 
-class TickStream(Protocol):
-    """A running setpoint stream that calls its tick hooks (``companion.link.setpoints``)."""
+class Ticking(Protocol):
+    """Something that runs periodically on the loop (``companion.link.periodic.PeriodicDriver``)."""
 
-    tick_hooks: list
     running: bool

@@ -1,31 +1,89 @@
-"""The daemon's mission: taken from a file or the vehicle, planned before takeoff, put back
-when the flight does not start; the threat snapshot; the end of the flight (``companion.daemon``)."""
+"""The daemon's mission and vehicle, before and after the legs (``companion.daemon``).
+
+``MissionService`` takes the mission (the file given, validated, or the vehicle's own), converts
+and plans every leg before takeoff (in a planning worker; an unreachable waypoint is an error
+before anything moves), starts the vehicle or joins it in the air, keeps the vehicle's current
+mission item at the goal of the leg flown (a companion restarted with ``--resume`` reads it
+back), puts the vehicle's previous mission back when the flight does not start, and lands or
+loiters at the end. MAVLink through the ``VehicleLink``; events and the record through the
+daemon's ``FlightSink``.
+"""
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import time
 
 import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from heli_common.mavlink_ids import COPTER_MODES
 
 from companion.config import settings_to_dict
-from companion.errors import CompanionError, MissionError
+from companion.errors import CompanionError, LinkError, MissionError
 from companion.flight.plan import LegPlan, plan_mission
-from companion.service.startup import AUX_MOTOR_INTERLOCK, is_airborne
+from companion.flight.resume import resume_mission, resume_refusal
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
-from companion.flight.resume import resume_mission, resume_refusal
-from companion.service.summary import CheckerHandle, feasibility_totals, make_checker, warm_process_checker
-from companion.threats.snapshot import SnapshotWriter, load_live_threats, snapshot_path
+from companion.service.startup import AUX_MOTOR_INTERLOCK, is_airborne, read_rotor_parameters, rotor_plan, start_vehicle
+from companion.service.summary import CheckerHandle, FlightSummary, feasibility_totals, make_checker, warm_process_checker
 from companion.world import world_to_dict
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MissionTasks"]
+__all__ = ["MissionService", "GUIDED"]
+
+GUIDED = COPTER_MODES["GUIDED"]
 
 
-class MissionTasks:
-    """Mixin of ``CompanionDaemon``: the mission before, and the landing after, the legs."""
+class MissionService:
+    """The mission before and after the legs (see the module docstring).
+
+    Parameters
+    ----------
+    settings : companion.config.Settings
+        The flight's settings (time scale and zenoh prefix already resolved).
+    link : VehicleLink
+    sink : FlightSink
+        ``event`` and ``record``.
+    workers : PlanningWorkers
+        Where the legs are planned (warm: ``workers_ready`` awaited first).
+    workers_ready : awaitable
+    summary : FlightSummary
+    clock : VehicleClock
+    mission_path, world_path : path or None
+    resume : bool
+    rng : numpy.random.Generator
+    """
+
+    def __init__(self, settings, *, link, sink, workers, workers_ready, summary: FlightSummary, clock,
+                 mission_path=None, world_path=None, resume: bool = False, rng=None) -> None:
+        self.settings = settings
+        self.link = link
+        self.sink = sink
+        self.workers = workers
+        self.workers_ready = workers_ready
+        self.summary = summary
+        self.clock = clock
+        self.mission_path = mission_path
+        self.world_path = world_path
+        self.resume = resume
+        self.rng = rng if rng is not None else np.random.default_rng(settings.seed)
+        self.local_mission = None
+        self.legs: list[LegPlan] = []
+        self.checker = None                       # closed-loop feasibility (settings.feasibility)
+        self.rotor_plan = None                    # how the start-up handled the rotor
+
+    def event(self, name: str, **fields) -> None:
+        self.sink.event(name, **fields)
+
+    def record(self, line_type: str, /, **fields) -> None:
+        self.sink.record(line_type, **fields)
+
+    async def in_worker(self, fn, /, *args, **kwargs):
+        await self.workers_ready
+        return await self.workers.run(fn, *args, **kwargs)
 
     async def take_mission(self):
         """The mission to fly: the file given (validated here, uploaded after planning) or the
@@ -88,7 +146,7 @@ class MissionTasks:
         process (each keeps its own: ``CheckerHandle``)."""
         if self.workers.kind == "thread":
             return await self.in_worker(make_checker, settings)
-        await self._workers_ready
+        await self.workers_ready
         await self.workers.on_each(warm_process_checker, settings)
         return CheckerHandle(settings)
 
@@ -114,32 +172,73 @@ class MissionTasks:
         except CompanionError as exc:
             log.error("could not restore the vehicle's previous mission: %s", exc)
 
-    # ------------------------------------------------------------------ threat snapshot
-    def _open_snapshots(self, home) -> None:
-        """Write the threat snapshot from now on when ``state.dir`` is set (``companion.threats.snapshot``)."""
-        if not self.settings.state.dir or self.threats is None:
-            return
-        path = snapshot_path(self.settings.state.dir, self.settings.zenoh.sysid)
-        self.snapshots = SnapshotWriter(path, sysid=self.settings.zenoh.sysid, home_lla=home)
-        self.threats.on_table_change = self.snapshots.save
+    async def wait_vehicle_clock(self, timeout_s: float) -> None:
+        """Wait until the mission clock runs on the vehicle's time (a first LOCAL_POSITION_NED
+        seen by the clock's watcher): references are timed on it."""
+        await self.link.waits.wait_for(lambda t: self.clock.synced, timeout_s, "the vehicle's clock")
 
-    def restore_threats(self) -> None:
-        """A resume: put the live threats of the snapshot back in the table (none when there
-        is no usable snapshot: that is logged, never fatal), then write the snapshot afresh."""
-        if self.threats is None:
+    async def start_or_join(self, alt_m: float) -> None:
+        """Join a flying vehicle where it is (GUIDED, no arming, no takeoff), or start it
+        (``companion.service.startup.start_vehicle``) and climb to ``alt_m`` above home."""
+        tele = self.link.telemetry
+        st = self.settings.startup
+        if is_airborne(tele, st.join_min_height_m):
+            self.summary.joined = True
+            self.event("joined", height_m=None if tele.height_m is None else round(tele.height_m, 2),
+                       mode=tele.mode_name, landed_state=tele.landed_state)
+            if tele.mode != GUIDED:
+                await self.link.commands.set_mode("GUIDED")
+            if self.resume:        # the crashed companion engaged the interlock: put it back at the end
+                self.rotor_plan = rotor_plan(st, await read_rotor_parameters(self.link, st))
             return
-        if not self.settings.state.dir:
-            log.warning("resuming without a state directory (--state-dir): no threats are restored")
-            return
-        path = snapshot_path(self.settings.state.dir, self.settings.zenoh.sysid)
-        threats = load_live_threats(path, self.clock.now_s(), sysid=self.settings.zenoh.sysid,
-                                    home_lla=self.home_lla)
-        ids = self.threats.restore(threats)
-        self.summary.threats_restored = len(ids)
-        self.event("threats_restored", ids=ids, snapshot=str(path),
-                   remaining_ttl_s={t.id: round(t.expires_t_s - self.clock.now_s(), 2)
-                                    for t in threats if t.ttl_s is not None})
+        self.rotor_plan = await start_vehicle(
+            self.link, st, alt_m, self.clock.now_s, time_scale=self.clock.scale,
+            climb_speed_m_s=self.settings.flight.climb_speed_m_s, event=self.event)
+        self.event("takeoff_complete", alt_m=alt_m)
 
+    async def set_mission_current(self, seq: int) -> None:
+        """Make ``seq`` (the goal of the leg now flown) the vehicle's current mission item
+        (MAV_CMD_DO_SET_MISSION_CURRENT, accepted in GUIDED): ground stations show it, and a
+        companion restarted with ``--resume`` reads it back. Never fails the flight."""
+        try:
+            result = await self.link.commands.command_result(
+                mavlink.MAV_CMD_DO_SET_MISSION_CURRENT, (float(seq),), what=f"DO_SET_MISSION_CURRENT {seq}",
+                timeout_s=3.0)
+        except CompanionError as exc:          # the link is down: set again at the next leg
+            log.info("current mission item %d not set: %s", seq, exc)
+            return
+        if result != 0:
+            log.warning("current mission item %d not set: MAV_RESULT %s", seq, result)
+
+    async def read_mission_current(self, timeout_s: float) -> int:
+        """The vehicle's current mission item (MISSION_CURRENT ``seq``), asked for with
+        MAV_CMD_REQUEST_MESSAGE every second until it arrives (ArduPilot also streams it with
+        the EXTENDED_STATUS group).
+
+        Raises
+        ------
+        LinkError
+            No MISSION_CURRENT within ``timeout_s``.
+        """
+        async def first_seq() -> int:
+            async for fields in self.link.inbound.messages("MISSION_CURRENT"):
+                if fields.get("_sysid") == self.link.target_system:
+                    return int(fields["seq"])
+            raise LinkError("the MISSION_CURRENT subscription ended")
+
+        task = asyncio.get_running_loop().create_task(first_seq(), name="mission-current")
+        deadline = time.monotonic() + timeout_s
+        try:
+            while time.monotonic() < deadline:
+                await self.link.commands.command_result(mavlink.MAV_CMD_REQUEST_MESSAGE,
+                                               (float(mavlink.MAVLINK_MSG_ID_MISSION_CURRENT),),
+                                               what="REQUEST_MESSAGE MISSION_CURRENT", timeout_s=1.0)
+                done, _ = await asyncio.wait({task}, timeout=min(1.0, max(0.0, deadline - time.monotonic())))
+                if done:
+                    return task.result()
+        finally:
+            task.cancel()
+        raise LinkError(f"timed out after {timeout_s:g} s waiting for the vehicle's MISSION_CURRENT")
     async def finish(self, end_action: str) -> None:
         """Land (LAND or RTL missions) and wait for the disarm, or hover in LOITER."""
         if end_action in ("land", "rtl"):

@@ -4,15 +4,14 @@
 the live server when asked; ``RecordSinks`` gives them the one ``write`` / ``close`` interface.
 
 Writing a line costs the event loop up to a few milliseconds (the scene's entities, JSON, the
-MCAP chunk): ``RecordSinks.pace`` makes the lines wait for the setpoint stream's next send and
-be written right after it, so that writing never delays a send (the jitter benchmark's
-``process_fifo_daemon_foxglove``).
+MCAP chunk): ``RecordSinks.pace`` makes the lines wait for ``flush`` (the daemon's schedule
+task ``record_write``, right after a setpoint), so that writing never delays a send (the jitter
+benchmark's ``process_fifo_daemon_foxglove``).
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 from pathlib import Path
 
 from companion.errors import ConfigError
@@ -29,27 +28,24 @@ class RecordSinks:
 
     def __init__(self, sinks: list) -> None:
         self.sinks = sinks
-        self._after_tick: Callable[[Callable[[], None]], None] | None = None
+        self.paced = False
         self._pending: list[tuple[str, dict]] = []
 
-    def pace(self, call_after_next_tick: Callable[[Callable[[], None]], None] | None) -> None:
-        """From now on, write each line right after the stream's next send
-        (``call_after_next_tick``: ``SetpointStreamer.call_after_next_tick``; call ``write`` on
-        the event loop); None: at once."""
-        self._after_tick = call_after_next_tick
-        if call_after_next_tick is None:
+    def pace(self, paced: bool) -> None:
+        """From now on, keep each line until ``flush`` (True: the daemon's schedule flushes
+        right after its setpoints), or write it at once (False: what waits is written now)."""
+        self.paced = bool(paced)
+        if not paced:
             self.flush()
 
     def write(self, line_type: str, /, **fields) -> None:
-        if self._after_tick is None:
+        if not self.paced:
             self._write(line_type, fields)
             return
-        if not self._pending:
-            self._after_tick(self.flush)
         self._pending.append((line_type, fields))
 
     def flush(self) -> None:
-        """Write the lines waiting for the stream's next send now."""
+        """Write the lines that wait now."""
         pending, self._pending = self._pending, []
         for line_type, fields in pending:
             self._write(line_type, fields)
