@@ -43,10 +43,10 @@ before and the landing after the legs (``mission``), the legs (``legs``) and the
 ``companion.threats`` (bus, reactor) do I/O. The event-loop thread that streams setpoints runs
 at real-time priority when allowed (``raise_stream_priority``); planning, smoothing, the
 feasibility check, threat decisions and M-GART refreshes run in two warm, niced worker
-processes (``companion.workers``; the threat manager's state is adopted back after each call),
+processes (``companion.workers``; the threat decision's state is a value sent and returned),
 so the 50 Hz period holds while a replan runs; a short GIL switch interval hands the GIL back
 to the stream from the link's own threads. An M-GART refresh with no threat held, on the same
-leg and reference as the last one, is not run (``companion.workers.AlternativesGate``).
+leg and reference as the last one, is not run (``companion.threats.reactor_legs.AlternativesGate``).
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ from companion.service.mission import MissionTasks
 from companion.service.summary import FlightSummary, feasibility_totals, make_checker
 from companion.threats.snapshot import SnapshotWriter
 from companion.threats.reactor import ThreatReactor
-from companion.workers import AlternativesGate, PlanningWorkers
+from companion.workers import PlanningWorkers
 
 log = logging.getLogger(__name__)
 
@@ -329,7 +329,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
             self.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
         if s.zenoh.enabled:
             self.threats = ThreatReactor(
-                s, clock_now_s=self.clock.now_s, in_worker=AlternativesGate(self.in_worker), rng=self.rng,
+                s, clock_now_s=self.clock.now_s, in_worker=self.in_worker, rng=self.rng,
                 engage=self.engage, send_now=self.send_now, reference=lambda: self.reference,
                 position_ned_m=lambda: self.link.telemetry.pos_ned_m, record=self.record,
                 statustext=self.send_statustext, bus=self.bus,

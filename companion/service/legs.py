@@ -62,7 +62,8 @@ class LegTasks:
         s = self.settings
         new = await self.in_worker(plan_leg, leg.index, leg.waypoint, pos,
                                    self.local_mission.world, gart_settings=s.gart,
-                                   smoothing=s.smoothing, settings=s.flight, rng=self.rng,
+                                   smoothing=s.smoothing, settings=s.flight,
+                                   rng=np.random.default_rng(self.rng.integers(2**63)),
                                    feasibility=self.checker)
         if new is not None:
             self.engage(new.trajectory, f"leg{leg.index}-resume", turn=True)

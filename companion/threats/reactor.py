@@ -1,10 +1,13 @@
 """The daemon's side of threat management: threats in, decisions out (DESIGN sections 6 and 7).
 
-``ThreatReactor`` connects the zenoh ``ThreatBus``, the ``ThreatTable`` and one
-``ThreatManager`` per flight to the daemon through a few callables (it never sees the daemon):
+``ThreatReactor`` connects the zenoh ``ThreatBus``, the ``ThreatTable`` and the pure threat
+decision (``companion.threats.decision.step``) to the daemon through a few callables (it never
+sees the daemon). It owns the flight's ``DecisionPolicy``, the ``DecisionState`` carried from one
+decision to the next and the current leg's ``LegContext``; the active reference is the daemon's
+(``reference()``), read into an ``Observation`` when a decision starts:
 
 - **Threats in.** zenoh samples arrive on the event loop (``ThreatBus.subscribe(loop=...)``);
-  every PUT or DELETE updates the table and asks the manager for a decision. A threat the
+  every PUT or DELETE updates the table and asks for a decision. A threat the
   companion learns itself (an ADS-B report, ``companion.threats.transport.adsb``) goes through
   :meth:`ThreatReactor.on_local_threat`: the very same path as a PUT, then it is republished on
   ``uav/<sysid>/threats/<id>`` for the other processes (never back to this one).
@@ -13,19 +16,21 @@
   turns the others' into threats: ``threats_now`` is the table's threats plus theirs.
 - **Monitor** (DESIGN 7.3). While a leg is flown and any threat or other vehicle is known, the
   active reference is re-checked every ``monitor_period_s`` of wall-clock time (default 0.1 s,
-  >= 10 Hz), in this process (``manager.check``); only a conflict goes to a worker for a
+  >= 10 Hz), in this process (``active_conflict``); only a conflict goes to a worker for a
   decision. A tick is skipped while a decision is under way.
-- **One decision at a time**, in a worker thread (``in_worker``): updates that arrive meanwhile
-  are folded into the next decision (the newest table always wins). A decision of kind
-  ``none`` (the reference stays clear, or no way back yet) publishes nothing.
+- **One decision at a time**, in a planning worker (``in_worker(decide, state, observation,
+  leg, policy)``): updates that arrive meanwhile are folded into the next decision (the newest
+  table always wins). The state that comes back is adopted unless the leg changed meanwhile
+  (alternatives refreshed meanwhile are kept). A decision of kind ``none`` (the reference stays
+  clear, or no way back yet) publishes nothing.
 - **Resume** (DESIGN 7.4). The reactor never asks the same question again by itself: when the
   active reference has ended short of the leg's goal (an ``evade`` or ``hold``), the daemon's
   flight-phase logic (``companion.flight.phases``) calls :meth:`ThreatReactor.resume`, which asks
-  ``manager.resume`` for a way back to the mission.
+  ``decide`` (trigger ``resume``) for a way back to the mission.
 - **Delay check.** With other vehicles known, a decision's trajectory is first published as
   pending and flown only if it still clears them after the communication delay (RMADER).
 - **Tell** (DESIGN 7.5). A decision with a trajectory becomes the active reference from the
-  manager's start time (``engage``), so the setpoint does not jump; its latency runs from the
+  decision's start time (``engage``), so the setpoint does not jump; its latency runs from the
   trigger (threat receipt on the zenoh thread, monitor tick, or resume request) to the first
   setpoint of the new trajectory handed to the vehicle link. It is published on
   ``uav/<sysid>/events`` (with ``trigger`` and ``label``) and ``uav/<sysid>/path``, written to
@@ -33,9 +38,11 @@
   (``companion.threats.statustext``). Rejected threats are published, recorded and told the same way.
 - **Alternatives.** M-GART alternatives are refreshed in the background at every leg start,
   after every decision and every ``flight.alternatives_period_s`` (mission time), from the
-  reference ``alternatives_lead_s`` ahead (entry nodes the vehicle can still reach).
+  reference ``alternatives_lead_s`` ahead (entry nodes the vehicle can still reach); a refresh
+  with no threat held, on the same leg and reference as the last one that found some, is not
+  run (``AlternativesGate``).
 
-Everything but the manager's work runs on the event loop thread. ``ThreatReactor`` (this
+Everything but the decision's work runs on the event loop thread. ``ThreatReactor`` (this
 module: set-up and threats in) is made of ``reactor_decisions`` (decide, monitor, resume, tell)
 and ``reactor_legs`` (legs, alternatives, the published path).
 """
@@ -54,9 +61,9 @@ from companion.errors import CompanionError
 from companion.geo import GeoError, LocalFrame
 from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import ThreatTable
-from companion.threats.decision.policy import ThreatManager
+from companion.threats.decision.step import DecisionPolicy, DecisionState, LegContext
 from companion.threats.reactor_decisions import ReactorDecisions
-from companion.threats.reactor_legs import LegsAndAlternatives
+from companion.threats.reactor_legs import AlternativesGate, LegsAndAlternatives
 from companion.threats.statustext import statustext_for
 from companion.threats.transport.update import ThreatUpdate, rejected_event
 
@@ -79,14 +86,14 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
     Parameters
     ----------
     settings : companion.config.Settings
-        Uses ``zenoh`` (the bus), ``threats``, ``smoothing``, ``gart`` (the manager), ``flight``
-        (alternatives) and ``seed`` (logged with every decision).
+        Uses ``zenoh`` (the bus), ``threats``, ``smoothing``, ``gart``, ``link.time_scale`` (the
+        default policy), ``flight`` (alternatives) and ``seed`` (logged with every decision).
     clock_now_s : callable () -> float
         Mission time now (s; the vehicle's clock): threats are stamped with it.
     in_worker : coroutine function (fn, *args, **kwargs)
-        Runs ``fn`` in a planning thread and returns its result.
+        Runs the module-level function ``fn`` in a planning worker and returns its result.
     rng : numpy.random.Generator
-        The flight's generator (the manager's and the alternatives' seeds come from it).
+        The flight's generator (the decision state's seed is drawn from it at the first leg).
     engage : callable (trajectory, path_id, *, t0_s, resume) -> reference
         Makes a decision's trajectory the active reference from mission time ``t0_s``
         (``resume``: it stops short on purpose) and returns it; the reference's
@@ -107,9 +114,8 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
     keep_bus_open : bool
         The bus outlives this flight (``companion serve``'s session): ``stop`` only
         unsubscribes, it does not close it.
-    manager_factory : callable (leg) -> ThreatManager, optional
-        Builds the flight's manager at the first leg (default: a ``ThreatManager`` from
-        ``settings``).
+    policy : DecisionPolicy, optional
+        The flight's decision policy (default ``DecisionPolicy.from_settings(settings)``).
     monitor_period_s : float
         See :data:`MONITOR_PERIOD_S`.
     pause : callable (delay_s) -> awaitable, optional
@@ -123,7 +129,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
     def __init__(self, settings, *, clock_now_s: Callable[[], float], in_worker, rng: np.random.Generator,
                  engage: Callable, send_now: Callable[[], None], reference: Callable,
                  position_ned_m: Callable, record: Callable, statustext: Callable | None = None,
-                 bus: ThreatBus | None = None, manager_factory: Callable | None = None,
+                 bus: ThreatBus | None = None, policy: DecisionPolicy | None = None,
                  monitor_period_s: float = MONITOR_PERIOD_S, on_table_change: Callable | None = None,
                  keep_bus_open: bool = False, pause: Callable = asyncio.sleep):
         self.settings = settings
@@ -139,12 +145,14 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         self.keep_bus_open = keep_bus_open
         self.bus = bus if bus is not None else ThreatBus.from_settings(settings.zenoh, clock=clock_now_s)
         self.bus.clock = clock_now_s
-        self.manager_factory = manager_factory or self._default_manager
+        self.policy = policy if policy is not None else DecisionPolicy.from_settings(settings)
         self.monitor_period_s = float(monitor_period_s)
         self.pause = pause
         self.on_table_change = on_table_change
         self.table = ThreatTable()
-        self.manager = None
+        self.decision_state: DecisionState | None = None     # from the first leg on
+        self.leg_context: LegContext | None = None
+        self.alternatives_gate = AlternativesGate()
         self.leg = None
         self.leg_index = -1
         self.decisions = 0
@@ -158,12 +166,6 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         self._local_seq = 0
         self._tasks: list[asyncio.Task] = []
         self.fleet = None
-
-    def _default_manager(self, leg) -> ThreatManager:
-        s = self.settings
-        return ThreatManager(leg.world, leg.goal_ned_m, settings=s.threats, limits=s.smoothing.limits,
-                             kappa_max_1_m=s.smoothing.kappa_max_1_m, gart_settings=s.gart, rng=self.rng,
-                             time_scale=s.link.time_scale)
 
     # ------------------------------------------------------------------ lifecycle
     async def start(self, home_lla) -> None:

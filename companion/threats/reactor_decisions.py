@@ -1,5 +1,6 @@
-"""The reactor's decisions (DESIGN 7.3 to 7.5): one at a time in a worker thread, updates that
-arrive meanwhile folded into the next one; the >= 10 Hz monitor of the active reference; a way
+"""The reactor's decisions (DESIGN 7.3 to 7.5): one at a time in a planning worker (the pure
+``decide`` on the reactor's state, an observation of the daemon's reference, the leg and the
+policy; the state that comes back adopted), updates that arrive meanwhile folded into the next one; the >= 10 Hz monitor of the active reference; a way
 back to the mission on request (``resume``); a decision engaged, its latency measured from the
 trigger to the first setpoint of the new trajectory, then published, recorded and told."""
 
@@ -8,9 +9,13 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from dataclasses import replace
 from typing import Callable
 
 from companion.errors import CompanionError
+from companion.threats.decision.kinds import DecisionKind, Trigger
+from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
+                                             Observation, active_conflict, decide)
 from companion.threats.model import ThreatTable
 from companion.threats.statustext import statustext_for
 
@@ -21,12 +26,14 @@ FIRST_SETPOINT_WAIT_S = 1.0
 
 
 class ReactorDecisions:
-    """The decisions of a ``ThreatReactor`` (a part of it: it uses the reactor's table, manager,
-    leg, callables and bus, and ``set_active``, ``publish_path`` and ``refresh_alternatives``)."""
+    """The decisions of a ``ThreatReactor`` (a part of it: it uses the reactor's table, policy,
+    decision state, leg, callables and bus, and ``publish_path`` and ``refresh_alternatives``)."""
 
     settings: object
     table: ThreatTable
-    manager: object
+    policy: DecisionPolicy
+    decision_state: DecisionState | None
+    leg_context: LegContext | None
     leg: object
     leg_index: int
     decisions: int
@@ -54,7 +61,7 @@ class ReactorDecisions:
         Outside a leg, or without an active reference (the daemon holds where the vehicle is
         after a link loss), nothing is decided: the next reference is checked when engaged.
         """
-        if self.manager is None or self.leg is None or self.reference() is None:
+        if self.leg_context is None or self.leg is None or self.reference() is None:
             return
         if self._busy:
             if self._pending is None:
@@ -64,13 +71,13 @@ class ReactorDecisions:
         asyncio.get_running_loop().create_task(self._decide(trigger_mono_s, trigger), name="threat-decision")
 
     async def resume(self):
-        """Ask the manager for a way back to the leg's goal (the reference ended short of it).
+        """Ask for a way back to the leg's goal (the reference ended short of it).
 
-        Waits for the decision under way, if any. Returns the manager's Decision (kind ``none``
-        with ``resume`` True when there is no clear way back yet: ask again later), or None
-        outside a leg.
+        Waits for the decision under way, if any. Returns the Decision (kind ``none`` with
+        ``resume`` True when there is no clear way back yet: ask again later), or None outside a
+        leg.
         """
-        if self.manager is None or self.leg is None or self.reference() is None:
+        if self.leg_context is None or self.leg is None or self.reference() is None:
             return None
         self._resume_waiting = True
         try:
@@ -86,20 +93,21 @@ class ReactorDecisions:
         first = None
         try:
             while True:
-                leg, ref, t = self.leg, self.reference(), self.clock_now_s()
+                leg, leg_context, ref, t = self.leg, self.leg_context, self.reference(), self.clock_now_s()
                 self.table.expire(t)
-                threats = self.threats_now(t)
-                if trigger == "monitor" and self._stays_clear(threats, t):
+                obs = self.observation(t, Trigger.RESUME if resume else Trigger(trigger))
+                if trigger == "monitor" and self._stays_clear(obs):
                     pass                                # the usual tick: nothing for a worker to do
                 else:
-                    decide = self.manager.resume if resume else self.manager.on_threats
-                    decision = await self.in_worker(decide, threats, t)
+                    sent = self.decision_state
+                    decision, state = await self.in_worker(decide, sent, obs, leg_context, self.policy)
                     first = decision if first is None else first
+                    if leg is not None and leg is self.leg:
+                        self._adopt(sent, state)
                     if leg is not None and leg is self.leg and ref is not None and ref is self.reference():
                         await self.apply(decision, trigger_mono_s, trigger)
                     elif self.reference() is not None:      # the daemon changed the reference meanwhile
                         log.info("decision %s dropped: the reference changed while deciding", decision.kind)
-                        self.set_active(self.reference())
                 if self._pending is None:
                     break
                 (trigger_mono_s, trigger), self._pending = self._pending, None
@@ -110,12 +118,30 @@ class ReactorDecisions:
             self._busy = False
         return first
 
-    def _stays_clear(self, threats, t_s: float) -> bool:
-        """The monitor's check of the active reference, here: the manager's own ``check`` (the
-        first step of ``on_threats``), a millisecond of numpy instead of a round trip of the
-        manager to a worker process ten times a second. False when in doubt."""
+    def observation(self, t_s: float, trigger: Trigger = Trigger.THREAT) -> Observation:
+        """What a decision at mission time ``t_s`` sees: every threat then (``threats_now``) and
+        the daemon's active reference (``reference()``; ``resume``: it ends short on purpose)."""
+        ref = self.reference()
+        active = None if ref is None else ActiveTrajectory(ref.trajectory, ref.t0_s, ref.path_id,
+                                                           bool(getattr(ref, "resume", False)))
+        return Observation(t_s, tuple(self.threats_now(t_s)), active, trigger)
+
+    def _adopt(self, sent: DecisionState, returned: DecisionState) -> None:
+        """Take the state a decision returned; alternatives refreshed while it ran are kept (and
+        the larger counter, so that no path id is given twice)."""
+        current = self.decision_state
+        if current is sent:
+            self.decision_state = returned
+        else:
+            self.decision_state = replace(returned, counter=max(current.counter, returned.counter),
+                                          alternatives=current.alternatives)
+
+    def _stays_clear(self, obs: Observation) -> bool:
+        """The monitor's check of the active reference, here: ``active_conflict`` (the first
+        step of ``decide``), a millisecond of numpy instead of a round trip to a worker process
+        ten times a second. False when in doubt."""
         try:
-            return self.manager.check(threats, t_s) is None
+            return active_conflict(obs, self.leg_context, self.policy) is None
         except Exception:  # noqa: BLE001 - the worker's decision will say what is wrong
             log.debug("monitor pre-check failed", exc_info=True)
             return False
@@ -126,11 +152,12 @@ class ReactorDecisions:
         Only decisions with a trajectory, and ``rejected``, are published; ``none`` (keep, or no
         way back yet) and a decision without a new reference are logged only.
         """
-        if decision.trajectory is None and decision.kind != "rejected":
+        if decision.trajectory is None and decision.kind != DecisionKind.REJECTED:
             log.debug("threat check (%s): %s %s (%.1f ms)", trigger, decision.kind, decision.reason,
                       decision.decide_ms)
             return
         latency_ms = None
+        kind = str(decision.kind)                         # a plain string in events and records
         if decision.trajectory is not None and self.fleet is not None:
             current = self.reference()
             if not await self.fleet.delay_check(decision.trajectory, decision.start_t_s, decision.path_id):
@@ -147,21 +174,21 @@ class ReactorDecisions:
                 await asyncio.sleep(0.001)
             if ref.first_sent_monotonic_s is not None:
                 latency_ms = (ref.first_sent_monotonic_s - trigger_mono_s) * 1000.0
-                self.latencies_ms.setdefault(decision.kind, []).append(latency_ms)
-        label = getattr(decision, "label", None) or decision.kind
+                self.latencies_ms.setdefault(kind, []).append(latency_ms)
+        label = getattr(decision, "label", None) or kind
         event = {**decision.as_event(), "label": label, "trigger": trigger, "latency_ms": latency_ms,
                  "t_s": self.clock_now_s(), "pos_ned_m": self.position_ned_m(), "leg": self.leg_index}
         if "threat_id" in event:
             event["source"] = self.source_of(event["threat_id"])
         self.decisions += 1
         log.warning("decision %s (%s, %s): %s (latency %s ms, decide %.1f ms, plan %.1f ms, seed %d)",
-                    decision.kind, label, trigger, decision.reason,
+                    kind, label, trigger, decision.reason,
                     "n/a" if latency_ms is None else f"{latency_ms:.1f}", decision.decide_ms,
                     decision.plan_ms, self.settings.seed)
         self.bus.publish_event(event)
-        self.record("decision", kind=decision.kind, path_ned_m=decision.path_ned_m, **event)
+        self.record("decision", kind=kind, path_ned_m=decision.path_ned_m, **event)
         threat_id = decision.conflict.threat_id if decision.conflict is not None else None
-        self._tell(*statustext_for(decision.kind, label, threat_id, latency_ms))
+        self._tell(*statustext_for(kind, label, threat_id, latency_ms))
         self.publish_path()
         self.refresh_alternatives()
 
@@ -180,7 +207,7 @@ class ReactorDecisions:
         while True:
             next_s = max(next_s + self.monitor_period_s, time.monotonic())
             await self.pause(next_s - time.monotonic())
-            if self.manager is None or self.leg is None or self._busy or self._resume_waiting \
+            if self.leg_context is None or self.leg is None or self._busy or self._resume_waiting \
                     or self.reference() is None:
                 continue
             self.table.expire(self.clock_now_s())

@@ -1,7 +1,9 @@
-"""The reactor's legs and alternatives (paper section 3.3): the manager told of each leg and
-of every reference the daemon engages; M-GART alternatives refreshed in the background (at
-every leg start, after every decision, every ``flight.alternatives_period_s``) from just ahead
-of the vehicle; the active path and the alternatives published on ``uav/<sysid>/path``."""
+"""The reactor's legs and alternatives (paper section 3.3): each leg's ``LegContext`` (its world
+and goal), the other vehicles told of every reference the daemon engages; M-GART alternatives
+refreshed in the background (at every leg start, after every decision, every
+``flight.alternatives_period_s``) from just ahead of the vehicle, unless the refresh could not
+change anything (``AlternativesGate``); the active path and the alternatives published on
+``uav/<sysid>/path``."""
 
 from __future__ import annotations
 
@@ -9,23 +11,58 @@ import asyncio
 import logging
 import math
 import time
+from dataclasses import replace
 from typing import Callable
 
 import numpy as np
 
+from companion.threats.decision.step import (DecisionPolicy, DecisionState, LegContext,
+                                             plan_alternatives_for)
 from companion.threats.model import ThreatTable
 
 log = logging.getLogger(__name__)
 
 
+class AlternativesGate:
+    """Whether an M-GART refresh could change anything.
+
+    With no threat held, the alternatives depend only on the leg (world, goal) and the active
+    reference; the periodic refresh (every ``flight.alternatives_period_s``) would search the
+    same static world again and again. The caller builds a key for each refresh (leg, world
+    and active path id with no threat held; None with threats) and asks ``should_run``: a key
+    equal to the one it ``remember``-ed after the last refresh that found alternatives is
+    skipped (the previous alternatives stay). Every other refresh runs.
+    """
+
+    def __init__(self) -> None:
+        self._last_key: tuple | None = None
+        self.skipped = 0
+
+    def should_run(self, key: tuple | None) -> bool:
+        """False (and counted in ``skipped``) for the key of the last refresh that found some."""
+        if key is not None and key == self._last_key:
+            self.skipped += 1
+            return False
+        self._last_key = None
+        return True
+
+    def remember(self, key: tuple | None) -> None:
+        """The refresh of ``key`` ran and found alternatives (None: it found none, or threats
+        were held)."""
+        self._last_key = key
+
+
 class LegsAndAlternatives:
     """Legs and alternatives of a ``ThreatReactor`` (a part of it: it uses the reactor's table,
-    manager, bus, callables and ``schedule``)."""
+    policy, decision state, bus, callables and ``schedule``)."""
 
     settings: object
     table: ThreatTable
-    manager: object
-    manager_factory: Callable
+    policy: DecisionPolicy
+    decision_state: DecisionState | None
+    leg_context: LegContext | None
+    alternatives_gate: AlternativesGate
+    observation: Callable
     leg: object
     leg_index: int
     fleet: object
@@ -41,21 +78,19 @@ class LegsAndAlternatives:
     _alt_dirty: bool
 
     def set_active(self, ref) -> None:
-        """The daemon engaged ``ref`` (any reference): the manager checks that one now
-        (``ref.resume``: it ends short of the goal on purpose); the other vehicles are told."""
+        """The daemon engaged ``ref`` (any reference): the other vehicles are told (the next
+        decision observes it through ``reference()``)."""
         if self.fleet is not None:
             self.fleet.publish()
-        if self.manager is not None:
-            self.manager.set_active(ref.trajectory, ref.t0_s, ref.path_id,
-                                    ends_short=bool(getattr(ref, "resume", False)))
 
     def on_leg_started(self, leg, ref) -> None:
-        """A leg starts with reference ``ref``: the manager gets its world, goal and reference."""
-        if self.manager is None:
-            self.manager = self.manager_factory(leg)
-        self.manager.set_leg(leg.world, leg.goal_ned_m)
+        """A leg starts with reference ``ref``: its world and goal become the ``LegContext``; the
+        alternatives of the previous leg go (the first leg draws the decision state's seed)."""
+        if self.decision_state is None:
+            self.decision_state = DecisionState.initial(self.policy, int(self.rng.integers(2**63)))
+        self.leg_context = LegContext(leg.index, leg.world, leg.goal_ned_m)
+        self.decision_state = self.decision_state.with_alternatives(())
         self.set_active(ref)
-        self.manager.set_alternatives([])
         self.leg, self.leg_index = leg, leg.index
         self.publish_path()
         self.refresh_alternatives()
@@ -64,13 +99,13 @@ class LegsAndAlternatives:
             self.schedule(time.monotonic(), "monitor")
 
     def on_leg_ended(self) -> None:
-        self.leg = None
-        if self.manager is not None:
-            self.manager.set_alternatives([])
+        self.leg = self.leg_context = None
+        if self.decision_state is not None:
+            self.decision_state = self.decision_state.with_alternatives(())
 
     def refresh_alternatives(self) -> None:
         """Recompute the M-GART alternatives from the current reference in the background."""
-        if self.manager is None or self.leg is None or self.settings.flight.alternatives_k == 0:
+        if self.leg_context is None or self.leg is None or self.settings.flight.alternatives_k == 0:
             return
         if self._alt_busy:
             self._alt_dirty = True
@@ -90,31 +125,43 @@ class LegsAndAlternatives:
         try:
             while True:
                 self._alt_dirty = False
-                leg, t = self.leg, self.clock_now_s()
+                leg, leg_context, t = self.leg, self.leg_context, self.clock_now_s()
                 if leg is None:
                     break
-                threats = self.threats_now(t)
-                rng = np.random.default_rng(self.rng.integers(2**63))
+                obs = self.observation(t)
                 ref = self.reference()
-                start = None if ref is None else ref.state(t + f.alternatives_lead_s)[0]
-                alternatives = await self.in_worker(
-                    self.manager.compute_alternatives, threats, t, f.alternatives_k, rng=rng,
-                    max_time_s=f.alternatives_budget_s, start_ned_m=start)
-                if leg is self.leg and alternatives:     # none found: keep the previous ones
-                    self.manager.set_alternatives(alternatives)
-                    self.publish_path()
-                    self.record("alternatives", leg=leg.index, t_s=t, paths=[a.path_ned_m for a in alternatives])
+                key = None if obs.threats or ref is None else (leg.index, leg_context.world_key, ref.path_id)
+                if self.alternatives_gate.should_run(key):
+                    start = None if ref is None else ref.state(t + f.alternatives_lead_s)[0]
+                    alternatives, state = await self.in_worker(
+                        plan_alternatives_for, self.decision_state, obs, leg_context, self.policy,
+                        f.alternatives_k, max_time_s=f.alternatives_budget_s, start_ned_m=start)
+                    self.alternatives_gate.remember(key if alternatives else None)
+                    if leg is self.leg:
+                        self._adopt_alternatives(state, alternatives)
+                    if leg is self.leg and alternatives:     # none found: keep the previous ones
+                        self.publish_path()
+                        self.record("alternatives", leg=leg.index, t_s=t,
+                                    paths=[a.path_ned_m for a in alternatives])
                 if not self._alt_dirty:
                     break
-        except Exception:  # noqa: BLE001 - without alternatives the manager replans or holds
+        except Exception:  # noqa: BLE001 - without alternatives the decision replans or holds
             log.exception("refreshing the alternatives failed")
         finally:
             self._alt_busy = False
 
+    def _adopt_alternatives(self, returned: DecisionState, alternatives) -> None:
+        """The search's counter (the larger: a decision may have advanced it meanwhile) and its
+        alternatives, when it found some, in the current state (a decision's estimates are kept)."""
+        current = self.decision_state
+        current = replace(current, counter=max(current.counter, returned.counter))
+        self.decision_state = current.with_alternatives(alternatives, dim=self.leg_context.world.dim) \
+            if alternatives else current
+
     def publish_path(self) -> None:
         """Publish the active reference and the alternatives on ``uav/<sysid>/path``."""
         ref = self.reference()
-        if ref is None or self.manager is None:
+        if ref is None or self.decision_state is None:
             return
         t = np.linspace(0.0, ref.trajectory.duration_s, max(2, int(ref.trajectory.duration_s * 2)))
         self.bus.publish_path({
@@ -122,7 +169,7 @@ class LegsAndAlternatives:
             "t0_s": ref.t0_s, "duration_s": ref.trajectory.duration_s,
             "reference_ned_m": ref.trajectory.sample(t)[0],
             "alternatives": [{"path_id": a.path_id, "path_ned_m": a.path_ned_m}
-                             for a in self.manager.alternatives]})
+                             for a in self.decision_state.alternatives]})
 
     def min_separation_m(self, pos_ned_m: np.ndarray, t_s: float) -> float:
         """Distance from ``pos_ned_m`` to the surface of the nearest threat now (inf if none)."""
