@@ -21,15 +21,18 @@ Paper section 3.3 (Fig. 5, Fig. 8) and DESIGN section 7. Two parts:
    *avoidable* when one manoeuvre keeps every threat's centre farther than its radius + 1.0 m
    (tracking-error allowance), keeps 0.5 m from the static obstacles and stays in the bounds.
 
-   *Policies.* Each strategy of ``ThreatManager.MODES`` among hold, replan, switch, evade and
-   hybrid flies every encounter. The daemon is emulated: M-GART alternatives (k = 4, 1 s budget)
-   computed 1 s before the encounter from the reference 1 s ahead with no threat known; from the
-   encounter start the monitor calls ``on_threats`` every 0.1 s of simulated time (not while a
-   decision is under way: a decision takes its measured wall-clock time of simulated time, during
-   which the vehicle keeps flying the old reference); every engaged trajectory is also given to
-   ``set_active`` (with ``ends_short`` = the decision's ``resume``), as the daemon's ``engage``
-   does; when the reference has ended more than 3 m short of the goal after a decision that
-   asked to resume, ``resume`` is called (at most every 1 s). The loop stops when the reference
+   *Policies.* Each ``Strategy`` (``companion.threats.decision.kinds``) among hold, replan, switch,
+   evade and hybrid flies every encounter. The daemon is emulated with the pure decision step
+   (``companion.threats.decision.step``): M-GART alternatives (k = 4, 1 s budget;
+   ``plan_alternatives_for``) computed 1 s before the encounter from the reference 1 s ahead with
+   no threat known; from the encounter start the monitor calls ``decide`` every 0.1 s of
+   simulated time (not while a decision is under way: a decision takes its measured wall-clock
+   time of simulated time, during which the vehicle keeps flying the old reference), carrying
+   the returned ``DecisionState`` to the next call; every engaged trajectory becomes the
+   observation's active reference (with ``ends_short`` = the decision's ``resume``), as the
+   daemon's ``engage`` does; when the reference has ended more than 3 m short of the goal after
+   a decision that asked to resume, ``decide`` is called with the ``resume`` trigger (at most
+   every 1 s). The loop stops when the reference
    is within 3 m of the goal or 60 s after the encounter start, or as soon as nothing is left to
    decide: the active reference goes to the goal and stays farther from every threat than its
    radius + inflation + the largest prediction uncertainty + 5 m until it gets there (every
@@ -65,7 +68,6 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import asyncio  # noqa: E402
 import functools  # noqa: E402
-import inspect  # noqa: E402
 import json  # noqa: E402
 import logging  # noqa: E402
 import math  # noqa: E402
@@ -84,10 +86,13 @@ from benchmarks.threat_encounters import (CATEGORIES, KAPPA_MAX_1_M, LIMITS, WOR
                                           encounter_world, make_encounter, make_leg)
 from benchmarks.threat_oracle import label_encounter  # noqa: E402
 from companion.planning import GartSettings  # noqa: E402
+from companion.threats.decision.kinds import Strategy, Trigger  # noqa: E402
+from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState,  # noqa: E402
+                                             LegContext, Observation, decide, plan_alternatives_for)
 from companion.threats.model import Threat, ThreatTable  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The strategies compared, in table order; those not in ``ThreatManager.MODES`` are skipped.
+#: The strategies compared, in table order; those not a ``Strategy`` are skipped.
 STRATEGIES = ("hold", "replan", "switch", "evade", "hybrid")
 GOAL_RADIUS_M = 3.0
 MONITOR_PERIOD_S = 0.1
@@ -101,15 +106,6 @@ ALTERNATIVES_BUDGET_S = 1.0
 ALTERNATIVES_LEAD_S = 1.0
 QUIET_CHECK_S = 0.5
 QUIET_EXTRA_M = 5.0
-
-
-def manager_class():
-    """``ThreatManager`` from its new home (``companion.threats.decision.policy``) or its old one."""
-    try:
-        from companion.threats.decision.policy import ThreatManager
-    except ImportError:
-        from companion.threats.manager import ThreatManager
-    return ThreatManager
 
 
 def threat_settings():
@@ -160,16 +156,6 @@ def compose_reference(segments, t0_s: float, t_end_s: float):
     return t, pos, vel, acc, yaw, rate
 
 
-def engage_in_manager(m, d) -> None:
-    """Tell the manager the decision's trajectory is engaged, as the daemon's ``engage`` does
-    (with ``ends_short`` = the decision's ``resume`` where the manager takes it)."""
-    params = inspect.signature(m.set_active).parameters
-    if "ends_short" in params:
-        m.set_active(d.trajectory, float(d.start_t_s), d.path_id or d.kind, ends_short=bool(d.resume))
-    else:
-        m.set_active(d.trajectory, float(d.start_t_s), d.path_id or d.kind)
-
-
 def quiet(leg, traj, start_t_s: float, t_s: float, threats, settings) -> bool:
     """True when nothing is left to decide: the active reference goes to the goal and stays, at
     every time until it gets there, farther from every threat than its radius + the policy's
@@ -191,10 +177,20 @@ def quiet(leg, traj, start_t_s: float, t_s: float, threats, settings) -> bool:
     return bool(leg.world.obstacles == () or np.min(leg.world.clearance_m(pos)) > 0.0)
 
 
-def make_manager(leg, settings, mode: str, rng: np.random.Generator):
-    cls = manager_class()
-    return cls(leg.world, leg.goal_ned_m, settings=settings, limits=LIMITS, kappa_max_1_m=KAPPA_MAX_1_M,
-               gart_settings=GartSettings(kappa_max_1_m=KAPPA_MAX_1_M), rng=rng, mode=mode)
+def make_policy(settings, strategy: str) -> DecisionPolicy:
+    """The benchmark's policy: the nominal's limits and K_max, one strategy."""
+    return DecisionPolicy(settings, LIMITS, KAPPA_MAX_1_M, GartSettings(kappa_max_1_m=KAPPA_MAX_1_M), strategy)
+
+
+def initial_state(policy: DecisionPolicy, *key: int) -> DecisionState:
+    """A first decision state whose seed is derived from ``key`` (reproducible per encounter)."""
+    return DecisionState.initial(policy, int(np.random.default_rng(list(key)).integers(2**63)))
+
+
+def engaged(d) -> ActiveTrajectory:
+    """The decision's trajectory as the active reference, as the daemon's ``engage`` makes it
+    (``ends_short`` = the decision's ``resume``)."""
+    return ActiveTrajectory(d.trajectory, float(d.start_t_s), d.path_id or str(d.kind), bool(d.resume))
 
 
 def fly_encounter(leg, enc, alternatives, strategy: str, settings, seed: int, model) -> dict:
@@ -206,9 +202,10 @@ def fly_encounter(leg, enc, alternatives, strategy: str, settings, seed: int, mo
     goal = leg.goal_ned_m
     threats = list(enc.threats)
     t_enc = enc.t_enc_s
-    m = make_manager(leg, settings, strategy, np.random.default_rng([seed, enc.index, 2]))
-    m.set_active(nominal, 0.0, "nominal")
-    m.set_alternatives(alternatives)
+    policy = make_policy(settings, strategy)
+    leg_context = LegContext(0, leg.world, goal)
+    state = initial_state(policy, seed, enc.index, 2).with_alternatives(alternatives, dim=leg.world.dim)
+    active = ActiveTrajectory(nominal, 0.0, "nominal")
     segments = [(nominal, 0.0, 0.0)]
     decisions = []
     pending_resume = False
@@ -231,23 +228,22 @@ def fly_encounter(leg, enc, alternatives, strategy: str, settings, seed: int, mo
                 break
         ended = rel >= traj.duration_s
         if ended and pending_resume and t - last_resume >= RESUME_PERIOD_S - 1e-9:
-            d = m.resume(threats, t)
-            via, last_resume = "resume", t
+            trigger, via, last_resume = Trigger.RESUME, "resume", t
         else:
-            d = m.on_threats(threats, t)
-            via = "monitor"
+            trigger, via = Trigger.MONITOR, "monitor"
+        d, state = decide(state, Observation(t, tuple(threats), active, trigger), leg_context, policy)
         calls += 1
         busy_s = max(float(d.decide_ms), 0.0) / 1e3
-        engaged = None
+        engaged_t = None
         if d.trajectory is not None:
-            engaged = t + busy_s
-            segments.append((d.trajectory, float(d.start_t_s), engaged))
+            engaged_t = t + busy_s
+            segments.append((d.trajectory, float(d.start_t_s), engaged_t))
             pending_resume = bool(d.resume)
-            engage_in_manager(m, d)
+            active = engaged(d)
         if d.kind != "none" or via == "resume":
-            decisions.append({"t_s": round(t - t_enc, 3), "via": via, "kind": d.kind,
+            decisions.append({"t_s": round(t - t_enc, 3), "via": via, "kind": str(d.kind),
                               "decide_ms": float(d.decide_ms), "resume": bool(d.resume),
-                              "engaged": engaged is not None, "reason": str(d.reason)[:160]})
+                              "engaged": engaged_t is not None, "reason": str(d.reason)[:160]})
         tick += max(1, int(math.ceil(busy_s / MONITOR_PERIOD_S - 1e-9)))   # the decider was busy
         t = t_enc + tick * MONITOR_PERIOD_S
     loop_end = t
@@ -273,7 +269,7 @@ def fly_encounter(leg, enc, alternatives, strategy: str, settings, seed: int, mo
     return {"success": success, "completed": success and reached, "reached": reached,
             "min_sep_m": sep, "static_clearance_m": static if math.isfinite(static) else None,
             "in_bounds": in_bounds, "extra_length_m": flown - nominal_rest if success and reached else None,
-            "decisions": decisions, "manager_calls": calls,
+            "decisions": decisions, "decide_calls": calls,
             "quiet_after_s": None if quiet_at is None else quiet_at - t_enc,
             "max_tracking_error_m": float(np.max(cl.tracking_error_m)),
             "saturated": bool(cl.saturated), "wall_s": time.perf_counter() - wall0}
@@ -300,14 +296,13 @@ def run_encounter(job: tuple) -> dict:
                     "tried": oracle.tried, "best_margin_m": oracle.best_margin_m, "ms": oracle.elapsed_ms,
                     "witness": oracle.witness.manoeuvre.name if oracle.witness is not None else None}})
     t_alt = time.perf_counter()
-    modes = manager_class().MODES
-    refresher = make_manager(leg, settings, "hybrid" if "hybrid" in modes else modes[0],
-                             np.random.default_rng([seed, index, 0]))
-    refresher.set_active(leg.trajectory, 0.0, "nominal")
+    refresher = make_policy(settings, Strategy.HYBRID)
     t_refresh = max(enc.t_enc_s - ALTERNATIVES_LEAD_S, 0.0)
     start = leg.trajectory.sample(np.array([t_refresh + ALTERNATIVES_LEAD_S]))[0][0]
-    alts = refresher.compute_alternatives([], t_refresh, ALTERNATIVES_K, rng=np.random.default_rng([seed, index, 1]),
-                                          max_time_s=ALTERNATIVES_BUDGET_S, start_ned_m=start)
+    alts, _ = plan_alternatives_for(initial_state(refresher, seed, index, 1),
+                                    Observation(t_refresh, (), ActiveTrajectory(leg.trajectory, 0.0, "nominal")),
+                                    LegContext(0, leg.world, leg.goal_ned_m), refresher, ALTERNATIVES_K,
+                                    max_time_s=ALTERNATIVES_BUDGET_S, start_ned_m=start)
     row["alternatives"] = len(alts)
     row["alternatives_s"] = time.perf_counter() - t_alt
     model = heli_model()
@@ -574,8 +569,8 @@ def storm_table(storm: dict) -> str:
 
 
 def choose_strategies(wanted: str | None) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """(strategies to fly, strategies asked for but not in ``ThreatManager.MODES``)."""
-    modes = tuple(manager_class().MODES)
+    """(strategies to fly, strategies asked for that are not a ``Strategy``)."""
+    modes = tuple(s.value for s in Strategy)
     asked = tuple(s.strip() for s in wanted.split(",") if s.strip()) if wanted else STRATEGIES
     return tuple(s for s in asked if s in modes), tuple(s for s in asked if s not in modes)
 
@@ -587,7 +582,7 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     parser.add_argument("--storm-s", type=float, default=None, help="storm duration in s (default 10; 0: none)")
     parser.add_argument("--strategies", default=None,
-                        help=f"comma-separated (default {','.join(STRATEGIES)}; those the manager lacks are skipped)")
+                        help=f"comma-separated (default {','.join(STRATEGIES)}; those that are not a Strategy are skipped)")
     parser.add_argument("--seed", type=int, default=0, help="master seed of the encounters (default 0)")
     parser.add_argument("--no-docs", action="store_true", help="do not write docs/benchmarks/threats.md")
     args = parser.parse_args(argv)
@@ -596,10 +591,10 @@ def main(argv=None) -> int:
     storm_s = args.storm_s if args.storm_s is not None else (2.0 if args.quick else 10.0)
     strategies, missing = choose_strategies(args.strategies)
     if not strategies:
-        print(f"none of the strategies {','.join(missing)} is in ThreatManager.MODES", file=sys.stderr)
+        print(f"none of the strategies {','.join(missing)} is a Strategy", file=sys.stderr)
         return 2
     if missing:
-        print(f"skipped (not in ThreatManager.MODES yet): {', '.join(missing)}", file=sys.stderr)
+        print(f"skipped (not a Strategy): {', '.join(missing)}", file=sys.stderr)
     t0 = time.perf_counter()
     rows = run_encounters(n, strategies, args.workers, args.seed)
     enc_wall = time.perf_counter() - t0
@@ -609,7 +604,7 @@ def main(argv=None) -> int:
     flown = [r for r in rows if "skipped" not in r]
     text = encounter_tables(summary, strategies, len(flown), enc_wall, args.workers)
     if missing:
-        text += f"\n\nNot flown (not in `ThreatManager.MODES` of this build): {', '.join(missing)}."
+        text += f"\n\nNot flown (not a `Strategy` of this build): {', '.join(missing)}."
     errors = {s: summary["all"]["strategies"][s]["errors"] for s in strategies}
     if any(errors.values()):
         text += ("\n\nEncounters in which the policy raised (counted as failures): "
@@ -620,7 +615,7 @@ def main(argv=None) -> int:
     machine = (f"Machine: {platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores "
                f"(shared); encounters {enc_wall:.0f} s wall ({np.mean(cpu) if cpu else 0:.1f} s per encounter "
                f"in a worker, {args.workers} workers), whole run {elapsed:.0f} s"
-               f"{' (--quick)' if args.quick else ''}; module {manager_class().__module__}.")
+               f"{' (--quick)' if args.quick else ''}; module {decide.__module__}.")
     print(text)
     print(machine)
     out = ROOT / "out" / "bench"
@@ -630,7 +625,7 @@ def main(argv=None) -> int:
         {"summary": summary, "storm": storm, "settings": settings.__dict__, "strategies": strategies,
          "skipped_strategies": missing, "encounters": rows, "quick": args.quick, "seed": args.seed,
          "workers": args.workers, "encounter_wall_s": enc_wall, "elapsed_s": elapsed,
-         "manager_module": manager_class().__module__}, indent=1, default=float))
+         "decision_module": decide.__module__}, indent=1, default=float))
     if not args.no_docs:
         doc = ROOT / "docs" / "benchmarks" / "threats.md"
         doc.parent.mkdir(parents=True, exist_ok=True)

@@ -1,22 +1,17 @@
 """Where the companion plans: a warm worker process pool beside the 50 Hz stream (DESIGN 1, 7).
 
-Planning, smoothing, the closed-loop feasibility check, the threat manager's decisions (its
+Planning, smoothing, the closed-loop feasibility check, the threat decisions (their
 replans) and the M-GART refreshes are pure Python and numpy that hold the GIL for
 milliseconds at a time. In a thread of the streaming process they delay the stream by up to
 the GIL switch interval each time; in a ``ProcessPoolExecutor`` they only compete for a core,
 and the workers run niced (``planning_worker_init``), so the stream keeps its period
 (``benchmarks/setpoint_jitter.py``).
 
-``PlanningWorkers.run(fn, *args, **kwargs)`` is the daemon's ``in_worker``:
-
-- a function runs in a worker on pickled copies of its arguments; a
-  ``numpy.random.Generator`` argument comes back advanced (its state is adopted), so a flight
-  draws the same numbers as with threads;
-- a bound method (the threat manager's ``on_threats``, ``resume``, ``compute_alternatives``)
-  runs on a copy of its object, and the attributes the call changed are adopted back
-  (``adopt_changes``), except those the caller replaced meanwhile (e.g. a new active
-  reference engaged while a decision was computed): the manager's state stays in this process,
-  as with threads.
+``PlanningWorkers.run(fn, *args, **kwargs)`` is the daemon's ``in_worker``: a module-level
+function runs in a worker on pickled copies of its arguments and its result comes back. Nothing
+else travels: a caller passes values and gets values back (the threat decision sends its
+``DecisionState`` and receives the next one; a planner is given a generator of its own,
+derived from the flight's).
 
 ``kind="thread"`` keeps today's two threads at normal priority (the comparison of the jitter
 benchmark, and a fallback). The pool is started and warmed (imports, one tiny GART per worker)
@@ -32,7 +27,6 @@ import logging
 import multiprocessing
 import multiprocessing.connection
 import os
-import pickle
 import threading
 import time
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
@@ -43,11 +37,10 @@ from companion.link.setpoints import planning_worker_init, restore_normal_priori
 
 log = logging.getLogger(__name__)
 
-__all__ = ["AlternativesGate", "PlanningWorkers", "adopt_changes", "call_function", "call_method", "warm_up"]
+__all__ = ["PlanningWorkers", "warm_up"]
 
 #: Niceness of the planning worker processes (the stream's process keeps 0 or better).
 WORKER_NICENESS = 10
-_MISSING = object()
 
 
 def worker_init(niceness: int, log_level: int, log_format: str | None) -> None:
@@ -92,8 +85,8 @@ def warm_up() -> float:
     from companion.planning import gart, mgart
     from companion.world import Disc, Sphere, World
 
-    for module in ("companion.flight.plan", "companion.threats.decision.policy", "companion.smoothing.feasibility"):
-        importlib.import_module(module)      # smoothing and timing; the threat manager and M-GART
+    for module in ("companion.flight.plan", "companion.threats.decision.step", "companion.smoothing.feasibility"):
+        importlib.import_module(module)      # smoothing and timing; the threat decision and M-GART
 
     # 2D and 3D: numba specialises on the points' tuple length; no straight line: iterations run
     for world in (World([Disc((5.0, 5.0), 1.5)], np.zeros(2), np.full(2, 10.0)),
@@ -102,45 +95,6 @@ def warm_up() -> float:
         gart(world, start, goal, rng=np.random.default_rng(0), stop_at_first=True, max_time_s=60.0)
         mgart(world, start, goal, 1, rng=np.random.default_rng(0), max_time_s=60.0)
     return time.perf_counter() - t0
-
-
-def call_function(fn, args: tuple, kwargs: dict):
-    """Run ``fn(*args, **kwargs)``; returns its result and the states of its generators.
-
-    Returns
-    -------
-    result, states : object, dict
-        ``states`` maps each ``numpy.random.Generator`` argument's position (int) or keyword
-        (str) to its bit generator's state after the call.
-    """
-    result = fn(*args, **kwargs)
-    states = {key: value.bit_generator.state for key, value in [*enumerate(args), *kwargs.items()]
-              if isinstance(value, np.random.Generator)}
-    return result, states
-
-
-def call_method(obj, name: str, args: tuple, kwargs: dict):
-    """Run ``obj.name(*args, **kwargs)`` on this copy of ``obj``; returns the result and the
-    attributes the call changed (compared by their pickles), pickled together with it so that
-    objects shared between them stay shared."""
-    before = {key: pickle.dumps(value, pickle.HIGHEST_PROTOCOL) for key, value in vars(obj).items()}
-    result = getattr(obj, name)(*args, **kwargs)
-    changed = {key: value for key, value in vars(obj).items()
-               if before.get(key) != pickle.dumps(value, pickle.HIGHEST_PROTOCOL)}
-    return result, changed
-
-
-def adopt_changes(obj, sent: dict, changed: dict) -> list[str]:
-    """Set the attributes of ``obj`` that a worker's call changed, unless the caller replaced
-    them meanwhile (``sent``: the attributes as they were when the call was sent, compared by
-    identity). Returns the names adopted."""
-    current = vars(obj)
-    adopted = []
-    for key, value in changed.items():
-        if current.get(key, _MISSING) is sent.get(key, _MISSING):
-            current[key] = value
-            adopted.append(key)
-    return adopted
 
 
 class PlanningWorkers:
@@ -192,22 +146,10 @@ class PlanningWorkers:
         return asyncio.ensure_future(ready())
 
     async def run(self, fn, /, *args, **kwargs):
-        """Run ``fn(*args, **kwargs)`` in a worker and return its result (see the module
-        docstring for what is adopted back from a worker process)."""
+        """Run ``fn(*args, **kwargs)`` in a worker and return its result (``fn`` module-level:
+        it is pickled by reference to a worker process, with copies of its arguments)."""
         loop = asyncio.get_running_loop()
-        if self.kind == "thread":
-            return await loop.run_in_executor(self.executor, functools.partial(fn, *args, **kwargs))
-        owner = getattr(fn, "__self__", None)
-        if owner is not None and hasattr(owner, "__dict__"):
-            sent = dict(vars(owner))
-            result, changed = await loop.run_in_executor(
-                self.executor, call_method, owner, fn.__name__, args, kwargs)
-            adopt_changes(owner, sent, changed)
-            return result
-        result, states = await loop.run_in_executor(self.executor, call_function, fn, args, kwargs)
-        for key, state in states.items():
-            (args[key] if isinstance(key, int) else kwargs[key]).bit_generator.state = state
-        return result
+        return await loop.run_in_executor(self.executor, functools.partial(fn, *args, **kwargs))
 
     async def on_each(self, fn, /, *args) -> None:
         """Run ``fn(*args)`` once per worker, side by side (a per-process cache filled in every
@@ -220,40 +162,3 @@ class PlanningWorkers:
         if self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
             self._executor = None
-
-
-class AlternativesGate:
-    """The threat reactor's ``in_worker``: an M-GART refresh that could not change anything is
-    not run.
-
-    With no threat held, the alternatives depend only on the leg (world, goal) and the active
-    reference; the periodic refresh (every ``flight.alternatives_period_s``) would search the
-    same static world again and again. A ``compute_alternatives`` call with no threats, on the
-    same world, goal and active reference as the last one that ran with no threats, returns
-    ``[]`` at once, which the reactor takes as "keep the previous alternatives". Every other
-    call (decisions, a refresh with threats held, a new leg or reference) goes to ``run``.
-
-    Parameters
-    ----------
-    run : coroutine function (fn, *args, **kwargs)
-        Runs ``fn`` in a planning worker (the daemon's ``in_worker``).
-    """
-
-    def __init__(self, run) -> None:
-        self.run = run
-        self._last_key: tuple | None = None
-        self.skipped = 0
-
-    async def __call__(self, fn, /, *args, **kwargs):
-        manager = getattr(fn, "__self__", None)
-        if manager is None or getattr(fn, "__name__", "") != "compute_alternatives":
-            return await self.run(fn, *args, **kwargs)
-        threats = args[0] if args else kwargs.get("threats")
-        key = None if threats else (id(manager.world), manager.goal_ned_m.tobytes(), manager.active_path_id)
-        if key is not None and key == self._last_key:
-            self.skipped += 1
-            return []
-        self._last_key = None
-        result = await self.run(fn, *args, **kwargs)
-        self._last_key = key if result else None
-        return result

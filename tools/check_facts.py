@@ -48,7 +48,9 @@ SIZE_CHECKED = ("companion/", "sim_vehicle/")
 NUMERICS = ("companion.planning", "companion.smoothing", "companion.world", "companion.threats.decision.prediction",
             "companion.threats.decision.spacetime", "companion.threats.decision.evasion", "companion.threats.decision.retime",
             "companion.threats.decision.join", "companion.threats.decision.alternatives", "companion.threats.decision.candidates",
-            "companion.threats.decision.choice", "companion.flight.trajectory", "companion.flight.phases",
+            "companion.threats.decision.choice", "companion.threats.decision.kinds",
+            "companion.threats.decision.estimate", "companion.threats.decision.worlds",
+            "companion.threats.decision.step", "companion.flight.trajectory", "companion.flight.phases",
             "companion.view.geometry", "heli_model.dynamics", "heli_model.model", "heli_model.control",
             "heli_model.wind", "sim_vehicle.rsc", "sim_vehicle.autopilot", "heli_model.vehicle_update",
             "heli_common.geometry", "heli_common.frames")

@@ -129,9 +129,9 @@ class MissionService:
         # the check flies the helicopter model: not a multirotor's
         if s.feasibility.enabled and s.startup.vehicle == "helicopter" and self.checker is None:
             self.checker = await self.closed_loop_checker(s.feasibility)
-        self.legs = await self.in_worker(
-            plan_mission, to_fly, first, gart_settings=s.gart,
-            smoothing=s.smoothing, settings=s.flight, rng=self.rng, feasibility=self.checker)
+        self.legs = await self.in_worker(           # a generator of its own: values travel, not state
+            plan_mission, to_fly, first, gart_settings=s.gart, smoothing=s.smoothing, settings=s.flight,
+            rng=np.random.default_rng(self.rng.integers(2**63)), feasibility=self.checker)
         self.summary.legs_planned = len(self.legs)
         self.summary.feasibility = feasibility_totals(self.legs)
         self.record("world", **world_to_dict(self.local_mission.world))

@@ -2,8 +2,8 @@
 
 Each generator turns one ``Situation`` (the reference state, the tubes, the airspace and the
 goal) into ``Candidate`` trajectories whose t = 0 is the situation's time, already judged by
-the one space-time check (``judge``). The policy (``policy.ThreatManager``) chooses among them
-with ``decision.choose``.
+the one space-time check (``judge``). The decision step (``step.decide``) chooses among them
+with ``choice.choose``.
 
 - ``evade_candidates``: the whole escape library in one vectorised check; the brake is the
   ``hold`` candidate (a hold is only chosen where its hover stays clear of every tube).
@@ -29,6 +29,7 @@ from companion.planning import gart
 from companion.smoothing import TrajectoryLimits
 from companion.threats.decision.alternatives import airspace_for, switch_candidates
 from companion.threats.decision.choice import Candidate, ReferenceState, rank_key
+from companion.threats.decision.kinds import CandidateKind
 from companion.threats.decision.evasion import EscapeLimits, escape_library
 from companion.threats.decision.join import HOVER_SPEED_M_S, join_trajectory, lead_length_m, turn_rad
 from companion.threats.decision.retime import RetimedTrajectory, ramp_time_s
@@ -194,7 +195,7 @@ def evade_candidates(sit: Situation, remaining_to_goal_s: float, *, brake_only: 
     rank = lambda c: rank_key(c, s.clearance_weight_s_m, s.clearance_cap_m)   # noqa: E731
     judged = _judge_library(sit, lib, remaining_to_goal_s, rank)
     brake = judged[0]
-    brake[0].kind, brake[0].label = "hold", "hold (brake to a hover)"
+    brake[0].kind, brake[0].label = CandidateKind.HOLD, "hold (brake to a hover)"
     picks = [brake]
     if not brake_only:
         escapes = sorted(judged[1:], key=lambda entry: rank(entry[0]))

@@ -22,12 +22,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from companion.threats.decision.kinds import CandidateKind, DecisionKind
 from companion.threats.decision.spacetime import Conflict
 
-__all__ = ["ReferenceState", "Candidate", "Decision", "choose", "intruding_key", "KINDS"]
-
-#: Decision kinds: ``none`` keeps the active reference.
-KINDS = ("none", "retime", "switch", "replan", "evade", "hold", "rejected")
+__all__ = ["ReferenceState", "Candidate", "Decision", "choose", "intruding_key"]
 
 
 @dataclass(frozen=True)
@@ -56,8 +54,9 @@ class Candidate:
 
     Attributes
     ----------
-    kind : str
-        ``retime``, ``switch``, ``replan``, ``evade`` or ``hold``.
+    kind : CandidateKind
+        ``retime``, ``switch``, ``replan``, ``evade`` or ``hold`` (``none``: the active
+        reference kept); a string is converted.
     label : str
         Short words for the operator (``evade left + climb``).
     trajectory : Trajectory-like
@@ -72,7 +71,7 @@ class Candidate:
         The candidate stops short of the goal (a plan back is needed after it).
     """
 
-    kind: str
+    kind: CandidateKind
     label: str
     trajectory: object
     time_to_goal_s: float
@@ -84,6 +83,9 @@ class Candidate:
     conflict: Conflict | None = None
     ends_short: bool = False
     static_clearance_m: float = math.inf
+
+    def __post_init__(self) -> None:
+        self.kind = CandidateKind(self.kind)
 
     def judged(self, check, i: int) -> "Candidate":
         """Take candidate ``i``'s result from a ``BatchCheck``."""
@@ -124,8 +126,8 @@ class Decision:
 
     Attributes
     ----------
-    kind : str
-        One of ``KINDS``.
+    kind : DecisionKind
+        A string is converted (``none`` keeps the active reference).
     reason : str
         Why, in words (logged and published in the ``events`` message).
     trajectory : Trajectory-like or None
@@ -152,7 +154,7 @@ class Decision:
         The chosen candidate's minimum clearance over the horizon (m; negative: it intrudes).
     """
 
-    kind: str
+    kind: DecisionKind
     reason: str
     trajectory: object = None
     start_t_s: float | None = None
@@ -166,11 +168,17 @@ class Decision:
     candidates: dict = field(default_factory=dict)
     min_clearance_m: float = math.inf
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", DecisionKind(self.kind))
+
     def as_event(self) -> dict:
-        """The ``uav/<sysid>/events`` message of this decision (without the transport latency)."""
-        out = {"event": self.kind, "reason": self.reason, "path_id": self.path_id,
-               "label": self.label or self.kind, "decide_ms": round(self.decide_ms, 3),
-               "plan_ms": round(self.plan_ms, 3), "candidates": dict(self.candidates),
+        """The ``uav/<sysid>/events`` message of this decision (without the transport latency);
+        kinds as plain strings."""
+        kind = self.kind.value
+        out = {"event": kind, "reason": self.reason, "path_id": self.path_id,
+               "label": self.label or kind, "decide_ms": round(self.decide_ms, 3),
+               "plan_ms": round(self.plan_ms, 3),
+               "candidates": {str(k): int(n) for k, n in self.candidates.items()},
                "min_clearance_m": (round(self.min_clearance_m, 3)
                                    if math.isfinite(self.min_clearance_m) else None)}
         if self.conflict is not None:

@@ -11,7 +11,8 @@ from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
 from companion.threats.decision.alternatives import Alternative, switch_candidates
 from companion.threats.decision.join import HOVER_SPEED_M_S, join_trajectory
 from companion.threats.model import Threat
-from companion.threats.decision.policy import ThreatManager
+from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
+                                             Observation, decide)
 from companion.threats.settings import ThreatSettings
 from companion.world import World
 
@@ -33,12 +34,11 @@ def state(traj, t_s):
 
 def test_replan_estimate_follows_measurements():
     world, traj = straight_leg()
-    m = ThreatManager(world, GOAL, limits=LIMITS, rng=np.random.default_rng(0),
-                      settings=ThreatSettings(replan_budget_s=5.0))
-    m.set_active(traj, 0.0, "leg0")
+    policy = DecisionPolicy(ThreatSettings(replan_budget_s=5.0), LIMITS)
     far = Threat("p1", "popup", "local_ned", (90.0, 0.0, 0.0), radius_m=6.0, received_t_s=5.0)
-    m.on_threats([far], 5.0)
-    assert m.replan_estimate_s < 5.0
+    _, state = decide(DecisionState.initial(policy, 0), Observation(5.0, (far,), ActiveTrajectory(traj, 0.0, "leg0")),
+                      LegContext(0, world, GOAL), policy)
+    assert state.replan_estimate_s < 5.0
 
 
 def test_alternative_entries_cover_the_path():

@@ -1,5 +1,6 @@
 """ThreatReactor plumbing (companion.threats.reactor): decisions one at a time, monitor, resume,
-publishing and STATUSTEXT, with a scripted manager and an in-memory bus (no zenoh, no vehicle)."""
+publishing and STATUSTEXT, with scripted decisions (in place of ``decide`` in the worker) and an
+in-memory bus (no zenoh, no vehicle)."""
 
 from __future__ import annotations
 
@@ -14,8 +15,13 @@ import pytest
 
 from companion.config import Settings
 from companion.errors import LinkError
+from companion.threats.decision.alternatives import Alternative
+from companion.threats.decision.kinds import Trigger
+from companion.threats.decision.step import decide, plan_alternatives_for
 from companion.threats.model import Threat, payload_error
 from companion.threats.reactor import ThreatReactor
+from companion.threats.reactor_legs import AlternativesGate
+from companion.world import World
 from companion.threats.statustext import STATUSTEXT_MAX_CHARS, statustext_for
 from companion.threats.transport.update import ThreatUpdate
 
@@ -77,7 +83,9 @@ def trajectory_decision(kind, threat_id="p1", resume=False, label=None, t0=5.0):
 
 
 class ScriptedManager:
-    """Answers ``on_threats`` / ``resume`` from scripts (default: ``none``); records every call."""
+    """Stands for ``decide`` (and ``plan_alternatives_for``) in the worker: answers threat and
+    monitor decisions from ``on_threats_script`` and resume decisions from ``resume_script``
+    (default: ``none``); records every call and the active reference each one observed."""
 
     def __init__(self):
         self.calls: list[tuple[str, tuple[str, ...], float]] = []
@@ -105,23 +113,14 @@ class ScriptedManager:
             with self._lock:
                 self._running -= 1
 
-    def on_threats(self, threats, t_s):
-        return self._call("on_threats", self.on_threats_script, threats, t_s)
+    def decide(self, state, obs, leg, policy):
+        self.active.append((obs.active.path_id, obs.active.ends_short))
+        if obs.trigger is Trigger.RESUME:
+            return self._call("resume", self.resume_script, obs.threats, obs.t_s), state
+        return self._call("on_threats", self.on_threats_script, obs.threats, obs.t_s), state
 
-    def resume(self, threats, t_s):
-        return self._call("resume", self.resume_script, threats, t_s)
-
-    def set_leg(self, world, goal):
-        pass
-
-    def set_active(self, trajectory, start_t_s, path_id, ends_short=False):
-        self.active.append((path_id, ends_short))
-
-    def set_alternatives(self, alternatives):
-        self.alternatives = tuple(alternatives)
-
-    def compute_alternatives(self, threats, t_s, k, **kw):
-        return [SimpleNamespace(path_id="alt0-1", path_ned_m=np.zeros((2, 3)))]
+    def plan_alternatives(self, state, obs, leg, policy, k, **kw):
+        return (Alternative.from_path("alt0-1", [[0.0, 0.0, -10.0], [10.0, 0.0, -10.0]]),), state
 
 
 class MemoryBus:
@@ -182,11 +181,18 @@ class Harness:
             self.settings, clock_now_s=lambda: 5.0, in_worker=self.in_worker, rng=np.random.default_rng(0),
             engage=self.engage, send_now=self.send_now, reference=lambda: self.reference,
             position_ned_m=lambda: np.array([1.0, 2.0, -10.0]), record=self.record, statustext=self.statustext,
-            bus=self.bus, manager_factory=lambda leg: self.manager, monitor_period_s=monitor_period_s)
-        self.leg = SimpleNamespace(index=1, world=None, goal_ned_m=np.array([10.0, 0.0, -10.0]))
+            bus=self.bus, monitor_period_s=monitor_period_s)
+        self.leg = SimpleNamespace(index=1, world=World([], [-50.0, -50.0, -50.0], [50.0, 50.0, 0.0]),
+                                   goal_ned_m=np.array([10.0, 0.0, -10.0]))
 
     async def in_worker(self, fn, *args, **kwargs):
-        return await asyncio.to_thread(fn, *args, **kwargs)
+        scripted = {decide: self.manager.decide, plan_alternatives_for: self.manager.plan_alternatives}
+        return await asyncio.to_thread(scripted[fn], *args, **kwargs)
+
+    def observed_active(self):
+        """(path id, ends short) of the active reference a decision would observe now."""
+        active = self.reactor.observation(5.0).active
+        return active.path_id, active.ends_short
 
     def engage(self, trajectory, path_id, *, t0_s, resume):
         """As ``CompanionDaemon.engage``: the new reference, also given to the reactor."""
@@ -215,7 +221,8 @@ class Harness:
         if leg:
             self.reactor.on_leg_started(self.leg, self.reference)
 
-    def put(self, tid, pos=(20.0, 0.0, -10.0), received_mono_s=None):
+    def put(self, tid, pos=(6.0, 0.0, -10.0), received_mono_s=None):
+        """A pop-up on the reference (by default): the monitor's check finds a conflict."""
         threat = Threat(tid, "popup", "local_ned", pos, radius_m=3.0, received_t_s=5.0)
         self.bus.handler(ThreatUpdate("put", tid, threat, None, f"uav/1/threats/{tid}", 5.0,
                                       time.monotonic() if received_mono_s is None else received_mono_s, 1))
@@ -253,7 +260,7 @@ def test_a_threat_decision_is_engaged_published_recorded_and_told():
         assert h.engaged == [{"path_id": "replan-1", "t0_s": 5.0, "resume": False}]
         assert h.reference.first_sent_monotonic_s >= receipt
         assert h.manager.calls[0][:2] == ("on_threats", ("p1",))
-        assert h.manager.active == [("leg0", False), ("replan-1", False)]
+        assert h.manager.active == [("leg0", False)] and h.observed_active() == ("replan-1", False)
         assert h.decisions_recorded()[0]["kind"] == "replan"
         text, severity = h.texts[0]
         assert text.startswith("AVOID p1: replan, ") and text.endswith(" ms") and severity == "NOTICE"
@@ -353,7 +360,7 @@ def test_a_decision_built_on_a_reference_the_daemon_replaced_meanwhile_is_droppe
         await until(lambda: h.manager.calls, "the decision")
         await asyncio.sleep(0.05)
         assert [e["path_id"] for e in h.engaged] == ["leg1-resume"] and h.bus.events == []
-        assert h.manager.active[-1] == ("leg1-resume", False), "the manager checks the daemon's reference"
+        assert h.observed_active() == ("leg1-resume", False), "decisions check the daemon's reference"
 
     run(main, h)
 
@@ -403,7 +410,7 @@ def test_the_monitor_rechecks_while_a_threat_is_known_and_a_leg_is_flown():
         await until(lambda: h.bus.events, "the monitor's decision")
         event = h.bus.events[0]
         assert event["trigger"] == "monitor" and event["event"] == "evade" and event["label"] == "evade left"
-        assert h.engaged[-1]["resume"] is True and h.manager.active[-1] == ("evade-1", True)
+        assert h.engaged[-1]["resume"] is True and h.observed_active() == ("evade-1", True)
         text, severity = h.texts[0]
         assert text.startswith("AVOID m1: evade left, ") and severity == "WARNING"
 
@@ -515,7 +522,7 @@ def test_alternatives_are_refreshed_at_the_leg_start_and_after_a_decision():
         await until(lambda: any(k == "alternatives" for k, _ in h.records), "the leg-start alternatives")
         h.put("p1")
         await until(lambda: sum(k == "alternatives" for k, _ in h.records) >= 2, "alternatives after the decision")
-        assert h.manager.alternatives and h.bus.paths[-1]["alternatives"][0]["path_id"] == "alt0-1"
+        assert h.reactor.decision_state.alternatives and h.bus.paths[-1]["alternatives"][0]["path_id"] == "alt0-1"
 
     run(main, h)
 
@@ -558,5 +565,35 @@ def test_a_local_threat_goes_the_way_of_a_zenoh_put_and_is_republished():
         assert h.bus.republished[0].frame == "global"               # as received, for other consumers
         recorded = [f for kind, f in h.records if kind == "threat"]
         assert recorded[0]["id"] == "adsb-4b1805" and recorded[0]["t_s"] == 4.0
+
+    run(main, h)
+
+
+# ---------------------------------------------------------------------------- the alternatives gate
+def test_the_gate_skips_a_refresh_that_cannot_change_anything():
+    gate = AlternativesGate()
+    quiet = (1, "world", "leg0")                        # no threat held: leg, world, active path id
+    runs = [gate.should_run(quiet)]
+    gate.remember(quiet)                                # it found alternatives
+    runs.append(gate.should_run(quiet))                 # nothing changed
+    new_reference = (1, "world", "replan-1")
+    runs.append(gate.should_run(new_reference))
+    gate.remember(new_reference)
+    runs += [gate.should_run(None), gate.should_run(None)]    # threats held: always
+    gate.remember(None)
+    runs.append(gate.should_run(new_reference))         # after a refresh with threats
+    assert runs == [True, False, True, True, True, True] and gate.skipped == 1
+
+
+def test_a_quiet_refresh_on_the_same_reference_is_skipped_by_the_reactor():
+    h = Harness(alternatives_k=2, monitor_period_s=60.0)
+
+    async def main(h):
+        await h.start()
+        await until(lambda: any(k == "alternatives" for k, _ in h.records), "the leg-start alternatives")
+        await until(lambda: not h.reactor._alt_busy, "the refresh to end")
+        h.reactor.refresh_alternatives()
+        await until(lambda: h.reactor.alternatives_gate.skipped >= 1, "the skipped refresh")
+        assert sum(k == "alternatives" for k, _ in h.records) == 1
 
     run(main, h)
