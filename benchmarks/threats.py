@@ -21,29 +21,21 @@ Paper section 3.3 (Fig. 5, Fig. 8) and DESIGN section 7. Two parts:
    *avoidable* when one manoeuvre keeps every threat's centre farther than its radius + 1.0 m
    (tracking-error allowance), keeps 0.5 m from the static obstacles and stays in the bounds.
 
-   *Policies.* Each ``Strategy`` (``companion.threats.decision.kinds``) among hold, replan, switch,
-   evade and hybrid flies every encounter. The daemon is emulated with the pure decision step
-   (``companion.threats.decision.step``): M-GART alternatives (k = 4, 1 s budget;
-   ``plan_alternatives_for``) computed 1 s before the encounter from the reference 1 s ahead with
-   no threat known; from the encounter start the monitor calls ``decide`` every 0.1 s of
-   simulated time (not while a decision is under way: a decision takes its measured wall-clock
-   time of simulated time, during which the vehicle keeps flying the old reference), carrying
-   the returned ``DecisionState`` to the next call; every engaged trajectory becomes the
-   observation's active reference (with ``ends_short`` = the decision's ``resume``), as the
-   daemon's ``engage`` does; when the reference has ended more than 3 m short of the goal after
-   a decision that asked to resume, ``decide`` is called with the ``resume`` trigger (at most
-   every 1 s). The loop stops when the reference
-   is within 3 m of the goal or 60 s after the encounter start, or as soon as nothing is left to
-   decide: the active reference goes to the goal and stays farther from every threat than its
-   radius + inflation + the largest prediction uncertainty + 5 m until it gets there (every
-   further call would answer ``none``; this skips most calls after the threats have passed).
-   The composed setpoint stream (from 1 s before the encounter, the helicopter trimmed on
-   it) is flown by the helicopter's closed loop (``heli_model.control.simulate_closed_loop``,
-   LQI + PID on the R-50 model) and judged on the simulated positions: *success* = no sample
-   inside a threat's bare radius and none inside a static obstacle (no safety margin);
-   *completion* = success and within 3 m of the goal at the end (at most 60 s + 3 s after the
-   encounter start); *extra length* = flown length - the nominal's remaining length (completed
-   encounters); *decision latency* = ``decide_ms`` of every decision other than ``none``.
+   *Policies.* Each strategy among hold, replan, switch, evade and hybrid (``Strategy``) flies
+   every encounter with the flight executor that ``companion run`` flies
+   (``companion.flight.fast_time.FastTimeFlight``): the same schedule, phase machine, monitor,
+   decisions, alternatives refresh and reference hand-over, on a virtual clock, against the
+   closed-loop helicopter model (``heli_model.vehicle_update``: LQI + PID on the R-50 model,
+   RK4 physics) instead of MAVLink. The leg is flown from its start, hovering there; the
+   threats arrive at the encounter start (``ThreatFeed``, as a zenoh PUT would); every decision
+   job takes its measured wall-clock time of simulated time, during which the vehicle keeps
+   flying the old reference. The flight ends when the executor has reached the goal (3 m) or
+   60 s after the encounter start. It is judged on the model's own positions: *success* = no
+   sample inside a threat's bare radius and none inside a static obstacle (no safety margin);
+   *completion* = success and within 3 m of the goal at the end; *extra length* = flown length
+   after the encounter start - the nominal's remaining length (completed encounters);
+   *decision latency* = from the trigger to the first setpoint of the new reference, on the
+   virtual clock, of every decision told (``resume`` ones apart).
    Margins: the policy inflates threats by its own ``inflation_m`` (2 m by default) and plans
    with a 1 m margin around obstacles; the oracle's 1 m and 0.5 m are smaller, so an
    encounter the oracle calls avoidable may still be out of reach of a policy that keeps its
@@ -85,27 +77,22 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.threat_encounters import (CATEGORIES, KAPPA_MAX_1_M, LIMITS, WORLD_KINDS,  # noqa: E402
                                           encounter_world, make_encounter, make_leg)
 from benchmarks.threat_oracle import label_encounter  # noqa: E402
+from companion.config import Settings  # noqa: E402
+from companion.flight.fast_time import FastTimeFlight  # noqa: E402
+from companion.flight.plan import LegPlan  # noqa: E402
+from companion.mission.model import LocalWaypoint  # noqa: E402
 from companion.planning import GartSettings  # noqa: E402
-from companion.threats.decision.kinds import Strategy, Trigger  # noqa: E402
-from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState,  # noqa: E402
-                                             LegContext, Observation, decide, plan_alternatives_for)
+from companion.threats.decision.kinds import Strategy  # noqa: E402
+from companion.threats.decision.step import DecisionPolicy  # noqa: E402
+from heli_model.model import HeliModel  # noqa: E402
+from heli_model.vehicle_update import VehicleUpdate  # noqa: E402
 from companion.threats.model import Threat, ThreatTable  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The strategies compared, in table order; those not a ``Strategy`` are skipped.
 STRATEGIES = ("hold", "replan", "switch", "evade", "hybrid")
 GOAL_RADIUS_M = 3.0
-MONITOR_PERIOD_S = 0.1
-RESUME_PERIOD_S = 1.0
 MAX_AFTER_S = 60.0
-SETTLE_S = 3.0
-PRE_ENCOUNTER_S = 1.0
-DT_S = 0.02
-ALTERNATIVES_K = 4
-ALTERNATIVES_BUDGET_S = 1.0
-ALTERNATIVES_LEAD_S = 1.0
-QUIET_CHECK_S = 0.5
-QUIET_EXTRA_M = 5.0
 
 
 def threat_settings():
@@ -122,59 +109,15 @@ def leg_of(world_kind: str, seed: int):
 
 
 @functools.lru_cache(maxsize=None)
-def heli_model():
-    """The helicopter model (cached per worker: its closed loop is built on first use)."""
-    from heli_model.model import HeliModel
-
-    return HeliModel.default()
+def vehicle_update() -> VehicleUpdate:
+    """The helicopter (cached per worker: its LQI is designed once)."""
+    return VehicleUpdate.build(HeliModel.default())
 
 
-def compose_reference(segments, t0_s: float, t_end_s: float):
-    """Sample the flown setpoints: each (trajectory, start_t_s, engaged_t_s) from its engagement.
-
-    Returns
-    -------
-    t (K,), pos (K, 3), vel (K, 3), acc (K, 3), yaw (K,), yaw_rate (K,)
-    """
-    t = t0_s + np.arange(0.0, t_end_s - t0_s, DT_S)
-    pos = np.empty((t.size, 3))
-    vel = np.empty((t.size, 3))
-    acc = np.empty((t.size, 3))
-    yaw = np.empty(t.size)
-    rate = np.zeros(t.size)
-    engaged = np.array([s[2] for s in segments])
-    idx = np.searchsorted(engaged, t, side="right") - 1
-    for k in np.unique(idx):
-        sel = idx == k
-        traj, start, _ = segments[k]
-        rel = np.clip(t[sel] - start, 0.0, traj.duration_s)
-        p, v, a = traj.sample(rel)
-        pos[sel], vel[sel], acc[sel] = np.atleast_2d(p)[:, :3], np.atleast_2d(v)[:, :3], np.atleast_2d(a)[:, :3]
-        yaw[sel] = traj.yaw_rad(rel)
-        if hasattr(traj, "yaw_rate_rad_s"):
-            rate[sel] = traj.yaw_rate_rad_s(rel)
-    return t, pos, vel, acc, yaw, rate
-
-
-def quiet(leg, traj, start_t_s: float, t_s: float, threats, settings) -> bool:
-    """True when nothing is left to decide: the active reference goes to the goal and stays, at
-    every time until it gets there, farther from every threat than its radius + the policy's
-    inflation + its largest prediction uncertainty + ``QUIET_EXTRA_M``, and clear of the
-    obstacles inflated by the world's margin. Every further monitor call would answer ``none``,
-    so the emulation stops calling (it saves most of the calls after the threats have passed)."""
-    end = np.atleast_2d(traj.sample(np.array([traj.duration_s]))[0])[0, :3]
-    if float(np.linalg.norm(end - leg.goal_ned_m)) > GOAL_RADIUS_M:
-        return False
-    t_goal = start_t_s + traj.duration_s
-    if not math.isfinite(t_goal) or t_goal > t_s + MAX_AFTER_S:
-        return False
-    t = np.arange(t_s, t_goal + MONITOR_PERIOD_S, MONITOR_PERIOD_S)
-    pos = np.atleast_2d(traj.sample(np.clip(t - start_t_s, 0.0, traj.duration_s))[0])[:, :3]
-    extra = settings.inflation_m + float(getattr(settings, "uncertainty_max_m", 0.0)) + QUIET_EXTRA_M
-    for th in threats:
-        if np.min(np.linalg.norm(pos - th.position_at(t), axis=1)) <= th.radius_m + extra:
-            return False
-    return bool(leg.world.obstacles == () or np.min(leg.world.clearance_m(pos)) > 0.0)
+@functools.lru_cache(maxsize=None)
+def companion_settings() -> Settings:
+    """The companion's default settings (the executor's rates, the flight's alternatives)."""
+    return Settings()
 
 
 def make_policy(settings, strategy: str) -> DecisionPolicy:
@@ -182,97 +125,47 @@ def make_policy(settings, strategy: str) -> DecisionPolicy:
     return DecisionPolicy(settings, LIMITS, KAPPA_MAX_1_M, GartSettings(kappa_max_1_m=KAPPA_MAX_1_M), strategy)
 
 
-def initial_state(policy: DecisionPolicy, *key: int) -> DecisionState:
-    """A first decision state whose seed is derived from ``key`` (reproducible per encounter)."""
-    return DecisionState.initial(policy, int(np.random.default_rng(list(key)).integers(2**63)))
+def leg_plan(leg):
+    """The benchmark's leg as the executor flies a mission leg (one waypoint, 3 m acceptance)."""
+    waypoint = LocalWaypoint(1, "waypoint", leg.goal_ned_m, GOAL_RADIUS_M, 0.0, None)
+    return LegPlan(0, waypoint, leg.start_ned_m, leg.goal_ned_m, None,
+                   np.vstack([leg.start_ned_m, leg.goal_ned_m]), leg.trajectory, leg.world)
 
 
-def engaged(d) -> ActiveTrajectory:
-    """The decision's trajectory as the active reference, as the daemon's ``engage`` makes it
-    (``ends_short`` = the decision's ``resume``)."""
-    return ActiveTrajectory(d.trajectory, float(d.start_t_s), d.path_id or str(d.kind), bool(d.resume))
-
-
-def fly_encounter(leg, enc, alternatives, strategy: str, settings, seed: int, model) -> dict:
-    """Fly one encounter with one strategy, emulating the daemon; judge it in closed loop."""
-    from heli_model.control import simulate_closed_loop
-
+def fly_encounter(leg, enc, strategy: str, settings, seed: int, update) -> dict:
+    """Fly one encounter with one strategy on the flight executor; judge it on the model's
+    own positions."""
     wall0 = time.perf_counter()
-    nominal = leg.trajectory
     goal = leg.goal_ned_m
     threats = list(enc.threats)
     t_enc = enc.t_enc_s
-    policy = make_policy(settings, strategy)
-    leg_context = LegContext(0, leg.world, goal)
-    state = initial_state(policy, seed, enc.index, 2).with_alternatives(alternatives, dim=leg.world.dim)
-    active = ActiveTrajectory(nominal, 0.0, "nominal")
-    segments = [(nominal, 0.0, 0.0)]
-    decisions = []
-    pending_resume = False
-    last_resume = -math.inf
-    tick = 0
-    t = t_enc
-    calls = 0
-    quiet_at = None
-    last_quiet_check = -math.inf
-    while t <= t_enc + MAX_AFTER_S:
-        traj, start, _ = segments[-1]
-        rel = t - start
-        ref_pos = np.atleast_2d(traj.sample(np.array([min(max(rel, 0.0), traj.duration_s)]))[0])[0, :3]
-        if float(np.linalg.norm(ref_pos - goal)) <= GOAL_RADIUS_M:
-            break
-        if not pending_resume and t - last_quiet_check >= QUIET_CHECK_S - 1e-9:
-            last_quiet_check = t
-            if quiet(leg, traj, start, t, threats, settings):
-                quiet_at = t
-                break
-        ended = rel >= traj.duration_s
-        if ended and pending_resume and t - last_resume >= RESUME_PERIOD_S - 1e-9:
-            trigger, via, last_resume = Trigger.RESUME, "resume", t
-        else:
-            trigger, via = Trigger.MONITOR, "monitor"
-        d, state = decide(state, Observation(t, tuple(threats), active, trigger), leg_context, policy)
-        calls += 1
-        busy_s = max(float(d.decide_ms), 0.0) / 1e3
-        engaged_t = None
-        if d.trajectory is not None:
-            engaged_t = t + busy_s
-            segments.append((d.trajectory, float(d.start_t_s), engaged_t))
-            pending_resume = bool(d.resume)
-            active = engaged(d)
-        if d.kind != "none" or via == "resume":
-            decisions.append({"t_s": round(t - t_enc, 3), "via": via, "kind": str(d.kind),
-                              "decide_ms": float(d.decide_ms), "resume": bool(d.resume),
-                              "engaged": engaged_t is not None, "reason": str(d.reason)[:160]})
-        tick += max(1, int(math.ceil(busy_s / MONITOR_PERIOD_S - 1e-9)))   # the decider was busy
-        t = t_enc + tick * MONITOR_PERIOD_S
-    loop_end = t
-    if quiet_at is not None:          # the rest is flown without a decision: to the goal
-        loop_end = segments[-1][1] + segments[-1][0].duration_s
-    last, last_start, _ = segments[-1]
-    t_end = min(max(last_start + last.duration_s, loop_end), t_enc + MAX_AFTER_S) + SETTLE_S
-    t0 = max(t_enc - PRE_ENCOUNTER_S, 0.0)
-    ts, pos, vel, acc, yaw, rate = compose_reference(segments, t0, t_end)
-    cl = simulate_closed_loop(model, ts, pos, vel, acc, yaw, yaw_rate_rad_s=rate)
-    veh = cl.pos_ned_m
-    after = ts >= t_enc
+    flight = FastTimeFlight([leg_plan(leg)], companion_settings(), threats=[(t_enc, th, th.id) for th in threats],
+                            policy=make_policy(settings, strategy),
+                            seed=int(np.random.default_rng([seed, enc.index, 2]).integers(2**31)),
+                            start_yaw_rad=float(leg.trajectory.yaw_rad(np.array([0.0]))[0]), update=update)
+    result = flight.run(max_s=t_enc + MAX_AFTER_S)
+    after = result.t_s >= t_enc
+    veh, ts = result.pos_ned_m[after], result.t_s[after]
     sep = math.inf
     for th in threats:
-        d_th = np.linalg.norm(veh[after] - th.position_at(ts[after]), axis=1) - th.radius_m
-        sep = min(sep, float(d_th.min()))
-    static = float(np.min(leg.raw_world.clearance_m(veh[after])))
-    in_bounds = bool(np.all(leg.raw_world.contains(veh[after])))
+        sep = min(sep, float(np.min(np.linalg.norm(veh - th.position_at(ts), axis=1) - th.radius_m)))
+    static = float(np.min(leg.raw_world.clearance_m(veh)))
+    in_bounds = bool(np.all(leg.raw_world.contains(veh)))
     reached = float(np.linalg.norm(veh[-1] - goal)) <= GOAL_RADIUS_M
     success = sep >= 0.0 and static >= 0.0
-    flown = float(np.sum(np.linalg.norm(np.diff(veh[after], axis=0), axis=1)))
-    nominal_rest = float(nominal.length_m - nominal.s_at(np.array([t_enc]))[0])
+    flown = float(np.sum(np.linalg.norm(np.diff(veh, axis=0), axis=1)))
+    nominal_rest = float(leg.trajectory.length_m - leg.trajectory.s_at(np.array([t_enc]))[0])
+    decisions = [{"t_s": round(d["t_s"] - t_enc, 3), "via": d["trigger"], "kind": d["event"],
+                  "decide_ms": float(d["decide_ms"]), "latency_ms": d["latency_ms"], "label": d["label"],
+                  "reason": str(d["reason"])[:160]} for d in result.decisions]
+    errors = np.linalg.norm(result.pos_ned_m - result.ref_pos_ned_m, axis=1)
     return {"success": success, "completed": success and reached, "reached": reached,
             "min_sep_m": sep, "static_clearance_m": static if math.isfinite(static) else None,
             "in_bounds": in_bounds, "extra_length_m": flown - nominal_rest if success and reached else None,
-            "decisions": decisions, "decide_calls": calls,
-            "quiet_after_s": None if quiet_at is None else quiet_at - t_enc,
-            "max_tracking_error_m": float(np.max(cl.tracking_error_m)),
-            "saturated": bool(cl.saturated), "wall_s": time.perf_counter() - wall0}
+            "decisions": decisions, "outcome": result.outcome.value,
+            "decision_jobs": len(result.job_wall_s.get("decision", ())),
+            "alternatives_jobs": len(result.job_wall_s.get("alternatives", ())),
+            "max_tracking_error_m": float(np.max(errors)), "wall_s": time.perf_counter() - wall0}
 
 
 def run_encounter(job: tuple) -> dict:
@@ -295,20 +188,10 @@ def run_encounter(job: tuple) -> dict:
                 "avoidable": oracle.avoidable, "oracle": {
                     "tried": oracle.tried, "best_margin_m": oracle.best_margin_m, "ms": oracle.elapsed_ms,
                     "witness": oracle.witness.manoeuvre.name if oracle.witness is not None else None}})
-    t_alt = time.perf_counter()
-    refresher = make_policy(settings, Strategy.HYBRID)
-    t_refresh = max(enc.t_enc_s - ALTERNATIVES_LEAD_S, 0.0)
-    start = leg.trajectory.sample(np.array([t_refresh + ALTERNATIVES_LEAD_S]))[0][0]
-    alts, _ = plan_alternatives_for(initial_state(refresher, seed, index, 1),
-                                    Observation(t_refresh, (), ActiveTrajectory(leg.trajectory, 0.0, "nominal")),
-                                    LegContext(0, leg.world, leg.goal_ned_m), refresher, ALTERNATIVES_K,
-                                    max_time_s=ALTERNATIVES_BUDGET_S, start_ned_m=start)
-    row["alternatives"] = len(alts)
-    row["alternatives_s"] = time.perf_counter() - t_alt
-    model = heli_model()
+    update = vehicle_update()
     for strategy in strategies:
         try:
-            row[strategy] = fly_encounter(leg, enc, alts, strategy, settings, seed, model)
+            row[strategy] = fly_encounter(leg, enc, strategy, settings, seed, update)
         except Exception as exc:  # noqa: BLE001 - one failing policy call must not end a long run
             logging.getLogger(__name__).exception("encounter %d, %s", index, strategy)
             row[strategy] = {"error": f"{type(exc).__name__}: {exc}", "success": False, "completed": False,
@@ -366,8 +249,9 @@ def summarize_group(rows: list[dict], strategy: str) -> dict:
     res = [r[strategy] for r in rows]
     avoid = [r[strategy] for r in rows if r["avoidable"]]
     extra = [x["extra_length_m"] for x in res if x["extra_length_m"] is not None]
-    latency = [d["decide_ms"] for x in res for d in x["decisions"] if d["kind"] != "none" and d["via"] != "resume"]
-    back = [d["decide_ms"] for x in res for d in x["decisions"] if d["kind"] != "none" and d["via"] == "resume"]
+    latency = [d["latency_ms"] for x in res for d in x["decisions"]
+               if d["latency_ms"] is not None and d["via"] != "resume"]
+    back = [d["latency_ms"] for x in res for d in x["decisions"] if d["latency_ms"] is not None and d["via"] == "resume"]
     kinds: dict[str, int] = {}
     for x in res:
         for d in x["decisions"]:
@@ -615,7 +499,7 @@ def main(argv=None) -> int:
     machine = (f"Machine: {platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores "
                f"(shared); encounters {enc_wall:.0f} s wall ({np.mean(cpu) if cpu else 0:.1f} s per encounter "
                f"in a worker, {args.workers} workers), whole run {elapsed:.0f} s"
-               f"{' (--quick)' if args.quick else ''}; module {decide.__module__}.")
+               f"{' (--quick)' if args.quick else ''}; flown by {FastTimeFlight.__module__}.")
     print(text)
     print(machine)
     out = ROOT / "out" / "bench"

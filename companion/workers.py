@@ -29,7 +29,7 @@ import multiprocessing.connection
 import os
 import threading
 import time
-from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Future, Executor, ProcessPoolExecutor, ThreadPoolExecutor
 
 import numpy as np
 
@@ -150,6 +150,11 @@ class PlanningWorkers:
         it is pickled by reference to a worker process, with copies of its arguments)."""
         loop = asyncio.get_running_loop()
         return await loop.run_in_executor(self.executor, functools.partial(fn, *args, **kwargs))
+
+    def submit(self, fn, /, *args) -> Future:
+        """Start ``fn(*args)`` in a worker; returns its ``concurrent.futures.Future`` (the
+        flight executor's jobs, ``companion.service.jobs``)."""
+        return self.executor.submit(fn, *args)
 
     async def on_each(self, fn, /, *args) -> None:
         """Run ``fn(*args)`` once per worker, side by side (a per-process cache filled in every

@@ -17,8 +17,9 @@
   the new reference; the decision is then told (``FlightSink.decision``) with that latency.
 - **Alternatives.** M-GART alternatives are refreshed as a job at every leg start, after every
   decision and periodically (``refresh_alternatives``, a task of the schedule), from the
-  reference ``lead_s`` ahead. With no threat held, a refresh on the same leg and reference as
-  the last one that found alternatives is not run.
+  reference ``lead_s`` ahead, when the policy's strategy switches to them. With no threat
+  held, a refresh on the same leg and reference as the last one that found alternatives is not
+  run.
 - **Delay check** (other vehicles known): a decision's trajectory passes the ``CommitGate``
   before it is engaged.
 
@@ -333,7 +334,7 @@ class Avoidance:
     def refresh_alternatives(self, now_mono_s: float | None = None) -> None:
         """Plan the M-GART alternatives again from the current reference, as a job (also the
         schedule's periodic task)."""
-        if self.leg is None or self.alternatives_plan.k == 0:
+        if self.leg is None or self.alternatives_plan.k == 0 or not self.policy.strategy.switches:
             return
         if self._alt_busy:
             self._alt_dirty = True

@@ -20,7 +20,7 @@ task              rate                                   work
                                                          setpoint went out (latency)
 ``prepare``       10 Hz                                  the reference's work ahead
 ``phase``         10 Hz                                  the phase machine (``leg_step``)
-``monitor``       ``1 / threats.monitor_period_s``       the active reference re-checked
+``monitor``       10 Hz (DESIGN 7.3: >= 10 Hz)           the active reference re-checked
 ``alternatives``  ``time_scale / flight.alternatives_    M-GART alternatives planned again
                   period_s``
 ================  =====================================  =================================
@@ -43,7 +43,7 @@ from companion.flight.legs import FlightOutcome, LegReplanner, LegRunner
 from companion.flight.ports import FlightSink, Jobs, VehiclePort
 from companion.flight.schedule import Scheduler, Task
 
-__all__ = ["FlightExecutor", "PHASE_RATE_HZ", "PREPARE_RATE_HZ"]
+__all__ = ["FlightExecutor", "PHASE_RATE_HZ", "PREPARE_RATE_HZ", "MONITOR_RATE_HZ"]
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +52,8 @@ log = logging.getLogger(__name__)
 PHASE_RATE_HZ = 10.0
 #: How often the reference evaluates ahead of the stream.
 PREPARE_RATE_HZ = 10.0
+#: The monitor's rate: the active reference is re-checked at >= 10 Hz (DESIGN 7.3).
+MONITOR_RATE_HZ = 10.0
 
 
 class FlightExecutor:
@@ -88,7 +90,7 @@ class FlightExecutor:
     def __init__(self, legs: Sequence, *, owner: ReferenceOwner, vehicle: VehiclePort, jobs: Jobs,
                  sink: FlightSink, stream: Callable[[float, bool], None], now_s: Callable[[], float],
                  clock_s: Callable[[], float], setpoint_rate_hz: float, timeout_margin_s: float, replanner: LegReplanner,
-                 avoidance: Avoidance | None = None, monitor_rate_hz: float = 10.0,
+                 avoidance: Avoidance | None = None, monitor_rate_hz: float = MONITOR_RATE_HZ,
                  alternatives_rate_hz: float = 0.2, leg_started: Callable | None = None,
                  seed: int = 0, slack_s: float = 0.0) -> None:
         self.owner = owner

@@ -257,6 +257,8 @@ class FastTimeFlight:
     threats : sequence of (t_s, Threat or None, str), optional
         The threat updates (``ThreatFeed``); None: no threats watched (no ``Avoidance``).
     strategy : Strategy
+    policy : DecisionPolicy, optional
+        The decision's policy (default ``DecisionPolicy.from_settings(settings, strategy)``).
     seed : int
     start_yaw_rad : float
     model : HeliModel, optional
@@ -271,7 +273,8 @@ class FastTimeFlight:
         The vehicle (default: built from ``model``); give one to fly many flights on one design.
     """
 
-    def __init__(self, legs, settings, *, threats=None, strategy: Strategy = Strategy.HYBRID, seed: int = 0,
+    def __init__(self, legs, settings, *, threats=None, strategy: Strategy = Strategy.HYBRID,
+                 policy: DecisionPolicy | None = None, seed: int = 0,
                  start_yaw_rad: float = 0.0, model: HeliModel | None = None, job_time_scale: float = 1.0,
                  world=None, replanner: LegReplanner | None = None,
                  update: VehicleUpdate | None = None) -> None:
@@ -285,20 +288,19 @@ class FastTimeFlight:
         self.owner = ReferenceOwner(self.clock, turn_rate_rad_s=settings.flight.turn_rate_rad_s,
                                     yaw_now_rad=lambda: self.vehicle.yaw_rad)
         self.feed = ThreatFeed(threats) if threats is not None else None
-        self.avoidance = self._avoidance(strategy, seed) if self.feed is not None else None
+        self.avoidance = None if self.feed is None else \
+            self._avoidance(policy or DecisionPolicy.from_settings(settings, strategy), seed)
         s = settings
         self.executor = FlightExecutor(
             legs, owner=self.owner, vehicle=self.vehicle, jobs=self.jobs, sink=self.log, stream=self._stream,
             now_s=self.clock.now_s, clock_s=self.clock.now_s, setpoint_rate_hz=s.link.setpoint_rate_hz,
             timeout_margin_s=s.link.leg_timeout_margin_s, replanner=replanner or LegReplanner.in_world(world or legs[0].world, s),
-            avoidance=self.avoidance, monitor_rate_hz=1.0 / s.threats.monitor_period_s,
+            avoidance=self.avoidance,
             alternatives_rate_hz=1.0 / s.flight.alternatives_period_s, seed=seed)
         self._refs: list[np.ndarray] = []
 
-    def _avoidance(self, strategy: Strategy, seed: int) -> Avoidance:
-        s = self.settings
-        policy = DecisionPolicy.from_settings(s, strategy)
-        f = s.flight
+    def _avoidance(self, policy: DecisionPolicy, seed: int) -> Avoidance:
+        f = self.settings.flight
         return Avoidance(policy=policy, state=DecisionState.initial(policy, seed), owner=self.owner,
                          threats=self.feed, jobs=self.jobs, sink=self.log, now_s=self.clock.now_s,
                          monotonic_s=self.clock.now_s, send_now=lambda: self.executor.send_now(),

@@ -49,6 +49,11 @@ class Strategy(enum.StrEnum):
     REPLAN = "replan"
     EVADE = "evade"
 
+    @property
+    def switches(self) -> bool:
+        """Its candidates include switching to the M-GART alternatives (so they are kept)."""
+        return self in (Strategy.HYBRID, Strategy.SWITCH)
+
 
 class Trigger(enum.StrEnum):
     """What asked for a decision: a threat update, the monitor's tick, or a way back to the

@@ -411,7 +411,7 @@ def _resume(state: DecisionState, obs: Observation, leg: LegContext, policy: Dec
     if sit is None:
         return Decision(DecisionKind.NONE, "no active trajectory", decide_ms=_ms_since(t0)), state
     cands: list[Candidate] = []
-    if policy.strategy in (Strategy.HYBRID, Strategy.SWITCH):
+    if policy.strategy.switches:
         cands += gen.switch_to_alternatives(sit, state.alternatives)[0]
     if policy.strategy is not Strategy.SWITCH:
         replans, state = _replan(state, sit, policy)
@@ -433,7 +433,7 @@ def _fast_candidates(sit: gen.Situation, active: ActiveTrajectory, alternatives,
         out += gen.evade_candidates(sit, remaining, brake_only=strategy is Strategy.HOLD)
     if strategy in (Strategy.HYBRID, Strategy.RETIME):
         out += gen.retime_candidates(sit, active.trajectory, active.start_t_s, remaining, active.ends_short)
-    if strategy in (Strategy.HYBRID, Strategy.SWITCH) and not any(
+    if strategy.switches and not any(
             c.clear and c.kind == CandidateKind.RETIME for c in out):
         out += gen.switch_to_alternatives(sit, alternatives)[0]
     return out
