@@ -40,7 +40,7 @@ from companion.threats.decision.kinds import DecisionKind, Trigger
 from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
                                              Observation, active_conflict, decide, plan_alternatives_for)
 
-__all__ = ["Avoidance", "ThreatSource", "CommitGate", "AlternativesPlan", "active_trajectory"]
+__all__ = ["Avoidance", "ThreatSource", "CommitGate", "AlternativesPlan", "DecisionSteps", "active_trajectory"]
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +74,16 @@ class AlternativesPlan:
     k: int
     budget_s: float
     lead_s: float
+
+
+@dataclasses.dataclass(frozen=True)
+class DecisionSteps:
+    """The pure steps the avoidance runs (module-level functions: jobs pickle them). The
+    default is ``companion.threats.decision.step``'s; a test gives scripted ones."""
+
+    decide: Callable = decide
+    active_conflict: Callable = active_conflict
+    plan_alternatives: Callable = plan_alternatives_for
 
 
 def active_trajectory(ref: ActiveReference | None) -> ActiveTrajectory | None:
@@ -115,14 +125,16 @@ class Avoidance:
         The vehicle's position (for the events).
     alternatives : AlternativesPlan
     commit_gate : CommitGate, optional
+    steps : DecisionSteps
     """
 
     def __init__(self, *, policy: DecisionPolicy, state: DecisionState, owner: ReferenceOwner,
                  threats: ThreatSource, jobs: Jobs, sink: FlightSink, now_s: Callable[[], float],
                  monotonic_s: Callable[[], float], send_now: Callable[[], None],
                  position_ned_m: Callable, alternatives: AlternativesPlan,
-                 commit_gate: CommitGate | None = None) -> None:
+                 commit_gate: CommitGate | None = None, steps: DecisionSteps = DecisionSteps()) -> None:
         self.policy = policy
+        self.steps = steps
         self.state = state
         self.owner = owner
         self.threats = threats
@@ -206,26 +218,31 @@ class Avoidance:
             return
         self._busy = True
         asked = (self.leg, self.owner.current, self.state)
-        self.jobs.submit("decision", decide, (self.state, obs, self.leg, self.policy),
+        self.jobs.submit("decision", self.steps.decide, (self.state, obs, self.leg, self.policy),
                          done=functools.partial(self._decided, asked, trigger, trigger_mono_s, answered),
                          failed=functools.partial(self._failed, answered))
 
     def _stays_clear(self, obs: Observation) -> bool:
         try:
-            return active_conflict(obs, self.leg, self.policy) is None
+            return self.steps.active_conflict(obs, self.leg, self.policy) is None
         except Exception:  # noqa: BLE001 - the decision will say what is wrong
             log.debug("monitor pre-check failed", exc_info=True)
             return False
 
     def _decided(self, asked, trigger: Trigger, trigger_mono_s: float, answered, result) -> None:
-        decision, state = result
         leg, ref, sent = asked
-        self._adopt(state, sent)
         self._busy = False
-        if leg is self.leg and ref is self.owner.current:
-            self._apply(decision, trigger, trigger_mono_s)
-        elif self.owner.current is not None:
-            log.info("decision %s dropped: the reference changed while deciding", decision.kind)
+        decision = None
+        try:
+            decision, state = result
+            self._adopt(state, sent)
+            if leg is self.leg and ref is self.owner.current:
+                self._apply(decision, trigger, trigger_mono_s)
+            elif self.owner.current is not None:
+                log.info("decision %s dropped: the reference changed while deciding", decision.kind)
+        except Exception:  # noqa: BLE001 - a failed decision must not stop the flight
+            log.exception("threat decision failed; the current reference is kept")
+            decision = None
         if answered is not None:
             answered(decision)
         self._next()
@@ -351,7 +368,7 @@ class Avoidance:
             return
         start = None if ref is None else ref.state(obs.t_s + plan.lead_s)[0]
         self._alt_busy, self._alt_dirty = True, False
-        fn = functools.partial(plan_alternatives_for, max_time_s=plan.budget_s, start_ned_m=start)
+        fn = functools.partial(self.steps.plan_alternatives, max_time_s=plan.budget_s, start_ned_m=start)
         self.jobs.submit("alternatives", fn, (self.state, obs, self.leg, self.policy, plan.k),
                          done=functools.partial(self._alternatives_done, self.leg, self.state, key, obs.t_s),
                          failed=self._alternatives_failed)

@@ -12,7 +12,7 @@ from companion.security.deployment import init_deployment
 from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat, ThreatTable
 from companion.threats.transport.update import ThreatUpdate, rejected_event
-from tests.unit.threats.test_reactor import Harness, run, trajectory_decision, until
+from tests.unit.flight.test_avoidance import Harness, run, trajectory_decision, until
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,8 @@
-"""ThreatReactor plumbing (companion.threats.reactor): decisions one at a time, monitor, resume,
-publishing and STATUSTEXT, with scripted decisions (in place of ``decide`` in the worker) and an
-in-memory bus (no zenoh, no vehicle)."""
+"""The executor's threat avoidance (companion.flight.avoidance) with the daemon's reactor
+(companion.threats.reactor): decisions one at a time, monitor, resume, engaging, publishing
+and STATUSTEXT. Scripted decisions stand for ``decide`` in real thread workers
+(``WorkerJobs`` on ``PlanningWorkers("thread")``), the reactor's bus is in memory (no zenoh,
+no vehicle) and a real ``PeriodicDriver`` runs the schedule's monitor and tell rows."""
 
 from __future__ import annotations
 
@@ -8,37 +10,60 @@ import asyncio
 import dataclasses
 import threading
 import time
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from companion.config import Settings
 from companion.errors import LinkError
+from companion.flight.active import ReferenceOwner
+from companion.flight.avoidance import AlternativesPlan, Avoidance, DecisionSteps
+from companion.flight.schedule import Scheduler, Task
+from companion.link.periodic import PeriodicDriver
+from companion.service.jobs import WorkerJobs
 from companion.threats.decision.alternatives import Alternative
-from companion.threats.decision.kinds import Trigger
-from companion.threats.decision.step import decide, plan_alternatives_for
+from companion.threats.decision.kinds import DecisionKind, Trigger
+from companion.threats.decision.step import DecisionPolicy, DecisionState, LegContext
 from companion.threats.model import Threat, payload_error
 from companion.threats.reactor import ThreatReactor
-from companion.threats.reactor_legs import AlternativesGate
-from companion.world import World
 from companion.threats.statustext import STATUSTEXT_MAX_CHARS, statustext_for
 from companion.threats.transport.update import ThreatUpdate
+from companion.workers import PlanningWorkers
+from companion.world import World
 
 HOME = (47.397742, 8.545594, 488.0)
 
 
 # ---------------------------------------------------------------------------- test doubles
 class Line:
-    """A straight 10 s trajectory (what the reactor samples for the path message)."""
+    """A straight 10 s trajectory at 1 m/s, heading north."""
 
     duration_s = 10.0
+    length_m = 10.0
     end_pos_ned_m = np.array([10.0, 0.0, -10.0])
 
     def sample(self, t):
-        t = np.atleast_1d(np.asarray(t, dtype=float))
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration_s)
         pos = np.stack([t, np.zeros_like(t), np.full_like(t, -10.0)], axis=1)
-        return pos, np.zeros_like(pos), np.zeros_like(pos)
+        vel = np.zeros_like(pos)
+        vel[:, 0] = 1.0
+        return pos, vel, np.zeros_like(pos)
+
+    def yaw_rad(self, t):
+        return np.zeros(np.atleast_1d(t).shape)
+
+    def yaw_rate_rad_s(self, t):
+        return np.zeros(np.atleast_1d(t).shape)
+
+
+class FixedClock:
+    """Mission time stands at 5 s (the decisions' t0)."""
+
+    scale = 1.0
+    synced = True
+
+    def now_s(self, monotonic_s=None):
+        return 5.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,7 +76,7 @@ class Conflict:
 class Decision:
     """The manager's Decision contract as the reactor uses it (``label`` optional)."""
 
-    kind: str
+    kind: DecisionKind
     reason: str = "test"
     trajectory: object = None
     start_t_s: float | None = None
@@ -61,9 +86,13 @@ class Decision:
     decide_ms: float = 1.0
     plan_ms: float = 0.0
     resume: bool = False
+    label: str = ""
+
+    def __post_init__(self):
+        object.__setattr__(self, "kind", DecisionKind(self.kind))
 
     def as_event(self) -> dict:
-        out = {"event": self.kind, "reason": self.reason, "path_id": self.path_id}
+        out = {"event": self.kind.value, "reason": self.reason, "path_id": self.path_id}
         if self.conflict is not None:
             out["threat_id"] = self.conflict.threat_id
         return out
@@ -95,6 +124,7 @@ class ScriptedManager:
         self.started = threading.Event()
         self.active = []
         self.alternatives = ()
+        self.alternatives_planned = 0
         self._running = 0
         self.max_running = 0
         self._lock = threading.Lock()
@@ -114,12 +144,14 @@ class ScriptedManager:
                 self._running -= 1
 
     def decide(self, state, obs, leg, policy):
+        """``decide`` of the pure step: scripted."""
         self.active.append((obs.active.path_id, obs.active.ends_short))
         if obs.trigger is Trigger.RESUME:
             return self._call("resume", self.resume_script, obs.threats, obs.t_s), state
         return self._call("on_threats", self.on_threats_script, obs.threats, obs.t_s), state
 
     def plan_alternatives(self, state, obs, leg, policy, k, **kw):
+        self.alternatives_planned += 1
         return (Alternative.from_path("alt0-1", [[0.0, 0.0, -10.0], [10.0, 0.0, -10.0]]),), state
 
 
@@ -162,8 +194,27 @@ class MemoryBus:
         self.statuses.append(status)
 
 
+class Sink:
+    """The daemon's sink as it uses the reactor (``companion.service.sink.DaemonSink``)."""
+
+    def __init__(self, harness):
+        self.h = harness
+
+    def record(self, line_type, /, **fields):
+        self.h.records.append((line_type, fields))
+
+    def event(self, name, **fields):
+        self.h.records.append(("event", {"name": name, **fields}))
+
+    def decision(self, decision, event):
+        self.h.reactor.tell_decision(decision, event)
+
+    def path(self, reference, alternatives, leg_index):
+        self.h.reactor.publish_path(reference, alternatives, leg_index)
+
+
 class Harness:
-    """A reactor wired to doubles of the daemon's callables."""
+    """The avoidance with the reactor, the reference owner, thread jobs and a driver."""
 
     def __init__(self, *, alternatives_k=0, monitor_period_s=0.01, statustext_error=None):
         s = Settings()                   # the fleet needs a zenoh session: not this bus in memory
@@ -171,42 +222,26 @@ class Harness:
                                             fleet=dataclasses.replace(s.fleet, enabled=False))
         self.manager = ScriptedManager()
         self.bus = MemoryBus()
-        self.reference = SimpleNamespace(trajectory=Line(), t0_s=0.0, path_id="leg0", first_sent_monotonic_s=None,
-                                         state=lambda t: Line().sample([t]))
-        self.engaged: list[dict] = []
         self.records: list[tuple[str, dict]] = []
         self.texts: list[tuple[str, str]] = []
         self.statustext_error = statustext_error
-        self.reactor = ThreatReactor(
-            self.settings, clock_now_s=lambda: 5.0, in_worker=self.in_worker, rng=np.random.default_rng(0),
-            engage=self.engage, send_now=self.send_now, reference=lambda: self.reference,
-            position_ned_m=lambda: np.array([1.0, 2.0, -10.0]), record=self.record, statustext=self.statustext,
-            bus=self.bus, monitor_period_s=monitor_period_s)
-        self.leg = SimpleNamespace(index=1, world=World([], [-50.0, -50.0, -50.0], [50.0, 50.0, 0.0]),
-                                   goal_ned_m=np.array([10.0, 0.0, -10.0]))
+        self.monitor_period_s = monitor_period_s
+        self.owner = ReferenceOwner(FixedClock(), turn_rate_rad_s=0.6, yaw_now_rad=lambda: 0.0)
+        self.owner.engage(Line(), "leg0", t0_s=0.0)
+        self.reactor = ThreatReactor(self.settings, clock_now_s=lambda: 5.0, record=Sink(self).record,
+                                     statustext=self.statustext, bus=self.bus)
+        self.leg = LegContext(1, World([], [-50.0, -50.0, -50.0], [50.0, 50.0, 0.0]), np.array([10.0, 0.0, -10.0]))
+        self.workers = PlanningWorkers("thread")
+        self.engaged: list[dict] = []
+        self.owner.listen(self._engaged)
 
-    async def in_worker(self, fn, *args, **kwargs):
-        scripted = {decide: self.manager.decide, plan_alternatives_for: self.manager.plan_alternatives}
-        return await asyncio.to_thread(scripted[fn], *args, **kwargs)
+    def _engaged(self, ref):
+        if ref is not None and ref.path_id != "leg0":
+            self.engaged.append({"path_id": ref.path_id, "t0_s": ref.t0_s, "resume": ref.resume})
 
-    def observed_active(self):
-        """(path id, ends short) of the active reference a decision would observe now."""
-        active = self.reactor.observation(5.0).active
-        return active.path_id, active.ends_short
-
-    def engage(self, trajectory, path_id, *, t0_s, resume):
-        """As ``CompanionDaemon.engage``: the new reference, also given to the reactor."""
-        self.reference = SimpleNamespace(trajectory=trajectory, t0_s=t0_s, path_id=path_id, resume=resume,
-                                         first_sent_monotonic_s=None, state=lambda t: trajectory.sample([t]))
-        self.engaged.append({"path_id": path_id, "t0_s": t0_s, "resume": resume})
-        self.reactor.set_active(self.reference)
-        return self.reference
-
-    def send_now(self):
-        self.reference.first_sent_monotonic_s = time.monotonic()
-
-    def record(self, line_type, /, **fields):
-        self.records.append((line_type, fields))
+    @property
+    def reference(self):
+        return self.owner.current
 
     def statustext(self, text, severity):
         if self.statustext_error is not None:
@@ -216,10 +251,38 @@ class Harness:
     def decisions_recorded(self):
         return [f for kind, f in self.records if kind == "decision"]
 
+    def send_now(self):
+        self.owner.setpoint_at(time.monotonic())
+
     async def start(self, *, leg=True):
-        await self.reactor.start(HOME)
+        loop = asyncio.get_running_loop()
+        policy = DecisionPolicy.from_settings(self.settings)
+        f = self.settings.flight
+        self.avoidance = Avoidance(
+            policy=policy, state=DecisionState.initial(policy, 1), owner=self.owner, threats=self.reactor,
+            jobs=WorkerJobs(self.workers, loop), sink=Sink(self), now_s=lambda: 5.0, monotonic_s=time.monotonic,
+            send_now=self.send_now, position_ned_m=lambda: np.array([1.0, 2.0, -10.0]),
+            alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s, f.alternatives_lead_s),
+            steps=DecisionSteps(decide=self.manager.decide, plan_alternatives=self.manager.plan_alternatives))
+        self.reactor.on_change = self.avoidance.on_threats_changed
+        await self.reactor.start(HOME, reference=lambda: self.owner.current, position_ned_m=lambda: None)
+        schedule = Scheduler([Task("monitor", 1.0 / self.monitor_period_s, self.avoidance.monitor, 10.0),
+                              Task("tell", 200.0, self.avoidance.tell_engaged, 1.0)])
+        self.driver = PeriodicDriver(200.0, schedule.tick)
+        self.driver.start()
         if leg:
-            self.reactor.on_leg_started(self.leg, self.reference)
+            self.avoidance.start_leg(self.leg)
+
+    async def stop(self):
+        await self.driver.stop()
+        await self.reactor.stop()
+        self.workers.shutdown()
+
+    async def resume(self):
+        """What the phase machine asks when a reference ended short: the answer, awaited."""
+        answer = asyncio.get_running_loop().create_future()
+        self.avoidance.request_resume(lambda d: answer.done() or answer.set_result(d))
+        return await answer
 
     def put(self, tid, pos=(6.0, 0.0, -10.0), received_mono_s=None):
         """A pop-up on the reference (by default): the monitor's check finds a conflict."""
@@ -240,7 +303,7 @@ def run(coro_fn, harness):
         try:
             await coro_fn(harness)
         finally:
-            await harness.reactor.stop()
+            await harness.stop()
     asyncio.run(main())
 
 
@@ -260,13 +323,12 @@ def test_a_threat_decision_is_engaged_published_recorded_and_told():
         assert h.engaged == [{"path_id": "replan-1", "t0_s": 5.0, "resume": False}]
         assert h.reference.first_sent_monotonic_s >= receipt
         assert h.manager.calls[0][:2] == ("on_threats", ("p1",))
-        assert h.manager.active == [("leg0", False)] and h.observed_active() == ("replan-1", False)
+        assert h.manager.active == [("leg0", False)] and h.reference.path_id == "replan-1"
         assert h.decisions_recorded()[0]["kind"] == "replan"
         text, severity = h.texts[0]
         assert text.startswith("AVOID p1: replan, ") and text.endswith(" ms") and severity == "NOTICE"
         assert h.bus.paths[-1]["path_id"] == "replan-1"
-        assert h.reactor.decisions == 1 and len(h.reactor.latencies_ms["replan"]) == 1
-        assert set(h.reactor.latency_summary()["replan"]) == {"n", "p50", "p99", "max"}
+        assert h.avoidance.decisions == 1 and len(h.avoidance.latencies_ms["replan"]) == 1
 
     run(main, h)
 
@@ -283,7 +345,7 @@ def test_none_and_trajectoryless_decisions_publish_nothing():
         await until(lambda: len(h.manager.calls) == 2, "the second decision")
         await asyncio.sleep(0.05)
         assert h.bus.events == [] and h.texts == [] and h.decisions_recorded() == [] and h.engaged == []
-        assert h.reactor.decisions == 0
+        assert h.avoidance.decisions == 0
 
     run(main, h)
 
@@ -316,9 +378,9 @@ def test_no_decision_outside_a_leg_and_the_next_leg_checks_the_threats_held():
         h.put("p1")
         await asyncio.sleep(0.1)
         assert h.manager.calls == []
-        h.reactor.on_leg_started(h.leg, h.reference)
+        h.avoidance.start_leg(h.leg)
         await until(lambda: h.manager.calls, "the check at the leg's start")
-        h.reactor.on_leg_ended()
+        h.avoidance.end_leg()
         await asyncio.sleep(0.05)
         n = len(h.manager.calls)
         await asyncio.sleep(0.1)
@@ -336,7 +398,7 @@ def test_a_decision_for_a_leg_that_ended_meanwhile_is_not_applied():
         await h.start()
         h.put("p1")
         await until(h.manager.started.is_set, "the decision to start")
-        h.reactor.on_leg_ended()
+        h.avoidance.end_leg()
         h.manager.gate.set()
         await until(lambda: h.manager.calls, "the decision")
         await asyncio.sleep(0.05)
@@ -355,12 +417,12 @@ def test_a_decision_built_on_a_reference_the_daemon_replaced_meanwhile_is_droppe
         await h.start()
         h.put("p1")
         await until(h.manager.started.is_set, "the decision to start")
-        h.engage(Line(), "leg1-resume", t0_s=6.0, resume=False)      # what resume_leg does
+        h.owner.engage(Line(), "leg1-resume", t0_s=6.0)      # what a replan after a link loss does
         h.manager.gate.set()
         await until(lambda: h.manager.calls, "the decision")
         await asyncio.sleep(0.05)
         assert [e["path_id"] for e in h.engaged] == ["leg1-resume"] and h.bus.events == []
-        assert h.observed_active() == ("leg1-resume", False), "decisions check the daemon's reference"
+        assert h.reference.path_id == "leg1-resume", "decisions check the owner's reference"
 
     run(main, h)
 
@@ -370,10 +432,10 @@ def test_nothing_is_decided_while_the_daemon_holds_without_a_reference():
 
     async def main(h):
         await h.start()
-        h.reference = None                   # hold_here after a link loss
+        h.owner.hold([0.0, 0.0, -10.0])      # hold_here after a link loss
         h.put("p1")
         await asyncio.sleep(0.1)
-        assert h.manager.calls == [] and await h.reactor.resume() is None
+        assert h.manager.calls == [] and await h.resume() is None
 
     run(main, h)
 
@@ -410,7 +472,7 @@ def test_the_monitor_rechecks_while_a_threat_is_known_and_a_leg_is_flown():
         await until(lambda: h.bus.events, "the monitor's decision")
         event = h.bus.events[0]
         assert event["trigger"] == "monitor" and event["event"] == "evade" and event["label"] == "evade left"
-        assert h.engaged[-1]["resume"] is True and h.observed_active() == ("evade-1", True)
+        assert h.engaged[-1]["resume"] is True and (h.reference.path_id, h.reference.resume) == ("evade-1", True)
         text, severity = h.texts[0]
         assert text.startswith("AVOID m1: evade left, ") and severity == "WARNING"
 
@@ -441,10 +503,10 @@ def test_resume_without_a_way_back_publishes_nothing_then_a_plan_back_is_publish
 
     async def main(h):
         await h.start()
-        first = await h.reactor.resume()
+        first = await h.resume()
         assert first.kind == "none" and first.resume
         assert h.bus.events == [] and h.texts == [] and h.engaged == []
-        second = await h.reactor.resume()
+        second = await h.resume()
         assert second.kind == "replan"
         assert [c[0] for c in h.manager.calls] == ["resume", "resume"]
         assert h.bus.events[0]["trigger"] == "resume" and h.engaged[0]["resume"] is False
@@ -461,7 +523,7 @@ def test_resume_waits_for_the_decision_under_way_and_never_overlaps_it():
         await h.start()
         h.put("p1")
         await until(h.manager.started.is_set, "a decision")
-        task = asyncio.ensure_future(h.reactor.resume())
+        task = asyncio.ensure_future(h.resume())
         await asyncio.sleep(0.05)
         assert not task.done()
         h.manager.gate.set()
@@ -477,7 +539,7 @@ def test_resume_outside_a_leg_asks_nothing():
 
     async def main(h):
         await h.start(leg=False)
-        assert await h.reactor.resume() is None and h.manager.calls == []
+        assert await h.resume() is None and h.manager.calls == []
 
     run(main, h)
 
@@ -491,7 +553,7 @@ def test_a_failing_statustext_does_not_disturb_the_decision():
         await h.start()
         h.put("p1")
         await until(lambda: h.bus.events, "the event")
-        assert h.engaged and h.reactor.decisions == 1
+        assert h.engaged and h.avoidance.decisions == 1
 
     run(main, h)
 
@@ -522,7 +584,7 @@ def test_alternatives_are_refreshed_at_the_leg_start_and_after_a_decision():
         await until(lambda: any(k == "alternatives" for k, _ in h.records), "the leg-start alternatives")
         h.put("p1")
         await until(lambda: sum(k == "alternatives" for k, _ in h.records) >= 2, "alternatives after the decision")
-        assert h.reactor.decision_state.alternatives and h.bus.paths[-1]["alternatives"][0]["path_id"] == "alt0-1"
+        assert h.avoidance.state.alternatives and h.bus.paths[-1]["alternatives"][0]["path_id"] == "alt0-1"
 
     run(main, h)
 
@@ -569,31 +631,18 @@ def test_a_local_threat_goes_the_way_of_a_zenoh_put_and_is_republished():
     run(main, h)
 
 
-# ---------------------------------------------------------------------------- the alternatives gate
-def test_the_gate_skips_a_refresh_that_cannot_change_anything():
-    gate = AlternativesGate()
-    quiet = (1, "world", "leg0")                        # no threat held: leg, world, active path id
-    runs = [gate.should_run(quiet)]
-    gate.remember(quiet)                                # it found alternatives
-    runs.append(gate.should_run(quiet))                 # nothing changed
-    new_reference = (1, "world", "replan-1")
-    runs.append(gate.should_run(new_reference))
-    gate.remember(new_reference)
-    runs += [gate.should_run(None), gate.should_run(None)]    # threats held: always
-    gate.remember(None)
-    runs.append(gate.should_run(new_reference))         # after a refresh with threats
-    assert runs == [True, False, True, True, True, True] and gate.skipped == 1
-
-
-def test_a_quiet_refresh_on_the_same_reference_is_skipped_by_the_reactor():
+# ---------------------------------------------------------------------------- alternatives without threats
+def test_a_quiet_refresh_on_the_same_reference_is_skipped():
     h = Harness(alternatives_k=2, monitor_period_s=60.0)
 
     async def main(h):
         await h.start()
         await until(lambda: any(k == "alternatives" for k, _ in h.records), "the leg-start alternatives")
-        await until(lambda: not h.reactor._alt_busy, "the refresh to end")
-        h.reactor.refresh_alternatives()
-        await until(lambda: h.reactor.alternatives_gate.skipped >= 1, "the skipped refresh")
-        assert sum(k == "alternatives" for k, _ in h.records) == 1
+        await until(lambda: not h.avoidance._alt_busy, "the refresh to end")
+        h.avoidance.refresh_alternatives()
+        assert h.avoidance.alternatives_skipped == 1 and h.manager.alternatives_planned == 1
+        h.owner.engage(Line(), "replan-9", t0_s=5.0)                 # a new reference: planned again
+        h.avoidance.refresh_alternatives()
+        await until(lambda: h.manager.alternatives_planned == 2, "the refresh on the new reference")
 
     run(main, h)
