@@ -89,8 +89,11 @@ SIZE_EXCEPTIONS = {
         "argument checks, forward/backward passes and yaw in one place; passes to be named",
     "companion/threats/codec.py::decode":
         "validates every field of the version-1 payload in order, naming the field (DESIGN 6)",
+    "companion/threats/transport/codec.py::decode":
+        "the same decoder after its move to transport/ (DESIGN 2)",
     "companion/threats/join.py::join_trajectory":
         "the one splice (lead, G2 corners, repair, profile from the current speed) and its checks",
+    "companion/threats/decision/join.py::join_trajectory": "the same splice after its move to decision/ (DESIGN 2)",
     "companion/threats/scenario.py::_event":
         "validates every key of a scenario event, naming the key",
     "companion/world/world.py::World":
@@ -107,8 +110,10 @@ SIZE_EXCEPTIONS = {
         "the same prediction after its move to heli_model/control/ (DESIGN 2)",
     "sim_vehicle/control/law.py::ControlLaw.step":
         "one control period (outer PID, LQI, integrators, saturation) written out for speed",
+    "heli_model/control/law.py::ControlLaw.step": "the same law after its move to heli_model/control/ (DESIGN 2)",
     "sim_vehicle/control/modal.py::run_modal":
         "the modal recursion with its rotation correction, one numerical routine",
+    "heli_model/control/modal.py::run_modal": "the same solver after its move to heli_model/control/ (DESIGN 2)",
     "sim_vehicle/dynamics.py::step_rk4":
         "one RK4 step written out (four stages, yaw and position kinematics) for speed",
     "heli_model/dynamics.py::step_rk4":
