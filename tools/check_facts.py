@@ -450,10 +450,26 @@ def cycle_findings(cycles: list[list[str]], modules) -> tuple[list[str], list[st
     return findings, notes
 
 
+def _line(text: str, m: re.Match) -> int:
+    return text.count("\n", 0, m.start()) + 1
+
+
+def text_facts(rel: str, text: str, facts: dict[str, list]) -> None:
+    """Append what the regular expressions find in ``text`` to ``facts`` (checks 2-5, 7)."""
+    for m in ARDUPILOT_NUMBER_RE.finditer(text):
+        fact = "MOTOR_INTERLOCK" if "INTERLOCK" in m.group(1) else m.group(1)
+        facts["ardupilot_numbers"].append((fact, f"{rel}:{_line(text, m)}: {m.group(1)}"))
+    for rx in (MODE_DICT_RE, MODE_ASSIGN_RE):
+        facts["mode_dicts"] += [f"{rel}:{_line(text, m)}: {m.group(0).strip()}" for m in rx.finditer(text)]
+    facts["pip"] += [f"{rel}:{_line(text, m)}" for m in POINT_IN_POLYGON_RE.finditer(text)]
+    facts["frames"] += [f"{rel}:{_line(text, m)}: class {m.group(1)}" for m in LOCAL_FRAME_CLASS_RE.finditer(text)]
+    facts["mav_ints"] += [f"{rel}:{_line(text, m)}: {m.group(0).strip()}" for m in MAV_INT_RE.finditer(text)]
+
+
 def check(root: Path = ROOT) -> list[Result]:
     """Run every check; returns one Result per check, in the module docstring's order."""
-    no_import, mode_dicts, pip, frames, mav_ints, records = [], [], [], [], [], []
-    ardupilot_numbers, io_in_numerics, sim_imports, sim_notes = [], [], [], []
+    facts: dict[str, list] = {k: [] for k in ("ardupilot_numbers", "mode_dicts", "pip", "frames", "mav_ints")}
+    no_import, records, io_in_numerics, sim_imports, sim_notes = [], [], [], [], []
     sizes: dict[str, str] = {}
     trees: dict[str, tuple[ast.AST, bool]] = {}
     files: dict[str, tuple[str, ast.AST]] = {}
@@ -466,34 +482,25 @@ def check(root: Path = ROOT) -> list[Result]:
         trees[module] = (tree, path.name == "__init__.py")
         files[module] = (rel, tree)
         sizes.update(size_findings(rel, tree))
+        text_facts(rel, text, facts)
+        records += [f"{rel}:{line}: class {name}" for name, line in mission_item_records(tree)]
         if in_prefixes(module, NUMERICS):
             tops = {m.split(".")[0] for m in imported_modules(tree, module, path.name == "__init__.py")}
             io_in_numerics += [f"{rel}: imports {lib}" for lib in sorted(tops & set(IO_LIBRARIES))]
-        for m in ARDUPILOT_NUMBER_RE.finditer(text):
-            fact = "MOTOR_INTERLOCK" if "INTERLOCK" in m.group(1) else m.group(1)
-            ardupilot_numbers.append((fact, f"{rel}:{text.count(chr(10), 0, m.start()) + 1}: {m.group(1)}"))
         if rel.startswith(("sim_vehicle/", "heli_model/", "heli_common/")):
             no_import += [f"{rel}:{n}: imports companion" for n in imports_package(tree, "companion")]
         if rel.startswith(("companion/", "heli_model/", "heli_common/")):
             found = [f"{rel}:{n}: imports sim_vehicle" for n in imports_package(tree, "sim_vehicle")]
             pending = rel.startswith("companion/") and not heli_model_exists
             (sim_notes if pending else sim_imports).extend(found)
-        for rx in (MODE_DICT_RE, MODE_ASSIGN_RE):
-            for m in rx.finditer(text):
-                mode_dicts.append(f"{rel}:{text.count(chr(10), 0, m.start()) + 1}: {m.group(0).strip()}")
-        for m in POINT_IN_POLYGON_RE.finditer(text):
-            pip.append(f"{rel}:{text.count(chr(10), 0, m.start()) + 1}")
-        for m in LOCAL_FRAME_CLASS_RE.finditer(text):
-            frames.append(f"{rel}:{text.count(chr(10), 0, m.start()) + 1}: class {m.group(1)}")
-        for m in MAV_INT_RE.finditer(text):
-            mav_ints.append(f"{rel}:{text.count(chr(10), 0, m.start()) + 1}: {m.group(0).strip()}")
-        records += [f"{rel}:{line}: class {name}" for name, line in mission_item_records(tree)]
     cycles, cycle_notes = cycle_findings(import_cycles(import_graph(trees)), trees)
     too_big, size_notes = exception_findings(sizes, SIZE_EXCEPTIONS, root, "SIZE_EXCEPTIONS")
     mixins, mixin_notes = exception_findings(mixin_findings(files), MIXIN_EXCEPTIONS, root, "MIXIN_EXCEPTIONS")
     if sim_notes:
         sim_notes.insert(0, f"pending until heli_model/ exists: {len(sim_notes)} companion imports of sim_vehicle")
     emulating, executor_notes = executor_findings(root)
+    mode_dicts, pip, frames, mav_ints = facts["mode_dicts"], facts["pip"], facts["frames"], facts["mav_ints"]
+    ardupilot_numbers = facts["ardupilot_numbers"]
     return [
         Result("sim_vehicle, heli_model and heli_common never import companion", not no_import, no_import, []),
         Result("no hand-written ArduCopter mode numbers", not mode_dicts, mode_dicts, []),

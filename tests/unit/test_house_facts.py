@@ -79,13 +79,10 @@ def test_check_facts_finds_cycles_and_io_in_numerics(tmp_path):
     assert results["ArduPilot numbers pymavlink lacks written once"]
 
 
-def test_real_tree_passes_in_well_under_ten_seconds():
-    """The real tree passes every check in process (with today's exception lists), quickly."""
-    import time
-    t0 = time.perf_counter()
-    results = check_facts.check(ROOT)
-    assert time.perf_counter() - t0 < 10.0
-    assert [r.name for r in results if not r.passed] == []
+def test_real_tree_passes():
+    """The real tree passes every check in process (with today's exception lists). The tool's
+    run time (about 1.5 s) is not asserted: timing goals are never wall-clock limits in tests."""
+    assert [r.name for r in check_facts.check(ROOT) if not r.passed] == []
 
 
 def test_sizes_find_long_classes_functions_and_stale_exceptions(tmp_path, monkeypatch):
