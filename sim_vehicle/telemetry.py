@@ -177,7 +177,8 @@ class Telemetry:
         ground = math.hypot(v[0], v[1])
         air = float(math.hypot(*(v[:2] - a.airframe.wind.current()[:2])))
         heading = int(round(math.degrees(a.euler_rad[2]))) % 360
-        throttle = int(round(min(100.0, max(0.0, 50.0 + 50.0 * a.airframe.delta[3])))) if a.armed and not a.landed else 0
+        collective = a.airframe.delta[3]
+        throttle = int(round(min(100.0, max(0.0, 50.0 + 50.0 * collective)))) if a.armed and not a.landed else 0
         _, _, alt = a.position_lla()
         return self.mav.vfr_hud_encode(air, ground, heading, throttle, alt, -v[2])
 

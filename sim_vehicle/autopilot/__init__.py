@@ -75,7 +75,9 @@ from sim_vehicle.autopilot.mode import (
     mode_name,
 )
 from sim_vehicle.autopilot.mode_context import ModeContext
-from sim_vehicle.autopilot.mode_guided import MAX_TAKEOFF_ALT_M, TARGET_INTEGRATION_MAX_S, check_setpoint, integrate_target
+from sim_vehicle.autopilot.mode_guided import (
+    MAX_TAKEOFF_ALT_M, TARGET_INTEGRATION_MAX_S, check_setpoint, integrate_target,
+)
 from sim_vehicle.autopilot.navigation import Navigation
 
 __all__ = [

@@ -169,12 +169,12 @@ class Autopilot:
 
     @property
     def armed(self) -> bool:
-        """True while armed (:attr:`Arming.armed <sim_vehicle.autopilot.arming.Arming.armed>`)."""
+        """True while armed (:class:`~sim_vehicle.autopilot.arming.Arming`'s state)."""
         return self.arming.armed
 
     @property
     def landed(self) -> bool:
-        """True while on the ground (:attr:`GroundContact.landed <sim_vehicle.autopilot.ground_contact.GroundContact.landed>`)."""
+        """True while on the ground (the land detector's, :class:`~sim_vehicle.autopilot.ground_contact.GroundContact`)."""
         return self.ground.landed
 
     # ------------------------------------------------------------------ modes

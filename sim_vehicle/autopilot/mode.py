@@ -4,7 +4,8 @@ As ArduCopter's ``Mode`` (``mode.h``): each mode says whether it allows arming a
 the vehicle does when it is entered, and what it runs every control tick. A mode keeps no state
 of its own; it acts on the vehicle it is given through the small interface of
 :mod:`~sim_vehicle.autopilot.mode_context` (the :class:`~sim_vehicle.autopilot.Autopilot`
-provides it), as ArduPilot's modes act on ``copter``. With no RC pilot, STABILIZE and ALT_HOLD hold position like LOITER.
+provides it), as ArduPilot's modes act on ``copter``. With no RC pilot, STABILIZE and ALT_HOLD hold
+position like LOITER.
 """
 
 from __future__ import annotations

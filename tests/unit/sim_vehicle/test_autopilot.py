@@ -343,8 +343,8 @@ def test_fence_breach_switches_to_rtl_when_enabled(model):
     fence_settings = replace_path(VehicleSettings(), "flight.fence_enable", 1)
     vehicle = make_vehicle(model, fence_settings)
     corners = [north_east_deg(n, e) for n, e in ((-20, -20), (20, -20), (20, 20), (-20, 20))]
-    vehicle.fence.set_items([item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0) for i, (lat, lon) in enumerate(corners)]
-                      + [item(4, ap.CMD_FENCE_CIRCLE_EXCLUSION, *north_east_deg(-10.0, 0.0), p1=3.0)])
+    polygon = [item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0) for i, (lat, lon) in enumerate(corners)]
+    vehicle.fence.set_items(polygon + [item(4, ap.CMD_FENCE_CIRCLE_EXCLUSION, *north_east_deg(-10.0, 0.0), p1=3.0)])
     assert len(vehicle.fence.area.inclusion_polygons) == 1 and len(vehicle.fence.area.exclusion_circles) == 1
     vehicle.set_mode(ap.GUIDED)
     arm_and_run_up(vehicle)
@@ -365,7 +365,8 @@ def test_fence_breach_switches_to_rtl_when_enabled(model):
 def test_fence_is_not_enforced_by_default(model):
     vehicle = airborne_at_10m(model)
     corners = [north_east_deg(n, e) for n, e in ((-5, -5), (5, -5), (5, 5), (-5, 5))]
-    vehicle.fence.set_items([item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0) for i, (lat, lon) in enumerate(corners)])
+    vehicle.fence.set_items([item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0)
+                             for i, (lat, lon) in enumerate(corners)])
     vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(20.0, 0.0, -10.0)))
     fly(vehicle, 10.0)
     assert vehicle.mode == ap.GUIDED and vehicle.fence.breached is None
