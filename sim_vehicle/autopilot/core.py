@@ -111,7 +111,7 @@ class Autopilot:
         self._steps = 0
         self._events: list[tuple] = []
         emit = self._events.append
-        current_settings = lambda: self.settings  # noqa: E731 - the parts always read the settings in use
+        current_settings = lambda: self.settings  # noqa: E731 (the parts always read the settings in use)
         self.airframe = Airframe(model, settings, yaw_deg, rng)
         self.arming = Arming(self, current_settings, emit)
         self.navigation = Navigation(self.airframe, self.frames, current_settings, emit, math.radians(yaw_deg))
