@@ -3,8 +3,8 @@
 As ArduCopter's modes act on ``copter`` through its public members, the modes here act on a
 :class:`ModeContext`: the vehicle's state, and the parts of the navigation, the mission, the
 land detector and the arming they need, each by its public methods. The
-:class:`~sim_vehicle.autopilot.Autopilot` provides it; a mode never imports it (no import cycle)
-and never touches another object's private members.
+:class:`~sim_vehicle.autopilot.Autopilot` provides it. No mode module imports the core (no import
+cycle, not even for type checking) or touches another object's private members.
 """
 
 from __future__ import annotations
