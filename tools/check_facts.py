@@ -94,8 +94,6 @@ SIZE_EXCEPTIONS = {
         "427 lines: the world's exact queries (free, segment, clearance, overlay) and their numpydoc",
     "companion/world/world.py::World.segment_free":
         "the exact segment test per obstacle kind with its bounds handling and numpydoc",
-    "sim_vehicle/autopilot/core.py::Autopilot":
-        "31 methods: the mixins' host (MIXIN_EXCEPTIONS); shrinks when they become collaborators",
     "sim_vehicle/cli.py::run":
         "builds the whole vehicle (model, autopilot, server, traffic, clock) from the arguments",
     "heli_model/control/closed_loop.py::simulate_closed_loop":
@@ -107,14 +105,6 @@ SIZE_EXCEPTIONS = {
 }
 #: ``"path::qualname"`` -> why this class may be or use a mixin today.
 MIXIN_EXCEPTIONS = {
-    "sim_vehicle/autopilot/arming.py::ArmingMixin": "one of the Autopilot's parts, to become a collaborator",
-    "sim_vehicle/autopilot/mission.py::MissionMixin": "one of the Autopilot's parts, to become a collaborator",
-    "sim_vehicle/autopilot/fence.py::FenceMixin": "one of the Autopilot's parts, to become a collaborator",
-    "sim_vehicle/autopilot/ground_contact.py::GroundContactMixin":
-        "one of the Autopilot's parts, to become a collaborator",
-    "sim_vehicle/autopilot/navigation.py::NavigationMixin":
-        "one of the Autopilot's parts, to become a collaborator",
-    "sim_vehicle/autopilot/core.py::Autopilot": "the host of the five mixins above",
     "companion/daemon.py::CompanionDaemon":
         "background, mission and leg tasks as bases; the flight executor and service/ take them apart",
     "companion/link/vehicle.py::VehicleLink":
@@ -127,8 +117,6 @@ MIXIN_EXCEPTIONS = {
 #: Package -> why an import cycle wholly inside it is tolerated today (an entry of a package with
 #: no cycle left is a finding; of a package that does not exist, a note).
 CYCLE_EXCEPTIONS = {
-    "sim_vehicle.autopilot":
-        "the modes annotate the Autopilot they are handed (TYPE_CHECKING); a Protocol of what they call ends it",
 }
 #: Base classes that never make a class a mixin (stdlib and library bases, by their last name).
 LIBRARY_BASES = frozenset({"object", "Exception", "BaseException", "ValueError", "TypeError", "RuntimeError",
