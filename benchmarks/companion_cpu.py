@@ -219,7 +219,7 @@ def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path 
                     if sent:
                         time.sleep(2.0)
                         for threat in sent:
-                            bus.delete_threat(threat.id)
+                            bus.client.delete_threat(threat.id)
                     flight.companion.wait(300)
         summary = demo.last_json_line(flight.log) or {}
     finally:

@@ -155,13 +155,13 @@ def sim_vehicle():
 
 @contextlib.asynccontextmanager
 async def link_sender(port: int):
-    """A real VehicleLink to the sim-vehicle on ``port``; yields ``link.send_setpoint``."""
+    """A real VehicleLink to the sim-vehicle on ``port``; yields ``link.direct.send_setpoint``."""
     from companion.link import VehicleLink
     link = VehicleLink()
     await link.connect(f"udpout://127.0.0.1:{port}", timeout_s=20)
     try:
-        await link.wait_ready(10)
-        yield link.send_setpoint
+        await link.waits.wait_ready(10)
+        yield link.direct.send_setpoint
     finally:
         await link.aclose()
 

@@ -42,7 +42,7 @@ def storm(bus: ThreatBus, rate_hz: float, seconds: float) -> int:
     total = int(rate_hz * seconds)
     while sent < total:
         k = sent % 50
-        bus.put_threat(Threat(f"storm{k}", "moving", "local_ned", (300.0 + k, 300.0 + 0.01 * sent, -15.0),
+        bus.client.put_threat(Threat(f"storm{k}", "moving", "local_ned", (300.0 + k, 300.0 + 0.01 * sent, -15.0),
                               (0.0, 1.0, 0.0), 2.0, 60.0))
         sent += 1
         delay = t0 + sent / rate_hz - time.monotonic()

@@ -464,9 +464,9 @@ def run_storm(duration_s: float, rate_hz: float = 1000.0, ids: int = 50) -> dict
         sub = ThreatBus(1, listen=[endpoint]).open()
         pub = ThreatBus(1, listen=[], connect=[endpoint]).open()
         try:
-            sub.subscribe(on_update, loop=loop)
+            sub.inbound.subscribe(on_update, loop=loop)
             for j in range(ids):
-                await asyncio.to_thread(pub.wait_for_subscriber, 10.0, f"s{j}")
+                await asyncio.to_thread(pub.client.wait_for_subscriber, 10.0, f"s{j}")
 
             def publish() -> None:
                 t0 = time.monotonic()
@@ -477,7 +477,7 @@ def run_storm(duration_s: float, rate_hz: float = 1000.0, ids: int = 50) -> dict
                     th = Threat(f"s{k % ids}", "moving", "local_ned", (float(k), 1.0, -20.0),
                                 (1.0, 0.0, 0.0), 3.0, 60.0, 0.0)
                     sent_at[k] = time.monotonic()
-                    pub.put_threat(th)
+                    pub.client.put_threat(th)
 
             timer = asyncio.create_task(timer_50hz())
             t_start = time.monotonic()

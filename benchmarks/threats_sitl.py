@@ -125,7 +125,7 @@ def fly_series_flight(index: int, out_dir: Path, speedup: float, rng: np.random.
                 threats = [t for t in threats if t is not None]
                 pos, vel = track_state(track)
                 for th in threats:
-                    bus.put_threat(as_sent(th, rng))
+                    bus.client.put_threat(as_sent(th, rng))
                 encounters.append({"flight": index, "leg": leg, "category": category, "kinds": kinds,
                                    "t_put_s": status["t_s"], "threats": threats, "pos": pos, "vel": vel})
             flight.companion.wait(400.0)

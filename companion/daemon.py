@@ -234,7 +234,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         if not self.link.connected:
             log.info("STATUSTEXT %r not sent: the link is down", text)
             return
-        self.link.send_statustext(text, severity=severity)
+        self.link.direct.send_statustext(text, severity=severity)
 
     def hold_here(self, pos_ned_m, reason: str) -> None:
         """Hold ``pos_ned_m`` (a hover) as the active reference."""
@@ -292,7 +292,8 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         link = self.settings.link
         scale, source = link.time_scale, "given"
         if scale is None:
-            got = await self.link.read_params(["SIM_SPEEDUP"], timeout_s=self.settings.startup.param_timeout_s)
+            got = await self.link.commands.read_params(["SIM_SPEEDUP"],
+                                                       timeout_s=self.settings.startup.param_timeout_s)
             value = got.get("SIM_SPEEDUP", math.nan)
             scale, source = ((value, "the vehicle's SIM_SPEEDUP") if math.isfinite(value) and value > 0
                              else (1.0, "real time: the vehicle has no SIM_SPEEDUP"))
@@ -309,11 +310,11 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
 
     async def _fly(self) -> FlightSummary:
         s = self.settings
-        await self.link.wait_ready(s.link.connect_timeout_s)
+        await self.link.waits.wait_ready(s.link.connect_timeout_s)
         self.resolve_sysid()
         s = self.settings
-        home = await self.link.wait_home(s.link.connect_timeout_s)
-        await self.link.wait_origin(s.link.origin_timeout_s)
+        home = await self.link.waits.wait_home(s.link.connect_timeout_s)
+        await self.link.waits.wait_origin(s.link.origin_timeout_s)
         frames = self.link.set_planning_home(home)
         self.home_lla = home
         tele = self.link.telemetry                   # positions about home from here on
@@ -324,8 +325,8 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
         alt = await self.plan_flight(plan, home, tele, current_seq)
         previous = None
         if self.mission_path is not None:          # planned: every item is reachable
-            previous = await self.link.download_plan()
-            await self.link.upload_plan(plan)
+            previous = await self.link.missions.download_plan()
+            await self.link.missions.upload_plan(plan)
             self.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
         if s.zenoh.enabled:
             self.threats = ThreatReactor(
@@ -350,16 +351,16 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
             if previous is not None and not is_airborne(self.link.telemetry, s.startup.join_min_height_m):
                 await self.restore_mission(previous)
             raise
-        self.streamer = SetpointStreamer(self.link.send_setpoint, rate_hz=s.link.setpoint_rate_hz)
+        self.streamer = SetpointStreamer(self.link.direct.send_setpoint, rate_hz=s.link.setpoint_rate_hz)
         self.recorder.pace(self.streamer.call_after_next_tick)     # the record is written between sends
         self.hold_here(self.link.telemetry.pos_ned_m,
                        "joined in the air" if self.summary.joined else "takeoff complete")
         self.streamer.start()
-        self.link.batch_reads(self.streamer)                      # telemetry taken at the stream's ticks
+        self.link.inbound.batch_reads(self.streamer)              # telemetry taken at the stream's ticks
         for leg in self.legs:
             await self.fly_leg(leg)
         self.hold_here(self.link.telemetry.pos_ned_m, "mission legs done")
-        self.link.batch_reads(None)
+        self.link.inbound.batch_reads(None)
         await self.streamer.stop()
         await self.finish(self.local_mission.end_action)
         self.summary.outcome = "completed"
@@ -368,7 +369,7 @@ class CompanionDaemon(BackgroundTasks, MissionTasks, LegTasks):
     async def shutdown(self) -> None:
         """Stop streaming and background tasks, write the summary, close the link."""
         if self.streamer is not None:
-            self.link.batch_reads(None)
+            self.link.inbound.batch_reads(None)
             await self.streamer.stop()
             jitter = self.streamer.stats()
             self.record("event", name="setpoint_jitter", **jitter.as_dict())

@@ -211,11 +211,11 @@ def inject(watcher: FlightWatcher, injections, timeout_s: float, *, done=None) -
         for injection in [i for i in pending if watcher.due(i)]:
             pending.remove(injection)
             if injection.raw_payload is not None:
-                watcher.bus.put_raw(injection.threat_id, injection.raw_payload)
+                watcher.bus.client.put_raw(injection.threat_id, injection.raw_payload)
                 log.info("put a raw payload on %s", injection.threat_id)
                 continue
             threat = place(injection, watcher)
-            watcher.bus.put_threat(threat)
+            watcher.bus.client.put_threat(threat)
             sent.append(threat)
             log.info("put %s %s at %s", threat.kind, threat.id, np.round(threat.position, 1))
     return sent
@@ -307,7 +307,7 @@ def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
                 sent = inject(watcher, injections, timeout_s, done=lambda: flight.companion.poll() is not None)
                 time.sleep(2.0)
                 for threat in sent:
-                    bus.delete_threat(threat.id)
+                    bus.client.delete_threat(threat.id)
             flight.companion.wait(timeout_s)
     summary = last_json_line(flight.log)
     if flight.companion.returncode != 0 or summary is None:

@@ -120,7 +120,7 @@ async def upload_plan(plan, url: str, timeout_s: float, key=None) -> None:
         home = await home_or_none(link)
         if plan.planned_home is None:
             check_flyable(plan, home)
-        await asyncio.wait_for(link.upload_plan(plan, home_lla=plan.planned_home or home),
+        await asyncio.wait_for(link.missions.upload_plan(plan, home_lla=plan.planned_home or home),
                                timeout=max(timeout_s, 30.0))
     except asyncio.TimeoutError:
         raise LinkError("the upload did not finish in time; the vehicle keeps its previous "
@@ -135,7 +135,7 @@ async def download_plan(url: str, timeout_s: float, key=None):
     link = VehicleLink(role="gcs", signing_key=key)
     await link.connect(url, timeout_s=timeout_s)
     try:
-        return await asyncio.wait_for(link.download_plan(), timeout=max(timeout_s, 30.0))
+        return await asyncio.wait_for(link.missions.download_plan(), timeout=max(timeout_s, 30.0))
     except asyncio.TimeoutError:
         raise LinkError("the download did not finish in time") from None
     finally:
@@ -145,6 +145,6 @@ async def download_plan(url: str, timeout_s: float, key=None):
 async def home_or_none(link, timeout_s: float = 2.0):
     """The vehicle's home if it reports one soon (used for the mission's seq 0)."""
     try:
-        return await link.wait_home(timeout_s)
+        return await link.waits.wait_home(timeout_s)
     except LinkError:
         return None

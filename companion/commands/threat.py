@@ -198,10 +198,10 @@ def _open_bus(args):
 
 
 def _wait_subscriber(bus, args, threat_id: str) -> bool:
-    if bus.wait_for_subscriber(args.wait, threat_id):
+    if bus.client.wait_for_subscriber(args.wait, threat_id):
         return True
     hint = (" or does its access control refuse this identity?" if bus.security is not None else "")
-    print(f"companion threat: warning: no subscriber of {bus.key(bus.threat_leaf(threat_id))} within "
+    print(f"companion threat: warning: no subscriber of {bus.key(bus.client.threat_leaf(threat_id))} within "
           f"{args.wait:g} s (is `companion run` listening{hint}); sending anyway", file=sys.stderr)
     return False
 
@@ -225,30 +225,30 @@ def run(args) -> int:
     with _open_bus(args) as bus:
         if action == "add":
             ok = _wait_subscriber(bus, args, threat.id)
-            bus.put_threat(threat)
-            print(f"PUT {bus.key(bus.threat_leaf(threat.id))}: {describe(threat)}")
+            bus.client.put_threat(threat)
+            print(f"PUT {bus.key(bus.client.threat_leaf(threat.id))}: {describe(threat)}")
             return 0 if ok else 1
         if action == "move":
             previous = None
             if args.radius is None or _position(args) is None:
-                held = {t.uid: t for t in bus.list_threats(args.wait)}
-                uid = args.id if bus.source is None else f"{bus.source}/{args.id}"
+                held = {t.uid: t for t in bus.client.list_threats(args.wait)}
+                uid = args.id if bus.client.source is None else f"{bus.client.source}/{args.id}"
                 previous = held.get(uid)
                 if previous is None:
                     raise ThreatPayloadError(f"--id: the companion holds no threat {args.id!r} "
                                              f"(add it first, or give --pos and --radius)")
             threat = threat_from_args(args, previous) if previous is not None else _full_move(args)
             ok = _wait_subscriber(bus, args, threat.id)
-            bus.put_threat(threat)
-            print(f"PUT {bus.key(bus.threat_leaf(threat.id))}: {describe(threat)}")
+            bus.client.put_threat(threat)
+            print(f"PUT {bus.key(bus.client.threat_leaf(threat.id))}: {describe(threat)}")
             return 0 if ok else 1
         if action == "remove":
             from companion.threats.transport import codec
 
             codec.check_id(args.id, "--id")
             ok = _wait_subscriber(bus, args, args.id)
-            bus.delete_threat(args.id)
-            print(f"DELETE {bus.key(bus.threat_leaf(args.id))}")
+            bus.client.delete_threat(args.id)
+            print(f"DELETE {bus.key(bus.client.threat_leaf(args.id))}")
             return 0 if ok else 1
         if action == "list":
             return list_held(bus, args)
@@ -265,7 +265,7 @@ def list_held(bus, args) -> int:
 
     from companion.threats.transport import codec
 
-    threats = bus.list_threats(args.wait)
+    threats = bus.client.list_threats(args.wait)
     if args.json:
         for t in threats:
             print(json.dumps({**codec.to_dict(t), "source": t.source}))
@@ -300,9 +300,9 @@ def play(bus, scenario, args) -> int:
         if delay > 0:
             time.sleep(delay)
         if ev.action == "remove":
-            bus.delete_threat(ev.threat_id)
-            print(f"t+{ev.at_s:7.2f} s  DELETE {bus.key(bus.threat_leaf(ev.threat_id))}", flush=True)
+            bus.client.delete_threat(ev.threat_id)
+            print(f"t+{ev.at_s:7.2f} s  DELETE {bus.key(bus.client.threat_leaf(ev.threat_id))}", flush=True)
         else:
-            bus.put_threat(ev.threat)
+            bus.client.put_threat(ev.threat)
             print(f"t+{ev.at_s:7.2f} s  PUT    {describe(ev.threat)}", flush=True)
     return 0

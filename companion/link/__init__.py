@@ -1,11 +1,12 @@
 """The vehicle link: MAVSDK 4.x connection, telemetry, missions, commands and the 50 Hz
 GUIDED setpoint stream (DESIGN.md section 5).
 
-Modules: ``vehicle`` (VehicleLink: the connection, made of ``watchers`` (telemetry
-subscriptions), ``waits``, ``vehicle_commands`` (COMMAND_LONG, parameters), ``direct_messages``
-(raw messages in, setpoints and STATUSTEXT out) and ``mission_transfer``), ``telemetry`` (the
-snapshot), ``streams`` (the telemetry asked for), ``frames`` (home vs the vehicle's EKF origin),
-``startup`` (arming, motor interlock, rotor run-up, takeoff, joining), ``setpoints`` (the 50 Hz
+Modules: ``vehicle`` (VehicleLink: the connection and its lifecycle, holding one part per job
+as a member: ``watchers`` (telemetry subscriptions), ``waits``, ``vehicle_commands``
+(COMMAND_LONG, parameters), ``message_tap`` (raw messages in), ``direct_messages`` (setpoints
+and STATUSTEXT out) and ``mission_transfer``; ``session``: MAVSDK's handles the parts share;
+``ports``: the Protocols the parts call), ``telemetry`` (the snapshot), ``streams`` (the
+telemetry asked for), ``frames`` (home vs the vehicle's EKF origin), ``setpoints`` (the 50 Hz
 stream), ``gate`` and ``transport`` (MAVLink signing in front of MAVSDK).
 
 MAVSDK is imported lazily (inside ``VehicleLink.connect``), so importing this package is cheap.

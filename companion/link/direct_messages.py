@@ -1,30 +1,26 @@
-"""The link's raw traffic: messages in (``messages``), and messages out without waiting
-(``send_message``, the GUIDED setpoint, STATUSTEXT to the ground stations).
+"""Messages out without waiting: ``send_message``, the GUIDED setpoint, and STATUSTEXT to the
+ground stations (``VehicleLink.direct``).
 
-Messages in come from the gate, which parses every frame anyway (``companion.link.gate``): the
-types someone reads are handed to the loop in batches as field dicts, without MAVSDK's JSON
-round trip. The 50 Hz SET_POSITION_TARGET_LOCAL_NED (position + velocity + acceleration + yaw,
-type_mask from what is given) is encoded here and written by the gate
-(``GateThread.send_message``); the rare sends (``send_message``, STATUSTEXT: broadcast, routed
-by the autopilot to its other links) use ``MavlinkDirect.send_message`` of MAVSDK's synchronous
-plugin (a ~20 us ctypes call). None of them blocks the event loop.
+The 50 Hz SET_POSITION_TARGET_LOCAL_NED (position + velocity + acceleration + yaw, type_mask
+from what is given) is encoded here and written by the gate (``GateThread.send_message``); the
+rare sends (``send_message``, STATUSTEXT: broadcast, routed by the autopilot to its other links)
+use ``MavlinkDirect.send_message`` of MAVSDK's synchronous plugin (a ~20 us ctypes call). None of
+them blocks the event loop. Messages in are ``companion.link.message_tap``.
 """
 
 from __future__ import annotations
 
-import asyncio
-import collections
 import json
 import logging
 import time
-from typing import AsyncIterator
+from typing import Callable
 
 from heli_common.mavlink_ids import enum_names
 
 from companion.errors import LinkError
 from companion.link.frames import LinkFrames
+from companion.link.session import LinkSession
 from companion.link.setpoint_frame import SETPOINT_MESSAGE, SetpointFrame, setpoint_values
-from companion.link.transport import TAP_HANDOVER_PERIOD_S
 
 log = logging.getLogger(__name__)
 
@@ -44,93 +40,28 @@ def setpoint_fields(time_boot_ms: int, target_system: int, target_component: int
 
 
 class DirectMessages:
-    """The MavlinkDirect traffic of a ``VehicleLink`` (a part of it: it uses the link's MAVSDK
-    handles and frames, set by ``connect`` and ``set_planning_home``)."""
+    """The link's sends (``VehicleLink.direct``).
 
-    target_system: int
-    target_component: int
-    frames: LinkFrames
-    _mavsdk: object
-    _system: object
-    _direct_sync: object
-    _t0: float
-    _readers: dict
-    _tap_batches: collections.deque       # batches of (type, fields) the gate read, for the loop
-    _taps_streamer: object                # the setpoint stream that takes them (``batch_reads``)
-    gate: object
+    Parameters
+    ----------
+    session : LinkSession
+        The connection: its gate, MavlinkDirect plugin and target.
+    frames : callable() -> LinkFrames
+        The link's current frames (setpoint positions are about the planning home).
+    """
 
-    def _require_connected(self) -> None:
-        if self._system is None or self._mavsdk is None:
-            raise LinkError("the link is not connected (call connect() first)")
-
-    def _from_vehicle(self, fields: dict) -> bool:
-        return fields.get("_sysid") == self.target_system
-
-    async def messages(self, name: str) -> AsyncIterator[dict]:
-        """Raw MAVLink messages named ``name`` (e.g. ``"SERVO_OUTPUT_RAW"``) as field dicts.
-
-        Each dict has the message fields plus ``"_sysid"``, ``"_compid"`` and ``"_t_s"``
-        (monotonic arrival time). They come straight from the gate (``companion.link.gate``:
-        the frames it admits, parsed once on its thread, ``tapped_fields``), not through MAVSDK;
-        every reader of a type gets the same dict: read it, do not change it.
-        """
-        self._require_connected()
-        queue: asyncio.Queue[dict] = asyncio.Queue()
-        readers = self._readers.setdefault(name, set())
-        readers.add(queue)
-        self.gate.inbound.tapped.add(name)
-        try:
-            while True:
-                yield await queue.get()
-        finally:
-            readers.discard(queue)
-            if not readers and self.gate is not None:
-                self.gate.inbound.tapped.discard(name)
-
-    def batch_reads(self, streamer=None) -> None:
-        """While the setpoint ``streamer`` runs (None: from now on, no longer), the gate reads
-        the vehicle's datagrams in batches every ``TAP_HANDOVER_PERIOD_S``
-        (``GateThread.batch_reads``) and the messages it read are taken at the stream's next
-        tick (``SetpointStreamer.tick_hooks``) instead of waking the loop: the companion's about
-        40 telemetry datagrams a second then cost the gate 10 wake-ups and the loop none."""
-        if self.gate is None:
-            return
-        if self._taps_streamer is not None:
-            self._taps_streamer.tick_hooks.remove(self._take_taps)
-        self._taps_streamer = streamer
-        if streamer is not None:
-            streamer.tick_hooks.append(self._take_taps)
-        self.gate.batch_reads(TAP_HANDOVER_PERIOD_S if streamer is not None else 0.0)
-        self._take_taps()
-
-    def _take_taps(self) -> None:
-        """On the loop: the messages the gate read, to their readers (``messages``)."""
-        batches = self._tap_batches
-        while batches:
-            for name, fields in batches.popleft():
-                for queue in self._readers.get(name, ()):
-                    queue.put_nowait(fields)
-
-    def _tap_from_gate_thread(self, loop: asyncio.AbstractEventLoop):
-        """The gate's ``on_tap``: keep each batch for the loop, and wake the loop for it unless
-        the setpoint stream's next tick takes it (``batch_reads``)."""
-        def on_tap(batch: list) -> None:
-            self._tap_batches.append(batch)
-            streamer = self._taps_streamer
-            if streamer is None or not streamer.running:     # a stream that stopped takes none
-                try:
-                    loop.call_soon_threadsafe(self._take_taps)
-                except RuntimeError:           # the loop is closed: the link is closing
-                    pass
-        return on_tap
+    def __init__(self, session: LinkSession, frames: Callable[[], LinkFrames]) -> None:
+        self._session = session
+        self._frames = frames
 
     def send_message(self, name: str, fields: dict) -> None:
         """Send one MAVLink message ``name`` with ``fields`` now (non-blocking)."""
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
-        self._require_connected()
-        self._direct_sync.send_message(MavlinkMessage(name, 0, 0, self.target_system,
-                                                      self.target_component, json.dumps(fields)))
+        session = self._session
+        session.require_connected()
+        session.direct.send_message(MavlinkMessage(name, 0, 0, session.target_system,
+                                                   session.target_component, json.dumps(fields)))
 
     def send_setpoint(self, pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
                       yaw_rate_rad_s=None) -> None:
@@ -142,19 +73,20 @@ class DirectMessages:
         directly (``GateThread.send_message``: encoded and signed here, from MAVSDK's address),
         through MAVSDK only before the gate knows that address.
         """
-        self._require_connected()
+        session = self._session
+        session.require_connected()
         if pos_ned_m is not None:
-            pos_ned_m = self.frames.to_origin_floats(pos_ned_m)
-        values = setpoint_values(int((time.monotonic() - self._t0) * 1000.0), self.target_system,
-                                 self.target_component, pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad,
+            pos_ned_m = self._frames().to_origin_floats(pos_ned_m)
+        values = setpoint_values(int((time.monotonic() - session.t0) * 1000.0), session.target_system,
+                                 session.target_component, pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad,
                                  yaw_rate_rad_s)
-        if self.gate is not None and self.gate.send_message(SetpointFrame(values)):
+        if session.gate is not None and session.gate.send_message(SetpointFrame(values)):
             return
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         fields = dict(zip(SETPOINT_MESSAGE.ordered_fieldnames, values))
-        self._direct_sync.send_message(MavlinkMessage(SETPOINT_MESSAGE.msgname, 0, 0, self.target_system,
-                                                      self.target_component, json.dumps(fields)))
+        session.direct.send_message(MavlinkMessage(SETPOINT_MESSAGE.msgname, 0, 0, session.target_system,
+                                                   session.target_component, json.dumps(fields)))
 
     def send_statustext(self, text: str, severity: int | str = "NOTICE") -> None:
         """Send one STATUSTEXT to the ground stations (non-blocking; call from the loop thread).
@@ -177,7 +109,7 @@ class DirectMessages:
         """
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
-        self._require_connected()
+        self._session.require_connected()
         name = severity.upper().removeprefix("MAV_SEVERITY_") if isinstance(severity, str) else None
         level = MAV_SEVERITY_NAMES.index(name) if name in MAV_SEVERITY_NAMES else severity
         if not (isinstance(level, int) and not isinstance(level, bool) and 0 <= level < len(MAV_SEVERITY_NAMES)):
@@ -185,5 +117,5 @@ class DirectMessages:
                             f"{', '.join(MAV_SEVERITY_NAMES)}, got {severity!r}")
         body = str(text).encode("ascii", "replace").decode("ascii")[:STATUSTEXT_MAX_CHARS]
         fields = {"severity": level, "text": body, "id": 0, "chunk_seq": 0}
-        self._direct_sync.send_message(MavlinkMessage("STATUSTEXT", 0, 0, 0, 0, json.dumps(fields)))
+        self._session.direct.send_message(MavlinkMessage("STATUSTEXT", 0, 0, 0, 0, json.dumps(fields)))
         log.debug("STATUSTEXT %d %r sent", level, body)

@@ -1,7 +1,8 @@
-"""Mission, fence and rally transfer with MAVSDK's MissionRaw (MISSION_ITEM_INT; ArduPilot's home
-at mission seq 0), like a ground station: an upload is all or nothing (a failed list restores
-the lists already replaced from a download taken before), and an empty list is cleared with
-MISSION_CLEAR_ALL confirmed by MISSION_ACK (MissionRaw refuses to upload an empty list).
+"""Mission, fence and rally transfer (``VehicleLink.missions``) with MAVSDK's MissionRaw
+(MISSION_ITEM_INT; ArduPilot's home at mission seq 0), like a ground station: an upload is all
+or nothing (a failed list restores the lists already replaced from a download taken before),
+and an empty list is cleared with MISSION_CLEAR_ALL confirmed by MISSION_ACK (MissionRaw
+refuses to upload an empty list).
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ import json
 import logging
 
 from companion.errors import LinkError, MissionError
+from companion.link.ports import MessageSource
+from companion.link.session import LinkSession
 from companion.mission.model import MissionPlan
 from companion.mission.raw import RawItem, fence_to_raw, mission_to_raw, rally_to_raw, raw_to_plan
 
@@ -35,25 +38,31 @@ def from_mavsdk_item(item) -> RawItem:
 
 
 class MissionTransfer:
-    """The mission transfers of a ``VehicleLink`` (a part of it: it uses the link's
-    ``_require_connected``, ``messages``, MavlinkDirect, MissionRaw plugin and the mission lock
-    made by ``connect``)."""
+    """The mission transfers of the link (``VehicleLink.missions``), one at a time.
 
-    target_system: int
-    target_component: int
-    _mission: object
-    _direct_sync: object
-    _mission_lock: asyncio.Lock | None
+    Parameters
+    ----------
+    session : LinkSession
+        The connection: MAVSDK's MissionRaw plugin, MavlinkDirect (MISSION_CLEAR_ALL), the target.
+    source : MessageSource
+        Received messages (MISSION_ACK).
+    """
+
+    def __init__(self, session: LinkSession, source: MessageSource) -> None:
+        self._session = session
+        self._source = source
+        self._lock = asyncio.Lock()
 
     async def download_raw(self) -> tuple[list[RawItem], list[RawItem], list[RawItem]]:
         """Download the mission, fence and rally lists as ``RawItem`` lists."""
         from mavsdk.plugins.mission_raw import MissionRawError, MissionRawResult
 
-        self._require_connected()
+        self._session.require_connected()
+        plugin = self._session.mission
         lists = []
-        for name, fetch in (("mission", self._mission.download_mission),
-                            ("fence", self._mission.download_geofence),
-                            ("rally", self._mission.download_rallypoints)):
+        for name, fetch in (("mission", plugin.download_mission),
+                            ("fence", plugin.download_geofence),
+                            ("rally", plugin.download_rallypoints)):
             try:
                 items = await fetch()
             except MissionRawError as exc:
@@ -66,7 +75,7 @@ class MissionTransfer:
 
     async def download_plan(self) -> MissionPlan:
         """Download mission + fence + rally as a ``MissionPlan`` (seq 0 = home, ArduPilot)."""
-        async with self._mission_lock:
+        async with self._lock:
             mission, fence, rally = await self.download_raw()
         try:
             return raw_to_plan(mission, fence, rally)
@@ -90,7 +99,7 @@ class MissionTransfer:
         plan.validate()
         lists = (("mission", mission_to_raw(plan, home_lla)), ("fence", fence_to_raw(plan)),
                  ("rally", rally_to_raw(plan)))
-        async with self._mission_lock:
+        async with self._lock:
             backup = await self.download_raw()
             done: list[int] = []
             for k, (name, raw) in enumerate(lists):
@@ -108,9 +117,10 @@ class MissionTransfer:
     async def _upload_list(self, name: str, raw: list[RawItem]) -> None:
         from mavsdk.plugins.mission_raw import MissionRawError
 
-        upload = {"mission": self._mission.upload_mission,
-                  "fence": self._mission.upload_geofence,
-                  "rally": self._mission.upload_rally_points}[name]
+        plugin = self._session.mission
+        upload = {"mission": plugin.upload_mission,
+                  "fence": plugin.upload_geofence,
+                  "rally": plugin.upload_rally_points}[name]
         try:
             if raw:
                 await upload([to_mavsdk_item(r) for r in raw])
@@ -121,8 +131,8 @@ class MissionTransfer:
 
     async def clear_plan(self) -> None:
         """Clear the vehicle's mission, fence and rally lists (each confirmed by MISSION_ACK)."""
-        self._require_connected()
-        async with self._mission_lock:
+        self._session.require_connected()
+        async with self._lock:
             for name in ("mission", "fence", "rally"):
                 await self._clear_list(name)
 
@@ -133,15 +143,16 @@ class MissionTransfer:
         """
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
+        session = self._session
         mission_type = {"mission": 0, "fence": 1, "rally": 2}[name]
-        fields = {"target_system": self.target_system, "target_component": self.target_component,
+        fields = {"target_system": session.target_system, "target_component": session.target_component,
                   "mission_type": mission_type}
-        message = MavlinkMessage("MISSION_CLEAR_ALL", 0, 0, self.target_system,
-                                 self.target_component, json.dumps(fields))
+        message = MavlinkMessage("MISSION_CLEAR_ALL", 0, 0, session.target_system,
+                                 session.target_component, json.dumps(fields))
 
         async def wait_ack() -> int:
-            async for ack in self.messages("MISSION_ACK"):
-                if ack.get("_sysid") == self.target_system and \
+            async for ack in self._source.messages("MISSION_ACK"):
+                if session.from_vehicle(ack) and \
                         int(ack.get("mission_type", 0)) == mission_type:
                     return int(ack.get("type", -1))
             return -1
@@ -149,7 +160,7 @@ class MissionTransfer:
         for _ in range(attempts):
             waiter = asyncio.ensure_future(wait_ack())
             await asyncio.sleep(0)               # subscribed before the request goes out
-            self._direct_sync.send_message(message)
+            session.direct.send_message(message)
             try:
                 result = await asyncio.wait_for(waiter, timeout_s)
             except asyncio.TimeoutError:

@@ -35,10 +35,12 @@ import logging
 import math
 import time
 from dataclasses import dataclass
+from typing import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import ConfigError
+from companion.link.ports import CommandSender, MessageSender, VehicleTarget
 from heli_common.typed_config import require_numbers
 
 __all__ = ["StreamSettings", "StreamKeeper", "StreamRequest", "stream_requests", "DATA_STREAM_OF",
@@ -160,9 +162,15 @@ class StreamKeeper:
 
     Parameters
     ----------
-    link : companion.link.VehicleLink
-        Used for ``command_result``, ``send_message``, ``connected`` and ``target_system``.
     settings : StreamSettings
+    commands : CommandSender
+        SET_MESSAGE_INTERVAL and REQUEST_MESSAGE (``command_result``).
+    sender : MessageSender
+        REQUEST_DATA_STREAM (``send_message``).
+    target : VehicleTarget
+        Who is asked (``target_system``, ``target_component``).
+    connected : callable() -> bool
+        Whether heartbeats arrive (nothing is asked while they do not).
     adsb : bool
         Also ask for ADSB_VEHICLE.
 
@@ -176,8 +184,12 @@ class StreamKeeper:
         How many times every stream has been requested.
     """
 
-    def __init__(self, link, settings: StreamSettings, *, adsb: bool = False) -> None:
-        self.link = link
+    def __init__(self, settings: StreamSettings, *, commands: CommandSender, sender: MessageSender,
+                 target: VehicleTarget, connected: Callable[[], bool], adsb: bool = False) -> None:
+        self._commands = commands
+        self._sender = sender
+        self._target = target
+        self._connected = connected
         self.settings = settings
         self.requests = stream_requests(settings, adsb)
         self.status: dict[str, str] = {r.name: "pending" for r in self.requests}
@@ -228,7 +240,7 @@ class StreamKeeper:
                 self._check_stale()
                 continue
             self._wanted.clear()
-            if not self.link.connected:
+            if not self._connected():
                 continue                  # asked again when the link is back
             try:
                 await self.request_all(self._reason)
@@ -241,7 +253,7 @@ class StreamKeeper:
 
     def _check_stale(self) -> None:
         now = time.monotonic()
-        if not self.link.connected or now - self._last_round_t < self.settings.stale_after_s:
+        if not self._connected() or now - self._last_round_t < self.settings.stale_after_s:
             return
         for name in CORE_STREAMS:
             if name not in self.status or self.status[name] == "unavailable":
@@ -263,7 +275,7 @@ class StreamKeeper:
             if self._interval_unsupported:
                 fallback.append(req)
                 continue
-            result = await self.link.command_result(
+            result = await self._commands.command_result(
                 mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (req.msg_id, req.interval_us),
                 what=f"SET_MESSAGE_INTERVAL {req.name}", timeout_s=self.settings.command_timeout_s)
             if result == MAV_RESULT_ACCEPTED:
@@ -285,8 +297,8 @@ class StreamKeeper:
     async def _fall_back(self, requests: list[StreamRequest]) -> None:
         groups = data_stream_rates(requests)
         for group, rate in sorted(groups.items()):
-            self.link.send_message("REQUEST_DATA_STREAM", {
-                "target_system": self.link.target_system, "target_component": self.link.target_component,
+            self._sender.send_message("REQUEST_DATA_STREAM", {
+                "target_system": self._target.target_system, "target_component": self._target.target_component,
                 "req_stream_id": group, "req_message_rate": rate, "start_stop": 1})
         for req in requests:
             if req.name in DATA_STREAM_OF:
@@ -296,7 +308,7 @@ class StreamKeeper:
             if req.name not in ONE_SHOT:
                 self.status[req.name] = "unavailable"
                 continue
-            result = await self.link.command_result(
+            result = await self._commands.command_result(
                 mavlink.MAV_CMD_REQUEST_MESSAGE, (req.msg_id,), what=f"REQUEST_MESSAGE {req.name}",
                 timeout_s=self.settings.command_timeout_s)
             if result == MAV_RESULT_ACCEPTED:

@@ -1,23 +1,29 @@
 """The vehicle link: MAVSDK 4.x (ctypes ``mavsdk.asyncio``) to an ArduPilot-like helicopter.
 
 Implements the companion side of the MAVLink contract of DESIGN.md section 5. ``VehicleLink``
-owns the connection (this module) and is made of one part per job:
+owns the connection and its lifecycle, and holds one part per job as a public member; each part
+is given at construction what it uses (the ``LinkSession`` of MAVSDK's handles and the gate, the
+other parts through the Protocols of ``companion.link.ports``) and owns its own state:
 
-- connection by MAVSDK URL (``udpin://``, ``udpout://``, ``tcpin://``, ``tcpout://``,
+- ``connect`` by MAVSDK URL (``udpin://``, ``udpout://``, ``tcpin://``, ``tcpout://``,
   ``serial://``), waiting for the first autopilot, through the signing gate
-  (``companion.link.transport``); ``close`` releases MAVSDK's plugins and System before MAVSDK
-  itself, and ``aclose`` first waits for the command calls still running;
-- telemetry streams requested, never assumed (``companion.link.streams.StreamKeeper``: ArduCopter
-  sends only HEARTBEAT until asked), and requested again after a reboot or a link loss;
-- telemetry as an always-fresh snapshot (``VehicleLink.telemetry``, ``companion.link.telemetry``)
-  kept up to date by background subscriptions (``companion.link.watchers``), waited on with
-  ``companion.link.waits``;
-- the two local frames (``companion.link.frames``): positions in and out of the link are about
-  the planning home, the vehicle's LOCAL_NED messages about its EKF origin; the link converts;
-- mission, fence and rally upload and download (``companion.link.mission_transfer``);
-- commands checked against their COMMAND_ACK, and parameters
+  (``companion.link.transport``), into ``link.session`` (``companion.link.session``);
+  ``close`` releases MAVSDK's plugins and System before MAVSDK itself, and ``aclose`` first
+  waits for the command calls still running; ``on_link_change`` listeners hear heartbeat loss;
+- ``link.streams``: the telemetry streams requested, never assumed
+  (``companion.link.streams.StreamKeeper``: ArduCopter sends only HEARTBEAT until asked), and
+  requested again after a reboot or a link loss;
+- ``link.telemetry``: an always-fresh snapshot (``companion.link.telemetry``) of the state kept
+  up to date by the subscriptions of ``link.watchers`` (``companion.link.watchers``), waited on
+  with ``link.waits`` (``companion.link.waits``);
+- ``link.frames`` (``companion.link.frames``): positions in and out of the link are about the
+  planning home, the vehicle's LOCAL_NED messages about its EKF origin; the link converts;
+- ``link.missions``: mission, fence and rally upload and download
+  (``companion.link.mission_transfer``);
+- ``link.commands``: commands checked against their COMMAND_ACK, and parameters
   (``companion.link.vehicle_commands``);
-- raw messages in, GUIDED setpoints and STATUSTEXT out without blocking the event loop
+- ``link.inbound``: raw messages in (``companion.link.message_tap``); ``link.direct``: GUIDED
+  setpoints, STATUSTEXT and other messages out without blocking the event loop
   (``companion.link.direct_messages``).
 
 MAVSDK 4.x note: ``Configuration`` is built with ``Configuration.create_with_component_type``
@@ -27,8 +33,6 @@ MAVSDK 4.x note: ``Configuration`` is built with ``Configuration.create_with_com
 from __future__ import annotations
 
 import asyncio
-import collections
-import contextlib
 import logging
 import time
 from typing import Callable
@@ -39,9 +43,11 @@ from companion.errors import LinkError
 from companion.link.direct_messages import DirectMessages
 from companion.link.frames import LinkFrames
 from companion.link.gate import SigningKey, silence_reason
+from companion.link.message_tap import MessageTap
 from companion.link.mission_transfer import MissionTransfer
+from companion.link.session import LinkSession
 from companion.link.streams import StreamKeeper, StreamSettings
-from companion.link.telemetry import HEARTBEAT_TIMEOUT_S, Telemetry, TelemetryState
+from companion.link.telemetry import HEARTBEAT_TIMEOUT_S, Telemetry
 from companion.link.transport import GateThread, open_gate
 from companion.link.vehicle_commands import VehicleCommands
 from companion.link.waits import TelemetryWaits
@@ -51,12 +57,12 @@ log = logging.getLogger(__name__)
 
 DEFAULT_URL = "udpin://0.0.0.0:14540"
 URL_SCHEMES = ("udpin://", "udpout://", "udp://", "tcpin://", "tcpout://", "tcp://", "serial://")
-#: How many recent STATUSTEXTs of the vehicle are kept (``VehicleLink.statustexts``).
-STATUSTEXT_KEEP = 64
 #: How long ``aclose`` waits for the cancelled telemetry subscriptions to end (s).
 CANCEL_WAIT_S = 5.0
 #: How long ``aclose`` waits for MAVSDK command calls still running before releasing MAVSDK.
 IN_FLIGHT_WAIT_S = 10.0
+#: How often the heartbeat's loss or return is checked (s).
+LINK_CHECK_PERIOD_S = 0.2
 
 
 def check_url(url: str) -> str:
@@ -68,8 +74,7 @@ def check_url(url: str) -> str:
     return url
 
 
-class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMessages,
-                  MissionTransfer):
+class VehicleLink:
     """MAVLink link to one autopilot through MAVSDK 4.x (asyncio).
 
     Parameters
@@ -91,13 +96,35 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         its HEARTBEAT instead of MAVSDK's, commands addressed to it answered); it learns the
         vehicle's system id on ``connect``.
 
+    Attributes
+    ----------
+    session : LinkSession
+        MAVSDK's handles and the gate while connected (set by ``connect``, emptied by ``close``).
+    streams : StreamKeeper or None
+        The telemetry requests of the current connection (None: not connected, or none asked).
+    frames : LinkFrames
+        Home frame <-> the vehicle's EKF-origin frame (``set_planning_home``).
+    inbound : MessageTap
+        Messages in (``messages(name)``, ``batch_reads``).
+    direct : DirectMessages
+        Messages out (``send_setpoint``, ``send_statustext``, ``send_message``).
+    watchers : TelemetryWatchers
+        The telemetry subscriptions, their ``state`` and the vehicle's ``statustexts``.
+    commands : VehicleCommands
+        COMMAND_LONG (``set_mode``, ``arm``, ``takeoff`` ...) and ``read_params``.
+    waits : TelemetryWaits
+        ``wait_for``, ``wait_ready``, ``wait_position``, ``wait_home``, ``wait_origin``.
+    missions : MissionTransfer
+        ``upload_plan``, ``download_plan``, ``clear_plan``.
+
     Examples
     --------
     >>> link = VehicleLink()                                    # doctest: +SKIP
     >>> await link.connect("udpin://0.0.0.0:14540", timeout_s=10)
-    >>> await link.wait_position(5.0); link.telemetry.pos_ned_m
-    >>> await link.set_mode("GUIDED"); await link.arm(); await link.takeoff(10.0)
-    >>> link.send_setpoint(pos_ned_m=[0, 0, -10], vel_ned_m_s=[0, 0, 0], yaw_rad=0.0)
+    >>> await link.waits.wait_position(5.0); link.telemetry.pos_ned_m
+    >>> await link.commands.set_mode("GUIDED"); await link.commands.arm()
+    >>> await link.commands.takeoff(10.0)
+    >>> link.direct.send_setpoint(pos_ned_m=[0, 0, -10], vel_ned_m_s=[0, 0, 0], yaw_rad=0.0)
     """
 
     def __init__(self, role: str = "companion", *, streams: StreamSettings | None = None,
@@ -107,9 +134,6 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
             raise LinkError(f"role must be 'companion' or 'gcs', got {role!r}")
         self.role = role
         self.url: str | None = None
-        self.target_system = 1
-        self.target_component = 1
-        self.frames = LinkFrames()
         if streams is None and role == "companion":
             streams = StreamSettings()
         self.stream_settings = streams
@@ -117,24 +141,19 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         self.signing_key = signing_key
         self.tlog_path = tlog_path or None
         self.onboard = onboard
-        self.gate: GateThread | None = None
+        self.session = LinkSession()
         self.streams: StreamKeeper | None = None
-        self.statustexts: collections.deque = collections.deque(maxlen=STATUSTEXT_KEEP)
-        self._mavsdk = None
-        self._system = None
-        self._direct_sync = None   # MavlinkDirect (commands, rare sends; telemetry and setpoints: the gate)
-        self._mission = None
-        self._state = TelemetryState()
+        self.frames = LinkFrames()
+        self.inbound = MessageTap(self.session)
+        self.direct = DirectMessages(self.session, lambda: self.frames)
+        self.watchers = TelemetryWatchers(self.session, self.inbound, lambda: self.streams)
+        self.commands = VehicleCommands(self.session, self.inbound, self.direct,
+                                        lambda: self.telemetry, self.watchers)
+        self.waits = TelemetryWaits(lambda: self.telemetry, self.commands, lambda: self.streams)
+        self.missions = MissionTransfer(self.session, self.inbound)
         self._tasks: list[asyncio.Task] = []
-        self._t0 = time.monotonic()
         self._link_listeners: list[Callable[[bool], None]] = []
         self._was_connected = False
-        self._command_lock: asyncio.Lock | None = None
-        self._in_flight: set[asyncio.Future] = set()      # MAVSDK command calls still running
-        self._mission_lock: asyncio.Lock | None = None
-        self._readers: dict[str, set[asyncio.Queue]] = {}  # message type -> the queues of messages()
-        self._tap_batches: collections.deque = collections.deque()
-        self._taps_streamer = None
 
     # ----------------------------------------------------------------- connection
 
@@ -154,55 +173,47 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
         route_mavsdk_logs()
         kind = (ComponentType.COMPANION_COMPUTER if self.role == "companion"
                 else ComponentType.GROUND_STATION)
-        self.gate = open_gate(url, self.signing_key, tlog_path=self.tlog_path, onboard=self.onboard)
-        self.gate.on_tap = self._tap_from_gate_thread(asyncio.get_running_loop())
-        self._mavsdk = Mavsdk(Configuration.create_with_component_type(kind))
-        self._command_lock = asyncio.Lock()
-        self._mission_lock = asyncio.Lock()
+        gate = self.session.gate = open_gate(url, self.signing_key, tlog_path=self.tlog_path,
+                                             onboard=self.onboard)
+        gate.on_tap = self.inbound.gate_callback(asyncio.get_running_loop())
+        mavsdk = self.session.mavsdk = Mavsdk(Configuration.create_with_component_type(kind))
         try:
-            await self._mavsdk.add_any_connection(self.gate.mavsdk_url)
+            await mavsdk.add_any_connection(gate.mavsdk_url)
         except MavsdkConnectionError as exc:
             self.close()
             raise LinkError(f"cannot open {url}: {exc}") from None
-        system = await self._mavsdk.first_autopilot(timeout_s=float(timeout_s))
+        system = await mavsdk.first_autopilot(timeout_s=float(timeout_s))
         if system is None:
-            why = silence_reason(self.gate.inbound.counts, self.signing_key)
+            why = silence_reason(gate.inbound.counts, self.signing_key)
             self.close()
             raise LinkError(f"no autopilot heard on {url} within {timeout_s:g} s ({why})")
         self.url = url
-        self._system = system
-        self.target_system = await system.get_system_id()
+        self.session.attach(mavsdk, system, MavlinkDirect(system._system), MissionRawAsync(system),
+                            await system.get_system_id())
         if self.onboard is not None:
             self.onboard.set_system(self.target_system)
-        self._direct_sync = MavlinkDirect(system._system)
-        self._mission = MissionRawAsync(system)
-        self._state.heartbeat_t = time.monotonic()
+        self.watchers.heard_now()
         self._was_connected = True
         if self.stream_settings is not None:
-            self.streams = StreamKeeper(self, self.stream_settings, adsb=self.adsb)
-        self._start_subscriptions()
+            self.streams = StreamKeeper(self.stream_settings, commands=self.commands,
+                                        sender=self.direct, target=self.session,
+                                        connected=lambda: self.connected, adsb=self.adsb)
+        self._start_tasks()
         log.info("connected to system %d on %s", self.target_system, url)
+
+    def _start_tasks(self) -> None:
+        loop = asyncio.get_running_loop()
+        coros = [*self.watchers.coroutines(), self._watch_link()]
+        if self.streams is not None:
+            coros.append(self.streams.run())
+        self._tasks = [loop.create_task(coro, name=f"link-{coro.__name__}") for coro in coros]
 
     def close(self) -> None:
         """Stop the subscriptions and release MAVSDK (idempotent)."""
         for task in self._tasks:
             task.cancel()
         self._tasks.clear()
-        # MAVSDK aborts the process if it is destroyed while a plugin or a System it handed out
-        # is alive: release them first, newest first
-        for owned in (self._mission, self._direct_sync,
-                      getattr(self._system, "_system", None)):
-            if owned is not None:
-                with contextlib.suppress(Exception):
-                    owned.destroy()
-        self._mission = self._direct_sync = self._system = None
-        if self._mavsdk is not None:
-            with contextlib.suppress(Exception):
-                self._mavsdk.destroy()
-        self._mavsdk = None
-        if self.gate is not None:
-            self.gate.close()
-        self.gate = None
+        self.session.release()
 
     async def aclose(self) -> None:
         """Cancel the subscriptions, let them unsubscribe, then release MAVSDK (idempotent)."""
@@ -214,8 +225,7 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
             if stuck:
                 log.warning("closing the link: %d telemetry subscriptions did not end within %g s (%s)",
                             len(stuck), CANCEL_WAIT_S, ", ".join(sorted(t.get_name() for t in stuck)))
-        if self._in_flight:              # MAVSDK ends each within its own retries (a few seconds)
-            await asyncio.wait(set(self._in_flight), timeout=IN_FLIGHT_WAIT_S)
+        await self.commands.wait_in_flight(IN_FLIGHT_WAIT_S)
         self.close()
 
     async def __aenter__(self) -> "VehicleLink":
@@ -223,6 +233,18 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
 
     async def __aexit__(self, *exc) -> None:
         await self.aclose()
+
+    @property
+    def target_system(self) -> int:
+        """The system id of the autopilot (learnt on ``connect``; 1 before)."""
+        return self.session.target_system
+
+    @property
+    def gate(self) -> GateThread | None:
+        """The signing gate of the current connection (None while not connected)."""
+        return self.session.gate
+
+    # ----------------------------------------------------------------- link state
 
     def on_link_change(self, callback: Callable[[bool], None]) -> Callable[[], None]:
         """Call ``callback(connected)`` on the loop when the heartbeat is lost or is back;
@@ -233,7 +255,7 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
     @property
     def connected(self) -> bool:
         """True while heartbeats arrive (within ``HEARTBEAT_TIMEOUT_S``)."""
-        return time.monotonic() - self._state.heartbeat_t < HEARTBEAT_TIMEOUT_S
+        return time.monotonic() - self.watchers.state.heartbeat_t < HEARTBEAT_TIMEOUT_S
 
     async def wait_connected(self, timeout_s: float | None = None) -> bool:
         """Wait until heartbeats arrive again (MAVSDK keeps the connection open meanwhile)."""
@@ -244,18 +266,39 @@ class VehicleLink(TelemetryWatchers, TelemetryWaits, VehicleCommands, DirectMess
             await asyncio.sleep(0.05)
         return True
 
+    async def _watch_link(self) -> None:
+        """Detect heartbeat loss and return; ask for the streams again and tell the listeners."""
+        while True:
+            await asyncio.sleep(LINK_CHECK_PERIOD_S)
+            now_connected = self.connected
+            if now_connected == self._was_connected:
+                continue
+            self._was_connected = now_connected
+            if now_connected:
+                log.warning("link to system %d is back", self.target_system)
+                if self.streams is not None:
+                    self.streams.request_again("link back")
+            else:
+                log.warning("link to system %d lost: no heartbeat for %.1f s; still "
+                            "listening on %s", self.target_system, HEARTBEAT_TIMEOUT_S, self.url)
+            for callback in list(self._link_listeners):
+                try:
+                    callback(now_connected)
+                except Exception:  # noqa: BLE001
+                    log.exception("link listener failed")
+
     # ----------------------------------------------------------------- telemetry
 
     @property
     def telemetry(self) -> Telemetry:
         """The latest vehicle state (a new immutable snapshot on every access)."""
-        return self._state.snapshot(time.monotonic(), self.frames)
+        return self.watchers.state.snapshot(time.monotonic(), self.frames)
 
     def set_planning_home(self, home_lla) -> LinkFrames:
         """Freeze the home frame: positions in and out of the link are about ``home_lla`` from
         now on, converted with the vehicle's EKF origin if it reported one
         (``companion.link.frames``). Returns the frames."""
-        origin = self._state.values.get("origin_lla")
+        origin = self.telemetry.origin_lla
         self.frames = LinkFrames.build(home_lla, origin)
         if origin is None:
             log.info("the vehicle reports no EKF origin (GPS_GLOBAL_ORIGIN): its local frame is "

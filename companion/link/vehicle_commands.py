@@ -1,26 +1,31 @@
-"""Commands to the vehicle: COMMAND_LONG through MavlinkDirect, each checked against its
-COMMAND_ACK (a refusal is ``VehicleRefused``), and parameters read with PARAM_REQUEST_READ.
+"""Commands to the vehicle (``VehicleLink.commands``): COMMAND_LONG through MavlinkDirect, each
+checked against its COMMAND_ACK (a refusal is ``VehicleRefused``), and parameters read with
+PARAM_REQUEST_READ.
 
 DO_SET_MODE with ArduCopter custom modes (GUIDED 4 ...), arm/disarm, takeoff, land, RTL,
 DO_AUX_FUNCTION (the motor interlock), REQUEST_MESSAGE. MAVSDK's ``send_command`` blocks until
 the ack or its own retries give up, so it runs in an executor; each such call is kept in
-``_in_flight`` until it ends, and ``VehicleLink.aclose`` waits for them before it releases
-MAVSDK (a call left blocked after MAVSDK was released would block for good).
+``_in_flight`` until it ends, and ``VehicleLink.aclose`` waits for them (``wait_in_flight``)
+before it releases MAVSDK (a call left blocked after MAVSDK was released would block for good).
 """
 
 from __future__ import annotations
 
 import asyncio
-import collections
 import json
 import logging
 import math
 import time
+from typing import Callable
 
 from heli_common.ardupilot_ids import FORCE_DISARM_MAGIC
 from heli_common.mavlink_ids import COPTER_MODE_NAMES, COPTER_MODES, MAV_RESULT_NAMES, mavlink
 
 from companion.errors import LinkError, VehicleRefused
+from companion.link.ports import MessageSender, MessageSource, StatusTextLog
+from companion.link.session import LinkSession
+from companion.link.telemetry import Telemetry
+from companion.link.waits import wait_for
 
 log = logging.getLogger(__name__)
 
@@ -49,16 +54,31 @@ def mode_number(mode) -> int:
 
 
 class VehicleCommands:
-    """The commands of a ``VehicleLink`` (a part of it: it uses the link's
-    ``_require_connected``, ``messages``, ``send_message``, ``_from_vehicle``, ``wait_for`` and
-    MavlinkDirect, and the command lock made by ``connect``)."""
+    """The commands and parameter reads of the link (``VehicleLink.commands``).
 
-    target_system: int
-    target_component: int
-    statustexts: collections.deque
-    _direct_sync: object
-    _command_lock: asyncio.Lock | None
-    _in_flight: set[asyncio.Future]
+    Parameters
+    ----------
+    session : LinkSession
+        The connection: MavlinkDirect (``send_command``) and the target.
+    source : MessageSource
+        Received messages (PARAM_VALUE).
+    sender : MessageSender
+        Sends PARAM_REQUEST_READ.
+    telemetry : callable() -> Telemetry
+        The latest snapshot: a mode or arming command waits to see its effect.
+    texts : StatusTextLog
+        The vehicle's STATUSTEXTs, quoted in a refusal.
+    """
+
+    def __init__(self, session: LinkSession, source: MessageSource, sender: MessageSender,
+                 telemetry: Callable[[], Telemetry], texts: StatusTextLog) -> None:
+        self._session = session
+        self._source = source
+        self._sender = sender
+        self._telemetry = telemetry
+        self._texts = texts
+        self._lock = asyncio.Lock()                        # one MAVSDK command call at a time
+        self._in_flight: set[asyncio.Future] = set()      # MAVSDK command calls still running
 
     def _command_message(self, command: int, params):
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
@@ -66,10 +86,11 @@ class VehicleCommands:
         # MavlinkDirect takes strict JSON, which has no NaN: unset parameters travel as 0
         values = [float(p) if math.isfinite(float(p)) else 0.0 for p in params]
         values += [0.0] * (7 - len(values))
-        fields = {"target_system": self.target_system, "target_component": self.target_component,
+        target = self._session
+        fields = {"target_system": target.target_system, "target_component": target.target_component,
                   "command": int(command), "confirmation": 0}
         fields.update({f"param{k + 1}": v for k, v in enumerate(values)})
-        return MavlinkMessage("COMMAND_LONG", 0, 0, self.target_system, self.target_component,
+        return MavlinkMessage("COMMAND_LONG", 0, 0, target.target_system, target.target_component,
                               json.dumps(fields))
 
     async def command_result(self, command: int, params=(), *, what: str | None = None,
@@ -78,13 +99,13 @@ class VehicleCommands:
         within ``timeout_s``). Never raises for a refusal: see ``command_long``."""
         from mavsdk.plugins.mavlink_direct import MavlinkDirectError
 
-        self._require_connected()
+        self._session.require_connected()
         message = self._command_message(command, params)
         label = what or f"command {command}"
-        async with self._command_lock:
+        async with self._lock:
             # MAVSDK's blocking call runs in a thread we keep track of: releasing MAVSDK while it
             # waits would leave that thread blocked for good (see ``aclose``)
-            call = asyncio.get_running_loop().run_in_executor(None, self._direct_sync.send_command, message)
+            call = asyncio.get_running_loop().run_in_executor(None, self._session.direct.send_command, message)
             self._in_flight.add(call)
             call.add_done_callback(self._command_call_done)
             try:
@@ -103,6 +124,12 @@ class VehicleCommands:
         log.log(logging.INFO if result == 0 else logging.DEBUG, "%s: %s", label,
                 MAV_RESULT_NAMES.get(result, result))
         return result
+
+    async def wait_in_flight(self, timeout_s: float) -> None:
+        """Wait up to ``timeout_s`` for the MAVSDK command calls still running (MAVSDK ends each
+        within its own retries, a few seconds)."""
+        if self._in_flight:
+            await asyncio.wait(set(self._in_flight), timeout=timeout_s)
 
     def _command_call_done(self, call: asyncio.Future) -> None:
         self._in_flight.discard(call)
@@ -139,15 +166,11 @@ class VehicleCommands:
     def refusal_text(self, label: str, result: int | None, since_monotonic_s: float) -> str:
         """``"<label> refused by the vehicle: FAILED (PreArm: ...)"``: the MAV_RESULT and the
         vehicle's most telling STATUSTEXT since ``since_monotonic_s`` (a PreArm/Arm line first)."""
-        texts = self.statustexts_since(since_monotonic_s - 0.5)
+        texts = self._texts.statustexts_since(since_monotonic_s - 0.5)
         telling = [t for t in texts if t.startswith(("PreArm", "Arm"))] or texts
         why = f" ({telling[-1]})" if telling else ""
         name = "no answer" if result is None else MAV_RESULT_NAMES.get(result, result)
         return f"{label} refused by the vehicle: {name}{why}"
-
-    def statustexts_since(self, t_monotonic_s: float) -> list[str]:
-        """The vehicle's STATUSTEXTs received since ``t_monotonic_s`` (oldest first)."""
-        return [text for t, _, text in list(self.statustexts) if t >= t_monotonic_s]
 
     async def set_mode(self, mode) -> None:
         """Switch to an ArduCopter mode (name or number) with DO_SET_MODE and wait to see it."""
@@ -156,12 +179,12 @@ class VehicleCommands:
         await self.command_long(MAV_CMD_DO_SET_MODE,
                                 (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number),
                                 what=f"set mode {name}")
-        await self.wait_for(lambda t: t.mode == number, 5.0, f"mode {name} in the heartbeat")
+        await wait_for(self._telemetry, lambda t: t.mode == number, 5.0, f"mode {name} in the heartbeat")
 
     async def arm(self) -> None:
         """Arm (COMPONENT_ARM_DISARM 1); ``LinkError`` if the vehicle refuses."""
         await self.command_long(MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), what="arm")
-        await self.wait_for(lambda t: bool(t.armed), 5.0, "armed state")
+        await wait_for(self._telemetry, lambda t: bool(t.armed), 5.0, "armed state")
 
     async def disarm(self, force: bool = False) -> None:
         """Disarm (``force``: even in the air, ArduPilot's 21196 magic)."""
@@ -199,14 +222,15 @@ class VehicleCommands:
             Name -> value (ArduPilot encoding: the value as a float) of those the vehicle
             answered within ``timeout_s``; a parameter the vehicle does not have is absent.
         """
-        self._require_connected()
+        session = self._session
+        session.require_connected()
         wanted = {str(n) for n in names}
         got: dict[str, float] = {}
 
         async def collect() -> None:
-            async for fields in self.messages("PARAM_VALUE"):
+            async for fields in self._source.messages("PARAM_VALUE"):
                 name = str(fields.get("param_id", "")).rstrip("\x00")
-                if self._from_vehicle(fields) and name in wanted:
+                if session.from_vehicle(fields) and name in wanted:
                     got[name] = float(fields.get("param_value", math.nan))
                     if len(got) == len(wanted):
                         return
@@ -216,8 +240,8 @@ class VehicleCommands:
         try:
             for attempt in range(2):
                 for name in sorted(wanted - set(got)):
-                    self.send_message("PARAM_REQUEST_READ", {
-                        "target_system": self.target_system, "target_component": self.target_component,
+                    self._sender.send_message("PARAM_REQUEST_READ", {
+                        "target_system": session.target_system, "target_component": session.target_component,
                         "param_id": name, "param_index": -1})
                 done, _ = await asyncio.wait({waiter}, timeout=timeout_s / 2.0)
                 if done:

@@ -1,10 +1,12 @@
-"""The link's telemetry subscriptions: each received message kept in the ``TelemetryState``.
+"""The link's telemetry subscriptions (``VehicleLink.watchers``): each received message kept in
+the ``TelemetryState`` they own, and the vehicle's recent STATUSTEXTs.
 
-Every message comes from the signing gate (``messages``: parsed once on its thread, handed
-over in batches), not through MAVSDK's Telemetry plugin, whose callbacks cost a loop wake-up
-each. The armed state is the HEARTBEAT's. A message from another system, or one with a
-missing, null or non-finite field (``finite_fields``), is dropped; a subscription that fails is
-logged and restarted (``_guarded``), so a telemetry glitch never stops the link.
+Every message comes from the signing gate (a ``MessageSource``: ``companion.link.message_tap``,
+parsed once on the gate's thread, handed over in batches), not through MAVSDK's Telemetry plugin,
+whose callbacks cost a loop wake-up each. The armed state is the HEARTBEAT's. A message from
+another system, or one with a missing, null or non-finite field (``finite_fields``), is dropped;
+a subscription that fails is logged and restarted (``_guarded``), so a telemetry glitch never
+stops the link.
 """
 
 from __future__ import annotations
@@ -19,8 +21,8 @@ import numpy as np
 
 from heli_common.mavlink_ids import mavlink
 
-from companion.link.streams import StreamKeeper
-from companion.link.telemetry import HEARTBEAT_TIMEOUT_S, TelemetryState, finite_fields
+from companion.link.ports import MessageSource, StreamNotes, VehicleTarget
+from companion.link.telemetry import TelemetryState, finite_fields
 
 log = logging.getLogger(__name__)
 
@@ -40,33 +42,60 @@ def degrees_lla(lla_int) -> tuple[float, float, float] | None:
         return None
     return lat, lon, lla_int[2] / 1e3
 
+#: How many recent STATUSTEXTs of the vehicle are kept (``TelemetryWatchers.statustexts``).
+STATUSTEXT_KEEP = 64
+
+
 class TelemetryWatchers:
-    """The subscriptions of a ``VehicleLink`` (a part of it: it uses the link's ``messages``,
-    ``_from_vehicle`` and ``connected``)."""
+    """The telemetry subscriptions of the link (``VehicleLink.watchers``).
 
-    url: str | None
-    target_system: int
-    target_component: int
-    streams: StreamKeeper | None
-    statustexts: collections.deque
-    _state: TelemetryState
-    _tasks: list[asyncio.Task]
-    _link_listeners: list[Callable[[bool], None]]
-    _was_connected: bool
+    Parameters
+    ----------
+    target : VehicleTarget
+        Whose messages count (``target_system``; HEARTBEAT and SYS_STATUS also ``target_component``).
+    source : MessageSource
+        The received messages (``messages(name)``).
+    streams : callable() -> StreamNotes or None
+        The link's stream keeper, told of every message that arrives (None: no streams asked for).
 
-    def _start_subscriptions(self) -> None:
-        loop = asyncio.get_running_loop()
-        coros = [self._watch_heartbeat(), self._watch_link(), self._watch_local_position(),
-                 self._watch_attitude(), self._watch_landed_state(),
-                 self._watch_home(), self._watch_origin(), self._watch_global_position(),
-                 self._watch_statustext(), self._watch_rpm(), self._watch_sys_status()]
-        if self.streams is not None:
-            coros.append(self.streams.run())
-        self._tasks = [loop.create_task(coro, name=f"link-{coro.__name__}") for coro in coros]
+    Attributes
+    ----------
+    state : TelemetryState
+        What the messages said (written here only; ``VehicleLink.telemetry`` snapshots it).
+    statustexts : deque of (monotonic_s, severity, text)
+        The vehicle's last ``STATUSTEXT_KEEP`` STATUSTEXTs.
+    """
+
+    def __init__(self, target: VehicleTarget, source: MessageSource,
+                 streams: Callable[[], StreamNotes | None]) -> None:
+        self._target = target
+        self._source = source
+        self._streams = streams
+        self.state = TelemetryState()
+        self.statustexts: collections.deque = collections.deque(maxlen=STATUSTEXT_KEEP)
+
+    def coroutines(self) -> list:
+        """One subscription coroutine per message type (run each as a task until cancelled)."""
+        return [self._watch_heartbeat(), self._watch_local_position(), self._watch_attitude(),
+                self._watch_landed_state(), self._watch_home(), self._watch_origin(),
+                self._watch_global_position(), self._watch_statustext(), self._watch_rpm(),
+                self._watch_sys_status()]
+
+    def heard_now(self) -> None:
+        """The autopilot was just heard (``connect`` found it): it counts as a heartbeat."""
+        self.state.heartbeat_t = time.monotonic()
+
+    def statustexts_since(self, t_monotonic_s: float) -> list[str]:
+        """The vehicle's STATUSTEXTs received since ``t_monotonic_s`` (oldest first)."""
+        return [text for t, _, text in list(self.statustexts) if t >= t_monotonic_s]
+
+    def _from_vehicle(self, fields: dict) -> bool:
+        return fields.get("_sysid") == self._target.target_system
 
     def _note(self, name: str, boot_s: float | None = None) -> None:
-        if self.streams is not None:
-            self.streams.note(name, boot_s)
+        streams = self._streams()
+        if streams is not None:
+            streams.note(name, boot_s)
 
     async def _guarded(self, what: str, agen, apply: Callable) -> None:
         """Run one subscription forever; a failure is logged and the subscription restarted."""
@@ -82,61 +111,40 @@ class TelemetryWatchers:
 
     async def _watch_heartbeat(self) -> None:
         def apply(fields: dict) -> None:
-            if fields.get("_sysid") != self.target_system or fields.get("_compid") != \
-                    self.target_component:
+            if fields.get("_sysid") != self._target.target_system or fields.get("_compid") != \
+                    self._target.target_component:
                 return
-            self._state.heartbeat_t = time.monotonic()
+            self.state.heartbeat_t = time.monotonic()
             values = finite_fields(fields, "base_mode", "custom_mode")
             if values is None:
                 return
             base_mode, custom_mode = map(int, values)
             if base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                self._state.values["mode"] = custom_mode
-            self._state.values["armed"] = bool(base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-        await self._guarded("HEARTBEAT", lambda: self.messages("HEARTBEAT"), apply)
-
-    async def _watch_link(self) -> None:
-        """Detect heartbeat loss and return; tell the listeners."""
-        while True:
-            await asyncio.sleep(0.2)
-            now_connected = self.connected
-            if now_connected != self._was_connected:
-                self._was_connected = now_connected
-                if now_connected:
-                    log.warning("link to system %d is back", self.target_system)
-                    if self.streams is not None:
-                        self.streams.request_again("link back")
-                else:
-                    log.warning("link to system %d lost: no heartbeat for %.1f s; still "
-                                "listening on %s", self.target_system, HEARTBEAT_TIMEOUT_S,
-                                self.url)
-                for callback in list(self._link_listeners):
-                    try:
-                        callback(now_connected)
-                    except Exception:  # noqa: BLE001
-                        log.exception("link listener failed")
+                self.state.values["mode"] = custom_mode
+            self.state.values["armed"] = bool(base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        await self._guarded("HEARTBEAT", lambda: self._source.messages("HEARTBEAT"), apply)
 
     async def _watch_local_position(self) -> None:
         def apply(fields: dict) -> None:
             values = finite_fields(fields, "x", "y", "z", "vx", "vy", "vz", "time_boot_ms")
             if not self._from_vehicle(fields) or values is None:
                 return
-            self._state.pos_origin = np.array(values[:3])
-            self._state.values["vel_ned_m_s"] = np.array(values[3:6])
+            self.state.pos_origin = np.array(values[:3])
+            self.state.values["vel_ned_m_s"] = np.array(values[3:6])
             boot_s = values[6] / 1000.0
-            self._state.values["boot_s"] = boot_s
-            self._state.position_t = time.monotonic()
+            self.state.values["boot_s"] = boot_s
+            self.state.position_t = time.monotonic()
             self._note("LOCAL_POSITION_NED", boot_s)
-        await self._guarded("LOCAL_POSITION_NED", lambda: self.messages("LOCAL_POSITION_NED"), apply)
+        await self._guarded("LOCAL_POSITION_NED", lambda: self._source.messages("LOCAL_POSITION_NED"), apply)
 
     async def _watch_attitude(self) -> None:
         def apply(fields: dict) -> None:
             values = finite_fields(fields, "roll", "pitch", "yaw")
             if not self._from_vehicle(fields) or values is None:
                 return
-            self._state.values["attitude_rad"] = np.array(values)
+            self.state.values["attitude_rad"] = np.array(values)
             self._note("ATTITUDE")
-        await self._guarded("ATTITUDE", lambda: self.messages("ATTITUDE"), apply)
+        await self._guarded("ATTITUDE", lambda: self._source.messages("ATTITUDE"), apply)
 
     async def _watch_landed_state(self) -> None:
         def apply(fields: dict) -> None:
@@ -144,10 +152,10 @@ class TelemetryWatchers:
             if not self._from_vehicle(fields) or values is None:
                 return
             state = int(values[0])
-            self._state.values["landed_state"] = state
-            self._state.values["in_air"] = None if state == 0 else state in LANDED_STATES_IN_AIR
+            self.state.values["landed_state"] = state
+            self.state.values["in_air"] = None if state == 0 else state in LANDED_STATES_IN_AIR
             self._note("EXTENDED_SYS_STATE")
-        await self._guarded("EXTENDED_SYS_STATE", lambda: self.messages("EXTENDED_SYS_STATE"), apply)
+        await self._guarded("EXTENDED_SYS_STATE", lambda: self._source.messages("EXTENDED_SYS_STATE"), apply)
 
     async def _watch_origin(self) -> None:
         def apply(fields: dict) -> None:
@@ -156,12 +164,12 @@ class TelemetryWatchers:
                 return
             origin = degrees_lla(lla)
             if origin is not None:
-                old = self._state.values.get("origin_lla")
+                old = self.state.values.get("origin_lla")
                 if old is not None and old != origin:
                     log.warning("the vehicle's EKF origin moved from %s to %s", old, origin)
-                self._state.values["origin_lla"] = origin
+                self.state.values["origin_lla"] = origin
             self._note("GPS_GLOBAL_ORIGIN")
-        await self._guarded("GPS_GLOBAL_ORIGIN", lambda: self.messages("GPS_GLOBAL_ORIGIN"), apply)
+        await self._guarded("GPS_GLOBAL_ORIGIN", lambda: self._source.messages("GPS_GLOBAL_ORIGIN"), apply)
 
     async def _watch_statustext(self) -> None:
         def apply(fields: dict) -> None:
@@ -171,28 +179,28 @@ class TelemetryWatchers:
             severity = int((finite_fields(fields, "severity") or [6])[0])
             self.statustexts.append((time.monotonic(), severity, text))
             log.log(logging.WARNING if severity <= 4 else logging.INFO, "vehicle: %s", text)
-        await self._guarded("STATUSTEXT", lambda: self.messages("STATUSTEXT"), apply)
+        await self._guarded("STATUSTEXT", lambda: self._source.messages("STATUSTEXT"), apply)
 
     async def _watch_sys_status(self) -> None:
         def apply(fields: dict) -> None:
             sensors = finite_fields(fields, "onboard_control_sensors_present",
                                     "onboard_control_sensors_health")
-            if not self._from_vehicle(fields) or fields.get("_compid") != self.target_component \
+            if not self._from_vehicle(fields) or fields.get("_compid") != self._target.target_component \
                     or sensors is None:
                 return
             present, health = map(int, sensors)
-            self._state.values["prearm_ok"] = (bool(health & MAV_SYS_STATUS_PREARM_CHECK)
+            self.state.values["prearm_ok"] = (bool(health & MAV_SYS_STATUS_PREARM_CHECK)
                                                if present & MAV_SYS_STATUS_PREARM_CHECK else None)
             self._note("SYS_STATUS")
-        await self._guarded("SYS_STATUS", lambda: self.messages("SYS_STATUS"), apply)
+        await self._guarded("SYS_STATUS", lambda: self._source.messages("SYS_STATUS"), apply)
 
     async def _watch_rpm(self) -> None:
         def apply(fields: dict) -> None:
             values = finite_fields(fields, "rpm1")
             if self._from_vehicle(fields) and values is not None:
-                self._state.values["rotor_rpm"] = values[0]
+                self.state.values["rotor_rpm"] = values[0]
                 self._note("RPM")
-        await self._guarded("RPM", lambda: self.messages("RPM"), apply)
+        await self._guarded("RPM", lambda: self._source.messages("RPM"), apply)
 
     async def _watch_home(self) -> None:
         def apply(fields: dict) -> None:
@@ -201,9 +209,9 @@ class TelemetryWatchers:
                 return
             home = degrees_lla(lla)
             if home is not None:
-                self._state.values["home_lla"] = home
+                self.state.values["home_lla"] = home
             self._note("HOME_POSITION")
-        await self._guarded("HOME_POSITION", lambda: self.messages("HOME_POSITION"), apply)
+        await self._guarded("HOME_POSITION", lambda: self._source.messages("HOME_POSITION"), apply)
 
     async def _watch_global_position(self) -> None:
         def apply(fields: dict) -> None:
@@ -211,7 +219,7 @@ class TelemetryWatchers:
             if not self._from_vehicle(fields) or values is None:
                 return
             lat, lon, alt_mm, rel_mm = values
-            self._state.values.update(lat_deg=lat / 1e7, lon_deg=lon / 1e7, alt_amsl_m=alt_mm / 1e3,
+            self.state.values.update(lat_deg=lat / 1e7, lon_deg=lon / 1e7, alt_amsl_m=alt_mm / 1e3,
                                       rel_alt_m=rel_mm / 1e3)
             self._note("GLOBAL_POSITION_INT")
-        await self._guarded("GLOBAL_POSITION_INT", lambda: self.messages("GLOBAL_POSITION_INT"), apply)
+        await self._guarded("GLOBAL_POSITION_INT", lambda: self._source.messages("GLOBAL_POSITION_INT"), apply)

@@ -24,7 +24,7 @@ class BackgroundTasks:
 
     async def _watch_local_position(self) -> None:
         """LOCAL_POSITION_NED with its timestamp: drives the clock and the tracking error."""
-        async for fields in self.link.messages("LOCAL_POSITION_NED"):
+        async for fields in self.link.inbound.messages("LOCAL_POSITION_NED"):
             if fields.get("_sysid") != self.link.target_system:
                 continue
             boot_s = fields.get("time_boot_ms", 0) / 1000.0
@@ -35,14 +35,14 @@ class BackgroundTasks:
                 self._errors_m.append(math.dist(pos, ref_pos))
 
     async def _watch_servos(self) -> None:
-        async for fields in self.link.messages("SERVO_OUTPUT_RAW"):
+        async for fields in self.link.inbound.messages("SERVO_OUTPUT_RAW"):
             if fields.get("_sysid") == self.link.target_system:
                 self._servo_us = [fields.get(f"servo{i}_raw", 1500) for i in range(1, 5)]
 
     async def _watch_adsb(self) -> None:
         """ADSB_VEHICLE reports become threats, treated as zenoh PUTs (``companion.threats.transport.adsb``)."""
         home = LocalFrame(*self.home_lla)
-        async for fields in self.link.messages("ADSB_VEHICLE"):
+        async for fields in self.link.inbound.messages("ADSB_VEHICLE"):
             if fields.get("_sysid") != self.link.target_system or self.threats is None:
                 continue
             try:

@@ -34,7 +34,7 @@ class LegTasks:
     async def wait_vehicle_clock(self, timeout_s: float) -> None:
         """Wait until the mission clock runs on the vehicle's time (a first LOCAL_POSITION_NED
         seen by the clock's watcher): references are timed on it."""
-        await self.link.wait_for(lambda t: self.clock.synced, timeout_s, "the vehicle's clock")
+        await self.link.waits.wait_for(lambda t: self.clock.synced, timeout_s, "the vehicle's clock")
 
     async def start_or_join(self, alt_m: float) -> None:
         """Join a flying vehicle where it is (GUIDED, no arming, no takeoff), or start it
@@ -46,7 +46,7 @@ class LegTasks:
             self.event("joined", height_m=None if tele.height_m is None else round(tele.height_m, 2),
                        mode=tele.mode_name, landed_state=tele.landed_state)
             if tele.mode != GUIDED:
-                await self.link.set_mode("GUIDED")
+                await self.link.commands.set_mode("GUIDED")
             if self.resume:        # the crashed companion engaged the interlock: put it back at the end
                 self.rotor_plan = rotor_plan(st, await read_rotor_parameters(self.link, st))
             return
@@ -134,7 +134,7 @@ class LegTasks:
         (MAV_CMD_DO_SET_MISSION_CURRENT, accepted in GUIDED): ground stations show it, and a
         companion restarted with ``--resume`` reads it back. Never fails the flight."""
         try:
-            result = await self.link.command_result(
+            result = await self.link.commands.command_result(
                 mavlink.MAV_CMD_DO_SET_MISSION_CURRENT, (float(seq),), what=f"DO_SET_MISSION_CURRENT {seq}",
                 timeout_s=3.0)
         except CompanionError as exc:          # the link is down: set again at the next leg
@@ -154,7 +154,7 @@ class LegTasks:
             No MISSION_CURRENT within ``timeout_s``.
         """
         async def first_seq() -> int:
-            async for fields in self.link.messages("MISSION_CURRENT"):
+            async for fields in self.link.inbound.messages("MISSION_CURRENT"):
                 if fields.get("_sysid") == self.link.target_system:
                     return int(fields["seq"])
             raise LinkError("the MISSION_CURRENT subscription ended")
@@ -163,7 +163,7 @@ class LegTasks:
         deadline = time.monotonic() + timeout_s
         try:
             while time.monotonic() < deadline:
-                await self.link.command_result(mavlink.MAV_CMD_REQUEST_MESSAGE,
+                await self.link.commands.command_result(mavlink.MAV_CMD_REQUEST_MESSAGE,
                                                (float(mavlink.MAVLINK_MSG_ID_MISSION_CURRENT),),
                                                what="REQUEST_MESSAGE MISSION_CURRENT", timeout_s=1.0)
                 done, _ = await asyncio.wait({task}, timeout=min(1.0, max(0.0, deadline - time.monotonic())))

@@ -32,7 +32,7 @@ class MissionTasks:
         vehicle's own mission and fence."""
         if self.mission_path is not None:
             return load_mission_file(self.mission_path)
-        plan = await self.link.download_plan()
+        plan = await self.link.missions.download_plan()
         if self.resume:
             refusal = resume_refusal(mission_items=len(plan.items), airborne=True)
             if refusal is not None:
@@ -107,9 +107,9 @@ class MissionTasks:
         """Put the vehicle's previous lists back (the flight did not start)."""
         try:
             if previous.items:
-                await self.link.upload_plan(previous)
+                await self.link.missions.upload_plan(previous)
             else:
-                await self.link.clear_plan()
+                await self.link.missions.clear_plan()
             self.event("mission_restored", reason="the flight did not start")
         except CompanionError as exc:
             log.error("could not restore the vehicle's previous mission: %s", exc)
@@ -143,16 +143,16 @@ class MissionTasks:
     async def finish(self, end_action: str) -> None:
         """Land (LAND or RTL missions) and wait for the disarm, or hover in LOITER."""
         if end_action in ("land", "rtl"):
-            await self.link.land()
+            await self.link.commands.land()
             self.event("landing")
-            await self.link.wait_for(lambda t: t.armed is False, 60.0 + 120.0 / self.clock.scale,
+            await self.link.waits.wait_for(lambda t: t.armed is False, 60.0 + 120.0 / self.clock.scale,
                                      "the landing and disarm")
             self.summary.landed = True
             self.event("landed")
             if self.rotor_plan is not None and self.rotor_plan.interlock == "command":
-                await self.link.aux_function(AUX_MOTOR_INTERLOCK, 0)    # as the start found it
+                await self.link.commands.aux_function(AUX_MOTOR_INTERLOCK, 0)    # as the start found it
         else:
-            await self.link.set_mode("LOITER")
+            await self.link.commands.set_mode("LOITER")
             self.event("loiter", reason="the mission ends without LAND or RTL")
 
     async def safe_stop(self, reason: str) -> None:
@@ -163,11 +163,11 @@ class MissionTasks:
         action = self.settings.link.on_interrupt
         try:
             if action == "land":
-                await self.link.land()
+                await self.link.commands.land()
             elif action == "rtl":
-                await self.link.return_to_launch()
+                await self.link.commands.return_to_launch()
             else:
-                await self.link.set_mode("LOITER")
+                await self.link.commands.set_mode("LOITER")
             self.event("safe_stop", action=action, reason=reason)
         except CompanionError as exc:
             log.error("safe stop (%s) failed: %s", action, exc)

@@ -152,7 +152,7 @@ class CompanionService:
     async def _left_hovering(self) -> bool:
         """Does the vehicle hover in GUIDED, as a companion that stopped mid-flight leaves it?"""
         try:
-            await self.link.wait_ready(self.settings.link.connect_timeout_s)
+            await self.link.waits.wait_ready(self.settings.link.connect_timeout_s)
         except CompanionError as exc:
             log.warning("--resume: %s; not taking over", exc)
             return False
@@ -240,7 +240,7 @@ class CompanionService:
     async def _publish_presence(self) -> None:
         while True:
             if self.state != "flying":          # while flying, the flight publishes its status
-                self.bus.publish_status(self.presence())
+                self.bus.outbound.publish_status(self.presence())
             await asyncio.sleep(PRESENCE_PERIOD_S)
 
     # ------------------------------------------------------------------ commands (other threads)
@@ -263,7 +263,7 @@ class CompanionService:
         else:
             result = "accepted" if self._request("zenoh") else f"busy: {self.state}"
         log.info("zenoh command %r: %s", command, result)
-        self.bus.publish_event({"event": "command", "command": command, "result": result})
+        self.bus.outbound.publish_event({"event": "command", "command": command, "result": result})
 
     def _request(self, source: str) -> bool:
         """Queue a flight unless one is queued or flying, or the vehicle is not there."""

@@ -211,7 +211,7 @@ async def read_rotor_parameters(link, settings: StartupSettings) -> dict:
     """The RSC parameters the vehicle has (PARAM_REQUEST_READ); {} for a multirotor profile."""
     if settings.vehicle == "multirotor":
         return {}
-    return await link.read_params(RSC_PARAMETERS, timeout_s=settings.param_timeout_s)
+    return await link.commands.read_params(RSC_PARAMETERS, timeout_s=settings.param_timeout_s)
 
 
 async def interlock_low(link) -> bool:
@@ -225,11 +225,11 @@ async def interlock_low(link) -> bool:
         Any other refusal, or no answer.
     """
     sent = time.monotonic()
-    result = await link.aux_function(AUX_MOTOR_INTERLOCK, SWITCH_LOW)
+    result = await link.commands.aux_function(AUX_MOTOR_INTERLOCK, SWITCH_LOW)
     if result == UNSUPPORTED:
         return False
     if result != ACCEPTED:
-        raise VehicleRefused(link.refusal_text("motor interlock low (DO_AUX_FUNCTION 32)", result, sent),
+        raise VehicleRefused(link.commands.refusal_text("motor interlock low (DO_AUX_FUNCTION 32)", result, sent),
                              result)
     return True
 
@@ -267,14 +267,14 @@ async def arm(link, settings: StartupSettings, now_s) -> float:
     message, result = "arm: no attempt", None
     for attempt in range(1, settings.arm_attempts + 1):
         sent = time.monotonic()
-        result = await link.command_result(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), what="arm",
+        result = await link.commands.command_result(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), what="arm",
                                            timeout_s=5.0)
         if result == ACCEPTED:
             armed_at = now_s()
-            await link.wait_for(lambda t: bool(t.armed), 5.0, "the armed state")
+            await link.waits.wait_for(lambda t: bool(t.armed), 5.0, "the armed state")
             return armed_at
         await asyncio.sleep(0.3)             # the vehicle's reason (STATUSTEXT) may follow the ack
-        message = link.refusal_text("arm", result, sent)
+        message = link.commands.refusal_text("arm", result, sent)
         log.warning("%s (attempt %d of %d)", message, attempt, settings.arm_attempts)
         if attempt < settings.arm_attempts:
             await wait_vehicle_s(now_s, settings.retry_interval_s)
@@ -302,13 +302,13 @@ async def engage_interlock(link, plan: RotorPlan, settings: StartupSettings, now
     deadline = now_s() + max(3.0, 3.0 * plan.arming_delay_s)
     while True:
         sent = time.monotonic()
-        result = await link.aux_function(AUX_MOTOR_INTERLOCK, SWITCH_HIGH)
+        result = await link.commands.aux_function(AUX_MOTOR_INTERLOCK, SWITCH_HIGH)
         if result == ACCEPTED:
             return True
         if result == UNSUPPORTED:
             return False
         if now_s() > deadline or not link.telemetry.armed:
-            raise VehicleRefused(link.refusal_text("motor interlock (DO_AUX_FUNCTION 32 high)", result,
+            raise VehicleRefused(link.commands.refusal_text("motor interlock (DO_AUX_FUNCTION 32 high)", result,
                                                    sent), result)
         await wait_vehicle_s(now_s, min(0.5, settings.retry_interval_s))
 
@@ -359,14 +359,14 @@ async def take_off(link, alt_m: float, attempts: int, retry_s: float, now_s,
     while True:
         attempt += 1
         sent = time.monotonic()
-        result = await link.command_result(mavlink.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, float(alt_m)),
+        result = await link.commands.command_result(mavlink.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, float(alt_m)),
                                            what=f"takeoff to {alt_m:g} m", timeout_s=5.0)
         if result == ACCEPTED:
             return attempt
         out_of_time = now_s() >= deadline_s if deadline_s is not None else attempt >= attempts
         if out_of_time or not link.telemetry.armed:
             await asyncio.sleep(0.3)
-            raise VehicleRefused(link.refusal_text(f"takeoff to {alt_m:g} m", result, sent), result)
+            raise VehicleRefused(link.commands.refusal_text(f"takeoff to {alt_m:g} m", result, sent), result)
         log.info("takeoff refused (%s), attempt %d; retrying", result, attempt)
         await wait_vehicle_s(now_s, retry_s)
 
@@ -382,17 +382,17 @@ async def abandon_start(link, interlock_commanded: bool, reason: str,
         elif is_airborne(tele, min_height_m) and left_guided(tele):
             outcome = f"left in {tele.mode_name}: a pilot's or the autopilot's mode, not commanded further"
         elif is_airborne(tele, min_height_m):
-            await link.set_mode("LOITER")
+            await link.commands.set_mode("LOITER")
             outcome = "holding in the air (LOITER)"
         else:
             try:
-                await link.disarm()
+                await link.commands.disarm()
             except LinkError:
-                await link.disarm(force=True)
-            await link.wait_for(lambda t: t.armed is False, 5.0, "the disarm")
+                await link.commands.disarm(force=True)
+            await link.waits.wait_for(lambda t: t.armed is False, 5.0, "the disarm")
             outcome = "disarmed on the ground"
         if interlock_commanded and not link.telemetry.armed:
-            await link.aux_function(AUX_MOTOR_INTERLOCK, SWITCH_LOW)
+            await link.commands.aux_function(AUX_MOTOR_INTERLOCK, SWITCH_LOW)
     except Exception as exc:  # noqa: BLE001 - the original error is what the user must see
         outcome = f"could not be made safe ({exc})"
     log.error("start-up failed (%s): vehicle %s", reason, outcome)
@@ -432,7 +432,7 @@ async def start_vehicle(link, settings: StartupSettings, alt_m: float, now_s: Ca
     plan = rotor_plan(settings, params)
     log.info("start-up: interlock %s (%s); arming delay %.1f s, run-up %.1f s", plan.interlock,
              plan.reason, plan.arming_delay_s, plan.runup_time_s)
-    await link.set_mode("GUIDED")
+    await link.commands.set_mode("GUIDED")
     commanded = False
     already_armed = bool(link.telemetry.armed)         # e.g. on the ground with the rotor running
     if plan.interlock == "command" and not already_armed:
@@ -476,7 +476,7 @@ async def start_vehicle(link, settings: StartupSettings, alt_m: float, now_s: Ca
     if plan.interlock == "pilot":
         wait_vehicle += plan.runup_time_s + settings.runup_margin_s
     try:
-        await link.wait_for(lambda t: left_guided(t) or (t.height_m is not None and t.pos_ned_m is not None
+        await link.waits.wait_for(lambda t: left_guided(t) or (t.height_m is not None and t.pos_ned_m is not None
                                                           and -t.pos_ned_m[2] >= alt_m - 0.5),
                             10.0 + wait_vehicle / time_scale, f"the takeoff to {alt_m:.1f} m")
         if left_guided(link.telemetry):

@@ -3,7 +3,7 @@
 ``ThreatReactor`` connects the zenoh ``ThreatBus``, the ``ThreatTable`` and one
 ``ThreatManager`` per flight to the daemon through a few callables (it never sees the daemon):
 
-- **Threats in.** zenoh samples arrive on the event loop (``ThreatBus.subscribe(loop=...)``);
+- **Threats in.** zenoh samples arrive on the event loop (``ThreatBus.inbound.subscribe(loop=...)``);
   every PUT or DELETE updates the table and asks the manager for a decision. A threat the
   companion learns itself (an ADS-B report, ``companion.threats.transport.adsb``) goes through
   :meth:`ThreatReactor.on_local_threat`: the very same path as a PUT, then it is republished on
@@ -170,8 +170,8 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         """Open the bus, subscribe to threats, serve the threat list, start the monitor."""
         self.table.set_home(LocalFrame(*home_lla))
         self.bus.open()
-        self.bus.subscribe(self.on_update, loop=asyncio.get_running_loop())
-        self.bus.serve_threats(lambda: self.table.snapshot(self.clock_now_s()))
+        self.bus.inbound.subscribe(self.on_update, loop=asyncio.get_running_loop())
+        self.bus.outbound.serve_threats(lambda: self.table.snapshot(self.clock_now_s()))
         loop = asyncio.get_running_loop()
         for coro in (self._monitor(), self._refresh_alternatives_periodically()):
             self._tasks.append(loop.create_task(coro, name=coro.__name__))
@@ -200,7 +200,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         """Publish ``status`` (``uav/<sysid>/status``) with the number of threats held."""
         self.table.expire(self.clock_now_s())
         status["threats"] = len(self.table)
-        self.bus.publish_status(status)
+        self.bus.outbound.publish_status(status)
 
     def latency_summary(self) -> dict:
         """Per decision kind: n, p50, p99 and max of the measured latencies (ms)."""
@@ -274,7 +274,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
                               self._local_seq)
         self.on_update(update)
         try:
-            self.bus.republish_threat(threat)
+            self.bus.outbound.republish_threat(threat)
         except Exception as exc:  # noqa: BLE001 - republishing is a courtesy; the flight goes on
             log.info("threat %s not republished: %s", threat.id, exc)
 
@@ -289,7 +289,7 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
         event = {**event, "t_s": self.clock_now_s()}
         log.warning("threat rejected: %s", event.get("reason"))
         self.decisions += 1
-        self.bus.publish_event(event)
+        self.bus.outbound.publish_event(event)
         self.record("decision", kind="rejected", reason=event.get("reason"), t_s=event["t_s"],
                     field=event.get("field"), threat_id=event.get("threat_id"), source=event.get("source"))
         if time.monotonic() - self._rejected_told_s >= REJECTED_TEXT_PERIOD_S:

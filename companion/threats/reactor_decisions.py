@@ -158,7 +158,7 @@ class ReactorDecisions:
                     decision.kind, label, trigger, decision.reason,
                     "n/a" if latency_ms is None else f"{latency_ms:.1f}", decision.decide_ms,
                     decision.plan_ms, self.settings.seed)
-        self.bus.publish_event(event)
+        self.bus.outbound.publish_event(event)
         self.record("decision", kind=decision.kind, path_ned_m=decision.path_ned_m, **event)
         threat_id = decision.conflict.threat_id if decision.conflict is not None else None
         self._tell(*statustext_for(decision.kind, label, threat_id, latency_ms))

@@ -117,7 +117,7 @@ class LegsAndAlternatives:
         if ref is None or self.manager is None:
             return
         t = np.linspace(0.0, ref.trajectory.duration_s, max(2, int(ref.trajectory.duration_s * 2)))
-        self.bus.publish_path({
+        self.bus.outbound.publish_path({
             "t_s": self.clock_now_s(), "leg": self.leg_index, "path_id": ref.path_id,
             "t0_s": ref.t0_s, "duration_s": ref.trajectory.duration_s,
             "reference_ned_m": ref.trajectory.sample(t)[0],

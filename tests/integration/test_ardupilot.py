@@ -95,7 +95,7 @@ def flight(sitl, tmp_path_factory):
     config.write_text(NO_ALTERNATIVES)
     adsb_puts = []
     with ThreatBus(1, listen=(), connect=(endpoint,)) as bus:
-        bus.subscribe(lambda u: adsb_puts.append(u) if (u.threat_id or "").startswith("adsb-") else None)
+        bus.inbound.subscribe(lambda u: adsb_puts.append(u) if (u.threat_id or "").startswith("adsb-") else None)
         start_boot, t0 = obs.boot_s, time.monotonic()
         result = run_companion_process(
             companion_command(sitl, tmp / "flight.jsonl", "--zenoh-listen", endpoint, "--adsb",
@@ -221,12 +221,12 @@ def test_after_a_reboot_the_link_asks_for_its_streams_again(sitl, joined):
         link = VehicleLink("companion", streams=StreamSettings(stale_after_s=2.0))
         await link.connect(f"udpin://127.0.0.1:{sitl.companion_port}", timeout_s=20.0)
         try:
-            await link.wait_ready(20.0)
+            await link.waits.wait_ready(20.0)
             rounds, boot_s = link.streams.rounds, link.telemetry.boot_s
             assert boot_s is not None and boot_s > 60.0
             result = await asyncio.to_thread(obs.command, obs.mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 1)
             assert result == obs.mavlink.MAV_RESULT_ACCEPTED
-            await link.wait_for(lambda t: t.boot_s is not None and t.boot_s < boot_s and t.position_age_s < 1.0,
+            await link.waits.wait_for(lambda t: t.boot_s is not None and t.boot_s < boot_s and t.position_age_s < 1.0,
                                 90.0, "positions from the rebooted vehicle")
             assert link.streams.rounds > rounds
             assert link.streams.status["LOCAL_POSITION_NED"] == "interval"

@@ -87,8 +87,8 @@ def test_a_killed_companion_leaves_a_hover_and_resume_finishes_the_mission_with_
                 centre = midpoint_of(plans[7]["path_ned_m"])
                 threat = Threat("keep1", "popup", "local_ned", tuple(map(float, centre)), (0.0, 0.0, 0.0),
                                 THREAT_RADIUS_M, THREAT_TTL_S)
-                assert bus.wait_for_subscriber(10.0, threat.id)
-                bus.put_threat(threat)
+                assert bus.client.wait_for_subscriber(10.0, threat.id)
+                bus.client.put_threat(threat)
                 wait_until(lambda: _snapshot_ids(state) == ["keep1"], 30, "the threat in the snapshot")
                 wait_until(lambda: watcher.status["leg"] >= 1, 120, "leg 1 (towards item 4)")
                 wait_until(lambda: horizontal_speed(track) > 2.0, 60, "the vehicle under way on leg 1")

@@ -24,7 +24,7 @@ pytestmark = pytest.mark.integration
 async def connected_link(sim) -> VehicleLink:
     link = VehicleLink()
     await link.connect(f"udpout://127.0.0.1:{sim.port}", timeout_s=20)
-    await link.wait_ready(10)
+    await link.waits.wait_ready(10)
     return link
 
 
@@ -36,7 +36,7 @@ def test_connect_and_telemetry():
             assert t.connected and t.armed is False and t.in_air in (False, None)
             assert t.mode in COPTER_MODES.values()
             assert t.pos_ned_m.shape == (3,) and np.all(np.abs(t.pos_ned_m) < 1.0)
-            home = await link.wait_home(10)
+            home = await link.waits.wait_home(10)
             assert home == pytest.approx((47.397742, 8.545594, 488.0), abs=1e-5)
             assert t.lat_deg == pytest.approx(47.397742, abs=1e-4)
             assert link.target_system == sim.sysid
@@ -61,18 +61,18 @@ def test_no_autopilot_times_out():
 def test_guided_takeoff_and_setpoints_move_the_vehicle():
     async def main(sim):
         link = await connected_link(sim)
-        streamer = SetpointStreamer(link.send_setpoint)
+        streamer = SetpointStreamer(link.direct.send_setpoint)
         try:
             with pytest.raises(LinkError, match="refused"):
-                await link.takeoff(10.0)             # disarmed: the vehicle refuses
+                await link.commands.takeoff(10.0)             # disarmed: the vehicle refuses
             # a helicopter: interlock low, arm, interlock after the arming delay, run-up, takeoff
             await start_vehicle(link, StartupSettings(), 10.0, VehicleClock(4.0).now_s, time_scale=4.0,
                                 climb_speed_m_s=2.5)
-            await link.wait_for(lambda t: t.pos_ned_m[2] < -8.0, 60, "takeoff to 10 m")
+            await link.waits.wait_for(lambda t: t.pos_ned_m[2] < -8.0, 60, "takeoff to 10 m")
             target = np.array([15.0, 10.0, -12.0])
             streamer.set_source(hold_position(target, 0.0))
             streamer.start()
-            t = await link.wait_for(lambda t: np.linalg.norm(t.pos_ned_m - target) < 1.5, 90,
+            t = await link.waits.wait_for(lambda t: np.linalg.norm(t.pos_ned_m - target) < 1.5, 90,
                                     "the vehicle to reach the GUIDED setpoint")
             assert t.mode == COPTER_MODES["GUIDED"] and t.armed and t.in_air is not False
             assert streamer.sent > 10 and streamer.send_errors == 0
@@ -92,14 +92,14 @@ def test_link_loss_is_detected_and_recovered():
         try:
             sim.proc.send_signal(signal.SIGSTOP)
             try:
-                await link.wait_for(lambda t: not t.connected and changes, 15, "link loss")
+                await link.waits.wait_for(lambda t: not t.connected and changes, 15, "link loss")
                 assert not link.connected and not link.telemetry.connected
             finally:
                 sim.proc.send_signal(signal.SIGCONT)
             assert await link.wait_connected(15)
             await asyncio.sleep(0.5)
             assert changes[:2] == [False, True]
-            await link.wait_position(5)
+            await link.waits.wait_position(5)
         finally:
             await link.aclose()
 

@@ -58,14 +58,14 @@ def test_the_companions_statustext_reaches_the_ground_station():
         link = VehicleLink("companion")
         await link.connect(f"udpin://127.0.0.1:{companion_port}", timeout_s=20)
         try:
-            await link.wait_ready(10)
+            await link.waits.wait_ready(10)
             with pytest.raises(LinkError, match="severity"):
-                link.send_statustext("x", severity="LOUD")
+                link.direct.send_statustext("x", severity="LOUD")
             received: list = []
             deadline = time.monotonic() + 15.0
             while time.monotonic() < deadline and not received:
-                link.send_statustext(TEXT, severity="WARNING")
-                link.send_statustext("x" * 80, severity=mavlink2.MAV_SEVERITY_NOTICE)
+                link.direct.send_statustext(TEXT, severity="WARNING")
+                link.direct.send_statustext("x" * 80, severity=mavlink2.MAV_SEVERITY_NOTICE)
                 await asyncio.sleep(0.3)
                 gcs.drain()
                 received = [m for m in gcs.statustexts if m.text == TEXT]

@@ -60,9 +60,9 @@ def deploy(tmp_path):
 def secured(deploy):
     bus = ThreatBus(1, zenoh_config=deploy.configs["companion"]).open()
     updates: list = []
-    bus.subscribe(updates.append)
+    bus.inbound.subscribe(updates.append)
     table = ThreatTable()
-    bus.serve_threats(table.snapshot)
+    bus.outbound.serve_threats(table.snapshot)
     yield deploy, bus, updates, table
     bus.close()
 
@@ -103,14 +103,14 @@ def test_an_unauthenticated_session_cannot_put(secured):
         time.sleep(SETTLE_S)
         for s in sessions:
             assert s.connected_peers() == 0
-            s.put_raw("radar1/x1", popup("x1"))
-            s.put_raw("x2", popup("x2"))
+            s.client.put_raw("radar1/x1", popup("x1"))
+            s.client.put_raw("x2", popup("x2"))
         res = companion("threat", "add", "--zenoh-connect", f"tcp/{host_port}", "--id", "x3",
                         "--pos", "1,2,-3", "--radius", "2", "--wait", "1")
         assert res.returncode == 1 and "no subscriber" in res.stderr
         with peer(dep, "radar1") as radar1:                                     # positive control
-            assert radar1.wait_for_subscriber(10.0, "ok")
-            radar1.put_raw("radar1/ok", popup("ok"))
+            assert radar1.client.wait_for_subscriber(10.0, "ok")
+            radar1.client.put_raw("radar1/ok", popup("ok"))
             assert wait_for(lambda: updates)
         time.sleep(0.5)
         assert [u.uid for u in updates] == ["radar1/ok"]
@@ -129,11 +129,11 @@ def test_identities_of_the_ca_cannot_put_beyond_their_rights(secured):
         assert gcs.connected_peers() == 1 and intruder.connected_peers() == 1   # connected, yet refused
         for s in (gcs, intruder):
             for leaf in ("gcs/x", "intruder/x", "radar1/x", "x"):
-                s.put_raw(leaf, popup("x"))
-        radar2.put_raw("radar1/spoof", popup("spoof"))       # a source impersonating another
-        radar2.put_raw("spoof", popup("spoof"))              # the unauthenticated layout
+                s.client.put_raw(leaf, popup("x"))
+        radar2.client.put_raw("radar1/spoof", popup("spoof"))       # a source impersonating another
+        radar2.client.put_raw("spoof", popup("spoof"))              # the unauthenticated layout
         radar2.session.delete("uav/1/threats/radar1/p1")
-        radar2.put_raw("radar2/ok", popup("ok"))              # positive control
+        radar2.client.put_raw("radar2/ok", popup("ok"))              # positive control
         assert wait_for(lambda: updates)
         time.sleep(0.5)
     assert [(u.action, u.uid) for u in updates] == [("put", "radar2/ok")]
@@ -153,8 +153,8 @@ def test_the_decision_event_names_the_source_and_only_authorised_readers_see_it(
             for name, s in readers.items():
                 s.subscribe_json("events", lambda key, msg, name=name: seen[name].append(msg))
             time.sleep(SETTLE_S)
-            readers["radar1"].put_threat(Threat("p1", "popup", "local_ned", (20.0, 0.0, -10.0), radius_m=3.0))
-            readers["radar1"].put_raw("radar1/bad", b'{"v": 1, "id": "bad", "kind": "popup", '
+            readers["radar1"].client.put_threat(Threat("p1", "popup", "local_ned", (20.0, 0.0, -10.0), radius_m=3.0))
+            readers["radar1"].client.put_raw("radar1/bad", b'{"v": 1, "id": "bad", "kind": "popup", '
                                       b'"frame": "local_ned", "position": [1, 2, 3], "radius_m": -4}')
             await until(lambda: len(seen["gcs"]) >= 2 and len(seen["radar1"]) >= 2, "events at the readers", 15.0)
             time.sleep(0.5)

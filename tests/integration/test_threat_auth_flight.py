@@ -48,13 +48,13 @@ def flight(tmp_path_factory):
             running = lambda: flight.companion.poll() is not None   # noqa: E731
             wait_until(lambda: observer.due(INTRUSION) or running(), 240, "leg 1 (observer)")
             intrusion = place(INTRUSION, observer)
-            gcs.put_threat(intrusion)
+            gcs.client.put_threat(intrusion)
             seen["threats"] = inject(watcher, [HEAD_ON], 240, done=running)
             wait_until(lambda: (watcher.status or {}).get("leg", 0) >= 2 or running(), 240, "leg 2")
             seen["status"] = dict(watcher.status or {})
             seen["events"] = list(watcher.events)
             seen["observer_events"] = list(observer.events)
-            seen["listed"] = sorted(t.uid for t in radar1.list_threats(5.0))
+            seen["listed"] = sorted(t.uid for t in radar1.client.list_threats(5.0))
         track_t, track_pos = track.samples()
     yield {"seen": seen, "record": load_record(flight.record), "log": flight.log.read_text(),
            "track_t_s": track_t, "track_ned_m": track_pos, "intrusion": intrusion}

@@ -44,9 +44,9 @@ def listener():
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     bus = ThreatBus(7, listen=[endpoint]).open()
     updates: list = []
-    bus.subscribe(updates.append)
+    bus.inbound.subscribe(updates.append)
     table = ThreatTable()
-    bus.serve_threats(table.snapshot)
+    bus.outbound.serve_threats(table.snapshot)
     yield endpoint, bus, updates, table
     bus.close()
 
@@ -86,11 +86,11 @@ def test_invalid_payload_from_another_process_is_rejected_naming_the_field(liste
     script = textwrap.dedent(f"""
         from companion.threats.transport.bus import ThreatBus
         with ThreatBus(7, listen=[], connect=["{endpoint}"]) as bus:
-            bus.wait_for_subscriber(10.0, "bad")
-            bus.put_raw("bad", b'{{"v": 1, "id": "bad", "kind": "popup", "frame": "local_ned", '
+            bus.client.wait_for_subscriber(10.0, "bad")
+            bus.client.put_raw("bad", b'{{"v": 1, "id": "bad", "kind": "popup", "frame": "local_ned", '
                                b'"position": [1, 2, 3], "radius_m": -4}}')
-            bus.put_raw("junk", b"not json")
-            bus.put_raw("other", b'{{"v": 1, "id": "t1", "kind": "popup", "frame": "local_ned", '
+            bus.client.put_raw("junk", b"not json")
+            bus.client.put_raw("other", b'{{"v": 1, "id": "t1", "kind": "popup", "frame": "local_ned", '
                                  b'"position": [1, 2, 3], "radius_m": 4}}')
     """)
     res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
@@ -156,7 +156,7 @@ def test_through_a_router_and_into_an_asyncio_loop(tmp_path):
 
             bus = ThreatBus(3, listen=[], connect=[router_ep], mode="client").open()
             try:
-                bus.subscribe(on_update, loop=loop)
+                bus.inbound.subscribe(on_update, loop=loop)
                 res = await asyncio.to_thread(
                     companion, "threat", "add", "--id", "r1", "--pos", "1,2,-3", "--radius", "2",
                     "--sysid", "3", "--zenoh-connect", router_ep)

@@ -14,32 +14,35 @@ it, in ``peer`` or ``client`` mode). Keys, with prefix ``uav/<sysid>``:
   ``put``, ``delete`` or ``rejected`` (with the ``ThreatPayloadError`` naming the field).
   zenoh-python has no asyncio API: with ``loop`` given the handler runs on that loop through
   ``loop.call_soon_threadsafe``; without, it runs on the zenoh thread; with no handler the
-  updates go to an unbounded queue (``drain_updates``). Nothing is ever
+  updates go to an unbounded queue (``inbound.drain_updates``). Nothing is ever
   dropped: there is no bounded queue, and every sample is counted (``stats``).
-- ``threats/**`` queryable (``serve_threats``): answers ``companion threat list`` with the threats
-  the companion currently holds, predicted to the time of the query.
-- ``status``, ``events``, ``path``: JSON objects published by the companion.
+- ``threats/**`` queryable (``outbound.serve_threats``): answers ``companion threat list`` with
+  the threats the companion currently holds, predicted to the time of the query.
+- ``status``, ``events``, ``path``: JSON objects published by the companion (``outbound``).
 
-The client side (``put_threat``, ``delete_threat``, ``list_threats``) is what
+The client side (``client.put_threat``, ``delete_threat``, ``list_threats``) is what
 ``companion threat`` uses; it puts on ``threats/<source>/<id>`` when the bus has a ``source``
 (given, or the common name of the certificate of its zenoh configuration file).
 
-``ThreatBus`` (this module: the session) is made of one part per job: ``bus_inbound`` (threats
-in), ``bus_outbound`` (what the companion publishes, and the threat list it serves) and
-``bus_client`` (``companion threat``). These are I/O modules: nothing numeric happens here.
+``ThreatBus`` (this module) owns the zenoh session and its lifecycle (``open``, ``unsubscribe``,
+``close``), the bus clock and counters, and holds one part per job as a member, each given the
+session, the key space and what else it uses: ``inbound`` (``bus_inbound.ThreatInbound``:
+threats in), ``outbound`` (``bus_outbound.CompanionOutbound``: what the companion publishes,
+and the threat list it serves) and ``client`` (``bus_client.ThreatClient``: ``companion
+threat``); ``bus_declarations`` has the publishers and counters they share the pattern of.
+These are I/O modules: nothing numeric happens here.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import queue
-import threading
 import time
 from typing import Callable
 
 from companion.errors import ThreatBusError
 from companion.threats.transport.bus_client import ThreatClient
+from companion.threats.transport.bus_declarations import BusCounters, undeclare_all
 from companion.threats.transport.bus_inbound import ThreatInbound, check_source
 from companion.threats.transport.bus_outbound import CompanionOutbound
 from companion.threats.settings import check_endpoint, default_listen
@@ -85,7 +88,7 @@ def session_config(*, mode: str = "peer", listen=(), connect=()):
     return cfg
 
 
-class ThreatBus(ThreatInbound, CompanionOutbound, ThreatClient):
+class ThreatBus:
     """One zenoh session for the threats of vehicle ``sysid`` (see the module docstring).
 
     Parameters
@@ -111,11 +114,24 @@ class ThreatBus(ThreatInbound, CompanionOutbound, ThreatClient):
         the certificate of ``zenoh_config`` if any (but not for a configuration with access
         control, i.e. the companion's own), else the plain ``threats/<id>``.
 
+    Attributes
+    ----------
+    inbound : ThreatInbound
+        Threats in (``subscribe``, ``parse_key``, ``drain_updates``).
+    outbound : CompanionOutbound
+        The companion's publications (``publish_status``, ``publish_event``, ``publish_path``,
+        ``serve_threats``, ``republish_threat``).
+    client : ThreatClient
+        ``companion threat``'s side (``put_threat``, ``delete_threat``, ``list_threats``,
+        ``wait_for_subscriber``, ``source``).
+    clock : callable() -> float
+        The bus clock (may be replaced, e.g. by the reactor's mission clock).
+
     Examples
     --------
     >>> bus = ThreatBus(1, listen=["tcp/127.0.0.1:7448"]).open()       # doctest: +SKIP
-    >>> bus.subscribe(lambda u: print(u.action, u.threat_id), loop=asyncio.get_running_loop())
-    >>> bus.publish_event({"event": "replan", "reason": "...", "latency_ms": 12.0})
+    >>> bus.inbound.subscribe(lambda u: print(u.action, u.threat_id), loop=asyncio.get_running_loop())
+    >>> bus.outbound.publish_event({"event": "replan", "reason": "...", "latency_ms": 12.0})
     >>> bus.close()
     """
 
@@ -148,18 +164,13 @@ class ThreatBus(ThreatInbound, CompanionOutbound, ThreatClient):
             source = self.security.identity
         if source is not None:
             source = check_source(source, "source")
-        self.source = source
         self._session = None
-        self._subscriber = None
-        self._queryable = None
-        self._publishers: dict = {}
-        self._handler = None
-        self._loop = None
-        self._queue: queue.SimpleQueue = queue.SimpleQueue()
-        self._lock = threading.Lock()
-        self._seq = 0
-        self._counts = {"received": 0, "put": 0, "delete": 0, "rejected": 0, "delivered": 0,
-                        "handler_errors": 0, "undeliverable": 0, "queries": 0, "republished": 0}
+        self._json_subscribers: list = []
+        self._counters = BusCounters()
+        session, clock = (lambda: self.session), (lambda: self.clock())
+        self.inbound = ThreatInbound(session, self.key, clock, self.require_source, self._counters)
+        self.outbound = CompanionOutbound(session, self.key, clock, self._counters)
+        self.client = ThreatClient(session, self.key, source)
 
     @classmethod
     def from_settings(cls, settings, *, clock=None) -> "ThreatBus":
@@ -193,30 +204,21 @@ class ThreatBus(ThreatInbound, CompanionOutbound, ThreatClient):
 
     def close(self) -> None:
         """Undeclare everything and close the session (idempotent)."""
-        session, self._session = self._session, None
-        if session is None:
+        if self._session is None:
             return
-        for ent in [self._subscriber, self._queryable, *self._publishers.values()]:
-            if ent is not None:
-                try:
-                    ent.undeclare()
-                except Exception as exc:   # already closed by the session: nothing to do
-                    log.debug("undeclare: %s", exc)
-        self._subscriber = self._queryable = None
-        self._publishers.clear()
+        self.unsubscribe()
+        self.outbound.close()
+        self.client.close()
+        undeclare_all(self._json_subscribers)
+        self._json_subscribers.clear()
+        session, self._session = self._session, None
         session.close()
 
     def unsubscribe(self) -> None:
-        """Undeclare the threat subscription and the threat list (``subscribe``,
-        ``serve_threats``); the session stays open for the next flight's."""
-        for ent in (self._subscriber, self._queryable):
-            if ent is not None:
-                try:
-                    ent.undeclare()
-                except Exception as exc:   # the session is closing
-                    log.debug("undeclare: %s", exc)
-        self._subscriber = self._queryable = None
-        self._handler = self._loop = None
+        """Undeclare the threat subscription and the threat list (``inbound.subscribe``,
+        ``outbound.serve_threats``); the session stays open for the next flight's."""
+        self.inbound.unsubscribe()
+        self.outbound.stop_serving()
 
     def __enter__(self) -> "ThreatBus":
         return self.open()
@@ -238,3 +240,29 @@ class ThreatBus(ThreatInbound, CompanionOutbound, ThreatClient):
     def key(self, leaf: str) -> str:
         """``uav/<sysid>/<leaf>``."""
         return f"{self.prefix}/{leaf}"
+
+    def stats(self) -> dict:
+        """Counters: received, put, delete, rejected, delivered, handler_errors, undeliverable,
+        queries, republished."""
+        return self._counters.snapshot()
+
+    def subscribe_json(self, leaf: str, handler: Callable[[str, dict | None], None]):
+        """Subscribe to ``uav/<sysid>/<leaf>`` and call ``handler(key, message)`` (zenoh thread).
+
+        For the tools and tests that watch ``status``, ``events`` or ``path``, and the service's
+        ``command``; ``message`` is None for a payload that is not JSON. Returns the zenoh
+        subscriber (undeclared by ``close``).
+        """
+        def on_sample(sample) -> None:
+            try:
+                msg = json.loads(sample.payload.to_bytes())
+            except ValueError:
+                msg = None
+            try:
+                handler(str(sample.key_expr), msg)
+            except Exception:
+                log.exception("handler of %s failed", leaf)
+
+        sub = self.session.declare_subscriber(self.key(leaf), on_sample)
+        self._json_subscribers.append(sub)
+        return sub

@@ -1,25 +1,42 @@
-"""The client side of the bus (``companion threat``): put and delete threats on
-``threats/[<source>/]<id>``, list the threats the companion(s) hold."""
+"""The client side of the bus (``ThreatBus.client``, what ``companion threat`` uses): put and
+delete threats on ``threats/[<source>/]<id>``, list the threats the companion(s) hold. It has
+its own publishers; nothing of the companion's side is needed."""
 
 from __future__ import annotations
 
 import logging
 import time
 from dataclasses import replace
+from typing import Callable
 
 from companion.errors import ThreatPayloadError
 from companion.threats.transport import codec
 from companion.threats.model import LOCAL_SOURCE, Threat, payload_error, threat_uid
+from companion.threats.transport.bus_declarations import Publishers
 
 log = logging.getLogger(__name__)
 
 
 class ThreatClient:
-    """The client side of a ``ThreatBus`` (a part of it: it uses the bus's ``session``, ``key``,
-    ``_publisher`` and ``source``)."""
+    """The client side of a bus (``ThreatBus.client``).
 
-    source: str | None
-    _session: object
+    Parameters
+    ----------
+    session : callable() -> zenoh.Session
+        The bus's open session (raises ``ThreatBusError`` when it is not open).
+    key : callable(leaf) -> str
+        ``uav/<sysid>/<leaf>``.
+    source : str or None
+        Put and delete on ``threats/<source>/<id>`` (None: the plain ``threats/<id>``); checked
+        by the bus.
+    """
+
+    def __init__(self, session: Callable[[], object], key: Callable[[str], str],
+                 source: str | None) -> None:
+        self._session = session
+        self._key = key
+        self.source = source
+        self._publishers = Publishers(session, key)
 
     def threat_leaf(self, threat_id: str) -> str:
         """``threats/<source>/<id>`` with this bus's ``source``, else ``threats/<id>``."""
@@ -28,7 +45,7 @@ class ThreatClient:
 
     def wait_for_subscriber(self, timeout_s: float, threat_id: str = "probe") -> bool:
         """Wait until a subscriber of this bus's key of ``threat_id`` is known (True) or timeout."""
-        pub = self._publisher(self.threat_leaf(threat_id), block=True)
+        pub = self._publishers.get(self.threat_leaf(threat_id), block=True)
         deadline = time.monotonic() + timeout_s
         while True:
             if pub.matching_status.matching:
@@ -40,30 +57,19 @@ class ThreatClient:
     def put_threat(self, threat: Threat) -> None:
         """PUT ``threat`` (encoded, validated) on ``uav/<sysid>/threats/[<source>/]<id>``."""
         payload = codec.encode(threat)
-        self._publisher(self.threat_leaf(threat.id), block=True).put(payload)
-
-    def republish_threat(self, threat: Threat) -> bool:
-        """PUT ``threat`` on ``uav/<sysid>/threats/<id>`` for *other* processes only (a threat
-        this process learnt otherwise, e.g. from ADS-B): zenoh's ``allowed_destination`` REMOTE
-        keeps it from the local subscriber, and it is dropped rather than wait under congestion
-        (the next report replaces it). Returns False when the session is not open."""
-        import zenoh
-
-        if self._session is None:
-            return False
-        self._session.put(self.key(f"threats/{threat.id}"), codec.encode(threat),
-                          allowed_destination=zenoh.Locality.REMOTE,
-                          congestion_control=zenoh.CongestionControl.DROP)
-        self._count("republished")
-        return True
+        self._publishers.get(self.threat_leaf(threat.id), block=True).put(payload)
 
     def put_raw(self, leaf: str, payload: bytes) -> None:
         """PUT an arbitrary payload on ``uav/<sysid>/threats/<leaf>`` (tests, fault injection)."""
-        self.session.put(self.key(f"threats/{leaf}"), payload)
+        self._session().put(self._key(f"threats/{leaf}"), payload)
 
     def delete_threat(self, threat_id: str) -> None:
         """DELETE ``uav/<sysid>/threats/[<source>/]<threat_id>``."""
-        self._publisher(self.threat_leaf(threat_id), block=True).delete()
+        self._publishers.get(self.threat_leaf(threat_id), block=True).delete()
+
+    def close(self) -> None:
+        """Undeclare the publishers (the session is closing)."""
+        self._publishers.close()
 
     def list_threats(self, timeout_s: float = 2.0) -> list[Threat]:
         """Ask the companion(s) for the threats they hold (``serve_threats``), sorted by uid
@@ -72,7 +78,7 @@ class ThreatClient:
         Invalid replies are logged and skipped.
         """
         out: dict[str, Threat] = {}
-        replies = self.session.get(self.key("threats/**"), timeout=timeout_s)
+        replies = self._session().get(self._key("threats/**"), timeout=timeout_s)
         for reply in replies:
             sample = reply.ok
             if sample is None:
@@ -80,7 +86,7 @@ class ThreatClient:
             try:
                 threat = codec.decode(sample.payload.to_bytes(), received_t_s=time.monotonic())
                 head, _, last = str(sample.key_expr).rpartition("/")
-                source = head.rpartition("/")[2] if head != self.key("threats") else LOCAL_SOURCE
+                source = head.rpartition("/")[2] if head != self._key("threats") else LOCAL_SOURCE
                 if last != threat.id:
                     raise payload_error("id", f"{threat.id!r} does not match the key's last chunk {last!r}")
                 threat = replace(threat, source=source)

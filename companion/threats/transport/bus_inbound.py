@@ -1,9 +1,10 @@
-"""Threats in: the bus's subscription to ``uav/<sysid>/threats/**``.
+"""Threats in (``ThreatBus.inbound``): the subscription to ``uav/<sysid>/threats/**``.
 
 Every sample is decoded and validated *on the zenoh thread* (``companion.threats.transport.codec``) and
 handed on as a ``ThreatUpdate`` with action ``put``, ``delete`` or ``rejected``: to a handler on
 an asyncio loop (``call_soon_threadsafe``), to a handler on the zenoh thread, or to an unbounded
-queue (``drain_updates``). Nothing is ever dropped, and every sample is counted (``stats``).
+queue (``drain_updates``). Nothing is ever dropped, and every sample is counted (the bus's
+``BusCounters``, ``ThreatBus.stats``).
 """
 
 from __future__ import annotations
@@ -18,25 +19,42 @@ from typing import Callable
 from companion.errors import ThreatBusError, ThreatPayloadError
 from companion.threats.transport import codec
 from companion.threats.model import LOCAL_SOURCE, payload_error
+from companion.threats.transport.bus_declarations import BusCounters, undeclare_all
 from companion.threats.transport.update import ThreatUpdate
 
 log = logging.getLogger(__name__)
 
 
 class ThreatInbound:
-    """The threat subscription of a ``ThreatBus`` (a part of it: it uses the bus's ``session``,
-    ``key``, ``clock`` and ``require_source``)."""
+    """The threat subscription of a bus (``ThreatBus.inbound``).
 
-    prefix: str
-    require_source: bool
-    clock: Callable[[], float]
-    _subscriber: object
-    _handler: Callable[[ThreatUpdate], None] | None
-    _loop: object
-    _queue: queue.SimpleQueue
-    _lock: threading.Lock
-    _seq: int
-    _counts: dict
+    Parameters
+    ----------
+    session : callable() -> zenoh.Session
+        The bus's open session (raises ``ThreatBusError`` when it is not open).
+    key : callable(leaf) -> str
+        ``uav/<sysid>/<leaf>``.
+    clock : callable() -> float
+        Time source (s) stamped on received threats (called on the zenoh thread).
+    require_source : bool
+        Threats must come on ``threats/<source>/<id>`` (the bus's access control is on).
+    counters : BusCounters
+        Every sample is counted there.
+    """
+
+    def __init__(self, session: Callable[[], object], key: Callable[[str], str],
+                 clock: Callable[[], float], require_source: bool, counters: BusCounters) -> None:
+        self._session = session
+        self._key = key
+        self._clock = clock
+        self._require_source = bool(require_source)
+        self._counters = counters
+        self._subscriber = None
+        self._handler: Callable[[ThreatUpdate], None] | None = None
+        self._loop = None
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._seq_lock = threading.Lock()
+        self._seq = 0
 
     def subscribe(self, handler: Callable[[ThreatUpdate], None] | None = None, *, loop=None) -> None:
         """Subscribe to ``uav/<sysid>/threats/**``.
@@ -54,28 +72,34 @@ class ThreatInbound:
             raise ThreatBusError("already subscribed")
         self._handler = handler
         self._loop = loop
-        self._subscriber = self.session.declare_subscriber(self.key("threats/**"), self._on_sample)
+        self._subscriber = self._session().declare_subscriber(self._key("threats/**"), self.on_sample)
 
-    def _on_sample(self, sample) -> None:
-        """zenoh thread: decode, count, hand on. Never raises (zenoh would log and go on)."""
+    def unsubscribe(self) -> None:
+        """Undeclare the subscription and forget its handler (``subscribe`` may be called again)."""
+        undeclare_all([self._subscriber])
+        self._subscriber = None
+        self._handler = self._loop = None
+
+    def on_sample(self, sample) -> None:
+        """The subscription's callback (zenoh thread): decode, count, hand on. Never raises
+        (zenoh would log and go on)."""
         try:
             update = self._decode_sample(sample)
             self._deliver(update)
         except Exception:          # a bug here must not kill the zenoh callback thread
             log.exception("threat sample handling failed")
-            with self._lock:
-                self._counts["handler_errors"] += 1
+            self._counters.count("handler_errors")
 
     def _decode_sample(self, sample) -> ThreatUpdate:
         import zenoh
 
         mono = time.monotonic()
-        t_s = float(self.clock())
+        t_s = float(self._clock())
         key = str(sample.key_expr)
-        with self._lock:
+        with self._seq_lock:
             self._seq += 1
             seq = self._seq
-            self._counts["received"] += 1
+        self._counters.count("received")
         threat_id, source, threat, error = None, None, None, None
         try:
             source, threat_id = self.parse_key(key)
@@ -88,8 +112,7 @@ class ThreatInbound:
                     threat = replace(threat, source=source)
         except ThreatPayloadError as exc:
             action, error, threat = "rejected", exc, None
-        with self._lock:
-            self._counts[action] += 1
+        self._counters.count(action)
         return ThreatUpdate(action, threat_id, threat, error, key, t_s, mono, seq, source)
 
     def parse_key(self, key: str) -> tuple[str, str]:
@@ -103,44 +126,40 @@ class ThreatInbound:
         ThreatPayloadError
             With ``field`` ``"key"``.
         """
-        head = self.key("threats/")
+        head = self._key("threats/")
         leaf = key[len(head):] if key.startswith(head) else ""
         chunks = leaf.split("/")
         if len(chunks) == 2:
             return check_source(chunks[0], "key"), codec.check_id(chunks[1], "key")
-        if len(chunks) == 1 and self.require_source:
+        if len(chunks) == 1 and self._require_source:
             raise payload_error("key", f"{key!r}: this companion takes threats from authenticated sources "
-                                f"only, on {self.prefix}/threats/<source>/<id> (its zenoh access control is on)")
+                                f"only, on {self._key('threats/<source>/<id>')} (its zenoh access control is on)")
         if len(chunks) > 2:
-            raise payload_error("key", f"{key!r}: expected {self.prefix}/threats/<id> or "
-                                f"{self.prefix}/threats/<source>/<id>")
+            raise payload_error("key", f"{key!r}: expected {self._key('threats/<id>')} or "
+                                f"{self._key('threats/<source>/<id>')}")
         return LOCAL_SOURCE, codec.check_id(leaf, "key")
 
     def _deliver(self, update: ThreatUpdate) -> None:
         handler = self._handler
         if handler is None:
             self._queue.put(update)
-            self._count("delivered")
+            self._counters.count("delivered")
             return
         if self._loop is not None:
             try:
                 self._loop.call_soon_threadsafe(self._run_handler, handler, update)
             except RuntimeError:       # the loop is closed: the service is shutting down
-                self._count("undeliverable")
+                self._counters.count("undeliverable")
             return
         self._run_handler(handler, update)
 
     def _run_handler(self, handler, update: ThreatUpdate) -> None:
         try:
             handler(update)
-            self._count("delivered")
+            self._counters.count("delivered")
         except Exception:
             log.exception("threat update handler failed on %s", update.key)
-            self._count("handler_errors")
-
-    def _count(self, name: str) -> None:
-        with self._lock:
-            self._counts[name] += 1
+            self._counters.count("handler_errors")
 
     def drain_updates(self) -> list[ThreatUpdate]:
         """All queued updates (queue mode), oldest first, without waiting."""
@@ -150,11 +169,6 @@ class ThreatInbound:
                 out.append(self._queue.get_nowait())
             except queue.Empty:
                 return out
-
-    def stats(self) -> dict:
-        """Counters: received, put, delete, rejected, delivered, handler_errors, undeliverable, queries."""
-        with self._lock:
-            return dict(self._counts)
 
 
 def check_source(name: str, field: str) -> str:

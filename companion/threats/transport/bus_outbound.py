@@ -1,6 +1,6 @@
-"""The companion's side of the bus: JSON objects out (``status``, ``events``, ``path``), the
-``threats/**`` queryable that answers ``companion threat list``, and JSON subscriptions for the
-tools and tests that watch what the companion publishes."""
+"""The companion's side of the bus (``ThreatBus.outbound``): JSON objects out (``status``,
+``events``, ``path``), the ``threats/**`` queryable that answers ``companion threat list``, and
+the threats this process learnt otherwise (ADS-B) put for the other processes."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ from typing import Callable
 
 import numpy as np
 
+from companion.errors import ThreatBusError
 from companion.threats.transport import codec
 from companion.threats.model import Threat
+from companion.threats.transport.bus_declarations import BusCounters, Publishers, undeclare_all
 
 log = logging.getLogger(__name__)
 
@@ -50,11 +52,28 @@ def to_json_bytes(message: dict) -> bytes:
 
 
 class CompanionOutbound:
-    """What the companion publishes on a ``ThreatBus`` (a part of it: it uses the bus's
-    ``session``, ``key``, ``clock`` and counters)."""
+    """What the companion publishes on a bus (``ThreatBus.outbound``).
 
-    _publishers: dict
-    _queryable: object
+    Parameters
+    ----------
+    session : callable() -> zenoh.Session
+        The bus's open session (raises ``ThreatBusError`` when it is not open).
+    key : callable(leaf) -> str
+        ``uav/<sysid>/<leaf>``.
+    clock : callable() -> float
+        The bus clock (s): threats listed are predicted to its now.
+    counters : BusCounters
+        Queries answered and threats republished are counted there.
+    """
+
+    def __init__(self, session: Callable[[], object], key: Callable[[str], str],
+                 clock: Callable[[], float], counters: BusCounters) -> None:
+        self._session = session
+        self._key = key
+        self._clock = clock
+        self._counters = counters
+        self._publishers = Publishers(session, key)
+        self._queryable = None
 
     def serve_threats(self, snapshot: Callable[[], list]) -> None:
         """Answer queries on ``uav/<sysid>/threats/**`` (``companion threat list``).
@@ -67,58 +86,55 @@ class CompanionOutbound:
             threat) and the ttl shortened accordingly.
         """
         def on_query(query) -> None:
-            self._count("queries")
+            self._counters.count("queries")
             try:
                 for item in snapshot():
-                    threat, now_t_s = item if isinstance(item, tuple) else (item, float(self.clock()))
+                    threat, now_t_s = item if isinstance(item, tuple) else (item, float(self._clock()))
                     pos = threat.position_at(now_t_s) if threat.frame == "local_ned" else threat.position
                     ttl = None if threat.ttl_s is None else max(threat.expires_t_s - now_t_s, 1e-3)
                     current = Threat(threat.id, threat.kind, threat.frame, tuple(float(x) for x in pos),
                                      threat.velocity_ned_m_s, threat.radius_m, ttl, now_t_s)
-                    query.reply(self.key(f"threats/{threat.uid}"), codec.encode(current))
+                    query.reply(self._key(f"threats/{threat.uid}"), codec.encode(current))
             except Exception:
                 log.exception("answering a threat list query failed")
 
-        self._queryable = self.session.declare_queryable(self.key("threats/**"), on_query)
+        self._queryable = self._session().declare_queryable(self._key("threats/**"), on_query)
 
-    def _publisher(self, leaf: str, block: bool):
-        import zenoh
+    def stop_serving(self) -> None:
+        """Undeclare the threat list queryable (``serve_threats`` may be called again)."""
+        undeclare_all([self._queryable])
+        self._queryable = None
 
-        pub = self._publishers.get(leaf)
-        if pub is None:
-            cc = zenoh.CongestionControl.BLOCK if block else zenoh.CongestionControl.DROP
-            pub = self.session.declare_publisher(self.key(leaf), congestion_control=cc)
-            self._publishers[leaf] = pub
-        return pub
+    def close(self) -> None:
+        """Undeclare the queryable and the publishers (the session is closing)."""
+        self.stop_serving()
+        self._publishers.close()
 
     def publish_status(self, status: dict) -> None:
         """PUT ``status`` (a JSON object) on ``uav/<sysid>/status``."""
-        self._publisher("status", block=False).put(to_json_bytes(status))
+        self._publishers.get("status", block=False).put(to_json_bytes(status))
 
     def publish_event(self, event: dict) -> None:
         """PUT ``event`` on ``uav/<sysid>/events`` (reliable: never dropped for congestion)."""
-        self._publisher("events", block=True).put(to_json_bytes(event))
+        self._publishers.get("events", block=True).put(to_json_bytes(event))
 
     def publish_path(self, path: dict) -> None:
         """PUT ``path`` (active path and alternatives) on ``uav/<sysid>/path``."""
-        self._publisher("path", block=True).put(to_json_bytes(path))
+        self._publishers.get("path", block=True).put(to_json_bytes(path))
 
-    def subscribe_json(self, leaf: str, handler: Callable[[str, dict | None], None]):
-        """Subscribe to ``uav/<sysid>/<leaf>`` and call ``handler(key, message)`` (zenoh thread).
+    def republish_threat(self, threat: Threat) -> bool:
+        """PUT ``threat`` on ``uav/<sysid>/threats/<id>`` for *other* processes only (a threat
+        this process learnt otherwise, e.g. from ADS-B): zenoh's ``allowed_destination`` REMOTE
+        keeps it from the local subscriber, and it is dropped rather than wait under congestion
+        (the next report replaces it). Returns False when the session is not open."""
+        import zenoh
 
-        For tools and tests that watch ``status``, ``events`` or ``path``; ``message`` is None
-        for a payload that is not JSON. Returns the zenoh subscriber (closed with the session).
-        """
-        def on_sample(sample) -> None:
-            try:
-                msg = json.loads(sample.payload.to_bytes())
-            except ValueError:
-                msg = None
-            try:
-                handler(str(sample.key_expr), msg)
-            except Exception:
-                log.exception("handler of %s failed", leaf)
-
-        sub = self.session.declare_subscriber(self.key(leaf), on_sample)
-        self._publishers[f"sub:{leaf}:{id(sub)}"] = sub
-        return sub
+        try:
+            session = self._session()
+        except ThreatBusError:
+            return False
+        session.put(self._key(f"threats/{threat.id}"), codec.encode(threat),
+                    allowed_destination=zenoh.Locality.REMOTE,
+                    congestion_control=zenoh.CongestionControl.DROP)
+        self._counters.count("republished")
+        return True

@@ -1,6 +1,6 @@
 """Property-based fuzz of the threat payloads the companion receives over zenoh (issue 11).
 
-Every sample goes through ``ThreatBus._on_sample`` (decode on the zenoh thread, count, queue),
+Every sample goes through ``ThreatInbound.on_sample`` (decode on the zenoh thread, count, queue),
 the path a real sample takes, with a stand-in for the zenoh sample. Inputs: any bytes, any JSON
 value (hypothesis' recursive JSON), JSON objects with the threat's field names and junk values,
 and valid threats with exactly one field broken (wrong type, out of range, NaN/Infinity
@@ -48,16 +48,16 @@ def sample(key: str, payload: bytes):
 
 @pytest.fixture(scope="module")
 def bus():
-    """A bus that is never opened: ``_on_sample`` needs no session, updates go to its queue."""
+    """A bus that is never opened: ``inbound.on_sample`` needs no session, updates go to its queue."""
     return ThreatBus(1, listen=("tcp/127.0.0.1:7447",))
 
 
 def receive(bus: ThreatBus, key: str, payload: bytes):
     """One sample through the bus; returns its update, checks the counters."""
     before = bus.stats()
-    bus._on_sample(sample(key, payload))
+    bus.inbound.on_sample(sample(key, payload))
     after = bus.stats()
-    updates = bus.drain_updates()
+    updates = bus.inbound.drain_updates()
     assert after["handler_errors"] == before["handler_errors"] == 0
     assert after["received"] == before["received"] + 1
     assert len(updates) == 1

@@ -48,6 +48,7 @@ class FakeHeli:
         self.height = 0.0
         self.texts: list[str] = []
         self.streams = None
+        self.commands = self.waits = self    # the link's parts the start-up uses, in one double
 
     # vehicle time
     def now_s(self) -> float:

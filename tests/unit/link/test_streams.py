@@ -42,6 +42,11 @@ class FakeLink:
         return [int(p[0]) for c, p in self.commands if c == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL]
 
 
+def keeper_of(link: FakeLink, settings: StreamSettings, **kw) -> StreamKeeper:
+    """A keeper that asks, sends and checks the link through ``link``."""
+    return StreamKeeper(settings, commands=link, sender=link, target=link, connected=lambda: link.connected, **kw)
+
+
 def test_every_message_the_companion_uses_is_requested_with_pymavlink_ids():
     names = [r.name for r in stream_requests(StreamSettings())]
     assert names == ["LOCAL_POSITION_NED", "ATTITUDE", "GLOBAL_POSITION_INT", "EXTENDED_SYS_STATE",
@@ -69,7 +74,7 @@ def test_settings_are_validated():
 
 def test_an_ardupilot_like_vehicle_accepts_every_interval():
     link = FakeLink(lambda c, p: ACCEPTED)
-    keeper = StreamKeeper(link, StreamSettings())
+    keeper = keeper_of(link, StreamSettings())
     status = asyncio.run(keeper.request_all())
     assert set(status.values()) == {"interval"}
     assert link.intervals() == [r.msg_id for r in keeper.requests]
@@ -86,7 +91,7 @@ def test_a_message_the_vehicle_cannot_stream_falls_back_then_is_left_out():
         return ACCEPTED
 
     link = FakeLink(answer)
-    keeper = StreamKeeper(link, StreamSettings(), adsb=True)
+    keeper = keeper_of(link, StreamSettings(), adsb=True)
     status = asyncio.run(keeper.request_all())
     assert status["GPS_GLOBAL_ORIGIN"] == "unavailable" and keeper.unavailable("GPS_GLOBAL_ORIGIN")
     assert status["ADSB_VEHICLE"] == "unavailable"
@@ -101,7 +106,7 @@ def test_a_message_the_vehicle_cannot_stream_falls_back_then_is_left_out():
 
 def test_a_vehicle_without_set_message_interval_gets_request_data_stream():
     link = FakeLink(lambda c, p: UNSUPPORTED if c == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL else ACCEPTED)
-    keeper = StreamKeeper(link, StreamSettings())
+    keeper = keeper_of(link, StreamSettings())
     status = asyncio.run(keeper.request_all())
     assert len(link.intervals()) == 1                         # asked once, then not again
     groups = sorted(m[1]["req_stream_id"] for m in link.messages)
@@ -111,7 +116,7 @@ def test_a_vehicle_without_set_message_interval_gets_request_data_stream():
 
 
 def test_no_ack_leaves_the_request_pending():
-    keeper = StreamKeeper(FakeLink(lambda c, p: None), StreamSettings())
+    keeper = keeper_of(FakeLink(lambda c, p: None), StreamSettings())
     assert set(asyncio.run(keeper.request_all()).values()) == {"pending"}
 
 
@@ -135,7 +140,7 @@ async def until(predicate, what, timeout_s=5.0):
 
 def test_a_reboot_link_back_or_silence_requests_everything_again():
     link = FakeLink(lambda c, p: ACCEPTED)
-    keeper = StreamKeeper(link, StreamSettings(stale_after_s=0.3))
+    keeper = keeper_of(link, StreamSettings(stale_after_s=0.3))
 
     async def scenario():
         await until(lambda: keeper.rounds == 1, "the first round")

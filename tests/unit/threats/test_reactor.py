@@ -125,12 +125,14 @@ class ScriptedManager:
 
 
 class MemoryBus:
-    """The part of ThreatBus the reactor uses, in memory."""
+    """The part of ThreatBus the reactor uses, in memory (its session, and its inbound and
+    outbound parts in one double)."""
 
     def __init__(self):
         self.events, self.paths, self.statuses = [], [], []
         self.republished = []
         self.handler = None
+        self.inbound = self.outbound = self
 
     def key(self, leaf):
         return f"uav/1/{leaf}"

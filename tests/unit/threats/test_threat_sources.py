@@ -23,32 +23,32 @@ def deploy(tmp_path_factory):
 
 def test_plain_bus_takes_both_layouts_with_the_source_from_the_key():
     bus = ThreatBus(1)
-    assert bus.parse_key("uav/1/threats/t1") == ("local", "t1")
-    assert bus.parse_key("uav/1/threats/radar1/t1") == ("radar1", "t1")
+    assert bus.inbound.parse_key("uav/1/threats/t1") == ("local", "t1")
+    assert bus.inbound.parse_key("uav/1/threats/radar1/t1") == ("radar1", "t1")
     for key in ("uav/1/threats/local/t1", "uav/1/threats/a/b/c", "uav/1/threats/bad source/t1",
                 "uav/1/threats/radar1/bad id"):
         with pytest.raises(ThreatPayloadError) as err:
-            bus.parse_key(key)
+            bus.inbound.parse_key(key)
         assert err.value.field == "key"
 
 
 def test_the_companion_config_refuses_the_plain_layout(deploy):
     bus = ThreatBus(1, zenoh_config=deploy.configs["companion"])
-    assert bus.require_source and bus.source is None and bus.security.identity == "companion"
+    assert bus.require_source and bus.client.source is None and bus.security.identity == "companion"
     assert bus.listen == ("tls/127.0.0.1:17447",) and bus.connect == ()
-    assert bus.parse_key("uav/1/threats/radar1/t1") == ("radar1", "t1")
+    assert bus.inbound.parse_key("uav/1/threats/radar1/t1") == ("radar1", "t1")
     with pytest.raises(ThreatPayloadError, match="authenticated sources only") as err:
-        bus.parse_key("uav/1/threats/t1")
+        bus.inbound.parse_key("uav/1/threats/t1")
     assert err.value.field == "key"
 
 
 def test_a_source_config_puts_under_its_certificate_name(deploy):
     bus = ThreatBus(1, zenoh_config=deploy.configs["radar1"])
-    assert not bus.require_source and bus.source == "radar1"
-    assert bus.threat_leaf("p1") == "threats/radar1/p1"
-    assert ThreatBus(1, zenoh_config=deploy.configs["radar1"], source="radar2").threat_leaf("p1") == "threats/radar2/p1"
-    assert ThreatBus(1).threat_leaf("p1") == "threats/p1"
-    assert ThreatBus(1, source="radar9").threat_leaf("p1") == "threats/radar9/p1"
+    assert not bus.require_source and bus.client.source == "radar1"
+    assert bus.client.threat_leaf("p1") == "threats/radar1/p1"
+    assert ThreatBus(1, zenoh_config=deploy.configs["radar1"], source="radar2").client.threat_leaf("p1") == "threats/radar2/p1"
+    assert ThreatBus(1).client.threat_leaf("p1") == "threats/p1"
+    assert ThreatBus(1, source="radar9").client.threat_leaf("p1") == "threats/radar9/p1"
     overridden = ThreatBus(1, zenoh_config=deploy.configs["radar1"], connect=["tls/127.0.0.1:1"])
     assert overridden.connect == ("tls/127.0.0.1:1",)
 
