@@ -85,8 +85,6 @@ SIZE_EXCEPTIONS = {
         "the vectorised certification of every corner curve at once, kept together for speed",
     "companion/smoothing/timing.py::time_parameterize":
         "argument checks, forward/backward passes and yaw in one place; passes to be named",
-    "companion/threats/transport/codec.py::decode":
-        "validates every field of the version-1 payload in order, naming the field (DESIGN 6)",
     "companion/threats/decision/join.py::join_trajectory": "the one splice (lead, G2 corners, repair, profile from the current speed) and its checks",
     "companion/threats/scenario.py::_event":
         "validates every key of a scenario event, naming the key",
@@ -107,10 +105,6 @@ SIZE_EXCEPTIONS = {
 MIXIN_EXCEPTIONS = {
     "companion/daemon.py::CompanionDaemon":
         "background, mission and leg tasks as bases; the flight executor and service/ take them apart",
-    "companion/link/vehicle.py::VehicleLink":
-        "watchers, waits, commands, direct messages and mission transfer as bases of the one link",
-    "companion/threats/transport/bus.py::ThreatBus":
-        "inbound, outbound and client parts of the zenoh bus as bases; threats/transport/ composes them",
     "companion/threats/reactor.py::ThreatReactor":
         "decisions and legs/alternatives as bases; threats/decision/ makes the decision a pure step",
 }
