@@ -118,11 +118,11 @@ class Telemetry:
 
     def msg_extended_sys_state(self) -> Any:
         a = self.autopilot
-        if a.taking_off:
+        if a.ground.taking_off:
             state = mavlink.MAV_LANDED_STATE_TAKEOFF
         elif a.landed:
             state = mavlink.MAV_LANDED_STATE_ON_GROUND
-        elif a.landing:
+        elif a.navigation.landing:
             state = mavlink.MAV_LANDED_STATE_LANDING
         else:
             state = mavlink.MAV_LANDED_STATE_IN_AIR
@@ -133,13 +133,13 @@ class Telemetry:
         total = len(self.store.items(MISSION_TYPE_MISSION))
         if total == 0:
             state = mavlink.MISSION_STATE_NO_MISSION
-        elif a.mission_finished:
+        elif a.mission.finished:
             state = mavlink.MISSION_STATE_COMPLETE
         elif a.mode == ap.AUTO and a.armed:
             state = mavlink.MISSION_STATE_ACTIVE
         else:
             state = mavlink.MISSION_STATE_NOT_STARTED
-        return self.mav.mission_current_encode(a.mission_current, total, state, 1 if a.mode == ap.AUTO else 2)
+        return self.mav.mission_current_encode(a.mission.current, total, state, 1 if a.mode == ap.AUTO else 2)
 
     def msg_system_time(self) -> Any:
         return self.mav.system_time_encode(int(time.time() * 1e6), self.time_boot_ms())
@@ -168,16 +168,17 @@ class Telemetry:
     def msg_attitude(self) -> Any:
         a = self.autopilot
         roll, pitch, yaw = a.euler_rad
-        p, q, r = a.body_rates_rad_s
+        p, q, r = a.airframe.body_rates_rad_s
         return self.mav.attitude_encode(self.time_boot_ms(), roll, pitch, yaw, p, q, r)
 
     def msg_vfr_hud(self) -> Any:
         a = self.autopilot
         v = a.vel_ned_m_s
         ground = math.hypot(v[0], v[1])
-        air = float(math.hypot(*(v[:2] - a.wind.current()[:2])))
+        air = float(math.hypot(*(v[:2] - a.airframe.wind.current()[:2])))
         heading = int(round(math.degrees(a.euler_rad[2]))) % 360
-        throttle = int(round(min(100.0, max(0.0, 50.0 + 50.0 * a.delta[3])))) if a.armed and not a.landed else 0
+        collective = a.airframe.delta[3]
+        throttle = int(round(min(100.0, max(0.0, 50.0 + 50.0 * collective)))) if a.armed and not a.landed else 0
         _, _, alt = a.position_lla()
         return self.mav.vfr_hud_encode(air, ground, heading, throttle, alt, -v[2])
 
@@ -205,18 +206,18 @@ class Telemetry:
     # ------------------------------------------------------------------ rotor, servos, RC
     def msg_servo_output_raw(self) -> Any:
         a = self.autopilot
-        us = [int(round(1500.0 + 500.0 * max(-1.0, min(1.0, float(v))))) for v in a.delta]
-        rsc_us = rsc.output_pwm_us(a.rotor, a.settings.rsc)
+        us = [int(round(1500.0 + 500.0 * max(-1.0, min(1.0, float(v))))) for v in a.airframe.delta]
+        rsc_us = rsc.output_pwm_us(a.arming.rotor, a.settings.rsc)
         # servo1 lateral cyclic, servo2 longitudinal cyclic, servo3 collective, servo4 tail rotor, servo8 RSC
         return self.mav.servo_output_raw_encode(self._time_usec() & 0xFFFFFFFF, 0, us[0], us[1], us[3], us[2], 0, 0, 0,
                                                 rsc_us)
 
     def msg_rpm(self) -> Any:
-        return self.mav.rpm_encode(float(self.autopilot.rotor.speed * rsc.ROTOR_RPM_NOMINAL), -1.0)
+        return self.mav.rpm_encode(float(self.autopilot.arming.rotor.speed * rsc.ROTOR_RPM_NOMINAL), -1.0)
 
     def msg_rc_channels(self) -> Any:
         channels = [1500] * 8 + [0] * 10
-        channels[7] = self.autopilot.rc8_us
+        channels[7] = self.autopilot.arming.rc8_us
         return self.mav.rc_channels_encode(self.time_boot_ms(), RC_CHANNEL_COUNT, *channels, 255)
 
     # ------------------------------------------------------------------ traffic

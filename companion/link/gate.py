@@ -91,7 +91,8 @@ class Identity:
 
 def tapped_fields(msg, arrival_s: float | None = None) -> dict:
     """A message's fields by name (text decoded), with ``_sysid``, ``_compid`` and ``_t_s``
-    (monotonic arrival time: ``arrival_s``, else now): what ``VehicleLink.messages`` yields."""
+    (monotonic arrival time: ``arrival_s``, else now): what ``VehicleLink.inbound.messages``
+    yields."""
     fields = msg.to_dict()
     del fields["mavpackettype"]
     fields["_sysid"], fields["_compid"] = msg.get_srcSystem(), msg.get_srcComponent()
@@ -99,9 +100,9 @@ def tapped_fields(msg, arrival_s: float | None = None) -> dict:
     return fields
 
 
-#: Telemetry the link reads itself (``VehicleLink.messages``) and MAVSDK has no use for (the
-#: companion creates no MAVSDK Telemetry plugin): the gate does not forward it to MAVSDK (a wake-up
-#: of its threads for each of about 30 frames a second). The tlog still has every frame.
+#: Telemetry the link reads itself (``VehicleLink.inbound.messages``) and MAVSDK has no use for
+#: (the companion creates no MAVSDK Telemetry plugin): the gate does not forward it to MAVSDK (a
+#: wake-up of its threads for each of about 30 frames a second). The tlog still has every frame.
 LINK_ONLY_MESSAGES = frozenset({"LOCAL_POSITION_NED", "ATTITUDE", "GLOBAL_POSITION_INT",
                                 "SERVO_OUTPUT_RAW", "RPM", "ADSB_VEHICLE"})
 
@@ -135,8 +136,8 @@ class InboundFilter:
     kinds : list of str
         The message types of the frames the last ``filter`` returned, in the same order.
     tapped : set of str
-        Message types the link reads itself (``VehicleLink.messages``): each admitted one is
-        also kept in ``taps`` as ``(type, fields)`` (``tapped_fields``) for the gate to hand over.
+        Message types the link reads itself (``VehicleLink.inbound.messages``): each admitted
+        one is also kept in ``taps`` as ``(type, fields)`` (``tapped_fields``) for the gate to hand over.
     counts : dict of str to int
         ``passed``, ``not_for_us``, ``onboard``, ``malformed`` and, with a key, each refused
         ``Verdict`` value (``unsigned``, ``bad_signature``, ``replayed``, ``stale``).

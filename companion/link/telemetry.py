@@ -1,5 +1,5 @@
 """The vehicle state as the link knows it: the immutable ``Telemetry`` snapshot, the mutable
-``TelemetryState`` behind it (kept up to date by ``companion.link.watchers``), and
+``TelemetryState`` behind it (owned and kept up to date by ``companion.link.watchers``), and
 ``finite_fields``, the check every received message passes before it is applied.
 """
 

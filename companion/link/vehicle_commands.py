@@ -1,5 +1,6 @@
-"""Commands to the vehicle (``VehicleLink.commands``): COMMAND_LONG through MavlinkDirect, each checked against its
-COMMAND_ACK (a refusal is ``VehicleRefused``), and parameters read with PARAM_REQUEST_READ.
+"""Commands to the vehicle (``VehicleLink.commands``): COMMAND_LONG through MavlinkDirect, each
+checked against its COMMAND_ACK (a refusal is ``VehicleRefused``), and parameters read with
+PARAM_REQUEST_READ.
 
 DO_SET_MODE with ArduCopter custom modes (GUIDED 4 ...), arm/disarm, takeoff, land, RTL,
 DO_AUX_FUNCTION (the motor interlock), REQUEST_MESSAGE. MAVSDK's ``send_command`` blocks until

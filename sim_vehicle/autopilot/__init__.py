@@ -31,46 +31,57 @@ Physics runs at ``timing.physics_rate_hz`` (400 Hz) with RK4 (:mod:`heli_model.d
 and the controller at ``timing.control_rate_hz`` (100 Hz), both in the pure vehicle update
 (:mod:`heli_model.vehicle_update`). Pure simulation: no I/O.
 
-The package, modelled on ArduCopter's sources:
+The package, modelled on ArduCopter's sources: :class:`Autopilot` holds one collaborator per
+concern as a member (not inherited), each built with what it needs; the modes act on the small
+interface :class:`ModeContext`.
 
 ==============================  ===========================================================
-``core``                        :class:`Autopilot`: state views, mode switching, the ticks
+``core``                        :class:`Autopilot`: mode switching, arming, the ticks
+``mode_context``                :class:`ModeContext`: what the modes may use of the vehicle
 ``mode``, ``mode_*``            the flight modes (``mode.h``, ``mode_auto.cpp``, ...)
-``mission``                     mission and rally lists, items to stages (``AP_Mission``)
-``navigation``                  the stages flown and their setpoints (``AC_WPNav``)
-``legs``                        :class:`Leg` (trapezoidal speed profile), :class:`Stage`
-``fence``                       polygon and circle fences, breach action (``AC_Fence``)
-``ground_contact``              lift-off, touchdown, auto-disarm (``land_detector.cpp``)
-``arming``                      arming, pre-arm checks, motor interlock (``AP_Arming``)
+``airframe``                    :class:`Airframe`: the pure vehicle update, its state, wind
+``mission``                     :class:`Mission`: mission and rally lists, items to stages
+                                (``AP_Mission``)
+``navigation``                  :class:`Navigation`: the stages flown and their setpoints
+                                (``AC_WPNav``)
+``legs``                        :class:`Leg` (trapezoidal speed profile), :class:`Stage`,
+                                :class:`GuidedCommand`
+``fence``                       :class:`Geofence`: polygon and circle fences, breach action
+                                (``AC_Fence``)
+``ground_contact``              :class:`GroundContact`: lift-off, touchdown, auto-disarm
+                                (``land_detector.cpp``)
+``arming``                      :class:`Arming`: arming, pre-arm checks, motor interlock
+                                (``AP_Arming``)
 ==============================  ===========================================================
 """
 
 from heli_common.geometry import point_in_polygon
 
-from sim_vehicle.autopilot.arming import MAV_SEVERITY_CRITICAL, PREARM_REPORT_PERIOD_S
+from sim_vehicle.autopilot.airframe import Airframe
+from sim_vehicle.autopilot.arming import MAV_SEVERITY_CRITICAL, PREARM_REPORT_PERIOD_S, Arming
 from sim_vehicle.autopilot.core import MODES, Autopilot
 from sim_vehicle.autopilot.fence import (
     CMD_FENCE_CIRCLE_EXCLUSION, CMD_FENCE_CIRCLE_INCLUSION, CMD_FENCE_POLYGON_EXCLUSION, CMD_FENCE_POLYGON_INCLUSION,
-    FENCE_ACTION_MODES, Fence, fence_breach, fence_from_items,
+    FENCE_ACTION_MODES, Fence, Geofence, fence_breach, fence_from_items,
 )
-from sim_vehicle.autopilot.ground_contact import LIFTOFF_HEIGHT_M, TOUCHDOWN_HEIGHT_M
-from sim_vehicle.autopilot.legs import Leg, Stage
+from sim_vehicle.autopilot.ground_contact import LIFTOFF_HEIGHT_M, TOUCHDOWN_HEIGHT_M, GroundContact
+from sim_vehicle.autopilot.legs import GuidedCommand, Leg, Stage
 from sim_vehicle.autopilot.mission import (
     CMD_DO_CHANGE_SPEED, CMD_NAV_LAND, CMD_NAV_LOITER_TIME, CMD_NAV_LOITER_UNLIM, CMD_NAV_RALLY_POINT,
-    CMD_NAV_RETURN_TO_LAUNCH, CMD_NAV_TAKEOFF, CMD_NAV_WAYPOINT, NAV_COMMANDS,
+    CMD_NAV_RETURN_TO_LAUNCH, CMD_NAV_TAKEOFF, CMD_NAV_WAYPOINT, NAV_COMMANDS, Mission,
 )
 from sim_vehicle.autopilot.mode import (
     ALT_HOLD, AUTO, BRAKE, GUIDED, LAND, LOITER, MODE_NAMES, MODE_NUMBERS, RTL, STABILIZE, Mode, QuietRefusal,
     mode_name,
 )
+from sim_vehicle.autopilot.mode_context import ModeContext
 from sim_vehicle.autopilot.mode_guided import (
-    MAX_TAKEOFF_ALT_M, TARGET_INTEGRATION_MAX_S, GuidedCommand, check_setpoint, integrate_target,
+    MAX_TAKEOFF_ALT_M, TARGET_INTEGRATION_MAX_S, check_setpoint, integrate_target,
 )
-
-_integrate_target = integrate_target  # the names of the single-module autopilot, kept for its importers
-_check_setpoint = check_setpoint
+from sim_vehicle.autopilot.navigation import Navigation
 
 __all__ = [
+    "Airframe", "Arming", "Geofence", "GroundContact", "Mission", "ModeContext", "Navigation",
     "ALT_HOLD", "AUTO", "BRAKE", "CMD_DO_CHANGE_SPEED", "CMD_FENCE_CIRCLE_EXCLUSION", "CMD_FENCE_CIRCLE_INCLUSION",
     "CMD_FENCE_POLYGON_EXCLUSION", "CMD_FENCE_POLYGON_INCLUSION", "CMD_NAV_LAND", "CMD_NAV_LOITER_TIME",
     "CMD_NAV_LOITER_UNLIM", "CMD_NAV_RALLY_POINT", "CMD_NAV_RETURN_TO_LAUNCH", "CMD_NAV_TAKEOFF", "CMD_NAV_WAYPOINT",

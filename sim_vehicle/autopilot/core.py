@@ -1,18 +1,32 @@
 """The Autopilot: the simulated helicopter's autopilot, composed of its parts.
 
-ArduCopter's ``Copter`` class is one class whose methods live in many files (``mode_*.cpp``,
-``land_detector.cpp``, ``fence.cpp``, ``motors.cpp``...); so is this one: the state views,
-mode switching and the simulation ticks are here, the rest in the mixins it is made of
-(:mod:`~sim_vehicle.autopilot.arming`, :mod:`~sim_vehicle.autopilot.mission`,
-:mod:`~sim_vehicle.autopilot.fence`, :mod:`~sim_vehicle.autopilot.ground_contact`,
-:mod:`~sim_vehicle.autopilot.navigation`) and in the mode objects (``mode_*.py``).
-The vehicle itself (controller and RK4 physics) is the pure update of
-:mod:`heli_model.vehicle_update`.
+As ArduCopter's ``Copter`` holds its libraries as members (``AP_Arming``, ``AP_Mission``,
+``AC_Fence``, ``AC_WPNav``...), :class:`Autopilot` holds one collaborator per concern, each
+given what it needs at construction (state objects, the settings, callables, and the vehicle
+itself through a small Protocol of the collaborator's module):
+
+==================  ====================================================================
+``airframe``        :class:`~sim_vehicle.autopilot.airframe.Airframe`: the pure vehicle
+                    update (:mod:`heli_model.vehicle_update`), its state, the wind
+``arming``          :class:`~sim_vehicle.autopilot.arming.Arming`: ``armed``, pre-arm
+                    checks, the rotor and motor interlock
+``navigation``      :class:`~sim_vehicle.autopilot.navigation.Navigation`: the stages flown
+                    and their setpoints
+``mission``         :class:`~sim_vehicle.autopilot.mission.Mission`: mission and rally
+                    lists, the sequencer
+``fence``           :class:`~sim_vehicle.autopilot.fence.Geofence`: the fence and its breach
+                    action
+``ground``          :class:`~sim_vehicle.autopilot.ground_contact.GroundContact`: ``landed``,
+                    lift-off, touchdown, auto-disarm
+==================  ====================================================================
+
+The Autopilot itself keeps the mode, the clock and the events, switches modes, arms and
+disarms (what that does to every part) and runs the simulation ticks. The flight modes
+(``mode_*.py``) act on it through :class:`~sim_vehicle.autopilot.mode_context.ModeContext`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 from typing import Sequence
@@ -20,28 +34,24 @@ from typing import Sequence
 import numpy as np
 
 from heli_model import dynamics
-from sim_vehicle import rsc
-from sim_vehicle.autopilot.arming import ArmingMixin
-from sim_vehicle.autopilot.fence import Fence, FenceMixin
-from sim_vehicle.autopilot.ground_contact import GroundContactMixin
-from sim_vehicle.autopilot.legs import Stage
-from sim_vehicle.autopilot.mission import MissionMixin
-from sim_vehicle.autopilot.mode import GUIDED, LAND, MODE_NAMES, RTL, STABILIZE, Mode, mode_name
+from sim_vehicle.autopilot.airframe import Airframe
+from sim_vehicle.autopilot.arming import Arming
+from sim_vehicle.autopilot.fence import Geofence
+from sim_vehicle.autopilot.ground_contact import GroundContact
+from sim_vehicle.autopilot.mission import Mission
+from sim_vehicle.autopilot.mode import AUTO, GUIDED, MODE_NAMES, STABILIZE, Mode, mode_name
 from sim_vehicle.autopilot.mode_auto import ModeAuto
 from sim_vehicle.autopilot.mode_brake import ModeBrake
-from sim_vehicle.autopilot.mode_guided import GuidedCommand, ModeGuided
+from sim_vehicle.autopilot.mode_guided import ModeGuided
 from sim_vehicle.autopilot.mode_land import ModeLand
 from sim_vehicle.autopilot.mode_loiter import ModeLoiter
 from sim_vehicle.autopilot.mode_rtl import ModeRTL
 from sim_vehicle.autopilot.mode_stabilize import ModeAltHold, ModeStabilize
-from sim_vehicle.autopilot.navigation import NavigationMixin
+from sim_vehicle.autopilot.navigation import Navigation
 from sim_vehicle.config import VehicleSettings
-from heli_model.control import ControlLaw, Setpoint, initial_controller_state
+from heli_model.control import Setpoint
 from sim_vehicle.frames import Frames
-from sim_vehicle.mission_store import MissionItem
 from heli_model.model import HeliModel
-from heli_model.vehicle_update import VehicleCommand, VehicleState, VehicleUpdate
-from heli_model.wind import WindModel, WindSettings
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +62,7 @@ if set(MODES) != set(MODE_NAMES):
     raise RuntimeError("every mode of MODE_NAMES needs its mode object")
 
 
-class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, NavigationMixin):
+class Autopilot:
     """The simulated helicopter and its autopilot.
 
     Parameters
@@ -72,127 +82,75 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
     ----------
     mode : int
         ArduCopter mode number.
-    armed, landed : bool
-    time_s : float
-        Simulated time since start.
-    x : ndarray, shape (17,) or (21,)
-        Simulation state (see :mod:`heli_model.dynamics`).
-    delta : ndarray, shape (4,)
-        Last rotor inputs ``[d_lat, d_lon, d_ped, d_col]`` in [-1, 1].
-    mission_current : int
-        Sequence number of the current mission item.
+    settings : VehicleSettings
+        The settings in use (the one owner; the parts read them through a callable).
     frames : Frames
-        Ground frame (internal), EKF origin and home.
-    rotor : sim_vehicle.rsc.RotorState
-        Interlock switch, effective interlock and rotor run-up.
-    vehicle : VehicleUpdate
-        The pure vehicle update (model, designed controller, physics step).
-    vehicle_state : VehicleState
-        Its state: ``x``, ``delta`` and the flight controller's state.
-    controller : ControlLaw
-        The designed flight controller (``gains``, ``settings``).
+        Ground frame (internal), EKF origin and home; ``frame`` is its ground frame.
+    airframe : Airframe
+        Vehicle update, state (``x``, ``delta``, ``controller``, ``body_rates_rad_s``) and wind.
+    arming : Arming
+        ``armed``, ``rotor``, ``set_interlock_switch``, ``rc_override``, ``rc8_us``.
+    navigation : Navigation
+        The stages flown; ``change_speed``, ``speed_m_s``, ``landing``.
+    mission : Mission
+        ``items``, ``current``, ``finished``, ``has_mission``; ``set_items``, ``set_current``, ``set_rally``.
+    fence : Geofence
+        ``area``, ``breached``; ``set_items``.
+    ground : GroundContact
+        ``landed``, ``taking_off``.
     """
 
     def __init__(self, model: HeliModel, settings: VehicleSettings, home_lla: Sequence[float],
                  rng: np.random.Generator, origin_lla: Sequence[float] | None = None) -> None:
         lat, lon, alt, yaw_deg = (float(v) for v in home_lla)
-        self.model = model
-        self.rng = rng
         self.frames = Frames((lat, lon, alt), origin_lla)
         self.frame = self.frames.ground
         self._home_yaw_deg = yaw_deg
-        self.vehicle_state = VehicleState(x=dynamics.hover_state(model, (0.0, 0.0, 0.0), math.radians(yaw_deg)),
-                                          delta=np.zeros(4), controller=initial_controller_state())
+        self.settings = settings
         self.mode = STABILIZE
-        self.armed = False
-        self.landed = True
         self._steps = 0
-        self.mission_items: tuple[MissionItem, ...] = ()
-        self.rally_ned_m: list[np.ndarray] = []
-        self.fence = Fence()
-        self.fence_breached: str | None = None
-        self.mission_current = 0
-        self.mission_finished = False
-        self._stages: list[Stage] = []
-        self._item_active = False
-        self._guided: GuidedCommand | None = None
-        self._speed_override_m_s: float | None = None
-        self._yaw_hold_rad = math.radians(yaw_deg)
-        self._ref_pos: np.ndarray | None = None
-        self._landed_since_s = 0.0
         self._events: list[tuple] = []
-        self.settings = settings
-        self.rotor_control = rsc.RotorControl(settings.rsc)
-        self._prearm_reported_s = 0.0
-        self._apply_settings(settings, first=True)
-
-    # ------------------------------------------------------------------ settings
-    def _apply_settings(self, settings: VehicleSettings, first: bool = False) -> None:
-        old = None if first else self.settings
-        self.settings = settings
-        self.physics_dt_s = settings.timing.physics_dt_s
-        self.steps_per_control = settings.timing.physics_steps_per_control
-        control_dt_s = self.physics_dt_s * self.steps_per_control
-        controller_settings = dataclasses.replace(settings.controller, control_dt_s=control_dt_s)
-        if first or controller_settings != self.controller.settings:
-            self.vehicle = VehicleUpdate.build(self.model, controller_settings, self.physics_dt_s)
-            self.vehicle_state = self.vehicle.reset_controller(self.vehicle_state)
-        elif self.vehicle.physics_dt_s != self.physics_dt_s:
-            self.vehicle = dataclasses.replace(self.vehicle, physics_dt_s=self.physics_dt_s)
-        if not first:
-            self.rotor_control.settings = settings.rsc
-        if first or settings.wind != old.wind:
-            wind = settings.wind
-            if wind.enabled:
-                wind_settings = WindSettings(wind.steady_ned_m_s(), wind.gust_m_s, wind.gust_tau_s)
-            else:
-                wind_settings = self.model.wind
-            self.wind = WindModel(wind_settings, self.rng)
-            self._wind_calm = wind_settings.is_calm
+        emit = self._events.append
+        current_settings = lambda: self.settings  # noqa: E731 (the parts always read the settings in use)
+        self.airframe = Airframe(model, settings, yaw_deg, rng)
+        self.arming = Arming(self, current_settings, emit)
+        self.navigation = Navigation(self.airframe, self.frames, current_settings, emit, math.radians(yaw_deg))
+        self.mission = Mission(self, self.navigation, self.frames, current_settings, emit)
+        self.fence = Geofence(self, self.frames, self.mission.item_target_ned_m, current_settings, emit)
+        self.ground = GroundContact(self.airframe, self.navigation, self.arming, self, current_settings,
+                                    self.mission.item_flown)
 
     def apply_settings(self, settings: VehicleSettings) -> None:
         """Use a new settings tree (after PARAM_SET): controller redesigned if its weights changed."""
-        self._apply_settings(settings)
-
-    # ------------------------------------------------------------------ vehicle
-    @property
-    def x(self) -> np.ndarray:
-        """Simulation state, (17,) or (21,) (see :mod:`heli_model.dynamics`)."""
-        return self.vehicle_state.x
-
-    @x.setter
-    def x(self, value: np.ndarray) -> None:
-        self.vehicle_state = self.vehicle_state._replace(x=value)
-
-    @property
-    def delta(self) -> np.ndarray:
-        """Rotor inputs held now, (4,) ``[d_lat, d_lon, d_ped, d_col]`` in [-1, 1]."""
-        return self.vehicle_state.delta
-
-    @delta.setter
-    def delta(self, value: np.ndarray) -> None:
-        self.vehicle_state = self.vehicle_state._replace(delta=value)
-
-    @property
-    def controller(self) -> ControlLaw:
-        """The designed flight controller (``gains``, ``settings``); its state is in :attr:`vehicle_state`."""
-        return self.vehicle.law
+        old, self.settings = self.settings, settings
+        self.airframe.apply_settings(settings, old)
+        self.arming.apply_settings(settings)
 
     # ------------------------------------------------------------------ state views
     @property
     def time_s(self) -> float:
         """Simulated time since start, s."""
-        return self._steps * self.physics_dt_s
+        return self._steps * self.airframe.physics_dt_s
 
     @property
     def pos_ned_m(self) -> np.ndarray:
         """Position, (3,) m NED in the ground frame (from the start point; ground at down 0)."""
-        return dynamics.pos_ned_m(self.x)
+        return self.airframe.pos_ned_m
 
     @property
     def local_ned_m(self) -> np.ndarray:
         """Position, (3,) m NED from the EKF origin (LOCAL_POSITION_NED)."""
         return self.frames.to_local(self.pos_ned_m)
+
+    @property
+    def vel_ned_m_s(self) -> np.ndarray:
+        """Ground velocity, (3,) m/s NED."""
+        return self.airframe.vel_ned_m_s
+
+    @property
+    def euler_rad(self) -> np.ndarray:
+        """Roll, pitch, yaw, (3,) rad."""
+        return self.airframe.euler_rad
 
     @property
     def home_lla(self) -> tuple[float, float, float, float]:
@@ -204,26 +162,20 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
         """Height of the vehicle above home, m."""
         return self.frames.height_above_home(self.pos_ned_m)
 
-    @property
-    def vel_ned_m_s(self) -> np.ndarray:
-        """Ground velocity, (3,) m/s NED."""
-        return dynamics.vel_ned_m_s(self.x)
-
-    @property
-    def euler_rad(self) -> np.ndarray:
-        """Roll, pitch, yaw, (3,) rad."""
-        return dynamics.euler_rad(self.x)
-
-    @property
-    def body_rates_rad_s(self) -> np.ndarray:
-        """Body rates p, q, r, (3,) rad/s."""
-        return dynamics.body_rates_rad_s(self.x)
-
     def position_lla(self) -> tuple[float, float, float]:
         """Latitude, longitude (degrees) and altitude AMSL (m) of the vehicle."""
         lat, lon, alt = self.frame.to_lla(*self.pos_ned_m)
         return float(lat), float(lon), float(alt)
 
+    @property
+    def armed(self) -> bool:
+        """True while armed (:class:`~sim_vehicle.autopilot.arming.Arming`'s state)."""
+        return self.arming.armed
+
+    @property
+    def landed(self) -> bool:
+        """True while on the ground (the land detector's, :class:`~sim_vehicle.autopilot.ground_contact.GroundContact`)."""
+        return self.ground.landed
 
     # ------------------------------------------------------------------ modes
     @property
@@ -232,7 +184,7 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
         return MODES[self.mode]
 
     def set_mode(self, mode: int) -> tuple[bool, str]:
-        """Switch flight mode (ArduCopter number)."""
+        """Switch flight mode (ArduCopter number): STABILIZE 0, AUTO 3, GUIDED 4, LOITER 5, RTL 6, LAND 9, ..."""
         if mode not in MODE_NAMES:
             return False, f"unknown mode {mode}"
         if mode == self.mode:
@@ -242,20 +194,17 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
             return False, refusal
         previous = self.mode
         self.mode = mode
-        self._guided = None
-        self._item_active = False
+        self.navigation.guided = None
+        self.mission.drop_active_item()
         self._events.append(("mode", mode))
         log.info("mode %s -> %s", mode_name(previous), mode_name(mode))
-        self._enter_mode(mode)
-        return True, ""
-
-    def _enter_mode(self, mode: int) -> None:
         if not self.armed:
-            self._stages = []
+            self.navigation.set_stages([])
         elif self.landed:
             MODES[mode].enter_landed(self)
         else:
             MODES[mode].enter(self)
+        return True, ""
 
     def takeoff(self, alt_m: float) -> tuple[bool, str]:
         """GUIDED takeoff to ``alt_m`` above home.
@@ -275,14 +224,6 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
         """
         return MODES[GUIDED].set_target(self, setpoint)
 
-    def land(self) -> tuple[bool, str]:
-        """Switch to LAND."""
-        return self.set_mode(LAND)
-
-    def rtl(self) -> tuple[bool, str]:
-        """Switch to RTL."""
-        return self.set_mode(RTL)
-
     def set_yaw(self, yaw_rad: float) -> tuple[bool, str]:
         """MAV_CMD_CONDITION_YAW: hold this heading (GUIDED, AUTO, LOITER, BRAKE; in flight)."""
         if not math.isfinite(yaw_rad):
@@ -291,11 +232,60 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
             return False, "not flying"
         if not self.flight_mode.accepts_condition_yaw:
             return False, f"not in {mode_name(self.mode)}"
-        self._yaw_hold_rad = math.remainder(float(yaw_rad), 2.0 * math.pi)  # direct setpoints with a yaw win
-        log.info("heading %.1f deg (CONDITION_YAW)", math.degrees(self._yaw_hold_rad))
+        yaw = math.remainder(float(yaw_rad), 2.0 * math.pi)  # direct setpoints with a yaw win
+        self.navigation.yaw_hold_rad = yaw
+        log.info("heading %.1f deg (CONDITION_YAW)", math.degrees(yaw))
         return True, ""
 
-    # ------------------------------------------------------------------ home
+    def mission_start(self, first: int = 0) -> tuple[bool, str]:
+        """MAV_CMD_MISSION_START: AUTO from item ``first`` (0 = from item 1)."""
+        refusal = self.mission.start_refusal(first)
+        if refusal is None and not self.armed:
+            refusal = "not armed"
+        if refusal is not None:
+            return False, refusal
+        if self.mode != AUTO:
+            self.mode = AUTO
+            self._events.append(("mode", AUTO))
+            log.info("mode -> AUTO (mission start)")
+        self.mission.start(max(1, first))
+        return True, ""
+
+    # ------------------------------------------------------------------ arming and home
+    def arm(self) -> tuple[bool, str]:
+        """Pre-arm checks, then arm. In AUTO the mission starts."""
+        if self.armed:
+            return True, "already armed"
+        refusal = "not landed" if not self.landed else self.flight_mode.arming_refusal(self)
+        if refusal is None:
+            refusal = self.arming.arming_check(self.airframe.healthy)
+        if refusal is not None:
+            return False, refusal
+        t = self.time_s
+        self.arming.arm(t)
+        self.ground.restart_idle_timer(t)
+        self.navigation.yaw_hold_rad = float(self.airframe.x[dynamics.IDX_PSI])
+        self.airframe.reset_controller()
+        self.navigation.set_stages([])
+        self._events.append(("armed", ""))
+        log.info("armed in %s", mode_name(self.mode))
+        self.flight_mode.on_armed(self)
+        return True, ""
+
+    def disarm(self, force: bool = False, reason: str = "commanded") -> tuple[bool, str]:
+        """Disarm; refused in flight unless ``force`` (the vehicle then drops to the ground)."""
+        if not self.armed:
+            return True, "already disarmed"
+        if not self.landed and not force:
+            return False, "flying: land first (or force-disarm)"
+        self.arming.disarm()
+        self.navigation.clear()
+        self.mission.drop_active_item()
+        self.ground.settle()
+        self._events.append(("disarmed", reason))
+        log.info("disarmed (%s)", reason)
+        return True, ""
+
     def set_home(self, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[bool, str]:
         """MAV_CMD_DO_SET_HOME: move home (RTL, relative altitudes); the EKF origin stays."""
         if not all(math.isfinite(v) for v in (lat_deg, lon_deg, alt_m)):
@@ -308,7 +298,6 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
                  alt_m, *home)
         return True, ""
 
-
     # ------------------------------------------------------------------ simulation
     def step(self, dt_s: float) -> list[tuple]:
         """Advance ``dt_s`` of simulated time (rounded to whole physics steps).
@@ -319,52 +308,49 @@ class Autopilot(ArmingMixin, MissionMixin, FenceMixin, GroundContactMixin, Navig
             ``('mission_item_reached', seq)``, ``('mission_current', seq)``, ``('mode', m)``,
             ``('armed', '')``, ``('disarmed', reason)``, ``('text', severity, message)``.
         """
-        steps = int(round(dt_s / self.physics_dt_s))
+        steps = int(round(dt_s / self.airframe.physics_dt_s))
         for _ in range(steps):
-            setpoint = self._control_tick() if self._steps % self.steps_per_control == 0 else None
+            setpoint = self._control_tick() if self._steps % self.airframe.steps_per_control == 0 else None
             self._physics_tick(setpoint)
-        events, self._events = self._events, []
+        events = list(self._events)
+        self._events.clear()
         return events
 
     def run_steps(self, steps: int) -> list[tuple]:
         """Advance ``steps`` physics steps; returns the events (see :meth:`step`)."""
-        return self.step(steps * self.physics_dt_s)
+        return self.step(steps * self.airframe.physics_dt_s)
 
     def _control_tick(self) -> Setpoint | None:
         """Decide what to track; the setpoint for the controller, or None when it does not fly."""
         t = self.time_s
-        self._update_rotor(self.physics_dt_s * self.steps_per_control)
+        self.arming.update_rotor(self.airframe.physics_dt_s * self.airframe.steps_per_control)
         if not self.armed:
-            self._report_prearm(t)
+            self.arming.report_prearm(t)
             return None
-        self._check_fence()
+        self.fence.check()
         self.flight_mode.run(self, t)
-        if self.landed and self._climbing_stage() and not self.rotor.runup_complete:
-            self._idle_on_ground(t)  # waiting for the rotor: the stages (and their legs' timing) start after it
+        if self.landed and self.ground.climbing_stage() and not self.arming.rotor.runup_complete:
+            self.ground.idle(t)  # waiting for the rotor: the stages (and their legs' timing) start after it
             return None
-        self._advance_stages(t)
-        if self.landed and not self._lifting_off():
-            self._idle_on_ground(t)
+        if self.navigation.advance(t):
+            self.mission.item_flown()
+        if self.landed and not self.ground.lifting_off():
+            self.ground.idle(t)
             return None
-        return self._setpoint(t)
+        return self.navigation.setpoint(t)
 
     def _physics_tick(self, setpoint: Setpoint | None) -> None:
         """One physics step of the pure update (the controller first when ``setpoint`` starts a control period)."""
         self._steps += 1
-        if not self.armed or (self.landed and not self._lifting_off()):
+        if not self.armed or (self.landed and not self.ground.lifting_off()):
             return
-        wind = None if self._wind_calm else self.wind.step(self.physics_dt_s)
-        self.vehicle_state = self.vehicle.update(self.vehicle_state, VehicleCommand(setpoint, wind), self.physics_dt_s)
-        self._ground_contact()
+        self.airframe.physics_step(setpoint)
+        self.ground.after_physics_step()
 
     def recover(self, reason: str) -> None:
         """After an internal error: drop the GUIDED setpoint and hold (or stay on the ground)."""
         log.error("recovering from an internal error (%s): holding position", reason)
-        self._guided = None
-        if not np.all(np.isfinite(self.x)):
-            pos = np.nan_to_num(self.pos_ned_m)
-            self.x = dynamics.hover_state(self.model, (pos[0], pos[1], min(0.0, pos[2])), 0.0)
-        self.vehicle_state = self.vehicle.reset_controller(self.vehicle_state._replace(delta=np.zeros(4)))
-        self._ref_pos = None
-        self._stages = [] if self.landed else [Stage("hold", target=self._brake_point())]
+        self.airframe.restore_finite()
+        self.airframe.reset_controller(zero_inputs=True)
+        self.navigation.hold_after_error(self.landed)
         self._events.append(("text", 3, f"internal error, holding: {reason}"[:50]))

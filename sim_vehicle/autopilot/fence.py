@@ -2,6 +2,8 @@
 
 ArduPilot's polygon and circle fences (FENCE_TYPE) and altitude ceiling (FENCE_ALT_MAX, above
 home); a breach triggers FENCE_ACTION (1 RTL, falling back to LAND; 2 LAND; 4 BRAKE).
+:class:`Fence` is the area, :func:`fence_breach` the pure test and :class:`Geofence` the
+vehicle's fence (ArduPilot's ``AC_Fence``): the list it holds and the check of every control tick.
 """
 
 from __future__ import annotations
@@ -9,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from typing import Callable, Sequence
+from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
@@ -17,6 +19,8 @@ from heli_common.geometry import point_in_polygon
 from heli_common.mavlink_ids import mavlink
 
 from sim_vehicle.autopilot.mode import BRAKE, LAND, RTL
+from sim_vehicle.config import VehicleSettings
+from sim_vehicle.frames import Frames
 from sim_vehicle.mission_store import MissionItem
 
 log = logging.getLogger(__name__)
@@ -99,36 +103,87 @@ def fence_from_items(items: Sequence[MissionItem], target_ned_m: Callable[[Missi
         tuple(circles[CMD_FENCE_CIRCLE_INCLUSION]), tuple(circles[CMD_FENCE_CIRCLE_EXCLUSION]))
 
 
-class FenceMixin:
-    """The Autopilot's fence: the list it holds and the breach check of every control tick."""
+class Host(Protocol):
+    """What the fence reads of the vehicle and asks of it (:class:`~sim_vehicle.autopilot.Autopilot`)."""
 
-    def set_fence(self, items: Sequence[MissionItem]) -> None:
+    @property
+    def mode(self) -> int:
+        """ArduCopter mode number now."""
+
+    @property
+    def landed(self) -> bool:
+        """True while on the ground."""
+
+    @property
+    def pos_ned_m(self) -> np.ndarray:
+        """Position, (3,) m NED in the ground frame."""
+
+    def set_mode(self, mode: int) -> tuple[bool, str]:
+        """Switch flight mode (the breach action)."""
+
+
+class Geofence:
+    """The vehicle's geofence: the area of the fence list and the breach check (ArduPilot's ``AC_Fence``).
+
+    Parameters
+    ----------
+    host : Host
+        Mode, ground contact and position; switches mode on a breach.
+    frames : Frames
+        Home (FENCE_ALT_MAX is above home).
+    item_target_ned_m : callable (MissionItem) -> ndarray (3,)
+        Position of a fence item, m NED in the ground frame.
+    settings : callable () -> VehicleSettings
+        The settings in use (FENCE_ENABLE, FENCE_ALT_MAX, FENCE_ACTION).
+    emit : callable (event tuple) -> None
+        Reports an event of :meth:`Autopilot.step <sim_vehicle.autopilot.Autopilot.step>`.
+
+    Attributes
+    ----------
+    area : Fence
+        The polygons and circles of the fence list.
+    breached : str or None
+        Why the fence is breached now (None inside).
+    """
+
+    def __init__(self, host: Host, frames: Frames, item_target_ned_m: Callable[[MissionItem], np.ndarray],
+                 settings: Callable[[], VehicleSettings], emit: Callable[[tuple], None]) -> None:
+        self._host = host
+        self._frames = frames
+        self._item_target_ned_m = item_target_ned_m
+        self._settings = settings
+        self._emit = emit
+        self.area = Fence()
+        self.breached: str | None = None
+
+    def set_items(self, items: Sequence[MissionItem]) -> None:
         """New fence list (polygon vertices grouped by their vertex count, circles)."""
-        self.fence = fence_from_items(items, self.item_target_ned_m)
-        self.fence_breached = None
-        log.info("fence: %d inclusion / %d exclusion polygons, %d / %d circles", len(self.fence.inclusion_polygons),
-                 len(self.fence.exclusion_polygons), len(self.fence.inclusion_circles),
-                 len(self.fence.exclusion_circles))
+        self.area = fence_from_items(items, self._item_target_ned_m)
+        self.breached = None
+        log.info("fence: %d inclusion / %d exclusion polygons, %d / %d circles", len(self.area.inclusion_polygons),
+                 len(self.area.exclusion_polygons), len(self.area.inclusion_circles),
+                 len(self.area.exclusion_circles))
 
-    def _check_fence(self) -> None:
-        f = self.settings.flight
-        if not f.fence_enable or self.landed:
+    def check(self) -> None:
+        """Every control tick while armed: a new breach switches to the FENCE_ACTION mode (not from RTL or LAND)."""
+        f = self._settings().flight
+        if not f.fence_enable or self._host.landed:
             return
-        pos = self.pos_ned_m.copy()
-        pos[2] = -self.frames.height_above_home(pos)  # FENCE_ALT_MAX is above home
-        reason = fence_breach(self.fence, pos, f.fence_alt_max_m)
+        pos = self._host.pos_ned_m.copy()
+        pos[2] = -self._frames.height_above_home(pos)  # FENCE_ALT_MAX is above home
+        reason = fence_breach(self.area, pos, f.fence_alt_max_m)
         if reason is None:
-            if self.fence_breached is not None:
+            if self.breached is not None:
                 log.info("fence: back inside")
-            self.fence_breached = None
+            self.breached = None
             return
-        if self.fence_breached is not None:
+        if self.breached is not None:
             return  # already acting on this breach
-        self.fence_breached = reason
+        self.breached = reason
         log.warning("fence breached (%s): action %d", reason, f.fence_action)
-        self._events.append(("text", 2, f"Fence breach: {reason}"[:50]))
+        self._emit(("text", 2, f"Fence breach: {reason}"[:50]))
         action = FENCE_ACTION_MODES.get(f.fence_action)
-        if action is not None and self.mode not in (RTL, LAND):
-            ok, why = self.set_mode(action)
+        if action is not None and self._host.mode not in (RTL, LAND):
+            ok, _ = self._host.set_mode(action)
             if not ok and action == RTL:
-                self.set_mode(LAND)
+                self._host.set_mode(LAND)

@@ -1,4 +1,4 @@
-"""What the vehicle flies: straight legs with a trapezoidal speed profile, and the stages of a manoeuvre.
+"""What the vehicle flies: straight legs with a trapezoidal speed profile, the stages of a manoeuvre, GUIDED setpoints.
 
 AUTO waypoints, takeoff, RTL and GUIDED position-only targets are flown as straight legs with a
 trapezoidal speed profile (WPNAV_SPEED horizontally, WPNAV_SPEED_UP/DN vertically,
@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from heli_model.control import Setpoint
 
 
 class Leg:
@@ -100,3 +101,11 @@ class Stage:
     leg: Leg | None = None
     started_s: float | None = None
     arrived_s: float | None = None
+
+
+@dataclasses.dataclass
+class GuidedCommand:
+    """A direct GUIDED setpoint and when it arrived (simulated s)."""
+
+    setpoint: Setpoint
+    received_s: float

@@ -2,20 +2,18 @@
 
 As ArduCopter's ``Mode`` (``mode.h``): each mode says whether it allows arming and entry, what
 the vehicle does when it is entered, and what it runs every control tick. A mode keeps no state
-of its own; it acts on the :class:`~sim_vehicle.autopilot.Autopilot` it is given, as ArduPilot's
-modes act on ``copter``. With no RC pilot, STABILIZE and ALT_HOLD hold position like LOITER.
+of its own; it acts on the vehicle it is given through the small interface of
+:mod:`~sim_vehicle.autopilot.mode_context` (the :class:`~sim_vehicle.autopilot.Autopilot`
+provides it), as ArduPilot's modes act on ``copter``. With no RC pilot, STABILIZE and ALT_HOLD hold
+position like LOITER.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from heli_common.mavlink_ids import COPTER_MODES, copter_mode_name
 
 from sim_vehicle.autopilot.legs import Stage
-
-if TYPE_CHECKING:
-    from sim_vehicle.autopilot.core import Autopilot
+from sim_vehicle.autopilot.mode_context import ModeContext
 
 # ArduCopter flight modes (custom_mode of HEARTBEAT; numbers from pymavlink's mode_mapping_acm)
 STABILIZE = COPTER_MODES["STABILIZE"]
@@ -60,24 +58,24 @@ class Mode:
         """ArduCopter name of the mode."""
         return mode_name(self.number)
 
-    def arming_refusal(self, ap: Autopilot) -> str | None:
+    def arming_refusal(self, ap: ModeContext) -> str | None:
         """Why the vehicle may not arm in this mode (None: it may)."""
         return None
 
-    def entry_refusal(self, ap: Autopilot) -> str | None:
+    def entry_refusal(self, ap: ModeContext) -> str | None:
         """Why an armed vehicle may not switch to this mode now (None: it may)."""
         return None
 
-    def enter(self, ap: Autopilot) -> None:
+    def enter(self, ap: ModeContext) -> None:
         """Entered while armed and in the air: brake to a hover."""
-        ap._stages = [Stage("hold", target=ap._brake_point())]
+        ap.navigation.set_stages([Stage("hold", target=ap.navigation.brake_point())])
 
-    def enter_landed(self, ap: Autopilot) -> None:
+    def enter_landed(self, ap: ModeContext) -> None:
         """Entered while armed on the ground: nothing to fly."""
-        ap._stages = []
+        ap.navigation.set_stages([])
 
-    def on_armed(self, ap: Autopilot) -> None:
+    def on_armed(self, ap: ModeContext) -> None:
         """Called once the vehicle has armed in this mode."""
 
-    def run(self, ap: Autopilot, t_s: float) -> None:
+    def run(self, ap: ModeContext, t_s: float) -> None:
         """Every control tick while armed (after the fence check), before the stages advance."""

@@ -2,12 +2,8 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from sim_vehicle.autopilot.mode import AUTO, Mode
-
-if TYPE_CHECKING:
-    from sim_vehicle.autopilot.core import Autopilot
+from sim_vehicle.autopilot.mode_context import ModeContext
 
 
 class ModeAuto(Mode):
@@ -16,20 +12,20 @@ class ModeAuto(Mode):
     number = AUTO
     accepts_condition_yaw = True
 
-    def arming_refusal(self, ap: Autopilot) -> str | None:
-        return None if ap.has_mission else "AUTO: no mission (upload one with a NAV item after item 0)"
+    def arming_refusal(self, ap: ModeContext) -> str | None:
+        return None if ap.mission.has_mission else "AUTO: no mission (upload one with a NAV item after item 0)"
 
-    def entry_refusal(self, ap: Autopilot) -> str | None:
-        return "AUTO: no mission" if ap.armed and not ap.has_mission else None
+    def entry_refusal(self, ap: ModeContext) -> str | None:
+        return "AUTO: no mission" if ap.armed and not ap.mission.has_mission else None
 
-    def enter(self, ap: Autopilot) -> None:
-        ap._start_mission(ap._resume_seq())
+    def enter(self, ap: ModeContext) -> None:
+        ap.mission.start(ap.mission.resume_seq())
 
-    def enter_landed(self, ap: Autopilot) -> None:
+    def enter_landed(self, ap: ModeContext) -> None:
         self.enter(ap)
 
-    def on_armed(self, ap: Autopilot) -> None:
-        ap._start_mission(ap._resume_seq())
+    def on_armed(self, ap: ModeContext) -> None:
+        ap.mission.start(ap.mission.resume_seq())
 
-    def run(self, ap: Autopilot, t_s: float) -> None:
-        ap._advance_mission(t_s)
+    def run(self, ap: ModeContext, t_s: float) -> None:
+        ap.mission.advance(t_s)

@@ -12,28 +12,16 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-from sim_vehicle.autopilot.legs import Stage
+from sim_vehicle.autopilot.legs import GuidedCommand, Stage
 from sim_vehicle.autopilot.mode import GUIDED, Mode, QuietRefusal, mode_name
+from sim_vehicle.autopilot.mode_context import ModeContext
 from heli_model.control import Setpoint
-
-if TYPE_CHECKING:
-    from sim_vehicle.autopilot.core import Autopilot
 
 log = logging.getLogger(__name__)
 
 MAX_TAKEOFF_ALT_M = 1000.0
-
-
-@dataclasses.dataclass
-class GuidedCommand:
-    """A direct GUIDED setpoint and when it arrived (simulated s)."""
-
-    setpoint: Setpoint
-    received_s: float
 
 
 class ModeGuided(Mode):
@@ -42,16 +30,16 @@ class ModeGuided(Mode):
     number = GUIDED
     accepts_condition_yaw = True
 
-    def takeoff(self, ap: Autopilot, alt_m: float) -> tuple[bool, str]:
+    def takeoff(self, ap: ModeContext, alt_m: float) -> tuple[bool, str]:
         """Takeoff to ``alt_m`` above home (see :meth:`Autopilot.takeoff`)."""
         ok, reason = self.takeoff_refusal(ap, alt_m)
         if not ok:
             return False, QuietRefusal(reason)
-        ap._stages = [ap._takeoff_stage(alt_m), Stage("hold")]
-        log.info("takeoff to %.1f m%s", alt_m, "" if ap.rotor.runup_complete else " once the rotor has run up")
+        ap.navigation.set_stages([ap.navigation.takeoff_stage(alt_m), Stage("hold")])
+        log.info("takeoff to %.1f m%s", alt_m, "" if ap.arming.rotor.runup_complete else " once the rotor has run up")
         return True, ""
 
-    def takeoff_refusal(self, ap: Autopilot, alt_m: float) -> tuple[bool, str]:
+    def takeoff_refusal(self, ap: ModeContext, alt_m: float) -> tuple[bool, str]:
         """``(True, "")`` if a takeoff to ``alt_m`` is accepted now, else ``(False, why)``."""
         if not math.isfinite(alt_m) or not 0.5 <= alt_m <= MAX_TAKEOFF_ALT_M:
             return False, f"takeoff altitude {alt_m!r} m outside 0.5..{MAX_TAKEOFF_ALT_M:g}"
@@ -63,12 +51,13 @@ class ModeGuided(Mode):
             return False, "already flying"
         if alt_m <= ap.height_above_home_m:
             return False, f"takeoff altitude {alt_m:g} m is not above the vehicle"
-        if not ap.rotor.interlock:
+        rotor = ap.arming.rotor
+        if not rotor.interlock:
             return False, ("motor interlock not in effect yet (ARMING_DELAY_SEC after arming)"
-                           if ap.rotor.switch_engaged else "motor interlock not engaged (RC8 or DO_AUX_FUNCTION 32)")
+                           if rotor.switch_engaged else "motor interlock not engaged (RC8 or DO_AUX_FUNCTION 32)")
         return True, ""
 
-    def set_target(self, ap: Autopilot, setpoint: Setpoint) -> tuple[bool, str]:
+    def set_target(self, ap: ModeContext, setpoint: Setpoint) -> tuple[bool, str]:
         """A GUIDED target (see :meth:`Autopilot.set_guided_setpoint`)."""
         if ap.mode != GUIDED:
             return False, f"not in GUIDED (mode {mode_name(ap.mode)})"
@@ -77,32 +66,34 @@ class ModeGuided(Mode):
         checked = check_setpoint(setpoint, ap.settings.flight.max_speed_m_s)
         if isinstance(checked, str):
             return False, checked
-        if ap.landed and not ap._climbing_stage():
+        if ap.landed and not ap.ground.climbing_stage():
             return False, "landed: take off first (MAV_CMD_NAV_TAKEOFF)"
         if checked.vel_ned_m_s is None and checked.acc_ned_m_s2 is None:
             return self._position_target(ap, checked)
-        ap._guided = GuidedCommand(checked, ap.time_s)
-        if not ap._stages or ap._stages[0].kind != "direct":
-            ap._stages = [Stage("direct")]
+        nav = ap.navigation
+        nav.guided = GuidedCommand(checked, ap.time_s)
+        if nav.current_stage is None or nav.current_stage.kind != "direct":
+            nav.set_stages([Stage("direct")])
         return True, ""
 
     @staticmethod
-    def _position_target(ap: Autopilot, checked: Setpoint) -> tuple[bool, str]:
+    def _position_target(ap: ModeContext, checked: Setpoint) -> tuple[bool, str]:
         """A target without velocity or acceleration: a leg to it and a hold (or a turn on the spot)."""
+        nav = ap.navigation
         if checked.pos_ned_m is None:  # yaw only: turn on the spot
-            ap._yaw_hold_rad = ap._yaw_target(checked)
-            target = ap._hold_target()
-            ap._stages = [Stage("hold", target=target)]
+            nav.yaw_hold_rad = nav.yaw_target(checked)
+            target = nav.hold_target()
+            nav.set_stages([Stage("hold", target=target)])
             return True, ""
-        target = ap._fill_nan(np.asarray(checked.pos_ned_m, dtype=float))
+        target = nav.fill_nan(np.asarray(checked.pos_ned_m, dtype=float))
         if checked.yaw_rad is not None or checked.yaw_rate_rad_s is not None:
-            ap._yaw_hold_rad = ap._yaw_target(checked)
-        current = ap._stages[0] if ap._stages else None
+            nav.yaw_hold_rad = nav.yaw_target(checked)
+        current = nav.current_stage
         same = (current is not None and current.kind in ("leg", "hold") and current.target is not None
                 and float(np.linalg.norm(current.target - target)) < 0.05)
         if not same:
-            ap._stages = [Stage("leg", target=target), Stage("hold", target=target)]
-        ap._guided = None
+            nav.set_stages([Stage("leg", target=target), Stage("hold", target=target)])
+        nav.guided = None
         return True, ""
 
 

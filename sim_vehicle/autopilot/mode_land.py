@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from sim_vehicle.autopilot.legs import Stage
 from sim_vehicle.autopilot.mode import LAND, Mode
+from sim_vehicle.autopilot.mode_context import ModeContext
+from sim_vehicle.config import FlightSettings
 from heli_model.control import Setpoint
-
-if TYPE_CHECKING:
-    from sim_vehicle.autopilot.core import Autopilot
 
 
 class ModeLand(Mode):
@@ -17,22 +14,23 @@ class ModeLand(Mode):
 
     number = LAND
 
-    def arming_refusal(self, ap: Autopilot) -> str | None:
+    def arming_refusal(self, ap: ModeContext) -> str | None:
         return f"cannot arm in {self.name}"
 
-    def enter(self, ap: Autopilot) -> None:
-        ap._stages = [Stage("land")]
+    def enter(self, ap: ModeContext) -> None:
+        ap.navigation.set_stages([Stage("land")])
 
-    def enter_landed(self, ap: Autopilot) -> None:
+    def enter_landed(self, ap: ModeContext) -> None:
         ap.disarm(reason="LAND on the ground")
-        ap._stages = []
+        ap.navigation.set_stages([])
 
 
-def land_setpoint(ap: Autopilot, stage: Stage) -> Setpoint:
-    """Descent of a ``land`` stage (LAND, the end of RTL, a NAV_LAND item): over its target, vertical speed only."""
-    f = ap.settings.flight
-    height = -float(ap.x[16])
-    speed = f.land_speed_high_m_s if height > f.land_slow_alt_m else f.land_speed_m_s
+def land_setpoint(stage: Stage, height_m: float, flight: FlightSettings, yaw_rad: float) -> Setpoint:
+    """Descent of a ``land`` stage (LAND, the end of RTL, a NAV_LAND item): over its target, vertical speed only.
+
+    ``height_m`` is the height above the ground: LAND_SPEED_HIGH above ``flight.land_slow_alt_m``,
+    LAND_SPEED below; the heading ``yaw_rad`` is held.
+    """
+    speed = flight.land_speed_high_m_s if height_m > flight.land_slow_alt_m else flight.land_speed_m_s
     target = stage.target
-    return Setpoint(pos_ned_m=(target[0], target[1], float("nan")), vel_ned_m_s=(0.0, 0.0, speed),
-                    yaw_rad=ap._yaw_hold_rad)
+    return Setpoint(pos_ned_m=(target[0], target[1], float("nan")), vel_ned_m_s=(0.0, 0.0, speed), yaw_rad=yaw_rad)

@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import TYPE_CHECKING
+from typing import Sequence
 
 import numpy as np
 
 from sim_vehicle.autopilot.legs import Stage
 from sim_vehicle.autopilot.mode import RTL, Mode
-
-if TYPE_CHECKING:
-    from sim_vehicle.autopilot.core import Autopilot
+from sim_vehicle.autopilot.mode_context import ModeContext
+from sim_vehicle.config import FlightSettings
+from sim_vehicle.frames import Frames
 
 log = logging.getLogger(__name__)
 
@@ -22,35 +22,37 @@ class ModeRTL(Mode):
 
     number = RTL
 
-    def arming_refusal(self, ap: Autopilot) -> str | None:
+    def arming_refusal(self, ap: ModeContext) -> str | None:
         return f"cannot arm in {self.name}"
 
-    def entry_refusal(self, ap: Autopilot) -> str | None:
+    def entry_refusal(self, ap: ModeContext) -> str | None:
         return "RTL: landed" if ap.armed and ap.landed else None
 
-    def enter(self, ap: Autopilot) -> None:
-        ap._stages = rtl_stages(ap)
+    def enter(self, ap: ModeContext) -> None:
+        ap.navigation.set_stages(rtl_stages(ap.pos_ned_m, ap.frames, ap.settings.flight, ap.mission.rally_ned_m))
 
 
-def rtl_stages(ap: Autopilot) -> list[Stage]:
-    """Climb (if below RTL_ALT), fly level to the destination, land (RTL mode and NAV_RETURN_TO_LAUNCH)."""
-    f = ap.settings.flight
-    pos = ap.pos_ned_m
-    height = ap.frames.height_above_home(pos)
+def rtl_stages(pos: np.ndarray, frames: Frames, f: FlightSettings, rally_ned_m: Sequence[np.ndarray]) -> list[Stage]:
+    """Climb (if below RTL_ALT), fly level to the destination, land (RTL mode and NAV_RETURN_TO_LAUNCH).
+
+    From ``pos`` (3,) m NED in the ground frame to the nearest of home and the rally points
+    (each (3,) m NED), at RTL_ALT (``f.rtl_alt_m``) above home or higher.
+    """
+    height = frames.height_above_home(pos)
     alt_m = max(f.rtl_alt_m, height)
-    down = min(ap.frames.down_at_height_above_home(alt_m), float(pos[2]))
+    down = min(frames.down_at_height_above_home(alt_m), float(pos[2]))
     stages = []
     if height < alt_m - 0.5:
         stages.append(Stage("leg", target=np.array([pos[0], pos[1], down]), radius_m=1.0))
-    destination = rtl_destination(ap, pos)
+    destination = rtl_destination(pos, frames, rally_ned_m)
     stages.append(Stage("leg", target=np.array([destination[0], destination[1], down])))
     stages.append(Stage("land"))
     return stages
 
 
-def rtl_destination(ap: Autopilot, pos: np.ndarray) -> np.ndarray:
-    """Nearest (horizontally) of home and the rally points."""
-    candidates = [ap.frames.home_ground_ned_m.copy()] + list(ap.rally_ned_m)
+def rtl_destination(pos: np.ndarray, frames: Frames, rally_ned_m: Sequence[np.ndarray]) -> np.ndarray:
+    """Nearest (horizontally) to ``pos`` of home and the rally points, (3,) m NED."""
+    candidates = [frames.home_ground_ned_m.copy()] + list(rally_ned_m)
     distances = [math.hypot(c[0] - pos[0], c[1] - pos[1]) for c in candidates]
     best = candidates[int(np.argmin(distances))]
     if best is not candidates[0]:

@@ -164,11 +164,11 @@ def _takeoff(room: CommandProtocol, call: CommandCall) -> Outcome:
 
 
 def _land(room: CommandProtocol, call: CommandCall) -> Outcome:
-    return _outcome(room.autopilot.land())
+    return _outcome(room.autopilot.set_mode(ap.LAND))
 
 
 def _rtl(room: CommandProtocol, call: CommandCall) -> Outcome:
-    return _outcome(room.autopilot.rtl())
+    return _outcome(room.autopilot.set_mode(ap.RTL))
 
 
 def _do_set_mode(room: CommandProtocol, call: CommandCall) -> Outcome:
@@ -184,7 +184,7 @@ def _do_set_mode(room: CommandProtocol, call: CommandCall) -> Outcome:
 
 def _mission_start(room: CommandProtocol, call: CommandCall) -> Outcome:
     first = 0.0 if math.isnan(call.p[0]) else call.p[0]
-    count = len(room.autopilot.mission_items)
+    count = len(room.autopilot.mission.items)
     if not _finite_int(first) or first < 0 or (count and first >= count):
         return (mavlink.MAV_RESULT_DENIED,
                 f"first item (param1) {call.p[0]!r} is not an item of the mission (0..{count - 1})")
@@ -193,9 +193,9 @@ def _mission_start(room: CommandProtocol, call: CommandCall) -> Outcome:
 
 def _set_mission_current(room: CommandProtocol, call: CommandCall) -> Outcome:
     seq = call.p[0]
-    if not _finite_int(seq) or not 0 <= seq < len(room.autopilot.mission_items):
+    if not _finite_int(seq) or not 0 <= seq < len(room.autopilot.mission.items):
         return mavlink.MAV_RESULT_DENIED, f"mission item {seq!r} does not exist"
-    result = _outcome(room.autopilot.set_current(int(seq)))
+    result = _outcome(room.autopilot.mission.set_current(int(seq)))
     room.endpoint.send(room.telemetry.msg_mission_current())
     return result
 
@@ -203,8 +203,8 @@ def _set_mission_current(room: CommandProtocol, call: CommandCall) -> Outcome:
 def _change_speed(room: CommandProtocol, call: CommandCall) -> Outcome:
     speed = call.p[1]
     if speed == -1.0:
-        return _outcome(room.autopilot.change_speed(None))
-    ok, reason = room.autopilot.change_speed(speed)
+        return _outcome(room.autopilot.navigation.change_speed(None))
+    ok, reason = room.autopilot.navigation.change_speed(speed)
     return (mavlink.MAV_RESULT_ACCEPTED if ok else mavlink.MAV_RESULT_DENIED), reason
 
 
@@ -278,7 +278,7 @@ def _aux_function(room: CommandProtocol, call: CommandCall) -> Outcome:
         return mavlink.MAV_RESULT_DENIED, f"switch position (param2) {position!r}: expected 0, 1 or 2"
     if function != rsc.AUX_FUNCTION_MOTOR_INTERLOCK:
         return mavlink.MAV_RESULT_FAILED, QuietRefusal(f"aux function {function:g} not simulated")
-    return _outcome(room.autopilot.set_interlock_switch(int(position)))
+    return _outcome(room.autopilot.arming.set_interlock_switch(int(position)))
 
 
 # ====================================================================== message requests

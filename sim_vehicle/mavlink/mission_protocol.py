@@ -211,7 +211,7 @@ class MissionItemProtocolWaypoints(MissionItemProtocol):
     mission_type = MISSION_TYPE_MISSION
 
     def apply(self) -> None:
-        self.autopilot.set_mission(self.store.items(self.mission_type))
+        self.autopilot.mission.set_items(self.store.items(self.mission_type))
         self.endpoint.send(self.telemetry.msg_mission_current())
 
 
@@ -221,7 +221,7 @@ class MissionItemProtocolFence(MissionItemProtocol):
     mission_type = MISSION_TYPE_FENCE
 
     def apply(self) -> None:
-        self.autopilot.set_fence(self.store.items(self.mission_type))
+        self.autopilot.fence.set_items(self.store.items(self.mission_type))
 
 
 class MissionItemProtocolRally(MissionItemProtocol):
@@ -230,4 +230,4 @@ class MissionItemProtocolRally(MissionItemProtocol):
     mission_type = MISSION_TYPE_RALLY
 
     def apply(self) -> None:
-        self.autopilot.set_rally(self.store.items(self.mission_type))
+        self.autopilot.mission.set_rally(self.store.items(self.mission_type))

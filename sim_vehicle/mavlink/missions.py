@@ -103,7 +103,7 @@ class MissionProtocols:
 
     def on_mission_set_current(self, msg: Any, address: Address) -> None:
         """MISSION_SET_CURRENT: the mission item to fly next; MISSION_CURRENT to every link either way."""
-        ok, reason = self.autopilot.set_current(int(msg.seq))
+        ok, reason = self.autopilot.mission.set_current(int(msg.seq))
         if not ok:
             log.warning("MISSION_SET_CURRENT %d refused: %s", msg.seq, reason)
             self.endpoint.statustext(mavlink.MAV_SEVERITY_WARNING, f"set current refused: {reason}")

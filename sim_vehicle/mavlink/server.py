@@ -220,7 +220,7 @@ class MavlinkServer:
                          gcs_sysid)
             return
         if msg.chan8_raw != 0xFFFF:  # UINT16_MAX: leave the channel as it is
-            self.autopilot.rc_override(int(msg.chan8_raw))
+            self.autopilot.arming.rc_override(int(msg.chan8_raw))
 
     def _on_timesync(self, msg: Any, address: Address) -> None:
         if msg.tc1 == 0:

@@ -156,6 +156,31 @@ def parse_json(payload, max_bytes: int = MAX_PAYLOAD_BYTES) -> dict:
     return data
 
 
+def check_envelope(data: dict) -> None:
+    """Every field known, every required one present, the version this service speaks
+    (``ThreatPayloadError`` naming the field otherwise)."""
+    for key in data:
+        if key not in REQUIRED and key not in OPTIONAL:
+            raise payload_error(_key_name(key), f"unknown field (known: {', '.join(REQUIRED + OPTIONAL)})")
+    for key in REQUIRED:
+        if key not in data:
+            raise payload_error(key, "missing")
+    version = data["v"]
+    if isinstance(version, bool) or not isinstance(version, int) or version != VERSION:
+        raise payload_error("v", f"unsupported version {version!r} (this service speaks {VERSION})")
+
+
+def _ttl(ttl) -> float | None:
+    """``ttl_s``: None (until deleted) or a number in (0, ``MAX_TTL_S``]."""
+    if ttl is None:
+        return None
+    ttl = finite_number(ttl, "ttl_s")
+    if not 0.0 < ttl <= MAX_TTL_S:
+        raise payload_error("ttl_s", f"must be > 0 and <= {MAX_TTL_S:g} (or null: until "
+                            f"deleted), got {ttl!r}")
+    return ttl
+
+
 def decode(payload, *, received_t_s: float | None = None, key_id: str | None = None) -> Threat:
     """Validate and decode one threat payload.
 
@@ -181,15 +206,7 @@ def decode(payload, *, received_t_s: float | None = None, key_id: str | None = N
         ``ttl_s`` or the unknown field's name); ``exc.field`` holds it.
     """
     data = parse_json(payload)
-    for key in data:
-        if key not in REQUIRED and key not in OPTIONAL:
-            raise payload_error(_key_name(key), f"unknown field (known: {', '.join(REQUIRED + OPTIONAL)})")
-    for key in REQUIRED:
-        if key not in data:
-            raise payload_error(key, "missing")
-    version = data["v"]
-    if isinstance(version, bool) or not isinstance(version, int) or version != VERSION:
-        raise payload_error("v", f"unsupported version {version!r} (this service speaks {VERSION})")
+    check_envelope(data)
     threat_id = check_id(data["id"])
     if key_id is not None and threat_id != key_id:
         raise payload_error("id", f"{threat_id!r} does not match the key's last chunk {key_id!r}")
@@ -212,12 +229,7 @@ def decode(payload, *, received_t_s: float | None = None, key_id: str | None = N
     radius = finite_number(data["radius_m"], "radius_m")
     if not 0.0 < radius <= MAX_RADIUS_M:
         raise payload_error("radius_m", f"must be > 0 and <= {MAX_RADIUS_M:g}, got {radius!r}")
-    ttl = data.get("ttl_s")
-    if ttl is not None:
-        ttl = finite_number(ttl, "ttl_s")
-        if not 0.0 < ttl <= MAX_TTL_S:
-            raise payload_error("ttl_s", f"must be > 0 and <= {MAX_TTL_S:g} (or null: until "
-                                f"deleted), got {ttl!r}")
+    ttl = _ttl(data.get("ttl_s"))
     stamp = time.monotonic() if received_t_s is None else float(received_t_s)
     return Threat(id=threat_id, kind=kind, frame=frame, position=position,
                   velocity_ned_m_s=velocity, radius_m=radius, ttl_s=ttl, received_t_s=stamp)

@@ -83,12 +83,12 @@ class FakeSubscriptions:
 async def drive(inputs: list[tuple[str, object]]) -> tuple[TelemetryWatchers, list[logging.LogRecord]]:
     """Run every watcher of fresh link watchers on ``inputs`` ((subscription, value) pairs, in order)."""
     subs = FakeSubscriptions()
-    link = TelemetryWatchers(LinkSession(), subs, lambda: None)
+    watchers = TelemetryWatchers(LinkSession(), subs, lambda: None)
     names = list(DIRECT.values())
     failures = Failures()
     logger = logging.getLogger("companion.link")   # the watchers and every other part of the link
     logger.addHandler(failures)
-    tasks = [asyncio.get_running_loop().create_task(getattr(link, name)()) for name in names]
+    tasks = [asyncio.get_running_loop().create_task(getattr(watchers, name)()) for name in names]
     try:
         for sub, value in inputs:
             subs.queues[sub].append(value)
@@ -104,7 +104,7 @@ async def drive(inputs: list[tuple[str, object]]) -> tuple[TelemetryWatchers, li
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         logger.removeHandler(failures)
-    return link, failures.records
+    return watchers, failures.records
 
 
 # ================================================================ strategies
@@ -146,9 +146,9 @@ def inputs(nullable: bool = False):
         *[st.tuples(st.just(name), fields_dicts(name, nullable)) for name in DIRECT]), min_size=1, max_size=15)
 
 
-def finite_telemetry(link: TelemetryWatchers) -> list[str]:
+def finite_telemetry(watchers: TelemetryWatchers) -> list[str]:
     """Names of the telemetry values that are not finite."""
-    t = link.state.snapshot(0.0)
+    t = watchers.state.snapshot(0.0)
     bad = []
     for name in ("pos_ned_m", "vel_ned_m_s", "attitude_rad", "lat_deg", "lon_deg", "alt_amsl_m", "rel_alt_m",
                  "home_lla", "origin_lla", "boot_s", "rotor_rpm"):
@@ -163,16 +163,16 @@ def finite_telemetry(link: TelemetryWatchers) -> list[str]:
 @given(received=inputs())
 def test_watchers_never_raise_on_typed_fields(received):
     """Typed values (what MAVSDK decodes from a frame), NaN and infinities included: no watcher raises."""
-    link, failures = asyncio.run(drive(received))
+    watchers, failures = asyncio.run(drive(received))
     assert not failures, [r.getMessage() for r in failures]
-    assert link.state.values.get("mode") is None or isinstance(link.state.values["mode"], int)
+    assert watchers.state.values.get("mode") is None or isinstance(watchers.state.values["mode"], int)
 
 
 @settings(max_examples=60, deadline=None)
 @given(received=inputs())
 def test_telemetry_stays_finite(received):
-    link, _ = asyncio.run(drive(received))
-    assert not finite_telemetry(link)
+    watchers, _ = asyncio.run(drive(received))
+    assert not finite_telemetry(watchers)
 
 
 @pytest.mark.parametrize("sub, value", [
@@ -186,9 +186,9 @@ def test_telemetry_stays_finite(received):
     ("RPM", {"_sysid": VEHICLE, "_compid": 1, "rpm1": math.inf, "rpm2": 0.0}),
 ])
 def test_reproducers_non_finite_telemetry(sub, value):
-    link, failures = asyncio.run(drive([(sub, value)]))
+    watchers, failures = asyncio.run(drive([(sub, value)]))
     assert not failures
-    assert not finite_telemetry(link)
+    assert not finite_telemetry(watchers)
 
 
 @pytest.mark.parametrize("sub, value", [
@@ -200,7 +200,7 @@ def test_reproducers_non_finite_telemetry(sub, value):
 ])
 def test_reproducers_null_fields_raise(sub, value):
     """Found by hypothesis with ``inputs(nullable=True)``; kept as fixed cases (each costs a 0.5 s restart)."""
-    link, failures = asyncio.run(drive([(sub, value)]))
+    watchers, failures = asyncio.run(drive([(sub, value)]))
     assert not failures, [r.getMessage() for r in failures]
 
 
@@ -211,6 +211,6 @@ def test_foreign_systems_do_not_touch_the_telemetry():
                ("HEARTBEAT", {"_sysid": 42, "_compid": 1, "base_mode": 129, "custom_mode": 9}),
                ("HOME_POSITION", {"_sysid": 42, "_compid": 1, "latitude": 10, "longitude": 10, "altitude": 0}),
                ("EXTENDED_SYS_STATE", {"_sysid": 42, "_compid": 1, "landed_state": 2})]
-    link, failures = asyncio.run(drive(foreign))
+    watchers, failures = asyncio.run(drive(foreign))
     assert not failures
-    assert link.state.pos_origin is None and link.state.values == {}
+    assert watchers.state.pos_origin is None and watchers.state.values == {}

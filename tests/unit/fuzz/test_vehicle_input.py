@@ -150,8 +150,8 @@ def flying():
     try:
         assert upload(server, MISSION) == mavlink.MAV_MISSION_ACCEPTED
         assert vehicle.set_mode(ap.GUIDED)[0]
-        assert vehicle.set_interlock_switch(rsc.SWITCH_LOW)[0] and vehicle.arm()[0]
-        assert vehicle.set_interlock_switch(rsc.SWITCH_HIGH)[0]
+        assert vehicle.arming.set_interlock_switch(rsc.SWITCH_LOW)[0] and vehicle.arm()[0]
+        assert vehicle.arming.set_interlock_switch(rsc.SWITCH_HIGH)[0]
         s = vehicle.settings.rsc
         fly(server, s.arming_delay_s + s.runup_time_s + 0.5)
         assert vehicle.takeoff(10.0)[0]
@@ -288,7 +288,7 @@ def check_parameters(server) -> None:
 
 def check_vehicle(server) -> None:
     vehicle = server.autopilot
-    assert np.all(np.isfinite(vehicle.x)), vehicle.x
+    assert np.all(np.isfinite(vehicle.airframe.x)), vehicle.airframe.x
     assert np.all(np.isfinite(vehicle.pos_ned_m)) and np.all(np.isfinite(vehicle.euler_rad))
     assert vehicle.pos_ned_m[2] < 0.5, "below the ground"
 

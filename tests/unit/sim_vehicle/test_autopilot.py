@@ -39,10 +39,10 @@ def fly(vehicle: Autopilot, seconds: float) -> list[tuple]:
 
 def arm_with_interlock(vehicle: Autopilot) -> None:
     """ArduCopter heli start-up: interlock switch low, arm, switch high (effective after the arming delay)."""
-    assert vehicle.set_interlock_switch(rsc.SWITCH_LOW)[0]
+    assert vehicle.arming.set_interlock_switch(rsc.SWITCH_LOW)[0]
     ok, reason = vehicle.arm()
     assert ok, reason
-    assert vehicle.set_interlock_switch(rsc.SWITCH_HIGH)[0]
+    assert vehicle.arming.set_interlock_switch(rsc.SWITCH_HIGH)[0]
 
 
 def arm_and_run_up(vehicle: Autopilot) -> None:
@@ -50,7 +50,7 @@ def arm_and_run_up(vehicle: Autopilot) -> None:
     arm_with_interlock(vehicle)
     s = vehicle.settings.rsc
     fly(vehicle, s.arming_delay_s + s.runup_time_s + 0.5)
-    assert vehicle.rotor.runup_complete and vehicle.armed and vehicle.landed
+    assert vehicle.arming.rotor.runup_complete and vehicle.armed and vehicle.landed
 
 
 def airborne_at_10m(model: HeliModel) -> Autopilot:
@@ -129,7 +129,7 @@ def test_guided_position_target_30m_is_reached_and_held(model):
         vehicle.step(0.5)
         errors.append(np.linalg.norm(vehicle.pos_ned_m - (30.0, 0.0, -10.0)))
     assert max(errors) < 0.5
-    assert float(np.max(np.abs(vehicle.delta))) < 1.0
+    assert float(np.max(np.abs(vehicle.airframe.delta))) < 1.0
 
 
 def test_guided_setpoint_refused_outside_guided_or_invalid(model):
@@ -154,7 +154,7 @@ def test_guided_velocity_timeout_brakes_to_hover(model):
 
 def test_land_disarms_on_touchdown_and_never_goes_below_ground(model):
     vehicle = airborne_at_10m(model)
-    assert vehicle.land()[0]
+    assert vehicle.set_mode(ap.LAND)[0]
     lowest = 0.0
     events = []
     for _ in range(60):
@@ -169,7 +169,7 @@ def test_rtl_climbs_returns_and_lands_at_home(model):
     vehicle = airborne_at_10m(model)
     vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(25.0, -20.0, -10.0)))
     fly(vehicle, 15.0)
-    assert vehicle.rtl()[0]
+    assert vehicle.set_mode(ap.RTL)[0]
     highest = 0.0
     for _ in range(120):
         vehicle.step(0.5)
@@ -193,7 +193,7 @@ def test_auto_mission_reaches_items_in_order_and_lands(model):
         item(5, 21, lat2, lon2, 0.0),
     ]
     vehicle = make_vehicle(model)
-    vehicle.set_mission(mission)
+    vehicle.mission.set_items(mission)
     assert vehicle.set_mode(ap.AUTO)[0]
     arm_with_interlock(vehicle)  # the takeoff item waits on the ground for the rotor run-up
     events = []
@@ -205,13 +205,13 @@ def test_auto_mission_reaches_items_in_order_and_lands(model):
     assert reached == [1, 2, 4, 5]
     assert not vehicle.armed and vehicle.landed
     assert np.allclose(vehicle.pos_ned_m, (20.0, 20.0, 0.0), atol=1.0)
-    assert vehicle.speed_m_s == 8.0
+    assert vehicle.navigation.speed_m_s == 8.0
 
 
 def test_idle_on_ground_disarms_after_delay(model):
     vehicle = make_vehicle(model, replace_path(VehicleSettings(), "flight.disarm_delay_s", 4.0))
     vehicle.set_mode(ap.GUIDED)
-    assert vehicle.set_interlock_switch(rsc.SWITCH_LOW)[0]
+    assert vehicle.arming.set_interlock_switch(rsc.SWITCH_LOW)[0]
     assert vehicle.arm()[0]
     fly(vehicle, 1.5)
     assert vehicle.armed
@@ -225,16 +225,16 @@ def test_no_auto_disarm_while_the_rotor_turns(model):
     vehicle.set_mode(ap.GUIDED)
     arm_and_run_up(vehicle)
     fly(vehicle, 30.0)  # three times DISARM_DELAY on the ground with the rotor at speed
-    assert vehicle.armed and vehicle.rotor.above_critical(vehicle.settings.rsc)
+    assert vehicle.armed and vehicle.arming.rotor.above_critical(vehicle.settings.rsc)
 
 
 def test_new_mission_does_not_disturb_disarmed_vehicle(model):
     vehicle = make_vehicle(model)
-    vehicle.set_mission([item(0, 16, HOME[0], HOME[1], HOME[2], frame=0), item(1, 22, z=5.0)])
-    assert vehicle.has_mission and vehicle.mission_current == 1
+    vehicle.mission.set_items([item(0, 16, HOME[0], HOME[1], HOME[2], frame=0), item(1, 22, z=5.0)])
+    assert vehicle.mission.has_mission and vehicle.mission.current == 1
     fly(vehicle, 2.0)
     assert vehicle.landed and np.allclose(vehicle.pos_ned_m, 0.0)
-    assert not vehicle.set_current(7)[0]
+    assert not vehicle.mission.set_current(7)[0]
 
 
 # ---------------------------------------------------------------- pacing (clock.py)
@@ -315,10 +315,10 @@ def test_rtl_goes_to_the_nearest_rally_point(model):
     vehicle = airborne_at_10m(model)
     lat, lon = north_east_deg(40.0, 0.0)
     far_lat, far_lon = north_east_deg(-80.0, 0.0)
-    vehicle.set_rally([item(0, 5100, lat, lon, 20.0), item(1, 5100, far_lat, far_lon, 20.0)])
+    vehicle.mission.set_rally([item(0, 5100, lat, lon, 20.0), item(1, 5100, far_lat, far_lon, 20.0)])
     vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(30.0, 0.0, -10.0)))
     fly(vehicle, 12.0)
-    vehicle.rtl()
+    vehicle.set_mode(ap.RTL)
     for _ in range(120):
         vehicle.step(0.5)
         if not vehicle.armed:
@@ -343,21 +343,21 @@ def test_fence_breach_switches_to_rtl_when_enabled(model):
     fence_settings = replace_path(VehicleSettings(), "flight.fence_enable", 1)
     vehicle = make_vehicle(model, fence_settings)
     corners = [north_east_deg(n, e) for n, e in ((-20, -20), (20, -20), (20, 20), (-20, 20))]
-    vehicle.set_fence([item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0) for i, (lat, lon) in enumerate(corners)]
-                      + [item(4, ap.CMD_FENCE_CIRCLE_EXCLUSION, *north_east_deg(-10.0, 0.0), p1=3.0)])
-    assert len(vehicle.fence.inclusion_polygons) == 1 and len(vehicle.fence.exclusion_circles) == 1
+    polygon = [item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0) for i, (lat, lon) in enumerate(corners)]
+    vehicle.fence.set_items(polygon + [item(4, ap.CMD_FENCE_CIRCLE_EXCLUSION, *north_east_deg(-10.0, 0.0), p1=3.0)])
+    assert len(vehicle.fence.area.inclusion_polygons) == 1 and len(vehicle.fence.area.exclusion_circles) == 1
     vehicle.set_mode(ap.GUIDED)
     arm_and_run_up(vehicle)
     vehicle.takeoff(10.0)
     fly(vehicle, 12.0)
-    assert vehicle.fence_breached is None
+    assert vehicle.fence.breached is None
     vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(40.0, 0.0, -10.0)))  # leaves the polygon at 20 m
     events = []
     for _ in range(40):
         events += vehicle.step(0.5)
         if vehicle.mode == ap.RTL:
             break
-    assert vehicle.mode == ap.RTL and "outside an inclusion polygon" in vehicle.fence_breached
+    assert vehicle.mode == ap.RTL and "outside an inclusion polygon" in vehicle.fence.breached
     assert 19.0 < vehicle.pos_ned_m[0] < 26.0
     assert any(e[0] == "text" and "Fence" in e[2] for e in events)
 
@@ -365,16 +365,17 @@ def test_fence_breach_switches_to_rtl_when_enabled(model):
 def test_fence_is_not_enforced_by_default(model):
     vehicle = airborne_at_10m(model)
     corners = [north_east_deg(n, e) for n, e in ((-5, -5), (5, -5), (5, 5), (-5, 5))]
-    vehicle.set_fence([item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0) for i, (lat, lon) in enumerate(corners)])
+    vehicle.fence.set_items([item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0)
+                             for i, (lat, lon) in enumerate(corners)])
     vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(20.0, 0.0, -10.0)))
     fly(vehicle, 10.0)
-    assert vehicle.mode == ap.GUIDED and vehicle.fence_breached is None
+    assert vehicle.mode == ap.GUIDED and vehicle.fence.breached is None
 
 
 def test_completed_mission_restarts_from_item_1(model):
     mission = [item(0, 16, HOME[0], HOME[1], HOME[2], frame=0), item(1, 22, z=3.0), item(2, 21)]
     vehicle = make_vehicle(model)
-    vehicle.set_mission(mission)
+    vehicle.mission.set_items(mission)
     vehicle.set_mode(ap.AUTO)
     for flight in range(2):
         arm_with_interlock(vehicle)
@@ -384,7 +385,7 @@ def test_completed_mission_restarts_from_item_1(model):
             if not vehicle.armed:
                 break
         assert [e[1] for e in events if e[0] == "mission_item_reached"] == [1, 2], f"flight {flight}"
-        assert vehicle.mission_finished
+        assert vehicle.mission.finished
 
 
 def test_leaving_auto_mid_item_reports_nothing_and_resumes_later(model):
@@ -392,11 +393,11 @@ def test_leaving_auto_mid_item_reports_nothing_and_resumes_later(model):
     mission = [item(0, 16, HOME[0], HOME[1], HOME[2], frame=0), item(1, 22, z=5.0), item(2, 16, lat, lon, 5.0),
                item(3, 21)]
     vehicle = make_vehicle(model)
-    vehicle.set_mission(mission)
+    vehicle.mission.set_items(mission)
     vehicle.set_mode(ap.AUTO)
     arm_with_interlock(vehicle)
     events = fly(vehicle, 8.0 + 12.0)  # 12 s of rotor start-up first
-    assert vehicle.mission_current == 2
+    assert vehicle.mission.current == 2
     vehicle.set_mode(ap.GUIDED)
     vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(0.0, 10.0, -5.0)))
     events = fly(vehicle, 10.0)
@@ -469,7 +470,7 @@ def test_server_survives_fuzzed_messages_while_flying(model, caplog):
                 server._send_due_streams()
         assert sent > 1000
         assert not [r for r in caplog.records if r.levelname in ("ERROR", "CRITICAL")]
-        assert np.all(np.isfinite(vehicle.x))
+        assert np.all(np.isfinite(vehicle.airframe.x))
         assert vehicle.pos_ned_m[2] <= 0.0
     finally:
         server.close()

@@ -207,45 +207,45 @@ def make_vehicle(model, settings_: VehicleSettings | None = None, origin=None) -
 
 def test_arming_refused_with_the_interlock_engaged_and_reported_every_30_s(model):
     vehicle = make_vehicle(model)
-    assert vehicle.rotor.switch_engaged and vehicle.rc8_us == 1500  # the SITL's RC8: MIDDLE
+    assert vehicle.arming.rotor.switch_engaged and vehicle.arming.rc8_us == 1500  # the SITL's RC8: MIDDLE
     assert vehicle.arm() == (False, "Arm: Motor Interlock Enabled")
     events = fly(vehicle, 61.0)
     assert texts(events).count("PreArm: Motor Interlock Enabled") == 2  # at 30 s and 60 s
-    assert vehicle.set_interlock_switch(rsc.SWITCH_LOW)[0] and vehicle.arm()[0]
+    assert vehicle.arming.set_interlock_switch(rsc.SWITCH_LOW)[0] and vehicle.arm()[0]
 
 
 def test_takeoff_needs_the_interlock_in_effect_then_waits_for_the_runup(model):
     vehicle = make_vehicle(model)
     vehicle.set_mode(ap.GUIDED)
-    assert vehicle.set_interlock_switch(rsc.SWITCH_LOW)[0] and vehicle.arm()[0]
+    assert vehicle.arming.set_interlock_switch(rsc.SWITCH_LOW)[0] and vehicle.arm()[0]
     ok, reason = vehicle.takeoff(10.0)
     assert not ok and isinstance(reason, QuietRefusal)  # interlock off: FAILED without STATUSTEXT
-    assert vehicle.set_interlock_switch(rsc.SWITCH_HIGH)[0]  # accepted during the arming delay ...
+    assert vehicle.arming.set_interlock_switch(rsc.SWITCH_HIGH)[0]  # accepted during the arming delay ...
     vehicle.step(1.0)
     assert not vehicle.takeoff(10.0)[0]  # ... but not in effect yet
     vehicle.step(1.01)
-    assert vehicle.rotor.interlock and vehicle.takeoff(10.0)[0]
+    assert vehicle.arming.rotor.interlock and vehicle.takeoff(10.0)[0]
     states = []
     for _ in range(int(14.0 / 0.25)):
         vehicle.step(0.25)
-        states.append((vehicle.time_s, vehicle.landed, vehicle.taking_off, vehicle.rotor.runup_complete))
+        states.append((vehicle.time_s, vehicle.landed, vehicle.ground.taking_off, vehicle.arming.rotor.runup_complete))
     lift_off = next(t for t, landed, _, _ in states if not landed)
     assert lift_off == pytest.approx(2.0 + 10.0, abs=0.6)  # after the 10 s run-up, not before
     assert not any(taking_off for t, _, taking_off, _ in states if t < 11.9)  # ON_GROUND while waiting
     assert any(taking_off for t, _, taking_off, _ in states if t > 12.5)
     fly(vehicle, 10.0)
-    assert abs(vehicle.height_above_home_m - 10.0) < 0.2 and not vehicle.taking_off
-    ok, reason = vehicle.set_interlock_switch(rsc.SWITCH_LOW)
-    assert not ok and "flight" in reason and vehicle.rotor.interlock
+    assert abs(vehicle.height_above_home_m - 10.0) < 0.2 and not vehicle.ground.taking_off
+    ok, reason = vehicle.arming.set_interlock_switch(rsc.SWITCH_LOW)
+    assert not ok and "flight" in reason and vehicle.arming.rotor.interlock
 
 
 def test_rc8_override_sets_the_switch_and_expires_back_to_engaged(model):
     vehicle = make_vehicle(model)
-    vehicle.rc_override(1000)
+    vehicle.arming.rc_override(1000)
     events = vehicle.step(0.1)
     assert "RC8: MotorInterlock LOW" in texts(events) and vehicle.arm()[0]
     events = fly(vehicle, 4.0)  # no new override for RC_OVERRIDE_TIME: RC8 back to 1500 us
-    assert "RC8: MotorInterlock MIDDLE" in texts(events) and vehicle.rotor.switch_engaged
+    assert "RC8: MotorInterlock MIDDLE" in texts(events) and vehicle.arming.rotor.switch_engaged
 
 
 def test_auto_mission_takeoff_waits_for_interlock_and_runup(model):
@@ -254,9 +254,9 @@ def test_auto_mission_takeoff_waits_for_interlock_and_runup(model):
     items = [MissionItem(0, 0, 16, 0, 1, 0, 0, 0, 0, 473977420, 85455940, 488.0),
              MissionItem(1, 3, 22, 0, 1, 0, 0, 0, 0, 0, 0, 5.0)]
     vehicle = make_vehicle(model)
-    vehicle.set_mission(items)
+    vehicle.mission.set_items(items)
     vehicle.set_mode(ap.AUTO)
-    vehicle.set_interlock_switch(rsc.SWITCH_LOW)
+    vehicle.arming.set_interlock_switch(rsc.SWITCH_LOW)
     assert vehicle.arm()[0]
     fly(vehicle, 4.0)
     assert vehicle.landed and vehicle.armed  # interlock off: the takeoff item waits (auto-disarm after 5 s)
@@ -269,9 +269,9 @@ def test_set_home_moves_relative_heights_and_rtl_but_not_the_local_frame(model):
     vehicle = make_vehicle(model, origin=origin)
     assert np.allclose(vehicle.local_ned_m, (30.0, 0.0, -10.0), atol=0.05)
     vehicle.set_mode(ap.GUIDED)
-    vehicle.set_interlock_switch(rsc.SWITCH_LOW)
+    vehicle.arming.set_interlock_switch(rsc.SWITCH_LOW)
     vehicle.arm()
-    vehicle.set_interlock_switch(rsc.SWITCH_HIGH)
+    vehicle.arming.set_interlock_switch(rsc.SWITCH_HIGH)
     fly(vehicle, 12.5)
     assert vehicle.takeoff(8.0)[0]
     fly(vehicle, 10.0)
@@ -286,7 +286,7 @@ def test_set_home_moves_relative_heights_and_rtl_but_not_the_local_frame(model):
     assert vehicle.set_guided_setpoint(Setpoint(pos_ned_m=vehicle.frames.from_local((40.0, 5.0, -18.0))))[0]
     fly(vehicle, 12.0)
     assert np.allclose(vehicle.local_ned_m, (40.0, 5.0, -18.0), atol=0.3)
-    assert vehicle.rtl()[0]
+    assert vehicle.set_mode(ap.RTL)[0]
     for _ in range(200):
         vehicle.step(0.5)
         if not vehicle.armed:
@@ -412,10 +412,10 @@ def test_aux_function_rc_override_from_the_gcs_sysid_only_and_chunked_statustext
     override = mavlink.MAVLink_rc_channels_override_message(1, 1, *([65535] * 7), 1000)
     gcs_send(server, override, source_system=250)  # not MAV_GCS_SYSID: ignored, as ArduPilot does
     advance(server, 0.1)
-    assert server.autopilot.rotor.switch_engaged
+    assert server.autopilot.arming.rotor.switch_engaged
     gcs_send(server, override, source_system=255)
     advance(server, 0.1)
-    assert not server.autopilot.rotor.switch_engaged
+    assert not server.autopilot.arming.rotor.switch_engaged
     assert command(server, mavlink.MAV_CMD_DO_AUX_FUNCTION, 32, 3)[0].result == mavlink.MAV_RESULT_DENIED
     assert command(server, mavlink.MAV_CMD_DO_AUX_FUNCTION, 41, 2)[0].result == mavlink.MAV_RESULT_FAILED
     replies = command(server, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 33, 1)

@@ -75,13 +75,14 @@ def test_unknown_parameter_is_refused():
 def test_lqi_weight_change_redesigns_the_controller():
     model = HeliModel.default()
     vehicle = Autopilot(model, VehicleSettings(), (47.0, 8.0, 400.0, 0.0), np.random.default_rng(0))
-    gains_before = vehicle.controller.gains.K.copy() if hasattr(vehicle.controller.gains, "K") else None
+    controller = vehicle.airframe.controller
+    gains_before = controller.gains.K.copy() if hasattr(controller.gains, "K") else None
     table = ParameterTable(vehicle.settings)
     assert table.set("LQI_R_LON", 1.0)[0]
     vehicle.apply_settings(table.settings)
-    assert vehicle.controller.settings.r_weights[1] == 1.0
+    assert vehicle.airframe.controller.settings.r_weights[1] == 1.0
     if gains_before is not None:
-        assert not np.allclose(gains_before, vehicle.controller.gains.K)
+        assert not np.allclose(gains_before, vehicle.airframe.controller.gains.K)
 
 
 def test_settings_errors_name_the_key(tmp_path):
