@@ -103,10 +103,6 @@ SIZE_EXCEPTIONS = {
 }
 #: ``"path::qualname"`` -> why this class may be or use a mixin today.
 MIXIN_EXCEPTIONS = {
-    "companion/daemon.py::CompanionDaemon":
-        "background, mission and leg tasks as bases; the flight executor and service/ take them apart",
-    "companion/threats/reactor.py::ThreatReactor":
-        "decisions and legs/alternatives as bases; threats/decision/ makes the decision a pure step",
 }
 #: Package -> why an import cycle wholly inside it is tolerated today (an entry of a package with
 #: no cycle left is a finding; of a package that does not exist, a note).
@@ -127,6 +123,8 @@ IO_LIBRARIES = ("socket", "asyncio", "selectors", "subprocess", "zenoh", "mavsdk
 MISSION_ITEM_INT_FIELDS = ("seq", "frame", "command", "current", "autocontinue", "param1", "param2",
                            "param3", "param4", "x", "y", "z")
 EXECUTOR = "companion.flight.executor"
+#: Modules that fly the executor: itself, and its fast-time driver.
+EXECUTOR_MODULES = (EXECUTOR, "companion.flight.fast_time")
 #: Benchmarks that fly threat encounters and must use the flight executor, not a copy of it.
 EXECUTOR_USERS = ("benchmarks/threats.py",)
 EMULATION_RE = re.compile("emulat", re.I)
@@ -345,17 +343,19 @@ def mixin_findings(trees: dict[str, tuple[str, ast.AST]]) -> dict[str, str]:
 
 
 def imports_executor(tree: ast.AST) -> bool:
-    """True when ``tree`` imports ``companion.flight.executor`` (at any depth, in any form)."""
+    """True when ``tree`` imports ``companion.flight.executor`` or its fast-time driver
+    ``companion.flight.fast_time`` (at any depth, in any form)."""
     for node in ast.walk(tree):
-        if isinstance(node, ast.Import) and any(a.name == EXECUTOR or a.name.startswith(EXECUTOR + ".")
-                                                for a in node.names):
+        if isinstance(node, ast.Import) and any(_is_executor(a.name) for a in node.names):
             return True
         if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            if node.module == EXECUTOR or node.module.startswith(EXECUTOR + "."):
-                return True
-            if node.module == EXECUTOR.rpartition(".")[0] and any(a.name == "executor" for a in node.names):
+            if _is_executor(node.module) or any(_is_executor(f"{node.module}.{a.name}") for a in node.names):
                 return True
     return False
+
+
+def _is_executor(module: str) -> bool:
+    return any(module == m or module.startswith(m + ".") for m in EXECUTOR_MODULES)
 
 
 def executor_findings(root: Path) -> tuple[list[str], list[str]]:
