@@ -212,11 +212,13 @@ def test_benchmarks_fly_with_the_executor(tmp_path):
 
 
 def test_numerics_cover_the_new_layout(tmp_path):
-    """heli_model (all of it) and the new flight/decision modules are numerics."""
-    for module in ("heli_model.control.lqi", "heli_model", "companion.flight.pipeline",
+    """heli_model (all of it) and the flight core (executor included: it runs in fast time with no
+    I/O) and the decision are numerics; the daemon's service and link are not."""
+    for module in ("heli_model.control.lqi", "heli_model", "companion.flight.pipeline", "companion.flight.executor",
                    "companion.flight.phases", "companion.flight.trajectory", "companion.threats.decision.step"):
         assert check_facts.in_prefixes(module, check_facts.NUMERICS), module
-    assert not check_facts.in_prefixes("companion.flight.executor", check_facts.NUMERICS)
+    assert not check_facts.in_prefixes("companion.service.jobs", check_facts.NUMERICS)
+    assert not check_facts.in_prefixes("companion.link.periodic", check_facts.NUMERICS)
     assert not check_facts.in_prefixes("heli_modelx", check_facts.NUMERICS)
     _write(tmp_path, {"heli_model/control/lqi.py": "import asyncio\n"})
     result = _results(tmp_path)["numerics import no I/O library"]
