@@ -50,7 +50,8 @@ NUMERICS = ("companion.planning", "companion.smoothing", "companion.world", "com
             "companion.threats.decision.join", "companion.threats.decision.alternatives", "companion.threats.decision.candidates",
             "companion.threats.decision.choice", "companion.threats.decision.kinds",
             "companion.threats.decision.estimate", "companion.threats.decision.worlds",
-            "companion.threats.decision.step", "companion.flight.trajectory", "companion.flight.phases",
+            "companion.threats.decision.step", "companion.threats.decision.values",
+            "companion.flight.trajectory", "companion.flight.phases",
             "companion.view.geometry", "heli_model.dynamics", "heli_model.model", "heli_model.control",
             "heli_model.wind", "sim_vehicle.rsc", "sim_vehicle.autopilot", "heli_model.vehicle_update",
             "heli_common.geometry", "heli_common.frames")
