@@ -1,8 +1,9 @@
 """The reactor's decisions (DESIGN 7.3 to 7.5): one at a time in a planning worker (the pure
 ``decide`` on the reactor's state, an observation of the daemon's reference, the leg and the
-policy; the state that comes back adopted), updates that arrive meanwhile folded into the next one; the >= 10 Hz monitor of the active reference; a way
-back to the mission on request (``resume``); a decision engaged, its latency measured from the
-trigger to the first setpoint of the new trajectory, then published, recorded and told."""
+policy; the state that comes back adopted), updates that arrive meanwhile folded into the next
+one; the >= 10 Hz monitor of the active reference; a way back to the mission on request
+(``resume``); a decision engaged, its latency measured from the trigger to the first setpoint of
+the new trajectory, then published, recorded and told."""
 
 from __future__ import annotations
 
@@ -94,6 +95,8 @@ class ReactorDecisions:
         try:
             while True:
                 leg, leg_context, ref, t = self.leg, self.leg_context, self.reference(), self.clock_now_s()
+                if leg_context is None:                 # the leg ended while a decision was pending
+                    break
                 self.table.expire(t)
                 obs = self.observation(t, Trigger.RESUME if resume else Trigger(trigger))
                 if trigger == "monitor" and self._stays_clear(obs):
