@@ -157,9 +157,11 @@ class DecisionPolicy:
         return (estimate.mean_s + estimate.dev_s) * self.time_scale
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class DecisionState:
     """What one decision hands to the next (small, explicit: sent to a worker and back).
+    Compared by identity (its alternatives hold arrays): the caller adopts a returned state
+    when its own is still the one it sent.
 
     Attributes
     ----------
@@ -210,7 +212,7 @@ class DecisionState:
         return self.replan_estimate.high_s
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Observation:
     """What a decision sees: clock time ``t_s``, every threat known then (local frame, stamped on
     the same clock), the reference being flown (None: nothing to decide) and what asked."""
