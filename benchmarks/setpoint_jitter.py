@@ -314,8 +314,8 @@ def markdown(results: list[dict], meta: dict) -> str:
         "equal-priority worker process, or any other busy process on a 2-core machine, takes "
         "the core from the streaming process for a scheduler tick (4 ms) at a time. "
         "`companion run` plans in `companion.workers.PlanningWorkers(\"process\")` "
-        "(`process_fifo_daemon`: two warm niced worker processes; the threat manager's state "
-        "is adopted back after each call), with the stream thread at SCHED_FIFO and a 0.5 ms "
+        "(`process_fifo_daemon`: two warm niced worker processes; the threat decision's state "
+        "is a value sent and returned), with the stream thread at SCHED_FIFO and a 0.5 ms "
         "GIL switch interval; `thread_fifo_daemon` is the same with planning threads, as "
         "before issue 13 (a planning thread preempted while it holds the GIL delays the stream).",
         "",
