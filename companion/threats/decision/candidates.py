@@ -119,10 +119,10 @@ def check(sit: Situation, t_s: np.ndarray, pos: np.ndarray, *, static: bool = Tr
 def judge(sit: Situation, candidates: list[Candidate]) -> list[Candidate]:
     """Check planned candidates (t = 0 at the situation's time) against the tubes.
 
-    Planned candidates (switch and replan joins) are built from segments checked free and G2
-    corners repaired in the world (``join.py``), like the mission's legs: the static world is
-    honoured by construction, and re-checking it with the chord bound would only mistake a
-    path that grazes the safety margin for a conflict.
+    Planned candidates (switch and replan joins) are built from segments checked free, corners
+    repaired and the curve checked in the world by the trajectory pipeline (``join.py``), like
+    the mission's legs: the static world is honoured by construction, and re-checking it with
+    the chord bound would only mistake a path that grazes the safety margin for a conflict.
     """
     if not candidates:
         return candidates
