@@ -11,7 +11,7 @@
 - ``Timer.time(curve, limits, start_speed_m_s=...) -> Trajectory``: the speed profile
   (``companion.smoothing.timing``), ``SpeedProfileTimer``.
 - ``Checker.check(trajectory, world=None, stretch=...) -> Checked``: the static-world validity of
-  the curve (sampled, against the inflated obstacles) and, when a closed-loop checker is given
+  the curve (its straight pieces exactly, its corners sampled, against the inflated obstacles) and, when a closed-loop checker is given
   (``companion.smoothing.feasibility.FeasibilityChecker``), the helicopter model flying it;
   the outcome is a ``TrajectoryStatus`` value.
 
@@ -33,6 +33,7 @@ from companion.errors import CompanionError
 from companion.flight.trajectory import Trajectory
 from companion.planning import GartSettings, MgartSettings, PlanResult, gart, mgart
 from companion.smoothing import TrajectoryLimits, smooth_g1, smooth_g2, time_parameterize
+from companion.smoothing.bezier_maths import bernstein
 from companion.world import World
 
 __all__ = ["PipelineError", "PlanningProblem", "PlanBudget", "Planner", "AlternativesPlanner", "Smoother",
@@ -275,14 +276,11 @@ class TrajectoryChecker:
     ----------
     closed_loop : FeasibilityChecker-like or None
         ``check(trajectory)`` and ``check_and_stretch(trajectory)`` -> ``FeasibilityReport``.
-    sample_step_m : float
-        Arc-length step of the static check's samples (m).
     tolerance_m : float
         Clearance below zero still accepted (m): the rounding of a path that grazes the margin.
     """
 
     closed_loop: object = field(default=None, compare=False)
-    sample_step_m: float = 0.5
     tolerance_m: float = 1e-6
 
     def check(self, trajectory: Trajectory, world: World | None = None, *, stretch: bool = True) -> Checked:
@@ -313,18 +311,34 @@ class TrajectoryChecker:
         return Checked(status, flown, report)
 
     def static_reason(self, trajectory: Trajectory, world: World) -> str:
-        """Why the curve of ``trajectory`` is not free in ``world`` ('' when it is)."""
+        """Why the curve of ``trajectory`` is not free in ``world`` ('' when it is).
+
+        Straight pieces are checked exactly (``World.segment_free``); curved pieces (the
+        corners) at ``CORNER_SAMPLES`` points each, against the inflated obstacles and the bounds.
+        """
         curve = trajectory.curve
         if curve.d != world.dim:
             raise PipelineError(f"world: a {world.dim}D world for a {curve.d}D trajectory")
-        n = max(2, int(math.ceil(curve.length_m / self.sample_step_m)) + 1)
-        pts = curve.evaluate(np.linspace(0.0, curve.length_m, n))
+        corners = []
+        for piece in curve.pieces:
+            if piece.shape[0] == 2:
+                if not world.segment_free(piece[0], piece[1]):
+                    return f"a straight piece from {piece[0].round(2).tolist()} crosses a static obstacle"
+            else:
+                corners.append(bernstein(piece.shape[0] - 1, _CORNER_U) @ piece)
+        if not corners:
+            return ""
+        pts = np.vstack(corners)
         span = np.maximum(np.abs(world.bounds_min), np.abs(world.bounds_max))
-        inside = (pts >= world.bounds_min - 1e-9 * span) & (pts <= world.bounds_max + 1e-9 * span)
-        if not np.all(inside):
-            return "the trajectory leaves the world's bounds"
+        if not np.all((pts >= world.bounds_min - 1e-9 * span) & (pts <= world.bounds_max + 1e-9 * span)):
+            return "a corner leaves the world's bounds"
         clearance = world.clearance_m(pts)
         if np.min(clearance) < -self.tolerance_m:
             k = int(np.argmin(clearance))
-            return f"the trajectory enters a static obstacle ({-clearance[k]:.2f} m deep at {pts[k].round(2).tolist()})"
+            return f"a corner enters a static obstacle ({-clearance[k]:.2f} m deep at {pts[k].round(2).tolist()})"
         return ""
+
+
+#: Bezier parameters at which the check samples each corner piece.
+CORNER_SAMPLES = 17
+_CORNER_U = np.linspace(0.0, 1.0, CORNER_SAMPLES)
