@@ -217,8 +217,9 @@ class ThreatManager:
         world = world.with_threats(obstacles) if obstacles else world
         self._counter += 1
         return plan_alternatives(world, start, self.goal_ned_m, k, pipeline=self.pipeline, rng=rng,
-                                 max_time_s=max_time_s, spacing_m=self.settings.entry_spacing_m, airspace=self._airspace([start]),
-                                 vertical_offsets_m=self.settings.vertical_offsets_m, tag=f"-{self._counter}")
+                                 max_time_s=max_time_s, spacing_m=self.settings.entry_spacing_m,
+                                 airspace=self._airspace([start]), vertical_offsets_m=self.settings.vertical_offsets_m,
+                                 tag=f"-{self._counter}")
 
     # ------------------------------------------------------------------ state
     def reference_state(self, t_s: float) -> ReferenceState | None:
