@@ -1,7 +1,7 @@
 """One trajectory pipeline: plan -> smooth -> time -> check (STYLE: Nav2 and OMPL).
 
 ``TrajectoryPipeline`` composes the stages of ``companion.flight.stages`` (a planner, an
-M-GART planner for alternatives, a smoother, a timer and a checker), built from the typed
+M-GART planner for alternatives, a smoother, a timer) and ``companion.flight.checker``, built from the typed
 settings in one place (``from_settings``). Every trajectory the companion plans goes through
 it: a mission leg (``companion.flight.plan``), a join onto a path and a replan
 (``companion.threats.decision.join`` and ``candidates``), the alternatives
@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.flight.stages import (SMOOTHERS, AlternativesPlanner, Checked, Checker, GartPlanner, MgartPlanner,
-                                     PipelineError, PlanBudget, Planner, PlanningProblem, Smoother,
-                                     SpeedProfileTimer, Timer, TrajectoryChecker, TrajectoryStatus)
+from companion.flight.checker import Checked, Checker, TrajectoryChecker, TrajectoryStatus
+from companion.flight.stages import (SMOOTHERS, AlternativesPlanner, GartPlanner, MgartPlanner, PipelineError,
+                                     PlanBudget, Planner, PlanningProblem, Smoother, SpeedProfileTimer, Timer)
 from companion.planning import GartSettings, MgartSettings, PlanResult
 from companion.smoothing import FeasibilitySettings, SmoothingSettings, TrajectoryLimits
 from companion.world import World

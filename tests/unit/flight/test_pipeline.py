@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 from companion.flight.pipeline import (PipelineError, PlanBudget, PlanningProblem, TrajectoryPipeline,
                                        TrajectoryStatus)
 from companion.flight.plan import FlightPlanSettings, plan_leg
-from companion.flight.stages import (G1Smoother, G2Smoother, GartPlanner, MgartPlanner, PolylineSmoother,
-                                     SpeedProfileTimer, TrajectoryChecker)
+from companion.flight.checker import TrajectoryChecker
+from companion.flight.stages import G1Smoother, G2Smoother, GartPlanner, MgartPlanner, PolylineSmoother, SpeedProfileTimer
 from companion.mission.model import LocalWaypoint
 from companion.planning import GartSettings, MgartSettings
 from companion.smoothing import FeasibilitySettings, SmoothingSettings, TrajectoryLimits
