@@ -16,7 +16,6 @@ threat manager). Numerics only: no I/O, no asyncio.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -100,11 +99,10 @@ class TrajectoryPipeline:
 
     @classmethod
     def for_limits(cls, limits: TrajectoryLimits | None = None, kappa_max_1_m: float = 0.1,
-                   gart_settings: GartSettings | None = None, method: str = "g2") -> "TrajectoryPipeline":
-        """``from_settings`` of a smoothing tree with these limits and K_max (tests, benchmarks and
-        the threat manager's keyword arguments)."""
-        smoothing = SmoothingSettings(method=method, kappa_max_1_m=kappa_max_1_m,
-                                      limits=limits or TrajectoryLimits())
+                   gart_settings: GartSettings | None = None) -> "TrajectoryPipeline":
+        """``from_settings`` of a G2 smoothing tree with these limits and K_max (tests, benchmarks
+        and the threat manager's keyword arguments)."""
+        smoothing = SmoothingSettings(kappa_max_1_m=kappa_max_1_m, limits=limits or TrajectoryLimits())
         return cls.from_settings(smoothing, gart_settings or GartSettings(kappa_max_1_m=kappa_max_1_m))
 
     # ------------------------------------------------------------------ the stages
@@ -121,15 +119,6 @@ class TrajectoryPipeline:
     def turn_kappa_1_m(self) -> float:
         """Curvature that bounds the speed through a corner (inf: the smoother stops there)."""
         return self.smoother.turn_kappa_1_m
-
-    @property
-    def corner_speed_m_s(self) -> float:
-        """Speed through the tightest corner at the lateral acceleration limit (0: a stop)."""
-        return math.sqrt(self.limits.lat_accel_m_s2 / self.turn_kappa_1_m)
-
-    def with_limits(self, limits: TrajectoryLimits) -> "TrajectoryPipeline":
-        """The same pipeline with other limits (a leg's cruise speed)."""
-        return dataclasses.replace(self, limits=limits)
 
     def trajectory(self, path, world: World | None, *, limits: TrajectoryLimits | None = None,
                    start_speed_m_s: float = 0.0, yaw_mode: str = "tangent",
