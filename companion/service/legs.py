@@ -60,10 +60,8 @@ class LegTasks:
         self._resume_needed = False
         pos = self.link.telemetry.pos_ned_m
         s = self.settings
-        new = await self.in_worker(plan_leg, leg.index, leg.waypoint, pos,
-                                   self.local_mission.world, gart_settings=s.gart,
-                                   smoothing=s.smoothing, settings=s.flight, rng=self.rng,
-                                   feasibility=self.checker)
+        new = await self.in_worker(plan_leg, leg.index, leg.waypoint, pos, self.local_mission.world,
+                                   pipeline=self.pipeline(), settings=s.flight, rng=self.rng)
         if new is not None:
             self.engage(new.trajectory, f"leg{leg.index}-resume", turn=True)
         checked = None if new is None or new.feasibility is None else \

@@ -10,6 +10,7 @@ import numpy as np
 
 from companion.config import settings_to_dict
 from companion.errors import CompanionError, MissionError
+from companion.flight.pipeline import TrajectoryPipeline
 from companion.flight.plan import LegPlan, plan_mission
 from companion.service.startup import AUX_MOTOR_INTERLOCK, is_airborne
 from companion.mission import load_mission_file
@@ -71,9 +72,8 @@ class MissionTasks:
         # the check flies the helicopter model: not a multirotor's
         if s.feasibility.enabled and s.startup.vehicle == "helicopter" and self.checker is None:
             self.checker = await self.closed_loop_checker(s.feasibility)
-        self.legs = await self.in_worker(
-            plan_mission, to_fly, first, gart_settings=s.gart,
-            smoothing=s.smoothing, settings=s.flight, rng=self.rng, feasibility=self.checker)
+        self.legs = await self.in_worker(plan_mission, to_fly, first, pipeline=self.pipeline(),
+                                         settings=s.flight, rng=self.rng)
         self.summary.legs_planned = len(self.legs)
         self.summary.feasibility = feasibility_totals(self.legs)
         self.record("world", **world_to_dict(self.local_mission.world))
@@ -82,6 +82,12 @@ class MissionTasks:
         self.event("planned", legs=len(self.legs), seconds=round(time.perf_counter() - t0, 3),
                    seed=s.seed, feasibility=self.summary.feasibility or None)
         return alt_m
+
+    def pipeline(self) -> TrajectoryPipeline:
+        """The legs' trajectory pipeline: the settings' planner, smoother and limits, and the
+        closed-loop checker once it is designed (``closed_loop_checker``)."""
+        s = self.settings
+        return TrajectoryPipeline.from_settings(s.smoothing, s.planning, s.feasibility, closed_loop=self.checker)
 
     async def closed_loop_checker(self, settings):
         """The legs' feasibility checker: designed in a planning thread, or in every planning

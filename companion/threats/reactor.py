@@ -51,6 +51,7 @@ from typing import Callable
 import numpy as np
 
 from companion.errors import CompanionError
+from companion.flight.pipeline import TrajectoryPipeline
 from companion.geo import GeoError, LocalFrame
 from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import ThreatTable
@@ -161,8 +162,8 @@ class ThreatReactor(ReactorDecisions, LegsAndAlternatives):
 
     def _default_manager(self, leg) -> ThreatManager:
         s = self.settings
-        return ThreatManager(leg.world, leg.goal_ned_m, settings=s.threats, limits=s.smoothing.limits,
-                             kappa_max_1_m=s.smoothing.kappa_max_1_m, gart_settings=s.gart, rng=self.rng,
+        return ThreatManager(leg.world, leg.goal_ned_m, settings=s.threats,
+                             pipeline=TrajectoryPipeline.from_settings(s.smoothing, s.planning), rng=self.rng,
                              time_scale=s.link.time_scale)
 
     # ------------------------------------------------------------------ lifecycle

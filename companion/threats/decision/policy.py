@@ -30,7 +30,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from companion.errors import CompanionError
-from companion.planning import GartSettings, MgartSettings
+from companion.flight.pipeline import TrajectoryPipeline
+from companion.planning import GartSettings
 from companion.smoothing import TrajectoryLimits
 from companion.threats.decision import candidates as gen
 from companion.threats.decision.alternatives import Alternative, airspace_for, plan_alternatives
@@ -105,6 +106,10 @@ class ThreatManager:
     kappa_max_1_m : float
         K_max of the G2 smoothing.
     gart_settings : GartSettings, optional
+    pipeline : TrajectoryPipeline, optional
+        Plans, smooths, times and checks every new trajectory (``TrajectoryPipeline.from_settings``);
+        default: G2 with ``limits``, ``kappa_max_1_m`` and ``gart_settings``, which must not be
+        given with it.
     rng : numpy.random.Generator, optional
         Default: ``numpy.random.default_rng(settings.seed)``.
     mode : str
@@ -119,7 +124,7 @@ class ThreatManager:
     def __init__(self, world: World, goal_ned_m, *, settings: ThreatSettings | None = None,
                  limits: TrajectoryLimits | None = None, kappa_max_1_m: float = 0.1,
                  gart_settings: GartSettings | None = None, rng: np.random.Generator | None = None,
-                 mode: str = "hybrid", time_scale: float = 1.0) -> None:
+                 mode: str = "hybrid", time_scale: float = 1.0, pipeline: TrajectoryPipeline | None = None) -> None:
         self.settings = settings or ThreatSettings()
         if not isinstance(self.settings, ThreatSettings):
             raise ThreatManagerError(f"settings: expected ThreatSettings, got {type(settings).__name__}")
@@ -131,9 +136,13 @@ class ThreatManager:
             raise ThreatManagerError(f"time_scale: must be a finite number > 0, got {time_scale!r}")
         self.mode = mode
         self.time_scale = float(time_scale)
-        self.limits = limits or TrajectoryLimits()
-        self.kappa_max_1_m = float(kappa_max_1_m)
-        self.gart_settings = gart_settings or GartSettings(kappa_max_1_m=self.kappa_max_1_m)
+        if pipeline is None:
+            pipeline = TrajectoryPipeline.for_limits(limits, float(kappa_max_1_m), gart_settings)
+        elif not isinstance(pipeline, TrajectoryPipeline):
+            raise ThreatManagerError(f"pipeline: expected a TrajectoryPipeline, got {type(pipeline).__name__}")
+        elif limits is not None or gart_settings is not None:
+            raise ThreatManagerError("pipeline: give either a pipeline or limits and gart_settings, not both")
+        self.pipeline = pipeline
         self.rng = rng if rng is not None else np.random.default_rng(self.settings.seed)
         self.set_leg(world, goal_ned_m)
         self._active: _Active | None = None
@@ -189,8 +198,7 @@ class ThreatManager:
         return self._estimate.high_s
 
     def compute_alternatives(self, threats, t_s: float, k: int = 4, *, rng: np.random.Generator,
-                             max_time_s: float = 2.0, settings: MgartSettings | None = None,
-                             start_ned_m=None) -> list[Alternative]:
+                             max_time_s: float = 2.0, start_ned_m=None) -> list[Alternative]:
         """M-GART alternatives from the reference (or ``start_ned_m``) to the goal.
 
         Slow (``max_time_s``): run it in the background, then ``set_alternatives``. Pop-ups are
@@ -208,10 +216,10 @@ class ThreatManager:
         world = airspace_for(self.world, [start])
         world = world.with_threats(obstacles) if obstacles else world
         self._counter += 1
-        return plan_alternatives(world, start, self.goal_ned_m, k, rng=rng, max_time_s=max_time_s,
-                                 settings=settings or MgartSettings(gart=self.gart_settings),
-                                 spacing_m=self.settings.entry_spacing_m, airspace=self._airspace([start]),
-                                 vertical_offsets_m=self.settings.vertical_offsets_m, tag=f"-{self._counter}")
+        return plan_alternatives(world, start, self.goal_ned_m, k, pipeline=self.pipeline, rng=rng,
+                                 max_time_s=max_time_s, spacing_m=self.settings.entry_spacing_m,
+                                 airspace=self._airspace([start]), vertical_offsets_m=self.settings.vertical_offsets_m,
+                                 tag=f"-{self._counter}")
 
     # ------------------------------------------------------------------ state
     def reference_state(self, t_s: float) -> ReferenceState | None:
@@ -251,7 +259,7 @@ class ThreatManager:
         lift = float(ref.pos_ned_m[2]) if self.world.dim == 2 and ref.pos_ned_m.shape[0] == 3 else None
         here = [ref.pos_ned_m[: self.world.dim]]
         return gen.Situation(ref, tubes, self._airspace(here), self._slab(here),
-                             self.goal_ned_m, s, self.limits, self.kappa_max_1_m, lift)
+                             self.goal_ned_m, s, self.pipeline, lift)
 
     def _airspace(self, points) -> World:
         """The leg's world with room above and below for escapes and alternatives (cached)."""
@@ -389,8 +397,7 @@ class ThreatManager:
             return []
         t0 = time.perf_counter()
         self._counter += 1
-        out = gen.replan_candidates(sit, rng=self.rng, gart_settings=self.gart_settings,
-                                    path_id=f"replan-{self._counter}")
+        out = gen.replan_candidates(sit, rng=self.rng, path_id=f"replan-{self._counter}")
         self._estimate.update(time.perf_counter() - t0, self.settings.estimate_gain)
         if not any(c.clear for c in out):
             self._replan_blocked_until_s = sit.ref.t_s + REPLAN_BACKOFF_S * self.time_scale
