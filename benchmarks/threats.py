@@ -79,9 +79,9 @@ from benchmarks.threat_encounters import (CATEGORIES, KAPPA_MAX_1_M, LIMITS, WOR
 from benchmarks.threat_oracle import label_encounter  # noqa: E402
 from companion.config import Settings  # noqa: E402
 from companion.flight.fast_time import FastTimeFlight  # noqa: E402
+from companion.flight.pipeline import TrajectoryPipeline  # noqa: E402
 from companion.flight.plan import LegPlan  # noqa: E402
 from companion.mission.model import LocalWaypoint  # noqa: E402
-from companion.planning import GartSettings  # noqa: E402
 from companion.threats.decision.kinds import Strategy  # noqa: E402
 from companion.threats.decision.step import DecisionPolicy  # noqa: E402
 from heli_model.model import HeliModel  # noqa: E402
@@ -122,7 +122,7 @@ def companion_settings() -> Settings:
 
 def make_policy(settings, strategy: str) -> DecisionPolicy:
     """The benchmark's policy: the nominal's limits and K_max, one strategy."""
-    return DecisionPolicy(settings, LIMITS, KAPPA_MAX_1_M, GartSettings(kappa_max_1_m=KAPPA_MAX_1_M), strategy)
+    return DecisionPolicy(settings, TrajectoryPipeline.for_limits(LIMITS, KAPPA_MAX_1_M), strategy)
 
 
 def leg_plan(leg):

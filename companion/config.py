@@ -177,14 +177,6 @@ class Settings:
         if self.seed < 0:
             raise ConfigError(f"seed: must be >= 0, got {self.seed}")
 
-    @property
-    def gart(self) -> GartSettings:
-        """The planner's settings, with corners that fit the G2 smoother's K_max unless
-        ``planning.kappa_max_1_m`` sets its own."""
-        if self.planning.kappa_max_1_m is not None or self.smoothing.method != "g2":
-            return self.planning
-        return dataclasses.replace(self.planning, kappa_max_1_m=self.smoothing.kappa_max_1_m)
-
 
 def settings_from_dict(data: dict) -> Settings:
     """Build the settings tree from a mapping (unknown keys and bad values: ``ConfigError``)."""

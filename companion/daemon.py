@@ -380,7 +380,7 @@ class CompanionDaemon:
             mission.legs, owner=self.owner, vehicle=LinkVehicle(self.link), jobs=jobs, sink=self.sink,
             stream=self.streamer.tick, now_s=self.clock.now_s, clock_s=time.monotonic,
             setpoint_rate_hz=s.link.setpoint_rate_hz, timeout_margin_s=s.link.leg_timeout_margin_s,
-            replanner=LegReplanner.in_world(mission.local_mission.world, s, mission.checker),
+            replanner=LegReplanner.in_world(mission.local_mission.world, mission.pipeline(), s.flight),
             avoidance=avoidance,
             alternatives_rate_hz=s.link.time_scale / s.flight.alternatives_period_s,
             leg_started=self._leg_started, seed=int(self.rng.integers(2**31)),

@@ -8,7 +8,8 @@ actuator use, predicted tracking error, stretch). ``--no-feasibility`` skips the
 
 Paper Fig. 6a (GART tree and path), Fig. 6b/6c (smoothed path and its curvature) and Fig. 7
 (M-GART's several paths). The numerics live in ``companion.world``, ``companion.planning`` and
-``companion.smoothing``; this module only parses, prints, writes JSON and draws.
+``companion.smoothing``, smoothed, timed and checked by ``companion.flight.pipeline`` (as the
+legs of ``companion run``); this module only parses, prints, writes JSON and draws.
 """
 
 from __future__ import annotations
@@ -100,17 +101,6 @@ def build_settings(args):
     return gs, MgartSettings(gart=gs), kappa
 
 
-def smooth_path(path, mode: str, kappa: float | None, world):
-    """Smooth one path with ``companion.smoothing`` (G1 or G2)."""
-    try:
-        from companion.smoothing import smooth_g1, smooth_g2
-    except ImportError as exc:  # the smoothing stage is a separate package
-        raise PlanningError(f"--smooth: the smoothing module is not available ({exc})") from None
-    if mode == "g1":
-        return smooth_g1(path)
-    return smooth_g2(path, kappa, world=world)
-
-
 def timing_limits(args):
     """The vehicle's limits (``TrajectoryLimits`` defaults) with ``--speed/--accel/--jerk``."""
     from dataclasses import replace
@@ -126,7 +116,24 @@ def timing_limits(args):
         raise PlanningError(f"--speed/--accel/--jerk: {exc}") from None
 
 
-def time_and_check(args, smoothed) -> list:
+def trajectory_pipeline(args, gart_settings, kappa: float | None):
+    """The trajectory pipeline of ``--smooth``, ``--kappa-max`` and the limits, with the
+    closed-loop checker unless ``--no-feasibility`` (``TrajectoryPipeline.from_settings``)."""
+    from companion.flight.pipeline import TrajectoryPipeline
+    from companion.smoothing import SmoothingSettings
+
+    checker = None
+    if not args.no_feasibility:
+        from companion.smoothing.feasibility import FeasibilityChecker
+        from heli_model.model import HeliModel
+
+        checker = FeasibilityChecker(HeliModel.default())
+        checker.warm_up()          # the one-off LQI design is not any path's check time
+    smoothing = SmoothingSettings(method=args.smooth, kappa_max_1_m=kappa or 0.1, limits=timing_limits(args))
+    return TrajectoryPipeline.from_settings(smoothing, gart_settings, closed_loop=checker)
+
+
+def time_and_check(pipeline, smoothed) -> list:
     """Time every smoothed path; check it on the closed loop (stretching it where needed).
 
     Returns, per path, None (no path) or a dict: ``duration_s`` of the first timing,
@@ -135,24 +142,14 @@ def time_and_check(args, smoothed) -> list:
     """
     from dataclasses import asdict
 
-    from companion.smoothing import time_parameterize
-
-    limits = timing_limits(args)
-    checker = None
-    if not args.no_feasibility:
-        from companion.smoothing.feasibility import FeasibilityChecker
-        from heli_model.model import HeliModel
-
-        checker = FeasibilityChecker(HeliModel.default())
-        checker.warm_up()          # the one-off LQI design is not any path's check time
     out = []
     for curve in smoothed:
         if curve is None:
             out.append(None)
             continue
-        trajectory = time_parameterize(curve, limits)
-        report = checker.check_and_stretch(trajectory) if checker is not None else None
-        out.append({"duration_s": float(trajectory.duration_s), "limits": asdict(limits),
+        trajectory = pipeline.timer.time(curve, pipeline.limits)
+        report = pipeline.checker.check(trajectory).report
+        out.append({"duration_s": float(trajectory.duration_s), "limits": asdict(pipeline.limits),
                     "feasibility": report.summary() if report is not None else None})
     return out
 
@@ -176,8 +173,9 @@ def run(args: argparse.Namespace) -> int:
         results = mgart(world, start, goal, args.k, rng=rng, max_time_s=budget, settings=ms)
     smoothed, timed = [], []
     if args.smooth != "none":
-        smoothed = [smooth_path(r.path, args.smooth, kappa, world) if r.solved else None for r in results]
-        timed = time_and_check(args, smoothed)
+        pipeline = trajectory_pipeline(args, gs, kappa)
+        smoothed = [pipeline.smoother.smooth(r.path, world) if r.solved else None for r in results]
+        timed = time_and_check(pipeline, smoothed)
     print_summary(args, wf, results, smoothed, start, goal, timed)
     if args.json_out:
         write_json(args, wf, results, smoothed, start, goal, kappa, timed)

@@ -1,6 +1,9 @@
 """The flight core: from a mission's legs to the reference the vehicle tracks (DESIGN 1, 2, 7).
 
-- ``plan``: mission legs planned before takeoff (``LegPlan``, ``plan_mission``);
+- ``pipeline``: the one trajectory pipeline (``TrajectoryPipeline``: plan -> smooth -> time ->
+  check, its stages in ``stages`` and ``checker``), built from the settings in one place;
+  mission legs, joins, replans and alternatives are its inputs;
+- ``plan``: mission legs planned before takeoff through the pipeline (``LegPlan``, ``plan_mission``);
 - ``trajectory``: flyable references sampled by time; ``reference``: the active reference on the
   vehicle's clock;
 - ``phases``: the pure phase machine of one leg (``leg_step``);

@@ -39,6 +39,7 @@ from companion.flight.active import ReferenceOwner
 from companion.flight.avoidance import AlternativesPlan, Avoidance
 from companion.flight.executor import FlightExecutor
 from companion.flight.legs import FlightOutcome, LegReplanner
+from companion.flight.pipeline import TrajectoryPipeline
 from companion.flight.ports import VehicleView
 from companion.threats.decision.kinds import Strategy
 from companion.threats.decision.step import DecisionPolicy, DecisionState
@@ -268,7 +269,7 @@ class FastTimeFlight:
     world : World, optional
         The mission's world, where a leg is planned again (default: the first leg's).
     replanner : LegReplanner, optional
-        How a leg is planned again (default: ``LegReplanner.in_world(world, settings)``).
+        How a leg is planned again (default: in ``world``, through the settings' pipeline).
     update : VehicleUpdate, optional
         The vehicle (default: built from ``model``); give one to fly many flights on one design.
     """
@@ -294,7 +295,8 @@ class FastTimeFlight:
         self.executor = FlightExecutor(
             legs, owner=self.owner, vehicle=self.vehicle, jobs=self.jobs, sink=self.log, stream=self._stream,
             now_s=self.clock.now_s, clock_s=self.clock.now_s, setpoint_rate_hz=s.link.setpoint_rate_hz,
-            timeout_margin_s=s.link.leg_timeout_margin_s, replanner=replanner or LegReplanner.in_world(world or legs[0].world, s),
+            timeout_margin_s=s.link.leg_timeout_margin_s, replanner=replanner or LegReplanner.in_world(
+                world or legs[0].world, TrajectoryPipeline.from_settings(s.smoothing, s.planning), s.flight),
             avoidance=self.avoidance,
             alternatives_rate_hz=1.0 / s.flight.alternatives_period_s, seed=seed)
         self._refs: list[np.ndarray] = []

@@ -50,20 +50,17 @@ class LegReplanner:
     fn: Callable
 
     @classmethod
-    def in_world(cls, world, settings, feasibility=None) -> "LegReplanner":
-        """Replans in ``world`` (the mission's) with the companion's ``settings`` (``gart``,
-        ``smoothing``, ``flight``) and the closed-loop check ``feasibility`` (None: none)."""
-        return cls(functools.partial(replan_from, world=world, gart_settings=settings.gart,
-                                     smoothing=settings.smoothing, flight=settings.flight,
-                                     feasibility=feasibility))
+    def in_world(cls, world, pipeline, flight) -> "LegReplanner":
+        """Replans in ``world`` (the mission's) through ``pipeline`` (the legs' trajectory
+        pipeline) with the ``flight`` planning settings."""
+        return cls(functools.partial(replan_from, world=world, pipeline=pipeline, flight=flight))
 
 
-def replan_from(leg, start_ned_m, seed: int, *, world, gart_settings, smoothing, flight, feasibility=None):
+def replan_from(leg, start_ned_m, seed: int, *, world, pipeline, flight):
     """``leg`` planned again from ``start_ned_m`` (``companion.flight.plan.plan_leg``), its
     randomness from ``seed``."""
-    return plan_leg(leg.index, leg.waypoint, start_ned_m, world, gart_settings=gart_settings,
-                    smoothing=smoothing, settings=flight, rng=np.random.default_rng(seed),
-                    feasibility=feasibility)
+    return plan_leg(leg.index, leg.waypoint, start_ned_m, world, pipeline=pipeline, settings=flight,
+                    rng=np.random.default_rng(seed))
 
 
 class LegRunner:

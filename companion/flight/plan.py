@@ -1,24 +1,25 @@
 """Mission -> legs -> planned, smoothed, time-parameterised trajectories (paper sections 3.1-3.2).
 
-The three stages are kept apart as in Nav2 (planner, smoother, timing) and called in sequence
-for every leg of a local mission:
+A leg is an *input* to the one trajectory pipeline (``companion.flight.pipeline``); for every
+leg of a local mission:
 
-1. ``plan``: GART from the leg's start to its goal in the leg's *slab*: the mission world with
-   its down bounds narrowed to the leg's altitudes plus ``slab_margin_m`` (exclusion zones are
-   full-height, so the search is almost planar and the path stays level);
-2. ``smooth``: G2 (default, curvature bounded by K_max), G1 or none, with the collision re-check
-   against the world;
-3. ``time``: the speed profile under the leg's speed and the vehicle's acceleration, lateral
-   acceleration and jerk limits; the leg starts and ends at rest at its waypoints;
-4. ``check`` (when a ``FeasibilityChecker`` is given): every piece of the leg is flown by the
-   helicopter model and its LQI in closed loop (``companion.smoothing.feasibility``); a piece
+1. ``plan``: the pipeline's planner (GART) from the leg's start to its goal in the leg's
+   *slab*: the mission world with its down bounds narrowed to the leg's altitudes plus
+   ``slab_margin_m`` (exclusion zones are full-height, so the search is almost planar and the
+   path stays level), in a budget doubled at every attempt (``planning_attempts``);
+2. ``smooth``, ``time`` and ``check``: the pipeline's smoother (``smoothing.method``: G2, G1 or
+   none, repaired against the slab), its speed profile under the leg's speed and the vehicle's
+   limits (the leg starts and ends at rest at its waypoints) and its checker: the curve is
+   checked free and, when the pipeline has a closed-loop checker, every piece of the leg is
+   flown by the helicopter model and its LQI (``companion.smoothing.feasibility``); a piece
    that would saturate a rotor input or track too far off is stretched in time until it does
    not. The figures (peak actuator use, predicted tracking error, stretch) are kept in
    ``LegPlan.feasibility``.
 
 A leg whose altitude changes starts with a vertical climb or descent (its own straight
-trajectory), then flies level: what flight-test engineers expect, and what keeps the planner in
-a thin slab. ``TrajectoryChain`` strings the pieces of a leg into one time-sampled reference.
+trajectory, timed and checked by the same pipeline), then flies level: what flight-test
+engineers expect, and what keeps the planner in a thin slab. ``TrajectoryChain`` strings the
+pieces of a leg into one time-sampled reference.
 
 Everything here is pure: no I/O, the randomness comes from ``rng``.
 """
@@ -31,8 +32,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from companion.errors import MissionError
-from companion.planning import GartSettings, PlanResult, gart
-from companion.smoothing import SmoothingSettings, TrajectoryLimits, smooth_g1, smooth_g2, time_parameterize
+from companion.flight.pipeline import Checked, PlanBudget, PlanningProblem, TrajectoryPipeline, TrajectoryStatus
+from companion.planning import PlanResult
+from companion.smoothing import TrajectoryLimits
 from companion.world import Cylinder, Prism, World
 from heli_common.typed_config import require_int, require_numbers
 
@@ -201,26 +203,17 @@ def leg_slab(world: World, down_values_m, margin_m: float) -> World:
 
 
 def vertical_trajectory(start_ned_m: np.ndarray, down_m: float, settings: FlightPlanSettings,
-                        yaw_rad: float):
-    """A straight climb or descent from ``start_ned_m`` to ``down_m`` at rest at both ends."""
+                        yaw_rad: float, pipeline: TrajectoryPipeline) -> Checked:
+    """A straight climb or descent from ``start_ned_m`` to ``down_m`` at rest at both ends,
+    timed and checked (closed loop) by ``pipeline``."""
     end = np.array([start_ned_m[0], start_ned_m[1], down_m])
     climbing = down_m < start_ned_m[2]
     speed = settings.climb_speed_m_s if climbing else settings.descent_speed_m_s
     accel = settings.vertical_accel_m_s2
     limits = TrajectoryLimits(speed_m_s=speed, accel_m_s2=accel, lat_accel_m_s2=accel,
                               jerk_m_s3=4.0 * accel)
-    return time_parameterize(np.vstack([start_ned_m, end]), limits, yaw_mode="hold",
-                             yaw_hold_rad=yaw_rad)
-
-
-def smooth(path: np.ndarray, settings: SmoothingSettings, world: World):
-    """Stage 2: the planner polyline as a flyable curve (or the polyline itself for 'none')."""
-    if settings.method == "g2":
-        return smooth_g2(path, settings.kappa_max_1_m, world=world,
-                         max_halvings=settings.repair_max_halvings)
-    if settings.method == "g1":
-        return smooth_g1(path)
-    return path
+    timed = pipeline.timer.time(np.vstack([start_ned_m, end]), limits, yaw_mode="hold", yaw_hold_rad=yaw_rad)
+    return pipeline.checker.check(timed)
 
 
 def footprint(world: World) -> World | None:
@@ -255,42 +248,28 @@ def leg_limits(waypoint, limits: TrajectoryLimits) -> TrajectoryLimits:
     return replace(limits, speed_m_s=min(float(speed), limits.speed_m_s))
 
 
-def search(world: World, start, goal, gart_settings: GartSettings, settings: FlightPlanSettings,
-           rng: np.random.Generator) -> PlanResult:
-    """Stage 1: GART in the budget, doubled at every attempt until a path is found."""
-    budget = settings.planning_budget_s
-    for attempt in range(settings.planning_attempts):
-        result = gart(world, start, goal, rng=rng, max_time_s=budget, settings=gart_settings)
-        if result.status != "timeout":
-            return result
-        log.info("no path in %.2f s (attempt %d); searching again for %.2f s", budget,
-                 attempt + 1, 2 * budget)
-        budget *= 2
-    return result
-
-
 def plan_level(level_start: np.ndarray, goal: np.ndarray, slab: World, waypoint, *,
-               gart_settings: GartSettings, smoothing: SmoothingSettings,
-               settings: FlightPlanSettings, rng: np.random.Generator, where: str):
-    """Plan, smooth and time the level part of a leg; returns (PlanResult, path, Trajectory)."""
+               pipeline: TrajectoryPipeline, settings: FlightPlanSettings, rng: np.random.Generator,
+               where: str) -> tuple[PlanResult, np.ndarray, Checked]:
+    """The level part of a leg through the pipeline; returns (PlanResult, path, Checked)."""
+    budget = PlanBudget(settings.planning_budget_s, settings.planning_attempts)
     plane = footprint(slab)
     if plane is not None:
-        result = search(plane, level_start[:2], goal[:2], gart_settings, settings, rng)
+        result = pipeline.plan(PlanningProblem(plane, level_start[:2], goal[:2]), budget, rng=rng)
         if result.path is not None:
             result = replace(result, path=np.column_stack([result.path, np.full(len(result.path), goal[2])]))
     else:
-        result = search(slab, level_start, goal, gart_settings, settings, rng)
+        result = pipeline.plan(PlanningProblem(slab, level_start, goal), budget, rng=rng)
     if result.status != "exact":
-        total_s = settings.planning_budget_s * (2 ** settings.planning_attempts - 1)
         reason = {"invalid_start": "the leg starts inside an obstacle or outside the bounds",
                   "invalid_goal": "the goal is inside an obstacle (with the safety margin)",
-                  "timeout": f"no path found in {total_s:g} s of search"}[result.status]
+                  "timeout": f"no path found in {budget.total_s:g} s of search"}[result.status]
         raise MissionError(f"{where}: unreachable: {reason}")
     path = level(result.path, goal[2], slab)
-    curve = smooth(path, smoothing, slab)
-    trajectory = time_parameterize(curve, leg_limits(waypoint, smoothing.limits))
-    trajectory.notes[:0] = list(getattr(curve, "notes", []))
-    return result, path, trajectory
+    checked = pipeline.trajectory(path, slab, limits=leg_limits(waypoint, pipeline.limits))
+    if checked.status is TrajectoryStatus.BLOCKED:
+        raise MissionError(f"{where}: the smoothed trajectory is not free: {checked.reason}")
+    return result, path, checked
 
 
 def feasibility_summary(reports) -> dict:
@@ -323,30 +302,9 @@ def feasibility_summary(reports) -> dict:
     }
 
 
-def check_pieces(pieces, checker) -> tuple[list, dict]:
-    """Stage 4: check every piece of a leg on the closed loop, stretching those that need it.
-
-    Returns the pieces to fly (stretched where needed) and ``feasibility_summary`` of them.
-    """
-    reports = [checker.check_and_stretch(p) for p in pieces]
-    flown = []
-    for piece, report in zip(pieces, reports):
-        if report.stretch > 1.0:
-            note = (f"feasibility: timing stretched x{report.stretch:.3g} "
-                    f"({piece.duration_s:.1f} s -> {report.trajectory.duration_s:.1f} s; first timing: "
-                    f"max |delta| {report.initial_max_abs_delta:.2f}, tracking error "
-                    f"{report.initial_max_tracking_error_m:.2f} m)")
-            report.trajectory.notes.append(note)
-        if not report.feasible:
-            report.trajectory.notes.append(f"feasibility: still infeasible: {report.reason}")
-        flown.append(report.trajectory)
-    return flown, feasibility_summary(reports)
-
-
-def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: GartSettings,
-             smoothing: SmoothingSettings, settings: FlightPlanSettings,
-             rng: np.random.Generator, yaw_rad: float = 0.0, feasibility=None) -> LegPlan | None:
-    """Plan, smooth and time one leg from ``start_ned_m`` to ``waypoint``.
+def plan_leg(index: int, waypoint, start_ned_m, world: World, *, pipeline: TrajectoryPipeline,
+             settings: FlightPlanSettings, rng: np.random.Generator, yaw_rad: float = 0.0) -> LegPlan | None:
+    """Plan, smooth, time and check one leg from ``start_ned_m`` to ``waypoint`` (``pipeline``).
 
     The level part is planned first; a climb or descent before it holds the level part's
     initial heading (``yaw_rad`` when there is no level part). Returns None when the goal is
@@ -367,20 +325,19 @@ def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: 
     slab = leg_slab(world, [goal[2]], settings.slab_margin_m)
     result, path, level_part = None, level_start[None, :], None
     if np.hypot(*(goal[:2] - level_start[:2])) > 1e-3:
-        result, path, level_part = plan_level(level_start, goal, slab, waypoint,
-                                              gart_settings=gart_settings, smoothing=smoothing,
+        result, path, level_part = plan_level(level_start, goal, slab, waypoint, pipeline=pipeline,
                                               settings=settings, rng=rng, where=where)
-        yaw_rad = float(level_part.yaw_rad(np.array([0.0]))[0])
-    pieces = []
+        yaw_rad = float(level_part.trajectory.yaw_rad(np.array([0.0]))[0])
+    checks = []
     if abs(goal[2] - start[2]) >= settings.min_vertical_change_m:
-        pieces.append(vertical_trajectory(start, goal[2], settings, yaw_rad))
+        checks.append(vertical_trajectory(start, goal[2], settings, yaw_rad, pipeline))
     if level_part is not None:
-        pieces.append(level_part)
-    if not pieces:
+        checks.append(level_part)
+    if not checks:
         return None
-    checked = None
-    if feasibility is not None:
-        pieces, checked = check_pieces(pieces, feasibility)
+    pieces = [c.trajectory for c in checks]
+    reports = [c.report for c in checks if c.report is not None]
+    checked = feasibility_summary(reports) if reports else None
     notes = [n for p in pieces for n in p.notes]
     log.info("leg %d to %s: %s, %.1f m, %.1f s%s", index, where,
              result.status if result else "vertical", sum(p.length_m for p in pieces),
@@ -394,22 +351,22 @@ def plan_leg(index: int, waypoint, start_ned_m, world: World, *, gart_settings: 
                    TrajectoryChain(pieces), slab, notes, checked)
 
 
-def plan_mission(local_mission, start_ned_m, *, gart_settings: GartSettings,
-                 smoothing: SmoothingSettings, settings: FlightPlanSettings,
-                 rng: np.random.Generator, feasibility=None) -> list[LegPlan]:
+def plan_mission(local_mission, start_ned_m, *, pipeline: TrajectoryPipeline, settings: FlightPlanSettings,
+                 rng: np.random.Generator) -> list[LegPlan]:
     """Plan every leg after the takeoff, in flight order; the first leg starts at ``start_ned_m``.
 
     The takeoff itself is the vehicle's (MAV_CMD_NAV_TAKEOFF); legs start at its altitude.
-    Raises ``MissionError`` naming the first unreachable item; nothing is flown then.
-    ``feasibility``: a ``FeasibilityChecker`` that checks (and stretches) every leg, or None.
+    Raises ``MissionError`` naming the first unreachable item; nothing is flown then. Every
+    leg goes through ``pipeline`` (with a closed-loop checker, every leg is checked and
+    stretched where needed).
     """
     legs: list[LegPlan] = []
     start = np.asarray(start_ned_m, dtype=float)
     for waypoint in local_mission.waypoints:
         if waypoint.kind == "takeoff":
             continue
-        leg = plan_leg(len(legs), waypoint, start, local_mission.world, gart_settings=gart_settings,
-                       smoothing=smoothing, settings=settings, rng=rng, feasibility=feasibility)
+        leg = plan_leg(len(legs), waypoint, start, local_mission.world, pipeline=pipeline, settings=settings,
+                       rng=rng)
         if leg is not None:
             legs.append(leg)
             start = leg.goal_ned_m

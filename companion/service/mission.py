@@ -22,6 +22,7 @@ from heli_common.mavlink_ids import COPTER_MODES
 
 from companion.config import settings_to_dict
 from companion.errors import CompanionError, LinkError, MissionError
+from companion.flight.pipeline import TrajectoryPipeline
 from companion.flight.plan import LegPlan, plan_mission
 from companion.flight.resume import resume_mission, resume_refusal
 from companion.mission import load_mission_file
@@ -130,8 +131,8 @@ class MissionService:
         if s.feasibility.enabled and s.startup.vehicle == "helicopter" and self.checker is None:
             self.checker = await self.closed_loop_checker(s.feasibility)
         self.legs = await self.in_worker(           # a generator of its own: values travel, not state
-            plan_mission, to_fly, first, gart_settings=s.gart, smoothing=s.smoothing, settings=s.flight,
-            rng=np.random.default_rng(self.rng.integers(2**63)), feasibility=self.checker)
+            plan_mission, to_fly, first, pipeline=self.pipeline(), settings=s.flight,
+            rng=np.random.default_rng(self.rng.integers(2**63)))
         self.summary.legs_planned = len(self.legs)
         self.summary.feasibility = feasibility_totals(self.legs)
         self.record("world", **world_to_dict(self.local_mission.world))
@@ -140,6 +141,12 @@ class MissionService:
         self.event("planned", legs=len(self.legs), seconds=round(time.perf_counter() - t0, 3),
                    seed=s.seed, feasibility=self.summary.feasibility or None)
         return alt_m
+
+    def pipeline(self) -> TrajectoryPipeline:
+        """The legs' trajectory pipeline: the settings' planner, smoother and limits, and the
+        closed-loop checker once it is designed (``closed_loop_checker``)."""
+        s = self.settings
+        return TrajectoryPipeline.from_settings(s.smoothing, s.planning, s.feasibility, closed_loop=self.checker)
 
     async def closed_loop_checker(self, settings):
         """The legs' feasibility checker: designed in a planning thread, or in every planning

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from companion.errors import SmoothingError
+from companion.flight.pipeline import TrajectoryPipeline
 from companion.flight.plan import FlightPlanSettings, plan_leg, plan_mission
 from companion.mission.model import LocalWaypoint
 from companion.planning import GartSettings
@@ -31,10 +32,13 @@ def checker():
     return FeasibilityChecker(HeliModel.default())
 
 
+def pipeline(smoothing, checker=None):
+    return TrajectoryPipeline.from_settings(smoothing, GartSettings(kappa_max_1_m=0.1), closed_loop=checker)
+
+
 def leg(smoothing, checker=None, seed=3):
-    return plan_leg(0, GOAL, START, WORLD, gart_settings=GartSettings(kappa_max_1_m=0.1),
-                    smoothing=smoothing, settings=FlightPlanSettings(),
-                    rng=np.random.default_rng(seed), feasibility=checker)
+    return plan_leg(0, GOAL, START, WORLD, pipeline=pipeline(smoothing, checker), settings=FlightPlanSettings(),
+                    rng=np.random.default_rng(seed))
 
 
 def fly(trajectory, hold_s=2.0):
@@ -101,9 +105,8 @@ def test_plan_mission_checks_every_leg(checker):
     back = LocalWaypoint(seq=3, kind="waypoint", pos_ned_m=np.array([0.0, 60.0, -20.0]),
                          acceptance_radius_m=2.0)
     mission = SimpleNamespace(waypoints=(GOAL, back), world=WORLD)
-    legs = plan_mission(mission, START, gart_settings=GartSettings(kappa_max_1_m=0.1),
-                        smoothing=AGGRESSIVE, settings=FlightPlanSettings(),
-                        rng=np.random.default_rng(1), feasibility=checker)
+    legs = plan_mission(mission, START, pipeline=pipeline(AGGRESSIVE, checker), settings=FlightPlanSettings(),
+                        rng=np.random.default_rng(1))
     assert len(legs) == 2 and all(lg.feasibility["feasible"] for lg in legs)
     assert all(lg.feasibility["stretch"] > 1.0 for lg in legs)
 

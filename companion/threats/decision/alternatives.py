@@ -1,11 +1,12 @@
 """Alternatives: pre-planned M-GART paths to switch to (paper section 3.3, Fig. 5 and 7).
 
-``plan_alternatives`` runs M-GART (*Extending Forbidden*: paths on different sides of the
-obstacles and of the threats known when it runs) from a point just ahead of the vehicle to the
+``plan_alternatives`` runs the trajectory pipeline's M-GART planner (*Extending Forbidden*:
+paths on different sides of the obstacles and of the threats known when it runs) from a point just ahead of the vehicle to the
 leg's goal, in the leg's airspace widened to include the start's altitude (a leg that climbs
 has alternatives too), and adds the cheapest path shifted up and down by ``vertical_offsets_m``
 where the airspace allows (alternatives above and below). ``switch_candidates`` lists the entry
-nodes within the switching range, cheapest first and diverse.
+nodes within the switching range, cheapest first and diverse. A switch to an alternative is a
+join (``join.join_trajectory``): smoothed, timed and checked by the same pipeline.
 
 Pure: no I/O; randomness from ``rng``.
 """
@@ -18,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.errors import CompanionError
-from companion.planning import MgartSettings, mgart
+from companion.flight.pipeline import PlanBudget, PlanningProblem, TrajectoryPipeline
 from companion.world import World
 
 __all__ = ["Alternative", "AlternativeError", "plan_alternatives", "switch_candidates", "airspace_for"]
@@ -117,9 +118,9 @@ def vertical_variants(path: np.ndarray, world: World, offsets_m) -> list[np.ndar
     return out
 
 
-def plan_alternatives(world: World, start, goal, k: int, *, rng: np.random.Generator, max_time_s: float,
-                      settings: MgartSettings, spacing_m: float, vertical_offsets_m=(), airspace=None,
-                      tag: str = "") -> list:
+def plan_alternatives(world: World, start, goal, k: int, *, pipeline: TrajectoryPipeline,
+                      rng: np.random.Generator, max_time_s: float, spacing_m: float, vertical_offsets_m=(),
+                      airspace=None, tag: str = "") -> list:
     """M-GART alternatives from ``start`` to ``goal`` (cheapest first) plus vertical variants.
 
     Parameters
@@ -129,6 +130,8 @@ def plan_alternatives(world: World, start, goal, k: int, *, rng: np.random.Gener
     start, goal : array_like, shape (d,)
     k : int
         Paths asked of M-GART.
+    pipeline : TrajectoryPipeline
+        Its ``alternatives_planner`` (M-GART) plans them.
     vertical_offsets_m : sequence of float
         Offsets of the cheapest path's above/below variants (3D only).
     airspace : World, optional
@@ -142,8 +145,7 @@ def plan_alternatives(world: World, start, goal, k: int, *, rng: np.random.Gener
     """
     start = np.asarray(start, dtype=float)
     world = airspace_for(world, [start])
-    results = mgart(world, start, np.asarray(goal, dtype=float), k, rng=rng, max_time_s=max_time_s,
-                    settings=settings)
+    results = pipeline.alternatives(PlanningProblem(world, start, goal), PlanBudget(max_time_s), k, rng=rng)
     paths = [r.path for r in results if r.status == "exact" and r.path is not None]
     if paths:
         paths += vertical_variants(paths[0], airspace_for(airspace or world, [start]), vertical_offsets_m)

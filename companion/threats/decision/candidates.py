@@ -9,9 +9,13 @@ with ``choice.choose``.
   ``hold`` candidate (a hold is only chosen where its hover stays clear of every tube).
 - ``retime_candidates``: the active path slowed or paused so that a mover passes first.
 - ``switch_to_alternatives``: M-GART alternatives joined from the current setpoint.
-- ``replan_candidates``: GART in the airspace with the pop-ups as obstacles; a mover is placed
-  where the replanned trajectory would meet it (a short stretch of its track around that time,
-  never its whole sweep), for a few rounds; then the last replan retimed (wait, then go).
+- ``replan_candidates``: the pipeline's planner (GART) in the airspace with the pop-ups as
+  obstacles; a mover is placed where the replanned trajectory would meet it (a short stretch of
+  its track around that time, never its whole sweep), for a few rounds; then the last replan
+  retimed (wait, then go).
+
+Joins and replans are inputs to the situation's ``TrajectoryPipeline`` (smoother, limits,
+timer and checker: ``join.join_trajectory``); the escapes take their speed limit from it.
 
 Pure: no I/O; randomness from ``rng``.
 """
@@ -25,8 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.planning import gart
-from companion.smoothing import TrajectoryLimits
+from companion.flight.pipeline import PlanBudget, PlanningProblem, TrajectoryPipeline
 from companion.threats.decision.alternatives import airspace_for, switch_candidates
 from companion.threats.decision.choice import Candidate, ReferenceState, rank_key
 from companion.threats.decision.kinds import CandidateKind
@@ -63,8 +66,8 @@ class Situation:
         The leg's thin slab widened to contain the reference (replans).
     goal_ned_m : ndarray, shape (d,)
     settings : ThreatSettings
-    limits : TrajectoryLimits
-    kappa_max_1_m : float
+    pipeline : TrajectoryPipeline
+        Planner, smoother, limits, timer and checker of every new trajectory.
     lift_down_m : float or None
         Down coordinate of 2D candidates in a 3D flight.
     """
@@ -75,8 +78,7 @@ class Situation:
     planning_world: World
     goal_ned_m: np.ndarray
     settings: ThreatSettings
-    limits: TrajectoryLimits
-    kappa_max_1_m: float
+    pipeline: TrajectoryPipeline
     lift_down_m: float | None = None
 
     @property
@@ -89,16 +91,17 @@ class Situation:
     @property
     def accel_bound_m_s2(self) -> float:
         s = self.settings
-        return max(self.limits.accel_m_s2, self.limits.lat_accel_m_s2, s.evade_accel_m_s2,
+        limits = self.pipeline.limits
+        return max(limits.accel_m_s2, limits.lat_accel_m_s2, s.evade_accel_m_s2,
                    s.hold_decel_m_s2) * 1.5
 
     def cruise_m_s(self) -> float:
         """Speed of the way back to the route (the planned trajectories' limit)."""
-        return self.limits.speed_m_s
+        return self.pipeline.limits.speed_m_s
 
     def escape_speed_m_s(self) -> float:
         """Escape speed: ``evade_speed_m_s``, at most 1.2 times the planned speed limit."""
-        return min(self.settings.evade_speed_m_s, ESCAPE_SPEED_FACTOR * self.limits.speed_m_s)
+        return min(self.settings.evade_speed_m_s, ESCAPE_SPEED_FACTOR * self.pipeline.limits.speed_m_s)
 
 
 def positions_at(trajectory, start_t_s: float, t_s: np.ndarray, dim: int) -> np.ndarray:
@@ -117,10 +120,10 @@ def check(sit: Situation, t_s: np.ndarray, pos: np.ndarray, *, static: bool = Tr
 def judge(sit: Situation, candidates: list[Candidate]) -> list[Candidate]:
     """Check planned candidates (t = 0 at the situation's time) against the tubes.
 
-    Planned candidates (switch and replan joins) are built from segments checked free and G2
-    corners repaired in the world (``join.py``), like the mission's legs: the static world is
-    honoured by construction, and re-checking it with the chord bound would only mistake a
-    path that grazes the safety margin for a conflict.
+    Planned candidates (switch and replan joins) are built from segments checked free, corners
+    repaired and the curve checked in the world by the trajectory pipeline (``join.py``), like
+    the mission's legs: the static world is honoured by construction, and re-checking it with
+    the chord bound would only mistake a path that grazes the safety margin for a conflict.
     """
     if not candidates:
         return candidates
@@ -258,8 +261,7 @@ def switch_to_alternatives(sit: Situation, alternatives) -> tuple[list[Candidate
         if tried >= s.max_candidates or time.perf_counter() - t0 > s.switch_budget_s:
             break
         traj, poly = join_trajectory(sit.ref.pos_ned_m[:d], sit.ref.vel_ned_m_s[:d], alt.nodes_from(i),
-                                     world=sit.world, limits=sit.limits, kappa_max_1_m=sit.kappa_max_1_m,
-                                     lift_down_m=sit.lift_down_m)
+                                     world=sit.world, pipeline=sit.pipeline, lift_down_m=sit.lift_down_m)
         if traj is None:
             key = poly.split(" (")[0]
             why[key] = why.get(key, 0) + 1
@@ -331,12 +333,14 @@ def _replan_start(sit: Situation):
         return p, None
     u = v / speed
     turn = max(turn_rad(u, sit.goal_ned_m - p), sit.settings.replan_turn_rad)
-    lead = lead_length_m(min(speed, sit.limits.speed_m_s), turn, sit.limits, sit.kappa_max_1_m)
+    limits = sit.pipeline.limits
+    lead = lead_length_m(min(speed, limits.speed_m_s), turn, limits, sit.pipeline.turn_kappa_1_m)
     return p + u * lead, lead
 
 
-def replan_candidates(sit: Situation, *, rng: np.random.Generator, gart_settings, path_id: str) -> list[Candidate]:
-    """GART replans through time (see the module docstring), cheapest-first rounds."""
+def replan_candidates(sit: Situation, *, rng: np.random.Generator, path_id: str) -> list[Candidate]:
+    """Replans through time with the situation's pipeline (see the module docstring),
+    cheapest-first rounds."""
     s = sit.settings
     d = sit.dim
     p, v = sit.ref.pos_ned_m[:d], sit.ref.vel_ned_m_s[:d]
@@ -348,18 +352,16 @@ def replan_candidates(sit: Situation, *, rng: np.random.Generator, gart_settings
     keep = [p, start, sit.goal_ned_m]
     obstacles = static_spheres(sit, keep)
     out: list[Candidate] = []
+    budget = PlanBudget(s.gart_budget_s, first_path_s=s.gart_first_budget_s)
     for _ in range(s.replan_iterations):
         planning = world.with_threats(obstacles) if obstacles else world
-        result = gart(planning, start, sit.goal_ned_m, rng=rng, max_time_s=s.gart_budget_s, settings=gart_settings)
-        if result.status == "timeout":
-            result = gart(planning, start, sit.goal_ned_m, rng=rng, max_time_s=s.gart_first_budget_s,
-                          stop_at_first=True, settings=gart_settings)
+        result = sit.pipeline.plan(PlanningProblem(planning, start, sit.goal_ned_m), budget, rng=rng)
         if result.status != "exact":
             log.info("replan: GART %s", result.status)
             break
         nodes = result.path[1:] if lead is not None else result.path
-        traj, poly = join_trajectory(p, v, nodes, world=planning, limits=sit.limits,
-                                     kappa_max_1_m=sit.kappa_max_1_m, lift_down_m=sit.lift_down_m, lead_m=lead)
+        traj, poly = join_trajectory(p, v, nodes, world=planning, pipeline=sit.pipeline,
+                                     lift_down_m=sit.lift_down_m, lead_m=lead)
         if traj is None:
             log.info("replan: %s", poly)
             break

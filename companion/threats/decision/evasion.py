@@ -15,6 +15,10 @@ the ADS-B avoidance repertoire of ArduPilot's ``AP_Avoidance`` (climb, descend, 
 perpendicular, hover) made kinodynamic. Positions are closed-form piecewise quadratics, so the
 whole library is sampled and checked in one vectorised pass (a few milliseconds).
 
+Escapes are neither smoothed nor timed by the trajectory pipeline (``companion.flight.pipeline``):
+their kinematics are closed-form. Their speed comes from the pipeline's limits
+(``candidates.Situation.escape_speed_m_s``: at most 1.2 times its speed limit).
+
 Pure: numpy only.
 """
 

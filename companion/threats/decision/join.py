@@ -3,11 +3,13 @@
 The one splice of the project (paper section 3.3: switching to a pre-planned path; DESIGN 7.4:
 "spliced from the current setpoint without a jump"). The polyline is [current position, lead
 point, nodes...]: the lead leaves along the current velocity, long enough to keep the current
-speed for half the jerk window and fit the first G2 corner (eq. 19) and, when the current speed
-is above the corner speed sqrt(a_lat / K_max), to slow down to it; the corners are G2-smoothed
-(with collision repair when a world is given) and the profile starts at the current speed
-(checked) and ends at rest at the last node. Used by switches, replans and the plan back to the
-mission after an evasion.
+speed for half the jerk window and fit the first corner of the pipeline's smoother (a G2
+corner: eq. 19) and, when the current speed is above the corner speed sqrt(a_lat / K_max)
+(zero for the polyline of ``smoothing.method = "none"``), to slow down to it. The polyline is
+an input to the trajectory pipeline (``companion.flight.pipeline``): smoothed by its smoother
+(repaired against the world when one is given), timed from the current speed (checked) to rest
+at the last node, and checked. Used by switches, replans and the plan back to the mission after
+an evasion.
 
 Pure: no I/O.
 """
@@ -18,7 +20,8 @@ import math
 
 import numpy as np
 
-from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
+from companion.flight.pipeline import TrajectoryPipeline
+from companion.smoothing import TrajectoryLimits
 from companion.smoothing.g2 import spiral_distance_m
 from companion.world import World
 
@@ -35,7 +38,8 @@ def lead_length_m(speed_m_s: float, turn_rad: float, limits: TrajectoryLimits,
                   kappa_max_1_m: float) -> float:
     """Straight lead along the current velocity before the first corner of a join (m).
 
-    Long enough to keep the current speed for half the jerk window (the profile's start) and fit
+    ``kappa_max_1_m``: the curvature of the smoother's corners (``TrajectoryPipeline.turn_kappa_1_m``;
+    inf for a polyline, which stops at its corners). Long enough to keep the current speed for half the jerk window (the profile's start) and fit
     the corner's spirals (eq. 19); when the current speed is above the speed the corner allows
     (K_max at the lateral acceleration limit), also to slow down to it outside the window over
     which the profile spreads a corner's speed limit (``speed_m_s * window``).
@@ -76,13 +80,13 @@ def _clean_nodes(nodes: np.ndarray, tol_m: float = 0.05, tol_rad: float = 1e-6) 
     return np.asarray(out)
 
 
-def join_trajectory(pos_ned_m, vel_ned_m_s, nodes, *, world: World | None, limits: TrajectoryLimits,
-                    kappa_max_1_m: float, lift_down_m: float | None = None, lead_m: float | None = None):
+def join_trajectory(pos_ned_m, vel_ned_m_s, nodes, *, world: World | None, pipeline: TrajectoryPipeline,
+                    lift_down_m: float | None = None, lead_m: float | None = None):
     """A trajectory from the reference state through ``nodes`` without a setpoint jump.
 
     The polyline is [current position, lead point, nodes...]: the lead leaves along the current
-    velocity, the corners are G2-smoothed (with collision repair when ``world`` is given) and
-    the profile starts at the current speed (checked) and ends at rest at the last node.
+    velocity; ``pipeline`` smooths the corners (with collision repair when ``world`` is given),
+    times the profile from the current speed (checked) to rest at the last node, and checks it.
 
     Parameters
     ----------
@@ -92,8 +96,8 @@ def join_trajectory(pos_ned_m, vel_ned_m_s, nodes, *, world: World | None, limit
         Where to go (the first is the entry node; the last the goal).
     world : World or None
         Static obstacles: every segment must be free; corners are repaired.
-    limits : TrajectoryLimits
-    kappa_max_1_m : float
+    pipeline : TrajectoryPipeline
+        Smoother, limits, timer and checker of the join.
     lift_down_m : float, optional
         Lift a 2D result to NED at this down coordinate.
     lead_m : float, optional
@@ -109,23 +113,23 @@ def join_trajectory(pos_ned_m, vel_ned_m_s, nodes, *, world: World | None, limit
     p0 = np.asarray(pos_ned_m, dtype=float)
     v0 = np.asarray(vel_ned_m_s, dtype=float)
     nodes = np.atleast_2d(np.asarray(nodes, dtype=float))
+    limits, kappa = pipeline.limits, pipeline.turn_kappa_1_m
     speed = min(float(np.linalg.norm(v0)), limits.speed_m_s)
     if speed < HOVER_SPEED_M_S:
-        return _timed_join(np.vstack([p0[None, :], nodes]), 0.0, world=world, limits=limits,
-                           kappa_max_1_m=kappa_max_1_m, lift_down_m=lift_down_m)
+        return _timed_join(np.vstack([p0[None, :], nodes]), 0.0, world=world, pipeline=pipeline,
+                           lift_down_m=lift_down_m)
     u = v0 / np.linalg.norm(v0)
     fixed = lead_m is not None
-    lead = float(lead_m) if fixed else lead_length_m(speed, turn_rad(u, nodes[0] - p0), limits, kappa_max_1_m)
+    lead = float(lead_m) if fixed else lead_length_m(speed, turn_rad(u, nodes[0] - p0), limits, kappa)
     reason = "no join"
     attempts = 1 if fixed else JOIN_ATTEMPTS
     for attempt in range(attempts):
         p_lead = p0 + u * lead
-        k = 0 if fixed else entry_index(p_lead, u, nodes, kappa_max_1_m)
+        k = 0 if fixed else entry_index(p_lead, u, nodes, kappa)
         if k is None:
             return None, "no node far enough beyond the stopping distance"
-        traj, poly = _timed_join(np.vstack([p0, p_lead, nodes[k:]]), speed, world=world,
-                                 limits=limits, kappa_max_1_m=kappa_max_1_m, lift_down_m=lift_down_m,
-                                 first_checked=1 if fixed else 0)
+        traj, poly = _timed_join(np.vstack([p0, p_lead, nodes[k:]]), speed, world=world, pipeline=pipeline,
+                                 lift_down_m=lift_down_m, first_checked=1 if fixed else 0)
         if traj is None:
             if fixed or attempt == attempts - 1:
                 return traj, poly
@@ -151,8 +155,9 @@ def entry_index(p_lead: np.ndarray, u: np.ndarray, nodes: np.ndarray, kappa_max_
     """First node ahead of the lead point with room for the two G2 corners around it.
 
     The corner at the lead point (turning from ``u`` towards the node) and the corner at the
-    node (turning onto the path) each need their spiral distance (eq. 19) on the segment between
-    them; nodes closer than that are skipped.
+    node (turning onto the path) each need their spiral distance (eq. 19, for the smoother's
+    corner curvature ``kappa_max_1_m``; none for a polyline) on the segment between them; nodes
+    closer than that are skipped.
 
     Returns
     -------
@@ -168,8 +173,9 @@ def entry_index(p_lead: np.ndarray, u: np.ndarray, nodes: np.ndarray, kappa_max_
     return int(ok[0]) if ok.size else None
 
 
-def _timed_join(points: np.ndarray, speed_m_s: float, *, world, limits, kappa_max_1_m, lift_down_m,
+def _timed_join(points: np.ndarray, speed_m_s: float, *, world, pipeline: TrajectoryPipeline, lift_down_m,
                 first_checked: int = 0):
+    """The cleaned polyline through the pipeline: (Trajectory, polyline) or (None, reason)."""
     poly = _clean_nodes(points)
     if poly.shape[0] < 2:
         return None, "nothing to fly"
@@ -177,8 +183,10 @@ def _timed_join(points: np.ndarray, speed_m_s: float, *, world, limits, kappa_ma
         for a, b in zip(poly[first_checked:-1], poly[first_checked + 1:]):
             if not world.segment_free(a, b):
                 return None, "the join crosses a static obstacle"
-    curve = smooth_g2(poly, kappa_max_1_m, world=world)
-    traj = time_parameterize(curve, limits, start_speed_m_s=speed_m_s)
+    checked = pipeline.trajectory(poly, world, start_speed_m_s=speed_m_s)
+    if not checked.status.flyable:
+        return None, f"the join is {checked.status.value}: {checked.reason}"
+    traj = checked.trajectory
     if lift_down_m is not None:
         traj = traj.to_ned(lift_down_m)
     return traj, poly

@@ -41,7 +41,6 @@ from dataclasses import replace
 
 import numpy as np
 
-from companion.planning import MgartSettings
 from companion.threats.decision import candidates as gen
 from companion.threats.decision.alternatives import Alternative, airspace_for, plan_alternatives
 from companion.threats.decision.choice import Candidate, Decision, ReferenceState, choose
@@ -109,8 +108,8 @@ def _situation(t_s: float, obs: Observation, leg: LegContext, policy: DecisionPo
     lift = float(ref.pos_ned_m[2]) if dim == 2 and ref.pos_ned_m.shape[0] == 3 else None
     here = [ref.pos_ned_m[:dim]]
     return gen.Situation(ref, tubes, airspace(leg.world, leg.world_key, here, s),
-                         planning_slab(leg.world, leg.world_key, here), leg.goal_ned_m, s, policy.limits,
-                         policy.kappa_max_1_m, lift)
+                         planning_slab(leg.world, leg.world_key, here), leg.goal_ned_m, s, policy.pipeline,
+                         lift)
 
 
 def _remaining_s(sit: gen.Situation, active: ActiveTrajectory) -> float:
@@ -249,8 +248,7 @@ def _replan(state: DecisionState, sit: gen.Situation, policy: DecisionPolicy):
         return [], state
     t0 = time.perf_counter()
     counter = state.counter + 1
-    out = gen.replan_candidates(sit, rng=_rng(state.seed, counter, REPLAN_STREAM),
-                                gart_settings=policy.gart_settings, path_id=f"replan-{counter}")
+    out = gen.replan_candidates(sit, rng=_rng(state.seed, counter, REPLAN_STREAM), path_id=f"replan-{counter}")
     estimate = state.replan_estimate.updated(time.perf_counter() - t0, policy.settings.estimate_gain)
     blocked = state.replan_blocked_until_s
     if not any(c.clear for c in out):
@@ -313,8 +311,7 @@ def _ms_since(t0: float) -> float:
 
 # ---------------------------------------------------------------------------- alternatives
 def plan_alternatives_for(state: DecisionState, obs: Observation, leg: LegContext, policy: DecisionPolicy,
-                          k: int, *, max_time_s: float, start_ned_m=None,
-                          settings: MgartSettings | None = None) -> tuple[tuple[Alternative, ...], DecisionState]:
+                          k: int, *, max_time_s: float, start_ned_m=None) -> tuple[tuple[Alternative, ...], DecisionState]:
     """M-GART alternatives from the active reference's state at ``obs.t_s`` (or ``start_ned_m``)
     to the leg's goal, and the state after the search (its counter advanced).
 
@@ -343,8 +340,8 @@ def plan_alternatives_for(state: DecisionState, obs: Observation, leg: LegContex
     world = world.with_threats(obstacles) if obstacles else world
     counter = state.counter + 1
     s = policy.settings
-    alts = plan_alternatives(world, start, leg.goal_ned_m, k, rng=_rng(state.seed, counter, ALTERNATIVES_STREAM),
-                             max_time_s=max_time_s, settings=settings or MgartSettings(gart=policy.gart_settings),
+    alts = plan_alternatives(world, start, leg.goal_ned_m, k, pipeline=policy.pipeline,
+                             rng=_rng(state.seed, counter, ALTERNATIVES_STREAM), max_time_s=max_time_s,
                              spacing_m=s.entry_spacing_m, airspace=airspace(leg.world, leg.world_key, [start], s),
                              vertical_offsets_m=s.vertical_offsets_m, tag=f"-{counter}")
     return tuple(alts), replace(state, counter=counter)

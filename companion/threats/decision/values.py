@@ -3,7 +3,7 @@ on, each small, immutable and picklable (sent to a planning worker process and b
 
 - ``ActiveTrajectory``: the reference being flown, as the decision sees it (the caller owns it).
 - ``LegContext``: the leg's static airspace (index, world, goal).
-- ``DecisionPolicy``: the policy as data (settings, limits, K_max, GART settings, strategy,
+- ``DecisionPolicy``: the policy as data (settings, the trajectory pipeline, strategy,
   time scale).
 - ``DecisionState``: what one decision hands to the next (seed and counter of the derived
   generators, running estimates, replan back-off, alternatives).
@@ -21,8 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from companion.errors import CompanionError
-from companion.planning import GartSettings
-from companion.smoothing import TrajectoryLimits
+from companion.flight.pipeline import TrajectoryPipeline
 from companion.threats.decision.alternatives import Alternative
 from companion.threats.decision.estimate import RunningEstimate
 from companion.threats.decision.kinds import Strategy, Trigger
@@ -109,12 +108,9 @@ class DecisionPolicy:
     Attributes
     ----------
     settings : ThreatSettings
-    limits : TrajectoryLimits
-        Limits of new planned trajectories.
-    kappa_max_1_m : float
-        K_max of the G2 smoothing.
-    gart_settings : GartSettings
-        Of the replans and (in ``MgartSettings``) the alternatives.
+    pipeline : TrajectoryPipeline
+        Plans, smooths, times and checks every new trajectory (replans, joins, alternatives:
+        ``companion.flight.pipeline``), with the flight's smoothing method and limits.
     strategy : Strategy
         ``hybrid`` (DESIGN section 7, the default) or a single strategy (the benchmark).
     time_scale : float
@@ -123,34 +119,28 @@ class DecisionPolicy:
     """
 
     settings: ThreatSettings = field(default_factory=ThreatSettings)
-    limits: TrajectoryLimits = field(default_factory=TrajectoryLimits)
-    kappa_max_1_m: float = 0.1
-    gart_settings: GartSettings | None = None
+    pipeline: TrajectoryPipeline = field(default_factory=TrajectoryPipeline.for_limits)
     strategy: Strategy = Strategy.HYBRID
     time_scale: float = 1.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.settings, ThreatSettings):
             raise DecisionError(f"settings: expected ThreatSettings, got {type(self.settings).__name__}")
-        if not isinstance(self.limits, TrajectoryLimits):
-            raise DecisionError(f"limits: expected TrajectoryLimits, got {type(self.limits).__name__}")
+        if not isinstance(self.pipeline, TrajectoryPipeline):
+            raise DecisionError(f"pipeline: expected a TrajectoryPipeline, got {type(self.pipeline).__name__}")
         try:
             object.__setattr__(self, "strategy", Strategy(self.strategy))
         except ValueError:
             raise DecisionError(f"strategy: expected one of {', '.join(Strategy)}, got {self.strategy!r}") from None
-        object.__setattr__(self, "kappa_max_1_m", _finite_positive("kappa_max_1_m", self.kappa_max_1_m))
         object.__setattr__(self, "time_scale", _finite_positive("time_scale", self.time_scale))
-        if self.gart_settings is None:
-            object.__setattr__(self, "gart_settings", GartSettings(kappa_max_1_m=self.kappa_max_1_m))
-        elif not isinstance(self.gart_settings, GartSettings):
-            raise DecisionError(f"gart_settings: expected GartSettings, got {type(self.gart_settings).__name__}")
 
     @classmethod
     def from_settings(cls, settings, strategy: Strategy | str = Strategy.HYBRID) -> "DecisionPolicy":
-        """From the companion's ``Settings`` (``threats``, ``smoothing``, ``gart``, ``link.time_scale``:
-        None, not read from the vehicle yet, is real time as for the daemon's clock)."""
-        return cls(settings.threats, settings.smoothing.limits, settings.smoothing.kappa_max_1_m, settings.gart,
-                   strategy, settings.link.time_scale or 1.0)
+        """From the companion's ``Settings`` (``threats``; ``smoothing`` and ``planning``: the
+        pipeline; ``link.time_scale``: None, not read from the vehicle yet, is real time as for
+        the daemon's clock). No closed-loop check: a decision has milliseconds."""
+        pipeline = TrajectoryPipeline.from_settings(settings.smoothing, settings.planning)
+        return cls(settings.threats, pipeline, strategy, settings.link.time_scale or 1.0)
 
     def lead_s(self, estimate: RunningEstimate) -> float:
         """Clock seconds that a step of ``estimate`` is expected to take (mean + 1 deviation)."""

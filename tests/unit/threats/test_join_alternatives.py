@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from companion.flight.pipeline import TrajectoryPipeline
 from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
 from companion.threats.decision.alternatives import Alternative, switch_candidates
 from companion.threats.decision.join import HOVER_SPEED_M_S, join_trajectory
@@ -34,7 +35,7 @@ def state(traj, t_s):
 
 def test_replan_estimate_follows_measurements():
     world, traj = straight_leg()
-    policy = DecisionPolicy(ThreatSettings(replan_budget_s=5.0), LIMITS)
+    policy = DecisionPolicy(ThreatSettings(replan_budget_s=5.0), TrajectoryPipeline.for_limits(LIMITS))
     far = Threat("p1", "popup", "local_ned", (90.0, 0.0, 0.0), radius_m=6.0, received_t_s=5.0)
     _, state = decide(DecisionState.initial(policy, 0), Observation(5.0, (far,), ActiveTrajectory(traj, 0.0, "leg0")),
                       LegContext(0, world, GOAL), policy)
@@ -71,7 +72,8 @@ def test_join_starts_at_the_reference_state(speed, heading, turn):
     u = np.array([math.cos(heading), math.sin(heading)])
     w = np.array([math.cos(heading + turn), math.sin(heading + turn)])
     nodes = np.array([60.0 * w, 60.0 * w + 80.0 * u])
-    traj, poly = join_trajectory(np.zeros(2), speed * u, nodes, world=world, limits=LIMITS, kappa_max_1_m=0.1)
+    traj, poly = join_trajectory(np.zeros(2), speed * u, nodes, world=world,
+                                 pipeline=TrajectoryPipeline.for_limits(LIMITS, 0.1))
     assert traj is not None, poly
     p, v = state(traj, 0.0)
     assert np.linalg.norm(p) < 1e-9

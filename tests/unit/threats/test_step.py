@@ -15,6 +15,8 @@ import pickle
 import numpy as np
 import pytest
 
+from companion.flight.pipeline import TrajectoryPipeline
+
 from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
 from companion.threats.decision.choice import Decision
 from companion.threats.decision.kinds import CandidateKind, DecisionKind, Strategy, Trigger
@@ -39,7 +41,7 @@ def nominal():
 
 
 def policy(strategy=Strategy.HYBRID, settings=None):
-    return DecisionPolicy(settings or ThreatSettings(), LIMITS, 0.1, None, strategy)
+    return DecisionPolicy(settings or ThreatSettings(), TrajectoryPipeline.for_limits(LIMITS, 0.1), strategy)
 
 
 class Flight:
@@ -164,9 +166,10 @@ def test_single_strategies_only_use_their_own_candidates(nominal, strategy, kind
 def test_bad_arguments_name_themselves(nominal):
     with pytest.raises(DecisionError, match="strategy"):
         policy("pray")
-    for name in ("kappa_max_1_m", "time_scale"):
-        with pytest.raises(DecisionError, match=name):
-            DecisionPolicy(**{name: math.nan})
+    with pytest.raises(DecisionError, match="time_scale"):
+        DecisionPolicy(time_scale=math.nan)
+    with pytest.raises(DecisionError, match="pipeline"):
+        DecisionPolicy(pipeline=LIMITS)
     with pytest.raises(DecisionError, match="goal_ned_m"):
         LegContext(0, WORLD, [1.0, 2.0])
     with pytest.raises(DecisionError, match=r"alternatives\[0\]"):
