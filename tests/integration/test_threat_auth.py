@@ -21,7 +21,7 @@ from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat, ThreatTable
 from tests.support import free_tcp_port
 from tests.integration.test_threat_bus import companion, wait_for
-from tests.unit.threats.test_reactor import Harness, run, trajectory_decision, until
+from tests.unit.flight.test_avoidance import Harness, run, trajectory_decision, until
 
 pytestmark = pytest.mark.integration
 
