@@ -190,15 +190,17 @@ class ThreatFeed:
 
 
 class FlightLog:
-    """The fast-time ``FlightSink``: what the flight told, kept in lists."""
+    """The fast-time ``FlightSink``: what the flight told, kept in lists (events stamped with
+    the mission time ``now_s()``, as the daemon's record stamps them)."""
 
-    def __init__(self) -> None:
+    def __init__(self, now_s: Callable[[], float]) -> None:
+        self.now_s = now_s
         self.events: list[dict] = []
         self.decisions: list[dict] = []
         self.paths = 0
 
     def event(self, name: str, **fields) -> None:
-        self.events.append({"name": name, **fields})
+        self.events.append({"name": name, "t_s": self.now_s(), **fields})
 
     def decision(self, decision, event: dict) -> None:
         self.decisions.append(event)
@@ -285,7 +287,7 @@ class FastTimeFlight:
         update = update or VehicleUpdate.build(model or HeliModel.default())
         self.vehicle = ModelVehicle(update, start, start_yaw_rad)
         self.jobs = InlineJobs(self.clock, job_time_scale)
-        self.log = FlightLog()
+        self.log = FlightLog(self.clock.now_s)
         self.owner = ReferenceOwner(self.clock, turn_rate_rad_s=settings.flight.turn_rate_rad_s,
                                     yaw_now_rad=lambda: self.vehicle.yaw_rad)
         self.feed = ThreatFeed(threats) if threats is not None else None

@@ -173,6 +173,7 @@ class LegRunner:
         if self.leg_started is not None:
             self.leg_started(leg)
         self.owner.engage(leg.trajectory, f"leg{leg.index}", turn=True)
+        self.sink.event("leg_started", leg=leg.index, seq=leg.waypoint.seq)
         if self.avoidance is not None:
             self.avoidance.start_leg(LegContext(leg.index, leg.world, leg.goal_ned_m))
 
