@@ -47,7 +47,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from companion import demo  # noqa: E402
-from companion.sitl.processes import descendants  # noqa: E402
+from companion.sitl.procfs import descendants  # noqa: E402
 from companion.sitl.vehicles import flight_processes  # noqa: E402
 from companion.threats.transport.bus import ThreatBus  # noqa: E402
 

@@ -19,8 +19,8 @@ each after a timeout), then ends what the child left behind: the descendants see
 exit on their own, then SIGKILL, and so does anything still in its process group. A
 ``ProcessGroup`` stops several children at once (each signal sent to all, one deadline for all).
 
-Everything here is blocking and thread-free; the descendants are read from ``/proc`` (none are
-found off Linux).
+Everything here is blocking and thread-free; the descendants are read from ``/proc``
+(``companion.sitl.procfs``; none are found off Linux).
 """
 
 from __future__ import annotations
@@ -38,15 +38,14 @@ from pathlib import Path
 from typing import Callable, Iterable, Mapping, Sequence
 
 from companion.errors import ConfigError, ProcessError
+from companion.sitl.procfs import GONE_STATES, descendants, process_state, start_time
 
-__all__ = ["Escalation", "ManagedProcess", "ProcessGroup", "descendants", "process_state", "python_command",
-           "spawn", "start_time", "stop_together", "DEFAULT_ESCALATION"]
+__all__ = ["Escalation", "ManagedProcess", "ProcessGroup", "python_command", "spawn", "stop_together",
+           "DEFAULT_ESCALATION"]
 
 log = logging.getLogger(__name__)
 
 PR_SET_PDEATHSIG = 1
-#: Process states of a process that no longer runs (zombie, dead).
-GONE_STATES = ("Z", "X", None)
 
 
 def _libc_prctl():
@@ -60,46 +59,6 @@ def _libc_prctl():
 
 
 _PRCTL = _libc_prctl()
-
-
-# ------------------------------------------------------------------------------------ /proc
-def start_time(pid: int) -> int | None:
-    """The process's start time in clock ticks since boot (identifies it beyond pid reuse);
-    None when it is gone."""
-    try:
-        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as fh:
-            return int(fh.read().rsplit(")", 1)[1].split()[19])
-    except (OSError, ValueError, IndexError):
-        return None
-
-
-def process_state(pid: int) -> str | None:
-    """The process's state letter (``R``, ``S``, ``Z`` ...), None when it is gone."""
-    try:
-        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as fh:
-            return fh.read().rsplit(")", 1)[1].split()[0]
-    except (OSError, IndexError):
-        return None
-
-
-def descendants(pid: int) -> list[int]:
-    """Every descendant process of ``pid`` (``/proc/<pid>/task/*/children``; empty off Linux)."""
-    out, todo = [], [pid]
-    while todo:
-        parent = todo.pop()
-        try:
-            tasks = os.listdir(f"/proc/{parent}/task")
-        except OSError:
-            continue
-        for tid in tasks:
-            try:
-                with open(f"/proc/{parent}/task/{tid}/children", encoding="ascii") as fh:
-                    kids = [int(v) for v in fh.read().split()]
-            except OSError:
-                continue
-            out += kids
-            todo += kids
-    return out
 
 
 def python_command(module_args: Sequence[str]) -> list[str]:

@@ -14,8 +14,8 @@ import time
 import pytest
 
 from companion.errors import ConfigError, ProcessError
-from companion.sitl.processes import (Escalation, ManagedProcess, ProcessGroup, descendants, process_state,
-                                      python_command, spawn, start_time)
+from companion.sitl.processes import Escalation, ManagedProcess, ProcessGroup, python_command, spawn
+from companion.sitl.procfs import descendants, process_state, start_time
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 
