@@ -117,7 +117,7 @@ def stop_together(processes: Iterable["ManagedProcess"], escalation: Escalation 
         if not live:
             break
         for proc in live:
-            log.info("stopping %s (pid %d): %s", proc.name, proc.pid, signal.Signals(sig).name)
+            log.debug("stopping %s (pid %d): %s", proc.name, proc.pid, signal.Signals(sig).name)
             proc.send_signal(sig)
         _wait_all(live, wait_s)
     live = [p for p in started if p.poll() is None]
