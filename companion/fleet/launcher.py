@@ -327,10 +327,10 @@ class Fleet:
 
     # -------------------------------------------------------------------------- stop
     def stop(self) -> FleetResult:
-        """Interrupt the companions still running (``COMPANION_ESCALATION``: SIGINT, SIGKILL
-        after about ``COMPANION_STOP_S``), then stop the simulators and the router
-        (``PROCESS_ESCALATION``: SIGTERM, then SIGKILL); any planning worker left behind is
-        killed after ``LEFTOVER_GRACE_S``. Idempotent; returns the result."""
+        """Interrupt the companions still running (``COMPANION_ESCALATION``: SIGINT, then
+        SIGTERM and SIGKILL if one is still running after ``COMPANION_STOP_S``), then stop the
+        simulators and the router (``PROCESS_ESCALATION``: SIGTERM, then SIGKILL); any planning
+        worker left behind is killed after ``LEFTOVER_GRACE_S``. Idempotent; returns the result."""
         if self._stopped:
             return self._result or self.result()
         if self.gate is not None:
