@@ -1,7 +1,7 @@
 """CPU of ``companion run`` per second of flight, in SITL (issue 13: idle cost).
 
 A real ``sim-vehicle`` and a real ``companion run`` (separate processes, as the integration
-tests start them: ``companion.demo.flight_processes``) fly the demo mission
+tests start them: ``companion.sitl.vehicles.flight_processes``) fly the demo mission
 (``exclusion_zones.plan``: five legs, RTL) twice:
 
 - ``plain``: zenoh on (the default configuration), no threat at all;
@@ -47,7 +47,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from companion import demo  # noqa: E402
-from companion.fleet.processes import descendants  # noqa: E402
+from companion.sitl.procfs import descendants  # noqa: E402
+from companion.sitl.vehicles import flight_processes  # noqa: E402
 from companion.threats.transport.bus import ThreatBus  # noqa: E402
 
 log = logging.getLogger("companion_cpu")
@@ -189,41 +190,35 @@ def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path 
     """One flight of the demo mission; its CPU figures and summary."""
     injections = demo.DEMO_INJECTIONS if name == "threats" else ()
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    spawn = demo.spawn
+    prefix: list[str] = []
     if profile_dir is not None:
         profile_dir.mkdir(parents=True, exist_ok=True)
-        prof = str(profile_dir / f"{name}.prof")
-        demo.spawn = lambda args, log_path, env=None: spawn(
-            ["cProfile", "-o", prof, "-m", *args] if args[0] == "companion.cli" else args, log_path, env)
+        prefix = ["cProfile", "-o", str(profile_dir / f"{name}.prof"), "-m"]
     accounts = out_dir / "loop_account.json"
     if account:
         env["PYTHONPATH"] = str(REPO / "benchmarks") + os.pathsep + env["PYTHONPATH"]
         accounts.unlink(missing_ok=True)
-        demo.spawn = lambda args, log_path, env=None: spawn(
-            ["loop_account", str(accounts), *args] if args[0] == "companion.cli" else args, log_path, env)
-    try:
-        with demo.flight_processes(out_dir, MISSION, speedup=speedup, env=env,
-                                   extra_args=companion_args) as flight:
-            with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
-                watcher = demo.FlightWatcher(bus)
+        prefix = ["loop_account", str(accounts)]
+    with flight_processes(out_dir, MISSION, speedup=speedup, env=env, extra_args=companion_args,
+                          companion_prefix=prefix) as flight:
+        with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
+            watcher = demo.FlightWatcher(bus)
 
-                def in_legs() -> bool:
-                    st = watcher.status
-                    return bool(st) and st.get("leg", -1) >= 0 and st.get("mode") == "GUIDED"
+            def in_legs() -> bool:
+                st = watcher.status
+                return bool(st) and st.get("leg", -1) >= 0 and st.get("mode") == "GUIDED"
 
-                signal_legs = (lambda legs: os.kill(flight.companion.pid, signal.SIGUSR1 if legs else signal.SIGUSR2)) \
-                    if account else None
-                with CpuSampler(flight.companion.pid, in_legs, signal_legs) as sampler:
-                    done = lambda: flight.companion.poll() is not None  # noqa: E731
-                    sent = demo.inject(watcher, injections, 300, done=done) if injections else []
-                    if sent:
-                        time.sleep(2.0)
-                        for threat in sent:
-                            bus.client.delete_threat(threat.id)
-                    flight.companion.wait(300)
-        summary = demo.last_json_line(flight.log) or {}
-    finally:
-        demo.spawn = spawn
+            signal_legs = (lambda legs: os.kill(flight.companion.pid, signal.SIGUSR1 if legs else signal.SIGUSR2)) \
+                if account else None
+            with CpuSampler(flight.companion.pid, in_legs, signal_legs) as sampler:
+                done = lambda: flight.companion.poll() is not None  # noqa: E731
+                sent = demo.inject(watcher, injections, 300, done=done) if injections else []
+                if sent:
+                    time.sleep(2.0)
+                    for threat in sent:
+                        bus.client.delete_threat(threat.id)
+                flight.companion.wait(300)
+    summary = demo.last_json_line(flight.log) or {}
     return {"flight": name, "speedup": speedup, "rc": flight.companion.returncode,
             "outcome": summary.get("outcome"), "decisions": summary.get("decisions"),
             **sampler.rates(), "threads_cpu_s": sampler.thread_cpu_s(),

@@ -55,9 +55,9 @@ sys.path.insert(0, str(ROOT))
 
 from companion.fleet.launcher import Fleet  # noqa: E402
 from companion.fleet.missions import crossing_missions, planned_length_m, write_missions  # noqa: E402
-from companion.fleet.processes import descendants  # noqa: E402
 from companion.fleet.settings import FleetSettings  # noqa: E402
 from companion.fleet.tracks import fleet_separation  # noqa: E402
+from companion.sitl.procfs import descendants  # noqa: E402
 
 log = logging.getLogger("fleet_bench")
 

@@ -1,8 +1,8 @@
 """Soak (issue 11): 100,000 bad MAVLink frames and 10,000 threat payloads during one real flight.
 
 Separate ``sim-vehicle`` and ``companion run`` processes fly ``mission_files/exclusion_zones.plan``
-(``companion.demo.flight_processes``, as the threat storm does; in real time by default, so that
-the injection fits in the flight). Once the first leg is flown, this process
+(``companion.sitl.vehicles.flight_processes``, as the threat storm does; in real time by default,
+so that the injection fits in the flight). Once the first leg is flown, this process
 
 - sends ``--frames`` MAVLink datagrams from its own UDP socket, paced at ``--rate`` per second,
   three quarters to the vehicle's port and one quarter to the companion's MAVLink port (its gate,
@@ -369,7 +369,7 @@ def run(frames_n: int, payloads_n: int, rate_hz: float, payload_rate_hz: float, 
     with tempfile.TemporaryDirectory(prefix="soak_") as tmp, TrackListener(rate_hz=5.0) as track:
         out = Path(tmp)
         with flight_processes(out, DEMO_MISSION, speedup=speedup, gcs_out=track.address) as flight:
-            mav_port = companion_port(flight.companion.args)
+            mav_port = companion_port(flight.companion.argv)
             with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
                 watcher = FlightWatcher(bus)
                 deadline = time.monotonic() + 180

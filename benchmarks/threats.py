@@ -87,6 +87,7 @@ from companion.threats.decision.step import DecisionPolicy  # noqa: E402
 from heli_model.model import HeliModel  # noqa: E402
 from heli_model.vehicle_update import VehicleUpdate  # noqa: E402
 from companion.threats.model import Threat, ThreatTable  # noqa: E402
+from heli_common.ports import free_port  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The strategies compared, in table order; those not a ``Strategy`` are skipped.
@@ -299,17 +300,11 @@ def summarize(rows: list[dict], strategies) -> dict:
 
 
 # ---------------------------------------------------------------------------- storm
-def free_tcp_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
 def run_storm(duration_s: float, rate_hz: float = 1000.0, ids: int = 50) -> dict:
     """PUT ``rate_hz`` threats per second for ``duration_s`` into a ThreatBus on an asyncio loop."""
     from companion.threats.transport.bus import ThreatBus
 
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     n = int(round(duration_s * rate_hz))
     sent_at = np.full(n, np.nan)
     recv_at = np.full(n, np.nan)

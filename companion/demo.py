@@ -18,8 +18,9 @@ Fig. 8-style plot.
 The mission is package data (``companion/data/exclusion_zones.plan``, read through
 ``importlib.resources``), so the demo runs from an installed wheel anywhere. The child processes
 are ``python -m sim_vehicle.cli`` and ``python -m companion.cli`` of this interpreter, in the
-current directory and environment. The threat integration tests and the SITL benchmarks drive
-their flights with the same pieces (through ``tests/flight_support.py``).
+current directory and environment, started and stopped by ``companion.sitl.vehicles.flight_processes``.
+The threat integration tests and the SITL benchmarks drive their flights with the same pieces
+(through ``tests/flight_support.py``).
 """
 
 from __future__ import annotations
@@ -28,9 +29,6 @@ import contextlib
 import importlib.resources
 import json
 import logging
-import socket
-import subprocess
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -40,9 +38,9 @@ import numpy as np
 
 from companion.errors import CompanionError
 from companion.geo import LocalFrame
-from companion.threats.transport.bus import ThreatBus
+from companion.sitl.vehicles import flight_processes
 from companion.threats.model import Threat
-from heli_common.ports import free_port
+from companion.threats.transport.bus import ThreatBus
 
 log = logging.getLogger(__name__)
 
@@ -221,25 +219,8 @@ def inject(watcher: FlightWatcher, injections, timeout_s: float, *, done=None) -
     return sent
 
 
-def spawn(args: list[str], log_path: Path, env: dict | None = None) -> subprocess.Popen:
-    """``python -m *args`` with this interpreter, output to ``log_path``; ``env`` defaults to
-    this process's environment."""
-    with open(log_path, "wb") as fh:
-        return subprocess.Popen([sys.executable, "-m", *args], stdout=fh, stderr=subprocess.STDOUT,
-                                env=env)
-
-
-def stop(proc: subprocess.Popen, timeout_s: float = 15.0) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
 def last_json_line(path: Path) -> dict | None:
+    """The last line of ``path`` that starts with ``{``, parsed (None: none, or not JSON)."""
     for line in reversed(path.read_text(errors="replace").splitlines()):
         if line.startswith("{"):
             try:
@@ -247,46 +228,6 @@ def last_json_line(path: Path) -> dict | None:
             except json.JSONDecodeError:
                 return None
     return None
-
-
-@dataclass
-class FlightProcesses:
-    """A ``sim-vehicle`` and a ``companion run`` flying together (see ``flight_processes``)."""
-
-    sim: subprocess.Popen
-    companion: subprocess.Popen
-    vehicle_port: int      # the vehicle's UDP port (another ground station can talk to it)
-    endpoint: str          # the companion's zenoh listen endpoint
-    record: Path           # its flight record
-    log: Path              # its log (stdout and stderr; the last line is the JSON summary)
-
-
-@contextlib.contextmanager
-def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0,
-                     gcs_out: str | None = None, extra_args=(), sim_args=(), env: dict | None = None,
-                     record_name: str = "flight.jsonl"):
-    """Start ``sim-vehicle`` and ``companion run --mission`` on free loopback ports.
-
-    ``extra_args`` go to ``companion run``, ``sim_args`` to ``sim-vehicle`` (e.g. wind); ``env``
-    is the processes' environment (default: this one's); the record is ``out_dir/record_name``
-    (``.mcap``: MCAP).
-    Yields ``FlightProcesses``; both processes are stopped on exit (SIGTERM, then SIGKILL).
-    """
-    out_dir.mkdir(parents=True, exist_ok=True)
-    mav_port, vehicle_port, zenoh_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
-    endpoint = f"tcp/127.0.0.1:{zenoh_port}"
-    outs = ["--out", f"127.0.0.1:{mav_port}"] + (["--out", gcs_out] if gcs_out else [])
-    sim = spawn(["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(speedup), *sim_args],
-                out_dir / "sim_vehicle.log", env)
-    record, log_path = out_dir / record_name, out_dir / "companion.log"
-    companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
-                       "--mission", str(mission),           # the time scale: the vehicle's SIM_SPEEDUP
-                       "--zenoh-listen", endpoint, "--record", str(record), *extra_args], log_path, env)
-    try:
-        yield FlightProcesses(sim, companion, vehicle_port, endpoint, record, log_path)
-    finally:
-        stop(companion)
-        stop(sim)
 
 
 def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),

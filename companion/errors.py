@@ -58,3 +58,8 @@ class VehicleRefused(LinkError):
 class FlightAborted(CompanionError):
     """The flight cannot go on (pilot took over, vehicle disarmed, leg not reached, start-up
     failed after the vehicle left the ground): the vehicle is held, or left on the ground."""
+
+
+class ProcessError(CompanionError):
+    """A child process (``companion.sitl``) could not be started, or exited or timed out before
+    it was ready; the message names the process and its log."""

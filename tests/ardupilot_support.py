@@ -29,8 +29,11 @@ from typing import Iterator
 
 import numpy as np
 
+from companion.errors import ProcessError
+from companion.sitl.processes import ManagedProcess
 from heli_common.mavlink_ids import COPTER_MODES
-from support import REPO_ROOT, free_udp_port, stop_process
+from heli_common.ports import free_port
+from support import REPO_ROOT
 
 ARDUPILOT_DIR = REPO_ROOT.parent / "shared" / "ardupilot"
 ARDUPILOT_BIN = ARDUPILOT_DIR / "arducopter-heli"
@@ -80,7 +83,7 @@ class ArduPilotSitl:
     """A running ``arducopter-heli``: ``companion_port`` is where it sends MAVLink for the
     companion (``udpin://127.0.0.1:<port>``); ``observer`` watches it on its own port."""
 
-    proc: subprocess.Popen
+    proc: ManagedProcess           # its log: directory / "sitl.log"
     directory: Path
     companion_port: int
     observer: "VehicleObserver"
@@ -88,11 +91,7 @@ class ArduPilotSitl:
     home: tuple
 
     def log_tail(self, lines: int = 40) -> str:
-        try:
-            text = (self.directory / "sitl.log").read_text(errors="replace")
-        except OSError:
-            return ""
-        return "\n".join(text.splitlines()[-lines:])
+        return self.proc.log_tail(lines)
 
 
 @contextlib.contextmanager
@@ -108,24 +107,25 @@ def start_ardupilot(directory, *, speedup: float = 8.0, home=(47.397742, 8.54559
         extra.write_text(f"ADSB_TYPE 1\nSIM_ADSB_COUNT {adsb_count}\nSIM_ADSB_RADIUS {adsb_radius_m:g}\n"
                          f"SIM_ADSB_ALT {adsb_alt_m:g}\n")
         defaults.append(str(extra))
-    companion_port = free_udp_port()
+    companion_port = free_port()
     observer = VehicleObserver()
     cmd = [str(ARDUPILOT_BIN), "--model", "heli", "--speedup", f"{speedup:g}", "--defaults", ",".join(defaults),
            "-I", str(free_instance()), "--home", ",".join(f"{v:.7f}" for v in home),
            "--serial0", f"udpclient:127.0.0.1:{companion_port}",
            "--serial2", f"udpclient:127.0.0.1:{observer.port}"]
-    with open(directory / "sitl.log", "wb") as log_file:
-        proc = subprocess.Popen(cmd, cwd=str(directory), stdout=log_file, stderr=subprocess.STDOUT)
+    proc = ManagedProcess(cmd, directory / "sitl.log", name="arducopter-heli", cwd=directory)
     sitl = ArduPilotSitl(proc, directory, companion_port, observer, speedup, tuple(home[:3]))
-    try:
-        observer.start()
-        if not observer.wait_heartbeat(30.0):
-            raise RuntimeError(f"arducopter-heli sent no heartbeat; log:\n{sitl.log_tail()}")
-        observer.request_streams()
-        yield sitl
-    finally:
-        observer.stop()
-        stop_process(proc)
+    with proc:
+        try:
+            observer.start()
+            try:
+                proc.wait_ready(lambda: observer.wait_heartbeat(0.2), 30.0, "heartbeat", poll_s=0.0)
+            except ProcessError as exc:
+                raise RuntimeError(f"{exc}; log:\n{sitl.log_tail()}") from None
+            observer.request_streams()
+            yield sitl
+        finally:
+            observer.stop()
 
 
 class VehicleObserver:
@@ -145,7 +145,7 @@ class VehicleObserver:
     def __init__(self) -> None:
         from pymavlink import mavutil
 
-        self.port = free_udp_port()
+        self.port = free_port()
         self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}", source_system=253,
                                                source_component=190)
         self.mavlink = mavutil.mavlink

@@ -1,10 +1,12 @@
 """Helpers for companion flight tests: a telemetry listener and the companion process.
 
-The flights with threats (``flight_processes``, ``fly``, ``spawn``) are ``companion.demo``'s, run
-on this checkout: the child processes get the repository root on their ``PYTHONPATH``, so they
-run the code under test even where another checkout is installed (a worktree, a benchmark run
-as a script). ``DEMO_MISSION`` is the demo's mission (``mission_files/`` links to the package
-data). The other flight helpers are re-exported from ``companion.demo``.
+The flights with threats (``flight_processes``: ``companion.sitl.vehicles``'s; ``fly``:
+``companion.demo``'s) and any other child process (``spawn``: a ``companion.sitl``
+``ManagedProcess``) run on this checkout: the child processes get the repository root on their
+``PYTHONPATH`` (``support.checkout_env``), so they run the code under test even where another
+checkout is installed (a worktree, a benchmark run as a script). ``DEMO_MISSION`` is the demo's
+mission (``mission_files/`` links to the package data). The other flight helpers are
+re-exported from ``companion.demo``.
 
 ``TrackListener`` is an independent pymavlink listener on its own UDP port (give its address to
 ``sim-vehicle --out``): the flown track and the armed state come from the vehicle itself, not
@@ -25,9 +27,10 @@ import time
 import numpy as np
 
 from companion import demo as _demo
-from companion.demo import (DEMO_HOME, FlightWatcher, Injection, free_port, inject,  # noqa: F401
-                            last_json_line, place, stop)
-from support import REPO_ROOT, free_udp_port
+from companion.demo import DEMO_HOME, FlightWatcher, Injection, inject, last_json_line, place  # noqa: F401
+from companion.sitl import processes, vehicles
+from heli_common.ports import free_port
+from support import REPO_ROOT, checkout_env
 
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 
@@ -46,7 +49,7 @@ class TrackListener:
 
         self.mavlink = mavlink2
         self.rate_hz = float(rate_hz)
-        self.port = free_udp_port()
+        self.port = free_port()
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", self.port))
         self._sock.settimeout(0.2)
@@ -132,19 +135,14 @@ def wait_until(predicate, timeout_s: float, what: str, poll_s: float = 0.1) -> N
 DEMO_MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
 
 
-def checkout_env() -> dict:
-    """This environment with the repository root first on ``PYTHONPATH``."""
-    return dict(os.environ, PYTHONPATH=str(REPO_ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-
-
-def spawn(args: list[str], log_path) -> subprocess.Popen:
-    """``companion.demo.spawn`` on this checkout."""
-    return _demo.spawn(args, log_path, env=checkout_env())
+def spawn(module_args: list[str], log_path) -> processes.ManagedProcess:
+    """``python -m <module_args>`` on this checkout, started (its output to ``log_path``)."""
+    return processes.spawn(processes.python_command(module_args), log_path, env=checkout_env())
 
 
 def flight_processes(out_dir, mission, **kwargs):
-    """``companion.demo.flight_processes`` on this checkout."""
-    return _demo.flight_processes(out_dir, mission, env=checkout_env(), **kwargs)
+    """``companion.sitl.vehicles.flight_processes`` on this checkout."""
+    return vehicles.flight_processes(out_dir, mission, env=checkout_env(), **kwargs)
 
 
 def fly(out_dir, mission, **kwargs) -> dict:

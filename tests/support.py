@@ -1,7 +1,10 @@
-"""Helpers for integration tests: free ports and a real ``sim-vehicle`` process.
+"""Helpers for integration tests: a real ``sim-vehicle`` process, and a MAVLink ground station.
 
 Integration tests start real processes on loopback and must never bind default ports (other
-flights run at the same time), so every port comes from the OS (bind to port 0).
+flights run at the same time), so every port comes from the OS (``heli_common.ports.free_port``).
+The processes are ``companion.sitl`` ``ManagedProcess``-es (their own process group, a log file,
+ending with the test run; stopped with SIGINT, SIGTERM, then SIGKILL, leaving nothing behind),
+run on this checkout (``checkout_env``).
 
 Example
 -------
@@ -14,31 +17,24 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
-import signal
 import socket
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Iterator, Sequence
 
+from companion.errors import ProcessError
+from companion.sitl.processes import ManagedProcess, python_command
+from companion.sitl.vehicles import sim_vehicle_args
+from heli_common.ports import free_port
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
-def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that is free right now (the OS picks it)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
-def free_tcp_port() -> int:
-    """A TCP port on 127.0.0.1 that is free right now (the OS picks it)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
+def checkout_env() -> dict:
+    """This environment with the repository root first on ``PYTHONPATH``: a child process runs
+    the code under test even where another checkout is installed (a worktree, a benchmark)."""
+    return dict(os.environ, PYTHONPATH=str(REPO_ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
 
 
 @dataclasses.dataclass
@@ -54,10 +50,8 @@ class SimVehicle:
         MAVLink system id (``1 + instance``); the autopilot is component 1.
     instance : int
         The ``--instance`` number.
-    proc : subprocess.Popen
-        The process.
-    log_path : pathlib.Path
-        File with the process's stdout and stderr (its log).
+    proc : companion.sitl.processes.ManagedProcess
+        The process (its log: ``proc.log_path``, stdout and stderr).
     out : list of str
         The ``--out HOST:PORT`` addresses telemetry is sent to.
     """
@@ -65,8 +59,7 @@ class SimVehicle:
     port: int
     sysid: int
     instance: int
-    proc: subprocess.Popen
-    log_path: Path
+    proc: ManagedProcess
     out: list[str]
 
     @property
@@ -74,64 +67,63 @@ class SimVehicle:
         """``127.0.0.1:<port>``, e.g. for MAVProxy ``--master=udpout:<address>``."""
         return f"127.0.0.1:{self.port}"
 
+    @property
+    def log_path(self) -> Path:
+        return self.proc.log_path
+
     def log_text(self) -> str:
         """The process log so far (for assertion messages)."""
-        try:
-            return self.log_path.read_text(errors="replace")
-        except OSError:
-            return ""
+        return self.proc.log_text()
 
     def log_tail(self, lines: int = 60) -> str:
         """The last ``lines`` lines of the log."""
-        return "\n".join(self.log_text().splitlines()[-lines:])
+        return self.proc.log_tail(lines)
 
     def is_running(self) -> bool:
         """True while the process has not exited."""
-        return self.proc.poll() is None
+        return self.proc.is_running()
 
 
-def sim_vehicle_command(port: int, out: Sequence[str] = (), speedup: float = 1.0, instance: int = 0,
-                        extra_args: Sequence[str] = ()) -> list[str]:
-    """The command line that starts ``sim-vehicle`` with this interpreter."""
-    cmd = [sys.executable, "-m", "sim_vehicle.cli", "--instance", str(instance), "--port", str(port),
-           "--speedup", repr(float(speedup))]
-    if not out:
-        cmd += ["--no-default-out"]
-    for address in out:
-        cmd += ["--out", address]
-    return cmd + list(extra_args)
+class HeartbeatProbe:
+    """A readiness condition: the vehicle ``sysid`` on ``127.0.0.1:port`` answers a GCS heartbeat.
 
-
-def wait_for_heartbeat(port: int, sysid: int, timeout_s: float, proc: subprocess.Popen | None = None,
-                       signing_key: bytes | None = None) -> bool:
-    """Send GCS heartbeats to ``127.0.0.1:port`` until the vehicle ``sysid`` answers with one.
-
-    The probe is a peer for 10 s only; it does not use any of the ``--out`` ports. A vehicle
-    with a signing key hears only a probe that signs with ``signing_key``.
+    Each call sends one heartbeat and waits up to ``wait_s`` for the vehicle's. The probe is a
+    peer for 10 s only; it does not use any of the ``--out`` ports. A vehicle with a signing key
+    hears only a probe that signs with ``signing_key``.
     """
-    from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        sock.settimeout(0.2)
-        mav = mavlink2.MAVLink(None, srcSystem=254, srcComponent=190)
-        mav.robust_parsing = True
+    def __init__(self, port: int, sysid: int, signing_key: bytes | None = None, wait_s: float = 0.2) -> None:
+        from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+        self.address = ("127.0.0.1", int(port))
+        self.sysid = int(sysid)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(wait_s)
+        self.mav = mavlink2.MAVLink(None, srcSystem=254, srcComponent=190)
+        self.mav.robust_parsing = True
         if signing_key is not None:
-            sign_with(mav, signing_key, link_id=254)
-        hb = mav.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if proc is not None and proc.poll() is not None:
-                return False
-            sock.sendto(hb.pack(mav), ("127.0.0.1", port))  # packed each time: a signed frame sent twice is a replay
-            try:
-                data = sock.recv(65535)
-            except (socket.timeout, ConnectionRefusedError):
-                continue
-            for msg in mav.parse_buffer(data) or []:
-                if msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == sysid:
-                    return True
-    return False
+            sign_with(self.mav, signing_key, link_id=254)
+        self.heartbeat = self.mav.heartbeat_encode(mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+
+    def __call__(self) -> bool:
+        # packed each time: a signed frame sent twice is a replay
+        self.sock.sendto(self.heartbeat.pack(self.mav), self.address)
+        try:
+            data = self.sock.recv(65535)
+        except (socket.timeout, ConnectionRefusedError):
+            return False
+        return any(msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == self.sysid
+                   for msg in self.mav.parse_buffer(data) or [])
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> "HeartbeatProbe":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def sign_with(mav, key: bytes, link_id: int = 1) -> None:
@@ -146,18 +138,6 @@ def sign_with(mav, key: bytes, link_id: int = 1) -> None:
     mav.signing.sign_outgoing = True
     mav.signing.link_id = int(link_id)
     mav.signing.timestamp = signing_timestamp_now()
-
-
-def stop_process(proc: subprocess.Popen, timeout_s: float = 10.0) -> int | None:
-    """SIGINT, then SIGKILL after ``timeout_s``; returns the exit status."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=timeout_s)
-    return proc.returncode
 
 
 @contextlib.contextmanager
@@ -190,27 +170,23 @@ def start_sim_vehicle(port: int | None = None, out: Sequence[str] = (), speedup:
     Yields
     ------
     SimVehicle
-        With ``.port``, ``.sysid``, ``.proc``, ``.log_text()``. On exit the process gets
-        SIGINT and is killed if it has not stopped after 10 s.
+        With ``.port``, ``.sysid``, ``.proc``, ``.log_text()``. On exit the process is stopped
+        (SIGINT, then SIGTERM and SIGKILL if it does not exit).
     """
-    port = free_udp_port() if port is None else int(port)
+    port = free_port() if port is None else int(port)
     directory = Path(log_dir) if log_dir is not None else Path(tempfile.mkdtemp(prefix="sim_vehicle_"))
     directory.mkdir(parents=True, exist_ok=True)
-    log_path = directory / f"sim_vehicle_{instance}_{port}.log"
-    cmd = sim_vehicle_command(port, out, speedup, instance, extra_args)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO_ROOT) + os.pathsep + env.get("PYTHONPATH", "")
-    with open(log_path, "wb") as log_file:
-        proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT, cwd=str(REPO_ROOT), env=env)
-    sim = SimVehicle(port=port, sysid=1 + instance, instance=instance, proc=proc, log_path=log_path,
-                     out=list(out))
-    try:
-        if not wait_for_heartbeat(port, sim.sysid, ready_timeout_s, proc, signing_key):
-            raise RuntimeError(f"sim-vehicle on port {port} did not become ready "
-                               f"(exit status {proc.poll()}); log:\n{sim.log_tail()}")
+    args = sim_vehicle_args(port, outs=out, speedup=speedup, instance=instance, default_outs=False, extra=extra_args)
+    proc = ManagedProcess(python_command(args), directory / f"sim_vehicle_{instance}_{port}.log",
+                          name=f"sim-vehicle on port {port}", env=checkout_env(), cwd=REPO_ROOT)
+    sim = SimVehicle(port=port, sysid=1 + instance, instance=instance, proc=proc, out=list(out))
+    with proc:
+        with HeartbeatProbe(port, sim.sysid, signing_key) as probe:
+            try:
+                proc.wait_ready(probe, ready_timeout_s, "heartbeat", poll_s=0.0)
+            except ProcessError as exc:
+                raise RuntimeError(f"{exc}; log:\n{sim.log_tail()}") from None
         yield sim
-    finally:
-        stop_process(proc)
 
 
 class MavlinkPeer:

@@ -29,14 +29,14 @@ first (SIGINT: each brings its vehicle to a safe stop, ``link.on_interrupt``), t
 simulators and the router, and kills whatever is left of the companions' planning workers:
 no process is left behind. The children run in their own process groups so that a Ctrl-C in
 the terminal reaches the launcher only, which stops them in that order; they get SIGTERM if
-the launcher dies (``PR_SET_PDEATHSIG``).
+the launcher dies (``PR_SET_PDEATHSIG``): ``companion.sitl.processes`` starts and stops them.
 
 Synchronised start (``sync_start``, the default): every vehicle's pre-arm checks are held failing
 until every companion waits to arm, then cleared on all at once (``companion.fleet.start_gate``),
 so that vehicles meant to meet at a crossing do. Each vehicle is parked facing its first
 waypoint (``face_first_leg``). The missions (choosing them, their homes, the crossing missions of
-``mission_files/fleet/``) are ``companion.fleet.missions``; the children's processes
-``companion.fleet.processes``; how the flight ended ``companion.fleet.results``.
+``mission_files/fleet/``) are ``companion.fleet.missions``; the children's command lines
+``companion.sitl.vehicles``; how the flight ended ``companion.fleet.results``.
 """
 
 from __future__ import annotations
@@ -48,16 +48,16 @@ import math
 import os
 import signal
 import socket
-import subprocess
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from companion.errors import ConfigError
 from companion.fleet.missions import first_leg_heading_deg, mission_home
-from companion.fleet.processes import descendants, process_state, send_signal, spawn, start_time, wait_or_kill
 from companion.fleet.results import FleetResult, VehicleResult, last_json_line
 from companion.fleet.start_gate import HOLD_CONFIG, StartGate
+from companion.sitl.processes import Escalation, ManagedProcess, ProcessGroup, python_command, spawn
+from companion.sitl.vehicles import companion_run_args, home_arg, sim_vehicle_args
 from heli_common.ports import free_port
 
 __all__ = ["Fleet", "FleetVehicle", "default_logs_dir", "DEFAULT_GCS_OUT"]
@@ -74,6 +74,11 @@ COMPANION_STOP_S = 45.0
 PROCESS_STOP_S = 10.0
 #: How long a companion's planning workers may take to exit after it (wall s).
 LEFTOVER_GRACE_S = 5.0
+#: Interrupted companions: SIGINT, then SIGTERM and SIGKILL if one does not stop in time.
+COMPANION_ESCALATION = Escalation(((signal.SIGINT, COMPANION_STOP_S), (signal.SIGTERM, 5.0)),
+                                  leftover_grace_s=LEFTOVER_GRACE_S)
+#: The simulators and the router: SIGTERM, then SIGKILL.
+PROCESS_ESCALATION = Escalation(((signal.SIGTERM, PROCESS_STOP_S),), leftover_grace_s=LEFTOVER_GRACE_S)
 
 
 def default_logs_dir() -> Path:
@@ -96,9 +101,8 @@ class FleetVehicle:
     companion_log: Path
     tlog: Path
     record: Path
-    sim: subprocess.Popen | None = None
-    companion: subprocess.Popen | None = None
-    worker_pids: dict = field(default_factory=dict)     # pid -> start time: the companion's children seen
+    sim: ManagedProcess | None = None
+    companion: ManagedProcess | None = None
 
     @property
     def sysid(self) -> int:
@@ -170,8 +174,10 @@ class Fleet:
         self.sync_start = bool(sync_start)
         self.gate: StartGate | None = None
         self.face_first_leg = bool(face_first_leg)
-        self.router: subprocess.Popen | None = None
+        self.router: ManagedProcess | None = None
         self.router_endpoint = ""
+        self.companions = ProcessGroup(COMPANION_ESCALATION)
+        self.others = ProcessGroup(PROCESS_ESCALATION)       # the simulators and the router
         self.vehicles = [self._vehicle(i, m) for i, m in enumerate(missions)]
         self._started_s: float | None = None
         self._result: FleetResult | None = None
@@ -205,22 +211,16 @@ class Fleet:
                 "vehicles": [v.describe() for v in self.vehicles]}
 
     # -------------------------------------------------------------------------- start
-    def _spawn(self, module_args: list[str], log_path: Path) -> subprocess.Popen:
-        return spawn(module_args, log_path, self.env)
+    def _spawn(self, module_args: list[str], log_path: Path) -> ManagedProcess:
+        """``python -m <module_args>`` in the children's environment, ending with the launcher."""
+        return spawn(python_command(module_args), log_path, env=self.env)
 
     def sim_command(self, v: FleetVehicle) -> list[str]:
-        home = (",".join(f"{x:.8f}".rstrip("0").rstrip(".") for x in v.home_lla[:2])
-                + f",{v.home_lla[2]:g},{v.heading_deg:g}")
-        args = ["sim_vehicle.cli", "--instance", str(v.instance), "--home", home, "--port", str(v.sim_port),
-                "--out", f"127.0.0.1:{v.companion_port}"]
-        if self.gcs_out:
-            args += ["--out", self.gcs_out]
-        args += ["--speedup", f"{self.speedup:g}", "--tlog", str(v.tlog)]
-        if self.seed is not None:
-            args += ["--seed", str(self.seed + v.instance)]
-        if self.sync_start:
-            args += ["--config", str(self.hold_config)]
-        return args + list(self.sim_args)
+        outs = [f"127.0.0.1:{v.companion_port}"] + ([self.gcs_out] if self.gcs_out else [])
+        return sim_vehicle_args(v.sim_port, outs=outs, speedup=self.speedup, instance=v.instance,
+                                home=home_arg(v.home_lla, v.heading_deg), tlog=v.tlog,
+                                seed=None if self.seed is None else self.seed + v.instance,
+                                config=self.hold_config if self.sync_start else None, extra=self.sim_args)
 
     @property
     def hold_config(self) -> Path:
@@ -228,17 +228,13 @@ class Fleet:
         return self.logs_dir / "sim_hold_start.toml"
 
     def companion_command(self, v: FleetVehicle) -> list[str]:
-        args = ["companion.cli", "run", "--instance", str(v.instance),
-                "--connect", f"udpin://127.0.0.1:{v.companion_port}", "--mission", str(v.mission),
-                "--zenoh-connect", self.router_endpoint, "--zenoh-listen", v.zenoh_listen,
-                "--record", str(v.record), "--time-scale", f"{self.speedup:g}"]
-        if not self.share:
-            args.append("--no-fleet")
+        fleet_args = [] if self.share else ["--no-fleet"]
         if self.trajectory_delay_ms is not None:
-            args += ["--fleet-delay-ms", f"{self.trajectory_delay_ms:g}"]
-        if self.seed is not None:
-            args += ["--seed", str(self.seed + v.instance)]
-        return args + list(self.companion_args)
+            fleet_args += ["--fleet-delay-ms", f"{self.trajectory_delay_ms:g}"]
+        return companion_run_args(f"udpin://127.0.0.1:{v.companion_port}", instance=v.instance, mission=v.mission,
+                                  zenoh_connect=self.router_endpoint, zenoh_listen=v.zenoh_listen, record=v.record,
+                                  time_scale=self.speedup, seed=None if self.seed is None else self.seed + v.instance,
+                                  extra=[*fleet_args, *self.companion_args])
 
     def start(self) -> "Fleet":
         """Start the router (and wait until it listens), then every simulator and companion;
@@ -254,8 +250,8 @@ class Fleet:
             for v in self.vehicles:
                 v.sim_port, v.companion_port = free_port(), free_port()
                 v.zenoh_listen = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
-                v.sim = self._spawn(self.sim_command(v), v.sim_log)
-                v.companion = self._spawn(self.companion_command(v), v.companion_log)
+                v.sim = self.others.add(self._spawn(self.sim_command(v), v.sim_log))
+                v.companion = self.companions.add(self._spawn(self.companion_command(v), v.companion_log))
                 log.info("vehicle %d: sim-vehicle pid %d, companion pid %d, mission %s", v.sysid, v.sim.pid,
                          v.companion.pid, v.mission.name)
             if self.sync_start:
@@ -270,16 +266,11 @@ class Fleet:
     def _start_router(self) -> None:
         self.router_endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
         router_log = self.logs_dir / "router.log"
-        self.router = self._spawn(["companion.cli", "router", "--listen", self.router_endpoint], router_log)
-        deadline = time.monotonic() + ROUTER_START_S
-        while "zenoh router listening" not in router_log.read_text(errors="replace"):
-            if self.router.poll() is not None:
-                raise ConfigError(f"the zenoh router on {self.router_endpoint} exited with status "
-                                  f"{self.router.returncode}; see {router_log}")
-            if time.monotonic() > deadline:
-                raise ConfigError(f"the zenoh router on {self.router_endpoint} did not listen within "
-                                  f"{ROUTER_START_S:.0f} s; see {router_log}")
-            time.sleep(0.1)
+        self.router = self.others.add(self._spawn(["companion.cli", "router", "--listen", self.router_endpoint],
+                                                  router_log))
+        self.router.name = f"the zenoh router on {self.router_endpoint}"
+        self.router.wait_ready(self.router.log_contains("zenoh router listening"), ROUTER_START_S,
+                               "'zenoh router listening'")
         log.info("zenoh router pid %d listening on %s", self.router.pid, self.router_endpoint)
 
     def write_description(self) -> Path:
@@ -290,24 +281,14 @@ class Fleet:
     # -------------------------------------------------------------------------- run
     def running(self) -> list[int]:
         """System ids of the vehicles whose companion still runs."""
-        return [v.sysid for v in self.vehicles if v.companion is not None and v.companion.poll() is None]
+        return [v.sysid for v in self.vehicles if v.companion is not None and v.companion.is_running()]
 
     def poll(self) -> FleetResult | None:
         """The result once every companion has exited, else None (and note their workers)."""
-        for v in self.vehicles:
-            self._note_workers(v)
+        self.companions.note_descendants()
         if self.running():
             return None
         return self.result()
-
-    def _note_workers(self, v: FleetVehicle) -> None:
-        if v.companion is None or v.companion.poll() is not None:
-            return
-        for pid in descendants(v.companion.pid):
-            if pid not in v.worker_pids:
-                start = start_time(pid)
-                if start is not None:
-                    v.worker_pids[pid] = start
 
     def wait(self, timeout_s: float | None = None, *, stop_event=None) -> FleetResult:
         """Wait until every companion has exited; the result.
@@ -346,52 +327,24 @@ class Fleet:
 
     # -------------------------------------------------------------------------- stop
     def stop(self) -> FleetResult:
-        """Interrupt the companions still running (SIGINT; SIGKILL after ``COMPANION_STOP_S``),
-        then stop the simulators and the router (SIGTERM, then SIGKILL) and any planning worker
-        left behind. Idempotent; returns the result."""
+        """Interrupt the companions still running (``COMPANION_ESCALATION``: SIGINT, then
+        SIGTERM and SIGKILL if one is still running after ``COMPANION_STOP_S``), then stop the
+        simulators and the router (``PROCESS_ESCALATION``: SIGTERM, then SIGKILL); any planning
+        worker left behind is killed after ``LEFTOVER_GRACE_S``. Idempotent; returns the result."""
         if self._stopped:
             return self._result or self.result()
         if self.gate is not None:
             self.gate.stop()
         for v in self.vehicles:
-            self._note_workers(v)
-        live = [v for v in self.vehicles if v.companion is not None and v.companion.poll() is None]
-        for v in live:
-            log.warning("interrupting the companion of vehicle %d (pid %d)", v.sysid, v.companion.pid)
-            send_signal(v.companion, signal.SIGINT)
-        deadline = time.monotonic() + COMPANION_STOP_S
-        for v in live:
-            wait_or_kill(v.companion, max(deadline - time.monotonic(), 0.1))
+            if v.companion is not None and v.companion.is_running():
+                log.warning("interrupting the companion of vehicle %d (pid %d)", v.sysid, v.companion.pid)
+        self.companions.stop()
         self._result = self.result()
-        procs = [v.sim for v in self.vehicles if v.sim is not None] + ([self.router] if self.router else [])
-        for proc in procs:
-            if proc.poll() is None:
-                send_signal(proc, signal.SIGTERM)
-        deadline = time.monotonic() + PROCESS_STOP_S
-        for proc in procs:
-            wait_or_kill(proc, max(deadline - time.monotonic(), 0.1))
-        self._end_leftovers()
+        self.others.stop()
         self._stopped = True
         if self._started_s is not None and self.logs_dir.is_dir():
             self.write_description()            # with the start gate's account
         return self._result
-
-    def _end_leftovers(self) -> None:
-        """The companions' children still alive (workers exit on their own once their companion
-        has: given ``LEFTOVER_GRACE_S``), SIGKILLed."""
-        def alive() -> list[tuple[int, int]]:
-            return [(v.sysid, pid) for v in self.vehicles for pid, start in v.worker_pids.items()
-                    if start_time(pid) == start and process_state(pid) not in ("Z", "X", None)]
-
-        deadline = time.monotonic() + LEFTOVER_GRACE_S
-        while alive() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        for sysid, pid in alive():
-            log.warning("killing a process left behind by the companion of vehicle %d: pid %d", sysid, pid)
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except OSError:
-                pass
 
     def __enter__(self) -> "Fleet":
         return self.start()
@@ -401,4 +354,4 @@ class Fleet:
 
 
 def _running(v: FleetVehicle):
-    return lambda: v.companion is not None and v.companion.poll() is None
+    return lambda: v.companion is not None and v.companion.is_running()

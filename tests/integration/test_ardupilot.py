@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -36,7 +37,8 @@ from companion.mission.convert import mission_to_local
 from companion.record.flight_record import load_record
 from companion.threats.transport.bus import ThreatBus
 from companion.world import World
-from support import REPO_ROOT, free_tcp_port
+from heli_common.ports import free_port
+from support import REPO_ROOT
 
 UNAVAILABLE = ardupilot_unavailable()
 pytestmark = [pytest.mark.integration,
@@ -90,7 +92,7 @@ def flight(sitl, tmp_path_factory):
     north, east, up = HOME_SHIFT_NEU_M
     home = tuple(float(v) for v in origin.to_lla(north, east, -up))
     obs.set_home(*home)
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     config = tmp / "companion.toml"
     config.write_text(NO_ALTERNATIVES)
     adsb_puts = []

@@ -11,15 +11,16 @@ up, takes off and flies a mission. The companion must take none of those answers
 from __future__ import annotations
 
 import socket
-import subprocess
 import threading
 import time
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from companion.sitl.processes import spawn
 from flight_support import run_companion
-from support import REPO_ROOT, free_udp_port, start_sim_vehicle, stop_process
+from heli_common.ports import free_port
+from support import REPO_ROOT, start_sim_vehicle
 from test_sitl_mavproxy import mavproxy_executable
 
 pytestmark = pytest.mark.integration
@@ -89,13 +90,12 @@ class CommandingStation(threading.Thread):
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("command_matching")
-    companion_port, gcs_port = free_udp_port(), free_udp_port()
+    companion_port, gcs_port = free_port(), free_port()
     with start_sim_vehicle(speedup=SPEEDUP) as sim:
-        router = subprocess.Popen(
+        router = spawn(
             [mavproxy_executable(), f"--master=udpout:127.0.0.1:{sim.port}", f"--out=udp:127.0.0.1:{companion_port}",
              f"--out=udp:127.0.0.1:{gcs_port}", "--non-interactive", "--nowait", "--default-modules=",
-             f"--state-basedir={tmp}"], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-            stderr=subprocess.STDOUT, cwd=str(tmp))
+             f"--state-basedir={tmp}"], tmp / "mavproxy.log", cwd=tmp)
         station = CommandingStation(gcs_port)
         station.start()
         try:
@@ -104,7 +104,7 @@ def flight(tmp_path_factory):
             time.sleep(0.5)                           # the last answers come in
         finally:
             station.stop()
-            stop_process(router)
+            router.stop()
         yield {"result": result, "station": station}
 
 

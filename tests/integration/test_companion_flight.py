@@ -20,7 +20,8 @@ from companion.mission.convert import mission_to_local
 from companion.world import World
 from heli_common.mavlink_ids import COPTER_MODES
 from flight_support import TrackListener, run_companion, wait_until
-from support import REPO_ROOT, MavlinkPeer, free_udp_port, start_sim_vehicle
+from heli_common.ports import free_port
+from support import REPO_ROOT, MavlinkPeer, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -36,7 +37,7 @@ AUTO, GUIDED = COPTER_MODES["AUTO"], COPTER_MODES["GUIDED"]
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("companion_flight")
-    port = free_udp_port()
+    port = free_port()
     with TrackListener() as track, \
             start_sim_vehicle(out=[f"127.0.0.1:{port}", track.address], speedup=SPEEDUP) as sim:
         result = run_companion("run", "--connect", f"udpin://127.0.0.1:{port}", "--mission",

@@ -18,9 +18,9 @@ from companion.record.flight_record import load_record
 from companion.threats.snapshot import read_snapshot, snapshot_path
 from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat
-from flight_support import (FlightWatcher, Injection, TrackListener, free_port, inject, last_json_line, spawn,
-                            stop, wait_until)
+from flight_support import FlightWatcher, Injection, TrackListener, inject, last_json_line, spawn, wait_until
 from heli_common.mavlink_ids import COPTER_MODES
+from heli_common.ports import free_port
 from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration
@@ -119,7 +119,7 @@ def test_a_killed_companion_leaves_a_hover_and_resume_finishes_the_mission_with_
         finally:
             for proc in (second, first, sim):
                 if proc is not None:
-                    stop(proc)
+                    proc.stop()
     summary = last_json_line(tmp_path / "second.log")
     record = load_record(tmp_path / "second.jsonl")
     seq_of_leg = {p["leg"]: p["seq"] for p in load_record(tmp_path / "first.jsonl").plans}
@@ -165,8 +165,8 @@ def test_resume_refuses_a_vehicle_on_the_ground(tmp_path):
         try:
             assert companion.wait(120) == 2
         finally:
-            stop(companion)
-            stop(sim)
+            companion.stop()
+            sim.stop()
     text = (tmp_path / "companion.log").read_text()
     assert "cannot resume: the vehicle is not flying" in text
     assert track.armed is False
@@ -212,9 +212,9 @@ def test_a_router_that_stops_and_returns_loses_neither_the_flight_nor_later_thre
                 assert companion.wait(300) == 0, (tmp_path / "companion.log").read_text()[-3000:]
             t, pos = track.samples()
         finally:
-            stop(companion)
-            stop(rtr)
-            stop(sim)
+            companion.stop()
+            rtr.stop()
+            sim.stop()
     summary = last_json_line(tmp_path / "companion.log")
     assert summary["outcome"] == "completed" and summary["legs_reached"] == summary["legs_planned"]
     names = [e["name"] for e in load_record(tmp_path / "flight.jsonl").events]

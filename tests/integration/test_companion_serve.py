@@ -20,8 +20,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.threats.transport.bus import ThreatBus
 from companion.geo import LocalFrame
-from flight_support import DEMO_HOME, TrackListener, free_port, last_json_line, run_companion, spawn, stop, wait_until
+from flight_support import DEMO_HOME, TrackListener, last_json_line, run_companion, spawn, wait_until
 from heli_common.mavlink_ids import COPTER_MODES
+from heli_common.ports import free_port
 from support import MavlinkPeer
 
 pytestmark = pytest.mark.integration
@@ -105,7 +106,7 @@ def test_serve_waits_for_the_vehicle_flies_each_start_and_yields_to_the_pilot(tm
                 assert (hb.type, hb.autopilot, hb.system_status) == (
                     mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, mavlink.MAV_STATE_STANDBY)
         finally:
-            stop(first)
+            first.stop()
         time.sleep(5.0)                                       # a vehicle reboot: its heartbeats stop
         with TrackListener() as track:
             vehicle = sim_vehicle(tmp_path, vehicle_port, mav_port, "sim_vehicle_2", track)
@@ -119,9 +120,9 @@ def test_serve_waits_for_the_vehicle_flies_each_start_and_yields_to_the_pilot(tm
                     hand_the_next_flight_to_the_pilot(gcs, track, endpoint)
                 service.wait(60.0)
             finally:
-                stop(vehicle)
+                vehicle.stop()
     finally:
-        stop(service)
+        service.stop()
     assert service.returncode == 0, log_text()[-3000:]
     summaries = [json.loads(line) for line in log_text().splitlines() if line.startswith('{"flight"')]
     assert [s["flight"] for s in summaries] == [1, 2]
@@ -206,7 +207,7 @@ def test_serve_resume_takes_over_the_hovering_vehicle_after_a_crash(tmp_path):
         finally:
             for proc in (first, second, vehicle):
                 if proc is not None:
-                    stop(proc)
+                    proc.stop()
     assert second.returncode == 0
     summary = last_json_line(tmp_path / "serve_2.log")
     assert summary["outcome"] == "completed" and summary["resumed_at_seq"] is not None, summary

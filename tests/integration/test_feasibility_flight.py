@@ -17,7 +17,8 @@ import pytest
 from companion.record.flight_record import load_record
 from companion.record.report import servo_us_to_delta
 from flight_support import TrackListener, run_companion, wait_until
-from support import free_udp_port, start_sim_vehicle
+from heli_common.ports import free_port
+from support import start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -43,7 +44,7 @@ def flight(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("feasibility_flight")
     (tmp / "leg.waypoints").write_text(MISSION)
     (tmp / "aggressive.toml").write_text(CONFIG)
-    port = free_udp_port()
+    port = free_port()
     with TrackListener() as track, \
             start_sim_vehicle(out=[f"127.0.0.1:{port}", track.address], speedup=SPEEDUP):
         result = run_companion("run", "--connect", f"udpin://127.0.0.1:{port}", "--mission",

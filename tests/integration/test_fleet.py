@@ -36,8 +36,8 @@ from companion.fleet.launcher import Fleet
 from companion.fleet.missions import select_missions
 from companion.fleet.settings import FleetSettings
 from companion.fleet.tracks import fleet_separation
-from flight_support import checkout_env, wait_until
-from support import REPO_ROOT
+from flight_support import wait_until
+from support import REPO_ROOT, checkout_env
 
 pytestmark = pytest.mark.integration
 

@@ -14,9 +14,10 @@ from companion.service.startup import StartupSettings, start_vehicle
 from companion.flight.reference import VehicleClock
 from companion.errors import LinkError
 from companion.link import COPTER_MODES, SetpointStreamer, VehicleLink, hold_position
+from heli_common.ports import free_port
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from support import free_udp_port, start_sim_vehicle  # noqa: E402
+from support import start_sim_vehicle  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
@@ -51,7 +52,7 @@ def test_no_autopilot_times_out():
     async def main():
         link = VehicleLink()
         with pytest.raises(LinkError, match="no autopilot"):
-            await link.connect(f"udpin://127.0.0.1:{free_udp_port()}", timeout_s=1.0)
+            await link.connect(f"udpin://127.0.0.1:{free_port()}", timeout_s=1.0)
         with pytest.raises(LinkError, match="cannot open udpin://127.0.0.1:0"):
             await VehicleLink().connect("udpin://127.0.0.1:0", timeout_s=1.0)
 

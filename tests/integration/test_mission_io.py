@@ -15,9 +15,10 @@ from pathlib import Path
 import pytest
 
 from companion.mission import load_mission_file
+from heli_common.ports import free_port
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from support import REPO_ROOT, free_udp_port, start_sim_vehicle  # noqa: E402
+from support import REPO_ROOT, start_sim_vehicle  # noqa: E402
 
 pytestmark = pytest.mark.integration
 SAMPLES = REPO_ROOT / "mission_files"
@@ -136,7 +137,7 @@ def test_broken_file_uploads_nothing(tmp_path, sim, breakage, message):
 
 
 def test_no_vehicle_is_a_clear_error(tmp_path):
-    port = free_udp_port()
+    port = free_port()
     result = companion("upload", str(SAMPLES / "square.waypoints"),
                        "--connect", f"udpout://127.0.0.1:{port}", "--timeout", "2")
     assert result.returncode == 2

@@ -18,7 +18,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from flight_support import run_companion
-from support import REPO_ROOT, MavlinkPeer, free_udp_port, start_sim_vehicle
+from heli_common.ports import free_port
+from support import REPO_ROOT, MavlinkPeer, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -67,7 +68,7 @@ def key_file(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def flight(key_file):
-    port = free_udp_port()
+    port = free_port()
     with start_sim_vehicle(out=[f"127.0.0.1:{port}"], speedup=SPEEDUP, signing_key=KEY,
                            extra_args=["--signing-key", str(key_file)]) as sim:
         intruder = Intruder(sim.port)
@@ -109,7 +110,7 @@ def test_a_companion_with_the_wrong_key_fails_with_one_line_naming_it(tmp_path):
     config.write_text("[link]\nconnect_timeout_s = 4.0\n")
     right = tmp_path / "right.key"
     right.write_text(PASSPHRASE)
-    port = free_udp_port()
+    port = free_port()
     with start_sim_vehicle(out=[f"127.0.0.1:{port}"], speedup=SPEEDUP, signing_key=KEY,
                            extra_args=["--signing-key", str(right)]):
         result = run_companion("run", "--connect", f"udpin://127.0.0.1:{port}", "--mission", str(MISSION),

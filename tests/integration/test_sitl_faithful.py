@@ -20,7 +20,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from flight_support import TrackListener, wait_until
-from support import MavlinkPeer, free_udp_port, start_sim_vehicle
+from heli_common.ports import free_port
+from support import MavlinkPeer, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -32,7 +33,7 @@ class Listener:
     """A passive UDP listener on an ``--out`` address: it never sends anything."""
 
     def __init__(self) -> None:
-        self.port = free_udp_port()
+        self.port = free_port()
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", self.port))
         self.sock.settimeout(0.1)

@@ -21,7 +21,8 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from support import free_udp_port, start_sim_vehicle
+from heli_common.ports import free_port
+from support import start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -137,7 +138,7 @@ async def _missions_and_guided_flight():
     from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
     from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
-    gcs_port = free_udp_port()
+    gcs_port = free_port()
     with start_sim_vehicle(out=[f"127.0.0.1:{gcs_port}"], speedup=SPEEDUP) as sim:
         mavsdk, system = await connect(gcs_port)
         try:

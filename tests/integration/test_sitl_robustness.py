@@ -18,7 +18,8 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from support import MavlinkPeer, REPO_ROOT, free_udp_port, start_sim_vehicle
+from heli_common.ports import free_port
+from support import MavlinkPeer, REPO_ROOT, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -161,7 +162,7 @@ def test_two_instances_side_by_side_and_tlog(tmp_path):
     (["--config", "/no/such/settings.toml"], "settings.toml"),
 ])
 def test_cli_errors_are_one_line_without_traceback(args, fragment):
-    port = free_udp_port()
+    port = free_port()
     proc = subprocess.run([sys.executable, "-m", "sim_vehicle.cli", "--port", str(port), *args],
                           capture_output=True, text=True, timeout=60, cwd=str(REPO_ROOT))
     assert proc.returncode == 2

@@ -17,7 +17,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from companion.errors import LinkError
 from companion.link import VehicleLink
-from support import free_udp_port, start_sim_vehicle
+from heli_common.ports import free_port
+from support import start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -52,7 +53,7 @@ class GroundStation:
 
 def test_the_companions_statustext_reaches_the_ground_station():
     gcs = GroundStation()
-    companion_port = free_udp_port()
+    companion_port = free_port()
 
     async def main(sim) -> list:
         link = VehicleLink("companion")

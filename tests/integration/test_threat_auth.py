@@ -9,6 +9,7 @@ control on the same companion session, so that "nothing arrived" is not a dead l
 from __future__ import annotations
 
 import json
+import socket
 import time
 
 import pytest
@@ -19,7 +20,7 @@ from companion.threats.transport import access
 from companion.threats.transport import codec
 from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat, ThreatTable
-from tests.support import free_tcp_port
+from heli_common.ports import free_port
 from tests.integration.test_threat_bus import companion, wait_for
 from tests.unit.flight.test_avoidance import Harness, run, trajectory_decision, until
 
@@ -34,7 +35,7 @@ def popup(tid: str) -> bytes:
 
 @pytest.fixture
 def deploy(tmp_path):
-    endpoint = f"tls/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"tls/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     dep = init_deployment(tmp_path / "deploy", sources=["radar1", "radar2"], observers=["gcs"],
                           listen=[endpoint], connect=[endpoint])
     # an identity signed by the same CA but named in no rule

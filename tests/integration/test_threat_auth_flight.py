@@ -11,6 +11,8 @@ companion.
 
 from __future__ import annotations
 
+import socket
+
 import numpy as np
 import pytest
 
@@ -18,9 +20,10 @@ from companion.geo import LocalFrame
 from companion.record.flight_record import load_record
 from companion.security.deployment import init_deployment
 from companion.threats.transport.bus import ThreatBus
-from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, inject,
-                            place, wait_until)
-from support import REPO_ROOT, free_tcp_port
+from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, inject, place,
+                            wait_until)
+from heli_common.ports import free_port
+from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration
 
@@ -34,7 +37,7 @@ INTRUSION = Injection("gcs1", "popup", leg=1, after_s=2.0, ahead_s=4.0, radius_m
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("threat_auth_flight")
-    endpoint = f"tls/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"tls/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     dep = init_deployment(tmp / "deploy", sources=["radar1"], observers=["gcs"], listen=[endpoint],
                           connect=[endpoint])
     seen: dict = {}

@@ -8,6 +8,7 @@ zenoh router running in a third process.
 from __future__ import annotations
 
 import asyncio
+import socket
 import subprocess
 import sys
 import textwrap
@@ -16,9 +17,11 @@ import time
 
 import pytest
 
+from companion.sitl.processes import spawn
 from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import ThreatTable
-from tests.support import REPO_ROOT, free_tcp_port, stop_process
+from heli_common.ports import free_port
+from tests.support import REPO_ROOT
 
 pytestmark = pytest.mark.integration
 
@@ -41,7 +44,7 @@ def wait_for(predicate, timeout_s: float = 10.0) -> bool:
 
 @pytest.fixture
 def listener():
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     bus = ThreatBus(7, listen=[endpoint]).open()
     updates: list = []
     bus.inbound.subscribe(updates.append)
@@ -131,19 +134,21 @@ def test_play_scenario_delivers_every_event_in_order(listener, tmp_path):
 
 
 def test_through_a_router_and_into_an_asyncio_loop(tmp_path):
-    router_ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router_ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     script = textwrap.dedent(f"""
-        import sys, time
+        import signal
         from companion.threats.transport.bus import ThreatBus
         bus = ThreatBus(3, listen=["{router_ep}"], mode="router").open()
         print("ready", flush=True)
-        sys.stdin.readline()
+        try:
+            signal.pause()                     # until stopped (SIGINT)
+        except KeyboardInterrupt:
+            pass
         bus.close()
     """)
-    router = subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE,
-                              stdout=subprocess.PIPE, text=True, cwd=REPO_ROOT)
+    router = spawn([sys.executable, "-c", script], tmp_path / "router.log", cwd=REPO_ROOT)
     try:
-        assert router.stdout.readline().strip() == "ready"
+        router.wait_ready(router.log_contains("ready"), 60.0, "'ready'")
 
         async def main():
             loop = asyncio.get_running_loop()
@@ -171,13 +176,11 @@ def test_through_a_router_and_into_an_asyncio_loop(tmp_path):
         assert update.action == "put" and update.threat.position == (1.0, 2.0, -3.0)
         assert thread_id == threading.get_ident()        # the handler ran on the loop's thread
     finally:
-        router.stdin.write("\n")
-        router.stdin.flush()
-        stop_process(router)
+        router.stop()
 
 
 def test_cli_without_a_listener_warns_and_fails():
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     res = companion("threat", "remove", "--id", "x", "--zenoh-listen", endpoint, "--wait", "0.3")
     assert res.returncode == 1
     assert "no subscriber" in res.stderr and "Traceback" not in res.stderr

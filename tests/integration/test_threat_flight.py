@@ -34,8 +34,9 @@ from companion.view.mcap_record import load_flight
 from foxglove_client import collect
 from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat
-from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, free_port,
-                            inject, last_json_line, wait_until)
+from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, inject,
+                            last_json_line, wait_until)
+from heli_common.ports import free_port
 from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration

@@ -17,6 +17,7 @@ from companion.fleet.launcher import Fleet
 from companion.fleet.missions import (crossing_missions, head_on_missions, mission_home, planned_length_m,
                                       select_missions, write_missions)
 from companion.mission import load_mission_file, mission_to_local
+from companion.sitl.processes import spawn
 from heli_common.frames import LocalFrame
 from support import REPO_ROOT
 
@@ -187,8 +188,7 @@ class FakeFleet(Fleet):
     def _spawn(self, module_args, log_path):
         code = {"companion.cli": self.DONE if self.finish else self.COMPANION, "sim_vehicle.cli": self.ROUTER}
         script = self.ROUTER if module_args[1] == "router" else code[module_args[0]]
-        with open(log_path, "wb") as fh:
-            return subprocess.Popen([sys.executable, "-c", script], stdout=fh, stderr=subprocess.STDOUT)
+        return spawn([sys.executable, "-c", script], log_path)
 
 
 def test_stop_interrupts_the_companions_then_ends_everything(tmp_path):
