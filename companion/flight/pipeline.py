@@ -9,8 +9,8 @@ it: a mission leg (``companion.flight.plan``), a join onto a path and a replan
 speed limit from it. So ``smoothing.method``, the limits and the closed-loop check take effect
 everywhere.
 
-The pipeline is immutable and picklable (it goes to the planning worker processes with the
-threat manager). Numerics only: no I/O, no asyncio.
+The pipeline is immutable and picklable (it goes to the planning worker processes in the
+decision's policy, ``companion.threats.decision.values.DecisionPolicy``). Numerics only: no I/O, no asyncio.
 """
 
 from __future__ import annotations
@@ -100,8 +100,8 @@ class TrajectoryPipeline:
     @classmethod
     def for_limits(cls, limits: TrajectoryLimits | None = None, kappa_max_1_m: float = 0.1,
                    gart_settings: GartSettings | None = None) -> "TrajectoryPipeline":
-        """``from_settings`` of a G2 smoothing tree with these limits and K_max (tests, benchmarks
-        and the threat manager's keyword arguments)."""
+        """``from_settings`` of a G2 smoothing tree with these limits and K_max (tests, benchmarks,
+        and the decision policy's default)."""
         smoothing = SmoothingSettings(kappa_max_1_m=kappa_max_1_m, limits=limits or TrajectoryLimits())
         return cls.from_settings(smoothing, gart_settings or GartSettings(kappa_max_1_m=kappa_max_1_m))
 

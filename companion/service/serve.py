@@ -46,7 +46,7 @@ from companion.link.onboard import OnboardCommand, OnboardComponent
 from companion.link.setpoints import raise_stream_priority
 from companion.service.startup import is_airborne
 from companion.link.vehicle import check_url
-from companion.service.legs import GUIDED
+from companion.service.mission import GUIDED
 from companion.threats.settings import DEFAULT_SYSID
 
 log = logging.getLogger(__name__)
