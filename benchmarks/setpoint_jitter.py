@@ -57,6 +57,9 @@ sys.path.insert(0, str(REPO))
 
 from benchmarks.live_view_load import LiveViewLoad  # noqa: E402
 from companion.daemon import GIL_SWITCH_INTERVAL_S  # noqa: E402
+from companion.flight.schedule import Scheduler, Task  # noqa: E402
+from companion.link.periodic import PeriodicDriver  # noqa: E402
+from companion.service.background import RECORD_WRITE_RATE_HZ  # noqa: E402
 from companion.workers import PlanningWorkers  # noqa: E402
 from companion.link.setpoints import (SetpointStreamer, hold_position, jitter_stats,  # noqa: E402
                                       planning_worker_init, raise_stream_priority,
@@ -213,9 +216,14 @@ async def run_scenario(name: str, send, seconds: float, view=None) -> dict:
                 view.on_replan()
             seed += 1
 
-    streamer.start()
+    # as companion.daemon streams: the schedule's setpoints row, the record written by its
+    # record_write row right after a send, one kernel timer driving the table
+    rows = [Task("setpoints", 50.0, streamer.tick, budget_ms=2.0)]
     if view is not None:
-        view.sinks.pace(streamer.call_after_next_tick)          # as companion.daemon writes its record
+        view.sinks.pace(True)
+        rows.append(Task("record_write", RECORD_WRITE_RATE_HZ, lambda now: view.sinks.flush(), budget_ms=3.0))
+    driver = PeriodicDriver(50.0, Scheduler(rows, slack_s=0.01).tick)
+    driver.start()
     feeding = asyncio.get_running_loop().create_task(view.feed(stop_at)) if view is not None else None
     try:
         if executor is not None or workers is not None:
@@ -224,7 +232,8 @@ async def run_scenario(name: str, send, seconds: float, view=None) -> dict:
         if remaining > 0:
             await asyncio.sleep(remaining)
     finally:
-        await streamer.stop()
+        await driver.stop()
+        streamer.missed = driver.missed
         if feeding is not None:
             await feeding
         sys.setswitchinterval(old_switch)
