@@ -504,7 +504,7 @@ def main(argv=None) -> int:
         {"summary": summary, "storm": storm, "settings": settings.__dict__, "strategies": strategies,
          "skipped_strategies": missing, "encounters": rows, "quick": args.quick, "seed": args.seed,
          "workers": args.workers, "encounter_wall_s": enc_wall, "elapsed_s": elapsed,
-         "decision_module": decide.__module__}, indent=1, default=float))
+         "flown_by": FastTimeFlight.__module__}, indent=1, default=float))
     if not args.no_docs:
         doc = ROOT / "docs" / "benchmarks" / "threats.md"
         doc.parent.mkdir(parents=True, exist_ok=True)

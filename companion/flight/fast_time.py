@@ -8,9 +8,9 @@ ports (``companion.flight.ports``):
   ``heli_model.vehicle_update.VehicleUpdate``, the LQI flight controller and RK4 physics that
   ``sim-vehicle`` flies), given each setpoint the executor streams;
 - jobs (decisions, replans, alternatives) run in process (:class:`InlineJobs`); each is done
-  when the virtual clock has passed its start plus its measured wall-clock duration (times
-  ``job_time_scale``), so the vehicle keeps flying the old reference meanwhile, as it does over
-  MAVLink;
+  at its start plus its measured wall-clock duration (times ``job_time_scale``) on the virtual
+  clock, and handed over at that instant, so the vehicle keeps flying the old reference
+  meanwhile, as it does over MAVLink;
 - threats arrive as the encounter says (:class:`ThreatFeed`): each update at its time, through
   the same ``Avoidance.on_threats_changed`` a zenoh sample or an ADS-B report goes through.
 
@@ -149,9 +149,13 @@ class InlineJobs:
         heapq.heappush(self._due, _Job(self.clock.t_s + spent * self.job_time_scale, next(self._order), outcome))
 
     def deliver(self, now_s: float) -> None:
-        """Hand over the results of the jobs done by ``now_s``, in order."""
+        """Hand over the results of the jobs done by ``now_s``, in order, each at the instant it
+        was done (as the daemon's loop takes a worker's result the moment it comes)."""
         while self._due and self._due[0].due_s <= now_s:
-            heapq.heappop(self._due).outcome()
+            job = heapq.heappop(self._due)
+            self.clock.t_s = max(job.due_s, self.clock.t_s)
+            job.outcome()
+        self.clock.t_s = now_s
 
 
 class ThreatFeed:
