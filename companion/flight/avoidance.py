@@ -36,7 +36,7 @@ from typing import Callable, Protocol
 from companion.flight.active import ReferenceOwner
 from companion.flight.ports import FlightSink, Jobs
 from companion.flight.reference import ActiveReference
-from companion.threats.decision.kinds import DecisionKind, Trigger
+from companion.threats.decision.kinds import Trigger
 from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
                                              Observation, active_conflict, decide, plan_alternatives_for)
 
@@ -281,12 +281,9 @@ class Avoidance:
     def _apply(self, decision, trigger: Trigger, trigger_mono_s: float) -> None:
         """Engage the decision's trajectory (after the delay check), then tell it; a decision
         without a new reference (``none``) is logged only."""
-        if decision.trajectory is None and decision.kind is not DecisionKind.REJECTED:
+        if decision.trajectory is None:
             log.debug("threat check (%s): %s %s (%.1f ms)", trigger.value, decision.kind.value,
                       decision.reason, decision.decide_ms)
-            return
-        if decision.trajectory is None:
-            self._tell(decision, trigger, None)
             return
         current = self.owner.current
         proceed = functools.partial(self._commit, decision, trigger, trigger_mono_s, current)
@@ -329,9 +326,6 @@ class Avoidance:
         return {**decision.as_event(), "label": decision.label or decision.kind.value,
                 "trigger": trigger.value, "latency_ms": None, "t_s": self.now_s(),
                 "pos_ned_m": self.position_ned_m(), "leg": None if self.leg is None else self.leg.index}
-
-    def _tell(self, decision, trigger: Trigger, latency_ms: float | None) -> None:
-        self._publish(decision, {**self._event(decision, trigger), "latency_ms": latency_ms})
 
     def _publish(self, decision, event: dict) -> None:
         self.decisions += 1

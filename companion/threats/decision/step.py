@@ -53,7 +53,7 @@ from companion.threats.decision.worlds import airspace, planning_slab
 
 #: The step's values (``values.py``) are part of its API: callers import them from here.
 __all__ = ["DecisionError", "ActiveTrajectory", "LegContext", "DecisionPolicy", "DecisionState", "Observation",
-           "decide", "active_conflict", "plan_alternatives_for", "rejected", "reference_state"]
+           "decide", "active_conflict", "plan_alternatives_for", "reference_state"]
 
 log = logging.getLogger(__name__)
 
@@ -163,11 +163,6 @@ def decide(state: DecisionState, obs: Observation, leg: LegContext,
     if obs.trigger is Trigger.RESUME:
         return _resume(state, obs, leg, policy)
     return _on_threats(state, obs, leg, policy)
-
-
-def rejected(error: Exception) -> Decision:
-    """The ``rejected`` decision for an invalid threat sample (the flight goes on)."""
-    return Decision(DecisionKind.REJECTED, str(error))
 
 
 def _on_threats(state: DecisionState, obs: Observation, leg: LegContext, policy: DecisionPolicy):

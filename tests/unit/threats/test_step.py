@@ -22,7 +22,7 @@ from companion.threats.decision.choice import Decision
 from companion.threats.decision.kinds import CandidateKind, DecisionKind, Strategy, Trigger
 from companion.threats.decision.step import (ActiveTrajectory, DecisionError, DecisionPolicy, DecisionState,
                                              LegContext, Observation, active_conflict, decide,
-                                             plan_alternatives_for, reference_state, rejected)
+                                             plan_alternatives_for, reference_state)
 from companion.threats.model import Threat
 from companion.threats.settings import ThreatSettings
 from companion.workers import PlanningWorkers
@@ -257,6 +257,6 @@ def test_kinds_in_events_are_plain_strings(nominal):
     assert type(event["event"]) is str and type(event["label"]) is str and event["event"] == "retime"
     assert all(type(k) is str for k in event["candidates"])
     assert json.loads(json.dumps(event))["event"] == "retime"
-    assert type(rejected(ValueError("bad radius")).as_event()["event"]) is str
-    assert rejected(ValueError("bad radius")).kind is DecisionKind.REJECTED
+    rejected = Decision(DecisionKind.REJECTED, "bad radius")
+    assert type(rejected.as_event()["event"]) is str and rejected.kind is DecisionKind.REJECTED
     assert CandidateKind("none") is CandidateKind.KEEP and f"{Strategy.HYBRID}" == "hybrid"
