@@ -1,0 +1,1 @@
+"""Validation campaign: encounters flown twice, risk ratios (DESIGN section 13)."""
