@@ -356,9 +356,12 @@ class Avoidance:
         plan = self.alternatives_plan
         obs = self._observation(Trigger.MONITOR)
         ref = self.owner.current
-        key = None if obs.threats else (self.leg.index, None if ref is None else ref.path_id)
-        if key is not None and key == self._alt_last_key:
-            self.alternatives_skipped += 1       # nothing could have changed them
+        # planned again when the reference or the set of threats known changes, not on every
+        # report of a threat already known: a switch is judged against the threats' latest
+        # prediction anyway (candidates.switch_to_alternatives)
+        key = (self.leg.index, None if ref is None else ref.path_id, frozenset(t.uid for t in obs.threats))
+        if key == self._alt_last_key:
+            self.alternatives_skipped += 1
             return
         start = None if ref is None else ref.state(obs.t_s + plan.lead_s)[0]
         self._alt_busy, self._alt_dirty = True, False

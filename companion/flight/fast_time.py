@@ -9,8 +9,9 @@ ports (``companion.flight.ports``):
   ``sim-vehicle`` flies), given each setpoint the executor streams;
 - jobs (decisions, replans, alternatives) run in process (:class:`InlineJobs`); each is done
   at its start plus its measured wall-clock duration (times ``job_time_scale``) on the virtual
-  clock, and handed over at that instant, so the vehicle keeps flying the old reference
-  meanwhile, as it does over MAVLink;
+  clock, or plus a modelled duration (:class:`JobLatency`: a reproducible flight), and handed
+  over at that instant, so the vehicle keeps flying the old reference meanwhile, as it does
+  over MAVLink;
 - threats arrive as the encounter says (:class:`ThreatFeed`): each update at its time, through
   the same ``Avoidance.on_threats_changed`` a zenoh sample or an ADS-B report goes through.
 
@@ -41,12 +42,12 @@ from companion.flight.executor import FlightExecutor
 from companion.flight.legs import FlightOutcome, LegReplanner
 from companion.flight.pipeline import TrajectoryPipeline
 from companion.flight.ports import VehicleView
-from companion.threats.decision.kinds import Strategy
+from companion.threats.decision.kinds import DecisionKind, Strategy, Trigger
 from companion.threats.decision.step import DecisionPolicy, DecisionState
 from companion.threats.model import Threat, ThreatTable
 
-__all__ = ["VirtualClock", "ModelVehicle", "InlineJobs", "ThreatFeed", "FlightLog", "FastTimeResult",
-           "FastTimeFlight"]
+__all__ = ["VirtualClock", "ModelVehicle", "JobLatency", "InlineJobs", "ThreatFeed", "FlightLog",
+           "FastTimeResult", "FastTimeFlight"]
 
 log = logging.getLogger(__name__)
 
@@ -113,6 +114,39 @@ class ModelVehicle:
             self.state = self.update.update(self.state, VehicleCommand(self.setpoint), dt_s / n)
 
 
+@dataclasses.dataclass(frozen=True)
+class JobLatency:
+    """Modelled job durations on the virtual clock (s), in place of the measured ones: the flight
+    no longer depends on this machine's speed or load (the campaign's rows are reproducible).
+
+    The defaults are the decision-latency goals (DESIGN section 7): 50 ms for a decision, 250 ms
+    for one that plans again (a replan, or the way back to the mission), 250 ms for a leg's
+    replan, the alternatives' budget for an alternatives job.
+    """
+
+    decision_s: float = 0.05
+    replan_s: float = 0.25
+    alternatives_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("decision_s", "replan_s", "alternatives_s"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name}: must be a finite number of seconds >= 0, got {value!r}")
+
+    def of(self, name: str, args: tuple, result) -> float:
+        """The duration of job ``name`` called with ``args`` that returned ``result`` (None when
+        it raised)."""
+        if name == "alternatives":
+            return self.alternatives_s
+        if name == "decision":
+            observation = args[1]
+            kind = getattr(result[0], "kind", None) if isinstance(result, tuple) and result else None
+            plans = kind == DecisionKind.REPLAN or observation.trigger == Trigger.RESUME
+            return self.replan_s if plans else self.decision_s
+        return self.replan_s
+
+
 @dataclasses.dataclass(order=True)
 class _Job:
     due_s: float
@@ -128,17 +162,21 @@ class InlineJobs:
     clock : VirtualClock
     job_time_scale : float
         Virtual seconds per measured wall-clock second of a job (1: as long as it took here).
+    latency : JobLatency, optional
+        Modelled durations instead (``job_time_scale`` is then not used).
     """
 
-    def __init__(self, clock: VirtualClock, job_time_scale: float = 1.0) -> None:
+    def __init__(self, clock: VirtualClock, job_time_scale: float = 1.0, latency: JobLatency | None = None) -> None:
         self.clock = clock
         self.job_time_scale = float(job_time_scale)
+        self.latency = latency
         self._due: list[_Job] = []
         self._order = itertools.count()
         self.wall_s: dict[str, list[float]] = {}
 
     def submit(self, name: str, fn: Callable, args: tuple, done: Callable, failed: Callable) -> None:
         t0 = time.perf_counter()
+        result = None
         try:
             result = fn(*args)
             outcome = lambda: done(result)          # noqa: E731 - delivered later
@@ -146,7 +184,8 @@ class InlineJobs:
             outcome = lambda: failed(exc)           # noqa: E731
         spent = time.perf_counter() - t0
         self.wall_s.setdefault(name, []).append(spent)
-        heapq.heappush(self._due, _Job(self.clock.t_s + spent * self.job_time_scale, next(self._order), outcome))
+        took = spent * self.job_time_scale if self.latency is None else self.latency.of(name, args, result)
+        heapq.heappush(self._due, _Job(self.clock.t_s + took, next(self._order), outcome))
 
     def deliver(self, now_s: float) -> None:
         """Hand over the results of the jobs done by ``now_s``, in order, each at the instant it
@@ -165,10 +204,12 @@ class ThreatFeed:
     ----------
     updates : sequence of (t_s, Threat or None, str)
         Mission time, the threat put (None: the id deleted) and its id.
+    home : companion.geo.LocalFrame, optional
+        Where ``global`` threats (ADS-B) are converted to the local frame.
     """
 
-    def __init__(self, updates: Sequence[tuple[float, Threat | None, str]]) -> None:
-        self.table = ThreatTable()
+    def __init__(self, updates: Sequence[tuple[float, Threat | None, str]], home=None) -> None:
+        self.table = ThreatTable(home)
         self._updates = sorted(updates, key=lambda u: u[0])
         self._next = 0
 
@@ -278,23 +319,28 @@ class FastTimeFlight:
         How a leg is planned again (default: in ``world``, through the settings' pipeline).
     update : VehicleUpdate, optional
         The vehicle (default: built from ``model``); give one to fly many flights on one design.
+    job_latency : JobLatency, optional
+        Modelled job durations (``InlineJobs``); default: measured, times ``job_time_scale``.
+    home : companion.geo.LocalFrame, optional
+        The local frame's origin, for ``global`` threats (ADS-B reports).
     """
 
     def __init__(self, legs, settings, *, threats=None, strategy: Strategy = Strategy.HYBRID,
                  policy: DecisionPolicy | None = None, seed: int = 0,
                  start_yaw_rad: float = 0.0, model: HeliModel | None = None, job_time_scale: float = 1.0,
                  world=None, replanner: LegReplanner | None = None,
-                 update: VehicleUpdate | None = None) -> None:
+                 update: VehicleUpdate | None = None, job_latency: JobLatency | None = None,
+                 home=None) -> None:
         self.settings = settings
         self.clock = VirtualClock()
         start = np.asarray(legs[0].trajectory.sample(np.array([0.0]))[0][0], dtype=float)
         update = update or VehicleUpdate.build(model or HeliModel.default())
         self.vehicle = ModelVehicle(update, start, start_yaw_rad)
-        self.jobs = InlineJobs(self.clock, job_time_scale)
+        self.jobs = InlineJobs(self.clock, job_time_scale, job_latency)
         self.log = FlightLog(self.clock.now_s)
         self.owner = ReferenceOwner(self.clock, turn_rate_rad_s=settings.flight.turn_rate_rad_s,
                                     yaw_now_rad=lambda: self.vehicle.yaw_rad)
-        self.feed = ThreatFeed(threats) if threats is not None else None
+        self.feed = ThreatFeed(threats, home) if threats is not None else None
         self.avoidance = None if self.feed is None else \
             self._avoidance(policy or DecisionPolicy.from_settings(settings, strategy), seed)
         s = settings

@@ -64,7 +64,8 @@ class TrajectoryPipeline:
 
     @classmethod
     def from_settings(cls, smoothing: SmoothingSettings, planning: GartSettings | None = None,
-                      feasibility: FeasibilitySettings | None = None, *, closed_loop=None) -> "TrajectoryPipeline":
+                      feasibility: FeasibilitySettings | None = None, *, closed_loop=None,
+                      iterations_per_s: float | None = None) -> "TrajectoryPipeline":
         """The pipeline of the settings tree's ``smoothing``, ``planning`` and ``feasibility``.
 
         Parameters
@@ -80,6 +81,9 @@ class TrajectoryPipeline:
         closed_loop : FeasibilityChecker-like, optional
             The closed-loop checker (its LQI is designed once per process; the daemon's
             ``CheckerHandle`` pickles as the worker's own).
+        iterations_per_s : float, optional
+            Search budgets in iterations instead of wall-clock seconds (``stages.iteration_budget``):
+            the same paths on any machine, as the fast-time campaign needs.
         """
         if not isinstance(smoothing, SmoothingSettings):
             raise PipelineError(f"smoothing: expected SmoothingSettings, got {type(smoothing).__name__}")
@@ -93,7 +97,8 @@ class TrajectoryPipeline:
         method = SMOOTHERS[smoothing.method]
         smoother = method() if smoothing.method == "none" else method(smoothing.kappa_max_1_m,
                                                                        smoothing.repair_max_halvings)
-        return cls(GartPlanner(gart_settings), MgartPlanner(MgartSettings(gart=gart_settings)), smoother,
+        return cls(GartPlanner(gart_settings, iterations_per_s),
+                   MgartPlanner(MgartSettings(gart=gart_settings), iterations_per_s), smoother,
                    SpeedProfileTimer(smoothing.grid_step_m),
                    TrajectoryChecker(closed_loop if use_closed_loop else None), smoothing.limits)
 
@@ -104,6 +109,18 @@ class TrajectoryPipeline:
         and the decision policy's default)."""
         smoothing = SmoothingSettings(kappa_max_1_m=kappa_max_1_m, limits=limits or TrajectoryLimits())
         return cls.from_settings(smoothing, gart_settings or GartSettings(kappa_max_1_m=kappa_max_1_m))
+
+    def with_iteration_budgets(self, iterations_per_s: float | None) -> "TrajectoryPipeline":
+        """This pipeline with its searches budgeted in iterations (see ``from_settings``)."""
+        return dataclasses.replace(
+            self, planner=dataclasses.replace(self.planner, iterations_per_s=iterations_per_s),
+            alternatives_planner=dataclasses.replace(self.alternatives_planner, iterations_per_s=iterations_per_s))
+
+    @property
+    def reproducible(self) -> bool:
+        """Budgets in iterations, not wall-clock seconds: the same trajectories on any machine
+        (callers then leave their own wall-clock cut-offs out too)."""
+        return getattr(self.planner, "iterations_per_s", None) is not None
 
     # ------------------------------------------------------------------ the stages
     def plan(self, problem: PlanningProblem, budget: PlanBudget, *, rng: np.random.Generator) -> PlanResult:

@@ -124,17 +124,30 @@ class Timer(Protocol):
 
 
 # ---------------------------------------------------------------------------- planners
+def iteration_budget(seconds: float, iterations_per_s: float | None) -> dict:
+    """The search budget of ``seconds``: wall-clock, or with ``iterations_per_s`` that many
+    iterations a second and no clock (a search whose result does not depend on the machine)."""
+    if iterations_per_s is None:
+        return {"max_time_s": seconds}
+    return {"max_iterations": max(1, math.ceil(seconds * iterations_per_s))}
+
+
 @dataclass(frozen=True)
 class GartPlanner:
-    """GART (paper section 3.1) in a ``PlanBudget``."""
+    """GART (paper section 3.1) in a ``PlanBudget``.
+
+    ``iterations_per_s`` (optional) turns the budget's seconds into iterations
+    (``iteration_budget``): the fast-time campaign's reproducible searches.
+    """
 
     settings: GartSettings = GartSettings()
+    iterations_per_s: float | None = None
 
     def plan(self, problem: PlanningProblem, budget: PlanBudget, *, rng: np.random.Generator) -> PlanResult:
         budget_s = budget.max_time_s
         for attempt in range(budget.attempts):
-            result = gart(problem.world, problem.start, problem.goal, rng=rng, max_time_s=budget_s,
-                          settings=self.settings)
+            result = gart(problem.world, problem.start, problem.goal, rng=rng, settings=self.settings,
+                          **iteration_budget(budget_s, self.iterations_per_s))
             if result.status != "timeout":
                 return result
             if attempt + 1 < budget.attempts:
@@ -142,21 +155,23 @@ class GartPlanner:
                          2 * budget_s)
             budget_s *= 2
         if budget.first_path_s is not None:
-            result = gart(problem.world, problem.start, problem.goal, rng=rng, max_time_s=budget.first_path_s,
-                          stop_at_first=True, settings=self.settings)
+            result = gart(problem.world, problem.start, problem.goal, rng=rng, stop_at_first=True,
+                          settings=self.settings, **iteration_budget(budget.first_path_s, self.iterations_per_s))
         return result
 
 
 @dataclass(frozen=True)
 class MgartPlanner:
-    """M-GART (paper section 3.3): up to ``k`` distinct paths, cheapest first."""
+    """M-GART (paper section 3.3): up to ``k`` distinct paths, cheapest first (``iterations_per_s``
+    as ``GartPlanner``'s)."""
 
     settings: MgartSettings = MgartSettings()
+    iterations_per_s: float | None = None
 
     def plan(self, problem: PlanningProblem, budget: PlanBudget, k: int, *,
              rng: np.random.Generator) -> list[PlanResult]:
-        return mgart(problem.world, problem.start, problem.goal, k, rng=rng, max_time_s=budget.max_time_s,
-                     settings=self.settings)
+        return mgart(problem.world, problem.start, problem.goal, k, rng=rng, settings=self.settings,
+                     **iteration_budget(budget.max_time_s, self.iterations_per_s))
 
 
 # ---------------------------------------------------------------------------- smoothers

@@ -12,6 +12,7 @@ and the tree, the paths and the generator's state are those of the Python iterat
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -111,13 +112,15 @@ class CompiledMgartSearch(CompiledGart):
         self.goal_radius = self.params[2]
         self.batch = _FIRST_BATCH
 
-    def iterate(self, every_node: bool = False) -> int:
+    def iterate(self, every_node: bool = False, max_iterations: float = math.inf) -> int:
         """Compiled iterations up to the next node M-GART must see (-1: a time slice ended first).
 
         That node got a goal link, or, with ``every_node`` (portals are open), it is any new node.
+        At most ``max_iterations`` (an iteration budget is met exactly, whatever the slices).
         """
         t_call = time.perf_counter()
-        status = self.run(self.batch, kernel.MGART_NODES if every_node else kernel.MGART_LINKS)
+        size = self.batch if max_iterations >= self.batch else max(1, int(max_iterations))
+        status = self.run(size, kernel.MGART_NODES if every_node else kernel.MGART_LINKS)
         if status == kernel.NEW_NODE:
             return self.n_nodes - 1
         took = time.perf_counter() - t_call

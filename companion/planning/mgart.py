@@ -98,7 +98,7 @@ def forbid_branch(search: GartSearch, node: int, keep_near_root_m: float, tube_m
 
 
 def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: float | None = None,
-          settings: MgartSettings | None = None) -> list[PlanResult]:
+          settings: MgartSettings | None = None, max_iterations: int | None = None) -> list[PlanResult]:
     """Up to ``k`` distinct collision-free paths from ``start`` to ``goal``, cheapest first.
 
     Parameters
@@ -109,8 +109,10 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
         Number of paths wanted, >= 1.
     rng : numpy.random.Generator
     max_time_s : float, optional
-        Wall-clock budget (default ``settings.time_budget_s``).
+        Wall-clock budget (default ``settings.time_budget_s``, unless ``max_iterations`` is given).
     settings : MgartSettings, optional
+    max_iterations : int, optional
+        Iteration budget (a deterministic search: the same paths whatever the machine's speed).
 
     Returns
     -------
@@ -125,13 +127,16 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
         raise PlanningError(f"settings: expected MgartSettings, got {type(settings).__name__}")
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
         raise PlanningError(f"k: must be a positive integer, got {k!r}")
-    start_t, goal_t = validate_problem(world, start, goal, rng, max_time_s, None)
+    start_t, goal_t = validate_problem(world, start, goal, rng, max_time_s, max_iterations)
     gs = settings.gart
     if not world.point_free(start_t) or not world.point_free(goal_t):
         status = "invalid_start" if not world.point_free(start_t) else "invalid_goal"
         return [PlanResult(status=status, path=None, cost=math.inf, length_m=math.inf, iterations=0,
                            elapsed_s=time.perf_counter() - t0, time_to_first_s=None, tree=None)]
-    deadline = t0 + (max_time_s if max_time_s is not None else settings.time_budget_s)
+    if max_time_s is None and max_iterations is None:
+        max_time_s = settings.time_budget_s
+    deadline = t0 + max_time_s if max_time_s is not None else math.inf
+    iter_limit = max_iterations if max_iterations is not None else math.inf
     compiled = compiled_case(world, gs)   # the whole iteration compiled (numba), the tree in arrays
     search = (CompiledMgartSearch if compiled else GartSearch)(world, start_t, goal_t, gs, rng)
     portals = GoalPortals(search, settings.portal_zone_m)
@@ -156,8 +161,8 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
 
     if world.segment_free(start_t, goal_t):
         consider(np.array([start_t, goal_t]))
-    while len(found) < k and clock() < deadline:
-        node = search.iterate(bool(portals.items)) if compiled else search.iterate()
+    while len(found) < k and clock() < deadline and search.iterations < iter_limit:
+        node = search.iterate(bool(portals.items), iter_limit - search.iterations) if compiled else search.iterate()
         if node < 0:
             continue
         raw = search.path_to_goal(node) if node in search.goal_links else portals.join(node)

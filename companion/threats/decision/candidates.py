@@ -258,7 +258,8 @@ def switch_to_alternatives(sit: Situation, alternatives) -> tuple[list[Candidate
     out = []
     entries = switch_candidates(alternatives, sit.ref.pos_ned_m[:d], s.switch_range_m, s.entry_spacing_m)
     for tried, (cost, alt, i) in enumerate(entries):
-        if tried >= s.max_candidates or time.perf_counter() - t0 > s.switch_budget_s:
+        out_of_time = not sit.pipeline.reproducible and time.perf_counter() - t0 > s.switch_budget_s
+        if tried >= s.max_candidates or out_of_time:
             break
         traj, poly = join_trajectory(sit.ref.pos_ned_m[:d], sit.ref.vel_ned_m_s[:d], alt.nodes_from(i),
                                      world=sit.world, pipeline=sit.pipeline, lift_down_m=sit.lift_down_m)

@@ -177,10 +177,10 @@ def _on_threats(state: DecisionState, obs: Observation, leg: LegContext, policy:
                         resume=active.ends_short, min_clearance_m=keep.min_clearance_m), state
     ttc = keep.conflict.time_to_conflict_s
     what = f"{keep.conflict.threat_id} in {ttc:.1f} s"
-    fast = _situation(obs.t_s + policy.lead_s(state.fast_estimate), obs, leg, policy)
+    fast = _situation(obs.t_s + policy.fast_lead_s(state), obs, leg, policy)
     cands = _fast_candidates(fast, active, state.alternatives, policy.strategy)
     continues = any(c.clear and not c.ends_short for c in cands)     # a clear way to the goal
-    slow_lead = policy.lead_s(state.fast_estimate) + policy.lead_s(state.replan_estimate)
+    slow_lead = policy.fast_lead_s(state) + policy.replan_lead_s(state)
     stop_s = float(np.linalg.norm(fast.ref.vel_ned_m_s)) / s.evade_accel_m_s2
     urgent = ttc <= slow_lead + stop_s + s.urgency_margin_s
     hybrid = policy.strategy is Strategy.HYBRID
@@ -199,7 +199,7 @@ def _resume(state: DecisionState, obs: Observation, leg: LegContext, policy: Dec
     """Plan back to the mission from the active reference (after an evasion or a hold), from
     its state when the measured replanning time has passed."""
     t0 = time.perf_counter()
-    sit = _situation(obs.t_s + policy.lead_s(state.replan_estimate), obs, leg, policy)
+    sit = _situation(obs.t_s + policy.replan_lead_s(state), obs, leg, policy)
     if sit is None:
         return Decision(DecisionKind.NONE, "no active trajectory", decide_ms=_ms_since(t0)), state
     cands: list[Candidate] = []

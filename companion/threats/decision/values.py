@@ -116,12 +116,17 @@ class DecisionPolicy:
     time_scale : float
         Clock seconds per wall-clock second (a SITL speed-up): the decision's own measured
         duration, in clock seconds, is how far ahead its candidates start.
+    modelled_lead_s : (float, float) or None
+        The fast step's and the replan's durations as modelled (clock seconds), in place of the
+        measured running estimates: a fast-time flight whose jobs take modelled times
+        (``companion.flight.fast_time.JobLatency``) plans for the same instants.
     """
 
     settings: ThreatSettings = field(default_factory=ThreatSettings)
     pipeline: TrajectoryPipeline = field(default_factory=TrajectoryPipeline.for_limits)
     strategy: Strategy = Strategy.HYBRID
     time_scale: float = 1.0
+    modelled_lead_s: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.settings, ThreatSettings):
@@ -145,6 +150,14 @@ class DecisionPolicy:
     def lead_s(self, estimate: RunningEstimate) -> float:
         """Clock seconds that a step of ``estimate`` is expected to take (mean + 1 deviation)."""
         return (estimate.mean_s + estimate.dev_s) * self.time_scale
+
+    def fast_lead_s(self, state: "DecisionState") -> float:
+        """Clock seconds the fast step is expected to take."""
+        return self.lead_s(state.fast_estimate) if self.modelled_lead_s is None else self.modelled_lead_s[0]
+
+    def replan_lead_s(self, state: "DecisionState") -> float:
+        """Clock seconds a replan is expected to take."""
+        return self.lead_s(state.replan_estimate) if self.modelled_lead_s is None else self.modelled_lead_s[1]
 
 
 @dataclass(frozen=True, eq=False)
