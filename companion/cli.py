@@ -18,7 +18,8 @@ import sys
 from companion.errors import CompanionError
 from companion.geo import GeoError
 
-COMMAND_MODULES = ("run", "serve", "mission_io", "plan", "threat", "keys", "router", "report", "demo", "fleet")
+COMMAND_MODULES = ("run", "serve", "mission_io", "plan", "threat", "keys", "router", "report", "demo", "fleet",
+                   "campaign")
 
 log = logging.getLogger(__name__)
 

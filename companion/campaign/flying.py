@@ -7,8 +7,9 @@ from the spec and flies it
 - *unmitigated*: the mission flown by ``companion.flight.fast_time.FastTimeFlight`` with no
   threat watched (the same flight for every encounter on a mission, so it is flown once per
   mission and worker);
-- *mitigated*: the same executor with the avoidance on, the intruders' reports delivered as in
-  flight (``companion.campaign.delivery``), jobs taking their modelled durations
+- *mitigated*: the same executor with the avoidance on, joining the unmitigated flight in the
+  air ``JOIN_LEAD_S`` before the first report (its vehicle state then: what comes before cannot
+  differ), the intruders' reports delivered as in flight (``companion.campaign.delivery``), jobs taking their modelled durations
   (``JobLatency``) and searches budgeted in iterations, so that the row is the same on any
   machine and with any number of workers.
 
@@ -54,6 +55,8 @@ MEASURED_COLUMNS = ("wall_ms", "m_decide_wall_ms")
 MANOEUVRES = ("evade", "switch", "retime", "hold", "replan")
 #: Unmitigated flights fly this long past the mission's nominal duration at most.
 SLACK_S = 60.0
+#: The mitigated flight joins the unmitigated one this long before the first report (s).
+JOIN_LEAD_S = 1.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -197,8 +200,9 @@ class CampaignWorker:
                                 seed=int(rng.integers(2 ** 31)), start_yaw_rad=m.start_yaw_rad, update=self.update,
                                 world=m.world, job_latency=self.spec.latency, home=HOME,
                                 replanner=LegReplanner.in_world(m.world, self.pipeline, self.settings.flight))
-        mitigated = flight.run(max_s=enc.end_t_s)
         base = self.unmitigated(enc.mission)
+        k = min(int(np.searchsorted(base.t_s, enc.first_report_t_s - JOIN_LEAD_S)), len(base.states) - 1)
+        mitigated = flight.run(max_s=enc.end_t_s, from_s=float(base.t_s[k]), from_state=base.states[k])
         dt = 1.0 / self.settings.link.setpoint_rate_hz
         grid = np.arange(enc.first_report_t_s, enc.end_t_s + 0.5 * dt, dt)
         threats = [tr.position_at(grid) for tr in enc.intruders]

@@ -97,12 +97,11 @@ def separation(t_s: np.ndarray, own_ned_m: np.ndarray, intruders, manned: bool, 
         vmd.append(float(dv[k]))
         cpa_t.append(float(t_s[k]))
         min_sep = min(min_sep, float(d3[k]) - track.radius_m)
+        collision |= bool(d3[k] < track.radius_m + volumes.collision_extra_m)
         if manned:
-            collision |= bool(d3[k] < track.radius_m + volumes.collision_extra_m)
             nmac |= bool(np.any((dh < volumes.nmac_h_ft * FT_M) & (dv < volumes.nmac_v_ft * FT_M)))
             lowc |= bool(np.any((dh < volumes.wc_h_ft * FT_M) & (dv < volumes.wc_v_ft * FT_M)))
         else:
-            collision |= bool(d3[k] < track.radius_m + volumes.collision_extra_m)
             nmac |= bool(d3[k] < track.radius_m + volumes.nmac_extra_m)
             lowc |= bool(d3[k] < track.radius_m + volumes.lowc_extra_m)
     return Separation(tuple(hmd), tuple(vmd), min_sep, collision, nmac, lowc, tuple(cpa_t))

@@ -7,7 +7,8 @@ closest approach to the helicopter's unmitigated flight: horizontally ``hmd`` aw
 relative velocity, and ``vmd`` above (negative: below). ``hmd`` and ``vmd`` are importance-sampled
 (``MannedSpec``) with the weight back to the nominal distribution; the intruder never flies
 below ``min_agl_m``. It is heard as ADSB_VEHICLE at 1 Hz from the track's start (within the
-companion's ADS-B range), with its emitter type's radius.
+companion's ADS-B range) to its end, with its emitter type's radius; the helicopter's flights
+go on to the mission's end.
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ __all__ = ["EMITTERS", "miss_weight", "draw_miss", "make_manned"]
 
 EMITTERS = {"rotorcraft": mavlink.ADSB_EMITTER_TYPE_ROTOCRAFT, "fixedwing": mavlink.ADSB_EMITTER_TYPE_LIGHT}
 ICAO_BASE = 0xA00000
+#: The flights go on this long after the unmitigated one ended (the mission is flown to its end).
+FLY_ON_S = 30.0
 
 
 def _vmd_range(spec, own_alt_m: float) -> tuple[float, float]:
@@ -78,7 +81,6 @@ def make_manned(index: int, stratum: str, model_kind: str, model, own: OwnFlight
     speed = float(np.hypot(*track.vel_neu_m_s[k_cpa, :2]))
     params = {"t_cpa_s": t_cpa, "hmd_target_m": hmd, "vmd_target_m": vmd, "intruder_speed_m_s": speed,
               "t_report_s": float(t[0])}
-    end = min(t_cpa + spec.after_s, own.end_t_s + 30.0)
-    return Encounter(index, stratum, "long", model_kind, (intruder,), weight, max(end, t_cpa + 5.0),
+    return Encounter(index, stratum, "long", model_kind, (intruder,), weight, own.end_t_s + FLY_ON_S,
                      {"noise_pos_m": 0.0, "noise_vel_m_s": 0.0, "update_hz": 1.0, "latency_s": 0.0,
                       "dropout": 0.0}, params)

@@ -24,7 +24,9 @@ geometry            the intruder
 ``climbing``        one that climbs or descends at 1-3 m/s from 1-3 s after its first report
 ==================  =====================================================================
 
-Radii are 2-6 m; movers' closest approach comes 2-10 s after the first report. ``above`` and
+Radii are 2-6 m; movers' closest approach comes 2-10 s after the first report. Every intruder is
+reported until the flight's end (the end of the mission + 10 s, or 25 s after the last closest
+approach). ``above`` and
 ``below`` aim at the climbing or descending part of the ``climb`` and ``descend`` missions. An
 intruder does not start within its radius + ``START_MARGIN_M`` of the vehicle, nor sit on the
 goal (a pop-up within radius + 5 m of it).
@@ -32,6 +34,7 @@ goal (a pop-up within radius + 5 m of it).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -189,8 +192,9 @@ def make_parametric(index: int, stratum: str, geometry: str, mission: str, own: 
             intruders.append(track)
             cpas.append(t_report + t_ca)
         if len(intruders) == len(kinds):
+            end = max(max(cpas) + AFTER_S, own.end_t_s + 10.0)
             params = {"t_report_s": t_report, "t_cpa_s": max(cpas), "kinds": kinds}
-            return Encounter(index, stratum, mission, "drone", tuple(intruders), 1.0,
-                             max(max(cpas) + AFTER_S, own.end_t_s + 10.0), delivery, params)
+            heard = tuple(dataclasses.replace(tr, last_report_t_s=end) for tr in intruders)   # to the end
+            return Encounter(index, stratum, mission, "drone", heard, 1.0, end, delivery, params)
     raise RuntimeError(f"encounter {index} ({stratum}): no valid geometry in {MAX_DRAWS} draws")
 

@@ -279,6 +279,8 @@ class FastTimeResult:
         The executor's schedule with what each task cost.
     job_wall_s : dict
         Measured wall-clock time of each job, by kind.
+    states : list of VehicleState
+        The vehicle's state at each sample (to join the flight later: ``run(from_state=...)``).
     """
 
     t_s: np.ndarray
@@ -290,6 +292,7 @@ class FastTimeResult:
     reason: str
     schedule: list
     job_wall_s: dict
+    states: list = dataclasses.field(default_factory=list, repr=False)
 
 
 class FastTimeFlight:
@@ -367,13 +370,27 @@ class FastTimeFlight:
         if setpoint is not None:
             self.vehicle.command(setpoint)
 
-    def run(self, max_s: float = 600.0) -> FastTimeResult:
-        """Fly until the legs are done or ``max_s`` of mission time has passed."""
+    def run(self, max_s: float = 600.0, *, from_s: float = 0.0, from_state=None) -> FastTimeResult:
+        """Fly until the legs are done or ``max_s`` of mission time has passed.
+
+        Parameters
+        ----------
+        max_s : float
+        from_s, from_state : float, VehicleState, optional
+            Join the flight in the air: the legs are engaged at time 0 as always, then the clock
+            jumps to ``from_s`` (a tick) and the vehicle is in ``from_state`` (a state of an earlier
+            flight of these legs at that instant, ``FastTimeResult.states``): an encounter that
+            begins in cruise, without flying what comes before again.
+        """
         dt = 1.0 / self.settings.link.setpoint_rate_hz
         self.owner.hold(self.vehicle.pos_ned_m)
         self.executor.start()
-        times, positions, refs = [], [], []
         k = 0
+        if from_state is not None:
+            k = int(round(from_s / dt))
+            self.vehicle.state = from_state
+            self.clock.t_s = k * dt
+        times, positions, refs, states = [], [], [], []
         while not self.executor.done and self.clock.t_s < max_s:
             now = self.clock.t_s
             if self.feed is not None and self.feed.deliver(now):
@@ -382,6 +399,7 @@ class FastTimeFlight:
             self.executor.tick(now)
             times.append(now)
             positions.append(self.vehicle.pos_ned_m)
+            states.append(self.vehicle.state)
             sp = self.vehicle.setpoint
             refs.append(positions[-1] if sp is None else np.asarray(sp.pos_ned_m, dtype=float))
             self.vehicle.advance(dt)
@@ -392,4 +410,4 @@ class FastTimeFlight:
             reason = f"not done after {max_s:g} s"
         return FastTimeResult(np.asarray(times), np.asarray(positions), np.asarray(refs),
                               self.log.decisions, self.log.events, outcome, reason,
-                              self.executor.schedule.report(), self.jobs.wall_s)
+                              self.executor.schedule.report(), self.jobs.wall_s, states)

@@ -1,0 +1,163 @@
+"""A campaign directory: its spec, and its rows appended to Parquet as batches finish.
+
+Layout of ``DIR``::
+
+    spec.toml              the spec as run (its hash is on every row)
+    settings.toml          the companion's settings file's text, when the spec names one
+    rows/part-0000020.parquet   one file per finished batch (its first encounter id)
+    runs.jsonl             one line per run: when, the code's commit, workers, pairs, wall time
+    report/                ``companion campaign report``'s output
+
+A part is written to a temporary name and renamed, so a killed campaign leaves only whole
+parts; resuming skips the batches whose part exists. Rows depend only on the spec and the
+encounter id, so parts written by any number of workers, or by a Dask cluster, are the same.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from companion.campaign.spec import CampaignSpec, SpecError, load_spec, spec_hash, spec_to_toml
+
+__all__ = ["SCHEMA", "CampaignStore", "StoreError"]
+
+
+class StoreError(SpecError):
+    """A campaign directory cannot be used (another spec's rows, a broken part)."""
+
+
+_FLOAT_LIST = pa.list_(pa.float64())
+_RUN_COLUMNS = [("collision", pa.bool_()), ("nmac", pa.bool_()), ("lowc", pa.bool_()), ("min_sep_m", pa.float64()),
+                ("hmd_m", _FLOAT_LIST), ("vmd_m", _FLOAT_LIST), ("obstacle_entries", pa.int64()),
+                ("fence_entries", pa.int64()), ("completed", pa.bool_()), ("path_m", pa.float64())]
+#: One row per encounter pair.
+SCHEMA = pa.schema(
+    [("id", pa.int64()), ("stratum", pa.string()), ("source", pa.string()), ("traffic", pa.string()),
+     ("world", pa.string()), ("mission", pa.string()), ("seed", pa.int64()), ("spec_hash", pa.string()),
+     ("weight", pa.float64()), ("n_threats", pa.int64())]
+    + [(f"{p}{name}", kind) for p in ("u_", "m_") for name, kind in _RUN_COLUMNS]
+    + [("m_alerted", pa.bool_()), ("m_alert_t_s", pa.float64()), ("m_manoeuvred", pa.bool_()),
+       ("m_decisions", pa.list_(pa.string())), ("m_latency_ms", _FLOAT_LIST), ("m_decide_wall_ms", _FLOAT_LIST),
+       ("m_extra_path_m", pa.float64()), ("noise_pos_m", pa.float64()), ("noise_vel_m_s", pa.float64()),
+       ("update_hz", pa.float64()), ("latency_s", pa.float64()), ("dropout", pa.float64()), ("wall_ms", pa.float64())])
+
+
+class CampaignStore:
+    """The directory ``root`` of one campaign.
+
+    Parameters
+    ----------
+    root : path
+    """
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+        self.rows_dir = self.root / "rows"
+
+    # ------------------------------------------------------------------ the spec
+    def open(self, spec: CampaignSpec, settings_text: str = "") -> str:
+        """Make or reopen the directory for ``spec``; returns the spec's hash.
+
+        Raises
+        ------
+        StoreError
+            The directory holds another spec's campaign.
+        """
+        digest = spec_hash(spec, settings_text)
+        self.rows_dir.mkdir(parents=True, exist_ok=True)
+        spec_file = self.root / "spec.toml"
+        if spec_file.exists():
+            held = spec_hash(load_spec(spec_file), self.settings_text())
+            if held != digest:
+                raise StoreError(f"{self.root}: holds the campaign of another spec (hash {held}, this one {digest}); "
+                                 "use another --out directory")
+        else:
+            self._write_text(spec_file, spec_to_toml(spec))
+            if settings_text:
+                self._write_text(self.root / "settings.toml", settings_text)
+        return digest
+
+    def spec(self) -> CampaignSpec:
+        """The spec the directory was made for."""
+        path = self.root / "spec.toml"
+        if not path.exists():
+            raise StoreError(f"{self.root}: not a campaign directory (no spec.toml)")
+        return load_spec(path)
+
+    def settings_text(self) -> str:
+        path = self.root / "settings.toml"
+        return path.read_text() if path.exists() else ""
+
+    @staticmethod
+    def _write_text(path: Path, text: str) -> None:
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        tmp.write_text(text)
+        os.replace(tmp, path)
+
+    def log_run(self, record: dict) -> None:
+        """Append one run's record to ``runs.jsonl`` (stamped with the time and the commit)."""
+        line = {"at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+                "commit": _commit(), **record}
+        with open(self.root / "runs.jsonl", "a", encoding="utf-8") as fh:
+            fh.write(json.dumps(line) + "\n")
+
+    def runs(self) -> list[dict]:
+        path = self.root / "runs.jsonl"
+        if not path.exists():
+            return []
+        return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+    # ------------------------------------------------------------------ rows
+    def part_path(self, first_id: int) -> Path:
+        return self.rows_dir / f"part-{first_id:07d}.parquet"
+
+    def done_batches(self) -> set[int]:
+        """First ids of the batches whose part is written."""
+        out = set()
+        for path in self.rows_dir.glob("part-*.parquet"):
+            try:
+                out.add(int(path.stem.split("-")[1]))
+            except (IndexError, ValueError):
+                continue
+        return out
+
+    def append(self, first_id: int, rows: list[dict]) -> Path:
+        """Write one batch's rows (atomically)."""
+        table = pa.Table.from_pylist(rows, schema=SCHEMA)
+        path = self.part_path(first_id)
+        tmp = path.with_suffix(".parquet.tmp")
+        pq.write_table(table, tmp)
+        os.replace(tmp, path)
+        return path
+
+    def table(self) -> pa.Table:
+        """Every row written, by id."""
+        parts = sorted(self.rows_dir.glob("part-*.parquet"))
+        if not parts:
+            return SCHEMA.empty_table()
+        tables = []
+        for path in parts:
+            try:
+                tables.append(pq.read_table(path, schema=SCHEMA))
+            except (pa.ArrowInvalid, OSError) as exc:
+                raise StoreError(f"{path}: unreadable part ({exc}); delete it and resume to fly its batch again") \
+                    from None
+        table = pa.concat_tables(tables)
+        return table.sort_by("id")
+
+
+def _commit() -> str:
+    """The code's git commit ("" outside a checkout)."""
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).resolve().parent,
+                             capture_output=True, text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return out.stdout.strip() if out.returncode == 0 else ""
