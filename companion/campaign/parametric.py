@@ -3,7 +3,8 @@
 Every intruder is aimed at the helicopter's own unmitigated flight (the track it flies when it
 ignores threats, ``companion.campaign.flying``): at ``t_ca`` seconds after its first report it
 passes the helicopter's position then at a miss distance drawn uniformly in
-``[0, radius + MISS_EXTRA_M]`` in a random direction. So a stratum holds collisions, NMACs, losses
+``[0, radius + MISS_EXTRA_M]``, across their relative velocity at a uniform angle about it (so,
+where the helicopter flies straight, that is the closest approach). So a stratum holds collisions, NMACs, losses
 of well clear and encounters that stay clear, in known proportions (the nominal distribution of
 the stratum: the weight is 1).
 
@@ -92,6 +93,17 @@ class OwnFlight:
         return float(self.t_s[-1])
 
 
+def _across(rel_m_s: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A unit vector across the relative velocity, its angle about it uniform: the miss at the
+    aim is then the closest approach of two straight tracks."""
+    axis = _unit(rel_m_s) if float(np.linalg.norm(rel_m_s)) > 1e-6 else np.array([1.0, 0.0, 0.0])
+    ref = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    e1 = _unit(np.cross(axis, ref))
+    e2 = np.cross(axis, e1)
+    angle = rng.uniform(0.0, 2.0 * math.pi)
+    return math.cos(angle) * e1 + math.sin(angle) * e2
+
+
 def _velocity(kind: str, tangent: np.ndarray, v_own: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     if kind in ("popup", "popup_near", "popup_far"):
         return np.zeros(3)
@@ -141,11 +153,10 @@ def _draw_intruder(kind: str, tid: str, own: OwnFlight, goal_ned_m: np.ndarray, 
     tangent = _unit(np.array([v_ca[0], v_ca[1], 0.0]) if np.hypot(v_ca[0], v_ca[1]) > 0.5 else
                     goal_ned_m - p_ca)
     tangent[2] = 0.0
-    miss = rng.normal(size=3)
-    miss *= rng.uniform(0.0, radius + MISS_EXTRA_M) / max(float(np.linalg.norm(miss)), 1e-9)
     base = "head_on" if kind == "turning" and rng.random() < 0.5 else ("crossing" if kind in ("turning", "climbing")
                                                                         else kind)
     v = _velocity(base, tangent, v_now, rng)
+    miss = _across(v - v_ca, rng) * rng.uniform(0.0, radius + MISS_EXTRA_M)
     start = p_ca + miss - v * t_ca
     if float(np.linalg.norm(start - p_now)) <= radius + START_MARGIN_M:
         return None

@@ -7,7 +7,8 @@ process holds one ``CampaignWorker`` (``_context``), built and warmed once (numb
 missions planned, unmitigated flights flown): on the local pool by the pool's initializer, on a
 Dask cluster (``--cluster tcp://HOST:8786``, real ``dask scheduler`` / ``dask worker``
 processes) by ``Client.run`` before the first task. Whatever runs them, a batch's rows are the
-same (``companion.campaign.flying``).
+same (``companion.campaign.flying``): each worker runs its BLAS on one thread, as a Dask worker
+does, since a multi-threaded one sums in another order.
 
 Every ``check_every`` encounters, on the rows stored so far in id order without a gap, the
 driver checks convergence: the NMAC and LoWC risk ratios of each traffic kind present
@@ -40,6 +41,8 @@ __all__ = ["CampaignRun", "RunProgress", "run_batch", "convergence_verdicts", "w
 log = logging.getLogger(__name__)
 
 _CONTEXT: dict[str, CampaignWorker] = {}
+#: Worker processes run their BLAS on one thread (Dask's workers do): the same sums, the same rows.
+BLAS_THREADS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def _spec_from_text(text: str) -> CampaignSpec:
@@ -216,6 +219,8 @@ class CampaignRun:
             def close():
                 client.close()
             return _DaskFutures(submit), close
+        for var in BLAS_THREADS:       # as a Dask worker's: a multi-threaded BLAS sums in another order
+            os.environ[var] = "1"
         pool = futures.ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
                                            initializer=warm_worker, initargs=args)
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -158,8 +159,22 @@ def load_spec(path: str | Path) -> CampaignSpec:
         raise SpecError(f"{path}: {exc}") from None
 
 
+def _plain(value, kind):
+    if dataclasses.is_dataclass(value):
+        hints = typing.get_type_hints(type(value))
+        return {f.name: _plain(getattr(value, f.name), hints[f.name]) for f in dataclasses.fields(value)}
+    if kind is float:
+        return float(value)
+    if isinstance(value, tuple):
+        args = typing.get_args(kind)
+        return [_plain(v, args[0] if args else None) for v in value]
+    return value
+
+
 def spec_to_dict(spec: CampaignSpec) -> dict:
-    return dataclasses.asdict(spec)
+    """The spec as plain values, a float field always a float (so that the hash of a spec made
+    in code with ``tolerance=1`` is the hash of the same spec read back from its TOML)."""
+    return _plain(spec, CampaignSpec)
 
 
 def spec_hash(spec: CampaignSpec, settings_text: str = "") -> str:

@@ -191,9 +191,6 @@ def test_toml_round_trip_property(tmp_path, spec):
     assert spec_hash(back) == spec_hash(spec)
 
 
-@pytest.mark.xfail(strict=True, reason="spec_hash hashes the Python type of a value: a float field given as an "
-                                       "int (tolerance=1) hashes differently from the equal spec read back "
-                                       "from spec_to_toml (tolerance=1.0)")
 def test_hash_of_an_int_valued_float_field_survives_the_round_trip(tmp_path):
     spec = CampaignSpec(tolerance=1, volumes=Volumes(nmac_h_ft=500))
     back = load_spec(write(tmp_path, spec_to_toml(spec)))
