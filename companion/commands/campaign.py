@@ -8,6 +8,9 @@ Actions:
 - ``status DIR``: pairs stored, throughput, the current ratios and whether they converged;
 - ``report DIR``: ``DIR/report/report.md`` and its plots (miss distances, convergence,
   per-stratum ratios, the worst encounters flown again);
+- ``replay DIR ID [--speedup X] [--foxglove PORT]``: fly encounter ``ID`` in SITL (real
+  ``sim-vehicle`` and ``companion run``, the reports over zenoh), judged by the vehicle's own
+  telemetry, next to its fast-time row;
 - ``strata``: the strata a spec can name.
 """
 
@@ -29,6 +32,7 @@ EPILOG = """examples:
   companion campaign run mission_files/campaigns/quick.toml --out out/campaign-quick
   companion campaign status out/campaign-quick
   companion campaign report out/campaign-quick
+  companion campaign replay out/campaign-quick 12 --foxglove 8765
   dask scheduler & dask worker tcp://127.0.0.1:8786 &
   companion campaign run mission_files/campaigns/full.toml --out out/full --cluster tcp://127.0.0.1:8786
 """
@@ -60,12 +64,20 @@ def register(subparsers) -> None:
     report = sub.add_parser("report", help="write DIR/report/report.md and its plots")
     report.add_argument("dir", help="campaign directory")
     report.add_argument("--worst", type=int, default=8, help="worst encounters flown again and plotted")
+    replay = sub.add_parser("replay", help="fly one encounter in SITL (sim-vehicle + companion run)")
+    replay.add_argument("dir", help="campaign directory")
+    replay.add_argument("id", type=int, help="encounter id (a row's id)")
+    replay.add_argument("--out", help="where the logs and the record go (default DIR/replay/ID)")
+    replay.add_argument("--speedup", type=float, default=2.0, help="sim-vehicle --speedup (default 2)")
+    replay.add_argument("--foxglove", metavar="[HOST:]PORT", help="the companion's Foxglove server, to watch")
+    replay.add_argument("--gcs", metavar="HOST:PORT", help="another MAVLink output of the vehicle (QGroundControl)")
     sub.add_parser("strata", help="list the strata a spec can name")
     p.set_defaults(func=main)
 
 
 def main(args) -> int:
-    return {"run": _run, "status": _status, "report": _report, "strata": _strata}[args.campaign_command](args)
+    return {"run": _run, "status": _status, "report": _report, "replay": _replay,
+            "strata": _strata}[args.campaign_command](args)
 
 
 def _spec_and_settings(path: str):
@@ -173,6 +185,31 @@ def _report(args) -> int:
     worker = CampaignWorker(spec, _settings_from_text(store.settings_text()), table.column("spec_hash")[0].as_py())
     path = write_report(table, store.root / "report", spec_name=spec.name, worst=args.worst, flight_of=worker.fly)
     print(path)
+    return 0
+
+
+def _replay(args) -> int:
+    from companion.campaign.flying import CampaignWorker
+    from companion.campaign.replay import replay
+    from companion.campaign.runner import _settings_from_text
+    from companion.campaign.spec import spec_hash
+    from companion.campaign.store import CampaignStore
+
+    if args.id < 0:
+        raise CampaignCommandError(f"id: must be >= 0, got {args.id}")
+    if not args.speedup > 0:
+        raise CampaignCommandError(f"--speedup: must be > 0, got {args.speedup}")
+    store = CampaignStore(args.dir)
+    spec, settings_text = store.spec(), store.settings_text()
+    worker = CampaignWorker(spec, _settings_from_text(settings_text), spec_hash(spec, settings_text))
+    out = Path(args.out) if args.out else store.root / "replay" / str(args.id)
+    result = replay(worker, args.id, out, speedup=args.speedup, foxglove=args.foxglove, gcs_out=args.gcs)
+    outcome = result.outcome()
+    row = next((r for r in store.table().filter([i == args.id for i in store.table().column("id").to_pylist()])
+                .to_pylist()), None)
+    if row is not None:
+        outcome["fast_time"] = {k: row[f"m_{k}"] for k in ("collision", "nmac", "lowc", "min_sep_m")}
+    print(json.dumps(outcome, indent=2))
     return 0
 
 

@@ -1,0 +1,196 @@
+"""``companion campaign replay DIR ID``: one encounter of a campaign flown in SITL, for a person
+to watch (Foxglove, QGroundControl) and to set against its fast-time row.
+
+The encounter is made from the campaign's spec exactly as its row was
+(``CampaignWorker.encounter``); then real processes fly it: ``sim-vehicle`` (home at the
+campaign's ``HOME``) and ``companion run`` with
+
+- the mission as a QGC WPL 110 file: takeoff to the leg's start altitude, the leg's goal, land;
+- the mission's world (obstacles and fences) as a world file, when it has any;
+- ``--foxglove PORT`` when asked.
+
+The intruders' reports are put over zenoh at their encounter times, counted from the instant
+the companion engages the leg (its ``path`` message for ``leg0``; mission time from its
+``status``): drone-scale ones as the local-frame payloads the campaign decodes, manned ones as
+the global-frame threats their ADSB_VEHICLE reports become (the companion converts them about
+home as it converts ADS-B). The flight is judged by the vehicle's own telemetry in the flight
+record against the intruders' true tracks, with the campaign's volumes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+from pymavlink import mavutil
+
+from companion.campaign import judge
+from companion.campaign.delivery import feed_updates
+from companion.campaign.flying import HOME, CampaignWorker
+from companion.campaign.tracks import Encounter
+from companion.record.flight_record import load_record
+from companion.sitl.vehicles import flight_processes
+from companion.threats.transport.bus import ThreatBus
+from companion.world.io import dumps_world_toml
+
+__all__ = ["ReplayResult", "write_mission", "replay", "judge_track"]
+
+log = logging.getLogger(__name__)
+
+ACCEPTANCE_M = 3.0
+
+
+@dataclasses.dataclass(frozen=True)
+class ReplayResult:
+    """One encounter flown in SITL.
+
+    Attributes
+    ----------
+    encounter : Encounter
+    leg_t0_s : float
+        The companion's mission time of the leg's start (encounter time 0).
+    separation : judge.Separation
+        Judged on the vehicle's telemetry.
+    puts : int
+        Threat reports put.
+    out_dir : Path
+    t_s : ndarray, shape (K,)
+        Encounter times of the vehicle's telemetry samples (0: the leg's start).
+    pos_ned_m : ndarray, shape (K, 3)
+        The vehicle's own positions then.
+    """
+
+    encounter: Encounter
+    leg_t0_s: float
+    separation: judge.Separation
+    puts: int
+    out_dir: Path
+    t_s: np.ndarray
+    pos_ned_m: np.ndarray
+
+    def outcome(self) -> dict:
+        s = self.separation
+        return {"id": self.encounter.id, "stratum": self.encounter.stratum, "collision": s.collision,
+                "nmac": s.nmac, "lowc": s.lowc, "min_sep_m": s.min_sep_m, "hmd_m": list(s.hmd_m),
+                "vmd_m": list(s.vmd_m), "leg_t0_s": self.leg_t0_s, "puts": self.puts,
+                "record": str(self.out_dir / "flight.jsonl")}
+
+
+def write_mission(mission, path: Path) -> Path:
+    """The campaign mission as QGC WPL 110 (takeoff, the leg's goal, land), home at ``HOME``."""
+    start, goal = mission.legs[0].start_ned_m, mission.goal_ned_m
+    lat, lon, _ = HOME.to_lla(goal[0], goal[1], goal[2])
+    rows = [(0, 1, mavutil.mavlink.MAV_FRAME_GLOBAL, mavutil.mavlink.MAV_CMD_NAV_WAYPOINT, 0.0,
+             HOME.lat0_deg, HOME.lon0_deg, HOME.alt0_m),
+            (1, 0, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, 0.0,
+             0.0, 0.0, -float(start[2])),
+            (2, 0, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavutil.mavlink.MAV_CMD_NAV_WAYPOINT, ACCEPTANCE_M,
+             float(lat), float(lon), -float(goal[2])),
+            (3, 0, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavutil.mavlink.MAV_CMD_NAV_LAND, 0.0,
+             float(lat), float(lon), 0.0)]
+    lines = ["QGC WPL 110"] + [f"{seq}\t{cur}\t{frame}\t{cmd}\t0.0\t{acc}\t0.0\tnan\t{la:.9f}\t{lo:.9f}\t{alt:.3f}\t1"
+                               for seq, cur, frame, cmd, acc, la, lo, alt in rows]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+class _LegClock:
+    """The companion's mission time, from its status messages, once it has engaged leg 0."""
+
+    def __init__(self, bus: ThreatBus, speedup: float) -> None:
+        self.speedup = speedup
+        self.status: tuple[float, float] | None = None      # (mission time, wall time)
+        self.leg_t0_s: float | None = None
+        bus.subscribe_json("status", self._on_status)
+        bus.subscribe_json("path", self._on_path)
+
+    def _on_status(self, key, msg) -> None:
+        if isinstance(msg, dict) and isinstance(msg.get("t_s"), (int, float)):
+            self.status = (float(msg["t_s"]), time.monotonic())
+
+    def _on_path(self, key, msg) -> None:
+        if self.leg_t0_s is None and isinstance(msg, dict) and msg.get("path_id") == "leg0":
+            self.leg_t0_s = float(msg["t0_s"])
+
+    def now_s(self) -> float | None:
+        if self.status is None:
+            return None
+        t, wall = self.status
+        return t + (time.monotonic() - wall) * self.speedup
+
+
+def _play(bus: ThreatBus, clock: _LegClock, updates, done, timeout_s: float) -> int:
+    """Put each update at its encounter time after the leg's start; returns how many were put."""
+    deadline = time.monotonic() + timeout_s
+    while clock.leg_t0_s is None and time.monotonic() < deadline and not done():
+        time.sleep(0.02)
+    puts = 0
+    for t_enc, threat, _ in updates:
+        while not done() and time.monotonic() < deadline:
+            now = clock.now_s()
+            if now is not None and now - clock.leg_t0_s >= t_enc:
+                break
+            time.sleep(0.005)
+        if done():
+            break
+        bus.client.put_threat(threat)
+        puts += 1
+    return puts
+
+
+def _vehicle_track(record_path: Path) -> tuple[np.ndarray, np.ndarray]:
+    record = load_record(record_path)
+    t = np.asarray(record.samples["t_s"], dtype=float)
+    pos = np.asarray(record.samples["pos_ned_m"], dtype=float)
+    keep = np.all(np.isfinite(pos), axis=1)
+    return t[keep], pos[keep]
+
+
+def replay(worker: CampaignWorker, index: int, out_dir: Path, *, speedup: float = 2.0,
+           foxglove: str | None = None, gcs_out: str | None = None, timeout_s: float = 600.0,
+           mitigated: bool = True) -> ReplayResult:
+    """Fly encounter ``index`` of ``worker``'s campaign in SITL (module docstring); with
+    ``mitigated`` False no report is put (the unmitigated flight, judged all the same)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    enc = worker.encounter(index)
+    mission = worker.mission(enc.mission)
+    mission_file = write_mission(mission, out_dir / "mission.waypoints")
+    extra = ["--seed", str(worker.spec.seed)]
+    if mission.obstacles or mission.fences:
+        world_file = out_dir / "world.toml"
+        world_file.write_text(dumps_world_toml(mission.world, name=enc.mission))
+        extra += ["--world", str(world_file)]
+    if foxglove:
+        extra += ["--foxglove", foxglove]
+    rng = np.random.default_rng([worker.spec.seed, index, 1])
+    updates = feed_updates(enc.intruders, enc.traffic, enc.delivery, rng, home=HOME,
+                           adsb_settings=worker.settings.adsb) if mitigated else []
+    home_arg = f"--home={HOME.lat0_deg},{HOME.lon0_deg},{HOME.alt0_m},0"
+    with flight_processes(out_dir, mission_file, speedup=speedup, gcs_out=gcs_out, extra_args=extra,
+                          sim_args=[home_arg]) as flight:
+        with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
+            clock = _LegClock(bus, speedup)
+            done = lambda: flight.companion.poll() is not None       # noqa: E731
+            puts = _play(bus, clock, updates, done, timeout_s)
+            flight.companion.wait(timeout_s)
+    if clock.leg_t0_s is None:
+        raise RuntimeError(f"encounter {index}: the companion never engaged leg 0; see {flight.log}")
+    t, pos = _vehicle_track(flight.record)
+    t_enc = t - clock.leg_t0_s
+    sep = judge_track(enc, t_enc, pos, worker.spec.volumes)
+    log.info("replay %d (%s): min separation %.2f m, collision %s, NMAC %s, LoWC %s", index, enc.stratum,
+             sep.min_sep_m, sep.collision, sep.nmac, sep.lowc)
+    return ReplayResult(enc, clock.leg_t0_s, sep, puts, out_dir, t_enc, pos)
+
+
+def judge_track(enc: Encounter, t_s: np.ndarray, pos_ned_m: np.ndarray, volumes) -> judge.Separation:
+    """A flown track (encounter times) judged against ``enc``'s intruders over its window (a flight
+    that ended early holds its last position, as in fast time)."""
+    dt = 0.02
+    grid = np.arange(enc.first_report_t_s, enc.end_t_s + 0.5 * dt, dt)
+    track = np.column_stack([np.interp(grid, t_s, pos_ned_m[:, a]) for a in range(3)])
+    return judge.separation(grid, track, enc.intruders, enc.traffic != "drone", volumes)
