@@ -32,12 +32,13 @@ from pathlib import Path
 from companion.campaign.judge import Volumes
 from companion.campaign.strata import STRATA, stratum_names
 from companion.flight.fast_time import JobLatency
+from companion.errors import CompanionError
 from heli_common.typed_config import SettingsError, from_dict, load_toml, require_numbers
 
 __all__ = ["CampaignSpec", "MannedSpec", "RobustnessSpec", "SpecError", "load_spec", "spec_hash", "spec_to_toml"]
 
 
-class SpecError(SettingsError):
+class SpecError(CompanionError, SettingsError):
     """A campaign spec is wrong; the message names the key."""
 
 

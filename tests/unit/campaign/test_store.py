@@ -1,0 +1,96 @@
+"""The campaign directory and the runner's bookkeeping: parts written whole, resuming, one spec
+per directory, batches, convergence verdicts, and the command's errors."""
+
+from __future__ import annotations
+
+import math
+
+import pyarrow.parquet as pq
+import pytest
+
+from companion.campaign.runner import CampaignRun, convergence_verdicts
+from companion.campaign.spec import CampaignSpec
+from companion.campaign.store import SCHEMA, CampaignStore, StoreError
+from companion.cli import main as cli_main
+
+
+def fake_row(i: int, *, u: bool, m: bool, traffic: str = "drone", weight: float = 1.0) -> dict:
+    row = {name: None for name in SCHEMA.names}
+    row.update({"id": i, "stratum": "crossing/open", "source": "parametric", "traffic": traffic, "world": "open",
+                "mission": "open", "seed": 1, "spec_hash": "h", "weight": weight, "n_threats": 1})
+    for p, flag in (("u_", u), ("m_", m)):
+        row.update({f"{p}collision": flag, f"{p}nmac": flag, f"{p}lowc": flag, f"{p}min_sep_m": 1.0,
+                    f"{p}hmd_m": [1.0], f"{p}vmd_m": [0.5], f"{p}obstacle_entries": 0, f"{p}fence_entries": 0,
+                    f"{p}completed": True, f"{p}path_m": 100.0})
+    row.update({"m_alerted": m, "m_alert_t_s": math.nan, "m_manoeuvred": m, "m_decisions": ["evade"] if m else [],
+                "m_latency_ms": [60.0] if m else [], "m_decide_wall_ms": [5.0] if m else [], "m_extra_path_m": 0.0,
+                "noise_pos_m": 0.0, "noise_vel_m_s": 0.0, "update_hz": 2.0, "latency_s": 0.0, "dropout": 0.0,
+                "wall_ms": 100.0})
+    return row
+
+
+def test_open_writes_the_spec_and_refuses_another(tmp_path):
+    store = CampaignStore(tmp_path / "c")
+    digest = store.open(CampaignSpec(name="a"))
+    assert (tmp_path / "c" / "spec.toml").exists()
+    assert store.open(CampaignSpec(name="a")) == digest          # reopening the same spec is fine
+    assert store.spec() == CampaignSpec(name="a")
+    with pytest.raises(StoreError, match="another spec"):
+        store.open(CampaignSpec(name="b"))
+
+
+def test_parts_are_whole_and_sorted(tmp_path):
+    store = CampaignStore(tmp_path / "c")
+    store.open(CampaignSpec())
+    store.append(10, [fake_row(i, u=True, m=False) for i in range(10, 20)])
+    store.append(0, [fake_row(i, u=True, m=i == 3) for i in range(10)])
+    assert store.done_batches() == {0, 10}
+    table = store.table()
+    assert table.column("id").to_pylist() == list(range(20))
+    assert not list((tmp_path / "c" / "rows").glob("*.tmp"))
+    assert pq.read_table(store.part_path(0)).num_rows == 10
+
+
+def test_a_broken_part_is_named(tmp_path):
+    store = CampaignStore(tmp_path / "c")
+    store.open(CampaignSpec())
+    store.part_path(0).write_bytes(b"not parquet")
+    with pytest.raises(StoreError, match="part-0000000.parquet: unreadable"):
+        store.table()
+
+
+def test_pending_batches_skip_the_stored_ones(tmp_path):
+    spec = CampaignSpec(max_pairs=45, min_pairs=10, batch_pairs=10)
+    store = CampaignStore(tmp_path / "c")
+    run = CampaignRun(spec, store, workers=1)
+    assert run.pending() == [(0, 10), (10, 10), (20, 10), (30, 10), (40, 5)]
+    store.append(10, [fake_row(i, u=True, m=False) for i in range(10, 20)])
+    assert run.pending() == [(0, 10), (20, 10), (30, 10), (40, 5)]
+    assert run._contiguous(store.done_batches()) == 0           # a gap at 0: nothing contiguous
+    store.append(0, [fake_row(i, u=True, m=False) for i in range(10)])
+    assert run._contiguous(store.done_batches()) == 20
+    assert CampaignRun(spec, store, workers=1, max_pairs=25).pending() == [(20, 5)]
+
+
+def test_verdicts_per_traffic_kind(tmp_path):
+    store = CampaignStore(tmp_path / "c")
+    store.open(CampaignSpec())
+    store.append(0, [fake_row(i, u=True, m=i % 10 == 0) for i in range(400)]
+                 + [fake_row(i, u=i % 2 == 0, m=False, traffic="rotorcraft") for i in range(400, 420)])
+    verdicts = convergence_verdicts(store.table(), 0.05)
+    assert set(verdicts) == {"drone nmac", "drone lowc", "rotorcraft nmac", "rotorcraft lowc"}
+    assert not verdicts["rotorcraft nmac"].converged            # 20 pairs are not enough
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["campaign", "run", "nope.toml", "--out", "x"], "nope.toml: no such file"),
+    (["campaign", "run", "SPEC", "--out", "x", "--workers", "0"], "--workers: must be >= 1"),
+    (["campaign", "status", "DIR"], "not a campaign directory"),
+])
+def test_command_errors_name_what_is_wrong(tmp_path, capsys, argv, message):
+    spec = tmp_path / "spec.toml"
+    spec.write_text('name = "x"\n')
+    argv = [str(spec) if a == "SPEC" else str(tmp_path / "nodir") if a == "DIR" else a for a in argv]
+    code = cli_main(argv)
+    assert code == 2
+    assert message in capsys.readouterr().err
