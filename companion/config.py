@@ -204,7 +204,12 @@ def settings_to_toml(settings) -> str:
 
     Unset keys (None) have no TOML value: they are written as comments.
     """
-    return "\n".join(_toml_table(settings_to_dict(settings), "")).strip() + "\n"
+    return dict_to_toml(settings_to_dict(settings))
+
+
+def dict_to_toml(data: dict) -> str:
+    """Nested plain data as TOML text (tables for dicts; None values as comments)."""
+    return "\n".join(_toml_table(data, "")).strip() + "\n"
 
 
 def _toml_table(data: dict, name: str) -> list[str]:

@@ -32,6 +32,7 @@ from pathlib import Path
 from companion.campaign.judge import Volumes
 from companion.campaign.strata import STRATA, stratum_names
 from companion.flight.fast_time import JobLatency
+from companion.config import dict_to_toml
 from companion.errors import CompanionError
 from heli_common.typed_config import SettingsError, from_dict, load_toml, require_numbers
 
@@ -184,22 +185,6 @@ def spec_hash(spec: CampaignSpec, settings_text: str = "") -> str:
     return hashlib.sha256(blob).hexdigest()[:16]
 
 
-def _toml_value(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, float)):
-        return repr(value)
-    if isinstance(value, str):
-        return json.dumps(value)
-    return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-
-
 def spec_to_toml(spec: CampaignSpec) -> str:
     """The spec as TOML (what the campaign directory keeps; ``load_spec`` reads it back)."""
-    tables, lines = [], []
-    for key, value in spec_to_dict(spec).items():
-        if isinstance(value, dict):
-            tables.append(f"\n[{key}]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in value.items()))
-        else:
-            lines.append(f"{key} = {_toml_value(value)}\n")
-    return "".join(lines) + "".join(tables)
+    return dict_to_toml(spec_to_dict(spec))

@@ -119,9 +119,9 @@ class JobLatency:
     """Modelled job durations on the virtual clock (s), in place of the measured ones: the flight
     no longer depends on this machine's speed or load (the campaign's rows are reproducible).
 
-    The defaults are the decision-latency goals (DESIGN section 7): 50 ms for a decision, 250 ms
-    for one that plans again (a replan, or the way back to the mission), 250 ms for a leg's
-    replan, the alternatives' budget for an alternatives job.
+    The defaults are the decision-latency goals: 50 ms for a decision, 250 ms for one that plans
+    again (a replan, or the way back to the mission) and for a leg's replan; 0.5 s for an
+    alternatives search (its default wall-clock budget).
     """
 
     decision_s: float = 0.05
