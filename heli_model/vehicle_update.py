@@ -109,7 +109,7 @@ class VehicleUpdate:
         update of a flight, which the simulator runs in its real-time loop.
         """
         update = cls(model, ControlLaw(model, controller_settings), float(physics_dt_s))
-        update.update(update.hover_state(), VehicleCommand(Setpoint()), update.law.settings.control_dt_s)
+        update.update(update.hover_state(), VehicleCommand(None), update.physics_dt_s)
         return update
 
     def hover_state(self, pos_ned_m=(0.0, 0.0, 0.0), yaw_rad: float = 0.0) -> VehicleState:

@@ -46,7 +46,7 @@ import numpy as np
 from heli_model.control.lqi import control_law_matrix, design_lqi
 from heli_model.control.outer_loop import heading_reference, limit_command, velocity_command, wrap_pi
 from heli_model.control.settings import N_LQI_STATES, ControlError, ControllerSettings, Setpoint
-from heli_model.dynamics import IDX_PSI, compiled_kernels
+from heli_model.dynamics import IDX_PSI, compiled_kernels, hover_state
 from heli_model.model import N_INPUTS, N_STATES, HeliModel
 
 __all__ = ["ControlLaw", "ControllerState", "initial_controller_state", "law_output"]
@@ -108,6 +108,12 @@ class ControlLaw:
     gains : LqiGains
     matrix : ndarray, shape (4, 26)
         ``delta = matrix @ [ref8, x14_err, z]`` (cached on the model).
+
+    Notes
+    -----
+    The constructor runs one :meth:`step` at hover, so that the compiled kernel of the linear
+    part is loaded here (numba's cache; compiled the first time on a machine) rather than in the
+    first step of a flight.
     """
 
     def __init__(self, model: HeliModel, settings: ControllerSettings | None = None) -> None:
@@ -117,6 +123,8 @@ class ControlLaw:
         self.matrix = model.cached(("law", s.control_dt_s, self.gains.q_weights, self.gains.r_weights),
                                    lambda: control_law_matrix(self.gains))
         self._matrix_shape = self.matrix.shape
+        hover = hover_state(model)
+        self.step(self.reset(hover), hover, Setpoint(), s.control_dt_s)
 
     def reset(self, x: np.ndarray) -> ControllerState:
         """Integrators cleared, heading held, velocity command = the current velocity (taking over)."""
