@@ -41,15 +41,30 @@ dozen float operations for the heading and position, whose RK4 stages then use e
 same stage states a textbook RK4 of the full 17-state system would use. :func:`step_rk4` is
 therefore a classical RK4 step of the whole nonlinear system, equal to one of
 :func:`derivative` up to rounding (with the body-axes wind of the step's start heading).
+
+:func:`step_rk4` is the reference implementation, in numpy. The vehicle update runs the same
+step compiled (:mod:`heli_model.rk4_kernel`, all sub-steps of an update in one call), bit for
+bit equal to it; :func:`compiled_kernels` gives that module where it is (numba imported on the
+first call, its BLAS products checked against numpy's once per matrix shape).
 """
 
 from __future__ import annotations
 
+import logging
 import math
+from types import ModuleType
 
 import numpy as np
 
 from heli_model.model import N_INPUTS, N_STATES, HeliModel
+
+__all__ = [
+    "ACT_SLICE", "IDX_PSI", "POS_SLICE", "STATE_SIZE", "DynamicsError", "actuator", "body_rates_rad_s",
+    "check_state", "compiled_kernels", "derivative", "euler_rad", "hover_state", "pos_ned_m", "rk4_matrices",
+    "state_size", "step_rk4", "vel_ned_m_s",
+]
+
+log = logging.getLogger(__name__)
 
 STATE_SIZE = 17
 """Length of the simulation state without servo lag."""
@@ -162,7 +177,7 @@ def derivative(
     xdot : ndarray, same shape as ``x``
     """
     x = np.asarray(x, dtype=float)
-    _check_state(model, x)
+    check_state(model, x)
     d = np.clip(np.asarray(delta, dtype=float), -1.0, 1.0)
     psi = x[IDX_PSI]
     c, s = math.cos(psi), math.sin(psi)
@@ -225,7 +240,8 @@ def _build_rk4_matrices(model: HeliModel, h: float) -> np.ndarray:
     return M
 
 
-def _check_state(model: HeliModel, x: np.ndarray) -> None:
+def check_state(model: HeliModel, x: np.ndarray) -> None:
+    """Raise :class:`DynamicsError` unless ``x`` has the shape of ``model``'s state, (17,) or (21,)."""
     want = state_size(model)
     if x.shape != (want,):
         lag = f" (servo lag {model.servo_tau_s} s adds 4 actuator states)" if want != STATE_SIZE else ""
@@ -262,7 +278,7 @@ def step_rk4(model: HeliModel, x: np.ndarray, delta, dt_s: float, wind_ned_m_s=N
     n_core = M.shape[1] - 7
     lag = n_core > N_STATES
     if n_total != STATE_SIZE + (N_INPUTS if lag else 0):
-        _check_state(model, np.asarray(x, dtype=float))
+        check_state(model, np.asarray(x, dtype=float))
     if type(delta) is np.ndarray and delta.shape == (4,):
         d0, d1, d2, d3 = delta.tolist()  # the fast path of the line below (the controller's output)
     else:
@@ -325,3 +341,39 @@ def step_rk4(model: HeliModel, x: np.ndarray, delta, dt_s: float, wind_ned_m_s=N
 
 def _bad_delta(delta) -> tuple:
     raise DynamicsError(f"delta: expected 4 inputs [d_lat, d_lon, d_ped, d_col], got {delta!r}")
+
+
+# ---------------------------------------------------------------------------- compiled kernels
+_KERNELS: list[ModuleType] = []
+_EXACT_SHAPES: dict[tuple[int, int], bool] = {}
+
+
+def compiled_kernels(shape: tuple[int, int]) -> ModuleType | None:
+    """:mod:`heli_model.rk4_kernel` if its matrix-vector products for matrices of ``shape`` are numpy's.
+
+    Imports the module (and numba) on the first call; checks each shape once per process
+    (:func:`heli_model.rk4_kernel.matvec_matches_numpy`). None where a product differs in a bit
+    (numba's BLAS summing in another order than numpy's on this machine): the caller then keeps
+    the numpy code, and a warning is logged once per shape.
+    """
+    ok = _EXACT_SHAPES.get(shape)
+    if ok is None:
+        ok = _check_kernel_shape(shape)
+    return _KERNELS[0] if ok else None
+
+
+def _check_kernel_shape(shape: tuple[int, int]) -> bool:
+    if not _KERNELS:
+        try:
+            from heli_model import rk4_kernel  # lazy: numba costs about 0.25 s to import
+        except ImportError as exc:  # numba is a dependency; without it the numpy code still runs
+            log.warning("compiled kernels unavailable (%s): the numpy code runs instead (slower, same results)", exc)
+            _EXACT_SHAPES[shape] = False
+            return False
+        _KERNELS.append(rk4_kernel)
+    ok = _KERNELS[0].matvec_matches_numpy(shape)
+    if not ok:
+        log.warning("compiled matrix-vector product for shape %s differs from numpy's in the last bits: "
+                    "the numpy code runs instead (slower, same results)", shape)
+    _EXACT_SHAPES[shape] = ok
+    return ok

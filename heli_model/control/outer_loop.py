@@ -11,9 +11,14 @@ import math
 from heli_model.control.settings import ControlError, ControllerSettings, Setpoint, setpoint_axes
 
 
+__all__ = ["heading_reference", "limit_command", "proportional_term", "velocity_command", "wrap_pi"]
+
+_TWO_PI = 2.0 * math.pi
+
+
 def wrap_pi(angle_rad: float) -> float:
     """Wrap an angle to [-pi, pi]."""
-    return math.remainder(angle_rad, 2.0 * math.pi)
+    return math.remainder(angle_rad, _TWO_PI)
 
 
 def _sqrt_gain(err_m: float, kp: float, accel: float) -> float:
@@ -26,37 +31,45 @@ def _sqrt_gain(err_m: float, kp: float, accel: float) -> float:
     return math.sqrt(2.0 * accel * (err_m - 0.5 * linear_m)) / err_m
 
 
+_NOT_COMMANDED = (math.nan, math.nan, math.nan)
+"""The axes of a setpoint vector that is None (NaN: no axis commanded)."""
+
+
 def velocity_command(st: ControllerSettings, pos_integral: list, x, sp: Setpoint, c: float, s: float):
     """PID position loop + velocity feed-forward.
 
     Returns the NED velocity command, acceleration and velocity feed-forward (3 each), which
     axes are position-controlled, and the position setpoint (or None). ``pos_integral`` (3
-    floats) is reset in place on the axes without a position.
+    floats) is reset in place on the axes without a position. ``x`` is the state, a sequence of
+    floats (:meth:`~heli_model.control.law.ControlLaw.step` passes it as a list).
     """
     pos = setpoint_axes(sp.pos_ned_m, "pos_ned_m")
     vel = setpoint_axes(sp.vel_ned_m_s, "vel_ned_m_s")
     acc = setpoint_axes(sp.acc_ned_m_s2, "acc_ned_m_s2")
-    u, v, w = float(x[0]), float(x[1]), float(x[2])
+    u, v, w = x[0], x[1], x[2]
     vel_now = (c * u - s * v, s * u + c * v, w)
     cmd = [0.0, 0.0, 0.0]
     acc_ff = [0.0, 0.0, 0.0]
     vel_ff = [0.0, 0.0, 0.0]
     pid_active = [False, False, False]
     p_term = proportional_term(st, x, pos)
+    ki_xy, kd_xy = st.ki_xy_1_s2, st.kd_xy
+    pos_axes = _NOT_COMMANDED if pos is None else pos
+    vel_axes = _NOT_COMMANDED if vel is None else vel
+    acc_axes = _NOT_COMMANDED if acc is None else acc
     for i in range(3):
-        ki, kd = (st.ki_xy_1_s2, st.kd_xy) if i < 2 else (st.ki_z_1_s2, st.kd_z)
-        v_ff = vel[i] if vel is not None and vel[i] == vel[i] else None
-        a_ff = acc[i] if acc is not None and acc[i] == acc[i] else 0.0
-        if pos is not None and pos[i] == pos[i]:
-            vf = 0.0 if v_ff is None else v_ff
+        p, v_ff, a_ff = pos_axes[i], vel_axes[i], acc_axes[i]  # NaN: not commanded
+        if p == p:
+            ki, kd = (ki_xy, kd_xy) if i < 2 else (st.ki_z_1_s2, st.kd_z)
+            vf = v_ff if v_ff == v_ff else 0.0
             cmd[i] = vf + p_term[i] + ki * pos_integral[i] + kd * (vf - vel_now[i])
             pid_active[i] = True
-            acc_ff[i] = a_ff
+            acc_ff[i] = a_ff if a_ff == a_ff else 0.0
             vel_ff[i] = vf
-        elif v_ff is not None:
+        elif v_ff == v_ff:
             cmd[i] = v_ff
             pos_integral[i] = 0.0
-            acc_ff[i] = a_ff
+            acc_ff[i] = a_ff if a_ff == a_ff else 0.0
             vel_ff[i] = v_ff
         else:
             pos_integral[i] = 0.0
@@ -70,17 +83,19 @@ def proportional_term(st: ControllerSettings, x, pos) -> list:
     ``sqrt(2 a (|e| - a / (2 kp^2)))`` so that the vehicle can stop from it at deceleration
     ``a`` without overshoot; within it, it is ``kp e`` (small errors and trajectory tracking
     stay linear). ``a`` is half the command slew limit, which leaves the inner loop margin
-    to follow the braking ramp. Horizontal error is treated as a vector.
+    to follow the braking ramp. Horizontal error is treated as a vector. ``x`` is the state, a
+    sequence of floats; returns the three terms, NED.
     """
     out = [0.0, 0.0, 0.0]
     if pos is None:
         return out
-    ex = pos[0] - float(x[14]) if pos[0] == pos[0] else 0.0
-    ey = pos[1] - float(x[15]) if pos[1] == pos[1] else 0.0
+    p0, p1, p2 = pos
+    ex = p0 - x[14] if p0 == p0 else 0.0
+    ey = p1 - x[15] if p1 == p1 else 0.0
     gain = _sqrt_gain(math.hypot(ex, ey), st.kp_xy_1_s, 0.5 * st.cmd_accel_xy_m_s2)
     out[0], out[1] = gain * ex, gain * ey
-    if pos[2] == pos[2]:
-        ez = pos[2] - float(x[16])
+    if p2 == p2:
+        ez = p2 - x[16]
         out[2] = _sqrt_gain(abs(ez), st.kp_z_1_s, 0.5 * st.cmd_accel_z_m_s2) * ez
     return out
 
@@ -112,10 +127,11 @@ def limit_command(st: ControllerSettings, prev, cmd: list, acc_ff: list, dt_s: f
     elif cmd[2] > st.max_descent_m_s:
         cmd[2] = st.max_descent_m_s
         limited[2] = True
-    am = math.sqrt(acc_ff[0] ** 2 + acc_ff[1] ** 2 + acc_ff[2] ** 2)
-    if am > st.max_accel_m_s2:
-        k = st.max_accel_m_s2 / am
-        acc_ff = [a * k for a in acc_ff]
+    if acc_ff[0] or acc_ff[1] or acc_ff[2]:  # (zero acceleration is within the limit)
+        am = math.sqrt(acc_ff[0] ** 2 + acc_ff[1] ** 2 + acc_ff[2] ** 2)
+        if am > st.max_accel_m_s2:
+            k = st.max_accel_m_s2 / am
+            acc_ff = [a * k for a in acc_ff]
     return cmd, acc_ff, limited
 
 
@@ -132,7 +148,8 @@ def heading_reference(st: ControllerSettings, yaw_ref_rad: float, sp: Setpoint, 
         rate = float(sp.yaw_rate_rad_s)
         if not math.isfinite(rate):
             raise ControlError(f"setpoint.yaw_rate_rad_s: expected a finite number, got {sp.yaw_rate_rad_s!r}")
-        rate = max(-lim, min(lim, rate))
+        rate = rate if rate < lim else lim  # max(-lim, min(lim, rate)), without the two calls
+        rate = rate if rate > -lim else -lim
     limited = False
     if sp.yaw_rad is not None:
         yaw = float(sp.yaw_rad)
