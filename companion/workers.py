@@ -79,7 +79,8 @@ def warm_up() -> float:
     """Import the planners and run one tiny GART and M-GART (in a worker); returns the seconds it took.
 
     The planners' numba kernels are loaded here, not at the first plan: GART's compiled
-    iteration and shortcut, and M-GART's distinctness test (other code, loaded at its first call).
+    iteration and shortcut, and M-GART's distinctness test (other code, loaded at its first call);
+    and the helicopter model's (the closed-loop check, fast-time flights).
     """
     t0 = time.perf_counter()
     from companion.planning import gart, mgart
@@ -88,6 +89,10 @@ def warm_up() -> float:
     for module in ("companion.flight.plan", "companion.threats.decision.step", "companion.smoothing.feasibility"):
         importlib.import_module(module)      # smoothing and timing; the threat decision and M-GART
 
+    from heli_model.model import HeliModel
+    from heli_model.vehicle_update import VehicleUpdate
+
+    VehicleUpdate.build(HeliModel.default())     # the model's compiled RK4 and control kernels
     # 2D and 3D: numba specialises on the points' tuple length; no straight line: iterations run
     for world in (World([Disc((5.0, 5.0), 1.5)], np.zeros(2), np.full(2, 10.0)),
                   World([Sphere((5.0, 5.0, 5.0), 1.5)], np.zeros(3), np.full(3, 10.0))):
