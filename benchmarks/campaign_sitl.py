@@ -14,7 +14,8 @@ flight and whether all three agree; the agreement rate (goal >= 95 %); the SITL 
 (SITL mitigated over SITL unmitigated) against the fast-time ratios of the same encounters and
 their 95 % intervals (``companion.campaign.stats.risk_ratio``).
 
-The cluttered strata are left out (``--skip``): ``companion run`` plans a cluttered leg anew
+A series resumes: an encounter whose replay finished (``OUT/encounter-ID/done``) is judged
+again from its record instead of flown again. The cluttered strata are left out (``--skip``): ``companion run`` plans a cluttered leg anew
 within a wall-clock budget, so its leg differs from the campaign's and the intruders aimed at
 the campaign's leg meet another flight.
 
@@ -36,7 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from companion.campaign.flying import CampaignWorker  # noqa: E402
-from companion.campaign.replay import judge_track, replay  # noqa: E402
+from companion.campaign.replay import judge_track, judged, replay  # noqa: E402
 from companion.campaign.runner import _settings_from_text  # noqa: E402
 from companion.campaign.spec import spec_hash  # noqa: E402
 from companion.campaign.stats import risk_ratio  # noqa: E402
@@ -45,6 +46,16 @@ from companion.campaign.store import CampaignStore  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 FLAGS = ("collision", "nmac", "lowc")
 log = logging.getLogger("campaign_sitl")
+
+
+def flown(worker, index: int, out: Path, speedup: float, mitigated: bool = True):
+    """The replay of ``index`` into ``out``, or its record there judged again (a series resumes)."""
+    record = out / "flight.jsonl"
+    if (out / "done").exists():
+        return judged(worker, worker.encounter(index), record)
+    result = replay(worker, index, out, speedup=speedup, mitigated=mitigated)
+    (out / "done").write_text("")
+    return result
 
 
 def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float) -> list[dict]:
@@ -56,10 +67,10 @@ def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float) 
     for i in ids:
         enc = worker.encounter(i)
         if enc.mission not in unmitigated:
-            base = replay(worker, i, out / f"unmitigated-{enc.mission}", speedup=speedup, mitigated=False)
+            base = flown(worker, i, out / f"unmitigated-{enc.mission}", speedup, mitigated=False)
             unmitigated[enc.mission] = (base.t_s, base.pos_ned_m)
         t0 = time.perf_counter()
-        got = replay(worker, i, out / f"encounter-{i}", speedup=speedup)
+        got = flown(worker, i, out / f"encounter-{i}", speedup)
         u = judge_track(enc, *unmitigated[enc.mission], spec.volumes)
         row = rows.get(i)
         entry = {"id": i, "stratum": enc.stratum, "weight": enc.weight, "wall_s": time.perf_counter() - t0,

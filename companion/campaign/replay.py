@@ -36,7 +36,7 @@ from companion.sitl.vehicles import flight_processes
 from companion.threats.transport.bus import ThreatBus
 from companion.world.io import dumps_world_toml
 
-__all__ = ["ReplayResult", "write_mission", "replay", "judge_track"]
+__all__ = ["ReplayResult", "write_mission", "replay", "judged", "judge_track", "recorded_track"]
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +51,8 @@ class ReplayResult:
     ----------
     encounter : Encounter
     leg_t0_s : float
-        The companion's mission time of the leg's start (encounter time 0).
+        The companion's mission time of the leg's start (encounter time 0; its ``leg_started``
+        event).
     separation : judge.Separation
         Judged on the vehicle's telemetry.
     puts : int
@@ -141,12 +142,17 @@ def _play(bus: ThreatBus, clock: _LegClock, updates, done, timeout_s: float) -> 
     return puts
 
 
-def _vehicle_track(record_path: Path) -> tuple[np.ndarray, np.ndarray]:
+def recorded_track(record_path: Path) -> tuple[float, np.ndarray, np.ndarray]:
+    """(leg 0's start, sample times from it, positions) of a flight record: the vehicle's own
+    telemetry as the companion recorded it, on the encounter's clock."""
     record = load_record(record_path)
+    starts = [float(e["t_s"]) for e in record.events if e.get("name") == "leg_started" and e.get("leg") == 0]
+    if not starts:
+        raise RuntimeError(f"{record_path}: leg 0 never started")
     t = np.asarray(record.samples["t_s"], dtype=float)
     pos = np.asarray(record.samples["pos_ned_m"], dtype=float)
     keep = np.all(np.isfinite(pos), axis=1)
-    return t[keep], pos[keep]
+    return starts[0], t[keep] - starts[0], pos[keep]
 
 
 def replay(worker: CampaignWorker, index: int, out_dir: Path, *, speedup: float = 2.0,
@@ -179,12 +185,16 @@ def replay(worker: CampaignWorker, index: int, out_dir: Path, *, speedup: float 
             flight.companion.wait(timeout_s)
     if clock.leg_t0_s is None:
         raise RuntimeError(f"encounter {index}: the companion never engaged leg 0; see {flight.log}")
-    t, pos = _vehicle_track(flight.record)
-    t_enc = t - clock.leg_t0_s
+    return judged(worker, enc, flight.record, puts)
+
+
+def judged(worker: CampaignWorker, enc: Encounter, record_path: Path, puts: int = 0) -> ReplayResult:
+    """A replay's flight record judged against its encounter (also to judge a record again)."""
+    leg_t0, t_enc, pos = recorded_track(record_path)
     sep = judge_track(enc, t_enc, pos, worker.spec.volumes)
-    log.info("replay %d (%s): min separation %.2f m, collision %s, NMAC %s, LoWC %s", index, enc.stratum,
+    log.info("replay %d (%s): min separation %.2f m, collision %s, NMAC %s, LoWC %s", enc.id, enc.stratum,
              sep.min_sep_m, sep.collision, sep.nmac, sep.lowc)
-    return ReplayResult(enc, clock.leg_t0_s, sep, puts, out_dir, t_enc, pos)
+    return ReplayResult(enc, leg_t0, sep, puts, Path(record_path).parent, t_enc, pos)
 
 
 def judge_track(enc: Encounter, t_s: np.ndarray, pos_ned_m: np.ndarray, volumes) -> judge.Separation:
