@@ -50,7 +50,7 @@ log = logging.getLogger(__name__)
 #: The local frame's origin: ArduPilot SITL's default home (Canberra).
 HOME = LocalFrame(-35.363261, 149.165230, 584.0)
 #: Columns measured on this machine (not reproducible; left out when rows are compared).
-MEASURED_COLUMNS = ("wall_ms", "m_decide_wall_ms")
+MEASURED_COLUMNS = ("wall_ms", "cpu_ms", "m_decide_wall_ms")
 #: Decision kinds that change the reference because of a threat.
 MANOEUVRES = ("evade", "switch", "retime", "hold", "replan")
 #: Unmitigated flights fly this long past the mission's nominal duration at most.
@@ -211,7 +211,7 @@ class CampaignWorker:
 
     def row(self, index: int) -> dict:
         """Encounter ``index``'s row (``companion.campaign.store.SCHEMA``)."""
-        wall0 = time.perf_counter()
+        wall0, cpu0 = time.perf_counter(), time.process_time()
         pair = self.fly(index)
         enc, m = pair.encounter, self.mission(pair.encounter.mission)
         manned = enc.traffic != "drone"
@@ -236,6 +236,7 @@ class CampaignWorker:
         row["m_extra_path_m"] = row["m_path_m"] - row["u_path_m"]
         row.update({key: float(enc.delivery[key]) for key in DEFAULT_DELIVERY})
         row["wall_ms"] = (time.perf_counter() - wall0) * 1e3
+        row["cpu_ms"] = (time.process_time() - cpu0) * 1e3
         return row
 
     @staticmethod

@@ -52,7 +52,7 @@ __all__ = [
 
 #: Row columns that are measured on the machine, not reproduced by a seed: leave them out when
 #: two campaigns' rows are compared.
-MEASURED_COLUMNS: tuple[str, ...] = ("wall_ms", "m_decide_wall_ms")
+MEASURED_COLUMNS: tuple[str, ...] = ("wall_ms", "cpu_ms", "m_decide_wall_ms")
 
 
 #: :func:`is_converged`'s defaults: relative tolerance of the running ratio, absolute floor of

@@ -46,7 +46,10 @@ SCHEMA = pa.schema(
     + [("m_alerted", pa.bool_()), ("m_alert_t_s", pa.float64()), ("m_manoeuvred", pa.bool_()),
        ("m_decisions", pa.list_(pa.string())), ("m_latency_ms", _FLOAT_LIST), ("m_decide_wall_ms", _FLOAT_LIST),
        ("m_extra_path_m", pa.float64()), ("noise_pos_m", pa.float64()), ("noise_vel_m_s", pa.float64()),
-       ("update_hz", pa.float64()), ("latency_s", pa.float64()), ("dropout", pa.float64()), ("wall_ms", pa.float64())])
+       ("update_hz", pa.float64()), ("latency_s", pa.float64()), ("dropout", pa.float64()), ("wall_ms", pa.float64()),
+       ("cpu_ms", pa.float64())])
+#: Measured columns a part written before they existed may lack (read as nulls).
+LATER_COLUMNS = ("cpu_ms",)
 
 
 class CampaignStore:
@@ -145,8 +148,12 @@ class CampaignStore:
         tables = []
         for path in parts:
             try:
-                tables.append(pq.read_table(path, schema=SCHEMA))
-            except (pa.ArrowInvalid, OSError) as exc:
+                table = pq.read_table(path)
+                for name in LATER_COLUMNS:
+                    if name not in table.column_names:
+                        table = table.append_column(name, pa.nulls(table.num_rows, pa.float64()))
+                tables.append(table.select(SCHEMA.names).cast(SCHEMA))
+            except (pa.ArrowInvalid, pa.ArrowTypeError, KeyError, OSError) as exc:
                 raise StoreError(f"{path}: unreadable part ({exc}); delete it and resume to fly its batch again") \
                     from None
         table = pa.concat_tables(tables)

@@ -33,7 +33,7 @@ STR_COLUMNS = ("stratum", "source", "traffic", "world", "mission", "spec_hash")
 BOOL_COLUMNS = ("u_collision", "u_nmac", "u_lowc", "u_completed", "m_collision", "m_nmac", "m_lowc", "m_completed",
                 "m_alerted", "m_manoeuvred")
 FLOAT_COLUMNS = ("weight", "u_min_sep_m", "u_path_m", "m_min_sep_m", "m_path_m", "m_alert_t_s", "m_extra_path_m",
-                 "noise_pos_m", "noise_vel_m_s", "update_hz", "latency_s", "dropout", "wall_ms")
+                 "noise_pos_m", "noise_vel_m_s", "update_hz", "latency_s", "dropout", "wall_ms", "cpu_ms")
 FLOAT_LIST_COLUMNS = ("u_hmd_m", "u_vmd_m", "m_hmd_m", "m_vmd_m", "m_latency_ms", "m_decide_wall_ms")
 STR_LIST_COLUMNS = ("m_decisions",)
 ALL_COLUMNS = INT_COLUMNS + STR_COLUMNS + BOOL_COLUMNS + FLOAT_COLUMNS + FLOAT_LIST_COLUMNS + STR_LIST_COLUMNS
@@ -145,7 +145,7 @@ def test_column_values(rows):
         assert len(row["m_latency_ms"]) == len(row["m_decisions"]) == len(row["m_decide_wall_ms"])
         assert row["update_hz"] == (1.0 if manned else 2.0)
         assert row["noise_pos_m"] == row["noise_vel_m_s"] == row["latency_s"] == row["dropout"] == 0.0
-        assert row["wall_ms"] > 0
+        assert row["wall_ms"] > 0 and row["cpu_ms"] > 0
 
 
 def test_weights(worker, rows):

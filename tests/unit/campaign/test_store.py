@@ -25,7 +25,7 @@ def fake_row(i: int, *, u: bool, m: bool, traffic: str = "drone", weight: float 
     row.update({"m_alerted": m, "m_alert_t_s": math.nan, "m_manoeuvred": m, "m_decisions": ["evade"] if m else [],
                 "m_latency_ms": [60.0] if m else [], "m_decide_wall_ms": [5.0] if m else [], "m_extra_path_m": 0.0,
                 "noise_pos_m": 0.0, "noise_vel_m_s": 0.0, "update_hz": 2.0, "latency_s": 0.0, "dropout": 0.0,
-                "wall_ms": 100.0})
+                "wall_ms": 100.0, "cpu_ms": 90.0})
     return row
 
 
@@ -94,3 +94,16 @@ def test_command_errors_name_what_is_wrong(tmp_path, capsys, argv, message):
     code = cli_main(argv)
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_part_written_before_cpu_ms_reads_with_nulls(tmp_path):
+    import pyarrow as pa
+
+    store = CampaignStore(tmp_path / "c")
+    store.open(CampaignSpec())
+    old = pa.Table.from_pylist([fake_row(i, u=True, m=False) for i in range(3)], schema=SCHEMA).drop_columns(["cpu_ms"])
+    pq.write_table(old, store.part_path(0))
+    store.append(3, [fake_row(i, u=True, m=False) for i in range(3, 6)])
+    cpu = store.table().column("cpu_ms").to_pylist()
+    assert cpu[:3] == [None] * 3 and cpu[3:] == [90.0] * 3
+
