@@ -131,7 +131,9 @@ def active_conflict(obs: Observation, leg: LegContext, policy: DecisionPolicy) -
     """First conflict of the observation's active reference with its threats over the horizon
     (None: clear, or nothing active). The monitor's check: a millisecond of numpy."""
     sit = _situation(obs.t_s, obs, leg, policy)
-    return None if sit is None else _keep_at(sit, obs.active).conflict
+    if sit is None or not sit.tubes:        # no threat within the sensor range: nothing to meet
+        return None
+    return _keep_at(sit, obs.active).conflict
 
 
 # ---------------------------------------------------------------------------- the decision
