@@ -36,7 +36,7 @@ from companion.campaign.summary import event_convergence
 from companion.config import Settings, settings_from_dict
 from heli_common.typed_config import from_dict
 
-__all__ = ["CampaignRun", "RunProgress", "run_batch", "convergence_verdicts", "worker_context"]
+__all__ = ["CampaignRun", "RunProgress", "RatioVerdict", "run_batch", "convergence_verdicts", "worker_context"]
 
 log = logging.getLogger(__name__)
 
@@ -79,14 +79,27 @@ def run_batch(first_id: int, n: int, spec_text: str, settings_text: str, digest:
 
 
 def convergence_verdicts(table, tolerance: float) -> dict[str, object]:
-    """The verdict of every ratio the campaign stops on: ``{"drone nmac": Verdict, ...}``."""
+    """The verdict of every ratio the campaign stops on: ``{"drone nmac": Verdict, ...}``; each
+    verdict also carries ``ratio``, the running ratio's last value."""
     out = {}
     traffic = table.column("traffic").to_pylist()
     for kind in sorted(set(traffic)):
         rows = table.filter([t == kind for t in traffic])
         for metric in ("nmac", "lowc"):
-            out[f"{kind} {metric}"] = is_converged(event_convergence(rows, metric), tol=tolerance)
+            curve = event_convergence(rows, metric)
+            verdict = is_converged(curve, tol=tolerance)
+            out[f"{kind} {metric}"] = RatioVerdict(verdict.converged, verdict.reason,
+                                                   float(curve.ratio[-1]) if len(curve.ratio) else float("nan"))
     return out
+
+
+@dataclass(frozen=True)
+class RatioVerdict:
+    """A ratio's convergence verdict and its current value."""
+
+    converged: bool
+    reason: str
+    ratio: float
 
 
 @dataclass

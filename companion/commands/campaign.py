@@ -101,7 +101,8 @@ def _spec_and_settings(path: str):
 def _progress_bar(enabled: bool):
     if not enabled or not sys.stderr.isatty():
         def log_progress(p) -> None:
-            log.info("campaign: %d/%d pairs, %.2f pairs/s", p.done, p.total, p.pairs_per_s)
+            log.info("campaign: %d/%d pairs, %.2f pairs/s%s", p.done, p.total, p.pairs_per_s,
+                     "".join(f", {k} RR {v.ratio:.3g}" for k, v in p.ratios.items()))
         return log_progress, lambda: None
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -111,7 +112,7 @@ def _progress_bar(enabled: bool):
     task = bar.add_task("pairs", total=None, ratios="")
 
     def show(p) -> None:
-        ratios = " ".join(f"{k}:{'ok' if v.converged else '..'}" for k, v in p.ratios.items())
+        ratios = " ".join(f"{k} {v.ratio:.3g}{'' if v.converged else '?'}" for k, v in p.ratios.items())
         bar.update(task, completed=p.done, total=p.total, ratios=f"{p.pairs_per_s:.2f}/s {ratios}")
     return show, bar.stop
 
@@ -164,7 +165,8 @@ def _status(args) -> int:
         print(f"  {group.name:10s} n={group.n:7d}  NMAC RR {_estimate(group.nmac.risk_ratio)}  "
               f"LoWC RR {_estimate(group.lowc.risk_ratio)}")
     for key, verdict in verdicts.items():
-        print(f"  {key:16s} {'converged' if verdict.converged else 'not converged: ' + verdict.reason}")
+        print(f"  {key:16s} RR {verdict.ratio:.3g}: "
+              f"{'converged' if verdict.converged else 'not converged: ' + verdict.reason}")
     return 0
 
 
