@@ -322,10 +322,15 @@ def read_model(path: str | os.PathLike) -> EncounterModel:
     return EncounterModel(path.stem, initial, transition, boundaries, rates, pairs)
 
 
+#: The models shipped with the package (MIT LL's files, unchanged, with their BSD licence).
+PACKAGED_MODELS = Path(__file__).resolve().parents[1] / "data" / "encounter_models"
+
+
 def models_directory(directory: str | os.PathLike | None = None) -> Path:
-    """``directory``, else ``$COMPANION_ENCOUNTER_MODELS``, else ``<repo>/../shared/encounter-models``."""
+    """``directory``, else ``$COMPANION_ENCOUNTER_MODELS``, else the packaged copy
+    (``companion/data/encounter_models``)."""
     if directory is None:
-        directory = os.environ.get(MODELS_ENV) or Path(__file__).resolve().parents[2] / ".." / "shared" / "encounter-models"
+        directory = os.environ.get(MODELS_ENV) or PACKAGED_MODELS
     return Path(directory).resolve()
 
 

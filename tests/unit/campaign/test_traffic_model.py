@@ -357,5 +357,6 @@ def test_the_models_directory_comes_from_the_argument_then_the_environment(tmp_p
     assert models_directory() == tmp_path.resolve()
     assert models_directory(tmp_path / "x") == (tmp_path / "x").resolve()
     monkeypatch.delenv(MODELS_ENV)
-    assert models_directory() == (Path(__file__).resolve().parents[3] / ".." / "shared" / "encounter-models").resolve()
+    assert models_directory() == (Path(__file__).resolve().parents[3] / "companion" / "data"
+                                  / "encounter_models").resolve()
     assert os.environ.get(MODELS_ENV) is None
