@@ -37,6 +37,7 @@ from companion.flight.active import ReferenceOwner
 from companion.flight.ports import FlightSink, Jobs
 from companion.flight.reference import ActiveReference
 from companion.threats.decision.kinds import Trigger
+from companion.threats.decision.screen import ReferenceTable, proves_clear
 from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
                                              Observation, active_conflict, decide, plan_alternatives_for)
 
@@ -157,6 +158,7 @@ class Avoidance:
         self._alt_busy = False
         self._alt_dirty = False
         self._alt_last_key: tuple | None = None
+        self._table: ReferenceTable | None = None
 
     # ------------------------------------------------------------------ legs
     def start_leg(self, leg: LegContext) -> None:
@@ -213,8 +215,8 @@ class Avoidance:
 
     def _start(self, trigger: Trigger, trigger_mono_s: float, answered: Callable | None) -> None:
         obs = self._observation(trigger)
-        if trigger is Trigger.MONITOR and self._stays_clear(obs):
-            self._next()                        # the usual tick: nothing for a worker to do
+        if trigger is not Trigger.RESUME and self._stays_clear(obs):
+            self._next()                        # the usual tick or report: nothing for a worker to do
             return
         self._busy = True
         asked = (self.leg, self.owner.current, self.state)
@@ -223,11 +225,21 @@ class Avoidance:
                          failed=functools.partial(self._failed, answered))
 
     def _stays_clear(self, obs: Observation) -> bool:
+        """The active reference stays clear of the observed threats: proven by the screen
+        (``screen.proves_clear``: exact, from the reference's table), else by ``active_conflict``."""
         try:
-            return self.steps.active_conflict(obs, self.leg, self.policy) is None
+            return self._screened(obs) or self.steps.active_conflict(obs, self.leg, self.policy) is None
         except Exception:  # noqa: BLE001 - the decision will say what is wrong
             log.debug("monitor pre-check failed", exc_info=True)
             return False
+
+    def _screened(self, obs: Observation) -> bool:
+        if obs.active is None:
+            return False
+        step_s, dim = self.policy.settings.check_step_s, self.leg.world.dim
+        if self._table is None or not self._table.describes(obs.active, step_s, dim):
+            self._table = ReferenceTable(obs.active, step_s, dim)
+        return proves_clear(self._table, obs.threats, obs.t_s, self.policy.settings, self.policy.accel_bound_m_s2)
 
     def _decided(self, asked, trigger: Trigger, trigger_mono_s: float, answered, result) -> None:
         leg, ref, sent = asked

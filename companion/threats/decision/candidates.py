@@ -37,7 +37,8 @@ from companion.threats.decision.evasion import EscapeLimits, escape_library
 from companion.threats.decision.join import HOVER_SPEED_M_S, join_trajectory, lead_length_m, turn_rad
 from companion.threats.decision.retime import RetimedTrajectory, ramp_time_s
 from companion.threats.settings import ThreatSettings
-from companion.threats.decision.spacetime import STATIC_ID, check_candidates, sample_times
+from companion.threats.decision.spacetime import (STATIC_ID, check_candidates, reference_accel_bound_m_s2,
+                                                  sample_times)
 from companion.world import Disc, Sphere, World
 
 __all__ = ["Situation", "check", "judge", "evade_candidates", "retime_candidates", "switch_to_alternatives",
@@ -90,10 +91,7 @@ class Situation:
 
     @property
     def accel_bound_m_s2(self) -> float:
-        s = self.settings
-        limits = self.pipeline.limits
-        return max(limits.accel_m_s2, limits.lat_accel_m_s2, s.evade_accel_m_s2,
-                   s.hold_decel_m_s2) * 1.5
+        return reference_accel_bound_m_s2(self.settings, self.pipeline.limits)
 
     def cruise_m_s(self) -> float:
         """Speed of the way back to the route (the planned trajectories' limit)."""

@@ -81,6 +81,13 @@ class BatchCheck:
     static_clearance_m: np.ndarray
 
 
+def reference_accel_bound_m_s2(settings, limits) -> float:
+    """Bound (m/s^2) on any reference's acceleration, for the chord error: 1.5 times the largest
+    of the planned limits (``limits``: ``accel_m_s2``, ``lat_accel_m_s2``) and the escapes' and
+    holds' (``settings``: ``evade_accel_m_s2``, ``hold_decel_m_s2``)."""
+    return max(limits.accel_m_s2, limits.lat_accel_m_s2, settings.evade_accel_m_s2, settings.hold_decel_m_s2) * 1.5
+
+
 def sample_times(t_from_s: float, horizon_s: float, step_s: float) -> np.ndarray:
     """Check times (K,) from ``t_from_s`` over ``horizon_s`` every ``step_s`` (last one included)."""
     n = max(2, int(math.ceil(horizon_s / step_s)) + 1)

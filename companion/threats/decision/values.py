@@ -25,6 +25,7 @@ from companion.flight.pipeline import TrajectoryPipeline
 from companion.threats.decision.alternatives import Alternative
 from companion.threats.decision.estimate import RunningEstimate
 from companion.threats.decision.kinds import Strategy, Trigger
+from companion.threats.decision.spacetime import reference_accel_bound_m_s2
 from companion.threats.settings import ThreatSettings
 from companion.world import World
 
@@ -146,6 +147,11 @@ class DecisionPolicy:
         the daemon's clock). No closed-loop check: a decision has milliseconds."""
         pipeline = TrajectoryPipeline.from_settings(settings.smoothing, settings.planning)
         return cls(settings.threats, pipeline, strategy, settings.link.time_scale or 1.0)
+
+    @property
+    def accel_bound_m_s2(self) -> float:
+        """The checks' bound on a reference's acceleration (``spacetime.reference_accel_bound_m_s2``)."""
+        return reference_accel_bound_m_s2(self.settings, self.pipeline.limits)
 
     def lead_s(self, estimate: RunningEstimate) -> float:
         """Clock seconds that a step of ``estimate`` is expected to take (mean + 1 deviation)."""

@@ -609,13 +609,13 @@ def test_statustext_is_cut_to_50_characters_keeping_the_latency():
 
 # ---------------------------------------------------------------------------- threats learnt locally
 def test_a_local_threat_goes_the_way_of_a_zenoh_put_and_is_republished():
-    """An ADS-B threat: stored, decided on like a PUT, recorded, and republished for others."""
+    """An ADS-B threat on the reference: stored, decided on like a PUT, recorded, and republished for others."""
     h = Harness(monitor_period_s=60.0)
     h.manager.on_threats_script = [trajectory_decision("evade", threat_id="adsb-4b1805")]
 
     async def main(h):
         await h.start()
-        threat = Threat("adsb-4b1805", "moving", "global", (47.3986, 8.5456, 508.0), (0.0, 20.0, 0.0),
+        threat = Threat("adsb-4b1805", "moving", "global", (47.397814, 8.545594, 498.0), (0.0, 20.0, 0.0),
                         radius_m=20.0, ttl_s=5.0, received_t_s=4.0)
         receipt = time.monotonic()
         h.reactor.on_local_threat(threat, receipt)

@@ -103,7 +103,7 @@ def test_the_decision_event_names_the_source_of_its_threat():
 
     async def main(h):
         await h.start()
-        threat = Threat("p1", "popup", "local_ned", (20.0, 0.0, -10.0), radius_m=3.0, received_t_s=5.0,
+        threat = Threat("p1", "popup", "local_ned", (8.0, 0.0, -10.0), radius_m=3.0, received_t_s=5.0,
                         source="radar1")
         h.bus.handler(ThreatUpdate("put", "p1", threat, None, "uav/1/threats/radar1/p1", 5.0,
                                    time.monotonic(), 1, "radar1"))
