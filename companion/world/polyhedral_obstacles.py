@@ -12,10 +12,21 @@ from typing import ClassVar
 import numpy as np
 
 from companion.errors import WorldError
-from companion.world import geometry as geo
-from companion.world.obstacles import Obstacle, down_limits, finite_vector, lerp, slab_interval
+from companion.world.obstacles import Obstacle, down_limits, finite_vector
 
 __all__ = ["Box", "Prism"]
+
+_KERNELS = None     # companion.world.polyhedral_kernels, imported at the first Prism query
+
+
+def _load_kernels():
+    """The Prism's compiled kernels; imported on demand so that ``import companion.world``
+    does not import numba (about 0.3 s)."""
+    global _KERNELS
+    from companion.world import polyhedral_kernels
+
+    _KERNELS = polyhedral_kernels
+    return polyhedral_kernels
 
 
 @dataclass(frozen=True)
@@ -115,6 +126,13 @@ class Prism(Obstacle):
     down_min_m, down_max_m : float
         Extent along *down*; altitudes ``h_lo < h_hi`` map to ``down_min_m = -h_hi``,
         ``down_max_m = -h_lo``. Infinite allowed (default). Ignored in a 2D world.
+
+    Notes
+    -----
+    :meth:`sdf` and :meth:`segment_distance` run the compiled kernels of
+    :mod:`companion.world.polyhedral_kernels` on the vertices kept as a (P, 2) float64 array
+    (``_vertices_array``, not a field); they return, bit for bit, what the plain-Python
+    ``companion.world.geometry`` functions give.
     """
 
     vertices_ne_m: tuple
@@ -137,6 +155,7 @@ class Prism(Obstacle):
         if abs(area2) < 1e-9:
             raise WorldError("Prism.vertices_ne_m: the polygon has zero area")
         object.__setattr__(self, "vertices_ne_m", tuple((float(x), float(y)) for x, y in arr))
+        object.__setattr__(self, "_vertices_array", np.ascontiguousarray(arr, dtype=np.float64))
         lo, hi = down_limits(self.down_min_m, self.down_max_m, "Prism")
         object.__setattr__(self, "down_min_m", lo)
         object.__setattr__(self, "down_max_m", hi)
@@ -149,42 +168,25 @@ class Prism(Obstacle):
         return (min(xs), min(ys), self.down_min_m), (max(xs), max(ys), self.down_max_m)
 
     def sdf(self, p: tuple) -> float:
-        dxy = geo.polygon_sdf(p[0], p[1], self.vertices_ne_m)
+        kern = _KERNELS or _load_kernels()
         if len(p) == 2:
-            return dxy
-        dz = max(self.down_min_m - p[2], p[2] - self.down_max_m)
-        if dxy <= 0.0 and dz <= 0.0:
-            return max(dxy, dz)
-        return math.hypot(max(dxy, 0.0), max(dz, 0.0))
+            return kern.polygon_sdf(float(p[0]), float(p[1]), self._vertices_array)
+        return kern.prism_sdf_3d(float(p[0]), float(p[1]), float(p[2]), self._vertices_array,
+                                 self.down_min_m, self.down_max_m)
 
     def segment_distance(self, a: tuple, b: tuple) -> float:
-        """Exact: intersection test, else endpoint-to-prism and segment-to-edge distances."""
-        verts = self.vertices_ne_m
+        """Exact: intersection test, else endpoint-to-prism and segment-to-edge distances.
+
+        Infinite limits are clamped just beyond the segment: the closest point of a vertical
+        extrusion to any point lies at that point's (clamped) height, so this is exact.
+        """
+        kern = _KERNELS or _load_kernels()
         if len(a) == 2:
-            return geo.segment_polygon_dist_2d(a, b, verts)
-        # Infinite limits are clamped just beyond the segment: the closest point of a vertical
-        # extrusion to any point lies at that point's (clamped) height, so this is exact.
-        seg_lo, seg_hi = min(a[2], b[2]), max(a[2], b[2])
-        z_lo = self.down_min_m if math.isfinite(self.down_min_m) else min(seg_lo, self.down_max_m) - 1.0
-        z_hi = self.down_max_m if math.isfinite(self.down_max_m) else max(seg_hi, z_lo) + 1.0
-        slab = slab_interval(a[2], b[2], z_lo, z_hi)
-        if slab is not None:
-            pa, pb = lerp(a, b, slab[0]), lerp(a, b, slab[1])
-            if geo.segment_polygon_dist_2d(pa[:2], pb[:2], verts) <= 0.0:
-                return 0.0
-        best2 = min(max(self.sdf(a), 0.0), max(self.sdf(b), 0.0)) ** 2
-        n = len(verts)
-        prev = verts[n - 1]
-        for i in range(n):
-            cur = verts[i]
-            for e0, e1 in (((prev[0], prev[1], z_lo), (cur[0], cur[1], z_lo)),
-                           ((prev[0], prev[1], z_hi), (cur[0], cur[1], z_hi)),
-                           ((cur[0], cur[1], z_lo), (cur[0], cur[1], z_hi))):
-                d2 = geo.segment_segment_dist2(a, b, e0, e1)
-                if d2 < best2:
-                    best2 = d2
-            prev = cur
-        return math.sqrt(best2)
+            return kern.segment_polygon_dist_2d(float(a[0]), float(a[1]), float(b[0]), float(b[1]),
+                                                self._vertices_array)
+        return kern.prism_segment_distance(float(a[0]), float(a[1]), float(a[2]),
+                                           float(b[0]), float(b[1]), float(b[2]),
+                                           self._vertices_array, self.down_min_m, self.down_max_m)
 
     def _polygon_sdf_batch(self, points: np.ndarray) -> np.ndarray:
         x, y = points[:, 0], points[:, 1]
