@@ -80,7 +80,7 @@ def warm_up() -> float:
 
     The planners' numba kernels are loaded here, not at the first plan: GART's compiled
     iteration and shortcut, and M-GART's distinctness test (other code, loaded at its first call);
-    and the helicopter model's (the closed-loop check, fast-time flights).
+    and the helicopter model's (the closed-loop check, fast-time flights), and the prisms' queries.
     """
     t0 = time.perf_counter()
     from companion.planning import gart, mgart
@@ -93,6 +93,9 @@ def warm_up() -> float:
     from heli_model.vehicle_update import VehicleUpdate
 
     VehicleUpdate.build(HeliModel.default())     # the model's compiled RK4 and control kernels
+    from companion.world import polyhedral_kernels
+
+    polyhedral_kernels.warm_up()                 # exclusion zones (prisms)
     # 2D and 3D: numba specialises on the points' tuple length; no straight line: iterations run
     for world in (World([Disc((5.0, 5.0), 1.5)], np.zeros(2), np.full(2, 10.0)),
                   World([Sphere((5.0, 5.0, 5.0), 1.5)], np.zeros(3), np.full(3, 10.0))):
