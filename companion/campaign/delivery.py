@@ -24,7 +24,7 @@ from companion.campaign.tracks import IntruderTrack
 from companion.threats.model import Threat
 from companion.threats.transport import adsb, codec
 
-__all__ = ["DEFAULT_DELIVERY", "feed_updates", "report_times", "adsb_fields", "MANNED_UPDATE_HZ"]
+__all__ = ["DEFAULT_DELIVERY", "feed_updates", "adsb_reports", "report_times", "adsb_fields", "MANNED_UPDATE_HZ"]
 
 #: Drone-scale reports: 2 Hz, exact, on time (the robustness strata vary these).
 DEFAULT_DELIVERY = {"noise_pos_m": 0.0, "noise_vel_m_s": 0.0, "update_hz": 2.0, "latency_s": 0.0, "dropout": 0.0}
@@ -72,6 +72,26 @@ def adsb_fields(track: IntruderTrack, pos_ned_m, vel_ned_m_s, home, link: mavlin
     return link.decode(bytearray(packed)).to_dict()
 
 
+def _reports(track: IntruderTrack, update_hz: float, delivery: dict, rng: np.random.Generator):
+    """(receive time, measured position, measured velocity) of each report of ``track`` that
+    arrives, in time order (the draws: dropouts, then noise)."""
+    t = report_times(track, update_hz)
+    kept = rng.random(t.size) >= float(delivery["dropout"])
+    kept[0] = True                      # the first report is what makes it an encounter
+    pos, vel = _measured(track, t, delivery, rng)
+    return [(float(t[k] + delivery["latency_s"]), pos[k], vel[k]) for k in np.flatnonzero(kept)]
+
+
+def adsb_reports(intruders, delivery: dict, rng: np.random.Generator, *, home) -> list[tuple[float, dict]]:
+    """Manned traffic's ADSB_VEHICLE reports as received: (receive time, the message's fields
+    packed and unpacked), in time order; the same draws as ``feed_updates`` (SITL sends these)."""
+    link = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    out = [(t, adsb_fields(track, pos, vel, home, link))
+           for track in intruders for t, pos, vel in _reports(track, MANNED_UPDATE_HZ, delivery, rng)]
+    out.sort(key=lambda u: u[0])
+    return out
+
+
 def feed_updates(intruders, traffic: str, delivery: dict, rng: np.random.Generator, *, home=None,
                  adsb_settings=None) -> list[tuple[float, Threat, str]]:
     """The threat updates the companion receives: (receive time, Threat, id), in time order.
@@ -80,7 +100,8 @@ def feed_updates(intruders, traffic: str, delivery: dict, rng: np.random.Generat
     ----------
     intruders : sequence of IntruderTrack
     traffic : str
-        ``drone`` (zenoh payloads) or manned (``rotorcraft``, ``fixedwing``: ADSB_VEHICLE).
+        ``drone`` (zenoh payloads) or manned (``rotorcraft``, ``fixedwing``: ADSB_VEHICLE,
+        ``adsb_reports`` turned into threats by the companion's ``threat_from_adsb``).
     delivery : dict
         ``noise_pos_m``, ``noise_vel_m_s``, ``update_hz``, ``latency_s``, ``dropout``.
     rng : numpy.random.Generator
@@ -89,25 +110,13 @@ def feed_updates(intruders, traffic: str, delivery: dict, rng: np.random.Generat
     adsb_settings : AdsbSettings
         The companion's ``[adsb]`` settings (radius by emitter type, ttl).
     """
-    manned = traffic != "drone"
-    update_hz = MANNED_UPDATE_HZ if manned else float(delivery["update_hz"])
-    ttl_s = max(TTL_PERIODS / update_hz, TTL_MIN_S)
-    link = mavlink.MAVLink(None, srcSystem=1, srcComponent=1) if manned else None
-    updates = []
-    for track in intruders:
-        t = report_times(track, update_hz)
-        kept = rng.random(t.size) >= float(delivery["dropout"])
-        kept[0] = True                      # the first report is what makes it an encounter
-        pos, vel = _measured(track, t, delivery, rng)
-        for k in np.flatnonzero(kept):
-            received = float(t[k] + delivery["latency_s"])
-            if manned:
-                threat = adsb.threat_from_adsb(adsb_fields(track, pos[k], vel[k], home, link), adsb_settings,
-                                               received, home)
-                if threat is None:
-                    continue
-            else:
-                threat = _zenoh_threat(track, pos[k], vel[k], ttl_s, received)
-            updates.append((received, threat, threat.id))
+    if traffic != "drone":
+        threats = ((t, adsb.threat_from_adsb(fields, adsb_settings, t, home))
+                   for t, fields in adsb_reports(intruders, delivery, rng, home=home))
+        return [(t, threat, threat.id) for t, threat in threats if threat is not None]
+    ttl_s = max(TTL_PERIODS / float(delivery["update_hz"]), TTL_MIN_S)
+    updates = [(t, threat, threat.id) for track in intruders
+               for t, pos, vel in _reports(track, float(delivery["update_hz"]), delivery, rng)
+               for threat in (_zenoh_threat(track, pos, vel, ttl_s, t),)]
     updates.sort(key=lambda u: u[0])
     return updates

@@ -9,11 +9,14 @@ campaign's ``HOME``) and ``companion run`` with
 - the mission's world (obstacles and fences) as a world file, when it has any;
 - ``--foxglove PORT`` when asked.
 
-The intruders' reports are put over zenoh at their encounter times, counted from the instant
-the companion engages the leg (its ``path`` message for ``leg0``; mission time from its
-``status``): drone-scale ones as the local-frame payloads the campaign decodes, manned ones as
-the global-frame threats their ADSB_VEHICLE reports become (the companion converts them about
-home as it converts ADS-B). The flight is judged by the vehicle's own telemetry in the flight
+The intruders' reports are sent at their encounter times, counted from the instant the
+companion engages the leg (its ``path`` message for ``leg0``; mission time from its
+``status``), as in flight:
+
+- drone-scale ones are put over zenoh, as the local-frame payloads the campaign decodes;
+- manned ones are ADSB_VEHICLE messages (the fields ``delivery.adsb_reports`` gives fast time)
+  sent to the vehicle by an ADS-B receiver component (``MAV_COMP_ID_ADSB``); the vehicle routes
+  them to the companion, which runs with ``--adsb``. The flight is judged by the vehicle's own telemetry in the flight
 record against the intruders' true tracks, with the campaign's volumes.
 """
 
@@ -28,7 +31,7 @@ import numpy as np
 from pymavlink import mavutil
 
 from companion.campaign import judge
-from companion.campaign.delivery import feed_updates
+from companion.campaign.delivery import adsb_reports, feed_updates
 from companion.campaign.flying import HOME, CampaignWorker
 from companion.campaign.tracks import Encounter
 from companion.record.flight_record import load_record
@@ -123,13 +126,14 @@ class _LegClock:
         return t + (time.monotonic() - wall) * self.speedup
 
 
-def _play(bus: ThreatBus, clock: _LegClock, updates, done, timeout_s: float) -> int:
-    """Put each update at its encounter time after the leg's start; returns how many were put."""
+def _play(send, clock: _LegClock, updates, done, timeout_s: float) -> int:
+    """``send`` each update (time, payload, ...) at its encounter time after the leg's start;
+    returns how many were sent."""
     deadline = time.monotonic() + timeout_s
     while clock.leg_t0_s is None and time.monotonic() < deadline and not done():
         time.sleep(0.02)
     puts = 0
-    for t_enc, threat, _ in updates:
+    for t_enc, payload, *_ in updates:
         while not done() and time.monotonic() < deadline:
             now = clock.now_s()
             if now is not None and now - clock.leg_t0_s >= t_enc:
@@ -137,9 +141,23 @@ def _play(bus: ThreatBus, clock: _LegClock, updates, done, timeout_s: float) -> 
             time.sleep(0.005)
         if done():
             break
-        bus.client.put_threat(threat)
+        send(payload)
         puts += 1
     return puts
+
+
+def _adsb_sender(vehicle_port: int):
+    """(send(fields), close()) of an ADS-B receiver component talking to the vehicle."""
+    conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{vehicle_port}", source_system=1,
+                                      source_component=mavutil.mavlink.MAV_COMP_ID_ADSB)
+
+    def send(fields: dict) -> None:
+        args = {k: v for k, v in fields.items() if k != "mavpackettype"}
+        callsign = args["callsign"]
+        args["callsign"] = callsign.encode() if isinstance(callsign, str) else callsign
+        conn.mav.adsb_vehicle_send(**args)
+
+    return send, conn.close
 
 
 def recorded_track(record_path: Path) -> tuple[float, np.ndarray, np.ndarray]:
@@ -173,15 +191,23 @@ def replay(worker: CampaignWorker, index: int, out_dir: Path, *, speedup: float 
     if foxglove:
         extra += ["--foxglove", foxglove]
     rng = np.random.default_rng([worker.spec.seed, index, 1])
-    updates = feed_updates(enc.intruders, enc.traffic, enc.delivery, rng, home=HOME,
-                           adsb_settings=worker.settings.adsb) if mitigated else []
+    manned = enc.traffic != "drone"
+    if manned:
+        extra += ["--adsb"]
+        updates = adsb_reports(enc.intruders, enc.delivery, rng, home=HOME) if mitigated else []
+    else:
+        updates = feed_updates(enc.intruders, enc.traffic, enc.delivery, rng, home=HOME) if mitigated else []
     home_arg = f"--home={HOME.lat0_deg},{HOME.lon0_deg},{HOME.alt0_m},0"
     with flight_processes(out_dir, mission_file, speedup=speedup, gcs_out=gcs_out, extra_args=extra,
                           sim_args=[home_arg]) as flight:
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             clock = _LegClock(bus, speedup)
             done = lambda: flight.companion.poll() is not None       # noqa: E731
-            puts = _play(bus, clock, updates, done, timeout_s)
+            send, close = _adsb_sender(flight.vehicle_port) if manned else (bus.client.put_threat, lambda: None)
+            try:
+                puts = _play(send, clock, updates, done, timeout_s)
+            finally:
+                close()
             flight.companion.wait(timeout_s)
     if clock.leg_t0_s is None:
         raise RuntimeError(f"encounter {index}: the companion never engaged leg 0; see {flight.log}")

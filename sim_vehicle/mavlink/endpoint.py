@@ -31,8 +31,9 @@ COMPONENT_ID = 1
 #: Kernel receive buffer of the vehicle's socket (the kernel may cap it at net.core.rmem_max).
 RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
 STATUSTEXT_CHUNK = 50
-#: Broadcast messages of other components forwarded between links (:meth:`Endpoint.route`), as ArduPilot does.
-ROUTED = frozenset({"STATUSTEXT", "HEARTBEAT"})
+#: Broadcast messages of other components forwarded between links (:meth:`Endpoint.route`), as ArduPilot does:
+#: texts, heartbeats, and an ADS-B receiver's traffic reports (which reach the companion through the vehicle).
+ROUTED = frozenset({"STATUSTEXT", "HEARTBEAT", "ADSB_VEHICLE"})
 
 Address = tuple[str, int]
 
@@ -171,8 +172,9 @@ class Endpoint:
           last heard (:attr:`routes`; ``target_component`` 0 of another system: every component
           heard of it). Unlike ArduPilot, a message to our own system with ``target_component``
           0 is handled here only, not also forwarded to the companion.
-        - A broadcast of a type in :data:`ROUTED` (STATUSTEXT, HEARTBEAT) goes to every other
-          destination, so a ground station sees the companion component and its texts.
+        - A broadcast of a type in :data:`ROUTED` (STATUSTEXT, HEARTBEAT, ADSB_VEHICLE) goes to
+          every other destination, so a ground station sees the companion component and its
+          texts, and the companion hears an ADS-B receiver's traffic.
         """
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         if source == (self.sysid, COMPONENT_ID):
