@@ -35,6 +35,7 @@ from companion.errors import MissionError
 from companion.flight.pipeline import Checked, PlanBudget, PlanningProblem, TrajectoryPipeline, TrajectoryStatus
 from companion.planning import PlanResult
 from companion.smoothing import TrajectoryLimits
+from companion.smoothing.bezier_maths import clip_ufunc
 from companion.world import Cylinder, Prism, World
 from heli_common.typed_config import require_int, require_numbers
 
@@ -116,29 +117,47 @@ class TrajectoryChain:
         self.duration_s = float(durations.sum())
         self.length_m = float(sum(p.length_m for p in self.pieces))
 
-    def _split(self, t_s) -> tuple[np.ndarray, np.ndarray]:
-        t = np.clip(np.atleast_1d(np.asarray(t_s, dtype=float)), 0.0, self.duration_s)
-        idx = np.clip(np.searchsorted(self.t_start_s, t, side="right") - 1, 0, len(self.pieces) - 1)
-        return t, idx
+    def _split(self, t_s) -> tuple[np.ndarray, np.ndarray | None, int, int]:
+        """Clipped times (K,), their piece indices (K,) and the first and last piece they fall in.
+
+        The indices are None when every time falls in one piece (one piece, or one time).
+        """
+        t = clip_ufunc(np.atleast_1d(np.asarray(t_s, dtype=float)), 0.0, self.duration_s)
+        if t.size == 0:
+            return t, np.zeros(0, dtype=int), 0, -1           # no piece is sampled
+        if len(self.pieces) == 1:
+            return t, None, 0, 0
+        idx = clip_ufunc(np.searchsorted(self.t_start_s, t, side="right") - 1, 0, len(self.pieces) - 1)
+        if idx.size == 1:
+            k = int(idx[0])
+            return t, None, k, k
+        first, last = int(idx.min()), int(idx.max())
+        return t, (idx if first != last else None), first, last
 
     def sample(self, t_s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position, velocity, acceleration (NED) at times ``t_s`` (K,) -> three (K, 3) arrays."""
-        t, idx = self._split(t_s)
+        t, idx, first, last = self._split(t_s)
+        if idx is None:                                   # all in one piece: no gather, no scatter
+            return self.pieces[first].sample(t - self.t_start_s[first])
         pos = np.empty((t.size, 3))
         vel = np.empty((t.size, 3))
         acc = np.empty((t.size, 3))
-        for k in np.unique(idx):
+        for k in range(first, last + 1):
             sel = idx == k
-            p, v, a = self.pieces[k].sample(t[sel] - self.t_start_s[k])
-            pos[sel], vel[sel], acc[sel] = p, v, a
+            if sel.any():
+                p, v, a = self.pieces[k].sample(t[sel] - self.t_start_s[k])
+                pos[sel], vel[sel], acc[sel] = p, v, a
         return pos, vel, acc
 
     def _per_piece(self, name: str, t_s) -> np.ndarray:
-        t, idx = self._split(t_s)
+        t, idx, first, last = self._split(t_s)
+        if idx is None:
+            return getattr(self.pieces[first], name)(t - self.t_start_s[first])
         out = np.empty(t.size)
-        for k in np.unique(idx):
+        for k in range(first, last + 1):
             sel = idx == k
-            out[sel] = getattr(self.pieces[k], name)(t[sel] - self.t_start_s[k])
+            if sel.any():
+                out[sel] = getattr(self.pieces[k], name)(t[sel] - self.t_start_s[k])
         return out
 
     def yaw_rad(self, t_s) -> np.ndarray:

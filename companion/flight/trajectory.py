@@ -38,6 +38,14 @@ import numpy as np
 
 from companion.errors import TrajectoryError
 
+# The ufunc that ``np.clip`` calls, without its Python wrappers: the same results (NaN and signed
+# zeros included) for a fraction of the cost. Not imported from ``companion.smoothing`` (which
+# imports this module).
+try:                                        # numpy >= 2
+    from numpy._core.umath import clip as clip_ufunc
+except ImportError:                         # numpy 1.26
+    from numpy.core.umath import clip as clip_ufunc
+
 __all__ = ["Trajectory", "RawProfile", "FlyableReference"]
 
 logger = logging.getLogger(__name__)
@@ -117,21 +125,21 @@ class RawProfile:
     def evaluate(self, tau_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Raw (arc length, speed, antiderivative of arc length) at times ``tau_s`` (K,)."""
         tau = self.tau_s
-        k = np.clip(np.searchsorted(tau, tau_s, side="right") - 1, 0, tau.size - 2)
+        k = clip_ufunc(np.searchsorted(tau, tau_s, side="right") - 1, 0, tau.size - 2)
         h = tau_s - tau[k]
         s0, v0, a = self.s_m[k], self.v_m_s[k], self.a_m_s2[k]
         s = s0 + v0 * h + 0.5 * a * h * h
         v = v0 + a * h
         s2 = self._s2[k] + s0 * h + 0.5 * v0 * h * h + a * h**3 / 6.0
         before = tau_s < tau[0]
-        if np.any(before):
+        if before.any():
             hb = tau_s[before] - tau[0]
             vs = self.start_speed_m_s
             s[before] = self.s_m[0] + vs * hb
             v[before] = vs
             s2[before] = self.s_m[0] * hb + 0.5 * vs * hb * hb
         after = tau_s > tau[-1]
-        if np.any(after):
+        if after.any():
             ha = tau_s[after] - tau[-1]
             ve = self.end_speed_m_s
             s[after] = self.s_m[-1] + ve * ha
@@ -140,10 +148,18 @@ class RawProfile:
         return s, v, s2
 
     def filtered(self, tau_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Box-filtered (arc length, speed, acceleration) at raw times ``tau_s`` (K,)."""
+        """Box-filtered (arc length, speed, acceleration) at raw times ``tau_s`` (K,).
+
+        Both ends of the windows are evaluated in one call (the arithmetic is elementwise).
+        """
         half = 0.5 * self.window_s
-        s_hi, v_hi, s2_hi = self.evaluate(tau_s + half)
-        s_lo, v_lo, s2_lo = self.evaluate(tau_s - half)
+        hi, lo = tau_s + half, tau_s - half
+        if hi.ndim == 1:
+            s, v, s2 = self.evaluate(np.concatenate((hi, lo)))
+            k = hi.size
+            s_hi, v_hi, s2_hi, s_lo, v_lo, s2_lo = s[:k], v[:k], s2[:k], s[k:], v[k:], s2[k:]
+        else:
+            (s_hi, v_hi, s2_hi), (s_lo, v_lo, s2_lo) = self.evaluate(hi), self.evaluate(lo)
         inv = 1.0 / self.window_s
         return (s2_hi - s2_lo) * inv, (s_hi - s_lo) * inv, (v_hi - v_lo) * inv
 
@@ -215,22 +231,24 @@ class Trajectory:
 
     def _check_t(self, t_s) -> tuple[np.ndarray, bool]:
         arr = np.asarray(t_s, dtype=float)
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():
             raise TrajectoryError("t_s: times must be finite (no NaN or inf)")
-        return np.clip(arr.reshape(-1), 0.0, self.duration_s), arr.ndim == 0
+        return clip_ufunc(arr.reshape(-1), 0.0, self.duration_s), arr.ndim == 0
 
     def _lift(self, xy: np.ndarray, down: float) -> np.ndarray:
         if self.down_m is None:
             return xy
-        col = np.full((xy.shape[0], 1), down)
-        return np.hstack([xy, col])
+        out = np.empty((xy.shape[0], xy.shape[1] + 1))
+        out[:, :-1] = xy
+        out[:, -1] = down
+        return out
 
     # ------------------------------------------------------------------ sampling
     def progress(self, t_s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Arc length (m), speed (m/s) and along-track acceleration (m/s^2) at times ``t_s`` (K,)."""
         t, scalar = self._check_t(t_s)
         s, v, a = self.profile.filtered(t + self._tau_start)
-        s = np.clip(s, 0.0, self.length_m)
+        s = clip_ufunc(s, 0.0, self.length_m)
         if scalar:
             return s[0], v[0], a[0]
         return s, v, a
@@ -255,7 +273,7 @@ class Trajectory:
         """
         t, scalar = self._check_t(t_s)
         s, v, a = self.profile.filtered(t + self._tau_start)
-        s = np.clip(s, 0.0, self.length_m)
+        s = clip_ufunc(s, 0.0, self.length_m)
         piece, u = self.curve.locate(s)
         r, r_s, r_ss = self.curve._arc_derivatives(piece, u, 2)
         vv = v[:, None]
@@ -276,13 +294,15 @@ class Trajectory:
         if self.yaw_mode == "hold":
             out = np.full(t.shape, self.yaw_hold_rad)
             return out[0] if scalar else out
-        s = np.clip(self.profile.filtered(t + self._tau_start)[0], 0.0, self.length_m)
-        tangent = self.curve.derivative(s, 1)
+        s = clip_ufunc(self.profile.filtered(t + self._tau_start)[0], 0.0, self.length_m)
+        piece, u = self.curve.locate(s)
+        tangent = self.curve._arc_derivatives(piece, u, 1, position=False)[1]
         yaw = np.arctan2(tangent[:, 1], tangent[:, 0])
-        flat = np.linalg.norm(tangent[:, :2], axis=1) <= 1e-6
-        if np.any(flat):
+        horizontal = tangent[:, :2]
+        flat = np.sqrt(np.add.reduce(horizontal * horizontal, axis=1)) <= 1e-6    # np.linalg.norm
+        if flat.any():
             table_s, table_yaw = self._fallback_yaw_table
-            k = np.clip(np.searchsorted(table_s, s[flat], side="right") - 1, 0, table_yaw.size - 1)
+            k = clip_ufunc(np.searchsorted(table_s, s[flat], side="right") - 1, 0, table_yaw.size - 1)
             yaw[flat] = table_yaw[k]
         return yaw[0] if scalar else yaw
 
@@ -293,9 +313,9 @@ class Trajectory:
             out = np.zeros(t.shape)
             return out[0] if scalar else out
         s, v, _ = self.profile.filtered(t + self._tau_start)
-        s = np.clip(s, 0.0, self.length_m)
+        s = clip_ufunc(s, 0.0, self.length_m)
         piece, u = self.curve.locate(s)
-        _, r_s, r_ss = self.curve._arc_derivatives(piece, u, 2)
+        _, r_s, r_ss = self.curve._arc_derivatives(piece, u, 2, position=False)
         horiz2 = r_s[:, 0] ** 2 + r_s[:, 1] ** 2
         turn = r_s[:, 0] * r_ss[:, 1] - r_s[:, 1] * r_ss[:, 0]
         out = np.where(horiz2 > 1e-12, v * turn / np.maximum(horiz2, 1e-12), 0.0)

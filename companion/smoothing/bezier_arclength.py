@@ -21,8 +21,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from companion.smoothing.bezier_maths import GAUSS_ORDER, bernstein, curvature_from_derivatives, gauss_legendre, \
-    norm_rows
+from companion.smoothing.bezier_maths import GAUSS_ORDER, bernstein, clip_ufunc, curvature_from_derivatives, \
+    gauss_legendre, norm_rows
 
 __all__ = ["TABLE_INTERVALS", "ArcLengthTable", "build_table", "knot_curvature", "locate", "arc_length_at",
            "arc_derivatives"]
@@ -217,12 +217,19 @@ def locate(table: ArcLengthTable, s_m: np.ndarray) -> tuple[np.ndarray, np.ndarr
     piece : ndarray of int, shape (K,)
     u : ndarray, shape (K,)
     """
-    s = np.clip(s_m, 0.0, table.piece_start_s[-1])
-    j = np.clip(np.searchsorted(table.s_lo, s, side="right") - 1, 0, table.s_lo.size - 1)
-    x = np.clip((s - table.s_lo[j]) / np.maximum(table.h[j], 1e-300), 0.0, 1.0)
-    frac = _hermite_quintic(x, *table.hermite_args(j))
+    s = clip_ufunc(s_m, 0.0, table.piece_start_s[-1])
+    j = clip_ufunc(np.searchsorted(table.s_lo, s, side="right") - 1, 0, table.s_lo.size - 1)
+    h = table.h[j]
+    x = clip_ufunc((s - table.s_lo[j]) / np.maximum(h, 1e-300), 0.0, 1.0)
     piece, k = np.divmod(j, TABLE_INTERVALS)
-    return piece, (k + np.clip(frac, 0.0, 1.0)) / TABLE_INTERVALS
+    knot = j + piece                                     # the values of ``hermite_args(j)``
+    hh = h * (TABLE_INTERVALS * h)
+    args = (h * table.u_s[knot], h * table.u_s[knot + 1], hh * table.u_ss[knot], hh * table.u_ss[knot + 1])
+    if x.shape == (1,):         # one point (a setpoint): the same arithmetic on Python floats
+        frac = np.array([_hermite_quintic(float(x[0]), *(float(a[0]) for a in args))])
+    else:
+        frac = _hermite_quintic(x, *args)
+    return piece, (k + clip_ufunc(frac, 0.0, 1.0)) / TABLE_INTERVALS
 
 
 def arc_length_at(table: ArcLengthTable, piece: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -254,13 +261,14 @@ def arc_length_at(table: ArcLengthTable, piece: np.ndarray, u: np.ndarray) -> np
     return table.s_lo[j] + table.h[j] * x
 
 
-def arc_derivatives(du: list[np.ndarray]) -> list[np.ndarray]:
+def arc_derivatives(du: list[np.ndarray | None]) -> list[np.ndarray | None]:
     """Derivatives with respect to arc length from those with respect to the parameter.
 
     Parameters
     ----------
     du : list of ndarray, shape (K, d)
-        [r, r_u, r_uu, r_uuu], the first 1 to 4 of them.
+        [r, r_u, r_uu, r_uuu], the first 1 to 4 of them. The position r is only passed
+        through: it may be None when only the derivatives are wanted.
 
     Returns
     -------
@@ -271,19 +279,20 @@ def arc_derivatives(du: list[np.ndarray]) -> list[np.ndarray]:
     out = [du[0]]
     if len(du) == 1:
         return out
+    add = np.add.reduce                                  # np.sum without its Python wrappers
     a = du[1]
-    sig2 = np.maximum(np.sum(a * a, axis=1, keepdims=True), 1e-300)
+    sig2 = np.maximum(add(a * a, axis=1, keepdims=True), 1e-300)
     sig = np.sqrt(sig2)
     out.append(a / sig)
     if len(du) == 2:
         return out
     b = du[2]
-    g = np.sum(a * b, axis=1, keepdims=True)
+    g = add(a * b, axis=1, keepdims=True)
     out.append(b / sig2 - g * a / sig2**2)
     if len(du) == 3:
         return out
     c = du[3]
-    gp = np.sum(b * b, axis=1, keepdims=True) + np.sum(a * c, axis=1, keepdims=True)
+    gp = add(b * b, axis=1, keepdims=True) + add(a * c, axis=1, keepdims=True)
     dk_du = c / sig2 - 3.0 * g * b / sig2**2 - gp * a / sig2**2 + 4.0 * g**2 * a / sig2**3
     out.append(dk_du / sig)
     return out

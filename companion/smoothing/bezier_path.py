@@ -18,8 +18,8 @@ from companion.errors import SmoothingError
 from companion.smoothing.bezier_arclength import TABLE_INTERVALS, arc_derivatives, arc_length_at, build_table, \
     knot_curvature, locate
 from companion.smoothing.bezier_joints import tangent_jumps
-from companion.smoothing.bezier_maths import as_control_points, bernstein, curvature_from_derivatives, elevate, \
-    lower_degree, norm_rows
+from companion.smoothing.bezier_maths import as_control_points, bernstein, bernstein_family, \
+    curvature_from_derivatives, elevate, lower_degree, norm_rows
 from companion.smoothing.bezier_peaks import interior_peaks, sampled_curvature
 
 __all__ = ["BezierPath"]
@@ -152,6 +152,13 @@ class BezierPath:
         basis = bernstein(hod.shape[1] - 1, u)
         return np.einsum("kn,knd->kd", basis, hod[piece], optimize=False)
 
+    def _piece_derivatives(self, piece: np.ndarray, u: np.ndarray, orders) -> list[np.ndarray]:
+        """``_piece_derivative`` of every order of ``orders`` at (piece (K,), u (K,)) -> list of
+        (K, d), from one table of the powers of u (``bernstein_family``)."""
+        hods = [self._hodograph(k) for k in orders]
+        bases = bernstein_family([hod.shape[1] - 1 for hod in hods], u)
+        return [np.einsum("kn,knd->kd", basis, hod[piece], optimize=False) for basis, hod in zip(bases, hods)]
+
     def arc_length_at(self, piece: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Arc length (m) that ``locate`` maps to (piece (K,), u (K,)): its exact inverse.
 
@@ -242,12 +249,16 @@ class BezierPath:
             raise SmoothingError(f"order: arc-length derivatives of order 0..3 are supported, got {order}")
         s, scalar = self._check_s(s_m)
         piece, u = self.locate(s)
-        out = self._arc_derivatives(piece, u, order)[order]
+        out = self._arc_derivatives(piece, u, order, position=order == 0)[order]
         return out[0] if scalar else out
 
-    def _arc_derivatives(self, piece: np.ndarray, u: np.ndarray, order: int) -> list[np.ndarray]:
-        """[r, r_s, r_ss, r_sss] up to ``order`` at (piece, u) by the chain rule."""
-        return arc_derivatives([self._piece_derivative(piece, u, k) for k in range(order + 1)])
+    def _arc_derivatives(self, piece: np.ndarray, u: np.ndarray, order: int, *,
+                         position: bool = True) -> list[np.ndarray | None]:
+        """[r, r_s, r_ss, r_sss] up to ``order`` (>= 1 without the position) at (piece, u) by the
+        chain rule; ``position=False`` does not evaluate r (its entry is None)."""
+        if position:
+            return arc_derivatives(self._piece_derivatives(piece, u, range(order + 1)))
+        return arc_derivatives([None, *self._piece_derivatives(piece, u, range(1, order + 1))])
 
     def curvature(self, s_m, *, signed: bool = False) -> np.ndarray:
         """Curvature (1/m) at arc lengths ``s_m`` (K,) -> (K,).

@@ -20,6 +20,13 @@ from functools import cached_property
 
 import numpy as np
 
+# The ufunc that ``np.clip`` calls, without its Python wrappers (same results, NaN and signed
+# zeros included).
+try:                                        # numpy >= 2
+    from numpy._core.umath import clip as clip_ufunc
+except ImportError:                         # numpy 1.26
+    from numpy.core.umath import clip as clip_ufunc
+
 __all__ = ["RetimedTrajectory", "ramp_time_s"]
 
 
@@ -61,6 +68,7 @@ class RetimedTrajectory:
         self.wait_s = float(wait_s)
         self.ramp_s = float(ramp_s)
         self.label = label or f"retime x{rate:.1f} for {wait_s:.1f} s"
+        self._constants()
         warp_end = 2.0 * self.ramp_s + self.wait_s
         remaining = base.duration_s - self.tau0_s
         tau_warp = self._integral(np.array([warp_end]))[0]
@@ -79,60 +87,119 @@ class RetimedTrajectory:
         """Where the retimed reference ends (the base's end), (D,)."""
         return np.atleast_2d(self.base.sample(np.array([self.base.duration_s]))[0])[0]
 
+    def _constants(self) -> None:
+        """Constants of the warp, each computed as ``_rate`` and ``_integral`` would compute it."""
+        self._drop = 1.0 - self.rate
+        self._half_drop = self._drop * 0.5
+        self._w = math.pi / self.ramp_s
+        self._dr_gain = self._drop * 0.5 * self._w              # |r'| = _dr_gain sin(w x)
+        self._t2 = self.ramp_s + self.wait_s                    # start of the way up
+        self._t3 = self._t2 + self.ramp_s                       # end of the warp
+
     def _rate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Progress rate r (K,) and its derivative r' (K,)."""
-        drop = 1.0 - self.rate
-        w = math.pi / self.ramp_s
-        t2 = self.ramp_s + self.wait_s
+        if t.shape == (1,):
+            return self._rate_at_one(t)
+        half_drop, w, t2 = self._half_drop, self._w, self._t2
         r = np.ones_like(t)
         dr = np.zeros_like(t)
         down = t < self.ramp_s
-        r[down] = 1.0 - drop * 0.5 * (1.0 - np.cos(w * t[down]))
-        dr[down] = -drop * 0.5 * w * np.sin(w * t[down])
+        r[down] = 1.0 - half_drop * (1.0 - np.cos(w * t[down]))
+        dr[down] = -self._dr_gain * np.sin(w * t[down])
         hold = (t >= self.ramp_s) & (t < t2)
         r[hold] = self.rate
-        up = (t >= t2) & (t < t2 + self.ramp_s)
+        up = (t >= t2) & (t < self._t3)
         x = t[up] - t2
-        r[up] = self.rate + drop * 0.5 * (1.0 - np.cos(w * x))
-        dr[up] = drop * 0.5 * w * np.sin(w * x)
+        r[up] = self.rate + half_drop * (1.0 - np.cos(w * x))
+        dr[up] = self._dr_gain * np.sin(w * x)
         return r, dr
+
+    def _rate_at_one(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``_rate`` at one time, t shape (1,): only the branch it falls in (the same operations)."""
+        t0 = t[0]
+        if t0 < self.ramp_s:
+            wt = self._w * t
+            return 1.0 - self._half_drop * (1.0 - np.cos(wt)), -self._dr_gain * np.sin(wt)
+        if t0 < self._t2:
+            return np.full(1, self.rate), np.zeros(1)
+        if t0 < self._t3:
+            wx = self._w * (t - self._t2)
+            return self.rate + self._half_drop * (1.0 - np.cos(wx)), self._dr_gain * np.sin(wx)
+        return np.ones(1), np.zeros(1)              # after the warp (or NaN, as ``_rate``)
 
     def _integral(self, t: np.ndarray) -> np.ndarray:
         """Base time advanced since t = 0: the integral of r (K,)."""
-        drop = 1.0 - self.rate
-        w = math.pi / self.ramp_s
-        ramp_loss = lambda x: drop * 0.5 * (x - np.sin(w * x) / w)   # noqa: E731 - int of 1 - r
+        half_drop, w = self._half_drop, self._w
         t1 = np.minimum(t, self.ramp_s)
-        loss = ramp_loss(t1)
-        t_hold = np.clip(t - self.ramp_s, 0.0, self.wait_s)
-        loss = loss + drop * t_hold
-        x = np.clip(t - self.ramp_s - self.wait_s, 0.0, self.ramp_s)
-        loss = loss + drop * x - ramp_loss(x)     # int of (1 - r) on the way up
+        loss = half_drop * (t1 - np.sin(w * t1) / w)                 # int of 1 - r on the way down
+        since_ramp = t - self.ramp_s
+        t_hold = clip_ufunc(since_ramp, 0.0, self.wait_s)
+        loss = loss + self._drop * t_hold
+        x = clip_ufunc(since_ramp - self.wait_s, 0.0, self.ramp_s)
+        loss = loss + self._drop * x - half_drop * (x - np.sin(w * x) / w)     # and on the way up
         return t - loss
 
+    def _clipped(self, t_s) -> np.ndarray:
+        return clip_ufunc(np.atleast_1d(np.asarray(t_s, dtype=float)), 0.0, self.duration_s)
+
     def _tau(self, t_s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        t = np.clip(np.atleast_1d(np.asarray(t_s, dtype=float)), 0.0, self.duration_s)
+        t = self._clipped(t_s)
         r, dr = self._rate(t)
         ended = t >= self.duration_s
-        r[ended], dr[ended] = 0.0, 0.0
+        if ended.any():
+            r[ended], dr[ended] = 0.0, 0.0
         return np.minimum(self.tau0_s + self._integral(t), self.base.duration_s), r, dr
+
+    def _tau_only(self, t_s) -> np.ndarray:
+        """The first output of ``_tau`` (which does not depend on r)."""
+        return np.minimum(self.tau0_s + self._integral(self._clipped(t_s)), self.base.duration_s)
+
+    def _innermost(self) -> tuple[list["RetimedTrajectory"], object]:
+        """The retimes nested in this one, outermost first, and the reference under them all."""
+        levels, ref = [], self
+        while isinstance(ref, RetimedTrajectory):
+            levels.append(ref)
+            ref = ref.base
+        return levels, ref
 
     def tau_at(self, t_s) -> np.ndarray:
         """Base time (K,) at times ``t_s`` (K,)."""
-        return self._tau(t_s)[0]
+        return self._tau_only(t_s)
 
     def sample(self, t_s):
-        """Position, velocity, acceleration (K, D) at times ``t_s`` (K,)."""
-        tau, r, dr = self._tau(t_s)
-        pos, vel, acc = (np.atleast_2d(v) for v in self.base.sample(tau))
-        return pos, vel * r[:, None], acc * (r * r)[:, None] + vel * dr[:, None]
+        """Position, velocity, acceleration (K, D) at times ``t_s`` (K,).
+
+        Nested retimes are composed in one loop: the times are warped level after level, the
+        innermost reference is sampled once and its derivatives are scaled back out, level
+        after level (the same operations as the recursion through every level's ``sample``).
+        """
+        levels, inner = self._innermost()
+        tau, rates = t_s, []
+        for level in levels:
+            tau, r, dr = level._tau(tau)
+            rates.append((r, dr))
+        pos, vel, acc = (np.atleast_2d(v) for v in inner.sample(tau))
+        for r, dr in reversed(rates):
+            vel, acc = vel * r[:, None], acc * (r * r)[:, None] + vel * dr[:, None]
+        return pos, vel, acc
 
     def yaw_rad(self, t_s) -> np.ndarray:
-        return self.base.yaw_rad(self._tau(t_s)[0])
+        levels, inner = self._innermost()
+        tau = t_s
+        for level in levels:
+            tau = level._tau_only(tau)
+        return inner.yaw_rad(tau)
 
     def yaw_rate_rad_s(self, t_s) -> np.ndarray:
-        tau, r, _ = self._tau(t_s)
-        return self.base.yaw_rate_rad_s(tau) * r
+        levels, inner = self._innermost()
+        tau, rates = t_s, []
+        for level in levels:
+            tau, r, _ = level._tau(tau)
+            rates.append(r)
+        out = inner.yaw_rate_rad_s(tau)
+        for r in reversed(rates):
+            out = out * r
+        return out
 
     @property
     def length_m(self) -> float:
