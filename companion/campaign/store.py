@@ -16,6 +16,7 @@ encounter id, so parts written by any number of workers, or by a Dask cluster, a
 from __future__ import annotations
 
 import datetime
+import hashlib
 import json
 import os
 import subprocess
@@ -71,9 +72,11 @@ class CampaignStore:
         Raises
         ------
         StoreError
-            The directory holds another spec's campaign.
+            The directory holds another spec's campaign, or rows flown by other code (rows of
+            two versions of the code are not one campaign).
         """
         digest = spec_hash(spec, settings_text)
+        self._check_code()
         self.rows_dir.mkdir(parents=True, exist_ok=True)
         spec_file = self.root / "spec.toml"
         if spec_file.exists():
@@ -86,6 +89,14 @@ class CampaignStore:
             if settings_text:
                 self._write_text(self.root / "settings.toml", settings_text)
         return digest
+
+    def _check_code(self) -> None:
+        flown = [run.get("commit", "") for run in self.runs() if run.get("flown", 1)]
+        here = code_version()
+        if flown and flown[-1] and here and flown[-1] != here and self.done_batches():
+            raise StoreError(f"{self.root}: its rows were flown by the code at {flown[-1]}, this is {here}; "
+                             f"resume it with that code (git worktree add DIR {flown[-1].split('+')[0]}) "
+                             "or use another --out directory")
 
     def spec(self) -> CampaignSpec:
         """The spec the directory was made for."""
@@ -107,7 +118,7 @@ class CampaignStore:
     def log_run(self, record: dict) -> None:
         """Append one run's record to ``runs.jsonl`` (stamped with the time and the commit)."""
         line = {"at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-                "commit": _commit(), **record}
+                "commit": code_version(), **record}
         with open(self.root / "runs.jsonl", "a", encoding="utf-8") as fh:
             fh.write(json.dumps(line) + "\n")
 
@@ -160,11 +171,26 @@ class CampaignStore:
         return table.sort_by("id")
 
 
-def _commit() -> str:
-    """The code's git commit ("" outside a checkout)."""
+#: The code whose changes make another campaign (a diff elsewhere, e.g. in docs, does not).
+CODE_DIRS = ("companion", "heli_model", "heli_common", "mavlink_signing", "sim_vehicle")
+
+
+def _git(*args: str) -> str | None:
     try:
-        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).resolve().parent,
-                             capture_output=True, text=True, timeout=5)
+        out = subprocess.run(["git", *args], cwd=Path(__file__).resolve().parent, capture_output=True, timeout=10)
     except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.decode(errors="replace") if out.returncode == 0 else None
+
+
+def code_version() -> str:
+    """The code's git commit, with ``+<hash of the diff>`` when the code differs from it ("" outside a
+    checkout): two runs of one campaign must say the same."""
+    commit = (_git("rev-parse", "--short", "HEAD") or "").strip()
+    if not commit:
         return ""
-    return out.stdout.strip() if out.returncode == 0 else ""
+    top = (_git("rev-parse", "--show-toplevel") or "").strip()
+    diff = _git("-C", top, "diff", "HEAD", "--", *CODE_DIRS) if top else None
+    if diff:
+        return f"{commit}+{hashlib.sha1(diff.encode()).hexdigest()[:8]}"
+    return commit

@@ -107,3 +107,29 @@ def test_a_part_written_before_cpu_ms_reads_with_nulls(tmp_path):
     cpu = store.table().column("cpu_ms").to_pylist()
     assert cpu[:3] == [None] * 3 and cpu[3:] == [90.0] * 3
 
+
+
+def test_rows_of_other_code_are_not_resumed(tmp_path, monkeypatch):
+    """A campaign is one version of the code: reopening its directory with other code is refused,
+    naming both versions; the same code resumes."""
+    from companion.campaign import store as store_module
+
+    store = CampaignStore(tmp_path)
+    monkeypatch.setattr(store_module, "code_version", lambda: "abc1234")
+    store.open(CampaignSpec())
+    store.append(0, [fake_row(0, u=True, m=False)])
+    store.log_run({"flown": 1})
+    assert store.open(CampaignSpec())                          # the same code: resumed
+    monkeypatch.setattr(store_module, "code_version", lambda: "abc1234+0f0f0f0f")
+    with pytest.raises(StoreError, match=r"abc1234\b.*abc1234\+0f0f0f0f"):
+        store.open(CampaignSpec())
+    assert store.runs()[0]["commit"] == "abc1234"
+
+
+def test_the_code_version_names_the_commit_and_a_diff():
+    from companion.campaign.store import code_version
+
+    version = code_version()
+    commit, _, diff = version.partition("+")
+    assert len(commit) >= 7 and all(c in "0123456789abcdef" for c in commit)
+    assert diff == "" or len(diff) == 8
