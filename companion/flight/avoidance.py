@@ -37,7 +37,7 @@ from companion.flight.active import ReferenceOwner
 from companion.flight.ports import FlightSink, Jobs
 from companion.flight.reference import ActiveReference
 from companion.threats.decision.kinds import Trigger
-from companion.threats.decision.screen import ReferenceTable, proves_clear
+from companion.threats.decision.screen import MonitorScreen
 from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
                                              Observation, active_conflict, decide, plan_alternatives_for)
 
@@ -158,7 +158,7 @@ class Avoidance:
         self._alt_busy = False
         self._alt_dirty = False
         self._alt_last_key: tuple | None = None
-        self._table: ReferenceTable | None = None
+        self.screen = MonitorScreen(policy.settings, policy.accel_bound_m_s2)
 
     # ------------------------------------------------------------------ legs
     def start_leg(self, leg: LegContext) -> None:
@@ -226,7 +226,7 @@ class Avoidance:
 
     def _stays_clear(self, obs: Observation) -> bool:
         """The active reference stays clear of the observed threats: proven by the screen
-        (``screen.proves_clear``: exact, from the reference's table), else by ``active_conflict``."""
+        (``screen.MonitorScreen``: exact, from the reference's table), else by ``active_conflict``."""
         try:
             return self._screened(obs) or self.steps.active_conflict(obs, self.leg, self.policy) is None
         except Exception:  # noqa: BLE001 - the decision will say what is wrong
@@ -234,12 +234,8 @@ class Avoidance:
             return False
 
     def _screened(self, obs: Observation) -> bool:
-        if obs.active is None:
-            return False
-        step_s, dim = self.policy.settings.check_step_s, self.leg.world.dim
-        if self._table is None or not self._table.describes(obs.active, step_s, dim):
-            self._table = ReferenceTable(obs.active, step_s, dim)
-        return proves_clear(self._table, obs.threats, obs.t_s, self.policy.settings, self.policy.accel_bound_m_s2)
+        return obs.active is not None and self.screen.proves_clear(obs.active, obs.threats, obs.t_s,
+                                                                   self.leg.world.dim)
 
     def _decided(self, asked, trigger: Trigger, trigger_mono_s: float, answered, result) -> None:
         leg, ref, sent = asked

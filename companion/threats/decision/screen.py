@@ -21,12 +21,24 @@ check: **a proof of clear is exact** (threats are taken within the sensor range 
 superset of the check's). Anything else is left to ``active_conflict``, which decides as
 before: the screen changes what the monitor costs, never what it finds.
 
+**A proof that stands.** The monitor checks ten times a second, and between two reports of the
+threats (0.5-1 s) nothing it checks changes but the check's own start time: the tubes' centres
+and radii are functions of absolute time. ``MonitorScreen`` therefore proves the reference clear
+over the horizon plus ``lead_s`` (every unexpired threat, whatever the sensor range), with twice
+the chord error more and the radius of the next grid point: a check started anywhere in the next
+``lead_s`` samples the same curve on other times, whose chords lie within a chord error of it
+(the curve is smooth there: no standing proof before the reference starts, and its end's kink,
+if it ends at speed, is added to the margin; a tube counts until a step after it expires, as a
+check counts it on an interval that starts before it expires). The proof stands, for the same
+reference and the very same threat reports, until ``lead_s`` has passed.
+
 Pure: numpy only; the table is owned by the avoidance component (``companion.flight.avoidance``).
 """
 
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 
@@ -34,13 +46,15 @@ from companion.threats.decision.prediction import predict_tubes
 from companion.threats.decision.spacetime import sample_times, segment_min_distance
 from companion.threats.decision.values import ActiveTrajectory
 
-__all__ = ["ReferenceTable", "proves_clear", "CHUNK_S"]
+__all__ = ["ReferenceTable", "MonitorScreen", "proves_clear", "CHUNK_S", "LEAD_S"]
 
 #: Reference time sampled at a time by a table (s): with a 15 s horizon, a new chunk about every
 #: 15 s of flight.
 CHUNK_S = 30.0
 #: Rounding allowance of the proof (m).
 ROUNDING_M = 1e-9
+#: How long a standing proof lasts (s): about the period of the threats' reports.
+LEAD_S = 1.0
 
 
 class ReferenceTable:
@@ -98,11 +112,56 @@ class ReferenceTable:
         """Largest distance (m) of an interpolated position from the reference's."""
         return accel_bound_m_s2 * self.step_s * self.step_s / 8.0
 
+    @cached_property
+    def end_speed_m_s(self) -> float:
+        """Speed (m/s) at the reference's end, where it then holds still (a kink unless 0)."""
+        vel = np.atleast_2d(self.trajectory.sample(np.array([float(self.trajectory.duration_s)]))[1])[0]
+        return float(np.linalg.norm(vel[:self.dim]))
+
+    def kink_m(self, t_lo_s: float, t_hi_s: float) -> float | None:
+        """How far (m) the held reference leaves its chords at kinks within clock times
+        [t_lo_s, t_hi_s]: 0 inside the trajectory, the end's speed times half a step when its end
+        (at speed) is inside; None when its start is (it holds its first point before it starts,
+        at whatever speed it then starts)."""
+        if t_lo_s < self.start_t_s:
+            return None
+        if t_hi_s <= self.start_t_s + float(self.trajectory.duration_s):
+            return 0.0
+        return self.end_speed_m_s * self.step_s / 2.0
+
 
 def _near(threats, t_s: float, pos: np.ndarray, dim: int, range_m: float) -> list:
     """Unexpired threats within ``range_m`` of ``pos`` now (``step._relevant``'s test)."""
     return [th for th in threats if th.expires_t_s > t_s and
             float(np.linalg.norm(th.position_at(t_s)[:dim] - pos[:dim])) - th.radius_m <= range_m]
+
+
+def _radius_living_on(tube, t: np.ndarray, extra_s: float) -> np.ndarray:
+    """The tube's radius (K,) at ``t``, as if it expired ``extra_s`` later: a check counts a tube
+    on an interval that starts before it expires (``spacetime._tube_clearance``), and a check
+    started later has its intervals elsewhere."""
+    grow = np.minimum(tube.growth_max_m, tube.growth_m_s * np.maximum(t - tube.t0_s, 0.0))
+    return np.where(t <= tube.expires_t_s + extra_s, tube.radius_m + grow, -np.inf)
+
+
+def _clear_of_tubes(pos: np.ndarray, t: np.ndarray, threats, settings, margin_m: np.ndarray, ahead: int) -> bool:
+    """Every interval's clearance from every threat's tube, less ``margin_m`` (K-1,) and the
+    largest radius of the interval's ends and the ``ahead`` grid points after it (the tube living
+    ``ahead`` steps longer), stays >= 0."""
+    tubes = predict_tubes(threats, inflation_m=settings.inflation_m, uncertainty_m_s=settings.uncertainty_m_s,
+                          uncertainty_max_m=settings.uncertainty_max_m)
+    dim = pos.shape[1]
+    n = t.size - 1 - ahead
+    for tube in tubes:
+        rel = pos - tube.center_at(t)[:, :dim]
+        radius = tube.radius_at(t) if not ahead else _radius_living_on(tube, t, ahead * (t[1] - t[0]))
+        reach = np.maximum(radius[:n], radius[1:n + 1])
+        for k in range(2, ahead + 2):
+            reach = np.maximum(reach, radius[k:n + k])
+        clearance = segment_min_distance(rel[:n], rel[1:n + 1]) - reach
+        if np.any(clearance - margin_m[:n] < ROUNDING_M):
+            return False
+    return True
 
 
 def proves_clear(table: ReferenceTable, threats, t_s: float, settings, accel_bound_m_s2: float) -> bool:
@@ -132,14 +191,64 @@ def proves_clear(table: ReferenceTable, threats, t_s: float, settings, accel_bou
     near = _near(threats, t_s, pos[0], dim, settings.sensor_range_m + err_m)
     if not near:
         return True
-    tubes = predict_tubes(near, inflation_m=settings.inflation_m, uncertainty_m_s=settings.uncertainty_m_s,
-                          uncertainty_max_m=settings.uncertainty_max_m)
     dt = np.diff(t)
-    chord_err = accel_bound_m_s2 * dt * dt / 8.0
-    for tube in tubes:
-        rel = pos - tube.center_at(t)[:, :dim]
-        radius = tube.radius_at(t)
-        clearance = segment_min_distance(rel[:-1], rel[1:]) - np.maximum(radius[:-1], radius[1:])
-        if np.any(clearance - chord_err - err_m < ROUNDING_M):
+    return _clear_of_tubes(pos, t, near, settings, accel_bound_m_s2 * dt * dt / 8.0 + err_m, 0)
+
+
+class MonitorScreen:
+    """The monitor's screen over a flight: the active reference's table and the standing proof
+    (module docstring). Owned by the avoidance component; exact, like ``proves_clear``.
+
+    Parameters
+    ----------
+    settings : ThreatSettings
+    accel_bound_m_s2 : float
+    lead_s : float
+        How long a proof stands (s).
+    """
+
+    def __init__(self, settings, accel_bound_m_s2: float, lead_s: float = LEAD_S) -> None:
+        self.settings = settings
+        self.accel_bound_m_s2 = float(accel_bound_m_s2)
+        self.lead_s = float(lead_s)
+        self.table: ReferenceTable | None = None
+        self._proof: tuple[tuple, float] | None = None      # (threat reports, until t_s)
+        self.proofs = self.standing = 0
+
+    def proves_clear(self, active: ActiveTrajectory, threats, t_s: float, dim: int) -> bool:
+        """True: ``active`` provably stays clear of ``threats`` over the horizon from ``t_s``."""
+        step_s = self.settings.check_step_s
+        if self.table is None or not self.table.describes(active, step_s, dim):
+            self.table, self._proof = ReferenceTable(active, step_s, dim), None
+        threats = tuple(threats)
+        if self._proof is not None and t_s <= self._proof[1] and _same(self._proof[0], threats):
+            self.standing += 1
+            return True
+        if self._proves_ahead(threats, t_s):
+            self._proof = (threats, t_s + self.lead_s)
+            self.proofs += 1
+            return True
+        self._proof = None
+        return proves_clear(self.table, threats, t_s, self.settings, self.accel_bound_m_s2)
+
+    def _proves_ahead(self, threats, t_s: float) -> bool:
+        if any(th.frame != "local_ned" for th in threats):
             return False
-    return True
+        s = self.settings
+        n = max(2, int(math.ceil((s.horizon_s + self.lead_s) / s.check_step_s)) + 2)
+        t = t_s + s.check_step_s * np.arange(n)
+        kink_m = self.table.kink_m(float(t[0]), float(t[-1]))
+        if kink_m is None:
+            return False
+        live = [th for th in threats if th.expires_t_s > t_s]
+        if not live:
+            return True
+        pos = self.table.positions_at(t)
+        chord_err = self.accel_bound_m_s2 * s.check_step_s ** 2 / 8.0
+        margin = np.full(n - 1, 3.0 * chord_err + self.table.error_m(self.accel_bound_m_s2) + 2.0 * kink_m)
+        return _clear_of_tubes(pos, t, live, s, margin, 1)
+
+
+def _same(a: tuple, b: tuple) -> bool:
+    """The very same reports (identity: a new report is a new object)."""
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b))
