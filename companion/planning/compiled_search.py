@@ -10,7 +10,7 @@ between batches to look at the clock. The uniform numbers are the batches of the
 :class:`~companion.planning.sampling.RandomStream` (same sizes, same order), so the tree, the
 path and the generator's state after the call are those of
 :class:`~companion.planning.search.GartSearch`'s Python iteration for the same seed. Everything
-else (M-GART, other costs or obstacles, K_max) keeps :class:`GartSearch`.
+else (threat or tracking cost, boxes, many obstacles) keeps :class:`GartSearch`.
 """
 
 from __future__ import annotations
@@ -21,15 +21,17 @@ import time
 import numpy as np
 
 from companion.planning import iteration_kernel as kernel
+from companion.planning.corner_kernel import climb_penalty_of, edge_cost, rule_of
 from companion.planning.cost import EdgeCost
 from companion.planning.guidance import Guidance
 from companion.planning.nearest import bucket_key, grid_shape
 from companion.planning.result import Tree
 from companion.planning.sampling import RandomStream, ellipse_frame
-from companion.planning.search import rrt_star_gamma, simple_cost
+from companion.planning.search import rrt_star_gamma
 from companion.planning.settings import GartSettings
 from companion.world import World
-from companion.world.segments import ball_arrays, compiled_for, segment_clear_of_balls
+from companion.world.obstacle_kernels import segment_clear, space_of
+from companion.world.segments import compiled_for
 
 __all__ = ["CompiledGart", "compiled_case", "grow_compiled"]
 
@@ -41,9 +43,10 @@ _SLICE_S = 1e-3
 
 def compiled_case(world: World, settings: GartSettings) -> bool:
     """True when :class:`CompiledGart` applies (see the module docstring)."""
-    if settings.kappa_max_1_m is not None or not compiled_for(world):
+    if not compiled_for(world):
         return False
-    if not simple_cost(EdgeCost(world, settings.cost)):
+    ec = EdgeCost(world, settings.cost)
+    if ec.uses_threat or ec.uses_tracking:
         return False
     return not settings.guidance or len(world.obstacles) <= Guidance.SCAN_ALL_BELOW
 
@@ -51,8 +54,9 @@ def compiled_case(world: World, settings: GartSettings) -> bool:
 def _world_arrays(world: World, r_max: float, influence_m: float | None) -> tuple:
     """``(lo, hi, 1/bucket edge, bucket shape, arrays)`` of a world, memoised per world and radii.
 
-    ``arrays``: bounds lo, hi, span (d,), balls' centres (N, d), inflated r^2 (N,), guidance
-    rows (N, d + 2) (none without guidance), bucket shape (d,).
+    ``arrays``: bounds lo, hi, span (d,), the obstacles (``space``,
+    :func:`~companion.world.obstacle_kernels.space_of`), guidance rows (N, d + 2) (none without
+    guidance), bucket shape (d,).
     """
     key = ("compiled_gart", r_max, influence_m)
     found = world._memo.get(key)
@@ -61,9 +65,8 @@ def _world_arrays(world: World, r_max: float, influence_m: float | None) -> tupl
         lo, hi = world.bounds_min.tolist(), world.bounds_max.tolist()
         inv_cell = 1.0 / max(r_max, 1e-3)
         shape = grid_shape(lo, hi, inv_cell)
-        centres, r2 = ball_arrays(world)
         guide = Guidance.ball_rows_of(world, influence_m) if influence_m is not None else np.zeros((0, d + 2))
-        arrays = (np.array(lo), np.array(hi), np.array([h - l for l, h in zip(lo, hi)]), centres, r2, guide,
+        arrays = (np.array(lo), np.array(hi), np.array([h - l for l, h in zip(lo, hi)]), space_of(world), guide,
                   np.array(shape, dtype=np.int64))
         found = (lo, hi, inv_cell, shape, arrays)
         world._memo[key] = found
@@ -94,14 +97,15 @@ class CompiledGart:
         ellipse = ellipse_frame(start, goal)
         c_min, basis, centre = ellipse if ellipse is not None else (0.0, np.zeros((0, d)), start)
         goal_arr, self.start_arr = np.array(goal), np.array(start)
-        self.problem = (goal_arr,) + world_arrays[:6] + (np.array(basis, dtype=float).reshape(-1, d), np.array(centre),
-                                                         inv_cell, world_arrays[6])
+        self.problem = (goal_arr,) + world_arrays[:5] + (np.array(basis, dtype=float).reshape(-1, d), np.array(centre),
+                                                         inv_cell, world_arrays[5], rule_of(settings))
         self.energy = settings.cost.energy
+        self.climb = climb_penalty_of(settings, d)
         self.params = (float(settings.goal_bias), float(step), float(settings.goal_radius_m or step), float(r_max),
-                       rrt_star_gamma(lo, hi, settings.rewire_factor), float(self.energy),
-                       math.cos(settings.max_heading_change_rad), float(c_min), float(settings.obstacle_gain_m2),
-                       float(settings.repel_offset_m), float(settings.goal_gain_m), float(settings.max_guidance_m),
-                       bool(settings.guidance), bool(settings.informed), ellipse is not None)
+                       rrt_star_gamma(lo, hi, settings.rewire_factor), float(self.energy), self.climb, float(c_min),
+                       float(settings.obstacle_gain_m2), float(settings.repel_offset_m), float(settings.goal_gain_m),
+                       float(settings.max_guidance_m), float(settings.influence_m), bool(settings.guidance),
+                       bool(settings.informed), ellipse is not None)
         self.counters = np.array([0, 0, -1, 0, 0], dtype=np.int64)
         self.best = np.array([math.inf])
         self._allocate(_FIRST_CAPACITY)
@@ -150,7 +154,8 @@ class CompiledGart:
         """The trivial problem: the start's straight edge to the goal as goal link (node 0)."""
         dist = math.dist(self.start, self.goal)
         _, gl_node, gl_e, gl_u, gl_len = self.links
-        gl_node[0], gl_e[0], gl_len[0] = 0, dist * self.energy, dist
+        e = edge_cost(self.start_arr, self.problem[0], dist, self.energy, self.climb)
+        gl_node[0], gl_e[0], gl_len[0] = 0, e, dist
         self.link_of[0] = 0
         self.counters[kernel.N_LINKS] = 1
         self.counters[kernel.BEST_NODE] = 0
@@ -206,8 +211,8 @@ def grow_compiled(search: CompiledGart, t0: float, deadline: float, iter_limit: 
     history: list[tuple[float, float]] = []
     first_s = None
     clock = time.perf_counter
-    goal, lo, hi, _, centres, r2 = search.problem[:6]
-    if segment_clear_of_balls(search.start_arr, goal, lo, hi, centres, r2):  # trivial problem: the straight line
+    goal, space = search.problem[0], search.problem[4]
+    if segment_clear(search.start_arr, goal, space):  # trivial problem: the straight line
         search.link_straight_line()
         first_s = clock() - t0
         history.append((first_s, search.best_cost))

@@ -6,9 +6,10 @@ moves the sample under the obstacles' and the goal's potential
 (:mod:`~companion.planning.search`). This module runs the iterations within the budgets and
 finishes the best path: shortcut by :mod:`companion.planning.simplify` (optional, separate
 step) and costed. Everything random comes from ``rng``: a fixed seed gives the same path. In the
-common case (plain length cost, no K_max, a world of balls) the iterations, the shortcut and the
-costing run compiled (:mod:`~companion.planning.compiled_search`,
-:mod:`~companion.planning.shortcut_kernel`) with the same results.
+common case (no threat or tracking cost; a world of balls, vertical cylinders and prisms) the
+iterations run compiled (:mod:`~companion.planning.compiled_search`), and without K_max or climb
+penalty so do the shortcut and the costing (:mod:`~companion.planning.shortcut_kernel`), with
+the same results.
 """
 
 from __future__ import annotations

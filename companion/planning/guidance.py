@@ -5,9 +5,12 @@ Inside an inflated obstacle the sample is repelled to just outside the surface (
 surface with a force ``k / c`` inversely proportional to the clearance ``c`` (capped at ``c / 2``
 so it never crosses the surface); the goal always attracts it by ``goal_gain_m``. The total
 displacement is capped at ``max_guidance_m``. Below 128 obstacles every obstacle is scanned; with
-more, only those listed for the sample's grid cell. A world of few discs/spheres only (the usual
-case) is scanned by one compiled kernel (numba, :func:`attract_to_balls`) doing the scalar
-code's floating-point operations in the same order, so the guided sample is the same.
+more, only those listed for the sample's grid cell. A world of few discs/spheres, vertical
+cylinders and prisms (the usual case) is scanned by one compiled kernel (numba,
+:func:`attract_to_balls`) doing the scalar code's floating-point operations in the same order
+(the balls in closed form, then the other obstacles with their exact ``sdf`` and its
+central-difference gradient, :meth:`~companion.world.obstacles.Obstacle.gradient`), so the
+guided sample is the same.
 """
 
 from __future__ import annotations
@@ -18,7 +21,8 @@ import numpy as np
 from numba import njit
 
 from companion.planning.settings import GartSettings
-from companion.world.segments import ball_table
+from companion.world import obstacle_kernels as okern
+from companion.world.segments import ball_table, compiled_for
 
 __all__ = ["Guidance"]
 
@@ -45,7 +49,8 @@ class Guidance:
         self.margin = world.margin_m
         self.scan_all = len(world.obstacles) <= self.SCAN_ALL_BELOW
         self.others = world.non_ball_obstacles
-        self.compiled = self.scan_all and not self.others
+        self.compiled = self.scan_all and compiled_for(world)
+        self.space = okern.space_of(world) if self.compiled else None
         self.ball_rows = self.ball_rows_of(world, settings.influence_m)
         self.balls = tuple(tuple(row) for row in self.ball_rows.tolist())
 
@@ -71,8 +76,9 @@ class Guidance:
         """Sample ``p`` moved by the potential, clamped to the bounds."""
         s = self.s
         if self.compiled:
-            out = attract_to_balls(p, self.goal, self.lo, self.hi, self.ball_rows, s.obstacle_gain_m2,
-                                   s.repel_offset_m, s.goal_gain_m, s.max_guidance_m)
+            out = attract_to_balls(np.array(p), self.goal, self.lo, self.hi, self.ball_rows, self.space,
+                                   s.influence_m, s.obstacle_gain_m2, s.repel_offset_m, s.goal_gain_m,
+                                   s.max_guidance_m)
             return tuple(out.tolist())
         force = [0.0] * self.dim
         if self.scan_all:
@@ -151,12 +157,50 @@ class Guidance:
 
 
 @njit(cache=True)
-def attract_to_balls(p, goal, lo, hi, balls: np.ndarray, gain: float, repel: float, goal_gain: float,
-                     max_guidance: float) -> np.ndarray:
-    """:meth:`Guidance.attract` for a world of discs/spheres only: the moved sample, shape (d,).
+def _others_force(p, space, influence: float, gain: float, repel: float, force) -> None:
+    """:meth:`Guidance._others` over the world's cylinders and prisms (``space``, in their order)."""
+    d = p.shape[0]
+    margin = space[8]
+    reach = influence + margin + space[10]     # beyond: c > influence surely (obstacle_kernels)
+    h = 1e-3
+    up = np.empty(d)
+    down = np.empty(d)
+    g = np.empty(d)
+    for j in range(space[4].shape[0]):
+        if okern.box_gap(j, p[0], p[1], p[0], p[1], space) > reach:
+            continue
+        c = okern.other_sdf(j, p, space) - margin
+        if c >= influence:
+            continue
+        for i in range(d):   # Obstacle.gradient: central differences, 1 mm
+            up[:] = p
+            down[:] = p
+            up[i] = p[i] + h
+            down[i] = p[i] - h
+            g[i] = (okern.other_sdf(j, up, space) - okern.other_sdf(j, down, space)) / (2 * h)
+        n2 = 0.0
+        for i in range(d):
+            n2 += g[i] * g[i]
+        n = math.sqrt(n2)
+        if n < 1e-12:
+            for i in range(d):
+                g[i] = 1.0 if i == 0 else 0.0
+        else:
+            for i in range(d):
+                g[i] = g[i] / n
+        mag = -c + repel if c <= 0.0 else -min(gain / c, 0.5 * c)
+        for i in range(d):
+            force[i] += mag * g[i]
 
-    ``balls`` (N, d + 2) rows ``(centre..., (r + influence)^2, r)``; the arithmetic is that of
-    the scalar methods, term by term.
+
+@njit(cache=True)
+def attract_to_balls(p, goal, lo, hi, balls: np.ndarray, space, influence: float, gain: float, repel: float,
+                     goal_gain: float, max_guidance: float) -> np.ndarray:
+    """:meth:`Guidance.attract` for a world of the compiled case: the moved sample, shape (d,).
+
+    ``p`` (d,) array; ``balls`` (N, d + 2) rows ``(centre..., (r + influence)^2, r)``; ``space``
+    the world's obstacles (:func:`~companion.world.obstacle_kernels.space_of`: its cylinders and
+    prisms are used). The arithmetic is that of the scalar methods, term by term.
     """
     d = balls.shape[1] - 2
     force = np.zeros(d)
@@ -177,6 +221,8 @@ def attract_to_balls(p, goal, lo, hi, balls: np.ndarray, gain: float, repel: flo
                 force[k] += mag * delta[k] / n
         else:
             force[0] += mag
+    if space[4].shape[0]:
+        _others_force(p, space, influence, gain, repel, force)
     for k in range(d):
         delta[k] = goal[k] - p[k]
     s2 = delta[0] * delta[0]

@@ -1,7 +1,7 @@
 """GART's whole iteration compiled (numba): sample, attract, steer, choose parent, insert, rewire, goal.
 
-For the common case (plain length cost, a world of at most 256 discs/spheres, no K_max corner
-clearance) :func:`grow_batch` runs many iterations of
+For the common case (the length and climb cost, a world of discs/spheres, vertical cylinders and
+prisms, K_max corner clearance or not) :func:`grow_batch` runs many iterations of
 :meth:`~companion.planning.search.GartSearch.iterate` in one call, with the tree in preallocated
 arrays (:class:`~companion.planning.compiled_search.CompiledGart` owns them and grows them by
 doubling between calls). Every step does the Python code's floating-point operations in the
@@ -28,11 +28,12 @@ import math
 import numpy as np
 from numba import njit
 
+from companion.planning.corner_kernel import corner_clear, corner_fits, edge_cost
 from companion.planning.exact_dist import python_dist
 from companion.planning.guidance import attract_to_balls
 from companion.planning.node_arrays import append_kernel, nearest_kernel
 from companion.planning.parent_choice import extend
-from companion.world.segments import segment_clear_of_balls
+from companion.world import obstacle_kernels as okern
 
 __all__ = ["grow_batch", "BATCH_DONE", "IMPROVED", "NEED_RANDOM", "NEW_NODE", "GART", "MGART_LINKS", "MGART_NODES",
            "N_NODES", "ITERATIONS", "BEST_NODE",
@@ -120,15 +121,6 @@ def rewire_radius(n: int, gamma: float, r_max: float, d: int) -> float:
 
 
 @njit(cache=True)
-def _heading_ok(u_a, u_b, cos_max: float) -> bool:
-    """The heading limit of :meth:`~companion.planning.simplify.CornerRule.ok` (no K_max)."""
-    c = 0.0
-    for k in range(u_a.shape[0]):
-        c += u_a[k] * u_b[k]
-    return not c < cos_max
-
-
-@njit(cache=True)
 def _link_child(first_child, next_sib, prev_sib, parent: int, child: int) -> None:
     head = first_child[parent]
     next_sib[child] = head
@@ -150,10 +142,47 @@ def _unlink_child(first_child, next_sib, prev_sib, parent: int, child: int) -> N
 
 
 @njit(cache=True)
-def rewire(tree, link_of, gl_u, node: int, ids, dists, energy: float, cos_max: float, lo, hi, centres, r2,
-           stack) -> None:
-    """Step 5 (:meth:`GartSearch.rewire` for the plain length cost): re-parent cheaper neighbours."""
+def _children_fit(tree, i: int, uu, dist: float, rule, corner, space) -> bool:
+    """The corners at node ``i`` towards each of its children, entered along ``uu`` (``dist`` m).
+
+    ``corner`` None: :meth:`CornerRule.ok` without the corner point; else with it.
+    """
+    u, length, first_child, next_sib = tree[5], tree[7], tree[9], tree[10]
+    ch = first_child[i]
+    while ch >= 0:
+        if corner is None:
+            if not corner_fits(uu, dist, u[ch], length[ch], rule):
+                return False
+        elif not corner_clear(uu, dist, u[ch], length[ch], corner, rule, space):
+            return False
+        ch = next_sib[ch]
+    return True
+
+
+@njit(cache=True)
+def _rewire_allowed(tree, link_of, gl_u, gl_len, node: int, i: int, uu, dist: float, rule, space) -> bool:
+    """The tests of :meth:`GartSearch.rewire` after the cost test: corners, edge, K_max's corners."""
+    coords, u, length = tree[0], tree[5], tree[7]
+    link = link_of[i]
+    if not corner_fits(u[node], length[node], uu, dist, rule) or not _children_fit(tree, i, uu, dist, rule, None,
+                                                                                    space):
+        return False
+    if link >= 0 and not corner_fits(uu, dist, gl_u[link], gl_len[link], rule):
+        return False
+    if not okern.segment_clear(coords[node], coords[i], space):
+        return False
+    if rule[1] == 0.0:
+        return True
+    return (corner_clear(u[node], length[node], uu, dist, coords[node], rule, space)
+            and _children_fit(tree, i, uu, dist, rule, coords[i], space)
+            and (link < 0 or corner_clear(uu, dist, gl_u[link], gl_len[link], coords[i], rule, space)))
+
+
+@njit(cache=True)
+def rewire(tree, links, node: int, ids, dists, energy: float, climb_penalty: float, rule, space, stack) -> None:
+    """Step 5 (:meth:`GartSearch.rewire` for the length and climb cost): re-parent cheaper neighbours."""
     coords, keys, active, parent, cost, u, has_u, length, edge, first_child, next_sib, prev_sib = tree
+    link_of, gl_u, gl_len = links[0], links[3], links[4]
     d = coords.shape[1]
     x_new = coords[node]
     c_new = cost[node]
@@ -168,18 +197,9 @@ def rewire(tree, link_of, gl_u, node: int, ids, dists, energy: float, cos_max: f
             continue
         for k in range(d):
             uu[k] = (coords[i, k] - x_new[k]) / dist
-        e = dist * energy
+        e = edge_cost(x_new, coords[i], dist, energy, climb_penalty)
         c = c_new + e
-        if c >= cost[i] - 1e-9 or not _heading_ok(u[node], uu, cos_max):
-            continue
-        ok = True
-        ch = first_child[i]
-        while ch >= 0 and ok:
-            ok = _heading_ok(uu, u[ch], cos_max)
-            ch = next_sib[ch]
-        if not ok or (link_of[i] >= 0 and not _heading_ok(uu, gl_u[link_of[i]], cos_max)):
-            continue
-        if not segment_clear_of_balls(x_new, coords[i], lo, hi, centres, r2):
+        if c >= cost[i] - 1e-9 or not _rewire_allowed(tree, link_of, gl_u, gl_len, node, i, uu, dist, rule, space):
             continue
         _unlink_child(first_child, next_sib, prev_sib, parent[i], i)
         parent[i] = node
@@ -201,10 +221,10 @@ def rewire(tree, link_of, gl_u, node: int, ids, dists, energy: float, cos_max: f
 
 
 @njit(cache=True)
-def connect_goal(tree, links, counters, node: int, goal, goal_radius: float, energy: float, cos_max: float, lo,
-                 hi, centres, r2) -> None:
+def connect_goal(tree, links, counters, node: int, goal, goal_radius: float, energy: float, climb_penalty: float,
+                 rule, space) -> None:
     """Step 6 (:meth:`GartSearch.connect_goal`): a straight edge from ``node`` to the goal, recorded."""
-    coords, u = tree[0], tree[5]
+    coords, u, length = tree[0], tree[5], tree[7]
     link_of, gl_node, gl_e, gl_u, gl_len = links
     dist = python_dist(coords[node], goal)
     if dist > goal_radius:
@@ -216,11 +236,13 @@ def connect_goal(tree, links, counters, node: int, goal, goal_radius: float, ene
     else:
         for j in range(coords.shape[1]):
             gl_u[k, j] = (goal[j] - coords[node, j]) / dist
-        if not _heading_ok(u[node], gl_u[k], cos_max):
+        if not corner_fits(u[node], length[node], gl_u[k], dist, rule):
             return
-        if not segment_clear_of_balls(coords[node], goal, lo, hi, centres, r2):
+        if not okern.segment_clear(coords[node], goal, space):
             return
-        e = dist * energy
+        if rule[1] > 0.0 and not corner_clear(u[node], length[node], gl_u[k], dist, coords[node], rule, space):
+            return
+        e = edge_cost(coords[node], goal, dist, energy, climb_penalty)
     gl_node[k], gl_e[k], gl_len[k] = node, e, dist
     link_of[node] = k
     counters[N_LINKS] = k + 1
@@ -261,11 +283,14 @@ def grow_batch(tree, links, counters, best, rand, problem, params, max_iteration
     rand : (m,) float
         Uniform numbers of the planner's stream; reading starts at ``counters[RANDOM_POS]``.
     problem : tuple
-        goal (d,), bounds lo, hi, span (d,), balls' centres (N, d) and inflated r^2 (N,),
-        guidance rows (N, d + 2), informed basis (d, d) and centre (d,), bucket 1/edge, bucket shape (d,).
+        goal (d,), bounds lo, hi, span (d,), the world's obstacles (``space``,
+        :func:`~companion.world.obstacle_kernels.space_of`), guidance rows (N, d + 2), informed
+        basis (d, d) and centre (d,), bucket 1/edge, bucket shape (d,), the corner rule
+        (:func:`~companion.planning.corner_kernel.rule_of`).
     params : tuple
-        goal_bias, step, goal radius, r_max, gamma, energy, cos_max, c_min, obstacle gain, repel
-        offset, goal gain, max guidance (floats), guided, informed, has_ellipse (bools).
+        goal_bias, step, goal radius, r_max, gamma, energy, climb penalty, c_min, obstacle gain,
+        repel offset, goal gain, max guidance, influence (floats), guided, informed, has_ellipse
+        (bools).
 
     max_iterations, mode : int
         ``mode`` GART: the best goal cost is kept up to date and the call returns IMPROVED right
@@ -276,9 +301,9 @@ def grow_batch(tree, links, counters, best, rand, problem, params, max_iteration
     Returns NEED_RANDOM (that iteration not started) when ``rand`` ran out.
     """
     coords, keys, active, parent, cost, u, has_u, length, edge, first_child, next_sib, prev_sib = tree
-    goal, lo, hi, span, centres, r2, ball_rows, basis, centre, inv_cell, shape = problem
-    (goal_bias, step, goal_radius, r_max, gamma, energy, cos_max, c_min, gain, repel, goal_gain, max_guidance,
-     guided, informed, has_ellipse) = params
+    goal, lo, hi, span, space, ball_rows, basis, centre, inv_cell, shape, rule = problem
+    (goal_bias, step, goal_radius, r_max, gamma, energy, climb, c_min, gain, repel, goal_gain, max_guidance,
+     influence, guided, informed, has_ellipse) = params
     d = coords.shape[1]
     x = np.empty(d)
     x_new = np.empty(d)
@@ -292,27 +317,29 @@ def grow_batch(tree, links, counters, best, rand, problem, params, max_iteration
         counters[ITERATIONS] += 1
         x_rand = x
         if guided and not is_goal:
-            x_rand = attract_to_balls(x, goal, lo, hi, ball_rows, gain, repel, goal_gain, max_guidance)
+            x_rand = attract_to_balls(x, goal, lo, hi, ball_rows, space, influence, gain, repel, goal_gain,
+                                      max_guidance)
         n = counters[N_NODES]
         near = nearest_kernel(coords, active, n, x_rand)
         if near < 0 or not steer(coords[near], x_rand, step, x_new):
             continue
         near_dist = python_dist(coords[near], x_new)
         _, chosen, ids, dists = extend(x_new, near, near_dist, rewire_radius(n, gamma, r_max, d), coords, keys,
-                                       active, n, cost, u, has_u, energy, cos_max, lo, hi, centres, r2)
+                                       active, n, cost, u, has_u, length, energy, climb, rule, space)
         if chosen < 0:
             continue
         p, dist = ids[chosen], dists[chosen]       # step 4 chose the parent: insert the node
         append_kernel(coords, keys, active, n, x_new, lo, inv_cell, shape)
         for k in range(d):
             u[n, k] = (x_new[k] - coords[p, k]) / dist
-        parent[n], cost[n], edge[n], length[n], has_u[n] = p, cost[p] + energy * dist, energy * dist, dist, True
+        e = edge_cost(coords[p], x_new, dist, energy, climb)
+        parent[n], cost[n], edge[n], length[n], has_u[n] = p, cost[p] + e, e, dist, True
         first_child[n] = -1
         _link_child(first_child, next_sib, prev_sib, p, n)
         links[0][n] = -1
         counters[N_NODES] = n + 1
-        rewire(tree, links[0], links[3], n, ids, dists, energy, cos_max, lo, hi, centres, r2, stack)
-        connect_goal(tree, links, counters, n, goal, goal_radius, energy, cos_max, lo, hi, centres, r2)
+        rewire(tree, links, n, ids, dists, energy, climb, rule, space, stack)
+        connect_goal(tree, links, counters, n, goal, goal_radius, energy, climb, rule, space)
         if mode == GART:
             if counters[N_LINKS] > 0 and update_best(cost, links, counters, best):
                 return IMPROVED

@@ -1,8 +1,10 @@
-"""GART step 4, ``choose_parent``, compiled (numba) for the plain length cost in a world of balls.
+"""GART step 4, ``choose_parent``, compiled (numba) for the length and climb cost among balls,
+cylinders and prisms.
 
-With cost = energy weight x length, no K_max corner clearance and only discs/spheres, choosing
-a parent is: order the neighbours by cost through them (then by id), and take the first whose
-corner respects the heading limit and whose edge is free. :class:`ParentArrays` mirrors the
+With cost = energy weight x (length + climb penalty), choosing a parent is: order the neighbours
+by cost through them (then by id), and take the first whose corner respects the heading limit
+(with K_max: leaves room for a G2 corner), whose edge is free and (with K_max) whose corner is
+clear. :class:`ParentArrays` mirrors the
 tree's cost-to-come and incoming unit directions as arrays (written wherever the planner
 writes its lists), and :func:`first_valid_parent` runs that loop in one call, with the
 arithmetic of :meth:`~companion.planning.search.GartSearch.choose_parent`,
@@ -18,8 +20,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from companion.planning.corner_kernel import corner_clear, corner_fits, edge_cost
 from companion.planning.node_arrays import within_kernel
-from companion.world.segments import segment_clear_of_balls
+from companion.world import obstacle_kernels as okern
 
 __all__ = ["ParentArrays", "first_valid_parent", "rewire_candidates", "extend"]
 
@@ -27,7 +30,8 @@ _FIRST_CAPACITY = 1024
 
 
 class ParentArrays:
-    """Cost-to-come (n,), incoming unit direction (n, d) and whether it exists (n,), per node.
+    """Cost-to-come (n,), incoming unit direction (n, d), whether it exists (n,) and incoming
+    edge length (n,), per node.
 
     Parameters
     ----------
@@ -39,16 +43,19 @@ class ParentArrays:
         self.cost = np.empty(_FIRST_CAPACITY)
         self.u = np.zeros((_FIRST_CAPACITY, dim))
         self.has_u = np.zeros(_FIRST_CAPACITY, dtype=np.bool_)
+        self.length = np.zeros(_FIRST_CAPACITY)
 
-    def set(self, node: int, cost: float, u: tuple | None) -> None:
-        """Write ``node``'s cost and incoming direction (None at the root), growing the arrays."""
+    def set(self, node: int, cost: float, u: tuple | None, length_m: float = 0.0) -> None:
+        """Write ``node``'s cost, incoming direction (None at the root) and edge length, growing the arrays."""
         cap = self.cost.shape[0]
         if node >= cap:
             extra = max(node + 1, 2 * cap) - cap
             self.cost = np.concatenate([self.cost, np.empty(extra)])
             self.u = np.concatenate([self.u, np.zeros((extra, self.dim))])
             self.has_u = np.concatenate([self.has_u, np.zeros(extra, dtype=np.bool_)])
+            self.length = np.concatenate([self.length, np.zeros(extra)])
         self.cost[node] = cost
+        self.length[node] = length_m
         if u is not None:
             self.u[node] = u
         self.has_u[node] = u is not None
@@ -56,23 +63,25 @@ class ParentArrays:
 
 @njit(cache=True)
 def first_valid_parent(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, u_in: np.ndarray,
-                       has_u: np.ndarray, coords: np.ndarray, x_new, energy: float, cos_max: float,
-                       lo, hi, centres: np.ndarray, r2: np.ndarray) -> int:
+                       has_u: np.ndarray, len_in: np.ndarray, coords: np.ndarray, x_new, energy: float,
+                       climb_penalty: float, rule, space) -> int:
     """Position in ``ids`` of the chosen parent of ``x_new``, or -1.
 
     Parameters
     ----------
     ids, dists : (m,) int64, (m,) float
         Neighbours and their distances (m).
-    cost, u_in, has_u : (n,), (n, d), (n,)
-        Tree arrays (:class:`ParentArrays`).
+    cost, u_in, has_u, len_in : (n,), (n, d), (n,), (n,)
+        Tree arrays: cost-to-come, incoming unit direction (and whether it exists), incoming
+        edge length (read with K_max only).
     coords : (n, d)
         Node positions.
-    x_new : d floats
-    energy, cos_max : float
-        Length weight; cosine of the largest heading change.
-    lo, hi, centres, r2
-        Bounds and inflated balls, as :func:`~companion.world.segments.segment_clear_of_balls`.
+    x_new : (d,) array
+    energy, climb_penalty : float
+        Length weight and climb penalty (0: none) of the edge cost.
+    rule, space : tuples
+        The corner rule (:func:`~companion.planning.corner_kernel.rule_of`) and the world's
+        obstacles (:func:`~companion.world.obstacle_kernels.space_of`).
     """
     m = ids.shape[0]
     d = coords.shape[1]
@@ -81,7 +90,7 @@ def first_valid_parent(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, u_i
     k = 0
     for a in range(m):
         if dists[a] >= 1e-9:
-            c = cost[ids[a]] + energy * dists[a]
+            c = cost[ids[a]] + edge_cost(coords[ids[a]], x_new, dists[a], energy, climb_penalty)
             # insertion by (cost, id): the order of sorting the tuples (cost, id, dist)
             b = k - 1
             while b >= 0 and (cs[b] > c or (cs[b] == c and ids[order[b]] > ids[a])):
@@ -92,20 +101,20 @@ def first_valid_parent(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, u_i
             cs[b + 1] = c
             k += 1
     u = np.empty(d)
+    with_corner = rule[1] > 0.0
     for s in range(k):
         a = order[s]
         i = ids[a]
         dist = dists[a]
         for j in range(d):
             u[j] = (x_new[j] - coords[i, j]) / dist
-        if has_u[i]:
-            dot = 0.0
-            for j in range(d):
-                dot += u_in[i, j] * u[j]
-            if dot < cos_max:
-                continue
-        if segment_clear_of_balls(coords[i], x_new, lo, hi, centres, r2):
-            return a
+        if has_u[i] and not corner_fits(u_in[i], len_in[i], u, dist, rule):
+            continue
+        if not okern.segment_clear(coords[i], x_new, space):
+            continue
+        if has_u[i] and with_corner and not corner_clear(u_in[i], len_in[i], u, dist, coords[i], rule, space):
+            continue
+        return a
     return -1
 
 
@@ -130,34 +139,17 @@ def rewire_candidates(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, c_ne
 
 
 @njit(cache=True)
-def point_clear_of_balls(x, lo, hi, centres: np.ndarray, r2: np.ndarray) -> bool:
-    """``World.point_free`` for a world of balls: inside the bounds and outside every ball."""
-    d = centres.shape[1]
-    for k in range(d):
-        if not (lo[k] <= x[k] and x[k] <= hi[k]):
-            return False
-    for j in range(centres.shape[0]):
-        dx = x[0] - centres[j, 0]
-        d2 = dx * dx
-        for k in range(1, d):
-            dk = x[k] - centres[j, k]
-            d2 += dk * dk
-        if d2 <= r2[j]:
-            return False
-    return True
-
-
-@njit(cache=True)
 def extend(x_new, near: int, near_dist: float, radius_m: float, coords: np.ndarray, keys: np.ndarray,
-           active: np.ndarray, n: int, cost: np.ndarray, u_in: np.ndarray, has_u: np.ndarray, energy: float,
-           cos_max: float, lo, hi, centres: np.ndarray, r2: np.ndarray):
+           active: np.ndarray, n: int, cost: np.ndarray, u_in: np.ndarray, has_u: np.ndarray, len_in: np.ndarray,
+           energy: float, climb_penalty: float, rule, space):
     """Point test, neighbours and parent of the steered point ``x_new`` in one call.
 
     Returns ``(free, pos, ids, dists)``: whether ``x_new`` is free, the position in ``ids`` of
     its parent (-1: none), and the neighbours within ``radius_m`` (m) by bucket then id, the
-    nearest node ``near`` (at ``near_dist``) appended when the radius leaves it out.
+    nearest node ``near`` (at ``near_dist``) appended when the radius leaves it out. The other
+    arguments are :func:`first_valid_parent`'s.
     """
-    if not point_clear_of_balls(x_new, lo, hi, centres, r2):
+    if not okern.point_clear(x_new, space):
         return False, -1, np.empty(0, dtype=np.int64), np.empty(0)
     rr = radius_m * radius_m
     ids, dists = within_kernel(coords, keys, active, n, x_new, rr)
@@ -169,5 +161,6 @@ def extend(x_new, near: int, near_dist: float, radius_m: float, coords: np.ndarr
     if not d2 <= rr:   # listed_within(pts[near], x_new, radius_m)
         ids = np.append(ids, near)
         dists = np.append(dists, near_dist)
-    pos = first_valid_parent(ids, dists, cost, u_in, has_u, coords, x_new, energy, cos_max, lo, hi, centres, r2)
+    pos = first_valid_parent(ids, dists, cost, u_in, has_u, len_in, coords, x_new, energy, climb_penalty, rule,
+                             space)
     return True, pos, ids, dists

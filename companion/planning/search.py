@@ -20,8 +20,8 @@ may leave descendants' corner costs slightly suboptimal. The tree is kept in pla
 floats and tuples: at the sizes of a first path (tens to hundreds of nodes) Python's scalar
 operations cost less than numpy's per-call overhead. The loops over all nodes or all obstacles
 (nearest and radius queries, exact segment tests, guidance) are compiled with numba. For the
-common case (plain length cost, no K_max, a world of balls) GART and M-GART run the whole
-iteration compiled instead (:mod:`~companion.planning.compiled_search`), with the same result;
+common case (length and climb cost, a world of balls, cylinders and prisms) GART and M-GART run
+the whole iteration compiled instead (:mod:`~companion.planning.compiled_search`), with the same result;
 this class is the reference and serves every other case.
 """
 
@@ -40,7 +40,9 @@ from companion.planning.sampling import RandomStream, Sampler
 from companion.planning.settings import GartSettings
 from companion.planning.simplify import CornerRule
 from companion.world import World
-from companion.world.segments import ball_arrays, compiled_for, segment_test
+from companion.planning.corner_kernel import rule_of
+from companion.world.obstacle_kernels import space_of
+from companion.world.segments import compiled_for, segment_test
 
 __all__ = ["GartSearch", "rrt_star_gamma", "simple_cost"]
 
@@ -107,12 +109,13 @@ class GartSearch:
         self.forbidden: list[bool] = [False]
         self.nn = NodeGrid(tuple(lo), tuple(hi), max(self.r_max, 1e-3), self.pts)
         self.nn.add(0)
-        # step 4 compiled for the plain length cost in a world of balls (else the Python loop)
+        # step 4 compiled for the plain length cost without K_max among balls, cylinders and
+        # prisms (else the Python loop)
         self.fast = None
         if self.simple_cost and self.rule.world is None and compiled_for(world):
             self.fast = ParentArrays(d)
             self.fast.set(0, 0.0, None)
-            self.fast_world = (tuple(lo), tuple(hi)) + ball_arrays(world)
+            self.fast_world = (rule_of(settings), space_of(world))
         # goal links: node -> (edge cost, u, length)
         self.goal_links: dict[int, tuple[float, tuple, float]] = {}
         self.best_node = -1
@@ -190,7 +193,7 @@ class GartSearch:
         self.children[parent].append(node)
         self.nn.add(node)
         if self.fast is not None:
-            self.fast.set(node, cost, u)
+            self.fast.set(node, cost, u, length)
         return node
 
     def rewire(self, node: int, neighbours: list) -> bool:
@@ -234,7 +237,7 @@ class GartSearch:
             self.children[node].append(i)
             self.edge_in[i], self.u_in[i], self.len_in[i], cost[i] = e, u, dist, c
             if self.fast is not None:
-                self.fast.set(i, c, u)
+                self.fast.set(i, c, u, dist)
             self.propagate(i)
             changed = True
         return changed
@@ -324,11 +327,11 @@ class GartSearch:
         return node
 
     def extend_compiled(self, near: int, x_new: tuple) -> int:
-        """Steps 4 to 6 from the steered ``x_new`` (plain length cost, world of balls)."""
+        """Steps 4 to 6 from the steered ``x_new`` (plain length cost, no K_max, compiled obstacles)."""
         fast, arrays, energy = self.fast, self.nn.arrays, self.s.cost.energy
-        free, pos, ids, dists = extend(x_new, near, math.dist(self.pts[near], x_new), self.radius(), arrays.coords,
-                                       arrays.keys, arrays.active, arrays.count, fast.cost, fast.u, fast.has_u,
-                                       energy, self.rule.cos_max, *self.fast_world)
+        free, pos, ids, dists = extend(np.array(x_new), near, math.dist(self.pts[near], x_new), self.radius(),
+                                       arrays.coords, arrays.keys, arrays.active, arrays.count, fast.cost, fast.u,
+                                       fast.has_u, fast.length, energy, 0.0, *self.fast_world)
         if pos < 0:
             return -1
         parent, dist = int(ids[pos]), float(dists[pos])

@@ -1,12 +1,14 @@
-"""Shortcutting and costing of a found path, compiled (numba) for the plain length cost among balls.
+"""Shortcutting and costing of a found path, compiled (numba) for the plain length cost.
 
 :func:`~companion.planning.simplify.shortcut_path` followed by
 :func:`~companion.planning.cost.path_cost`, for cost = energy weight x length, no K_max corner
-clearance and a world of at most 256 discs/spheres (:func:`shortcut_case`). The same greedy
+clearance and a world the compiled segment test covers (:func:`shortcut_case`). The same greedy
 rule (from each waypoint the farthest later waypoint joined by a free, cheaper edge that keeps
 the heading limit at both ends), the same rounds, and the Python code's arithmetic in the same
 order (``math.dist`` through :func:`~companion.planning.exact_dist.python_dist`, the section
-costs summed left to right), so the path and its cost are the same to the bit.
+costs summed left to right), so the path and its cost are the same to the bit. The worlds are
+those of the compiled segment test (:func:`~companion.world.segments.compiled_for`: balls,
+vertical cylinders, prisms).
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ from companion.planning.cost import EdgeCost
 from companion.planning.exact_dist import python_dist
 from companion.planning.search import simple_cost
 from companion.planning.settings import GartSettings
-from companion.world.segments import ball_arrays, compiled_for, segment_clear_of_balls
+from companion.world.obstacle_kernels import segment_clear, space_of
+from companion.world.segments import compiled_for
 
 __all__ = ["shortcut_case", "shortcut_and_cost"]
 
@@ -32,11 +35,9 @@ def shortcut_case(world, settings: GartSettings) -> bool:
 
 def shortcut_and_cost(world, path: np.ndarray, settings: GartSettings) -> tuple[np.ndarray, float]:
     """``(path (M', d), cost)``: the path shortcut when ``settings.simplify`` says so, then costed."""
-    centres, r2 = ball_arrays(world)
     rounds = settings.simplify.max_rounds if settings.simplify.enabled and path.shape[0] > 2 else -1
     out, cost = shortcut_polyline(np.ascontiguousarray(path, dtype=float), float(settings.cost.energy),
-                                  math.cos(settings.max_heading_change_rad), rounds, world.bounds_min,
-                                  world.bounds_max, centres, r2)
+                                  math.cos(settings.max_heading_change_rad), rounds, space_of(world))
     return out, cost
 
 
@@ -61,7 +62,7 @@ def _dot(a, b) -> float:
 
 
 @njit(cache=True)
-def farthest_shortcut(path, idx, m, i, u, length, terms, energy, cos_max, lo, hi, centres, r2, u_new) -> int:
+def farthest_shortcut(path, idx, m, i, u, length, terms, energy, cos_max, space, u_new) -> int:
     """The farthest waypoint ``j > i + 1`` that a free, cheaper, heading-respecting edge joins, or -1."""
     d = path.shape[1]
     last = m - 1
@@ -85,13 +86,13 @@ def farthest_shortcut(path, idx, m, i, u, length, terms, energy, cos_max, lo, hi
             old += terms[k]
         if not new < old - 1e-9:
             continue
-        if segment_clear_of_balls(a, b, lo, hi, centres, r2):
+        if segment_clear(a, b, space):
             return j
     return -1
 
 
 @njit(cache=True)
-def shortcut_polyline(path, energy, cos_max, rounds, lo, hi, centres, r2):
+def shortcut_polyline(path, energy, cos_max, rounds, space):
     """Shortcut ``path`` (M, d) for at most ``rounds`` rounds (-1: none) and cost it.
 
     Repeated waypoints (within 1e-9 m of the previous one) are dropped first, as the Python
@@ -115,7 +116,7 @@ def shortcut_polyline(path, energy, cos_max, rounds, lo, hi, centres, r2):
         i = 0
         _edges(path, idx, m, energy, u, length, terms)
         while i < m - 2:
-            j = farthest_shortcut(path, idx, m, i, u, length, terms, energy, cos_max, lo, hi, centres, r2, u_new)
+            j = farthest_shortcut(path, idx, m, i, u, length, terms, energy, cos_max, space, u_new)
             if j > 0:
                 gap = j - i - 1
                 for k in range(j, m):

@@ -9,9 +9,11 @@ answers equal the scalar ones exactly. Other obstacles (boxes, cylinders, prisms
 with their own exact ``segment_distance`` on the segments that clear the balls.
 
 The planner's inner loop asks one segment at a time; :func:`segment_test` gives it a compiled
-test against every disc/sphere (numba), which at tens of obstacles costs less than the Python
-grid walk of :meth:`~companion.world.world.World.segment_free`. It uses the scalar method's
-arithmetic in the same order (no fused multiply-add), so its answers are the same booleans.
+test against every obstacle (numba, :func:`companion.world.obstacle_kernels.segment_clear`) for
+worlds of discs/spheres, vertical cylinders and prisms (:func:`compiled_for`), which at tens of
+obstacles costs less than the Python grid walk of
+:meth:`~companion.world.world.World.segment_free`. It uses the scalar methods' arithmetic in the
+same order (no fused multiply-add), so its answers are the same booleans.
 """
 
 from __future__ import annotations
@@ -22,11 +24,14 @@ from typing import Callable
 import numpy as np
 from numba import njit
 
-__all__ = ["segments_free_from", "segment_test", "segment_clear_of_balls", "ball_arrays", "ball_table", "compiled_for"]
+from companion.world import obstacle_kernels as okern
+
+__all__ = ["segments_free_from", "segments_clear", "segment_test", "ball_arrays", "ball_table", "compiled_for"]
 
 _MEMO_KEY = ("segments_free_from", "balls")
 _TABLE_KEY = ("segments", "ball_table")
 _COMPILED_UP_TO_BALLS = 256  # above, the grid walk visits fewer obstacles than a full scan
+_COMPILED_UP_TO_OTHERS = 64  # cylinders and prisms
 
 
 def ball_arrays(world) -> tuple[np.ndarray, np.ndarray]:
@@ -69,10 +74,9 @@ def segments_free_from(world, a: tuple, ends: list) -> list[bool]:
     """
     if not ends:
         return []
-    if compiled_for(world):   # a world of balls: compiled
-        centres, r2 = ball_arrays(world)
-        lo, hi = _bounds(world)
-        free = segments_clear_of_balls(a, np.array(ends, dtype=float).reshape(-1, world.dim), lo, hi, centres, r2)
+    if compiled_for(world):   # balls, cylinders and prisms: compiled
+        free = segments_clear(np.array(a, dtype=float), np.array(ends, dtype=float).reshape(-1, world.dim),
+                              okern.space_of(world))
         return free.tolist()
     if not world.in_bounds(a):
         return [False] * len(ends)
@@ -106,70 +110,36 @@ def segments_free_from(world, a: tuple, ends: list) -> list[bool]:
 
 
 @njit(cache=True)
-def segment_clear_of_balls(a, b, lo, hi, centres: np.ndarray, r2: np.ndarray) -> bool:
-    """True when segment ``a b`` (d floats each) lies in ``[lo, hi]`` and clear of every ball.
-
-    ``centres`` (N, d) and ``r2`` (N,) are the inflated balls; the arithmetic is that of
-    :meth:`~companion.world.world.World.segment_free` (closest point clamped to the segment).
-    """
-    d = centres.shape[1]
-    for k in range(d):
-        if not (lo[k] <= a[k] and a[k] <= hi[k] and lo[k] <= b[k] and b[k] <= hi[k]):
-            return False
-    delta = np.empty(d)
-    for k in range(d):
-        delta[k] = b[k] - a[k]
-    l2 = delta[0] * delta[0]
-    for k in range(1, d):
-        l2 += delta[k] * delta[k]
-    for j in range(centres.shape[0]):
-        t = 0.0
-        if l2 > 0.0:
-            num = (centres[j, 0] - a[0]) * delta[0]
-            for k in range(1, d):
-                num += (centres[j, k] - a[k]) * delta[k]
-            t = num / l2
-            t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
-        q = a[0] + t * delta[0] - centres[j, 0]
-        q2 = q * q
-        for k in range(1, d):
-            q = a[k] + t * delta[k] - centres[j, k]
-            q2 += q * q
-        if q2 <= r2[j]:
-            return False
-    return True
-
-
-@njit(cache=True)
-def segments_clear_of_balls(a, ends: np.ndarray, lo, hi, centres: np.ndarray, r2: np.ndarray) -> np.ndarray:
-    """:func:`segment_clear_of_balls` from ``a`` to each row of ``ends`` (K, d): (K,) bool."""
+def segments_clear(a, ends: np.ndarray, space) -> np.ndarray:
+    """:func:`~companion.world.obstacle_kernels.segment_clear` from ``a`` to each row of ``ends`` (K, d): (K,) bool."""
     out = np.empty(ends.shape[0], dtype=np.bool_)
     for i in range(ends.shape[0]):
-        out[i] = segment_clear_of_balls(a, ends[i], lo, hi, centres, r2)
+        out[i] = okern.segment_clear(a, ends[i], space)
     return out
 
 
-def _bounds(world) -> tuple[tuple, tuple]:
-    return tuple(world.bounds_min.tolist()), tuple(world.bounds_max.tolist())
-
-
 def segment_test(world) -> Callable[[tuple, tuple], bool]:
-    """``world.segment_free`` for tuples of d floats, compiled when the world has only balls.
+    """``world.segment_free`` for tuples of d floats, compiled when :func:`compiled_for` says so.
 
-    Worlds with other obstacles, or with more than 256 balls, get ``world.segment_free`` itself.
-    (The ball arrays are memoised per world, the returned function is not: worlds may be pickled.)
+    Other worlds (a ``Box``, more than 256 balls or 64 cylinders/prisms) get
+    ``world.segment_free`` itself. (The arrays are memoised per world, the returned function is
+    not: worlds may be pickled.)
     """
     if not compiled_for(world):
         return world.segment_free
-    centres, r2 = ball_arrays(world)
-    lo, hi = _bounds(world)
+    space = okern.space_of(world)
+    clear = okern.segment_clear
+    as_array = np.array
 
     def segment_free(a: tuple, b: tuple) -> bool:
-        return segment_clear_of_balls(a, b, lo, hi, centres, r2)
+        return clear(as_array(a, dtype=float), as_array(b, dtype=float), space)
 
     return segment_free
 
 
 def compiled_for(world) -> bool:
-    """True when the compiled tests apply: only discs/spheres, at most 256 of them."""
-    return not world.non_ball_obstacles and len(world.inflated_balls) <= _COMPILED_UP_TO_BALLS
+    """True when the compiled tests apply: discs/spheres (at most 256), vertical cylinders and
+    prisms (at most 64 together), no box."""
+    others = world.non_ball_obstacles
+    return (len(world.inflated_balls) <= _COMPILED_UP_TO_BALLS and len(others) <= _COMPILED_UP_TO_OTHERS
+            and okern.supported(world))
