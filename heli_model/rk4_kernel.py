@@ -1,10 +1,9 @@
-"""Compiled kernels of the pure vehicle update (numba): the RK4 sub-steps and the law's linear part.
+"""Compiled kernels of the pure vehicle update (numba): the RK4 sub-steps.
 
 :func:`integrate_rk4` runs the ``n`` RK4 sub-steps of one update, with the ground stop after
-each, in one call; :func:`law_output` is the linear part of one control period (references in
-body axes, ``delta = L @ [ref8, x14_err, z]``, clipping, the LQI integrators). Both give, bit
-for bit, what the numpy code gives (:func:`heli_model.dynamics.step_rk4`, the reference
-implementation, and the tail of :meth:`heli_model.control.law.ControlLaw.step`):
+each, in one call. It gives, bit for bit, what the numpy code gives
+(:func:`heli_model.dynamics.step_rk4`, the reference implementation); the control law's kernels
+are in :mod:`heli_model.control_kernel`:
 
 * every expression is the numpy code's, in the same order, with the same grouping; numba
   compiles without fast-math, so LLVM neither reassociates nor fuses a multiply and an add;
@@ -19,8 +18,7 @@ that importing :mod:`heli_model` stays cheap. The kernels compile on their first
 numba's cache (``cache=True``, beside this file) for the next processes.
 
 Shapes: ``M`` (n_core + 12, n_core + 7) from :func:`heli_model.dynamics.rk4_matrices`, ``x``
-(17,) or (21,), ``delta`` (4,), ``wind`` (3 k,) (k rows of 3); ``L`` (4, 26) from
-:func:`heli_model.control.lqi.control_law_matrix`.
+(17,) or (21,), ``delta`` (4,), ``wind`` (3 k,) (k rows of 3).
 """
 
 from __future__ import annotations
@@ -32,7 +30,7 @@ from numba import njit
 
 __all__ = [
     "OK", "BAD_ANGLE", "BAD_DELTA", "WIND_CALM", "WIND_CONSTANT", "WIND_PER_SUBSTEP",
-    "integrate_rk4", "law_output", "matvec", "matvec_matches_numpy",
+    "integrate_rk4", "matvec", "matvec_matches_numpy",
 ]
 
 N_STATES = 13
@@ -196,65 +194,3 @@ def integrate_rk4(M, x, delta, h, n, wind, wind_mode, x_next):
         src, dst = dst, src
     x_next[:] = src
     return OK
-
-
-@njit(cache=True)
-def law_output(L, x, c, s, cmd0, cmd1, cmd2, vf0, vf1, a0, a1, a2, rate_ref, psi_err, z0, z1, z2, z3, dt,
-               integrate_vel, integrate_yaw, delta, raw):
-    """The linear part of one control period (the LQI with its feed-forward) and its integrators.
-
-    Parameters
-    ----------
-    L : ndarray, shape (4, 26)
-        ``delta = L @ [ref8, x14_err, z]``.
-    x : ndarray, shape (17,) or (21,)
-    c, s : float
-        ``cos`` and ``sin`` of the heading ``x[13]``.
-    cmd0, cmd1, cmd2 : float
-        NED velocity command (after its limits), m/s.
-    vf0, vf1 : float
-        North and east velocity feed-forward, m/s.
-    a0, a1, a2 : float
-        NED acceleration feed-forward (after its limit), m/s^2.
-    rate_ref, psi_err : float
-        Yaw-rate feed-forward, rad/s, and heading error wrapped to [-pi, pi], rad.
-    z0, z1, z2, z3 : float
-        LQI integrators.
-    dt : float
-    integrate_vel, integrate_yaw : bool
-        Whether the velocity and heading integrators may run (the command was not limited).
-    delta, raw : ndarray, shape (4,)
-        Outputs: the rotor inputs clipped to [-1, 1], and before clipping.
-
-    Returns
-    -------
-    saturated : bool
-    z_next : tuple of 4 float
-        The integrators after the period (unchanged while saturated).
-    """
-    ub = c * cmd0 + s * cmd1
-    vb = -s * cmd0 + c * cmd1
-    wb = cmd2
-    vfx = c * vf0 + s * vf1
-    vfy = -s * vf0 + c * vf1
-    vec = np.empty(L.shape[1])
-    vec[0] = c * a0 + s * a1 + rate_ref * vfy
-    vec[1] = -s * a0 + c * a1 - rate_ref * vfx
-    vec[2], vec[3], vec[4], vec[5], vec[6], vec[7] = a2, rate_ref, ub, vb, wb, 0.0
-    vec[8:8 + N_STATES] = x[:N_STATES]
-    vec[8 + N_STATES] = psi_err
-    vec[9 + N_STATES], vec[10 + N_STATES], vec[11 + N_STATES], vec[12 + N_STATES] = z0, z1, z2, z3
-    raw[:] = np.dot(L, vec)
-    saturated = False
-    for k in range(4):
-        delta[k] = _clip_unit(raw[k])
-        if abs(raw[k]) > 1.0:
-            saturated = True
-    if not saturated:
-        if integrate_vel:
-            z0 += dt * (x[0] - ub)
-            z1 += dt * (x[1] - vb)
-            z2 += dt * (x[2] - wb)
-        if integrate_yaw:
-            z3 += dt * psi_err
-    return saturated, (z0, z1, z2, z3)

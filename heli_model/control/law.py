@@ -31,9 +31,9 @@ section 2.2:
    slewed at most at ``max_yaw_rate_rad_s`` (a heading step is flown as a turn); a yaw rate
    alone integrates the reference.
 
-Speed: the outer loop is Python written for speed (:mod:`~heli_model.control.outer_loop`), the
-linear part one call of a compiled kernel (:mod:`heli_model.rk4_kernel`) that gives the numpy
-code's results to the bit (:func:`law_output` is that numpy code).
+Speed: a control period is one call of a compiled kernel (:func:`heli_model.control_kernel.law_step`)
+that gives the Python code's results to the bit (:meth:`ControlLaw.step_python`: the outer loop
+of :mod:`~heli_model.control.outer_loop`, the linear part in numpy, :func:`law_output`).
 """
 
 from __future__ import annotations
@@ -46,12 +46,28 @@ import numpy as np
 from heli_model.control.lqi import control_law_matrix, design_lqi
 from heli_model.control.outer_loop import heading_reference, limit_command, velocity_command, wrap_pi
 from heli_model.control.settings import N_LQI_STATES, ControlError, ControllerSettings, Setpoint
-from heli_model.dynamics import IDX_PSI, compiled_kernels, hover_state
+from heli_model.control.settings import setpoint_axes
+from heli_model.dynamics import IDX_PSI, STATE_SIZE, compiled_kernels, hover_state
 from heli_model.model import N_INPUTS, N_STATES, HeliModel
 
 __all__ = ["ControlLaw", "ControllerState", "initial_controller_state", "law_output"]
 
 _FLOAT64 = np.dtype(np.float64)
+_NAN = math.nan
+_NOT_COMMANDED = (_NAN, _NAN, _NAN)
+_SHAPE3 = (3,)
+_NDARRAY = np.ndarray
+_empty = np.empty
+_KERNEL: list = []
+"""The module :mod:`heli_model.control_kernel`, once loaded."""
+
+
+def _control_kernel():
+    """:mod:`heli_model.control_kernel`, imported on the first call (it imports numba)."""
+    if not _KERNEL:
+        from heli_model import control_kernel
+        _KERNEL.append(control_kernel)
+    return _KERNEL[0]
 
 
 class ControllerState(NamedTuple):
@@ -123,6 +139,8 @@ class ControlLaw:
         self.matrix = model.cached(("law", s.control_dt_s, self.gains.q_weights, self.gains.r_weights),
                                    lambda: control_law_matrix(self.gains))
         self._matrix_shape = self.matrix.shape
+        self._params_of: ControllerSettings | None = None  # the settings self._params packs
+        self._params: np.ndarray | None = None
         hover = hover_state(model)
         self.step(self.reset(hover), hover, Setpoint(), s.control_dt_s)
 
@@ -156,15 +174,43 @@ class ControlLaw:
 
         Notes
         -----
-        The outer loop runs in Python (:mod:`~heli_model.control.outer_loop`); the linear part
-        (references in body axes, the LQI with its feed-forward, clipping, integrators) runs
-        compiled, :func:`heli_model.rk4_kernel.law_output`, or in numpy, :func:`law_output`,
-        where the compiled product would not be numpy's to the bit: the same results either way.
+        The whole period runs in one call of a compiled kernel,
+        :func:`heli_model.control_kernel.law_step`, that gives the Python code's results to the
+        bit (:meth:`step_python`: the outer loop of :mod:`~heli_model.control.outer_loop` in
+        Python, the linear part in numpy, :func:`law_output`, or compiled,
+        :func:`heli_model.control_kernel.law_output`). The Python code runs where the compiled
+        product would not be numpy's to the bit, for settings that are not all floats, and where
+        it raises (the kernel says so rather than raising itself).
         """
         if not (dt_s > 0 and math.isfinite(dt_s)):
             raise ControlError(f"dt_s: expected a period > 0 s, got {dt_s!r}")
         if type(x) is not np.ndarray or x.dtype is not _FLOAT64:
             x = np.asarray(x, dtype=float)
+        if compiled_kernels(self._matrix_shape) is not None:
+            params = self._params if self._params_of is self.settings else self._pack_settings()
+            if params is not None and x.ndim == 1 and x.shape[0] >= STATE_SIZE:
+                out = _step_compiled(_KERNEL[0], params, self.matrix, state, x, setpoint, float(dt_s))
+                if out is not None:
+                    return out
+        return self.step_python(state, x, setpoint, dt_s)
+
+    def _pack_settings(self) -> np.ndarray | None:
+        """The settings as the kernel reads them (kept until ``settings`` is replaced); loads the kernel."""
+        if not _KERNEL:
+            _control_kernel()
+        self._params_of = self.settings
+        self._params = _KERNEL[0].pack_settings(self.settings)
+        return self._params
+
+    def step_python(self, state: ControllerState, x: np.ndarray, setpoint: Setpoint, dt_s: float) -> ControllerState:
+        """:meth:`step` in Python (the reference of the compiled kernel), after its checks of ``dt_s`` and ``x``.
+
+        ``x`` is a float array here. The outer loop runs in Python
+        (:mod:`~heli_model.control.outer_loop`); the linear part (references in body axes, the
+        LQI with its feed-forward, clipping, integrators) runs compiled,
+        :func:`heli_model.control_kernel.law_output`, or in numpy, :func:`law_output`, where the
+        compiled product would not be numpy's to the bit: the same results either way.
+        """
         st = self.settings
         xl = x.tolist()  # the state as floats, once
         psi = xl[IDX_PSI]
@@ -180,8 +226,8 @@ class ControlLaw:
         cmd0, cmd1, cmd2 = cmd
         z0, z1, z2, z3 = state.z
         delta, raw = np.empty(N_INPUTS), np.empty(N_INPUTS)
-        kernels = compiled_kernels(self._matrix_shape)
-        saturated, z = (law_output if kernels is None else kernels.law_output)(
+        kernel = None if compiled_kernels(self._matrix_shape) is None else _control_kernel()
+        saturated, z = (law_output if kernel is None else kernel.law_output)(
             self.matrix, x, c, s, cmd0, cmd1, cmd2, vel_ff[0], vel_ff[1], acc_ff[0], acc_ff[1], acc_ff[2], rate_ref,
             psi_err, z0, z1, z2, z3, float(dt_s), not (limited[0] or limited[1] or limited[2]), not yaw_limited,
             delta, raw)
@@ -202,13 +248,59 @@ class ControlLaw:
         return ControllerState(z, tuple(pos_integral), yaw_ref, cmd, delta, raw, saturated, np.array(cmd))
 
 
+def _step_compiled(kernel, params: np.ndarray, L: np.ndarray, state: ControllerState, x: np.ndarray,
+                   sp: Setpoint, dt_s: float) -> ControllerState | None:
+    """:meth:`ControlLaw.step` in one call of :func:`heli_model.control_kernel.law_step`; None where the Python code must run.
+
+    The setpoint and the controller state go in as floats (NaN: an axis not commanded), the
+    outputs come back as the fields of the next :class:`ControllerState`. None where an argument
+    is not of the usual kinds or the kernel says the Python code raises here: the caller runs
+    it, and it raises as before.
+    """
+    try:
+        pos, vel, acc, yaw, rate = sp.pos_ned_m, sp.vel_ned_m_s, sp.acc_ned_m_s2, sp.yaw_rad, sp.yaw_rate_rad_s
+        # float arrays of 3 (the fast-time flights' setpoints) inline, anything else through _kernel_axes
+        p0, p1, p2 = (pos.tolist() if type(pos) is _NDARRAY and pos.dtype is _FLOAT64 and pos.shape == _SHAPE3
+                      else _kernel_axes(pos, "pos_ned_m"))
+        v0, v1, v2 = (vel.tolist() if type(vel) is _NDARRAY and vel.dtype is _FLOAT64 and vel.shape == _SHAPE3
+                      else _kernel_axes(vel, "vel_ned_m_s"))
+        a0, a1, a2 = (acc.tolist() if type(acc) is _NDARRAY and acc.dtype is _FLOAT64 and acc.shape == _SHAPE3
+                      else _kernel_axes(acc, "acc_ned_m_s2"))
+        has_yaw, has_rate = yaw is not None, rate is not None
+        yaw = float(yaw) if has_yaw else 0.0
+        rate = float(rate) if has_rate else 0.0
+        z0, z1, z2, z3 = state.z
+        i0, i1, i2 = state.pos_integral_m
+        prev0, prev1, prev2 = state.cmd_prev_ned_m_s
+        delta, raw, vel_cmd = _empty(N_INPUTS), _empty(N_INPUTS), _empty(3)
+        status, saturated, z, integral, yaw_ref, cmd = kernel.law_step(
+            params, L, x, p0, p1, p2, v0, v1, v2, a0, a1, a2, has_yaw, yaw, has_rate, rate, z0, z1, z2, z3,
+            i0, i1, i2, state.yaw_ref_rad, prev0, prev1, prev2, dt_s, delta, raw, vel_cmd)
+    except Exception:  # noqa: BLE001 - an argument of another kind: the Python code says what is wrong
+        return None
+    if status != kernel.OK:
+        return None
+    # positional: the fields in their order (z, pos_integral_m, yaw_ref_rad, cmd_prev_ned_m_s, delta,
+    # delta_unclipped, saturated, vel_cmd_ned_m_s), a little faster than keywords at 100 Hz
+    return ControllerState(z, integral, yaw_ref, cmd, delta, raw, saturated, vel_cmd)
+
+
+def _kernel_axes(v, name: str) -> tuple[float, float, float]:
+    """The 3 axes of a setpoint vector as floats, NaN where not commanded (None: all three); infinities kept."""
+    if v is None:
+        return _NOT_COMMANDED
+    if type(v) is np.ndarray and v.dtype is _FLOAT64 and v.shape == _SHAPE3:
+        return v.tolist()
+    return setpoint_axes(v, name)
+
+
 def law_output(L: np.ndarray, x: np.ndarray, c: float, s: float, cmd0: float, cmd1: float, cmd2: float,
                vf0: float, vf1: float, a0: float, a1: float, a2: float, rate_ref: float, psi_err: float,
                z0: float, z1: float, z2: float, z3: float, dt_s: float, integrate_vel: bool, integrate_yaw: bool,
                delta: np.ndarray, raw: np.ndarray) -> tuple[bool, tuple]:
     """The linear part of a control period in numpy: references in body axes, ``L @ vec``, clip, integrators.
 
-    The reference implementation of :func:`heli_model.rk4_kernel.law_output` (same arguments,
+    The reference implementation of :func:`heli_model.control_kernel.law_output` (same arguments,
     same results bit for bit), run where the compiled kernels are not exact.
     """
     # references in body axes
