@@ -96,7 +96,7 @@ SIZE_EXCEPTIONS = {
         "builds the whole vehicle (model, autopilot, server, traffic, clock) from the arguments",
     "heli_model/control/closed_loop.py::simulate_closed_loop":
         "the closed-loop prediction's argument checks, state set-up and loop with a long numpydoc",
-    "heli_model/control/law.py::ControlLaw.step": "one control period (outer PID, LQI, integrators, saturation) written out for speed",
+    "heli_model/control_kernel.py::law_step": "one control period (outer PID, LQI, integrators, saturation) in one numba kernel, the Python step's operations in its order (bit-identical)",
     "heli_model/control/modal.py::run_modal": "the modal recursion with its rotation correction, one numerical routine",
     "heli_model/dynamics.py::step_rk4":
         "one RK4 step written out (four stages, yaw and position kinematics) for speed",

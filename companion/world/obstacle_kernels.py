@@ -32,6 +32,7 @@ answers do not change.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -43,7 +44,7 @@ from companion.world.polyhedral_kernels import (_point_segment_dist2_2d, _py_max
 from companion.world.polyhedral_obstacles import Prism
 from companion.world.round_obstacles import Cylinder
 
-__all__ = ["space_of", "supported", "segment_clear", "point_clear", "other_sdf", "box_gap", "CYLINDER", "PRISM"]
+__all__ = ["ball_arrays", "ball_table", "space_of", "supported", "segment_clear", "point_clear", "other_sdf", "box_gap", "CYLINDER", "PRISM"]
 
 CYLINDER, PRISM = 0, 1
 _GOLDEN_ITERATIONS = 90          # geometry.golden_min's default
@@ -53,6 +54,32 @@ _MEMO_KEY = ("obstacle_kernels", "space")
 def supported(world) -> bool:
     """True when every obstacle that is not a ball is a ``Cylinder`` or a ``Prism``."""
     return all(isinstance(ob, (Cylinder, Prism)) for ob in world.non_ball_obstacles)
+
+
+_BALLS_KEY = ("segments_free_from", "balls")
+_TABLE_KEY = ("segments", "ball_table")
+
+
+def ball_arrays(world) -> tuple[np.ndarray, np.ndarray]:
+    """``(centres (N, d), r_inflated^2 (N,))`` of the world's discs/spheres, memoised per world."""
+    found = world._memo.get(_BALLS_KEY)
+    if found is None:
+        d = world.dim
+        rows = ball_table(world)
+        found = (np.ascontiguousarray(rows[:, :d]), np.ascontiguousarray(rows[:, d]))
+        world._memo[_BALLS_KEY] = found
+    return found
+
+
+def ball_table(world) -> np.ndarray:
+    """The world's inflated discs/spheres as rows ``(centre..., r^2, r)``, (N, d + 2), memoised (read it only)."""
+    found = world._memo.get(_TABLE_KEY)
+    if found is None:
+        balls = world.inflated_balls
+        flat = np.fromiter(itertools.chain.from_iterable(balls), dtype=float, count=len(balls) * (world.dim + 2))
+        found = flat.reshape(-1, world.dim + 2)
+        world._memo[_TABLE_KEY] = found
+    return found
 
 
 def space_of(world) -> tuple:
@@ -67,8 +94,6 @@ def space_of(world) -> tuple:
     if found is None:
         if not supported(world):
             raise ValueError("space_of: the world has an obstacle the kernels do not know (Box)")
-        from companion.world.segments import ball_arrays
-
         centres, r2 = ball_arrays(world)
         others = world.non_ball_obstacles
         kinds = np.empty(len(others), dtype=np.int64)

@@ -18,42 +18,18 @@ same order (no fused multiply-add), so its answers are the same booleans.
 
 from __future__ import annotations
 
-import itertools
 from typing import Callable
 
 import numpy as np
 from numba import njit
 
 from companion.world import obstacle_kernels as okern
+from companion.world.obstacle_kernels import ball_arrays, ball_table
 
 __all__ = ["segments_free_from", "segments_clear", "segment_test", "ball_arrays", "ball_table", "compiled_for"]
 
-_MEMO_KEY = ("segments_free_from", "balls")
-_TABLE_KEY = ("segments", "ball_table")
 _COMPILED_UP_TO_BALLS = 256  # above, the grid walk visits fewer obstacles than a full scan
 _COMPILED_UP_TO_OTHERS = 64  # cylinders and prisms
-
-
-def ball_arrays(world) -> tuple[np.ndarray, np.ndarray]:
-    """``(centres (N, d), r_inflated^2 (N,))`` of the world's discs/spheres, memoised per world."""
-    found = world._memo.get(_MEMO_KEY)
-    if found is None:
-        d = world.dim
-        rows = ball_table(world)
-        found = (np.ascontiguousarray(rows[:, :d]), np.ascontiguousarray(rows[:, d]))
-        world._memo[_MEMO_KEY] = found
-    return found
-
-
-def ball_table(world) -> np.ndarray:
-    """The world's inflated discs/spheres as rows ``(centre..., r^2, r)``, (N, d + 2), memoised (read it only)."""
-    found = world._memo.get(_TABLE_KEY)
-    if found is None:
-        balls = world.inflated_balls
-        flat = np.fromiter(itertools.chain.from_iterable(balls), dtype=float, count=len(balls) * (world.dim + 2))
-        found = flat.reshape(-1, world.dim + 2)
-        world._memo[_TABLE_KEY] = found
-    return found
 
 
 def segments_free_from(world, a: tuple, ends: list) -> list[bool]:
