@@ -13,7 +13,7 @@ Paper section 3.3 (Fig. 5, Fig. 8) and DESIGN section 7. Two parts:
    descending are possible. The nominal reference is GART + G2 + speed profile (6 m/s,
    K_max = 0.1 1/m) from (0, 0) to (99, 99).
 
-   *Oracle* (``benchmarks/threat_oracle.py``, written independently of the policy): a point
+   *Oracle* (``companion/campaign/oracle.py``, written independently of the policy): a point
    mass leaves the reference state at the encounter start with |a| <= 2.5 m/s^2 horizontally
    and 1.5 m/s^2 vertically and speed <= 7.2 m/s, and flies one of ~7700 two-phase manoeuvres
    (constant accelerations on a direction grid, hard stop, reversal, climb/descend, with a
@@ -76,7 +76,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.threat_encounters import (CATEGORIES, KAPPA_MAX_1_M, LIMITS, WORLD_KINDS,  # noqa: E402
                                           encounter_world, make_encounter, make_leg)
-from benchmarks.threat_oracle import label_encounter  # noqa: E402
+from companion.campaign.oracle import label_encounter  # noqa: E402
 from companion.config import Settings  # noqa: E402
 from companion.flight.fast_time import FastTimeFlight  # noqa: E402
 from companion.flight.pipeline import TrajectoryPipeline  # noqa: E402

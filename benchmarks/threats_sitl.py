@@ -17,7 +17,7 @@ random (seeded) from:
 Radii 2-4 m. Some threats are sent in the global frame (lat/lon/alt). An independent pymavlink
 listener records the vehicle's own LOCAL_POSITION_NED; an intrusion is a sample inside a
 threat's bare radius. Every encounter is also labelled by the independent oracle
-(``threat_oracle.label_encounter``) from the vehicle's state when the threat was put.
+(``companion.campaign.oracle.label_encounter``) from the vehicle's state when the threat was put.
 Latency is the companion's: threat receipt (zenoh thread) to the first setpoint of the new
 reference, per decision kind.
 
@@ -41,7 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from benchmarks.threat_oracle import label_encounter  # noqa: E402
+from companion.campaign.oracle import label_encounter  # noqa: E402
 from companion.demo import DEMO_HOME, FlightWatcher, last_json_line  # noqa: E402
 from companion.geo import LocalFrame  # noqa: E402
 from companion.threats.transport.bus import ThreatBus  # noqa: E402

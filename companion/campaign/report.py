@@ -148,8 +148,35 @@ def _worst_section(cols: Columns, idx: np.ndarray, flight_figures: dict[int, str
     return lines
 
 
+def oracle_section(cols: Columns, labels: Sequence[dict]) -> list[str]:
+    """Mitigated drone-scale events against the oracle's labels (``companion.campaign.labels``):
+    overall and per stratum, how many some manoeuvre could have avoided."""
+    stratum = {int(i): str(s) for i, s in zip(cols["id"], cols["stratum"])}
+    lines = ["## What the oracle says", "",
+             "Every mitigated collision and NMAC of a drone-scale encounter, labelled by the brute-force oracle "
+             "(`companion/campaign/oracle.py`, independent of the policy): *avoidable* when some feasible "
+             "manoeuvre of a point mass within the helicopter's limits, started at the first report from the "
+             "unmitigated state, stays out of the event's volume against the true tracks.", ""]
+    rows = []
+    for event in ("collision", "nmac"):
+        mine = [lab for lab in labels if lab["event"] == event]
+        n_event = int(np.sum(cols[f"m_{event}"] & (cols["traffic"] == "drone")))
+        avoid = sum(lab["avoidable"] for lab in mine)
+        rows.append([event, n_event, len(mine), avoid, len(mine) - avoid])
+    lines += _table(["event (with the system)", "events", "labelled", "avoidable", "unavoidable"], rows)
+    per = {}
+    for lab in labels:
+        if lab["event"] == "collision":
+            per.setdefault(stratum.get(int(lab["id"]), "?"), []).append(lab["avoidable"])
+    if per:
+        lines += ["Collisions with the system per stratum, oracle-avoidable of all:", ""]
+        lines += _table(["stratum", "avoidable", "collisions"],
+                        [[k, sum(v), len(v)] for k, v in sorted(per.items(), key=lambda kv: -sum(kv[1]))])
+    return lines
+
+
 def render_markdown(spec_name: str, summary: CampaignSummary, cols: Columns, worst_idx: np.ndarray,
-                    figures: dict[str, str], flight_figures: dict[int, str]) -> str:
+                    figures: dict[str, str], flight_figures: dict[int, str], labels: Sequence[dict] = ()) -> str:
     """The report's Markdown text (figures named by file, relative to the report)."""
     g = summary.overall
     flags = sorted({ev.risk_ratio.flag for grp in (g, *summary.strata, *summary.traffic)
@@ -169,6 +196,8 @@ def render_markdown(spec_name: str, summary: CampaignSummary, cols: Columns, wor
     lines += ["## Miss distances", "", f"![miss distances]({figures['miss']})", "",
               "## Risk ratios per stratum", "", f"![risk ratios per stratum]({figures['ratios']})", ""]
     lines += _latency_section(g)
+    if labels:
+        lines += oracle_section(cols, labels)
     lines += _worst_section(cols, worst_idx, flight_figures)
     return "\n".join(lines)
 
@@ -187,7 +216,7 @@ def _flight_figures(cols: Columns, idx: np.ndarray, flight_of: Callable[[int], o
 
 
 def write_report(table, out_dir, *, spec_name: str, worst: int = 8,
-                 flight_of: Callable[[int], object] | None = None) -> Path:
+                 flight_of: Callable[[int], object] | None = None, labels: Sequence[dict] = ()) -> Path:
     """Write ``report.md`` and its PNG figures into ``out_dir``.
 
     Parameters
@@ -204,6 +233,8 @@ def write_report(table, out_dir, *, spec_name: str, worst: int = 8,
         ``flight_of(id)`` gives an object with ``t_s`` (K,), ``own_u_ned_m`` (K, 3),
         ``own_m_ned_m`` (K, 3) and ``threats`` (list of (K, 3), NED metres); each worst
         encounter is then drawn (top view and altitude). Without it they are only listed.
+    labels : sequence of dict, optional
+        The oracle's labels (``companion.campaign.labels.LABEL_SCHEMA`` rows): a section.
 
     Returns
     -------
@@ -221,6 +252,6 @@ def write_report(table, out_dir, *, spec_name: str, worst: int = 8,
     idx = worst_encounters(cols, worst)
     flights = _flight_figures(cols, idx, flight_of, out)
     path = out / "report.md"
-    path.write_text(render_markdown(spec_name, summary, cols, idx, figures, flights), encoding="utf-8")
+    path.write_text(render_markdown(spec_name, summary, cols, idx, figures, flights, labels), encoding="utf-8")
     log.info("campaign report %s: %d encounters, %d figures", path, cols.n, len(figures) + len(flights))
     return path

@@ -66,6 +66,12 @@ class IntruderTrack:
             out[after] = p[-1] + (t[after, None] - ts[-1]) * v1
         return out
 
+    @property
+    def max_speed_m_s(self) -> float:
+        """Its fastest segment's speed (m/s)."""
+        step = np.linalg.norm(np.diff(self.pos_ned_m, axis=0), axis=1) / np.diff(self.t_s)
+        return float(step.max())
+
     def velocity_at(self, t_s) -> np.ndarray:
         """True velocities at ``t_s`` (K,) -> (K, 3) (the segment's)."""
         t = np.atleast_1d(np.asarray(t_s, dtype=float))

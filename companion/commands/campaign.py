@@ -6,11 +6,14 @@ Actions:
   the spec's encounters twice each in fast time, rows into ``DIR/rows/*.parquet``; resumes what
   ``DIR`` holds; stops when every ratio has converged (or at ``max_pairs``);
 - ``status DIR``: pairs stored, throughput, the current ratios and whether they converged;
+- ``label DIR``: the oracle's labels of the mitigated drone-scale collisions and NMACs
+  (``DIR/labels.parquet``: could any feasible manoeuvre have avoided them?);
 - ``report DIR``: ``DIR/report/report.md`` and its plots (miss distances, convergence,
-  per-stratum ratios, the worst encounters flown again);
+  per-stratum ratios, the oracle's labels when made, the worst encounters flown again);
 - ``replay DIR ID [--speedup X] [--foxglove PORT]``: fly encounter ``ID`` in SITL (real
-  ``sim-vehicle`` and ``companion run``, the reports over zenoh), judged by the vehicle's own
-  telemetry, next to its fast-time row;
+  ``sim-vehicle`` and ``companion run``, the reports over zenoh or, for manned traffic, as
+  ADSB_VEHICLE through the vehicle), judged by the vehicle's own telemetry, next to its
+  fast-time row;
 - ``strata``: the strata a spec can name.
 """
 
@@ -31,6 +34,7 @@ log = logging.getLogger(__name__)
 EPILOG = """examples:
   companion campaign run mission_files/campaigns/quick.toml --out out/campaign-quick
   companion campaign status out/campaign-quick
+  companion campaign label out/campaign-quick
   companion campaign report out/campaign-quick
   companion campaign replay out/campaign-quick 12 --foxglove 8765
   dask scheduler & dask worker tcp://127.0.0.1:8786 &
@@ -61,6 +65,9 @@ def register(subparsers) -> None:
     status = sub.add_parser("status", help="pairs stored and the current ratios")
     status.add_argument("dir", help="campaign directory")
     status.add_argument("--json", action="store_true", help="print the summary as JSON")
+    label = sub.add_parser("label", help="label the mitigated drone-scale collisions and NMACs with the oracle "
+                                         "(DIR/labels.parquet: avoidable or not)")
+    label.add_argument("dir", help="campaign directory")
     report = sub.add_parser("report", help="write DIR/report/report.md and its plots")
     report.add_argument("dir", help="campaign directory")
     report.add_argument("--worst", type=int, default=8, help="worst encounters flown again and plotted")
@@ -76,7 +83,7 @@ def register(subparsers) -> None:
 
 
 def main(args) -> int:
-    return {"run": _run, "status": _status, "report": _report, "replay": _replay,
+    return {"run": _run, "status": _status, "label": _label, "report": _report, "replay": _replay,
             "strata": _strata}[args.campaign_command](args)
 
 
@@ -174,19 +181,39 @@ def _estimate(e) -> str:
     return f"{e.value:.3g} [{e.lo:.3g}, {e.hi:.3g}]"
 
 
-def _report(args) -> int:
+def _stored(path: str):
+    """(store, rows, worker) of a campaign directory with rows."""
     from companion.campaign.flying import CampaignWorker
-    from companion.campaign.report import write_report
     from companion.campaign.runner import _settings_from_text
     from companion.campaign.store import CampaignStore
 
-    store = CampaignStore(args.dir)
+    store = CampaignStore(path)
     spec = store.spec()
     table = store.table()
     if table.num_rows == 0:
-        raise CampaignCommandError(f"{args.dir}: no pairs stored yet (run the campaign first)")
+        raise CampaignCommandError(f"{path}: no pairs stored yet (run the campaign first)")
     worker = CampaignWorker(spec, _settings_from_text(store.settings_text()), table.column("spec_hash")[0].as_py())
-    path = write_report(table, store.root / "report", spec_name=spec.name, worst=args.worst, flight_of=worker.fly)
+    return store, table, worker
+
+
+def _label(args) -> int:
+    from companion.campaign.labels import label_campaign
+
+    store, table, worker = _stored(args.dir)
+    labels = label_campaign(worker, table, store.root).to_pylist()
+    counts = {e: (sum(1 for lab in labels if lab["event"] == e and lab["avoidable"]),
+                  sum(1 for lab in labels if lab["event"] == e)) for e in ("collision", "nmac")}
+    print(json.dumps({f"{e}_avoidable_of_labelled": list(v) for e, v in counts.items()}))
+    return 0
+
+
+def _report(args) -> int:
+    from companion.campaign.labels import read_labels
+    from companion.campaign.report import write_report
+
+    store, table, worker = _stored(args.dir)
+    path = write_report(table, store.root / "report", spec_name=store.spec().name, worst=args.worst,
+                        flight_of=worker.fly, labels=read_labels(store.root).to_pylist())
     print(path)
     return 0
 

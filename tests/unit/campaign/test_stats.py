@@ -416,3 +416,16 @@ def test_report_flags_undefined_ratios(tmp_path):
     assert "n/a (no events)" in text and "(zero with)" in text
     assert "no event with the system: the ratio is 0" in text
     assert (tmp_path / "risk_ratios.png").stat().st_size > 5000
+
+
+def test_report_sets_the_events_against_the_oracle(tmp_path):
+    rows = synthetic_rows()
+    drone = [r for r in rows if r["traffic"] == "drone" and r["m_collision"]]
+    assert drone, "the synthetic rows need a mitigated drone-scale collision"
+    labels = [{"id": r["id"], "event": "collision", "avoidable": k % 2 == 0, "best_margin_m": 0.1, "witness": "",
+               "horizon_s": 12.0, "oracle_ms": 1.0} for k, r in enumerate(drone)]
+    text = write_report(rows, tmp_path, spec_name="s", labels=labels).read_text()
+    section = text[text.index("## What the oracle says"):]
+    n_avoidable = sum(lab["avoidable"] for lab in labels)
+    assert f"| collision | {len(drone)} | {len(drone)} | {n_avoidable} | {len(drone) - n_avoidable} |" in section
+    assert "## What the oracle says" not in write_report(rows, tmp_path / "none", spec_name="s").read_text()

@@ -1,9 +1,12 @@
-"""Brute-force oracle of the threat benchmark: could *any* feasible manoeuvre avoid the encounter?
+"""Brute-force oracle of avoidance: could *any* feasible manoeuvre avoid the encounter?
 
-The threat benchmark (``benchmarks/threats.py``) reports each policy's success on the encounters
-that can be avoided at all. Which ones those are is decided here, independently of the policy
-under test (DESIGN section 7): nothing of ``companion.threats`` is used except the ``Threat``
-record (its constant-velocity prediction), and none of the policy's manoeuvres are reused.
+The threat benchmark (``benchmarks/threats.py``) and the validation campaign
+(``companion.campaign.labels``) judge a policy on the encounters that can be avoided at all.
+Which ones those are is decided here, independently of the policy under test (DESIGN section
+7): nothing of ``companion.threats`` is used except the ``Threat`` record (its constant-velocity
+prediction), and none of the policy's manoeuvres are reused. A threat is a ``Threat`` or an
+intruder's true track (``companion.campaign.tracks.IntruderTrack``: ``position_at``,
+``radius_m``, ``max_speed_m_s``), which may turn or climb.
 
 Model. The vehicle is a point mass that starts at the reference state of the encounter start
 (position, velocity) and flies one *manoeuvre* for ``horizon_s`` (12 s):
@@ -367,18 +370,24 @@ def sample_flights(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray, limits: Or
     return np.concatenate([inner.reshape(m, -1, 3), pos[:, -1:, :]], axis=1)
 
 
+def _speed_m_s(threat) -> float:
+    """A bound of the threat's speed: a track's fastest segment, a record's constant velocity."""
+    if hasattr(threat, "max_speed_m_s"):
+        return float(threat.max_speed_m_s)
+    return float(np.linalg.norm(threat.velocity_ned_m_s))
+
+
 def _threat_tracks(threats, t0_s: float, limits: OracleLimits):
     t = t0_s + limits.step_s * np.arange(limits.steps + 1)
     out = []
     for th in threats:
-        speed = float(np.linalg.norm(th.velocity_ned_m_s))
-        limit = th.radius_m + limits.threat_allowance_m + limits.sampling_slack_m(speed)
-        out.append((th.position_at(t), limit))
+        limit = th.radius_m + limits.threat_allowance_m + limits.sampling_slack_m(_speed_m_s(th))
+        out.append((np.asarray(th.position_at(t), dtype=float).reshape(-1, 3), limit))
     return out
 
 
 def _speeds(threats) -> list[float]:
-    return [float(np.linalg.norm(th.velocity_ned_m_s)) for th in threats]
+    return [_speed_m_s(th) for th in threats]
 
 
 def _threat_margins(pos: np.ndarray, tracks) -> np.ndarray:
@@ -439,8 +448,8 @@ def label_encounter(pos0_ned_m, vel0_ned_m_s, threats, t0_s: float, world=None, 
     ----------
     pos0_ned_m, vel0_ned_m_s : array_like, shape (3,)
         Reference state at the encounter start (NED, m and m/s).
-    threats : sequence of companion.threats.model.Threat
-        Local-frame threats, stamped on the same clock as ``t0_s``.
+    threats : sequence of companion.threats.model.Threat or IntruderTrack
+        Local-frame threats, stamped on the same clock as ``t0_s``, or true tracks on it.
     t0_s : float
         Clock time of the encounter start (s).
     world : companion.world.World (3D) or None
@@ -457,8 +466,10 @@ def label_encounter(pos0_ned_m, vel0_ned_m_s, threats, t0_s: float, world=None, 
     vel0 = np.asarray(vel0_ned_m_s, dtype=float).reshape(3)
     threats = list(threats)
     for th in threats:
-        if not isinstance(th, Threat) or th.frame != "local_ned":
+        if isinstance(th, Threat) and th.frame != "local_ned":
             raise ValueError(f"threats: expected local-frame Threat records, got {th!r}")
+        if not (hasattr(th, "position_at") and hasattr(th, "radius_m")):
+            raise ValueError(f"threats: expected Threat records or tracks (position_at, radius_m), got {th!r}")
     tracks = _threat_tracks(threats, t0_s, limits)
     coarse_tracks = [(centers[::limits.substeps], limit - limits.sampling_slack_m(speed))
                      for (centers, limit), speed in zip(tracks, _speeds(threats))]

@@ -1,4 +1,4 @@
-"""The threat benchmark's oracle (``benchmarks/threat_oracle.py``): labels and witnesses.
+"""The threat benchmark's oracle (``companion/campaign/oracle.py``): labels and witnesses.
 
 The oracle decides which encounters can be avoided at all; the policy's success is reported on
 those. It must say "avoidable" only with a manoeuvre that really stays clear (checked here at a
@@ -21,7 +21,7 @@ from companion.threats.model import Threat
 from companion.world import Box, Cylinder, World
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))
-from benchmarks.threat_oracle import (TRACKING_ALLOWANCE_M, OracleLimits, flight_margins,  # noqa: E402
+from companion.campaign.oracle import (TRACKING_ALLOWANCE_M, OracleLimits, flight_margins,  # noqa: E402
                                       label_encounter, manoeuvres)
 
 LIMITS = OracleLimits()
