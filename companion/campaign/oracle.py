@@ -439,6 +439,42 @@ def flight_margins(flight: Flight, threats, world=None, *, step_s: float = 0.005
     return threat, worldm
 
 
+def _first_clear(pos0, vel0, batch: list, tracks, coarse_tracks, world, limits: OracleLimits):
+    """(the first manoeuvre of ``batch`` that stays clear or None, the best margin seen)."""
+    pos_c, vel_c, acc_c = fly(pos0, vel0, batch, limits)
+    # a manoeuvre that meets a threat at a control-step boundary (a subset of the samples)
+    # fails for sure: only the others are sampled every step_s
+    coarse = _threat_margins(pos_c, coarse_tracks)
+    keep = np.flatnonzero(coarse >= 0.0)
+    if keep.size == 0:
+        return None, float(coarse.max())
+    batch = [batch[i] for i in keep]
+    pos = sample_flights(pos_c[keep], vel_c[keep], acc_c[keep], limits)
+    margin = _threat_margins(pos, tracks)
+    ok = np.flatnonzero(margin >= 0.0)
+    if ok.size == 0:
+        return None, float(margin.max())
+    best = -math.inf
+    start, chunk = 0, 16
+    while start < ok.size:                   # world and bounds, in order, until one is clear
+        idx = ok[start:start + chunk]
+        start, chunk = start + chunk, 4 * chunk
+        both = margin[idx]
+        if world is not None:
+            # coarse first (the control-step boundaries, no slack: a failure there is final)
+            coarse_w = _world_margins(pos_c[keep][idx], world, limits, slack=False)
+            idx, both = idx[coarse_w >= 0.0], both[coarse_w >= 0.0]
+            if idx.size == 0:
+                best = max(best, float(coarse_w.max()))
+                continue
+            both = np.minimum(both, _world_margins(pos[idx], world, limits))
+        best = max(best, float(both.max()))
+        good = np.flatnonzero(both >= 0.0)
+        if good.size:
+            return batch[idx[good[0]]], best
+    return None, best
+
+
 # ---------------------------------------------------------------------------- the label
 def label_encounter(pos0_ned_m, vel0_ned_m_s, threats, t0_s: float, world=None, *,
                     limits: OracleLimits = OracleLimits(), batch_size: int = 4000) -> OracleResult:
@@ -482,39 +518,11 @@ def label_encounter(pos0_ned_m, vel0_ned_m_s, threats, t0_s: float, world=None, 
                                 for s in range(n_single, len(candidates), batch_size)]
     for lo, hi in bounds:
         batch = candidates[lo:hi]
-        pos_c, vel_c, acc_c = fly(pos0, vel0, batch, limits)
         tried += len(batch)
-        # a manoeuvre that meets a threat at a control-step boundary (a subset of the samples)
-        # fails for sure: only the others are sampled every step_s
-        coarse = _threat_margins(pos_c, coarse_tracks)
-        keep = np.flatnonzero(coarse >= 0.0)
-        if keep.size == 0:
-            best = max(best, float(coarse.max()))
-            continue
-        batch = [batch[i] for i in keep]
-        pos = sample_flights(pos_c[keep], vel_c[keep], acc_c[keep], limits)
-        margin = _threat_margins(pos, tracks)
-        ok = np.flatnonzero(margin >= 0.0)
-        if ok.size == 0:
-            best = max(best, float(margin.max()))
-            continue
-        start, chunk = 0, 16
-        while start < ok.size:                   # world and bounds, in order, until one is clear
-            idx = ok[start:start + chunk]
-            start, chunk = start + chunk, 4 * chunk
-            both = margin[idx]
-            if world is not None:
-                # coarse first (the control-step boundaries, no slack: a failure there is final)
-                coarse_w = _world_margins(pos_c[keep][idx], world, limits, slack=False)
-                idx, both = idx[coarse_w >= 0.0], both[coarse_w >= 0.0]
-                if idx.size == 0:
-                    best = max(best, float(coarse_w.max()))
-                    continue
-                both = np.minimum(both, _world_margins(pos[idx], world, limits))
-            best = max(best, float(both.max()))
-            good = np.flatnonzero(both >= 0.0)
-            if good.size:
-                return _result(pos0, vel0, batch[idx[good[0]]], limits, t0_s, tried, best, t_start)
+        found, margin = _first_clear(pos0, vel0, batch, tracks, coarse_tracks, world, limits)
+        best = max(best, margin)
+        if found is not None:
+            return _result(pos0, vel0, found, limits, t0_s, tried, best, t_start)
     return OracleResult(False, None, tried, best, (time.perf_counter() - t_start) * 1e3)
 
 
