@@ -92,3 +92,16 @@ def test_heartbeats_and_texts_are_broadcast_to_the_others_only(vehicle_and_peers
     at_gcs = [(m.get_type(), m.get_srcComponent()) for m in gcs.received()]
     assert ("HEARTBEAT", COMPANION[1]) in at_gcs and ("STATUSTEXT", COMPANION[1]) in at_gcs
     assert not [m for m in companion.received() if m.get_srcComponent() == COMPANION[1]]
+
+
+def test_an_adsb_receiver_s_traffic_reaches_the_companion_and_the_ground_station(vehicle_and_peers):
+    """ADSB_VEHICLE of an ADS-B receiver component (MAV_COMP_ID_ADSB) is a broadcast: the vehicle
+    forwards it to every other link, as ArduPilot's routing does, never back to the receiver."""
+    endpoint, gcs, companion, pump, delivered = vehicle_and_peers
+    receiver = Peer((1, mavlink.MAV_COMP_ID_ADSB), endpoint.port)
+    pump((receiver, receiver.mav.adsb_vehicle_encode(0xA00023, -353632610, 1491652300, 1, 600000, 9000, 5000, 0,
+                                                     b"N00035", 8, 1, 0x1FF, 1200)))
+    for peer in (companion, gcs):
+        got = [m for m in peer.received() if m.get_type() == "ADSB_VEHICLE"]
+        assert [(m.ICAO_address, m.get_srcComponent()) for m in got] == [(0xA00023, mavlink.MAV_COMP_ID_ADSB)]
+    assert not [m for m in receiver.received() if m.get_type() == "ADSB_VEHICLE"]
