@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 import time
 from pathlib import Path
@@ -60,17 +61,20 @@ def flown(worker, index: int, out: Path, speedup: float, mitigated: bool = True)
     return result
 
 
-def _unmitigated(worker, index: int, out: Path, speedup: float, flies: bool):
-    """The mission's unmitigated flight: flown by the series that ``flies`` it, waited for by the
-    others (shards of one series share it)."""
-    if not flies:
+def _unmitigated(worker, index: int, out: Path, speedup: float):
+    """The mission's unmitigated flight: flown by the first series that needs it (it claims it),
+    waited for by the others (shards of one series share it)."""
+    claim = out.parent / f"{out.name}.claim"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        os.close(os.open(claim, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
         while not (out / "done").exists():
             time.sleep(2.0)
     return flown(worker, index, out, speedup, mitigated=False)
 
 
-def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float, *,
-               flies_unmitigated: bool = True) -> list[dict]:
+def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float) -> list[dict]:
     spec, settings_text = store.spec(), store.settings_text()
     worker = CampaignWorker(spec, _settings_from_text(settings_text), spec_hash(spec, settings_text))
     rows = {r["id"]: r for r in store.table().to_pylist() if r["id"] in set(ids)}
@@ -79,7 +83,7 @@ def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float, 
     for i in ids:
         enc = worker.encounter(i)
         if enc.mission not in unmitigated:
-            base = _unmitigated(worker, i, out / f"unmitigated-{enc.mission}", speedup, flies_unmitigated)
+            base = _unmitigated(worker, i, out / f"unmitigated-{enc.mission}", speedup)
             unmitigated[enc.mission] = (base.t_s, base.pos_ned_m)
         t0 = time.perf_counter()
         got = flown(worker, i, out / f"encounter-{i}", speedup)
@@ -142,8 +146,8 @@ def main(argv=None) -> int:
     parser.add_argument("--skip", default="cluttered",
                         help="leave out the strata whose name holds this (default: cluttered; '' for none)")
     parser.add_argument("--shard", default="0/1", metavar="I/N",
-                        help="fly every N-th encounter from the I-th (shards run side by side into one --out; "
-                             "shard 0 flies the unmitigated flights; then run once without --shard to judge all)")
+                        help="fly every N-th encounter from the I-th (shards run side by side into one --out and "
+                             "share the unmitigated flights; then run once without --shard to judge all)")
     parser.add_argument("--no-docs", dest="docs", action="store_false")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
@@ -158,7 +162,7 @@ def main(argv=None) -> int:
             raise ValueError
     except ValueError:
         parser.error(f"--shard: expected I/N with 0 <= I < N, got {args.shard!r}")
-    results = fly_series(store, ids[shard::shards], Path(args.out), args.speedup, flies_unmitigated=shard == 0)
+    results = fly_series(store, ids[shard::shards], Path(args.out), args.speedup)
     if shards > 1:
         return 0
     compared = [r for r in results if "agree" in r]
