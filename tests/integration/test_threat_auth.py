@@ -154,7 +154,7 @@ def test_the_decision_event_names_the_source_and_only_authorised_readers_see_it(
             for name, s in readers.items():
                 s.subscribe_json("events", lambda key, msg, name=name: seen[name].append(msg))
             time.sleep(SETTLE_S)
-            readers["radar1"].client.put_threat(Threat("p1", "popup", "local_ned", (20.0, 0.0, -10.0), radius_m=3.0))
+            readers["radar1"].client.put_threat(Threat("p1", "popup", "local_ned", (8.0, 0.0, -10.0), radius_m=3.0))
             readers["radar1"].client.put_raw("radar1/bad", b'{"v": 1, "id": "bad", "kind": "popup", '
                                       b'"frame": "local_ned", "position": [1, 2, 3], "radius_m": -4}')
             await until(lambda: len(seen["gcs"]) >= 2 and len(seen["radar1"]) >= 2, "events at the readers", 15.0)
