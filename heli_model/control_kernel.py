@@ -10,12 +10,12 @@ LQI integrators) and the position integrators. It gives, bit for bit, what the P
 * every expression is the Python code's, in the same order, with the same grouping; numba
   compiles without fast-math, so LLVM neither reassociates nor fuses a multiply and an add;
 * the functions of CPython's ``math`` that are not the C library's are ported from CPython 3.11's
-  ``Modules/mathmodule.c``: :func:`py_hypot` (``math.hypot``, CPython's own ``vector_norm``, not
-  libm's ``hypot``) and :func:`py_remainder` (``math.remainder``, ``m_remainder``, on the exact
+  ``Modules/mathmodule.c``: ``math.hypot`` (CPython's own ``vector_norm``, not libm's ``hypot``:
+  ``heli_common.pyfloat.py_hypot``) and :func:`py_remainder` (``math.remainder``, ``m_remainder``, on the exact
   ``fmod``); ``math.cos``, ``math.sin`` and ``pow`` (for Python's ``a ** 2``, through
   :func:`py_square` with the exponent given at run time so that LLVM does not turn it into
   ``a * a``) are the C library's, the functions CPython calls;
-* ``min`` and ``max`` are written as CPython evaluates them for two floats (NaN kept the same way);
+* ``min`` and ``max`` are CPython's for two floats (``heli_common.pyfloat``; NaN kept the same way);
 * the matrix-vector product is ``np.dot`` (BLAS's ``dgemv``), which
   :func:`heli_model.dynamics.compiled_kernels` checks against numpy's ``@`` per shape.
 
@@ -38,6 +38,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from heli_common.pyfloat import py_hypot, py_max, py_min
 
 __all__ = [
     "FALL_BACK", "N_PARAMS", "OK", "SETTINGS_FIELDS", "law_output", "law_step", "pack_settings", "py_hypot",
@@ -63,9 +65,6 @@ SETTINGS_FIELDS = (
 N_PARAMS = len(SETTINGS_FIELDS) + 1
 """Length of ``P``: the settings, then the exponent 2.0 of :func:`py_square`."""
 
-_T27 = 134217729.0
-"""2^27 + 1: Veltkamp's split of a double into two halves of 26 bits (CPython's ``vector_norm``)."""
-_DBL_MIN = 2.2250738585072014e-308
 _TWO_PI = 2.0 * math.pi
 
 
@@ -79,76 +78,6 @@ def pack_settings(settings) -> np.ndarray | None:
     if any(type(v) is not float for v in values):
         return None
     return np.array(values + [2.0])
-
-
-@njit(cache=True)
-def py_hypot(x: float, y: float) -> float:
-    """``math.hypot(x, y)`` of CPython 3.11, to the bit: ``vector_norm`` of ``Modules/mathmodule.c``."""
-    x = abs(x)
-    y = abs(y)
-    found_nan = x != x or y != y
-    mx = 0.0
-    if x > mx:
-        mx = x
-    if y > mx:
-        mx = y
-    if math.isinf(mx):
-        return mx
-    if found_nan:
-        return math.nan
-    if mx == 0.0:
-        return mx
-    max_e = math.frexp(mx)[1]
-    if max_e < -1023:  # subnormal: CPython scales to normals and calls itself once more
-        x /= _DBL_MIN
-        y /= _DBL_MIN
-        return _DBL_MIN * _vector_norm_2(x, y, mx / _DBL_MIN)
-    return _vector_norm_2(x, y, mx)
-
-
-@njit(cache=True)
-def _vector_norm_2(x0: float, x1: float, mx: float) -> float:
-    """CPython 3.11's ``vector_norm`` of two finite coordinates ``>= 0`` whose largest ``mx`` is normal."""
-    max_e = math.frexp(mx)[1]
-    scale = math.ldexp(1.0, -max_e)
-    csum = 1.0
-    frac1 = 0.0
-    frac2 = 0.0
-    frac3 = 0.0
-    for i in range(2):
-        x = x0 if i == 0 else x1
-        x *= scale
-        t = x * _T27
-        hi = t - (t - x)
-        lo = x - hi
-        x = hi * hi
-        oldcsum = csum
-        csum += x
-        frac1 += (oldcsum - csum) + x
-        x = 2.0 * hi * lo
-        oldcsum = csum
-        csum += x
-        frac2 += (oldcsum - csum) + x
-        frac3 += lo * lo
-    h = math.sqrt(csum - 1.0 + (frac1 + frac2 + frac3))
-    x = h
-    t = x * _T27
-    hi = t - (t - x)
-    lo = x - hi
-    x = -hi * hi
-    oldcsum = csum
-    csum += x
-    frac1 += (oldcsum - csum) + x
-    x = -2.0 * hi * lo
-    oldcsum = csum
-    csum += x
-    frac2 += (oldcsum - csum) + x
-    x = -lo * lo
-    oldcsum = csum
-    csum += x
-    frac3 += (oldcsum - csum) + x
-    x = csum - 1.0 + (frac1 + frac2 + frac3)
-    return (h + x / (2.0 * h)) / scale
 
 
 @njit(cache=True)
@@ -269,18 +198,6 @@ def law_output(L, x, c, s, cmd0, cmd1, cmd2, vf0, vf1, a0, a1, a2, rate_ref, psi
 
 
 @njit(cache=True)
-def _min(a: float, b: float) -> float:
-    """CPython's ``min(a, b)``: ``b`` only if it is smaller."""
-    return b if b < a else a
-
-
-@njit(cache=True)
-def _max(a: float, b: float) -> float:
-    """CPython's ``max(a, b)``: ``b`` only if it is larger."""
-    return b if b > a else a
-
-
-@njit(cache=True)
 def _has_infinity(a: float, b: float, c: float) -> bool:
     """Whether one of the 3 entries of a setpoint vector is infinite (where ``setpoint_axes`` raises)."""
     return math.isinf(a) or math.isinf(b) or math.isinf(c)
@@ -303,7 +220,7 @@ def _integrate_position(integral, dt, p, now, ki, pos_int_max):
     new = integral + dt * (p - now)
     if ki > 0:
         cap = pos_int_max / ki
-        new = _max(-cap, _min(cap, new))
+        new = py_max(-cap, py_min(cap, new))
     return new
 
 

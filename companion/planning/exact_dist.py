@@ -17,24 +17,11 @@ import math
 import numpy as np
 from numba import njit
 
+from heli_common.pyfloat import exact_product
+
 __all__ = ["python_dist"]
 
-_SPLITTER = 134217729.0          # 2**27 + 1: Veltkamp's split of a double into two halves
 _DBL_MIN = 2.2250738585072014e-308
-
-
-@njit(cache=True)
-def _exact_product(a: float, b: float):
-    """``(p, e)`` with ``p = fl(a * b)`` and ``a * b = p + e`` exactly (Dekker)."""
-    p = a * b
-    c = _SPLITTER * a
-    a_hi = c - (c - a)
-    a_lo = a - a_hi
-    c = _SPLITTER * b
-    b_hi = c - (c - b)
-    b_lo = b - b_hi
-    e = ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
-    return p, e
 
 
 @njit(cache=True)
@@ -47,13 +34,13 @@ def _scaled_norm(diffs: np.ndarray, largest: float) -> float:
     frac_sum = 0.0   # rounding errors of the sum
     for k in range(diffs.shape[0]):
         x = diffs[k] * scale
-        sq, sq_lo = _exact_product(x, x)
+        sq, sq_lo = exact_product(x, x)
         s = total + sq
         frac_sum += sq - (s - total)
         total = s
         frac_sq += sq_lo
     h = math.sqrt(total - 1.0 + (frac_sq + frac_sum))
-    sq, sq_lo = _exact_product(-h, h)
+    sq, sq_lo = exact_product(-h, h)
     s = total + sq
     frac_sum += sq - (s - total)
     total = s
