@@ -115,8 +115,7 @@ def feed_updates(intruders, traffic: str, delivery: dict, rng: np.random.Generat
                    for t, fields in adsb_reports(intruders, delivery, rng, home=home))
         return [(t, threat, threat.id) for t, threat in threats if threat is not None]
     ttl_s = max(TTL_PERIODS / float(delivery["update_hz"]), TTL_MIN_S)
-    updates = [(t, threat, threat.id) for track in intruders
-               for t, pos, vel in _reports(track, float(delivery["update_hz"]), delivery, rng)
-               for threat in (_zenoh_threat(track, pos, vel, ttl_s, t),)]
+    updates = [(t, _zenoh_threat(track, pos, vel, ttl_s, t), track.id) for track in intruders
+               for t, pos, vel in _reports(track, float(delivery["update_hz"]), delivery, rng)]
     updates.sort(key=lambda u: u[0])
     return updates
