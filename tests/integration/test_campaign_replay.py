@@ -79,4 +79,5 @@ def test_manned_traffic_reaches_the_companion_as_adsb_vehicle_through_the_vehicl
     assert 20 <= len(heard) <= outcome["puts"]     # reports sent after the landing reach no one
     gaps = [b["t_s"] - a["t_s"] for a, b in zip(heard, heard[1:])]
     assert 0.8 < sorted(gaps)[len(gaps) // 2] < 1.2                  # 1 Hz
-    assert outcome["fast_time"]["min_sep_m"] == pytest.approx(outcome["min_sep_m"], abs=5.0)
+    # a 50 m/s intruder: a tenth of a second of timing at speed-up 4 is metres of separation
+    assert outcome["fast_time"]["min_sep_m"] == pytest.approx(outcome["min_sep_m"], rel=0.02, abs=5.0)
