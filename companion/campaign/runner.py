@@ -176,13 +176,14 @@ class CampaignRun:
         flown = 0
         stop, verdicts = self.check()
         if not stop and pending:
+            self.store.log_run({"event": "start", "workers": self.workers, "cluster": self.cluster or ""})
             submit, close = self._executor()
             try:
                 flown, stop, verdicts = self._drive(pending, submit, done_before, t0)
             finally:
                 close()
         wall = time.perf_counter() - t0
-        result = {"flown": flown, "stored": self._contiguous(self.store.done_batches()), "wall_s": wall,
+        result = {"event": "end", "flown": flown, "stored": self._contiguous(self.store.done_batches()), "wall_s": wall,
                   "workers": self.workers, "cluster": self.cluster or "",
                   "pairs_per_s": flown / wall if wall > 0 else 0.0, "converged": stop,
                   "verdicts": {k: v.reason if not v.converged else "converged" for k, v in verdicts.items()}}

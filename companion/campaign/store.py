@@ -5,11 +5,13 @@ Layout of ``DIR``::
     spec.toml              the spec as run (its hash is on every row)
     settings.toml          the companion's settings file's text, when the spec names one
     rows/part-0000020.parquet   one file per finished batch (its first encounter id)
+    rows/pack-0000000.parquet   many batches packed into one file (``pack``; their first ids in
+                                its metadata), small enough to keep in a repository
     runs.jsonl             one line per run: when, the code's commit, workers, pairs, wall time
     report/                ``companion campaign report``'s output
 
 A part is written to a temporary name and renamed, so a killed campaign leaves only whole
-parts; resuming skips the batches whose part exists. Rows depend only on the spec and the
+parts; resuming skips the batches whose part exists (alone or in a pack). Rows depend only on the spec and the
 encounter id, so parts written by any number of workers, or by a Dask cluster, are the same.
 """
 
@@ -51,6 +53,8 @@ SCHEMA = pa.schema(
        ("cpu_ms", pa.float64())])
 #: Measured columns a part written before they existed may lack (read as nulls).
 LATER_COLUMNS = ("cpu_ms",)
+#: A pack's metadata key holding its batches' first ids (JSON list).
+PACK_KEY = b"companion.batches"
 
 
 class CampaignStore:
@@ -91,12 +95,14 @@ class CampaignStore:
         return digest
 
     def _check_code(self) -> None:
-        flown = [run.get("commit", "") for run in self.runs() if run.get("flown", 1)]
-        here = code_version()
-        if flown and flown[-1] and here and flown[-1] != here and self.done_batches():
-            raise StoreError(f"{self.root}: its rows were flown by the code at {flown[-1]}, this is {here}; "
-                             f"resume it with that code (git worktree add DIR {flown[-1].split('+')[0]}) "
-                             "or use another --out directory")
+        held = [run["code"] for run in self.runs() if run.get("code")]
+        here = code_hash()
+        if held and held[-1] != here and self.done_batches():
+            commit = next(run.get("commit", "") for run in reversed(self.runs()) if run.get("code") == held[-1])
+            raise StoreError(f"{self.root}: its rows were flown by other code (code {held[-1]}, at commit "
+                             f"{commit or '?'}), this is code {here}; resume it with that code "
+                             f"(git worktree add DIR {commit.split('+')[0] or 'COMMIT'}) or use another --out "
+                             "directory")
 
     def spec(self) -> CampaignSpec:
         """The spec the directory was made for."""
@@ -116,9 +122,10 @@ class CampaignStore:
         os.replace(tmp, path)
 
     def log_run(self, record: dict) -> None:
-        """Append one run's record to ``runs.jsonl`` (stamped with the time and the commit)."""
+        """Append one record to ``runs.jsonl``, stamped with the time, the commit and the code's hash
+        (``code_hash``): a run logs one when it starts and one when it ends."""
         line = {"at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-                "commit": code_version(), **record}
+                "commit": code_version(), "code": code_hash(), **record}
         with open(self.root / "runs.jsonl", "a", encoding="utf-8") as fh:
             fh.write(json.dumps(line) + "\n")
 
@@ -133,14 +140,52 @@ class CampaignStore:
         return self.rows_dir / f"part-{first_id:07d}.parquet"
 
     def done_batches(self) -> set[int]:
-        """First ids of the batches whose part is written."""
+        """First ids of the batches whose rows are written (in a part of their own or in a pack)."""
         out = set()
         for path in self.rows_dir.glob("part-*.parquet"):
             try:
                 out.add(int(path.stem.split("-")[1]))
             except (IndexError, ValueError):
                 continue
+        for path in self._packs():
+            out.update(self._pack_batches(path))
         return out
+
+    def _packs(self) -> list[Path]:
+        return sorted(self.rows_dir.glob("pack-*.parquet"))
+
+    @staticmethod
+    def _pack_batches(path: Path) -> list[int]:
+        try:
+            meta = pq.read_schema(path).metadata or {}
+            return [int(first) for first in json.loads(meta[PACK_KEY])]
+        except (pa.ArrowInvalid, OSError, KeyError, ValueError, TypeError) as exc:
+            raise StoreError(f"{path}: unreadable pack ({exc!r}); restore it from where it was kept") from None
+
+    def pack(self) -> Path | None:
+        """Pack every batch's part into one new ``pack-*.parquet`` (zstd) and delete the parts.
+
+        The rows are unchanged (``table()`` is the same before and after) and resuming skips the
+        packed batches. A pack of 10^5 pairs is about 13 MB. Returns the pack, or None when there
+        were no parts.
+        """
+        parts = sorted(self.rows_dir.glob("part-*.parquet"))
+        if not parts:
+            return None
+        firsts = sorted(int(path.stem.split("-")[1]) for path in parts)
+        table = self._read_parts(parts)
+        path = self.rows_dir / f"pack-{firsts[0]:07d}.parquet"
+        n = 0
+        while path.exists():
+            n += 1
+            path = self.rows_dir / f"pack-{firsts[0]:07d}-{n}.parquet"
+        table = table.replace_schema_metadata({PACK_KEY: json.dumps(firsts).encode()})
+        tmp = path.with_suffix(".parquet.tmp")
+        pq.write_table(table, tmp, compression="zstd", compression_level=19)
+        os.replace(tmp, path)
+        for part in parts:
+            part.unlink()
+        return path
 
     def append(self, first_id: int, rows: list[dict]) -> Path:
         """Write one batch's rows (atomically)."""
@@ -153,11 +198,14 @@ class CampaignStore:
 
     def table(self) -> pa.Table:
         """Every row written, by id."""
-        parts = sorted(self.rows_dir.glob("part-*.parquet"))
-        if not parts:
+        return self._read_parts(sorted(self.rows_dir.glob("part-*.parquet")) + self._packs())
+
+    @staticmethod
+    def _read_parts(paths: list[Path]) -> pa.Table:
+        if not paths:
             return SCHEMA.empty_table()
         tables = []
-        for path in parts:
+        for path in paths:
             try:
                 table = pq.read_table(path)
                 for name in LATER_COLUMNS:
@@ -167,17 +215,35 @@ class CampaignStore:
             except (pa.ArrowInvalid, pa.ArrowTypeError, KeyError, OSError) as exc:
                 raise StoreError(f"{path}: unreadable part ({exc}); delete it and resume to fly its batch again") \
                     from None
-        table = pa.concat_tables(tables)
-        return table.sort_by("id")
+        return pa.concat_tables(tables).sort_by("id")
 
 
 #: The code whose changes make another campaign (a diff elsewhere, e.g. in docs, does not).
 CODE_DIRS = ("companion", "heli_model", "heli_common", "mavlink_signing", "sim_vehicle")
+#: Modules that only store, read, report or replay rows: changing them changes no row.
+ROWLESS_MODULES = ("companion/campaign/store.py", "companion/campaign/report.py",
+                   "companion/campaign/report_plots.py", "companion/campaign/summary.py",
+                   "companion/campaign/labels.py", "companion/campaign/replay.py", "companion/commands")
+_ROOT = Path(__file__).resolve().parents[2]
+
+
+def code_hash(root: Path = _ROOT) -> str:
+    """A hash of the Python source that makes the rows (``CODE_DIRS`` without ``ROWLESS_MODULES``),
+    read from the files themselves: two trees with the same flight code give the same hash, whatever
+    their commits, and rows of two hashes are not one campaign."""
+    digest = hashlib.sha1()
+    for d in CODE_DIRS:
+        for path in sorted((root / d).rglob("*.py")):
+            rel = path.relative_to(root).as_posix()
+            if any(rel == m or rel.startswith(m + "/") for m in ROWLESS_MODULES):
+                continue
+            digest.update(rel.encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()[:12]
 
 
 def _git(*args: str) -> str | None:
     try:
-        out = subprocess.run(["git", *args], cwd=Path(__file__).resolve().parent, capture_output=True, timeout=10)
+        out = subprocess.run(["git", *args], cwd=_ROOT, capture_output=True, timeout=10)
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.decode(errors="replace") if out.returncode == 0 else None
@@ -185,12 +251,11 @@ def _git(*args: str) -> str | None:
 
 def code_version() -> str:
     """The code's git commit, with ``+<hash of the diff>`` when the code differs from it ("" outside a
-    checkout): two runs of one campaign must say the same."""
+    checkout), for a person to find the code again (``code_hash`` is what must match)."""
     commit = (_git("rev-parse", "--short", "HEAD") or "").strip()
     if not commit:
         return ""
-    top = (_git("rev-parse", "--show-toplevel") or "").strip()
-    diff = _git("-C", top, "diff", "HEAD", "--", *CODE_DIRS) if top else None
+    diff = _git("diff", "HEAD", "--", *CODE_DIRS)
     if diff:
         return f"{commit}+{hashlib.sha1(diff.encode()).hexdigest()[:8]}"
     return commit

@@ -10,6 +10,8 @@ Actions:
   (``DIR/labels.parquet``: could any feasible manoeuvre have avoided them?);
 - ``report DIR``: ``DIR/report/report.md`` and its plots (miss distances, convergence,
   per-stratum ratios, the oracle's labels when made, the worst encounters flown again);
+- ``pack DIR``: every batch's part packed into one zstd Parquet file (about 13 MB per 10^5
+  pairs), to keep a campaign in a repository and resume it on another machine;
 - ``replay DIR ID [--speedup X] [--foxglove PORT]``: fly encounter ``ID`` in SITL (real
   ``sim-vehicle`` and ``companion run``, the reports over zenoh or, for manned traffic, as
   ADSB_VEHICLE through the vehicle), judged by the vehicle's own telemetry, next to its
@@ -36,6 +38,7 @@ EPILOG = """examples:
   companion campaign status out/campaign-quick
   companion campaign label out/campaign-quick
   companion campaign report out/campaign-quick
+  companion campaign pack out/campaign-quick
   companion campaign replay out/campaign-quick 12 --foxglove 8765
   dask scheduler & dask worker tcp://127.0.0.1:8786 &
   companion campaign run mission_files/campaigns/full.toml --out out/full --cluster tcp://127.0.0.1:8786
@@ -71,6 +74,8 @@ def register(subparsers) -> None:
     report = sub.add_parser("report", help="write DIR/report/report.md and its plots")
     report.add_argument("dir", help="campaign directory")
     report.add_argument("--worst", type=int, default=8, help="worst encounters flown again and plotted")
+    pack = sub.add_parser("pack", help="pack the batches' parts into one compressed file (to keep or move DIR)")
+    pack.add_argument("dir", help="campaign directory")
     replay = sub.add_parser("replay", help="fly one encounter in SITL (sim-vehicle + companion run)")
     replay.add_argument("dir", help="campaign directory")
     replay.add_argument("id", type=int, help="encounter id (a row's id)")
@@ -83,8 +88,8 @@ def register(subparsers) -> None:
 
 
 def main(args) -> int:
-    return {"run": _run, "status": _status, "label": _label, "report": _report, "replay": _replay,
-            "strata": _strata}[args.campaign_command](args)
+    return {"run": _run, "status": _status, "label": _label, "report": _report, "pack": _pack,
+            "replay": _replay, "strata": _strata}[args.campaign_command](args)
 
 
 def _spec_and_settings(path: str):
@@ -204,6 +209,19 @@ def _label(args) -> int:
     counts = {e: (sum(1 for lab in labels if lab["event"] == e and lab["avoidable"]),
                   sum(1 for lab in labels if lab["event"] == e)) for e in ("collision", "nmac")}
     print(json.dumps({f"{e}_avoidable_of_labelled": list(v) for e, v in counts.items()}))
+    return 0
+
+
+def _pack(args) -> int:
+    from companion.campaign.store import CampaignStore
+
+    store = CampaignStore(args.dir)
+    store.spec()                                      # a campaign directory, or a clear error
+    path = store.pack()
+    if path is None:
+        print(f"{args.dir}: nothing to pack (no parts)")
+    else:
+        print(f"{path}: {store.table().num_rows} pairs stored, {path.stat().st_size / 1e6:.1f} MB")
     return 0
 
 

@@ -59,6 +59,34 @@ def test_a_broken_part_is_named(tmp_path):
         store.table()
 
 
+def test_a_pack_holds_the_same_rows_and_its_batches_stay_done(tmp_path):
+    spec = CampaignSpec(max_pairs=50, min_pairs=10, batch_pairs=10)
+    store = CampaignStore(tmp_path / "c")
+    store.open(spec)
+    for first in (0, 10, 30):
+        store.append(first, [fake_row(i, u=True, m=i == first) for i in range(first, first + 10)])
+    before = store.table()
+    pack = store.pack()
+    assert pack.name == "pack-0000000.parquet"
+    assert not list(store.rows_dir.glob("part-*"))
+    assert repr(store.table().to_pylist()) == repr(before.to_pylist())   # (NaN equal to NaN)
+    assert store.done_batches() == {0, 10, 30}
+    assert CampaignRun(spec, store, workers=1).pending() == [(20, 10), (40, 10)]
+    store.append(20, [fake_row(i, u=True, m=False) for i in range(20, 30)])
+    assert store.pack().name == "pack-0000020.parquet"          # a second pack beside the first
+    assert store.pack() is None                                  # nothing left to pack
+    assert store.table().column("id").to_pylist() == list(range(40))
+    assert store.done_batches() == {0, 10, 20, 30}
+
+
+def test_a_broken_pack_is_named(tmp_path):
+    store = CampaignStore(tmp_path / "c")
+    store.open(CampaignSpec())
+    (store.rows_dir / "pack-0000000.parquet").write_bytes(b"not parquet")
+    with pytest.raises(StoreError, match="pack-0000000.parquet: unreadable pack"):
+        store.done_batches()
+
+
 def test_pending_batches_skip_the_stored_ones(tmp_path):
     spec = CampaignSpec(max_pairs=45, min_pairs=10, batch_pairs=10)
     store = CampaignStore(tmp_path / "c")
@@ -86,6 +114,7 @@ def test_verdicts_per_traffic_kind(tmp_path):
     (["campaign", "run", "nope.toml", "--out", "x"], "nope.toml: no such file"),
     (["campaign", "run", "SPEC", "--out", "x", "--workers", "0"], "--workers: must be >= 1"),
     (["campaign", "status", "DIR"], "not a campaign directory"),
+    (["campaign", "pack", "DIR"], "not a campaign directory"),
 ])
 def test_command_errors_name_what_is_wrong(tmp_path, capsys, argv, message):
     spec = tmp_path / "spec.toml"
@@ -94,6 +123,16 @@ def test_command_errors_name_what_is_wrong(tmp_path, capsys, argv, message):
     code = cli_main(argv)
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+def test_the_pack_command_packs_and_says_how_many(tmp_path, capsys):
+    store = CampaignStore(tmp_path / "c")
+    store.open(CampaignSpec())
+    store.append(0, [fake_row(i, u=True, m=False) for i in range(20)])
+    assert cli_main(["campaign", "pack", str(store.root)]) == 0
+    assert "20 pairs stored" in capsys.readouterr().out
+    assert cli_main(["campaign", "pack", str(store.root)]) == 0
+    assert "nothing to pack" in capsys.readouterr().out
 
 
 def test_a_part_written_before_cpu_ms_reads_with_nulls(tmp_path):
@@ -111,19 +150,36 @@ def test_a_part_written_before_cpu_ms_reads_with_nulls(tmp_path):
 
 def test_rows_of_other_code_are_not_resumed(tmp_path, monkeypatch):
     """A campaign is one version of the code: reopening its directory with other code is refused,
-    naming both versions; the same code resumes."""
+    naming both versions and the commit to pin; the same code resumes."""
     from companion.campaign import store as store_module
 
     store = CampaignStore(tmp_path)
+    monkeypatch.setattr(store_module, "code_hash", lambda: "c0de00000001")
     monkeypatch.setattr(store_module, "code_version", lambda: "abc1234")
     store.open(CampaignSpec())
+    store.log_run({"event": "start"})                         # a run killed before its end record
     store.append(0, [fake_row(0, u=True, m=False)])
-    store.log_run({"flown": 1})
     assert store.open(CampaignSpec())                          # the same code: resumed
-    monkeypatch.setattr(store_module, "code_version", lambda: "abc1234+0f0f0f0f")
-    with pytest.raises(StoreError, match=r"abc1234\b.*abc1234\+0f0f0f0f"):
+    monkeypatch.setattr(store_module, "code_version", lambda: "fed4321")
+    assert store.open(CampaignSpec())                          # another commit, the same flight code
+    monkeypatch.setattr(store_module, "code_hash", lambda: "c0de00000002")
+    with pytest.raises(StoreError, match=r"code c0de00000001, at commit abc1234.*code c0de00000002"):
         store.open(CampaignSpec())
     assert store.runs()[0]["commit"] == "abc1234"
+
+
+def test_the_code_hash_follows_the_flight_code_not_the_storage(tmp_path):
+    from companion.campaign.store import code_hash
+
+    for rel in ("companion/flight/x.py", "companion/campaign/store.py", "companion/commands/c.py"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text("a = 1\n")
+    before = code_hash(tmp_path)
+    (tmp_path / "companion/campaign/store.py").write_text("a = 2\n")
+    (tmp_path / "companion/commands/c.py").write_text("a = 2\n")
+    assert code_hash(tmp_path) == before                       # storage and commands make no row
+    (tmp_path / "companion/flight/x.py").write_text("a = 2\n")
+    assert code_hash(tmp_path) != before
 
 
 def test_the_code_version_names_the_commit_and_a_diff():
