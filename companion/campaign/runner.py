@@ -180,6 +180,11 @@ class CampaignRun:
             submit, close = self._executor()
             try:
                 flown, stop, verdicts = self._drive(pending, submit, done_before, t0)
+            except BaseException as exc:        # killed (Ctrl-C) or failed: say so, keep the parts
+                self.store.log_run({"event": "interrupted", "reason": type(exc).__name__,
+                                    "stored": self._contiguous(self.store.done_batches()),
+                                    "wall_s": time.perf_counter() - t0})
+                raise
             finally:
                 close()
         wall = time.perf_counter() - t0

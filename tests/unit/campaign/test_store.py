@@ -100,6 +100,22 @@ def test_pending_batches_skip_the_stored_ones(tmp_path):
     assert CampaignRun(spec, store, workers=1, max_pairs=25).pending() == [(20, 5)]
 
 
+def test_a_killed_run_logs_its_start_and_why_it_stopped(tmp_path, monkeypatch):
+    spec = CampaignSpec(max_pairs=40, min_pairs=10, batch_pairs=10)
+    store = CampaignStore(tmp_path / "c")
+    store.open(spec)
+    run = CampaignRun(spec, store, workers=1)
+
+    def submit(first, n):
+        raise KeyboardInterrupt                                  # Ctrl-C while the batches go out
+    monkeypatch.setattr(run, "_executor", lambda: (submit, lambda: None))
+    with pytest.raises(KeyboardInterrupt):
+        run.run()
+    events = [r["event"] for r in store.runs()]
+    assert events == ["start", "interrupted"]
+    assert store.runs()[1]["reason"] == "KeyboardInterrupt" and store.runs()[0]["code"]
+
+
 def test_verdicts_per_traffic_kind(tmp_path):
     store = CampaignStore(tmp_path / "c")
     store.open(CampaignSpec())
