@@ -14,8 +14,11 @@ flight and whether all three agree; the agreement rate (goal >= 95 %); the SITL 
 (SITL mitigated over SITL unmitigated) against the fast-time ratios of the same encounters and
 their 95 % intervals (``companion.campaign.stats.risk_ratio``).
 
-A series resumes: an encounter whose replay finished (``OUT/encounter-ID/done``) is judged
-again from its record instead of flown again. The cluttered strata are left out (``--skip``): ``companion run`` plans a cluttered leg anew
+A series resumes: an encounter whose replay finished is judged again from its track
+(``OUT/encounter-ID/track.npz``, the vehicle's telemetry from the record) or its record
+(``done``) instead of flown again. ``--keep DIR`` copies the tracks there (a few MB for 100
+encounters, small enough for the repository): ``--out DIR`` on them judges the series again, on
+another machine, without flying. The cluttered strata are left out (``--skip``): ``companion run`` plans a cluttered leg anew
 within a wall-clock budget, so its leg differs from the campaign's and the intruders aimed at
 the campaign's leg meet another flight.
 
@@ -31,6 +34,7 @@ import argparse
 import json
 import logging
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -51,14 +55,25 @@ FLAGS = ("collision", "nmac", "lowc")
 log = logging.getLogger("campaign_sitl")
 
 
-def flown(worker, index: int, out: Path, speedup: float, mitigated: bool = True):
-    """The replay of ``index`` into ``out``, or its record there judged again (a series resumes)."""
-    record = out / "flight.jsonl"
+def flown(worker, index: int, out: Path, speedup: float, mitigated: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """The track (encounter times (K,), NED positions (K, 3)) of ``index``'s replay into ``out``.
+
+    A finished replay keeps its track in ``OUT/.../track.npz`` (the vehicle's telemetry from the
+    flight record, a few tens of kB): a series resumes from the tracks, or from the records where
+    no track was kept yet, and the tracks alone can be kept to judge the series again elsewhere.
+    """
+    track = out / "track.npz"
+    if track.exists():
+        with np.load(track) as npz:
+            return npz["t_s"], npz["pos_ned_m"]
     if (out / "done").exists():
-        return judged(worker, worker.encounter(index), record)
-    result = replay(worker, index, out, speedup=speedup, mitigated=mitigated)
-    (out / "done").write_text("")
-    return result
+        got = judged(worker, worker.encounter(index), out / "flight.jsonl")
+    else:
+        got = replay(worker, index, out, speedup=speedup, mitigated=mitigated)
+        (out / "done").write_text("")
+    np.savez_compressed(track.with_suffix(".tmp.npz"), t_s=got.t_s, pos_ned_m=got.pos_ned_m)
+    os.replace(track.with_suffix(".tmp.npz"), track)
+    return got.t_s, got.pos_ned_m
 
 
 def _unmitigated(worker, index: int, out: Path, speedup: float):
@@ -69,12 +84,14 @@ def _unmitigated(worker, index: int, out: Path, speedup: float):
     try:
         os.close(os.open(claim, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
     except FileExistsError:
-        while not (out / "done").exists():
+        while not (out / "track.npz").exists():
             time.sleep(2.0)
     return flown(worker, index, out, speedup, mitigated=False)
 
 
-def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float) -> list[dict]:
+def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float, fly: bool = True) -> list[dict]:
+    """The series' entries; with ``fly`` False only the encounters whose tracks are there (and
+    whose mission's unmitigated track is)."""
     spec, settings_text = store.spec(), store.settings_text()
     worker = CampaignWorker(spec, _settings_from_text(settings_text), spec_hash(spec, settings_text))
     rows = {r["id"]: r for r in store.table().to_pylist() if r["id"] in set(ids)}
@@ -82,17 +99,19 @@ def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float) 
     results = []
     for i in ids:
         enc = worker.encounter(i)
+        if not fly and not all((out / d / "track.npz").exists() for d in (f"encounter-{i}",
+                                                                          f"unmitigated-{enc.mission}")):
+            continue
         if enc.mission not in unmitigated:
-            base = _unmitigated(worker, i, out / f"unmitigated-{enc.mission}", speedup)
-            unmitigated[enc.mission] = (base.t_s, base.pos_ned_m)
+            unmitigated[enc.mission] = _unmitigated(worker, i, out / f"unmitigated-{enc.mission}", speedup)
         t0 = time.perf_counter()
-        got = flown(worker, i, out / f"encounter-{i}", speedup)
+        m = judge_track(enc, *flown(worker, i, out / f"encounter-{i}", speedup), spec.volumes)
         u = judge_track(enc, *unmitigated[enc.mission], spec.volumes)
         row = rows.get(i)
         entry = {"id": i, "stratum": enc.stratum, "weight": enc.weight, "wall_s": time.perf_counter() - t0,
-                 "sitl_m": {f: getattr(got.separation, f) for f in FLAGS},
+                 "sitl_m": {f: getattr(m, f) for f in FLAGS},
                  "sitl_u": {f: getattr(u, f) for f in FLAGS},
-                 "sitl_m_min_sep_m": got.separation.min_sep_m}
+                 "sitl_m_min_sep_m": m.min_sep_m}
         if row is not None:
             entry["fast_m"] = {f: row[f"m_{f}"] for f in FLAGS}
             entry["fast_u"] = {f: row[f"u_{f}"] for f in FLAGS}
@@ -148,6 +167,9 @@ def main(argv=None) -> int:
     parser.add_argument("--shard", default="0/1", metavar="I/N",
                         help="fly every N-th encounter from the I-th (shards run side by side into one --out and "
                              "share the unmitigated flights; then run once without --shard to judge all)")
+    parser.add_argument("--no-fly", dest="fly", action="store_false",
+                        help="judge only the encounters whose tracks are in --out (a series cut short, or kept)")
+    parser.add_argument("--keep", metavar="DIR", help="copy the series' tracks (track.npz) into DIR")
     parser.add_argument("--no-docs", dest="docs", action="store_false")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
@@ -162,7 +184,12 @@ def main(argv=None) -> int:
             raise ValueError
     except ValueError:
         parser.error(f"--shard: expected I/N with 0 <= I < N, got {args.shard!r}")
-    results = fly_series(store, ids[shard::shards], Path(args.out), args.speedup)
+    results = fly_series(store, ids[shard::shards], Path(args.out), args.speedup, args.fly)
+    if args.keep:
+        for track in Path(args.out).glob("*/track.npz"):
+            kept = Path(args.keep) / track.parent.name / track.name
+            kept.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(track, kept)
     if shards > 1:
         return 0
     compared = [r for r in results if "agree" in r]
