@@ -16,10 +16,10 @@ their 95 % intervals (``companion.campaign.stats.risk_ratio``).
 
 A series resumes: an encounter whose replay finished is judged again from its track
 (``OUT/encounter-ID/track.npz``, the vehicle's telemetry from the record) or its record
-(``done``) instead of flown again. ``--keep DIR`` copies the tracks there (a few MB for 100
-encounters, small enough for the repository): ``--out DIR`` on them judges the series again, on
-another machine, without flying. The cluttered strata are left out (``--skip``): ``companion run`` plans a cluttered leg anew
-within a wall-clock budget, so its leg differs from the campaign's and the intruders aimed at
+(``done``) instead of flown again. ``--keep DIR`` copies the tracks there (about 10 kB an
+encounter, small enough for the repository): ``--out DIR`` on them judges the series again, on
+another machine, without flying. The cluttered strata are left out (``--skip``): ``companion
+run`` plans a cluttered leg anew within a wall-clock budget, so its leg differs from the campaign's and the intruders aimed at
 the campaign's leg meet another flight.
 
 Writes ``out/bench/campaign_sitl.json`` and ``docs/benchmarks/campaign_sitl.md``.
@@ -59,7 +59,7 @@ def flown(worker, index: int, out: Path, speedup: float, mitigated: bool = True)
     """The track (encounter times (K,), NED positions (K, 3)) of ``index``'s replay into ``out``.
 
     A finished replay keeps its track in ``OUT/.../track.npz`` (the vehicle's telemetry from the
-    flight record, a few tens of kB): a series resumes from the tracks, or from the records where
+    flight record, about 10 kB): a series resumes from the tracks, or from the records where
     no track was kept yet, and the tracks alone can be kept to judge the series again elsewhere.
     """
     track = out / "track.npz"
@@ -78,14 +78,15 @@ def flown(worker, index: int, out: Path, speedup: float, mitigated: bool = True)
 
 def _unmitigated(worker, index: int, out: Path, speedup: float):
     """The mission's unmitigated flight: flown by the first series that needs it (it claims it),
-    waited for by the others (shards of one series share it)."""
-    claim = out.parent / f"{out.name}.claim"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        os.close(os.open(claim, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
-    except FileExistsError:
-        while not (out / "track.npz").exists():
-            time.sleep(2.0)
+    waited for by the others (shards of one series share it); a kept track needs no claim."""
+    if not (out / "track.npz").exists():
+        claim = out.parent / f"{out.name}.claim"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.close(os.open(claim, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+        except FileExistsError:
+            while not (out / "track.npz").exists():
+                time.sleep(2.0)
     return flown(worker, index, out, speedup, mitigated=False)
 
 
@@ -99,13 +100,13 @@ def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float, 
     results = []
     for i in ids:
         enc = worker.encounter(i)
-        if not fly and not all((out / d / "track.npz").exists() for d in (f"encounter-{i}",
-                                                                          f"unmitigated-{enc.mission}")):
+        enc_dir, base_dir = out / f"encounter-{i}", out / f"unmitigated-{enc.mission}"
+        if not fly and not ((enc_dir / "track.npz").exists() and (base_dir / "track.npz").exists()):
             continue
         if enc.mission not in unmitigated:
-            unmitigated[enc.mission] = _unmitigated(worker, i, out / f"unmitigated-{enc.mission}", speedup)
+            unmitigated[enc.mission] = _unmitigated(worker, i, base_dir, speedup)
         t0 = time.perf_counter()
-        m = judge_track(enc, *flown(worker, i, out / f"encounter-{i}", speedup), spec.volumes)
+        m = judge_track(enc, *flown(worker, i, enc_dir, speedup), spec.volumes)
         u = judge_track(enc, *unmitigated[enc.mission], spec.volumes)
         row = rows.get(i)
         entry = {"id": i, "stratum": enc.stratum, "weight": enc.weight, "wall_s": time.perf_counter() - t0,

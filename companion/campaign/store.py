@@ -95,11 +95,11 @@ class CampaignStore:
         return digest
 
     def _check_code(self) -> None:
-        held = [run["code"] for run in self.runs() if run.get("code")]
+        last = next((run for run in reversed(self.runs()) if run.get("code")), None)
         here = code_hash()
-        if held and held[-1] != here and self.done_batches():
-            commit = next(run.get("commit", "") for run in reversed(self.runs()) if run.get("code") == held[-1])
-            raise StoreError(f"{self.root}: its rows were flown by other code (code {held[-1]}, at commit "
+        if last is not None and last["code"] != here and self.done_batches():
+            commit = last.get("commit", "")
+            raise StoreError(f"{self.root}: its rows were flown by other code (code {last['code']}, at commit "
                              f"{commit or '?'}), this is code {here}; resume it with that code "
                              f"(git worktree add DIR {commit.split('+')[0] or 'COMMIT'}) or use another --out "
                              "directory")
@@ -141,14 +141,19 @@ class CampaignStore:
 
     def done_batches(self) -> set[int]:
         """First ids of the batches whose rows are written (in a part of their own or in a pack)."""
-        out = set()
-        for path in self.rows_dir.glob("part-*.parquet"):
-            try:
-                out.add(int(path.stem.split("-")[1]))
-            except (IndexError, ValueError):
-                continue
+        out = set(self._parts())
         for path in self._packs():
             out.update(self._pack_batches(path))
+        return out
+
+    def _parts(self) -> dict[int, Path]:
+        """The batches' own parts by first id (files not named ``part-<id>.parquet`` left out)."""
+        out = {}
+        for path in sorted(self.rows_dir.glob("part-*.parquet")):
+            try:
+                out[int(path.stem.split("-")[1])] = path
+            except (IndexError, ValueError):
+                continue
         return out
 
     def _packs(self) -> list[Path]:
@@ -169,11 +174,11 @@ class CampaignStore:
         packed batches. A pack of 10^5 pairs is about 13 MB. Returns the pack, or None when there
         were no parts.
         """
-        parts = sorted(self.rows_dir.glob("part-*.parquet"))
+        parts = self._parts()
         if not parts:
             return None
-        firsts = sorted(int(path.stem.split("-")[1]) for path in parts)
-        table = self._read_parts(parts)
+        firsts = sorted(parts)
+        table = self._read_parts(list(parts.values()))
         path = self.rows_dir / f"pack-{firsts[0]:07d}.parquet"
         n = 0
         while path.exists():
@@ -183,7 +188,7 @@ class CampaignStore:
         tmp = path.with_suffix(".parquet.tmp")
         pq.write_table(table, tmp, compression="zstd", compression_level=19)
         os.replace(tmp, path)
-        for part in parts:
+        for part in parts.values():
             part.unlink()
         return path
 
@@ -213,8 +218,9 @@ class CampaignStore:
                         table = table.append_column(name, pa.nulls(table.num_rows, pa.float64()))
                 tables.append(table.select(SCHEMA.names).cast(SCHEMA))
             except (pa.ArrowInvalid, pa.ArrowTypeError, KeyError, OSError) as exc:
-                raise StoreError(f"{path}: unreadable part ({exc}); delete it and resume to fly its batch again") \
-                    from None
+                remedy = ("restore it from where it was kept, or delete it and resume to fly its batches again"
+                          if path.name.startswith("pack-") else "delete it and resume to fly its batch again")
+                raise StoreError(f"{path}: unreadable {path.name.split('-')[0]} ({exc}); {remedy}") from None
         return pa.concat_tables(tables).sort_by("id")
 
 
