@@ -19,6 +19,8 @@ Tree (``companion run --config FILE``; ``companion run --print-config`` shows it
     feasibility closed-loop check on the helicopter model
     threats     threat-manager policy (companion.threats.settings.ThreatSettings)
     adsb        ADS-B traffic as threats (companion.threats.transport.adsb.AdsbSettings)
+    alerts      traffic alerts to the ground station: COLLISION, STATUSTEXT
+                (companion.threats.alerts.AlertSettings)
     state       where the threat snapshot is kept for a resume after a crash (companion.threats.snapshot)
     view        the live Foxglove server (companion.view)
 """
@@ -39,6 +41,7 @@ from companion.link.streams import StreamSettings
 from companion.mission.convert import ConversionSettings
 from companion.planning import GartSettings
 from companion.smoothing import FeasibilitySettings, SmoothingSettings
+from companion.threats.alerts import AlertSettings
 from companion.threats.transport.adsb import AdsbSettings
 from companion.threats.settings import ThreatSettings, ZenohSettings
 from companion.view.sinks import parse_foxglove_address
@@ -154,7 +157,8 @@ class Settings:
     ----------
     seed : int
         Random seed of every planner run (logged, so that any flight can be replayed).
-    link, startup, zenoh, mission, flight, planning, smoothing, feasibility, threats, adsb, state, view, fleet
+    link, startup, zenoh, mission, flight, planning, smoothing, feasibility, threats, adsb, alerts, state, view,
+    fleet
         The tables of the tree (their keys are documented by their own classes).
     """
 
@@ -169,6 +173,7 @@ class Settings:
     feasibility: FeasibilitySettings = FeasibilitySettings()
     threats: ThreatSettings = ThreatSettings()
     adsb: AdsbSettings = AdsbSettings()
+    alerts: AlertSettings = AlertSettings()
     state: StateSettings = StateSettings()
     view: ViewSettings = ViewSettings()
     fleet: FleetSettings = FleetSettings()

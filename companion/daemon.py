@@ -67,7 +67,7 @@ import time
 import numpy as np
 
 from companion.config import Settings
-from companion.errors import FlightAborted, LinkError, MissionError, VehicleRefused
+from companion.errors import CompanionError, FlightAborted, LinkError, MissionError, VehicleRefused
 from companion.flight.active import ReferenceOwner
 from companion.flight.avoidance import AlternativesPlan, Avoidance
 from companion.flight.executor import FlightExecutor
@@ -230,6 +230,17 @@ class CompanionDaemon:
             return
         self.link.direct.send_statustext(text, severity=severity)
 
+    def send_message(self, name: str, fields: dict) -> None:
+        """One broadcast message to the ground stations through the vehicle (``COLLISION``);
+        logged if the link is down or the message is refused."""
+        if not self.link.connected:
+            log.info("%s not sent: the link is down", name)
+            return
+        try:
+            self.link.direct.send_message(name, fields)
+        except CompanionError as exc:
+            log.info("%s not sent: %s", name, exc)
+
     def _current_yaw(self) -> float:
         att = self.link.telemetry.attitude_rad
         return float(att[2]) if att is not None else 0.0
@@ -373,7 +384,7 @@ class CompanionDaemon:
                 monotonic_s=time.monotonic, send_now=self.streamer.send_now,
                 position_ned_m=lambda: self.link.telemetry.pos_ned_m,
                 alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s, f.alternatives_lead_s),
-                commit_gate=self.threats.commit_gate(loop))
+                commit_gate=self.threats.commit_gate(loop), alerts=s.alerts)
             self.threats.on_change = avoidance.on_threats_changed
         mission = self.mission
         executor = FlightExecutor(
@@ -383,7 +394,7 @@ class CompanionDaemon:
             replanner=LegReplanner.in_world(mission.local_mission.world, mission.pipeline(), s.flight),
             avoidance=avoidance,
             alternatives_rate_hz=s.link.time_scale / s.flight.alternatives_period_s,
-            leg_started=self._leg_started, seed=int(self.rng.integers(2**31)),
+            alerts_rate_hz=s.link.time_scale * s.alerts.rate_hz, leg_started=self._leg_started, seed=int(self.rng.integers(2**31)),
             slack_s=0.5 / s.link.setpoint_rate_hz)
         tasks = DaemonTasks(s, link=self.link, owner=self.owner, watchers=self.watchers, summary=self.summary,
                             sink=self.sink, status=self.status, reactor=self.threats, recorder=self.recorder,

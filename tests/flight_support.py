@@ -36,7 +36,9 @@ MAV_MODE_FLAG_SAFETY_ARMED = 128
 
 
 class TrackListener:
-    """Collects LOCAL_POSITION_NED and HEARTBEAT from the vehicle on a UDP port of its own.
+    """Collects LOCAL_POSITION_NED and HEARTBEAT from the vehicle on a UDP port of its own, and,
+    as a ground station sees them, the companion's COLLISION and STATUSTEXT (forwarded by the
+    vehicle), each with its wall-clock receipt time.
 
     Parameters
     ----------
@@ -59,6 +61,8 @@ class TrackListener:
         self.track: list[tuple[float, float, float, float]] = []   # (time_boot_s, n, e, d)
         self.armed: bool | None = None
         self.mode: int | None = None
+        self.collisions: list[tuple[float, object]] = []     # (monotonic s, COLLISION)
+        self.companion_texts: list[tuple[float, object]] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -76,6 +80,10 @@ class TrackListener:
                 kind = msg.get_type()
                 if kind == "LOCAL_POSITION_NED":
                     self.track.append((msg.time_boot_ms / 1000.0, msg.x, msg.y, msg.z))
+                elif kind == "COLLISION":
+                    self.collisions.append((time.monotonic(), msg))
+                elif kind == "STATUSTEXT" and msg.get_srcComponent() != 1:
+                    self.companion_texts.append((time.monotonic(), msg))
                 elif kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
                     self.armed = bool(msg.base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
                     self.mode = msg.custom_mode

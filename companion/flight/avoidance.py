@@ -22,6 +22,10 @@
   run.
 - **Delay check** (other vehicles known): a decision's trajectory passes the ``CommitGate``
   before it is engaged.
+- **Alerts** (``alerts`` settings given and enabled): the ``TrafficAlerts``
+  (``companion.flight.alerting``) it owns predict the traffic against the reference at
+  ``alerts.rate_hz`` (the schedule's ``alerts`` task), at once when the monitor finds a
+  conflict, and tell every decision's action once it is told.
 
 No asyncio and no I/O: the executor's ticks and the jobs' completions drive it.
 """
@@ -34,6 +38,7 @@ import logging
 from typing import Callable, Protocol
 
 from companion.flight.active import ReferenceOwner
+from companion.flight.alerting import TrafficAlerts
 from companion.flight.ports import FlightSink, Jobs
 from companion.flight.reference import ActiveReference
 from companion.threats.decision.kinds import Trigger
@@ -127,13 +132,17 @@ class Avoidance:
     alternatives : AlternativesPlan
     commit_gate : CommitGate, optional
     steps : DecisionSteps
+    alerts : AlertSettings, optional
+        Traffic alerts to the ground stations (``companion.threats.alerts``); None or disabled:
+        none.
     """
 
     def __init__(self, *, policy: DecisionPolicy, state: DecisionState, owner: ReferenceOwner,
                  threats: ThreatSource, jobs: Jobs, sink: FlightSink, now_s: Callable[[], float],
                  monotonic_s: Callable[[], float], send_now: Callable[[], None],
                  position_ned_m: Callable, alternatives: AlternativesPlan,
-                 commit_gate: CommitGate | None = None, steps: DecisionSteps = DecisionSteps()) -> None:
+                 commit_gate: CommitGate | None = None, steps: DecisionSteps = DecisionSteps(),
+                 alerts=None) -> None:
         self.policy = policy
         self.steps = steps
         self.state = state
@@ -159,6 +168,13 @@ class Avoidance:
         self._alt_dirty = False
         self._alt_last_key: tuple | None = None
         self.screen = MonitorScreen(policy.settings, policy.accel_bound_m_s2)
+        self.alerts = None if alerts is None or not alerts.enabled else TrafficAlerts(
+            alerts, threats=threats.threats_at, reference=lambda: owner.current, own_down_m=self._own_down_m,
+            now_s=now_s, sink=sink)
+
+    def _own_down_m(self) -> float | None:
+        pos = self.position_ned_m()
+        return None if pos is None or len(pos) < 3 else float(pos[2])
 
     # ------------------------------------------------------------------ legs
     def start_leg(self, leg: LegContext) -> None:
@@ -218,6 +234,8 @@ class Avoidance:
         if trigger is not Trigger.RESUME and self._stays_clear(obs):
             self._next()                        # the usual tick or report: nothing for a worker to do
             return
+        if trigger is not Trigger.RESUME and self.alerts is not None:
+            self.alerts.check()                 # a conflict: the ground station hears of it first
         self._busy = True
         asked = (self.leg, self.owner.current, self.state)
         self.jobs.submit("decision", self.steps.decide, (self.state, obs, self.leg, self.policy),
@@ -342,6 +360,8 @@ class Avoidance:
                     "n/a" if event["latency_ms"] is None else f"{event['latency_ms']:.1f}",
                     decision.decide_ms, decision.plan_ms)
         self.sink.decision(decision, event)
+        if self.alerts is not None:
+            self.alerts.decided(decision)
         self.sink_path()
 
     def sink_path(self) -> None:

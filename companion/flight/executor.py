@@ -23,6 +23,7 @@ task              rate                                   work
 ``monitor``       10 Hz (DESIGN 7.3: >= 10 Hz)           the active reference re-checked
 ``alternatives``  ``time_scale / flight.alternatives_    M-GART alternatives planned again
                   period_s``
+``alerts``        ``time_scale x alerts.rate_hz`` (1 Hz)  traffic alerts to the ground station
 ================  =====================================  =================================
 
 The daemon adds its own rows (telemetry hand-over, record, status, zenoh watch, fleet
@@ -79,8 +80,9 @@ class FlightExecutor:
         See ``companion.flight.phases``.
     replanner : LegReplanner
     avoidance : Avoidance, optional
-    monitor_rate_hz, alternatives_rate_hz : float
-        The monitor's and the alternatives' rates (with ``avoidance``).
+    monitor_rate_hz, alternatives_rate_hz, alerts_rate_hz : float
+        The monitor's, the alternatives' and the traffic alerts' rates (with ``avoidance``; the
+        alerts with its ``alerts``).
     leg_started : callable (LegPlan), optional
     seed : int
     slack_s : float
@@ -91,7 +93,7 @@ class FlightExecutor:
                  sink: FlightSink, stream: Callable[[float, bool], None], now_s: Callable[[], float],
                  clock_s: Callable[[], float], setpoint_rate_hz: float, timeout_margin_s: float, replanner: LegReplanner,
                  avoidance: Avoidance | None = None, monitor_rate_hz: float = MONITOR_RATE_HZ,
-                 alternatives_rate_hz: float = 0.2, leg_started: Callable | None = None,
+                 alternatives_rate_hz: float = 0.2, alerts_rate_hz: float = 1.0, leg_started: Callable | None = None,
                  seed: int = 0, slack_s: float = 0.0) -> None:
         self.owner = owner
         self.avoidance = avoidance
@@ -100,10 +102,11 @@ class FlightExecutor:
         self.legs = LegRunner(legs, owner=owner, vehicle=vehicle, jobs=jobs, sink=sink, now_s=now_s,
                               replanner=replanner, timeout_margin_s=timeout_margin_s,
                               avoidance=avoidance, leg_started=leg_started, seed=seed)
-        self.schedule = Scheduler(self._table(setpoint_rate_hz, monitor_rate_hz, alternatives_rate_hz),
-                                  slack_s=slack_s)
+        self.schedule = Scheduler(self._table(setpoint_rate_hz, monitor_rate_hz, alternatives_rate_hz,
+                                              alerts_rate_hz), slack_s=slack_s)
 
-    def _table(self, setpoint_rate_hz: float, monitor_rate_hz: float, alternatives_rate_hz: float) -> list[Task]:
+    def _table(self, setpoint_rate_hz: float, monitor_rate_hz: float, alternatives_rate_hz: float,
+               alerts_rate_hz: float) -> list[Task]:
         rows = [Task("setpoints", setpoint_rate_hz, lambda now: self.stream(now, True), budget_ms=2.0),
                 Task("prepare", PREPARE_RATE_HZ, lambda now: self.owner.prepare(), budget_ms=4.0),
                 Task("phase", PHASE_RATE_HZ, self.legs.step, budget_ms=2.0)]
@@ -112,6 +115,8 @@ class FlightExecutor:
                      Task("monitor", monitor_rate_hz, self.avoidance.monitor, budget_ms=8.0),
                      Task("alternatives", alternatives_rate_hz, self.avoidance.refresh_alternatives,
                           budget_ms=2.0)]
+            if self.avoidance.alerts is not None:
+                rows.append(Task("alerts", alerts_rate_hz, self.avoidance.alerts.check, budget_ms=4.0))
         return rows
 
     # ------------------------------------------------------------------ driving

@@ -242,6 +242,7 @@ class FlightLog:
         self.now_s = now_s
         self.events: list[dict] = []
         self.decisions: list[dict] = []
+        self.alerts: list = []
         self.paths = 0
 
     def event(self, name: str, **fields) -> None:
@@ -256,6 +257,9 @@ class FlightLog:
 
     def path(self, reference, alternatives, leg_index: int) -> None:
         self.paths += 1
+
+    def alert(self, alert) -> None:
+        self.alerts.append(alert)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -353,7 +357,7 @@ class FastTimeFlight:
             timeout_margin_s=s.link.leg_timeout_margin_s, replanner=replanner or LegReplanner.in_world(
                 world or legs[0].world, TrajectoryPipeline.from_settings(s.smoothing, s.planning), s.flight),
             avoidance=self.avoidance,
-            alternatives_rate_hz=1.0 / s.flight.alternatives_period_s, seed=seed)
+            alternatives_rate_hz=1.0 / s.flight.alternatives_period_s, alerts_rate_hz=s.alerts.rate_hz, seed=seed)
         self._refs: list[np.ndarray] = []
 
     def _avoidance(self, policy: DecisionPolicy, seed: int) -> Avoidance:
@@ -363,7 +367,7 @@ class FastTimeFlight:
                          monotonic_s=self.clock.now_s, send_now=lambda: self.executor.send_now(),
                          position_ned_m=lambda: self.vehicle.pos_ned_m,
                          alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s,
-                                                       f.alternatives_lead_s))
+                                                       f.alternatives_lead_s), alerts=self.settings.alerts)
 
     def _stream(self, now_s: float, scheduled: bool) -> None:
         setpoint = self.owner.setpoint_at(now_s)

@@ -10,7 +10,8 @@ port                      real time (``companion run``)                   fast t
 ``VehiclePort``           the MAVLink link's telemetry                    the closed-loop helicopter model
 ``Jobs``                  the planning worker processes                   in process, done after the
                                                                           measured time on the virtual clock
-``FlightSink``            record, zenoh events and status, STATUSTEXT     the flight's log (lists)
+``FlightSink``            record, zenoh events and status, STATUSTEXT,    the flight's log (lists)
+                          COLLISION
 ========================  =============================================  ==============================
 
 The setpoints leave through the ``ReferenceOwner``'s stream (``companion.flight.active``).
@@ -82,3 +83,7 @@ class FlightSink(Protocol):
 
     def path(self, reference, alternatives, leg_index: int) -> None:
         """The active reference and the alternatives (``uav/<sysid>/path``)."""
+
+    def alert(self, alert) -> None:
+        """A traffic alert (``companion.flight.alerting.TrafficAlert``): COLLISION and, when it
+        has one, its STATUSTEXT to the ground stations; recorded and published."""

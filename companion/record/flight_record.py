@@ -126,6 +126,7 @@ class FlightRecord:
     alternatives: list[dict] = field(default_factory=list)
     threats: list[dict] = field(default_factory=list)
     events: list[dict] = field(default_factory=list)
+    alerts: list[dict] = field(default_factory=list)
     summary: dict | None = None
     samples: dict[str, np.ndarray] = field(default_factory=dict)
 
@@ -180,6 +181,8 @@ def load_record(path: str | Path) -> FlightRecord:
             record.summary = item
         elif kind == "event":
             record.events.append(item)
+        elif kind == "alert":
+            record.alerts.append(item)
     record.samples = samples_from_columns(columns)
     return record
 

@@ -3,7 +3,10 @@
 ``DaemonSink`` writes every event and decision to the flight record (``--record``: MCAP or
 JSON Lines, and the live Foxglove view), logs the events and publishes the status with each,
 and hands decisions and paths to the threat reactor: ``uav/<sysid>/events``, ``path`` and a
-STATUSTEXT to the ground stations (``companion.threats.reactor``).
+STATUSTEXT to the ground stations (``companion.threats.reactor``). Traffic alerts
+(``companion.flight.alerting``) go to the ground stations as ArduPilot's AP_Avoidance sends them
+(``COLLISION``, and a STATUSTEXT when first alerted, raised or cleared) and to the record
+(``alert`` lines, ``/flight/alert`` in Foxglove).
 """
 
 from __future__ import annotations
@@ -44,6 +47,16 @@ class DaemonSink:
     def decision(self, decision, event: dict) -> None:
         if self.daemon.threats is not None:
             self.daemon.threats.tell_decision(decision, event)
+
+    def alert(self, alert) -> None:
+        """A traffic alert: recorded, then ``COLLISION`` and its STATUSTEXT through the vehicle."""
+        d = self.daemon
+        self.record("alert", **alert.as_record())
+        if alert.statustext is not None:
+            log.warning("traffic alert: %s", alert.statustext[0])
+            if d.threats is not None:
+                d.threats.tell(*alert.statustext)
+        d.send_message("COLLISION", alert.collision)
 
     def path(self, reference, alternatives, leg_index: int) -> None:
         if self.daemon.threats is not None:

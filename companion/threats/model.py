@@ -19,9 +19,11 @@ import numpy as np
 
 from companion.errors import ThreatPayloadError
 
-__all__ = ["Threat", "ThreatTable", "KINDS", "FRAMES", "LOCAL_SOURCE", "payload_error", "threat_uid"]
+__all__ = ["Threat", "ThreatTable", "KINDS", "TRAFFIC", "FRAMES", "LOCAL_SOURCE", "payload_error", "threat_uid"]
 
 KINDS = ("popup", "moving")
+#: What a threat is, for its volumes (``companion.threats.alerts``): drone scale, or manned traffic.
+TRAFFIC = ("drone", "manned")
 #: Source of a threat put on the plain key ``uav/<sysid>/threats/<id>`` (unauthenticated).
 LOCAL_SOURCE = "local"
 FRAMES = ("local_ned", "global")
@@ -66,6 +68,9 @@ class Threat:
         Who put the threat: the ``<source>`` segment of an authenticated key
         ``uav/<sysid>/threats/<source>/<id>``, or ``"local"`` (the plain key
         ``uav/<sysid>/threats/<id>``, or learnt by the companion itself, e.g. ADS-B).
+    traffic : str
+        ``"drone"`` (drone-scale volumes about the sphere, the default) or ``"manned"`` (manned
+        traffic, ADS-B: the aviation volumes, 2000 ft / 250 ft well clear).
     """
 
     id: str
@@ -77,6 +82,7 @@ class Threat:
     ttl_s: float | None = None
     received_t_s: float = 0.0
     source: str = LOCAL_SOURCE
+    traffic: str = "drone"
 
     @property
     def uid(self) -> str:

@@ -37,7 +37,7 @@ import numpy as np
 
 from companion.errors import CompanionError
 from companion.geo import LocalFrame
-from companion.threats.model import Threat
+from companion.threats.model import TRAFFIC, Threat
 
 __all__ = ["SNAPSHOT_VERSION", "SnapshotError", "ThreatSnapshot", "snapshot_path", "snapshot_to_dict",
            "snapshot_from_dict", "write_snapshot", "read_snapshot", "live_threats",
@@ -93,7 +93,7 @@ def _threat_to_dict(threat: Threat) -> dict:
             "position": [float(v) for v in threat.position],
             "velocity_ned_m_s": [float(v) for v in threat.velocity_ned_m_s],
             "radius_m": float(threat.radius_m), "received_t_s": float(threat.received_t_s),
-            "expires_t_s": float(expires) if math.isfinite(expires) else None}
+            "expires_t_s": float(expires) if math.isfinite(expires) else None, "traffic": threat.traffic}
 
 
 def snapshot_to_dict(snapshot: ThreatSnapshot) -> dict:
@@ -130,10 +130,13 @@ def _threat_from_dict(data, index: int) -> Threat:
     received = _number(data, "received_t_s", where)
     expires = _number(data, "expires_t_s", where, optional=True)
     radius = _number(data, "radius_m", where)
+    traffic = data.get("traffic", "drone")
+    if traffic not in TRAFFIC:
+        raise SnapshotError(f"{where}traffic: expected one of {', '.join(TRAFFIC)}, got {traffic!r}")
     try:
         return Threat(str(data["id"]), str(data["kind"]), "local_ned", _vector(data, "position", where),
                       _vector(data, "velocity_ned_m_s", where), radius,
-                      None if expires is None else expires - received, received)
+                      None if expires is None else expires - received, received, traffic=traffic)
     except KeyError as exc:
         raise SnapshotError(f"{where}{exc.args[0]}: missing") from None
 

@@ -25,7 +25,7 @@ log = logging.getLogger(__name__)
 
 _LINE_TYPES = {topic: line_type for line_type, (topic, _) in ch.RECORD_TOPICS.items()}
 _LISTS = {"plan": "plans", "decision": "decisions", "alternatives": "alternatives", "threat": "threats",
-          "event": "events"}
+          "event": "events", "alert": "alerts"}
 
 
 def load_flight(path: str | Path) -> FlightRecord:

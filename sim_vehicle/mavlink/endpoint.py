@@ -33,7 +33,7 @@ RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
 STATUSTEXT_CHUNK = 50
 #: Broadcast messages of other components forwarded between links (:meth:`Endpoint.route`), as ArduPilot does:
 #: texts, heartbeats, and an ADS-B receiver's traffic reports (which reach the companion through the vehicle).
-ROUTED = frozenset({"STATUSTEXT", "HEARTBEAT", "ADSB_VEHICLE"})
+ROUTED = frozenset({"STATUSTEXT", "HEARTBEAT", "ADSB_VEHICLE", "COLLISION"})
 
 Address = tuple[str, int]
 
@@ -172,9 +172,9 @@ class Endpoint:
           last heard (:attr:`routes`; ``target_component`` 0 of another system: every component
           heard of it). Unlike ArduPilot, a message to our own system with ``target_component``
           0 is handled here only, not also forwarded to the companion.
-        - A broadcast of a type in :data:`ROUTED` (STATUSTEXT, HEARTBEAT, ADSB_VEHICLE) goes to
-          every other destination, so a ground station sees the companion component and its
-          texts, and the companion hears an ADS-B receiver's traffic.
+        - A broadcast of a type in :data:`ROUTED` (STATUSTEXT, HEARTBEAT, ADSB_VEHICLE, COLLISION)
+          goes to every other destination, so a ground station sees the companion component, its
+          texts and its traffic alerts, and the companion hears an ADS-B receiver's traffic.
         """
         source = (msg.get_srcSystem(), msg.get_srcComponent())
         if source == (self.sysid, COMPONENT_ID):

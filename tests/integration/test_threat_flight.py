@@ -11,7 +11,9 @@ pymavlink listener records the vehicle's own LOCAL_POSITION_NED. One flight of
 - leg 3: a threat in the *global* frame crossing the leg at right angles at 2 m/s, timed to
   meet the vehicle where the path crosses its track;
 
-and the flight completes with no sample of the vehicle's own track inside any threat.
+and the flight completes with no sample of the vehicle's own track inside any threat. The ground
+station (the pymavlink listener on the vehicle's other output) receives the traffic alerts
+(issue 24): ``COLLISION`` as AP_Avoidance sends it and a STATUSTEXT, then the decision's action.
 
 The same flight checks the operator's view (issue 14): a Foxglove WebSocket client connected to
 ``--foxglove`` during the flight, the MCAP record (``--record flight.mcap``) and the ``--tlog``.
@@ -22,11 +24,13 @@ from __future__ import annotations
 import asyncio
 import socket
 import threading
+import zlib
 
 import numpy as np
 import pytest
 from mcap.reader import make_reader
 from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from companion.geo import LocalFrame
 from companion.view import channels as ch
@@ -83,6 +87,7 @@ def flight(tmp_path_factory):
             seen["events"] = list(watcher.events)
         track_t, track_pos = track.samples()
         watch.join(30)
+    seen["collisions"], seen["texts"] = list(track.collisions), list(track.companion_texts)
     yield {"rc": flight.companion.returncode, "summary": last_json_line(flight.log), "seen": seen,
            "record": load_flight(flight.record), "mcap": flight.record, "tlog": tlog, "live": live.get("got"),
            "log": flight.log.read_text(), "track_t_s": track_t, "track_ned_m": track_pos}
@@ -145,6 +150,27 @@ def test_every_decision_is_told_once(flight):
     for e in decisions:
         per_threat.setdefault(e.get("threat_id"), []).append(e["event"])
     assert all(len(kinds) <= 6 for kinds in per_threat.values()), per_threat
+
+
+def test_the_ground_station_is_alerted_before_the_decision_then_told_its_action(flight):
+    """COLLISION for the head-on mover with its CRC-32 id, first as REPORT, then with the action
+    of the decision that followed; a TRAFFIC STATUSTEXT arrives before the AVOID one."""
+    ident = zlib.crc32(HEAD_ON.threat_id.encode())
+    mine = [(t, m) for t, m in flight["seen"]["collisions"] if m.id == ident]
+    assert mine, f"no COLLISION for {HEAD_ON.threat_id}: {flight['seen']['collisions'][:5]}"
+    assert all(m.src == mavlink2.MAV_COLLISION_SRC_MAVLINK_GPS_GLOBAL_INT for _, m in mine)
+    first = mine[0][1]
+    assert first.action == mavlink2.MAV_COLLISION_ACTION_REPORT and first.threat_level >= 1
+    assert first.time_to_minimum_delta > 0.0
+    acted = [m for _, m in mine if m.action not in (mavlink2.MAV_COLLISION_ACTION_NONE,
+                                                     mavlink2.MAV_COLLISION_ACTION_REPORT)]
+    assert acted, [(m.action, m.threat_level) for _, m in mine]
+    assert mine[-1][1].threat_level == mavlink2.MAV_COLLISION_THREAT_LEVEL_NONE, "the alert was never cleared"
+    texts = [(t, m.text) for t, m in flight["seen"]["texts"]]
+    alert_t = next(t for t, text in texts if text.startswith(f"TRAFFIC {HEAD_ON.threat_id}"))
+    avoid_t = next(t for t, text in texts if text.startswith(f"AVOID {HEAD_ON.threat_id}"))
+    assert alert_t <= avoid_t
+    assert any(a["threat_id"] == HEAD_ON.threat_id for a in flight["record"].alerts)
 
 
 def test_an_invalid_payload_is_rejected_naming_the_field(flight):

@@ -145,6 +145,10 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
     Returns
     -------
     list of Tube
+        Each lives over the whole horizon: a threat's ``ttl_s`` says how long its last report
+        stays valid, not when the threat goes away (a source that keeps seeing it reports it
+        again before then). A candidate that only waits for a reported threat to expire (a
+        retime in front of a pop-up) would wait for ever and be decided again and again.
     """
     out = []
     for th in threats:
@@ -155,6 +159,5 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
         moving = float(np.linalg.norm(vel)) > STATIC_SPEED_M_S
         out.append(Tube(th.uid, th.pos_ned_m, vel, float(th.received_t_s),
                         float(th.radius_m) + inflation_m, float(th.radius_m),
-                        uncertainty_m_s if moving else 0.0, uncertainty_max_m if moving else 0.0,
-                        th.expires_t_s))
+                        uncertainty_m_s if moving else 0.0, uncertainty_max_m if moving else 0.0))
     return out

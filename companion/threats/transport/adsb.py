@@ -11,7 +11,10 @@ a moving threat with
   speed (positive up in ADSB_VEHICLE), each used only when its validity flag is set;
 - a radius by emitter type (:class:`AdsbSettings`: a light aircraft is smaller than an airliner's
   wake), and a ttl of a few seconds, refreshed by every report: a target no longer heard
-  disappears by itself.
+  disappears by itself;
+- traffic ``manned`` for every emitter but a UAV and a surface vehicle or point obstacle (and
+  for an unknown emitter: ADS-B Out is what manned aircraft carry), so that it is judged with the
+  aviation volumes (``companion.threats.alerts``).
 
 Reports without valid coordinates or altitude, or farther than ``max_range_m`` from home, are
 ignored. The conversion is pure; ``companion.daemon`` feeds the messages to the threat reactor,
@@ -32,7 +35,7 @@ from companion.threats.transport.codec import MAX_SPEED_M_S
 from companion.threats.model import Threat
 from heli_common.typed_config import require_numbers
 
-__all__ = ["AdsbSettings", "threat_from_adsb", "adsb_threat_id", "emitter_radius_m"]
+__all__ = ["AdsbSettings", "threat_from_adsb", "adsb_threat_id", "emitter_radius_m", "emitter_traffic"]
 
 FLAG_COORDS = mavlink.ADSB_FLAGS_VALID_COORDS
 FLAG_ALTITUDE = mavlink.ADSB_FLAGS_VALID_ALTITUDE
@@ -109,6 +112,12 @@ def emitter_radius_m(emitter_type: int, settings: AdsbSettings) -> float:
     return float(settings.radius_m)
 
 
+def emitter_traffic(emitter_type: int) -> str:
+    """``drone`` for a UAV and a surface emitter, else ``manned`` (``Threat.traffic``)."""
+    drone = EMITTER_CLASSES["uav"] + EMITTER_CLASSES["surface"]
+    return "drone" if int(emitter_type) in drone else "manned"
+
+
 def threat_from_adsb(fields: dict, settings: AdsbSettings, now_t_s: float, home=None) -> Threat | None:
     """The threat of one ADSB_VEHICLE report, or None when it cannot or need not be one.
 
@@ -153,4 +162,5 @@ def threat_from_adsb(fields: dict, settings: AdsbSettings, now_t_s: float, home=
     return Threat(id=adsb_threat_id(fields.get("ICAO_address", 0)), kind="moving", frame="global",
                   position=(lat, lon, alt_m), velocity_ned_m_s=(vn, ve, vd),
                   radius_m=emitter_radius_m(fields.get("emitter_type", 0), settings),
-                  ttl_s=settings.ttl_s, received_t_s=now_t_s - age_s)
+                  ttl_s=settings.ttl_s, received_t_s=now_t_s - age_s,
+                  traffic=emitter_traffic(fields.get("emitter_type", 0)))

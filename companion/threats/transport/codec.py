@@ -13,7 +13,9 @@ Fields: ``v`` (must be 1), ``id`` (1-64 characters of ``A-Z a-z 0-9 _ - .``, a v
 key chunk), ``kind`` (``popup``: static, its velocity must be zero; ``moving``), ``frame``,
 ``position``, ``radius_m`` (0 < r <= 10 000) are required; ``velocity_ned_m_s`` (default
 zero, each component at most 300 m/s) and ``ttl_s`` (0 < ttl <= 1e6, or null or absent: until
-deleted) are optional. Unknown or duplicate fields, wrong types, NaN/inf, a payload over 4096
+deleted) and ``traffic`` (``drone``, the default, or ``manned``: manned traffic, judged
+with the aviation volumes; ADS-B reports of manned aircraft are republished with it) are
+optional. Unknown or duplicate fields, wrong types, NaN/inf, a payload over 4096
 bytes or not UTF-8 JSON are rejected with a ``ThreatPayloadError`` whose message starts with
 the field at fault (and whose ``field`` attribute names it; an unknown or duplicate field whose
 name is not plain ``A-Z a-z 0-9 _`` is named quoted as JSON, e.g. ``""`` for an empty name).
@@ -26,7 +28,7 @@ import math
 import re
 import time
 
-from companion.threats.model import FRAMES, KINDS, Threat, payload_error
+from companion.threats.model import FRAMES, KINDS, TRAFFIC, Threat, payload_error
 
 __all__ = ["decode", "encode", "to_dict", "MAX_PAYLOAD_BYTES", "check_id", "VERSION", "finite_number", "parse_json"]
 
@@ -39,7 +41,7 @@ MAX_LOCAL_M = 1e6
 ID_PATTERN = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9_]{1,64}$")
 REQUIRED = ("v", "id", "kind", "frame", "position", "radius_m")
-OPTIONAL = ("velocity_ned_m_s", "ttl_s")
+OPTIONAL = ("velocity_ned_m_s", "ttl_s", "traffic")
 GLOBAL_KEYS = ("lat", "lon", "alt_m")
 
 
@@ -230,9 +232,12 @@ def decode(payload, *, received_t_s: float | None = None, key_id: str | None = N
     if not 0.0 < radius <= MAX_RADIUS_M:
         raise payload_error("radius_m", f"must be > 0 and <= {MAX_RADIUS_M:g}, got {radius!r}")
     ttl = _ttl(data.get("ttl_s"))
+    traffic = data.get("traffic", "drone")
+    if not isinstance(traffic, str) or traffic not in TRAFFIC:
+        raise payload_error("traffic", f"expected one of {', '.join(TRAFFIC)}, got {traffic!r}")
     stamp = time.monotonic() if received_t_s is None else float(received_t_s)
     return Threat(id=threat_id, kind=kind, frame=frame, position=position,
-                  velocity_ned_m_s=velocity, radius_m=radius, ttl_s=ttl, received_t_s=stamp)
+                  velocity_ned_m_s=velocity, radius_m=radius, ttl_s=ttl, received_t_s=stamp, traffic=traffic)
 
 
 def to_dict(threat: Threat) -> dict:
@@ -242,10 +247,13 @@ def to_dict(threat: Threat) -> dict:
         position = {"lat": float(lat), "lon": float(lon), "alt_m": float(alt)}
     else:
         position = [float(x) for x in threat.position]
-    return {"v": VERSION, "id": threat.id, "kind": threat.kind, "frame": threat.frame,
-            "position": position, "velocity_ned_m_s": [float(x) for x in threat.velocity_ned_m_s],
-            "radius_m": float(threat.radius_m),
-            "ttl_s": None if threat.ttl_s is None else float(threat.ttl_s)}
+    out = {"v": VERSION, "id": threat.id, "kind": threat.kind, "frame": threat.frame,
+           "position": position, "velocity_ned_m_s": [float(x) for x in threat.velocity_ned_m_s],
+           "radius_m": float(threat.radius_m),
+           "ttl_s": None if threat.ttl_s is None else float(threat.ttl_s)}
+    if threat.traffic != "drone":
+        out["traffic"] = threat.traffic
+    return out
 
 
 def encode(threat: Threat) -> bytes:

@@ -119,6 +119,8 @@ def valid_threats(draw) -> dict:
         data["velocity_ned_m_s"] = draw(SPEED) if kind == "moving" else [0.0, 0.0, 0.0]
     if draw(st.booleans()):
         data["ttl_s"] = draw(st.one_of(st.none(), st.floats(0.0, 1e6, exclude_min=True)))
+    if draw(st.booleans()):
+        data["traffic"] = draw(st.sampled_from(["drone", "manned"]))
     return data
 
 
@@ -141,6 +143,8 @@ BAD_VALUES = {
                                   st.just([0.0, -math.inf, 0.0]), st.just([0.0, 0.0, False])),
     "ttl_s": st.one_of(st.floats(max_value=0.0), st.floats(min_value=1e6, exclude_min=True), st.text(max_size=3),
                        st.just(math.nan), st.just([1.0])),
+    "traffic": st.one_of(st.text(max_size=8).filter(lambda s: s not in ("drone", "manned")), st.none(),
+                         st.integers(), st.just(["manned"])),
 }
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 
 import numpy as np
@@ -91,13 +93,17 @@ def test_uncertainty_grows_a_moving_tube_only():
     np.testing.assert_allclose(tp.radius_at(np.array([0.0, 10.0])), [3.0, 3.0])
 
 
-def test_expired_tube_is_gone():
+def test_a_tube_outlives_its_reports_ttl_but_a_tube_given_an_end_is_gone_after_it():
+    """A threat's ttl bounds how long its report is valid, not the threat: its tube lives over
+    the horizon, so waiting for a reported pop-up to expire is never clear. A tube with an end of
+    its own (another vehicle that yields) is gone after it."""
     th = Threat("e", "popup", "local_ned", (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 5.0, 2.0, 0.0)
     tube = predict_tubes([th], inflation_m=0.0)[0]
     t = sample_times(0.0, 10.0, 0.5)
     hover_later = np.zeros((t.size, 3))
-    res = check_candidates(t[t > 3.0], hover_later[t > 3.0], [tube])
-    assert res.clear[0]
+    assert not check_candidates(t[t > 3.0], hover_later[t > 3.0], [tube]).clear[0]
+    ended = dataclasses.replace(tube, expires_t_s=2.0)
+    assert check_candidates(t[t > 3.0], hover_later[t > 3.0], [ended]).clear[0]
 
 
 @settings(max_examples=30, deadline=None)

@@ -35,6 +35,9 @@ def flight_lines(samples: int = 60):
             yield "threat", {"id": "mover1", "source": "radar1", "kind": "moving", "position_ned_m": [30, 20, -15],
                              "velocity_ned_m_s": [0, -3, 0], "radius_m": 3.0, "t_s": t}
         if k == samples // 2:
+            yield "alert", {"t_s": t, "threat_id": "radar1/mover1", "traffic": "drone", "level": "low", "action": 1,
+                            "time_to_cpa_s": 2.5, "horizontal_m": 1.2, "vertical_m": 0.0, "time_to_lowc_s": 1.5,
+                            "text": "TRAFFIC radar1/mover1 LoWC in 2s, 1 m / 0 m"}
             yield "decision", {"kind": "evade", "reason": "mover1 in 2.0 s: evade", "path_id": "evade-1",
                                "path_ned_m": [[20, 0, -15], [20, 5, -13]], "t_s": t, "leg": 0}
         yield "sample", {"t_s": t, "ref_pos_ned_m": np.array([t, 0, -15]), "ref_vel_ned_m_s": [1, 0, 0],
@@ -79,8 +82,10 @@ def test_the_mcap_reads_back_as_the_json_lines_record_does(tmp_path):
     write_flight(FlightRecorder(tmp_path / "f.jsonl"))
     mcap, jsonl = load_flight(tmp_path / "f.mcap"), load_record(tmp_path / "f.jsonl")
     assert (mcap.header, mcap.world, mcap.plans, mcap.decisions, mcap.threats, mcap.events, mcap.summary,
-            mcap.alternatives) == (jsonl.header, jsonl.world, jsonl.plans, jsonl.decisions, jsonl.threats,
-                                   jsonl.events, jsonl.summary, jsonl.alternatives)
+            mcap.alternatives, mcap.alerts) == (jsonl.header, jsonl.world, jsonl.plans, jsonl.decisions,
+                                                jsonl.threats, jsonl.events, jsonl.summary, jsonl.alternatives,
+                                                jsonl.alerts)
+    assert mcap.alerts and mcap.alerts[0]["threat_id"] == "radar1/mover1"
     assert set(mcap.samples) == set(jsonl.samples) and len(mcap.samples["t_s"]) == 60
     for key, column in jsonl.samples.items():
         np.testing.assert_allclose(mcap.samples[key], column)
