@@ -145,10 +145,11 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
     Returns
     -------
     list of Tube
-        Each lives over the whole horizon: a threat's ``ttl_s`` says how long its last report
-        stays valid, not when the threat goes away (a source that keeps seeing it reports it
-        again before then). A candidate that only waits for a reported threat to expire (a
-        retime in front of a pop-up) would wait for ever and be decided again and again.
+        A static threat's tube lives over the whole horizon: its ``ttl_s`` says how long its
+        last report stays valid, not when it goes away (a source that still sees it reports it
+        again before then), and a candidate that only waits for it to expire (a retime in front
+        of a pop-up) would wait for ever and be decided again and again. A mover's tube ends
+        when its report expires: its constant-velocity prediction is not trusted beyond.
     """
     out = []
     for th in threats:
@@ -159,5 +160,6 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
         moving = float(np.linalg.norm(vel)) > STATIC_SPEED_M_S
         out.append(Tube(th.uid, th.pos_ned_m, vel, float(th.received_t_s),
                         float(th.radius_m) + inflation_m, float(th.radius_m),
-                        uncertainty_m_s if moving else 0.0, uncertainty_max_m if moving else 0.0))
+                        uncertainty_m_s if moving else 0.0, uncertainty_max_m if moving else 0.0,
+                        th.expires_t_s if moving else math.inf))
     return out

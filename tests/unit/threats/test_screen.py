@@ -163,23 +163,44 @@ def test_a_proof_stands_for_the_same_reports_only():
     assert not screen.proves_clear(active, ahead, 4.5 + LEAD_S, 3)          # nothing stands for it
 
 
-def test_a_threat_whose_report_expires_before_it_meets_the_reference_still_conflicts():
-    """A head-on mover whose reports expire just before it meets the reference: its tube lives
-    over the whole horizon (a ttl is how long a report stays valid, not when the threat goes
-    away), so the check finds the conflict and the screen never proves the reference clear."""
+def test_a_standing_proof_counts_a_tube_until_a_step_after_it_expires():
+    """A head-on mover whose reports expire just before it meets the reference: a check counts
+    its tube on an interval that starts before it expires, so a proof made earlier must too."""
     active = _active(0.0, None, 0.0)
     traj = active.trajectory
     leg = LegContext(0, WORLD3, np.array([120.0, 0.0, -25.0]))
     vel = np.array([-12.0, 0.0, 0.0])
-    proven, missed = 0, []
+    wrong, proven = [], 0
     for meet_s in (8.0, 9.0):
         meet = np.atleast_2d(traj.sample(np.array([meet_s]))[0])[0]
-        for t in np.arange(2.0, 3.0, 0.14):
-            for after_s in np.linspace(0.0, 3.0, 7):
+        for t in np.arange(2.0, 3.0, 0.07):
+            for after_s in np.linspace(0.0, 0.3, 13):
                 threat = _threat(meet - vel * (meet_s - t), vel, 0.5, t, meet_s - after_s - t)
                 screen = MonitorScreen(POLICY.settings, POLICY.accel_bound_m_s2)
-                t_now = t + 0.5 * LEAD_S
-                proven += screen.proves_clear(active, (threat,), t_now, 3)
-                if active_conflict(Observation(t_now, (threat,), active, Trigger.MONITOR), leg, POLICY) is None:
-                    missed.append((meet_s, t, after_s))
+                for t_now in t + np.linspace(0.0, LEAD_S, 11):
+                    if screen.proves_clear(active, (threat,), t_now, 3):
+                        proven += 1
+                        if active_conflict(Observation(t_now, (threat,), active, Trigger.MONITOR), leg,
+                                           POLICY) is not None:
+                            wrong.append((meet_s, t, after_s, t_now))
+    assert proven and not wrong
+
+
+def test_a_popup_whose_report_expires_before_the_reference_reaches_it_still_conflicts():
+    """A pop-up on the path whose report expires before the vehicle gets there: a static threat's
+    tube lives over the whole horizon (a ttl is how long a report stays valid, not when the
+    threat goes away), so the check finds the conflict and the screen never proves it clear."""
+    active = _active(0.0, None, 0.0)
+    traj = active.trajectory
+    leg = LegContext(0, WORLD3, np.array([120.0, 0.0, -25.0]))
+    proven, missed = 0, []
+    for meet_s in (6.0, 9.0):
+        meet = np.atleast_2d(traj.sample(np.array([meet_s]))[0])[0]
+        for t in np.arange(2.0, 3.0, 0.25):
+            for ttl_s in (0.5, 1.0, 2.0):
+                threat = _threat(meet, np.zeros(3), 0.5, t, ttl_s)
+                screen = MonitorScreen(POLICY.settings, POLICY.accel_bound_m_s2)
+                proven += screen.proves_clear(active, (threat,), t + 0.2, 3)
+                if active_conflict(Observation(t + 0.2, (threat,), active, Trigger.MONITOR), leg, POLICY) is None:
+                    missed.append((meet_s, t, ttl_s))
     assert proven == 0 and not missed
