@@ -165,8 +165,17 @@ def judge(flight: dict) -> list[dict]:
         rows.append({"flight": enc["flight"], "leg": enc["leg"], "category": enc["category"],
                      "kinds": enc["kinds"], "min_sep_m": sep, "intrusion": sep < 0.0,
                      "avoidable": bool(oracle.avoidable),
-                     "decisions": [(e["event"], e["latency_ms"]) for e in decisions]})
+                     "decisions": [(_kind(e), e["latency_ms"], e.get("latency_parts_ms") or {},
+                                    e.get("trigger")) for e in decisions]})
     return rows
+
+
+def _kind(event: dict) -> str:
+    """The decision's kind, and for an evasion or a hold chosen once a replan had been tried
+    (the conflict was far enough to replan first: its candidates start after the fast step and
+    the replan, DESIGN 7.4), ``<kind> after a replan``."""
+    kind = event["event"]
+    return f"{kind} after a replan" if kind in ("evade", "hold") and event.get("branch") == "replan" else kind
 
 
 # ---------------------------------------------------------------------------- report
@@ -176,9 +185,15 @@ def pct(values, q):
 
 def summarize(rows: list[dict], flights: list[dict], wall_s: float) -> dict:
     latency: dict[str, list[float]] = {}
+    parts: dict[str, dict[str, list[float]]] = {}
+    slowest: dict[str, tuple] = {}
     for r in rows:
-        for kind, ms in r["decisions"]:
+        for kind, ms, split, trigger in r["decisions"]:
             latency.setdefault(kind, []).append(ms)
+            for name, v in split.items():
+                parts.setdefault(kind, {}).setdefault(name, []).append(v)
+            if ms >= slowest.get(kind, (-1.0,))[0]:
+                slowest[kind] = (ms, split, trigger)
     per_cat = {}
     for cat in CATEGORIES:
         mine = [r for r in rows if r["category"] == cat]
@@ -192,6 +207,9 @@ def summarize(rows: list[dict], flights: list[dict], wall_s: float) -> dict:
             "min_sep_m": min((r["min_sep_m"] for r in rows), default=None),
             "latency_ms": {k: {"n": len(v), "p50": pct(v, 50), "p99": pct(v, 99), "max": max(v)}
                            for k, v in sorted(latency.items())},
+            "latency_parts_ms": {k: {name: {"p50": pct(v, 50), "p99": pct(v, 99)} for name, v in split.items()}
+                                 for k, split in sorted(parts.items())},
+            "slowest": {k: {"ms": v[0], "parts": v[1], "trigger": v[2]} for k, v in sorted(slowest.items())},
             "categories": per_cat, "wall_s": wall_s}
 
 
@@ -210,6 +228,19 @@ def table(summary: dict, speedup: float) -> str:
               "|---|---|---|---|---|"]
     for kind, v in summary["latency_ms"].items():
         lines.append(f"| {kind} | {v['n']} | {fmt(v['p50'])} | {fmt(v['p99'])} | {fmt(v['max'])} |")
+    names = ("queued", "compute", "transport", "gate", "start")
+    lines += ["", "Where the time goes (``latency_parts_ms`` of each decision event, p50 / p99 ms): *queued* "
+              "behind the decision before it, the decision's own *compute*, *transport* to the worker "
+              "process and back, the fleet's delay check (*gate*), and *start*: from engaging to the first "
+              "setpoint of the new reference, which takes effect at its start time (the trigger plus the "
+              "decision's expected duration, or plus a replan's when it replans first).", "",
+              "| decision | " + " | ".join(names) + " | slowest: ms (trigger) and its parts |",
+              "|---|" + "---|" * (len(names) + 1)]
+    for kind, split in summary.get("latency_parts_ms", {}).items():
+        cells = [f"{fmt(split[n]['p50'])} / {fmt(split[n]['p99'])}" if n in split else "-" for n in names]
+        slow = summary["slowest"][kind]
+        worst = ", ".join(f"{n} {slow['parts'][n]:.0f}" for n in names if n in slow["parts"])
+        lines.append(f"| {kind} | " + " | ".join(cells) + f" | {slow['ms']:.0f} ({slow['trigger']}): {worst} |")
     return "\n".join(lines) + "\n"
 
 

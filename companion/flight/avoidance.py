@@ -35,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import logging
+import math
 from typing import Callable, Protocol
 
 from companion.flight.active import ReferenceOwner
@@ -100,11 +101,33 @@ def active_trajectory(ref: ActiveReference | None) -> ActiveTrajectory | None:
 
 
 @dataclasses.dataclass
+class _Timing:
+    """Where a decision's latency went, on the executor's clock (s): asked (the trigger), sent
+    to a job, its result back, engaged (after the delay check)."""
+
+    trigger_s: float
+    submitted_s: float
+    returned_s: float = math.nan
+    engaged_s: float = math.nan
+
+    def parts_ms(self, first_sent_s: float, decide_ms: float) -> dict[str, float]:
+        """``queued`` (waiting for the decision before it), ``compute`` (the decision's own),
+        ``transport`` (to the job and back, beyond its compute), ``gate`` (the delay check) and
+        ``start`` (engaged to its first setpoint: the new reference takes effect at its start
+        time, the decision's expected duration after the trigger), in ms."""
+        ms = lambda a, b: round((b - a) * 1000.0, 2)     # noqa: E731
+        job = ms(self.submitted_s, self.returned_s)
+        return {"queued": ms(self.trigger_s, self.submitted_s), "compute": round(decide_ms, 2),
+                "transport": round(job - decide_ms, 2), "gate": ms(self.returned_s, self.engaged_s),
+                "start": ms(self.engaged_s, first_sent_s)}
+
+
+@dataclasses.dataclass
 class _Pending:
     ref: ActiveReference
     decision: object
     event: dict
-    trigger_mono_s: float
+    timing: _Timing
     deadline_mono_s: float
 
 
@@ -234,13 +257,14 @@ class Avoidance:
         if trigger is not Trigger.RESUME and self._stays_clear(obs):
             self._next()                        # the usual tick or report: nothing for a worker to do
             return
-        if trigger is not Trigger.RESUME and self.alerts is not None:
-            self.alerts.check()                 # a conflict: the ground station hears of it first
         self._busy = True
         asked = (self.leg, self.owner.current, self.state)
+        timing = _Timing(trigger_mono_s, self.monotonic_s())
         self.jobs.submit("decision", self.steps.decide, (self.state, obs, self.leg, self.policy),
-                         done=functools.partial(self._decided, asked, trigger, trigger_mono_s, answered),
+                         done=functools.partial(self._decided, asked, trigger, timing, answered),
                          failed=functools.partial(self._failed, answered))
+        if trigger is not Trigger.RESUME and self.alerts is not None:
+            self.alerts.check()                 # a conflict: told while the decision is made
 
     def _stays_clear(self, obs: Observation) -> bool:
         """The active reference stays clear of the observed threats: proven by the screen
@@ -255,15 +279,16 @@ class Avoidance:
         return obs.active is not None and self.screen.proves_clear(obs.active, obs.threats, obs.t_s,
                                                                    self.leg.world.dim)
 
-    def _decided(self, asked, trigger: Trigger, trigger_mono_s: float, answered, result) -> None:
+    def _decided(self, asked, trigger: Trigger, timing: _Timing, answered, result) -> None:
         leg, ref, sent = asked
+        timing.returned_s = self.monotonic_s()
         self._busy = False
         decision = None
         try:
             decision, state = result
             self._adopt(state, sent)
             if leg is self.leg and ref is self.owner.current:
-                self._apply(decision, trigger, trigger_mono_s)
+                self._apply(decision, trigger, timing)
             elif self.owner.current is not None:
                 log.info("decision %s dropped: the reference changed while deciding", decision.kind)
         except Exception:  # noqa: BLE001 - a failed decision must not stop the flight
@@ -304,7 +329,7 @@ class Avoidance:
             self._request(trigger, mono)
 
     # ------------------------------------------------------------------ engaging and telling
-    def _apply(self, decision, trigger: Trigger, trigger_mono_s: float) -> None:
+    def _apply(self, decision, trigger: Trigger, timing: _Timing) -> None:
         """Engage the decision's trajectory (after the delay check), then tell it; a decision
         without a new reference (``none``) is logged only."""
         if decision.trajectory is None:
@@ -312,22 +337,22 @@ class Avoidance:
                       decision.reason, decision.decide_ms)
             return
         current = self.owner.current
-        proceed = functools.partial(self._commit, decision, trigger, trigger_mono_s, current)
+        proceed = functools.partial(self._commit, decision, trigger, timing, current)
         if self.commit_gate is None:
             proceed()
         else:
             self.commit_gate.check(decision, proceed)
 
-    def _commit(self, decision, trigger: Trigger, trigger_mono_s: float, expected) -> None:
+    def _commit(self, decision, trigger: Trigger, timing: _Timing, expected) -> None:
         if self.owner.current is not expected:
             log.info("decision %s dropped: the reference changed during the delay check", decision.kind.value)
             return
+        timing.engaged_s = self.monotonic_s()
         ref = self.owner.engage(decision.trajectory, decision.path_id, t0_s=decision.start_t_s,
                                 resume=bool(decision.resume))
         self.send_now()
         event = self._event(decision, trigger)
-        self._told.append(_Pending(ref, decision, event, trigger_mono_s,
-                                   self.monotonic_s() + FIRST_SETPOINT_WAIT_S))
+        self._told.append(_Pending(ref, decision, event, timing, self.monotonic_s() + FIRST_SETPOINT_WAIT_S))
         self.tell_engaged(self.monotonic_s())
         self.refresh_alternatives()
 
@@ -342,10 +367,11 @@ class Avoidance:
             if sent is None and now_mono_s < p.deadline_mono_s:
                 waiting.append(p)
                 continue
-            latency_ms = None if sent is None else (sent - p.trigger_mono_s) * 1000.0
+            latency_ms = None if sent is None else (sent - p.timing.trigger_s) * 1000.0
+            parts = None if sent is None else p.timing.parts_ms(sent, p.decision.decide_ms)
             if latency_ms is not None:
                 self.latencies_ms.setdefault(p.decision.kind.value, []).append(latency_ms)
-            self._publish(p.decision, {**p.event, "latency_ms": latency_ms})
+            self._publish(p.decision, {**p.event, "latency_ms": latency_ms, "latency_parts_ms": parts})
         self._told = waiting
 
     def _event(self, decision, trigger: Trigger) -> dict:

@@ -152,6 +152,10 @@ class Decision:
         How many candidates of each kind were judged.
     min_clearance_m : float
         The chosen candidate's minimum clearance over the horizon (m; negative: it intrudes).
+    branch : str
+        How it was decided: ``fast`` (the fast step: milliseconds), ``replan`` (the conflict was
+        far enough to replan first: the candidates start after the fast step and a replan, and
+        an evasion chosen then took that long) or ``resume`` (a way back to the mission).
     """
 
     kind: DecisionKind
@@ -167,6 +171,7 @@ class Decision:
     label: str = ""
     candidates: dict = field(default_factory=dict)
     min_clearance_m: float = math.inf
+    branch: str = "fast"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kind", DecisionKind(self.kind))
@@ -177,7 +182,7 @@ class Decision:
         kind = self.kind.value
         out = {"event": kind, "reason": self.reason, "path_id": self.path_id,
                "label": self.label or kind, "decide_ms": round(self.decide_ms, 3),
-               "plan_ms": round(self.plan_ms, 3),
+               "plan_ms": round(self.plan_ms, 3), "branch": self.branch,
                "candidates": {str(k): int(n) for k, n in self.candidates.items()},
                "min_clearance_m": (round(self.min_clearance_m, 3)
                                    if math.isfinite(self.min_clearance_m) else None)}

@@ -192,7 +192,7 @@ def _on_threats(state: DecisionState, obs: Observation, leg: LegContext, policy:
         cands, state = _replan(state, slow, policy)
         if hybrid:
             cands += gen.evade_candidates(slow, _remaining_s(slow, active))
-        return _finish(state, slow, keep, cands, what, t0, active, policy)
+        return _finish(state, slow, keep, cands, what, t0, active, policy, branch="replan")
     state = replace(state, fast_estimate=state.fast_estimate.updated(time.perf_counter() - t0, s.estimate_gain))
     return _finish(state, fast, keep, cands, what, t0, active, policy)
 
@@ -214,8 +214,8 @@ def _resume(state: DecisionState, obs: Observation, leg: LegContext, policy: Dec
     best = choose([c for c in _sane(cands) if c.clear], s.clearance_weight_s_m, s.clearance_cap_m)
     if best is None:
         return Decision(DecisionKind.NONE, "no clear way back to the mission yet", decide_ms=_ms_since(t0),
-                        resume=True, candidates=_counts(cands)), state
-    return _engage(state, sit, best, "back to the mission", None, cands, t0)
+                        resume=True, candidates=_counts(cands), branch="resume"), state
+    return _engage(state, sit, best, "back to the mission", None, cands, t0, branch="resume")
 
 
 def _fast_candidates(sit: gen.Situation, active: ActiveTrajectory, alternatives,
@@ -254,18 +254,18 @@ def _replan(state: DecisionState, sit: gen.Situation, policy: DecisionPolicy):
 
 
 def _finish(state: DecisionState, sit: gen.Situation, keep: Candidate, cands: list[Candidate], what: str,
-            t0: float, active: ActiveTrajectory, policy: DecisionPolicy):
+            t0: float, active: ActiveTrajectory, policy: DecisionPolicy, branch: str = "fast"):
     s = policy.settings
     best = choose(_sane(cands), s.clearance_weight_s_m, s.clearance_cap_m)
     if best is None or (not best.clear and best.min_clearance_m < keep.min_clearance_m + BETTER_BY_M):
         return Decision(DecisionKind.NONE, f"{what}: no candidate better than the active reference",
                         decide_ms=_ms_since(t0), resume=active.ends_short, conflict=keep.conflict,
-                        candidates=_counts(cands), min_clearance_m=keep.min_clearance_m), state
-    return _engage(state, sit, best, what, keep.conflict, cands, t0)
+                        candidates=_counts(cands), min_clearance_m=keep.min_clearance_m, branch=branch), state
+    return _engage(state, sit, best, what, keep.conflict, cands, t0, branch)
 
 
 def _engage(state: DecisionState, sit: gen.Situation, best: Candidate, what: str, conflict, cands,
-            t0: float) -> tuple[Decision, DecisionState]:
+            t0: float, branch: str = "fast") -> tuple[Decision, DecisionState]:
     """The decision to fly ``best`` from the situation's time, and the state after it."""
     state = replace(state, counter=state.counter + 1)
     kind = DecisionKind(best.kind)
@@ -275,7 +275,7 @@ def _engage(state: DecisionState, sit: gen.Situation, best: Candidate, what: str
     decision = Decision(kind, f"{what}: {best.label} ({clear})", best.trajectory, sit.ref.t_s,
                         path_id, best.path_ned_m, conflict, plan_ms=_ms_since(t0),
                         resume=best.ends_short, label=best.label, candidates=_counts(cands),
-                        min_clearance_m=best.min_clearance_m)
+                        min_clearance_m=best.min_clearance_m, branch=branch)
     decision = replace(decision, decide_ms=_ms_since(t0))
     log.info("threat decision %s (%s) path %s: decide %.1f ms", kind.value, decision.reason,
              path_id, decision.decide_ms)

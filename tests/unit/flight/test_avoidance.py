@@ -320,6 +320,10 @@ def test_a_threat_decision_is_engaged_published_recorded_and_told():
         event = h.bus.events[0]
         assert event["event"] == "replan" and event["trigger"] == "threat" and event["label"] == "replan"
         assert event["latency_ms"] >= 0.0 and event["leg"] == 1 and event["threat_id"] == "p1"
+        parts = event["latency_parts_ms"]                    # where the latency went, summing to it
+        assert set(parts) == {"queued", "compute", "transport", "gate", "start"}
+        assert all(v >= -0.01 for k, v in parts.items() if k != "transport") and parts["transport"] > -1.0
+        assert sum(parts.values()) == pytest.approx(event["latency_ms"], abs=0.1)
         assert h.engaged == [{"path_id": "replan-1", "t0_s": 5.0, "resume": False}]
         assert h.reference.first_sent_monotonic_s >= receipt
         assert h.manager.calls[0][:2] == ("on_threats", ("p1",))

@@ -260,3 +260,20 @@ def test_kinds_in_events_are_plain_strings(nominal):
     rejected = Decision(DecisionKind.REJECTED, "bad radius")
     assert type(rejected.as_event()["event"]) is str and rejected.kind is DecisionKind.REJECTED
     assert CandidateKind("none") is CandidateKind.KEEP and f"{Strategy.HYBRID}" == "hybrid"
+
+
+def test_each_decision_says_how_it_was_decided(nominal):
+    """``branch``: the fast step for a near conflict; a replan first for a far one that no fast
+    candidate clears to the goal (its latency is a replan's); ``resume`` for the way back."""
+    f = Flight(nominal)
+    t = 4.0
+    fast = f.decide([crossing(f, t)], t)
+    assert fast.kind == "retime" and fast.branch == "fast" and fast.as_event()["branch"] == "fast"
+    g = Flight(nominal, Strategy.REPLAN)
+    _, spot = ahead(g, 6.0, 8.0)
+    far = g.decide([Threat("p", "popup", "local_ned", tuple(spot), (0, 0, 0), 3.0, None, 6.0)], 6.0)
+    assert far.branch == "replan" and far.kind in ("replan", "none")
+    e = Flight(nominal, Strategy.EVADE)
+    d = e.decide([head_on(e, 6.0)], 6.0)
+    back = e.decide([head_on(e, 6.0)], d.start_t_s + d.trajectory.duration_s + 5.0, Trigger.RESUME)
+    assert back.branch == "resume"
