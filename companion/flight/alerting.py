@@ -188,29 +188,24 @@ class TrafficAlerts:
         t = self.now_s()
         told = self.told.get(uid)
         if told is None or told.cleared_t_s is not None:
-            approach = self._decision_approach(uid, t)
-            self.told[uid] = told = _Told(approach.level, action, self._traffic_of(uid, t), approach, t)
+            threat = next((th for th in self.threats(t) if _uid(th) == uid), None)
+            traffic = "drone" if threat is None else _traffic(threat)
+            approach = self._decision_approach(threat, t)
+            self.told[uid] = told = _Told(approach.level, action, traffic, approach, t)
             text = alert_statustext(uid, approach)
         else:
             told.action, told.sent_t_s, text = action, t, None
         self._tell(uid, told.traffic, told.approach, action, t, text)
 
-    def _decision_approach(self, uid: str, t_s: float) -> Approach:
-        """The approach of a decision's threat not alerted yet: as predicted now, at LOW at least
-        (the companion's own protected volume was predicted to be entered)."""
+    def _decision_approach(self, threat, t_s: float) -> Approach:
+        """The approach of a decision's threat not alerted yet (None: no longer held): as
+        predicted now, at LOW at least (the companion's own protected volume was predicted to be
+        entered)."""
         own = self._own_track(t_s)
-        threat = self._find(uid, t_s)
         if own is None or threat is None:
             return Approach(0.0, float("nan"), float("nan"), None, LOW)
         approach = self._approach(own, threat, t_s)
         return approach if approach.level != NONE else dataclasses.replace(approach, level=LOW)
-
-    def _find(self, uid: str, t_s: float):
-        return next((th for th in self.threats(t_s) if _uid(th) == uid), None)
-
-    def _traffic_of(self, uid: str, t_s: float) -> str:
-        threat = self._find(uid, t_s)
-        return "drone" if threat is None else _traffic(threat)
 
     def _tell(self, uid: str, traffic: str, approach: Approach, action: int, t_s: float, text) -> None:
         self.alerts += 1
