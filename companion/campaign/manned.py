@@ -25,8 +25,10 @@ __all__ = ["EMITTERS", "miss_weight", "draw_miss", "make_manned"]
 
 EMITTERS = {"rotorcraft": mavlink.ADSB_EMITTER_TYPE_ROTOCRAFT, "fixedwing": mavlink.ADSB_EMITTER_TYPE_LIGHT}
 ICAO_BASE = 0xA00000
-#: The flights go on this long after the unmitigated one ended (the mission is flown to its end).
-FLY_ON_S = 30.0
+#: The flights go on this long after the unmitigated one ended, so that the mission is flown to
+#: its end: a climb or descent out of a manned aircraft's well clear and the way back take a
+#: minute or more.
+FLY_ON_S = 120.0
 
 
 def _vmd_range(spec, own_alt_m: float) -> tuple[float, float]:

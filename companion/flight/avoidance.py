@@ -22,6 +22,10 @@
   run.
 - **Delay check** (other vehicles known): a decision's trajectory passes the ``CommitGate``
   before it is engaged.
+- **Manned traffic at 1 Hz.** When a decision finds nothing better than the reference against
+  a manned aircraft (its well clear volume cannot always be kept), the monitor does not ask
+  again on the same reports: the aircraft's next report (about 1 Hz), or
+  ``MANNED_REDECIDE_S``, does. A drone-scale conflict is decided again at every tick.
 - **Alerts** (``alerts`` settings given and enabled): the ``TrafficAlerts``
   (``companion.flight.alerting``) it owns predict the traffic against the reference at
   ``alerts.rate_hz`` (the schedule's ``alerts`` task), at once when the monitor finds a
@@ -43,7 +47,7 @@ from companion.flight.alerting import TrafficAlerts
 from companion.flight.ports import FlightSink, Jobs
 from companion.flight.reference import ActiveReference
 from companion.threats.decision.kinds import Trigger
-from companion.threats.decision.screen import MonitorScreen
+from companion.threats.decision.screen import MonitorScreen, same_reports
 from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
                                              Observation, active_conflict, decide, plan_alternatives_for)
 
@@ -53,6 +57,9 @@ log = logging.getLogger(__name__)
 
 #: How long a decision's event waits for the first setpoint of its reference (s, monotonic).
 FIRST_SETPOINT_WAIT_S = 1.0
+#: Longest wait (s, monotonic) before a manned conflict left unanswered is decided again on the
+#: same reports (the module docstring).
+MANNED_REDECIDE_S = 1.0
 
 
 class ThreatSource(Protocol):
@@ -185,6 +192,7 @@ class Avoidance:
         self.alternatives_skipped = 0
         self._busy = False
         self._queued: tuple[Trigger, float] | None = None
+        self._unanswered: tuple | None = None     # (reference, threat reports, until s): a manned stand-off
         self._resume_wanted: Callable | None = None
         self._told: list[_Pending] = []
         self._alt_busy = False
@@ -225,8 +233,20 @@ class Avoidance:
         decision first checks the active reference here, in process)."""
         if self.leg is None or self._busy or self._resume_wanted is not None or self.owner.current is None:
             return
-        if self.threats.any_known():
+        if self.threats.any_known() and not self._still_unanswered(now_mono_s):
             self._request(Trigger.MONITOR, now_mono_s)
+
+    def _still_unanswered(self, now_mono_s: float) -> bool:
+        """The last decision found nothing better against a manned aircraft, on the reference
+        and the very reports (identity) that the monitor would decide on again, not long ago."""
+        if self._unanswered is None:
+            return False
+        ref, reports, until_s = self._unanswered
+        same = ref is self.owner.current and now_mono_s < until_s and same_reports(
+            reports, tuple(self.threats.threats_at(self.now_s())))
+        if not same:
+            self._unanswered = None
+        return same
 
     def request_resume(self, answered: Callable[[object], None]) -> None:
         """Plan back to the leg's goal (the reference ended short of it); ``answered(decision)``
@@ -258,7 +278,7 @@ class Avoidance:
             self._next()                        # the usual tick or report: nothing for a worker to do
             return
         self._busy = True
-        asked = (self.leg, self.owner.current, self.state)
+        asked = (self.leg, self.owner.current, self.state, obs.threats)
         timing = _Timing(trigger_mono_s, self.monotonic_s())
         self.jobs.submit("decision", self.steps.decide, (self.state, obs, self.leg, self.policy),
                          done=functools.partial(self._decided, asked, trigger, timing, answered),
@@ -280,13 +300,15 @@ class Avoidance:
                                                                    self.leg.world.dim)
 
     def _decided(self, asked, trigger: Trigger, timing: _Timing, answered, result) -> None:
-        leg, ref, sent = asked
+        leg, ref, sent, reports = asked
         timing.returned_s = self.monotonic_s()
         self._busy = False
         decision = None
         try:
             decision, state = result
             self._adopt(state, sent)
+            self._unanswered = ((ref, reports, timing.returned_s + MANNED_REDECIDE_S)
+                                if _manned_unanswered(decision, reports) else None)
             if leg is self.leg and ref is self.owner.current:
                 self._apply(decision, trigger, timing)
             elif self.owner.current is not None:
@@ -442,3 +464,11 @@ class Avoidance:
     def _alternatives_failed(self, error: BaseException) -> None:
         log.error("refreshing the alternatives failed: %r", error)
         self._alt_busy = False
+
+
+def _manned_unanswered(decision, reports) -> bool:
+    """``decision`` kept the reference although it meets a manned aircraft of ``reports``."""
+    if decision.trajectory is not None or decision.conflict is None:
+        return False
+    return any(getattr(th, "uid", None) == decision.conflict.threat_id and getattr(th, "traffic", "drone") == "manned"
+               for th in reports)

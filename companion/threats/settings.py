@@ -17,6 +17,14 @@ Why these defaults (paper section 3.3, Fig. 5 and Fig. 8; R-50-class helicopter 
 - ``switch_range_m = 20``: the paper's switching range (Fig. 5).
 - escape manoeuvres at 2.5 m/s^2 horizontally and 1.5 m/s^2 vertically: the lateral limit of
   the smoothing settings, which the LQI tracks within a few decimetres.
+
+Manned traffic (``Threat.traffic == "manned"``: ADS-B) is another scale: a 50 m/s helicopter
+heard at 1 Hz from 2-3 km away, judged by the aviation volumes (well clear 2000 ft / 250 ft).
+Its tube is the well-clear cylinder (``manned_h_m`` across, ``manned_v_m`` up and down; in its
+clearance a metre of height counts as eight of distance), checked ``manned_horizon_s = 45`` s ahead
+from ``manned_range_m = 5000`` m away; its escapes coast for ``manned_coasts_s`` (10-30 s) and
+may use ``manned_vertical_room_m = 60`` above and below the leg, never below
+``min_altitude_m``. A drone-scale threat's decision is the same with or without these.
 """
 
 from __future__ import annotations
@@ -204,6 +212,23 @@ class ThreatSettings:
         Clearance bonus of the cost (s per m, up to the cap in m).
     estimate_gain : float
         Weight of a new measurement in the running estimate of the replanning time.
+    manned_h_m, manned_v_m : float
+        Radius and half-height of a manned aircraft's tube, a cylinder (m). Defaults 609.6 and
+        76.2 (well clear, 2000 ft and 250 ft; the inflation is added to the radius).
+    manned_horizon_s : float
+        Horizon of every check while a manned aircraft is within ``manned_range_m`` (s), at
+        least ``horizon_s``. Default 45.
+    manned_range_m : float
+        Manned aircraft farther than this (m) are ignored by the decision. Default 5000.
+    manned_step_s : float
+        Sample step of every check while a manned aircraft is near (s), when longer than
+        ``check_step_s`` and ``evade_step_s``: over a 45 s horizon, against a 610 m cylinder, a
+        chord error of a few decimetres costs nothing. Default 0.5.
+    manned_coasts_s : tuple of float
+        Coast durations of the escapes while a manned aircraft is near (s), with
+        ``evade_coasts_s``. Default (10, 20, 30).
+    manned_vertical_room_m : float
+        Room above and below the leg for escapes from a manned aircraft (m). Default 60.
     seed : int
         Seed of the manager's random generator when none is given.
     """
@@ -242,10 +267,17 @@ class ThreatSettings:
     clearance_weight_s_m: float = 1.0
     clearance_cap_m: float = 3.0
     estimate_gain: float = 0.2
+    manned_h_m: float = 609.6
+    manned_v_m: float = 76.2
+    manned_horizon_s: float = 45.0
+    manned_range_m: float = 5000.0
+    manned_step_s: float = 0.5
+    manned_coasts_s: tuple[float, ...] = (10.0, 20.0, 30.0)
+    manned_vertical_room_m: float = 60.0
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("vertical_offsets_m", "retime_rates", "retime_waits_s", "evade_coasts_s"):
+        for name in ("vertical_offsets_m", "retime_rates", "retime_waits_s", "evade_coasts_s", "manned_coasts_s"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
             for i, v in enumerate(getattr(self, name)):
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
@@ -258,11 +290,15 @@ class ThreatSettings:
             "horizon_s", "check_step_s", "evade_step_s", "replan_budget_s", "switch_range_m",
             "sensor_range_m", "switch_budget_s", "gart_budget_s", "entry_spacing_m",
             "gart_first_budget_s", "hold_decel_m_s2", "estimate_gain", "evade_speed_m_s",
-            "evade_accel_m_s2", "evade_vertical_accel_m_s2", "evade_climb_m_s", "evade_descent_m_s"),
+            "evade_accel_m_s2", "evade_vertical_accel_m_s2", "evade_climb_m_s", "evade_descent_m_s",
+            "manned_h_m", "manned_v_m", "manned_horizon_s", "manned_range_m", "manned_step_s"),
             non_negative=("inflation_m", "urgency_margin_s", "static_slack_m", "replan_turn_rad", "uncertainty_m_s",
-                          "uncertainty_max_m", "restart_s", "vertical_room_m", "min_altitude_m", "clearance_weight_s_m", "clearance_cap_m"))
+                          "uncertainty_max_m", "restart_s", "vertical_room_m", "manned_vertical_room_m", "min_altitude_m", "clearance_weight_s_m", "clearance_cap_m"))
         if self.horizon_s < 10.0:
             raise ConfigError(f"threats.horizon_s: must be >= 10 s (DESIGN 7.2), got {self.horizon_s!r}")
+        if self.manned_horizon_s < self.horizon_s:
+            raise ConfigError(f"threats.manned_horizon_s: must be >= horizon_s ({self.horizon_s!r}), "
+                              f"got {self.manned_horizon_s!r}")
         if self.replan_turn_rad >= math.pi:
             raise ConfigError(f"threats.replan_turn_rad: must be < pi, got {self.replan_turn_rad!r}")
         if self.estimate_gain > 1:

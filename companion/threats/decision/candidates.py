@@ -71,6 +71,9 @@ class Situation:
         Planner, smoother, limits, timer and checker of every new trajectory.
     lift_down_m : float or None
         Down coordinate of 2D candidates in a 3D flight.
+    horizon_s : float or None
+        Horizon of the checks (s; ``prediction.horizon_for`` the tubes' threats). None:
+        ``settings.horizon_s``.
     """
 
     ref: ReferenceState
@@ -81,13 +84,30 @@ class Situation:
     settings: ThreatSettings
     pipeline: TrajectoryPipeline
     lift_down_m: float | None = None
+    horizon_s: float | None = None
 
     @property
     def dim(self) -> int:
         return self.world.dim
 
-    def times(self, step_s: float) -> np.ndarray:
-        return sample_times(self.ref.t_s, self.settings.horizon_s, step_s)
+    @property
+    def check_horizon_s(self) -> float:
+        """The checks' horizon (s)."""
+        return self.settings.horizon_s if self.horizon_s is None else self.horizon_s
+
+    @property
+    def manned(self) -> bool:
+        """A manned aircraft is among the tubes (its volumes and escapes apply)."""
+        return any(tube.traffic == "manned" for tube in self.tubes)
+
+    def step_s(self, step_s: float) -> float:
+        """The check's sample step for a setting's ``step_s``: ``manned_step_s`` when longer and
+        a manned aircraft is near."""
+        return max(step_s, self.settings.manned_step_s) if self.manned else step_s
+
+    def times(self, step_s: float, extra_s: float = 0.0) -> np.ndarray:
+        """Check times over the horizon (plus ``extra_s``) every ``step_s(step_s)``."""
+        return sample_times(self.ref.t_s, self.check_horizon_s + extra_s, self.step_s(step_s))
 
     @property
     def accel_bound_m_s2(self) -> float:
@@ -189,8 +209,9 @@ def evade_candidates(sit: Situation, remaining_to_goal_s: float, *, brake_only: 
     and ``restart_s`` (stop, plan back, accelerate again).
     """
     s = sit.settings
+    coasts = s.evade_coasts_s + s.manned_coasts_s if sit.manned else s.evade_coasts_s
     lim = EscapeLimits(sit.escape_speed_m_s(), s.evade_accel_m_s2, s.evade_climb_m_s, s.evade_descent_m_s,
-                       s.evade_vertical_accel_m_s2, s.evade_coasts_s)
+                       s.evade_vertical_accel_m_s2, coasts)
     lib = escape_library(sit.ref.pos_ned_m, sit.ref.vel_ned_m_s, lim, vertical=sit.dim == 3,
                          away_from=_nearest_threat(sit))
     rank = lambda c: rank_key(c, s.clearance_weight_s_m, s.clearance_cap_m)   # noqa: E731
@@ -235,7 +256,7 @@ def retime_candidates(sit: Situation, active, active_start_t_s: float, remaining
     # one vectorised sampling of the base for every warp, over the horizon plus the longest
     # delay: a retime must not merely push a conflict beyond the horizon
     delay = max(c.trajectory.delay_s for c in out)
-    t = sample_times(sit.ref.t_s, s.horizon_s + delay, s.check_step_s)
+    t = sit.times(s.check_step_s, delay)
     taus = np.concatenate([c.trajectory.tau_at(t - sit.ref.t_s) for c in out])
     pos = np.atleast_2d(active.sample(taus)[0])[:, :sit.dim].reshape(len(out), t.size, sit.dim)
     res = check(sit, t, pos, static=False)                    # on the active, checked path
@@ -290,7 +311,7 @@ def static_spheres(sit: Situation, keep_free) -> list:
     out = []
     now = np.array([sit.ref.t_s])
     for tube in sit.tubes:
-        if tube.speed_m_s > 0.05:
+        if tube.speed_m_s > 0.05 or tube.traffic == "manned":
             continue
         c, r = tube.center_at(now)[0], float(tube.radius_at(now)[0])
         if math.isfinite(r) and _keeps_free(c, r, keep_free, sit.dim):
@@ -314,7 +335,7 @@ def meeting_obstacles(sit: Situation, active, active_start_t_s: float, keep_free
     t = sit.times(sit.settings.check_step_s)
     pos = positions_at(active, active_start_t_s, t, sit.dim)
     for tube in sit.tubes:
-        if tube.speed_m_s <= 0.05:
+        if tube.speed_m_s <= 0.05 or tube.traffic == "manned":
             continue
         dist = np.linalg.norm(pos - tube.center_at(t)[:, :sit.dim], axis=1) - tube.radius_at(t)
         k = int(np.argmin(dist))
@@ -369,6 +390,8 @@ def replan_candidates(sit: Situation, *, rng: np.random.Generator, path_id: str)
         if cand.clear or cand.conflict.threat_id == STATIC_ID:
             break
         tube = next(t for t in sit.tubes if t.threat_id == cand.conflict.threat_id)
+        if tube.traffic == "manned":            # a volume to keep out of in time, not an obstacle
+            break
         obstacles = obstacles + meeting_spheres(sit, tube, cand.conflict.t_s, keep)
     if out and not any(c.clear for c in out) and lead is None:
         out += retimed_starts(sit, out[-1])        # from a hover: wait for the mover, then go

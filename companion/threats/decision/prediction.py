@@ -9,6 +9,15 @@ where ``inflation_m`` stands for the rotor radius plus a margin and the last ter
 the prediction time of a *moving* threat (a static pop-up stays where it was reported). The
 radius never shrinks with t, so checking an interval against its later end is conservative.
 
+A manned aircraft (``traffic == "manned"``, ADS-B) is judged by the aviation volumes, not by a
+sphere about its airframe: its tube is the well-clear *cylinder*, of radius ``r(t)`` (the well
+clear distance ``ThreatSettings.manned_h_m`` plus the inflation and the growth) and half-height
+``manned_v_m``. Its clearance is ``max(h - r, vertical_scale (v - manned_v_m))`` for a
+horizontal distance h and a vertical one v from its centre, with ``vertical_scale = manned_h_m
+/ manned_v_m``: in horizontal metres, a metre of height worth eight of distance
+(``spacetime.interval_clearance``). The decision looks at manned aircraft from farther away
+(``manned_range_m``) and further ahead (``manned_horizon_s``: ``horizon_for``).
+
 Pure: numpy only.
 """
 
@@ -19,7 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Tube", "TrajectoryTube", "along_samples", "predict_tubes", "STATIC_SPEED_M_S"]
+__all__ = ["Tube", "TrajectoryTube", "along_samples", "predict_tubes", "tubes_for", "horizon_for", "range_for",
+           "STATIC_SPEED_M_S"]
 
 #: A threat slower than this (m/s) counts as static: its tube does not grow.
 STATIC_SPEED_M_S = 0.05
@@ -46,6 +56,12 @@ class Tube:
         Uncertainty growth rate (m/s) and cap (m).
     expires_t_s : float
         After this time the tube is gone (inf without ttl).
+    half_height_m : float
+        A manned aircraft's cylinder: its half-height (m); inf: a ball (module docstring).
+    vertical_scale : float
+        The cylinder's horizontal metres per vertical metre of clearance.
+    traffic : str
+        ``drone`` or ``manned`` (``Threat.traffic``).
     """
 
     threat_id: str
@@ -57,6 +73,9 @@ class Tube:
     growth_m_s: float = 0.0
     growth_max_m: float = 0.0
     expires_t_s: float = math.inf
+    half_height_m: float = math.inf
+    vertical_scale: float = 1.0
+    traffic: str = "drone"
 
     def center_at(self, t_s: np.ndarray) -> np.ndarray:
         """Predicted centre (K, 3) at clock times ``t_s`` (K,)."""
@@ -119,6 +138,10 @@ class TrajectoryTube:
 
     #: The same growth and end as a threat's tube (the same attributes).
     radius_at = Tube.radius_at
+    #: Another vehicle of the fleet is a ball at drone scale.
+    half_height_m = math.inf
+    vertical_scale = 1.0
+    traffic = "drone"
 
     @property
     def speed_m_s(self) -> float:
@@ -129,8 +152,29 @@ class TrajectoryTube:
         return float(step.max())
 
 
+def range_for(threat, settings) -> float:
+    """How far (m) the decision looks for ``threat``: ``manned_range_m`` for manned traffic,
+    else ``sensor_range_m`` (``ThreatSettings``)."""
+    return settings.manned_range_m if getattr(threat, "traffic", "drone") == "manned" else settings.sensor_range_m
+
+
+def horizon_for(threats, settings) -> float:
+    """The check's horizon (s) against ``threats``: ``manned_horizon_s`` when one of them is
+    manned traffic, else ``horizon_s``."""
+    manned = any(getattr(th, "traffic", "drone") == "manned" for th in threats)
+    return settings.manned_horizon_s if manned else settings.horizon_s
+
+
+def tubes_for(threats, settings) -> list[Tube]:
+    """``predict_tubes`` with the policy's inflation, growth and manned volume
+    (``ThreatSettings``)."""
+    return predict_tubes(threats, inflation_m=settings.inflation_m, uncertainty_m_s=settings.uncertainty_m_s,
+                         uncertainty_max_m=settings.uncertainty_max_m,
+                         manned_axes_m=(settings.manned_h_m, settings.manned_v_m))
+
+
 def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
-                  uncertainty_max_m: float = 0.0) -> list[Tube]:
+                  uncertainty_max_m: float = 0.0, manned_axes_m: tuple[float, float] | None = None) -> list[Tube]:
     """Tubes of ``threats`` (local-frame ``Threat`` records) for the space-time check.
 
     Parameters
@@ -141,6 +185,9 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
         Rotor radius plus margin, added to every radius (m).
     uncertainty_m_s, uncertainty_max_m : float
         Growth of a moving threat's radius per second since its last update, and its cap.
+    manned_axes_m : (float, float), optional
+        Radius and half-height (m) of a manned aircraft's cylinder (module docstring). None:
+        manned traffic is a ball of its own radius, like any threat.
 
     Returns
     -------
@@ -149,7 +196,9 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
         last report stays valid, not when it goes away (a source that still sees it reports it
         again before then), and a candidate that only waits for it to expire (a retime in front
         of a pop-up) would wait for ever and be decided again and again. A mover's tube ends
-        when its report expires: its constant-velocity prediction is not trusted beyond.
+        when its report expires: its constant-velocity prediction is not trusted beyond. A manned
+        aircraft's lives over the whole (manned) horizon: its ttl is ADS-B's few seconds
+        between reports, after which the threat table drops a target no longer heard.
     """
     out = []
     for th in threats:
@@ -158,8 +207,13 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
             continue
         vel = np.asarray(th.velocity_ned_m_s, dtype=float)
         moving = float(np.linalg.norm(vel)) > STATIC_SPEED_M_S
+        radius, half_height, ends = float(th.radius_m), math.inf, th.expires_t_s if moving else math.inf
+        if manned_axes_m is not None and th.traffic == "manned":
+            radius, half_height = float(manned_axes_m[0]), float(manned_axes_m[1])
+            ends = math.inf                     # ADS-B's ttl drops a target not heard (the table's)
         out.append(Tube(th.uid, th.pos_ned_m, vel, float(th.received_t_s),
-                        float(th.radius_m) + inflation_m, float(th.radius_m),
+                        radius + inflation_m, float(th.radius_m),
                         uncertainty_m_s if moving else 0.0, uncertainty_max_m if moving else 0.0,
-                        th.expires_t_s if moving else math.inf))
+                        ends, half_height, radius / half_height if math.isfinite(half_height) else 1.0,
+                        th.traffic))
     return out

@@ -42,11 +42,11 @@ from functools import cached_property
 
 import numpy as np
 
-from companion.threats.decision.prediction import predict_tubes
+from companion.threats.decision.prediction import horizon_for, range_for, tubes_for
 from companion.threats.decision.spacetime import sample_times, segment_min_distance
 from companion.threats.decision.values import ActiveTrajectory
 
-__all__ = ["ReferenceTable", "MonitorScreen", "proves_clear", "CHUNK_S", "LEAD_S"]
+__all__ = ["ReferenceTable", "MonitorScreen", "proves_clear", "same_reports", "CHUNK_S", "LEAD_S"]
 
 #: Reference time sampled at a time by a table (s): with a 15 s horizon, a new chunk about every
 #: 15 s of flight.
@@ -130,10 +130,11 @@ class ReferenceTable:
         return self.end_speed_m_s * self.step_s / 2.0
 
 
-def _near(threats, t_s: float, pos: np.ndarray, dim: int, range_m: float) -> list:
-    """Unexpired threats within ``range_m`` of ``pos`` now (``step._relevant``'s test)."""
-    return [th for th in threats if th.expires_t_s > t_s and
-            float(np.linalg.norm(th.position_at(t_s)[:dim] - pos[:dim])) - th.radius_m <= range_m]
+def _near(threats, t_s: float, pos: np.ndarray, dim: int, settings, extra_m: float) -> list:
+    """Unexpired threats within their range (``prediction.range_for``) plus ``extra_m`` of
+    ``pos`` now (``step._relevant``'s test)."""
+    return [th for th in threats if th.expires_t_s > t_s and float(np.linalg.norm(
+        th.position_at(t_s)[:dim] - pos[:dim])) - th.radius_m <= range_for(th, settings) + extra_m]
 
 
 def _radius_living_on(tube, t: np.ndarray, extra_s: float) -> np.ndarray:
@@ -147,11 +148,14 @@ def _radius_living_on(tube, t: np.ndarray, extra_s: float) -> np.ndarray:
 def _clear_of_tubes(pos: np.ndarray, t: np.ndarray, threats, settings, margin_m: np.ndarray, ahead: int) -> bool:
     """Every interval's clearance from every threat's tube, less ``margin_m`` (K-1,) and the
     largest radius of the interval's ends and the ``ahead`` grid points after it (the tube living
-    ``ahead`` steps longer), stays >= 0."""
-    tubes = predict_tubes(threats, inflation_m=settings.inflation_m, uncertainty_m_s=settings.uncertainty_m_s,
-                          uncertainty_max_m=settings.uncertainty_max_m)
+    ``ahead`` steps longer), stays >= 0. Never for a manned aircraft's cylinder: the check's
+    clearance of it is a bound that depends on its sample times, so no proof on other times
+    stands for it (the check decides)."""
+    tubes = tubes_for(threats, settings)
     dim = pos.shape[1]
     n = t.size - 1 - ahead
+    if any(math.isfinite(tube.half_height_m) for tube in tubes):
+        return False
     for tube in tubes:
         rel = pos - tube.center_at(t)[:, :dim]
         radius = tube.radius_at(t) if not ahead else _radius_living_on(tube, t, ahead * (t[1] - t[0]))
@@ -186,11 +190,11 @@ def proves_clear(table: ReferenceTable, threats, t_s: float, settings, accel_bou
         return False                        # the check names the error
     dim = table.dim
     err_m = table.error_m(accel_bound_m_s2)
-    t = sample_times(t_s, settings.horizon_s, settings.check_step_s)
-    pos = table.positions_at(t)
-    near = _near(threats, t_s, pos[0], dim, settings.sensor_range_m + err_m)
+    near = _near(threats, t_s, table.positions_at(np.array([t_s]))[0], dim, settings, err_m)
     if not near:
         return True
+    t = sample_times(t_s, horizon_for(near, settings), settings.check_step_s)
+    pos = table.positions_at(t)
     dt = np.diff(t)
     return _clear_of_tubes(pos, t, near, settings, accel_bound_m_s2 * dt * dt / 8.0 + err_m, 0)
 
@@ -221,7 +225,7 @@ class MonitorScreen:
         if self.table is None or not self.table.describes(active, step_s, dim):
             self.table, self._proof = ReferenceTable(active, step_s, dim), None
         threats = tuple(threats)
-        if self._proof is not None and t_s <= self._proof[1] and _same(self._proof[0], threats):
+        if self._proof is not None and t_s <= self._proof[1] and same_reports(self._proof[0], threats):
             self.standing += 1
             return True
         if self._proves_ahead(threats, t_s):
@@ -235,7 +239,7 @@ class MonitorScreen:
         if any(th.frame != "local_ned" for th in threats):
             return False
         s = self.settings
-        n = max(2, int(math.ceil((s.horizon_s + self.lead_s) / s.check_step_s)) + 2)
+        n = max(2, int(math.ceil((horizon_for(threats, s) + self.lead_s) / s.check_step_s)) + 2)
         t = t_s + s.check_step_s * np.arange(n)
         kink_m = self.table.kink_m(float(t[0]), float(t[-1]))
         if kink_m is None:
@@ -249,6 +253,6 @@ class MonitorScreen:
         return _clear_of_tubes(pos, t, live, s, margin, 1)
 
 
-def _same(a: tuple, b: tuple) -> bool:
+def same_reports(a: tuple, b: tuple) -> bool:
     """The very same reports (identity: a new report is a new object)."""
     return len(a) == len(b) and all(x is y for x, y in zip(a, b))

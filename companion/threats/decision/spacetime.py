@@ -14,6 +14,12 @@ over a piece of length L between points of clearance c_a and c_b it stays above
 ``(c_a + c_b - L) / 2`` (each chord is cut into ``STATIC_SUBSTEPS`` pieces); candidates may use ``static_slack_m`` of the safety margin (never more
 than half of it).
 
+A manned aircraft's tube is the well-clear cylinder (``prediction``), whose clearance
+``max(h - r, scale (v - half_height))`` has no closed form on an interval. It is 1-Lipschitz in
+the norm ``|(dh, scale dv)|``, so over an interval whose relative chord has that length L it stays
+above ``(c_a + c_b - L) / 2`` (as the static world's); the vehicle's chord error counts ``scale``
+times.
+
 Clearance is positive outside every inflated tube and obstacle. Candidates that intrude are
 ranked by the intrusion integral ``sum(max(0, -c)^2 dt)`` (deep intrusions weigh most), which
 also rewards getting out fast when a pop-up appears around the vehicle.
@@ -29,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["Conflict", "BatchCheck", "check_candidates", "segment_min_distance", "sample_times",
-           "STATIC_ID"]
+           "STATIC_ID", "interval_clearance"]
 
 #: ``Conflict.threat_id`` of a conflict with the static world (obstacle or bounds).
 STATIC_ID = "static"
@@ -103,12 +109,33 @@ def segment_min_distance(r0: np.ndarray, r1: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("...i,...i->...", closest, closest))
 
 
-def _tube_clearance(t_s, pos, tube, dim: int) -> np.ndarray:
-    """Clearance (C, K-1) of every interval from one tube."""
+def interval_clearance(rel: np.ndarray, reach_m: np.ndarray, tube) -> np.ndarray:
+    """Clearance (..., K-1) of every interval of relative positions ``rel`` (..., K, d) from the
+    tube's volume, whose radius on each interval is ``reach_m`` (K-1,): exact for a ball, a
+    lower bound for a manned aircraft's cylinder (module docstring; in 2D both are columns)."""
+    if not math.isfinite(tube.half_height_m) or rel.shape[-1] != 3:
+        return segment_min_distance(rel[..., :-1, :], rel[..., 1:, :]) - reach_m
+    scale = tube.vertical_scale
+    h = np.linalg.norm(rel[..., :2], axis=-1)
+    v = scale * (np.abs(rel[..., 2]) - tube.half_height_m)
+    ends = np.maximum(h[..., :-1] - reach_m, v[..., :-1]), np.maximum(h[..., 1:] - reach_m, v[..., 1:])
+    step = np.diff(rel, axis=-2) * np.array([1.0, 1.0, scale])
+    return 0.5 * (ends[0] + ends[1] - np.linalg.norm(step, axis=-1))
+
+
+def chord_scale(tube, dim: int) -> float:
+    """How many times the vehicle's chord error counts in the tube's clearance."""
+    return max(tube.vertical_scale, 1.0) if dim == 3 else 1.0
+
+
+def _tube_clearance(t_s, pos, tube, dim: int, chord_err: np.ndarray) -> np.ndarray:
+    """Clearance (C, K-1) of every interval from one tube, less the part of the chord error
+    (K-1,) that a manned aircraft's scale adds (the caller takes the chord error itself off
+    every clearance)."""
     rel = pos[:, :, :dim] - tube.center_at(t_s)[None, :, :dim]
-    dist = segment_min_distance(rel[:, :-1], rel[:, 1:])
     radius = tube.radius_at(t_s)
-    return dist - np.maximum(radius[:-1], radius[1:])[None, :]
+    clearance = interval_clearance(rel, np.maximum(radius[:-1], radius[1:])[None, :], tube)
+    return clearance - (chord_scale(tube, dim) - 1.0) * chord_err[None, :]
 
 
 #: Pieces a chord near the static world is cut into, and what "near" is (m).
@@ -199,7 +226,7 @@ def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: flo
     source = np.full((c_n, k_n - 1), -1)
     sources = [tube.threat_id for tube in tubes] + [STATIC_ID]
     for i, tube in enumerate(tubes):
-        c = _tube_clearance(t, pos, tube, dim)
+        c = _tube_clearance(t, pos, tube, dim, chord_err)
         closer = c < clearance
         clearance = np.where(closer, c, clearance)
         source = np.where(closer, i, source)

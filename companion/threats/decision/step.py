@@ -16,8 +16,10 @@ returned state.
   chosen by the same cost (``choice.choose``). With ``hybrid`` the fast candidates (evade and
   hold, retime, switch: milliseconds) are always generated; when none of them reaches the goal
   clear (retime, switch) and the conflict is further away than the measured replanning time, a
-  replan joins them. A candidate that still intrudes replaces the active reference only when
-  it is strictly better, so the same answer is never decided twice (once the caller engages it).
+  replan joins them (not against a manned aircraft: its well-clear cylinder is kept by the fast
+  candidates, which see it, where a planner only sees obstacles). A candidate that still intrudes replaces the active reference only when
+  it is strictly better over the same window (from the time it would start), so the same answer
+  is never decided twice (once the caller engages it).
 - ``decide`` with the ``resume`` trigger (after an evasion or a hold has ended in a hover):
   plan back to the mission (replan through time, waiting for a mover where that is cheapest,
   or switch).
@@ -45,7 +47,7 @@ from companion.threats.decision import candidates as gen
 from companion.threats.decision.alternatives import Alternative, airspace_for, plan_alternatives
 from companion.threats.decision.choice import Candidate, Decision, ReferenceState, choose
 from companion.threats.decision.kinds import CandidateKind, DecisionKind, Strategy, Trigger
-from companion.threats.decision.prediction import predict_tubes
+from companion.threats.decision.prediction import horizon_for, range_for, tubes_for
 from companion.threats.decision.spacetime import Conflict
 from companion.threats.decision.values import (ActiveTrajectory, DecisionError, DecisionPolicy, DecisionState,
                                                LegContext, Observation)
@@ -82,8 +84,9 @@ def reference_state(active: ActiveTrajectory, t_s: float) -> ReferenceState:
     return ReferenceState(float(t_s), pos, vel, acc, yaw)
 
 
-def _relevant(threats, t_s: float, pos: np.ndarray, dim: int, sensor_range_m: float) -> list:
-    """Local, unexpired threats within the sensor range of ``pos`` now."""
+def _relevant(threats, t_s: float, pos: np.ndarray, dim: int, settings) -> list:
+    """Local, unexpired threats within their range of ``pos`` now (``prediction.range_for``:
+    the sensor range, or the manned one)."""
     out = []
     for th in threats:
         if th.frame != "local_ned":
@@ -91,7 +94,7 @@ def _relevant(threats, t_s: float, pos: np.ndarray, dim: int, sensor_range_m: fl
                                 f"(ThreatTable(home=...))")
         if th.expires_t_s <= t_s:
             continue
-        if float(np.linalg.norm(th.position_at(t_s)[:dim] - pos[:dim])) - th.radius_m <= sensor_range_m:
+        if float(np.linalg.norm(th.position_at(t_s)[:dim] - pos[:dim])) - th.radius_m <= range_for(th, settings):
             out.append(th)
     return out
 
@@ -102,14 +105,14 @@ def _situation(t_s: float, obs: Observation, leg: LegContext, policy: DecisionPo
         return None
     ref = reference_state(obs.active, t_s)
     s, dim = policy.settings, leg.world.dim
-    tubes = predict_tubes(_relevant(obs.threats, t_s, ref.pos_ned_m, dim, s.sensor_range_m),
-                          inflation_m=s.inflation_m, uncertainty_m_s=s.uncertainty_m_s,
-                          uncertainty_max_m=s.uncertainty_max_m)
+    relevant = _relevant(obs.threats, t_s, ref.pos_ned_m, dim, s)
+    tubes = tubes_for(relevant, s)
+    room_m = s.manned_vertical_room_m if any(tube.traffic == "manned" for tube in tubes) else s.vertical_room_m
     lift = float(ref.pos_ned_m[2]) if dim == 2 and ref.pos_ned_m.shape[0] == 3 else None
     here = [ref.pos_ned_m[:dim]]
-    return gen.Situation(ref, tubes, airspace(leg.world, leg.world_key, here, s),
+    return gen.Situation(ref, tubes, airspace(leg.world, leg.world_key, here, s, room_m),
                          planning_slab(leg.world, leg.world_key, here), leg.goal_ned_m, s, policy.pipeline,
-                         lift)
+                         lift, horizon_for(relevant, s))
 
 
 def _remaining_s(sit: gen.Situation, active: ActiveTrajectory) -> float:
@@ -186,7 +189,8 @@ def _on_threats(state: DecisionState, obs: Observation, leg: LegContext, policy:
     stop_s = float(np.linalg.norm(fast.ref.vel_ned_m_s)) / s.evade_accel_m_s2
     urgent = ttc <= slow_lead + stop_s + s.urgency_margin_s
     hybrid = policy.strategy is Strategy.HYBRID
-    if policy.strategy is Strategy.REPLAN or (hybrid and not continues and not urgent):
+    if policy.strategy is Strategy.REPLAN or (hybrid and not continues and not urgent
+                                              and not _meets_manned(sit, keep.conflict)):
         # there is time to replan: plan from where the vehicle will be when it is done
         slow = _situation(obs.t_s + slow_lead, obs, leg, policy)
         cands, state = _replan(state, slow, policy)
@@ -195,6 +199,12 @@ def _on_threats(state: DecisionState, obs: Observation, leg: LegContext, policy:
         return _finish(state, slow, keep, cands, what, t0, active, policy, branch="replan")
     state = replace(state, fast_estimate=state.fast_estimate.updated(time.perf_counter() - t0, s.estimate_gain))
     return _finish(state, fast, keep, cands, what, t0, active, policy)
+
+
+def _meets_manned(sit: gen.Situation, conflict: Conflict) -> bool:
+    """The conflict is with a manned aircraft: its cylinder is no obstacle a replan could plan
+    around (it moves at 50 m/s), so the fast candidates answer it."""
+    return any(tube.threat_id == conflict.threat_id and tube.traffic == "manned" for tube in sit.tubes)
 
 
 def _resume(state: DecisionState, obs: Observation, leg: LegContext, policy: DecisionPolicy):
@@ -257,7 +267,9 @@ def _finish(state: DecisionState, sit: gen.Situation, keep: Candidate, cands: li
             t0: float, active: ActiveTrajectory, policy: DecisionPolicy, branch: str = "fast"):
     s = policy.settings
     best = choose(_sane(cands), s.clearance_weight_s_m, s.clearance_cap_m)
-    if best is None or (not best.clear and best.min_clearance_m < keep.min_clearance_m + BETTER_BY_M):
+    # an intruding candidate is compared with the active reference over its own window (from the
+    # situation's time): inside a receding tube, the reference is as good from then on
+    if best is None or (not best.clear and best.min_clearance_m < _keep_at(sit, active).min_clearance_m + BETTER_BY_M):
         return Decision(DecisionKind.NONE, f"{what}: no candidate better than the active reference",
                         decide_ms=_ms_since(t0), resume=active.ends_short, conflict=keep.conflict,
                         candidates=_counts(cands), min_clearance_m=keep.min_clearance_m, branch=branch), state

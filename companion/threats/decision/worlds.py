@@ -19,17 +19,20 @@ from companion.world import World
 
 __all__ = ["airspace", "planning_slab", "MEMO_SIZE"]
 
-#: Leg worlds (times two kinds) whose widened worlds are kept.
-MEMO_SIZE = 8
+#: Widened worlds kept (a few leg worlds, each as a slab and an airspace or two: the manned
+#: traffic's has more room).
+MEMO_SIZE = 12
 
 _memo: "OrderedDict[tuple[str, str], tuple[tuple, World]]" = OrderedDict()
 
 
-def airspace(world: World, world_key: str, points, settings) -> World:
-    """``world`` widened to contain ``points`` with ``settings.vertical_room_m`` above and below,
-    never lower than ``settings.min_altitude_m`` (``ThreatSettings``)."""
-    return _widened(world, world_key, "airspace", points,
-                    lambda: airspace_for(world, points, settings.vertical_room_m, -settings.min_altitude_m))
+def airspace(world: World, world_key: str, points, settings, room_m: float | None = None) -> World:
+    """``world`` widened to contain ``points`` with ``room_m`` (default
+    ``settings.vertical_room_m``) above and below, never lower than ``settings.min_altitude_m``
+    (``ThreatSettings``)."""
+    room = settings.vertical_room_m if room_m is None else float(room_m)
+    return _widened(world, world_key, f"airspace {room:g}", points,
+                    lambda: airspace_for(world, points, room, -settings.min_altitude_m))
 
 
 def planning_slab(world: World, world_key: str, points) -> World:

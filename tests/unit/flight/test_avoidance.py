@@ -284,9 +284,9 @@ class Harness:
         self.avoidance.request_resume(lambda d: answer.done() or answer.set_result(d))
         return await answer
 
-    def put(self, tid, pos=(6.0, 0.0, -10.0), received_mono_s=None):
+    def put(self, tid, pos=(6.0, 0.0, -10.0), received_mono_s=None, traffic="drone"):
         """A pop-up on the reference (by default): the monitor's check finds a conflict."""
-        threat = Threat(tid, "popup", "local_ned", pos, radius_m=3.0, received_t_s=5.0)
+        threat = Threat(tid, "popup", "local_ned", pos, radius_m=3.0, received_t_s=5.0, traffic=traffic)
         self.bus.handler(ThreatUpdate("put", tid, threat, None, f"uav/1/threats/{tid}", 5.0,
                                       time.monotonic() if received_mono_s is None else received_mono_s, 1))
 
@@ -495,6 +495,31 @@ def test_the_monitor_skips_ticks_while_a_decision_is_under_way():
         h.manager.gate.set()
         await until(lambda: len(h.manager.calls) >= 3, "monitor checks after the decision")
         assert h.manager.max_running == 1
+
+    run(main, h)
+
+
+def test_a_manned_conflict_left_unanswered_is_decided_again_on_the_next_report_not_every_tick():
+    """Nothing better than the reference against a manned aircraft: the monitor does not ask
+    again on the same reports (its ticks run every 10 ms), the aircraft's next report does; a
+    drone-scale conflict left unanswered is asked again at every tick."""
+    h = Harness(monitor_period_s=0.01)
+    unanswered = lambda tid: Decision("none", "no candidate better", conflict=Conflict(tid))  # noqa: E731
+
+    async def main(h):
+        await h.start()
+        h.manager.on_threats_script = [unanswered("adsb-a00001")] * 50
+        h.put("adsb-a00001", traffic="manned")
+        await until(lambda: len(h.manager.calls) >= 1, "the report's decision")
+        await asyncio.sleep(0.3)                 # 30 ticks on the same report
+        assert len(h.manager.calls) == 1
+        h.put("adsb-a00001", pos=(7.0, 0.0, -10.0), traffic="manned")
+        await until(lambda: len(h.manager.calls) >= 2, "the next report's decision")
+        await asyncio.sleep(0.3)
+        assert len(h.manager.calls) == 2
+        h.manager.on_threats_script = [unanswered("p1")] * 50
+        h.put("p1")
+        await until(lambda: len(h.manager.calls) >= 10, "a drone-scale conflict asked at every tick")
 
     run(main, h)
 

@@ -123,3 +123,47 @@ def test_static_clearance_is_exact_near_obstacles_and_a_lower_bound_far(seed):
     assert np.all(fast <= exact + 1e-9)
     near = fast < STATIC_REACH_M - world.margin_m
     np.testing.assert_allclose(fast[near], exact[near], atol=1e-9)
+
+
+MANNED_AXES = (609.6, 76.2)
+
+
+def _cylinder_clearance(rel: np.ndarray, radius_m: float, half_height_m: float, scale: float) -> np.ndarray:
+    """The manned cylinder's clearance at points (K, 3), straight from its definition."""
+    return np.maximum(np.linalg.norm(rel[:, :2], axis=1) - radius_m, scale * (np.abs(rel[:, 2]) - half_height_m))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.tuples(st.floats(-2000, 2000), st.floats(-2000, 2000), st.floats(-200, 200)),
+       st.tuples(st.floats(-60, 60), st.floats(-60, 60), st.floats(-8, 8)),
+       st.sampled_from([0.1, 0.25, 1.0, 3.0]))
+def test_a_manned_aircraft_is_never_falsely_clear_of_its_well_clear_cylinder(p0, v_rel, step_s):
+    """A manned aircraft's tube is the well-clear cylinder (2000 ft / 250 ft): the check's
+    clearance is a lower bound of the cylinder's own, sampled every millisecond, and a path that
+    enters the cylinder is never clear."""
+    threat = Threat("m", "moving", "local_ned", (0.0, 0.0, -100.0), (0.0, 0.0, 0.0), 25.0, None, 0.0,
+                    traffic="manned")
+    tube = predict_tubes([threat], inflation_m=0.0, manned_axes_m=MANNED_AXES)[0]
+    assert (tube.radius_m, tube.half_height_m, tube.bare_radius_m) == (609.6, 76.2, 25.0)
+    t = sample_times(0.0, 20.0, step_s)
+    own0 = np.array(p0) + np.array([0.0, 0.0, -100.0])
+    pos = own0[None, :] + t[:, None] * np.array(v_rel)[None, :]
+    res = check_candidates(t, pos, [tube], accel_bound_m_s2=0.0)
+    fine = np.arange(0.0, 20.0 + 1e-9, 0.001)
+    rel = np.array(p0)[None, :] + fine[:, None] * np.array(v_rel)[None, :]
+    true = _cylinder_clearance(rel, 609.6, 76.2, 609.6 / 76.2).min()
+    assert res.min_clearance_m[0] <= true + 1e-6
+    if true < 0:
+        assert not res.clear[0] and res.conflicts[0].threat_id == "m"
+
+
+def test_a_manned_tube_spans_the_horizon_and_a_drone_tube_is_unchanged():
+    manned = Threat("m", "moving", "local_ned", (0.0, 0.0, -100.0), (50.0, 0.0, 0.0), 25.0, 5.0, 0.0,
+                    traffic="manned")
+    drone = dataclasses.replace(manned, id="d", traffic="drone")
+    m, d = predict_tubes([manned, drone], inflation_m=2.0, manned_axes_m=MANNED_AXES)
+    assert m.expires_t_s == math.inf and m.radius_m == 611.6 and m.vertical_scale == 609.6 / 76.2
+    assert d.expires_t_s == 5.0 and d.radius_m == 27.0 and d.half_height_m == math.inf
+    # without the manned volume (another vehicle's check), manned traffic is a ball of its radius
+    plain = predict_tubes([manned], inflation_m=2.0)[0]
+    assert plain.radius_m == 27.0 and plain.half_height_m == math.inf

@@ -8,6 +8,7 @@ true constant-velocity track (not through the decision's own check).
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import json
 import math
 import pickle
@@ -277,3 +278,22 @@ def test_each_decision_says_how_it_was_decided(nominal):
     d = e.decide([head_on(e, 6.0)], 6.0)
     back = e.decide([head_on(e, 6.0)], d.start_t_s + d.trajectory.duration_s + 5.0, Trigger.RESUME)
     assert back.branch == "resume"
+
+
+def test_a_manned_aircraft_head_on_40_s_away_is_met_with_a_climb_out_of_its_nmac_volume(nominal):
+    """A 50 m/s manned aircraft at the helicopter's altitude, 2 km ahead (ADS-B's volumes, 40 s
+    to the closest approach): a drone-scale threat there is beyond the 15 s horizon, a manned
+    one is seen over 45 s and met at once with a climb. Judged on the true track every 10 ms:
+    never inside the NMAC cylinder (500 ft / 100 ft), and nearly out of well clear (2000 ft /
+    250 ft; the leg's airspace lets it climb 80 m)."""
+    manned = Threat("adsb-a00001", "moving", "local_ned", (2000.0, 0.0, -20.0), (-50.0, 0.0, 0.0), 25.0, 5.0, 0.0,
+                    traffic="manned")
+    drone = Flight(nominal).decide([dataclasses.replace(manned, traffic="drone")], 0.0)
+    assert drone.kind is DecisionKind.NONE
+    decision = Flight(nominal).decide([manned], 0.0)
+    assert decision.kind is DecisionKind.EVADE and "climb" in decision.label
+    t = np.arange(0.0, 60.0, 0.01)
+    rel = np.atleast_2d(decision.trajectory.sample(np.clip(t - decision.start_t_s, 0.0, None))[0]) - manned.position_at(t)
+    dh, dv = np.linalg.norm(rel[:, :2], axis=1), np.abs(rel[:, 2])
+    assert not np.any((dh < 152.4) & (dv < 30.48))
+    assert dv[np.argmin(dh)] > 0.9 * 76.2                          # ~70 m above as it passes
