@@ -5,8 +5,12 @@ The encounter is made from the campaign's spec exactly as its row was
 (``CampaignWorker.encounter``); then real processes fly it: ``sim-vehicle`` (home at the
 campaign's ``HOME``) and ``companion run`` with
 
-- the mission as a QGC WPL 110 file: takeoff to the leg's start altitude, the leg's goal, land;
-- the mission's world (obstacles and fences) as a world file, when it has any;
+- the mission as a QGroundControl ``.plan``: takeoff to the leg's start altitude, the leg's
+  goal, land, and the campaign world's airspace as the operator gives it (an inclusion fence on
+  its horizontal bounds; its ceiling in the companion's settings, ``--config``);
+- the mission's world as a world file: its obstacles, fences and bounds, the airspace fast time
+  flies in (without it the companion would make its own from the mission: 30 m about the route,
+  up to 120 m);
 - ``--foxglove PORT`` when asked.
 
 The intruders' reports are sent at their encounter times, counted from the instant the
@@ -34,6 +38,8 @@ from companion.campaign import judge
 from companion.campaign.delivery import adsb_reports, feed_updates
 from companion.campaign.flying import HOME, CampaignWorker
 from companion.campaign.tracks import Encounter
+from companion.mission.model import FencePolygon, MissionItem, MissionPlan
+from companion.mission.plan_file import write_plan_file
 from companion.record.flight_record import load_record
 from companion.sitl.vehicles import flight_processes
 from companion.threats.transport.bus import ThreatBus
@@ -84,20 +90,28 @@ class ReplayResult:
 
 
 def write_mission(mission, path: Path) -> Path:
-    """The campaign mission as QGC WPL 110 (takeoff, the leg's goal, land), home at ``HOME``."""
+    """The campaign mission as a QGroundControl ``.plan`` (takeoff, the leg's goal, land; home at
+    ``HOME``) whose airspace is the campaign world's, as an operator gives it: an inclusion fence
+    on its horizontal bounds. Its ceiling goes in the companion's settings (``mission_settings``)."""
     start, goal = mission.legs[0].start_ned_m, mission.goal_ned_m
     lat, lon, _ = HOME.to_lla(goal[0], goal[1], goal[2])
-    rows = [(0, 1, mavutil.mavlink.MAV_FRAME_GLOBAL, mavutil.mavlink.MAV_CMD_NAV_WAYPOINT, 0.0,
-             HOME.lat0_deg, HOME.lon0_deg, HOME.alt0_m),
-            (1, 0, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, 0.0,
-             0.0, 0.0, -float(start[2])),
-            (2, 0, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavutil.mavlink.MAV_CMD_NAV_WAYPOINT, ACCEPTANCE_M,
-             float(lat), float(lon), -float(goal[2])),
-            (3, 0, mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavutil.mavlink.MAV_CMD_NAV_LAND, 0.0,
-             float(lat), float(lon), 0.0)]
-    lines = ["QGC WPL 110"] + [f"{seq}\t{cur}\t{frame}\t{cmd}\t0.0\t{acc}\t0.0\tnan\t{la:.9f}\t{lo:.9f}\t{alt:.3f}\t1"
-                               for seq, cur, frame, cmd, acc, la, lo, alt in rows]
-    path.write_text("\n".join(lines) + "\n")
+    relative = mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
+    items = (MissionItem(mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, relative, alt_m=-float(start[2])),
+             MissionItem(mavutil.mavlink.MAV_CMD_NAV_WAYPOINT, relative, param2=ACCEPTANCE_M, lat_deg=float(lat),
+                         lon_deg=float(lon), alt_m=-float(goal[2])),
+             MissionItem(mavutil.mavlink.MAV_CMD_NAV_LAND, relative, lat_deg=float(lat), lon_deg=float(lon)))
+    (n0, e0), (n1, e1) = mission.world.bounds_min[:2], mission.world.bounds_max[:2]
+    corners = [HOME.to_lla(n, e, 0.0)[:2] for n, e in ((n0, e0), (n1, e0), (n1, e1), (n0, e1))]
+    fence = FencePolygon(tuple((float(la), float(lo)) for la, lo in corners), inclusion=True)
+    write_plan_file(MissionPlan(items, polygons=(fence,), planned_home=(HOME.lat0_deg, HOME.lon0_deg, HOME.alt0_m)),
+                    path)
+    return path
+
+
+def mission_settings(mission, path: Path) -> Path:
+    """The companion's settings for the campaign mission: its world's ceiling and margin."""
+    path.write_text(f"[mission]\nceiling_m = {-float(mission.world.bounds_min[2]):.3f}\n"
+                    f"margin_m = {float(mission.world.margin_m):.3f}\n")
     return path
 
 
@@ -182,12 +196,11 @@ def replay(worker: CampaignWorker, index: int, out_dir: Path, *, speedup: float 
     out_dir.mkdir(parents=True, exist_ok=True)
     enc = worker.encounter(index)
     mission = worker.mission(enc.mission)
-    mission_file = write_mission(mission, out_dir / "mission.waypoints")
-    extra = ["--seed", str(worker.spec.seed)]
-    if mission.obstacles or mission.fences:
-        world_file = out_dir / "world.toml"
-        world_file.write_text(dumps_world_toml(mission.world, name=enc.mission))
-        extra += ["--world", str(world_file)]
+    mission_file = write_mission(mission, out_dir / "mission.plan")
+    extra = ["--seed", str(worker.spec.seed), "--config", str(mission_settings(mission, out_dir / "companion.toml"))]
+    world_file = out_dir / "world.toml"
+    world_file.write_text(dumps_world_toml(mission.world, name=enc.mission))
+    extra += ["--world", str(world_file)]
     if foxglove:
         extra += ["--foxglove", foxglove]
     rng = np.random.default_rng([worker.spec.seed, index, 1])
