@@ -8,9 +8,9 @@ campaign's ``HOME``) and ``companion run`` with
 - the mission as a QGroundControl ``.plan``: takeoff to the leg's start altitude, the leg's
   goal, land, and the campaign world's airspace as the operator gives it (an inclusion fence on
   its horizontal bounds; its ceiling in the companion's settings, ``--config``);
-- the mission's world as a world file: its obstacles, fences and bounds, the airspace fast time
-  flies in (without it the companion would make its own from the mission: 30 m about the route,
-  up to 120 m);
+- the mission's world (obstacles and fences) as a world file, when it has any (the companion
+  takes a world file's obstacles, not its bounds: without the fence and the ceiling it would
+  fly in 33 m about the route, up to 120 m);
 - ``--foxglove PORT`` when asked.
 
 The intruders' reports are sent at their encounter times, counted from the instant the
@@ -198,9 +198,10 @@ def replay(worker: CampaignWorker, index: int, out_dir: Path, *, speedup: float 
     mission = worker.mission(enc.mission)
     mission_file = write_mission(mission, out_dir / "mission.plan")
     extra = ["--seed", str(worker.spec.seed), "--config", str(mission_settings(mission, out_dir / "companion.toml"))]
-    world_file = out_dir / "world.toml"
-    world_file.write_text(dumps_world_toml(mission.world, name=enc.mission))
-    extra += ["--world", str(world_file)]
+    if mission.obstacles or mission.fences:
+        world_file = out_dir / "world.toml"
+        world_file.write_text(dumps_world_toml(mission.world, name=enc.mission))
+        extra += ["--world", str(world_file)]
     if foxglove:
         extra += ["--foxglove", foxglove]
     rng = np.random.default_rng([worker.spec.seed, index, 1])

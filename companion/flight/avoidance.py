@@ -47,6 +47,7 @@ from companion.flight.alerting import TrafficAlerts
 from companion.flight.ports import FlightSink, Jobs
 from companion.flight.reference import ActiveReference
 from companion.threats.decision.kinds import Trigger
+from companion.threats.decision.prediction import is_manned
 from companion.threats.decision.screen import MonitorScreen, same_reports
 from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
                                              Observation, active_conflict, decide, plan_alternatives_for)
@@ -470,5 +471,4 @@ def _manned_unanswered(decision, reports) -> bool:
     """``decision`` kept the reference although it meets a manned aircraft of ``reports``."""
     if decision.trajectory is not None or decision.conflict is None:
         return False
-    return any(getattr(th, "uid", None) == decision.conflict.threat_id and getattr(th, "traffic", "drone") == "manned"
-               for th in reports)
+    return any(getattr(th, "uid", None) == decision.conflict.threat_id and is_manned(th) for th in reports)

@@ -28,19 +28,30 @@ strata = ["head_on/open"]
 """
 
 
-def test_replay_flies_the_encounter_in_sitl(tmp_path):
+def flown_campaign(tmp_path, spec_text: str):
+    """``companion campaign run`` of ``spec_text`` in one worker; its directory."""
     spec = tmp_path / "spec.toml"
-    spec.write_text(SPEC)
+    spec.write_text(spec_text)
     out = tmp_path / "campaign"
     run = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", "run", str(spec), "--out", str(out),
                           "--workers", "1", "--no-progress"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
-    rows = CampaignStore(out).table().to_pylist()
-    pick = next(r for r in rows if r["u_collision"] and r["m_manoeuvred"])
-    replay = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", "replay", str(out), str(pick["id"]),
+    return out
+
+
+def replayed(out, encounter_id: int) -> dict:
+    """``companion campaign replay`` of one encounter at speed-up 4 (real processes); its outcome."""
+    replay = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", "replay", str(out), str(encounter_id),
                              "--speedup", "4"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=500)
     assert replay.returncode == 0, replay.stderr[-3000:]
-    outcome = json.loads(replay.stdout[replay.stdout.index("{"):])
+    return json.loads(replay.stdout[replay.stdout.index("{"):])
+
+
+def test_replay_flies_the_encounter_in_sitl(tmp_path):
+    out = flown_campaign(tmp_path, SPEC)
+    rows = CampaignStore(out).table().to_pylist()
+    pick = next(r for r in rows if r["u_collision"] and r["m_manoeuvred"])
+    outcome = replayed(out, pick["id"])
     assert outcome["id"] == pick["id"] and outcome["puts"] > 0
     assert outcome["fast_time"]["min_sep_m"] == pytest.approx(pick["m_min_sep_m"])
     record = load_record(outcome["record"])
@@ -63,16 +74,8 @@ def test_manned_traffic_reaches_the_companion_as_adsb_vehicle_through_the_vehicl
     """A manned rotorcraft of the MIT LL model, replayed: its reports are ADSB_VEHICLE messages of
     an ADS-B receiver component sent to the vehicle, which routes them to the companion (--adsb);
     the companion's record holds them as threats, at the message's quantisation, 1 Hz apart."""
-    spec = tmp_path / "spec.toml"
-    spec.write_text(MANNED_SPEC)
-    out = tmp_path / "campaign"
-    run = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", "run", str(spec), "--out", str(out),
-                          "--workers", "1", "--no-progress"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
-    assert run.returncode == 0, run.stderr[-3000:]
-    replay = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", "replay", str(out), "0",
-                             "--speedup", "4"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=500)
-    assert replay.returncode == 0, replay.stderr[-3000:]
-    outcome = json.loads(replay.stdout[replay.stdout.index("{"):])
+    out = flown_campaign(tmp_path, MANNED_SPEC)
+    outcome = replayed(out, 0)
     assert outcome["puts"] > 20
     record = load_record(outcome["record"])
     heard = [t for t in record.threats if str(t["id"]).startswith("adsb-")]
@@ -97,18 +100,10 @@ def test_a_manned_rotorcraft_on_a_collision_course_passes_with_no_loss_of_well_c
     the system, in fast time), sent to the vehicle as ADSB_VEHICLE at 1 Hz and routed to the
     companion, passes with no loss of well clear (2000 ft / 250 ft), judged by the vehicle's own
     telemetry against the track."""
-    spec = tmp_path / "spec.toml"
-    spec.write_text(WELL_CLEAR_SPEC)
-    out = tmp_path / "campaign"
-    run = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", "run", str(spec), "--out", str(out),
-                          "--workers", "1", "--no-progress"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
-    assert run.returncode == 0, run.stderr[-3000:]
+    out = flown_campaign(tmp_path, WELL_CLEAR_SPEC)
     rows = CampaignStore(out).table().to_pylist()
     pick = next(r for r in rows if r["u_nmac"] and not r["m_lowc"])
-    replay = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", "replay", str(out), str(pick["id"]),
-                             "--speedup", "4"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=500)
-    assert replay.returncode == 0, replay.stderr[-3000:]
-    outcome = json.loads(replay.stdout[replay.stdout.index("{"):])
+    outcome = replayed(out, pick["id"])
     assert outcome["puts"] > 20
     record = load_record(outcome["record"])
     assert any(str(d.get("threat_id", "")).startswith("adsb-") for d in record.decisions), "no decision on the traffic"

@@ -35,6 +35,7 @@ from companion.threats.decision.choice import Candidate, ReferenceState, rank_ke
 from companion.threats.decision.kinds import CandidateKind
 from companion.threats.decision.evasion import EscapeLimits, escape_library
 from companion.threats.decision.join import HOVER_SPEED_M_S, join_trajectory, lead_length_m, turn_rad
+from companion.threats.decision.prediction import horizon_for, is_manned
 from companion.threats.decision.retime import RetimedTrajectory, ramp_time_s
 from companion.threats.settings import ThreatSettings
 from companion.threats.decision.spacetime import (STATIC_ID, check_candidates, reference_accel_bound_m_s2,
@@ -71,9 +72,6 @@ class Situation:
         Planner, smoother, limits, timer and checker of every new trajectory.
     lift_down_m : float or None
         Down coordinate of 2D candidates in a 3D flight.
-    horizon_s : float or None
-        Horizon of the checks (s; ``prediction.horizon_for`` the tubes' threats). None:
-        ``settings.horizon_s``.
     """
 
     ref: ReferenceState
@@ -84,7 +82,6 @@ class Situation:
     settings: ThreatSettings
     pipeline: TrajectoryPipeline
     lift_down_m: float | None = None
-    horizon_s: float | None = None
 
     @property
     def dim(self) -> int:
@@ -92,13 +89,13 @@ class Situation:
 
     @property
     def check_horizon_s(self) -> float:
-        """The checks' horizon (s)."""
-        return self.settings.horizon_s if self.horizon_s is None else self.horizon_s
+        """The checks' horizon (s): ``prediction.horizon_for`` the tubes."""
+        return horizon_for(self.tubes, self.settings)
 
     @property
     def manned(self) -> bool:
         """A manned aircraft is among the tubes (its volumes and escapes apply)."""
-        return any(tube.traffic == "manned" for tube in self.tubes)
+        return any(map(is_manned, self.tubes))
 
     def step_s(self, step_s: float) -> float:
         """The check's sample step for a setting's ``step_s``: ``manned_step_s`` when longer and
@@ -311,7 +308,7 @@ def static_spheres(sit: Situation, keep_free) -> list:
     out = []
     now = np.array([sit.ref.t_s])
     for tube in sit.tubes:
-        if tube.speed_m_s > 0.05 or tube.traffic == "manned":
+        if tube.speed_m_s > 0.05 or is_manned(tube):
             continue
         c, r = tube.center_at(now)[0], float(tube.radius_at(now)[0])
         if math.isfinite(r) and _keeps_free(c, r, keep_free, sit.dim):
@@ -335,7 +332,7 @@ def meeting_obstacles(sit: Situation, active, active_start_t_s: float, keep_free
     t = sit.times(sit.settings.check_step_s)
     pos = positions_at(active, active_start_t_s, t, sit.dim)
     for tube in sit.tubes:
-        if tube.speed_m_s <= 0.05 or tube.traffic == "manned":
+        if tube.speed_m_s <= 0.05 or is_manned(tube):
             continue
         dist = np.linalg.norm(pos - tube.center_at(t)[:, :sit.dim], axis=1) - tube.radius_at(t)
         k = int(np.argmin(dist))
@@ -390,7 +387,7 @@ def replan_candidates(sit: Situation, *, rng: np.random.Generator, path_id: str)
         if cand.clear or cand.conflict.threat_id == STATIC_ID:
             break
         tube = next(t for t in sit.tubes if t.threat_id == cand.conflict.threat_id)
-        if tube.traffic == "manned":            # a volume to keep out of in time, not an obstacle
+        if is_manned(tube):                     # a volume to keep out of in time, not an obstacle
             break
         obstacles = obstacles + meeting_spheres(sit, tube, cand.conflict.t_s, keep)
     if out and not any(c.clear for c in out) and lead is None:

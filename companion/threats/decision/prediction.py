@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["Tube", "TrajectoryTube", "along_samples", "predict_tubes", "tubes_for", "horizon_for", "range_for",
-           "STATIC_SPEED_M_S"]
+           "is_manned", "STATIC_SPEED_M_S"]
 
 #: A threat slower than this (m/s) counts as static: its tube does not grow.
 STATIC_SPEED_M_S = 0.05
@@ -152,17 +152,22 @@ class TrajectoryTube:
         return float(step.max())
 
 
+def is_manned(item) -> bool:
+    """A threat or tube of manned traffic (``traffic == "manned"``; another vehicle of the fleet,
+    which carries no traffic kind, is drone scale)."""
+    return getattr(item, "traffic", "drone") == "manned"
+
+
 def range_for(threat, settings) -> float:
     """How far (m) the decision looks for ``threat``: ``manned_range_m`` for manned traffic,
     else ``sensor_range_m`` (``ThreatSettings``)."""
-    return settings.manned_range_m if getattr(threat, "traffic", "drone") == "manned" else settings.sensor_range_m
+    return settings.manned_range_m if is_manned(threat) else settings.sensor_range_m
 
 
 def horizon_for(threats, settings) -> float:
-    """The check's horizon (s) against ``threats``: ``manned_horizon_s`` when one of them is
-    manned traffic, else ``horizon_s``."""
-    manned = any(getattr(th, "traffic", "drone") == "manned" for th in threats)
-    return settings.manned_horizon_s if manned else settings.horizon_s
+    """The check's horizon (s) against ``threats`` (or their tubes): ``manned_horizon_s`` when
+    one of them is manned traffic, else ``horizon_s``."""
+    return settings.manned_horizon_s if any(map(is_manned, threats)) else settings.horizon_s
 
 
 def tubes_for(threats, settings) -> list[Tube]:
@@ -208,7 +213,7 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
         vel = np.asarray(th.velocity_ned_m_s, dtype=float)
         moving = float(np.linalg.norm(vel)) > STATIC_SPEED_M_S
         radius, half_height, ends = float(th.radius_m), math.inf, th.expires_t_s if moving else math.inf
-        if manned_axes_m is not None and th.traffic == "manned":
+        if manned_axes_m is not None and is_manned(th):
             radius, half_height = float(manned_axes_m[0]), float(manned_axes_m[1])
             ends = math.inf                     # ADS-B's ttl drops a target not heard (the table's)
         out.append(Tube(th.uid, th.pos_ned_m, vel, float(th.received_t_s),

@@ -42,7 +42,7 @@ from functools import cached_property
 
 import numpy as np
 
-from companion.threats.decision.prediction import horizon_for, range_for, tubes_for
+from companion.threats.decision.prediction import is_manned, range_for, tubes_for
 from companion.threats.decision.spacetime import sample_times, segment_min_distance
 from companion.threats.decision.values import ActiveTrajectory
 
@@ -148,14 +148,10 @@ def _radius_living_on(tube, t: np.ndarray, extra_s: float) -> np.ndarray:
 def _clear_of_tubes(pos: np.ndarray, t: np.ndarray, threats, settings, margin_m: np.ndarray, ahead: int) -> bool:
     """Every interval's clearance from every threat's tube, less ``margin_m`` (K-1,) and the
     largest radius of the interval's ends and the ``ahead`` grid points after it (the tube living
-    ``ahead`` steps longer), stays >= 0. Never for a manned aircraft's cylinder: the check's
-    clearance of it is a bound that depends on its sample times, so no proof on other times
-    stands for it (the check decides)."""
+    ``ahead`` steps longer), stays >= 0 (drone-scale threats only: ``_provable``)."""
     tubes = tubes_for(threats, settings)
     dim = pos.shape[1]
     n = t.size - 1 - ahead
-    if any(math.isfinite(tube.half_height_m) for tube in tubes):
-        return False
     for tube in tubes:
         rel = pos - tube.center_at(t)[:, :dim]
         radius = tube.radius_at(t) if not ahead else _radius_living_on(tube, t, ahead * (t[1] - t[0]))
@@ -193,7 +189,9 @@ def proves_clear(table: ReferenceTable, threats, t_s: float, settings, accel_bou
     near = _near(threats, t_s, table.positions_at(np.array([t_s]))[0], dim, settings, err_m)
     if not near:
         return True
-    t = sample_times(t_s, horizon_for(near, settings), settings.check_step_s)
+    if not _provable(near):
+        return False
+    t = sample_times(t_s, settings.horizon_s, settings.check_step_s)
     pos = table.positions_at(t)
     dt = np.diff(t)
     return _clear_of_tubes(pos, t, near, settings, accel_bound_m_s2 * dt * dt / 8.0 + err_m, 0)
@@ -239,7 +237,7 @@ class MonitorScreen:
         if any(th.frame != "local_ned" for th in threats):
             return False
         s = self.settings
-        n = max(2, int(math.ceil((horizon_for(threats, s) + self.lead_s) / s.check_step_s)) + 2)
+        n = max(2, int(math.ceil((s.horizon_s + self.lead_s) / s.check_step_s)) + 2)
         t = t_s + s.check_step_s * np.arange(n)
         kink_m = self.table.kink_m(float(t[0]), float(t[-1]))
         if kink_m is None:
@@ -247,10 +245,19 @@ class MonitorScreen:
         live = [th for th in threats if th.expires_t_s > t_s]
         if not live:
             return True
+        if not _provable(live):
+            return False
         pos = self.table.positions_at(t)
         chord_err = self.accel_bound_m_s2 * s.check_step_s ** 2 / 8.0
         margin = np.full(n - 1, 3.0 * chord_err + self.table.error_m(self.accel_bound_m_s2) + 2.0 * kink_m)
         return _clear_of_tubes(pos, t, live, s, margin, 1)
+
+
+def _provable(threats) -> bool:
+    """No manned aircraft among ``threats``: the check's clearance of its cylinder is a bound
+    that depends on the sample times, so no proof on other times stands for it (the check
+    decides; its horizon is then the manned one)."""
+    return not any(map(is_manned, threats))
 
 
 def same_reports(a: tuple, b: tuple) -> bool:

@@ -47,7 +47,7 @@ from companion.threats.decision import candidates as gen
 from companion.threats.decision.alternatives import Alternative, airspace_for, plan_alternatives
 from companion.threats.decision.choice import Candidate, Decision, ReferenceState, choose
 from companion.threats.decision.kinds import CandidateKind, DecisionKind, Strategy, Trigger
-from companion.threats.decision.prediction import horizon_for, range_for, tubes_for
+from companion.threats.decision.prediction import is_manned, range_for, tubes_for
 from companion.threats.decision.spacetime import Conflict
 from companion.threats.decision.values import (ActiveTrajectory, DecisionError, DecisionPolicy, DecisionState,
                                                LegContext, Observation)
@@ -106,13 +106,12 @@ def _situation(t_s: float, obs: Observation, leg: LegContext, policy: DecisionPo
     ref = reference_state(obs.active, t_s)
     s, dim = policy.settings, leg.world.dim
     relevant = _relevant(obs.threats, t_s, ref.pos_ned_m, dim, s)
-    tubes = tubes_for(relevant, s)
-    room_m = s.manned_vertical_room_m if any(tube.traffic == "manned" for tube in tubes) else s.vertical_room_m
+    room_m = s.manned_vertical_room_m if any(map(is_manned, relevant)) else s.vertical_room_m
     lift = float(ref.pos_ned_m[2]) if dim == 2 and ref.pos_ned_m.shape[0] == 3 else None
     here = [ref.pos_ned_m[:dim]]
-    return gen.Situation(ref, tubes, airspace(leg.world, leg.world_key, here, s, room_m),
+    return gen.Situation(ref, tubes_for(relevant, s), airspace(leg.world, leg.world_key, here, s, room_m),
                          planning_slab(leg.world, leg.world_key, here), leg.goal_ned_m, s, policy.pipeline,
-                         lift, horizon_for(relevant, s))
+                         lift)
 
 
 def _remaining_s(sit: gen.Situation, active: ActiveTrajectory) -> float:
@@ -204,7 +203,7 @@ def _on_threats(state: DecisionState, obs: Observation, leg: LegContext, policy:
 def _meets_manned(sit: gen.Situation, conflict: Conflict) -> bool:
     """The conflict is with a manned aircraft: its cylinder is no obstacle a replan could plan
     around (it moves at 50 m/s), so the fast candidates answer it."""
-    return any(tube.threat_id == conflict.threat_id and tube.traffic == "manned" for tube in sit.tubes)
+    return any(tube.threat_id == conflict.threat_id and is_manned(tube) for tube in sit.tubes)
 
 
 def _resume(state: DecisionState, obs: Observation, leg: LegContext, policy: DecisionPolicy):
