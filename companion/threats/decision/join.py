@@ -66,18 +66,26 @@ def turn_rad(u: np.ndarray, w: np.ndarray) -> float:
 
 
 def _clean_nodes(nodes: np.ndarray, tol_m: float = 0.05, tol_rad: float = 1e-6) -> np.ndarray:
-    """Drop repeated nodes and nodes in the middle of a straight line."""
+    """Drop repeated nodes (within ``tol_m`` of the last one kept) and nodes in the middle of a
+    straight line (turning less than ``tol_rad``). Vectorised: an alternative's entries, every
+    ``entry_spacing_m`` along it, come here by the hundred."""
+    keep = _deduplicated(nodes, tol_m)
+    if keep.shape[0] < 3:
+        return keep
+    seg = np.diff(keep, axis=0)
+    corners = np.flatnonzero(_angles_rad(seg[:-1], seg[1:]) > tol_rad) + 1
+    return np.vstack([keep[:1], keep[corners], keep[-1:]])
+
+
+def _deduplicated(nodes: np.ndarray, tol_m: float) -> np.ndarray:
+    """``nodes`` without those within ``tol_m`` of the last node kept."""
+    if nodes.shape[0] < 2 or np.all(np.linalg.norm(np.diff(nodes, axis=0), axis=1) > tol_m):
+        return nodes
     keep = [nodes[0]]
     for p in nodes[1:]:
         if np.linalg.norm(p - keep[-1]) > tol_m:
             keep.append(p)
-    out = [keep[0]]
-    for i in range(1, len(keep) - 1):
-        if turn_rad(keep[i] - out[-1], keep[i + 1] - keep[i]) > tol_rad:
-            out.append(keep[i])
-    if len(keep) > 1:
-        out.append(keep[-1])
-    return np.asarray(out)
+    return np.asarray(keep)
 
 
 def join_trajectory(pos_ned_m, vel_ned_m_s, nodes, *, world: World | None, pipeline: TrajectoryPipeline,

@@ -79,3 +79,29 @@ def test_join_starts_at_the_reference_state(speed, heading, turn):
     assert np.linalg.norm(p) < 1e-9
     assert np.linalg.norm(v - speed * u) <= max(0.02 * speed + 0.06, HOVER_SPEED_M_S)
     np.testing.assert_allclose(traj.end_pos_ned_m, nodes[-1], atol=1e-6)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.tuples(st.integers(-5, 5), st.integers(-5, 5)), min_size=1, max_size=12),
+       st.lists(st.integers(0, 3), min_size=12, max_size=12))
+def test_clean_nodes_keeps_the_path_and_its_corners(steps, repeats):
+    """Repeated and collinear nodes go; the ends, every corner and so the polyline itself stay."""
+    from companion.threats.decision.join import _clean_nodes
+    nodes = [np.zeros(2)]
+    for (dx, dy), rep in zip(steps, repeats):
+        nodes.extend([nodes[-1] + (dx, dy)] + [nodes[-1] + (dx, dy)] * rep)
+    nodes = np.asarray(nodes, float)
+    out = _clean_nodes(nodes)
+    assert np.array_equal(out[0], nodes[0]) and np.array_equal(out[-1], nodes[-1])
+    assert out.shape[0] == 1 or np.all(np.linalg.norm(np.diff(out, axis=0), axis=1) > 0.05)
+    for p in nodes:  # every input node lies on the cleaned polyline
+        a, b = out[:-1], out[1:]
+        ab = b - a
+        t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0, 1)
+        gap = np.linalg.norm(a + t[:, None] * ab - p, axis=1).min() if out.shape[0] > 1 else np.linalg.norm(p - out[0])
+        assert gap < 1e-9
+    seg = np.diff(out, axis=0)
+    if seg.shape[0] > 1:  # no interior node left on a straight line
+        cross = seg[:-1, 0] * seg[1:, 1] - seg[:-1, 1] * seg[1:, 0]
+        dot = np.einsum("ij,ij->i", seg[:-1], seg[1:])
+        assert np.all((np.abs(cross) > 1e-9) | (dot < 0))
