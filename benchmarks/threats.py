@@ -158,6 +158,7 @@ def fly_encounter(leg, enc, strategy: str, settings, seed: int, update) -> dict:
     nominal_rest = float(leg.trajectory.length_m - leg.trajectory.s_at(np.array([t_enc]))[0])
     decisions = [{"t_s": round(d["t_s"] - t_enc, 3), "via": d["trigger"], "kind": d["event"],
                   "decide_ms": float(d["decide_ms"]), "latency_ms": d["latency_ms"], "label": d["label"],
+                  "branch": d.get("branch"),
                   "reason": str(d["reason"])[:160]} for d in result.decisions]
     errors = np.linalg.norm(result.pos_ned_m - result.ref_pos_ned_m, axis=1)
     return {"success": success, "completed": success and reached, "reached": reached,

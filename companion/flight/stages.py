@@ -18,6 +18,7 @@ processes). Numerics only: no I/O.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -144,12 +145,15 @@ class GartPlanner:
     iterations_per_s: float | None = None
 
     def plan(self, problem: PlanningProblem, budget: PlanBudget, *, rng: np.random.Generator) -> PlanResult:
+        """The last search's result, with the ``iterations`` and ``elapsed_s`` of all of them."""
         budget_s = budget.max_time_s
+        iterations, elapsed_s = 0, 0.0
         for attempt in range(budget.attempts):
             result = gart(problem.world, problem.start, problem.goal, rng=rng, settings=self.settings,
                           **iteration_budget(budget_s, self.iterations_per_s))
+            iterations, elapsed_s = iterations + result.iterations, elapsed_s + result.elapsed_s
             if result.status != "timeout":
-                return result
+                return dataclasses.replace(result, iterations=iterations, elapsed_s=elapsed_s)
             if attempt + 1 < budget.attempts:
                 log.info("no path in %.2f s (attempt %d); searching again for %.2f s", budget_s, attempt + 1,
                          2 * budget_s)
@@ -157,7 +161,8 @@ class GartPlanner:
         if budget.first_path_s is not None:
             result = gart(problem.world, problem.start, problem.goal, rng=rng, stop_at_first=True,
                           settings=self.settings, **iteration_budget(budget.first_path_s, self.iterations_per_s))
-        return result
+            iterations, elapsed_s = iterations + result.iterations, elapsed_s + result.elapsed_s
+        return dataclasses.replace(result, iterations=iterations, elapsed_s=elapsed_s)
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,10 @@ Why these defaults (paper section 3.3, Fig. 5 and Fig. 8; R-50-class helicopter 
 - ``inflation_m = 2``: half the rotor span (1.8 m) plus a few tenths for tracking error, added to
   every threat radius; ``uncertainty_m_s = 0.3`` grows a moving threat's tube with the time
   since its last update (capped at ``uncertainty_max_m = 4``).
-- ``replan_budget_s = 0.25``: first estimate of the replanning time (then measured); a replan
-  is attempted only when no fast candidate (evade, retime, switch: milliseconds) keeps going to
+- ``replan_budget_s = 0.15``: a replan's time budget: its searches (every round) share it, and
+  it is the first estimate of its duration (then measured), so that with the fast candidates
+  before it and the escapes judged after it, a decision that replans puts its first setpoint on
+  the wire within the 250 ms goal; a replan is attempted only when no fast candidate (evade, retime, switch: milliseconds) keeps going to
   the goal clear and the conflict is further away than that estimate plus the time to stop
   plus ``urgency_margin_s = 3``; closer conflicts are answered in milliseconds.
 - ``switch_range_m = 20``: the paper's switching range (Fig. 5).
@@ -164,7 +166,8 @@ class ThreatSettings:
     sensor_range_m : float
         Threats farther than this from the vehicle (now) are ignored by the decision (m).
     replan_budget_s : float
-        Initial estimate of the replanning time (s), refined by the measured times.
+        Budget of a replan's searches, its rounds together (s), and the initial estimate of the
+        replanning time, refined by the measured times. Default 0.15.
     urgency_margin_s : float
         A conflict closer than the replanning estimate + the time to stop + this margin (s) is
         urgent: only the fast candidates are judged. Default 3.
@@ -173,7 +176,8 @@ class ThreatSettings:
     replan_turn_rad : float
         The replan's straight lead is long enough for a first corner of this turn (rad).
     gart_budget_s, gart_first_budget_s : float
-        Wall-clock budgets of one replanning GART after / until its first solution (s).
+        Budgets of one round's GART after / until its first solution (s), each cut to what is
+        left of ``replan_budget_s``.
     switch_range_m : float
         Entry nodes of the alternatives must be within this distance (m). Default 20.
     entry_spacing_m : float
@@ -241,7 +245,7 @@ class ThreatSettings:
     uncertainty_m_s: float = 0.3
     uncertainty_max_m: float = 4.0
     sensor_range_m: float = 1000.0
-    replan_budget_s: float = 0.25
+    replan_budget_s: float = 0.15
     urgency_margin_s: float = 3.0
     replan_iterations: int = 3
     replan_turn_rad: float = 1.0

@@ -11,8 +11,8 @@ with ``choice.choose``.
 - ``switch_to_alternatives``: M-GART alternatives joined from the current setpoint.
 - ``replan_candidates``: the pipeline's planner (GART) in the airspace with the pop-ups as
   obstacles; a mover is placed where the replanned trajectory would meet it (a short stretch of
-  its track around that time, never its whole sweep), for a few rounds; then the last replan
-  retimed (wait, then go).
+  its track around that time, never its whole sweep), for a few rounds that share one budget
+  (``replan_budget_s``); then the last replan retimed (wait, then go).
 
 Joins and replans are inputs to the situation's ``TrajectoryPipeline`` (smoother, limits,
 timer and checker: ``join.join_trajectory``); the escapes take their speed limit from it.
@@ -51,6 +51,8 @@ log = logging.getLogger(__name__)
 ESCAPE_SPEED_FACTOR = 1.2
 #: Half-length (s) of the stretch of a mover's track placed where a replan would meet it.
 MEETING_HALF_S = 1.5
+#: A replan's round needs at least this much of its budget left (s).
+MIN_ROUND_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -369,10 +371,15 @@ def replan_candidates(sit: Situation, *, rng: np.random.Generator, path_id: str)
     keep = [p, start, sit.goal_ned_m]
     obstacles = static_spheres(sit, keep)
     out: list[Candidate] = []
-    budget = PlanBudget(s.gart_budget_s, first_path_s=s.gart_first_budget_s)
+    left_s = s.replan_budget_s
     for _ in range(s.replan_iterations):
+        budget = round_budget(s, left_s)
+        if budget is None:
+            log.info("replan: its %.2f s budget is spent", s.replan_budget_s)
+            break
         planning = world.with_threats(obstacles) if obstacles else world
         result = sit.pipeline.plan(PlanningProblem(planning, start, sit.goal_ned_m), budget, rng=rng)
+        left_s -= sit.pipeline.search_time_s(result)
         if result.status != "exact":
             log.info("replan: GART %s", result.status)
             break
@@ -393,6 +400,17 @@ def replan_candidates(sit: Situation, *, rng: np.random.Generator, path_id: str)
     if out and not any(c.clear for c in out) and lead is None:
         out += retimed_starts(sit, out[-1])        # from a hover: wait for the mover, then go
     return out
+
+
+def round_budget(s: ThreatSettings, left_s: float) -> PlanBudget | None:
+    """The search budget of a replan's next round, out of the ``left_s`` its rounds still share
+    (``replan_budget_s`` in all): GART's ``gart_budget_s``, then a first path in
+    ``gart_first_budget_s``, each cut to what is left; None when less than ``MIN_ROUND_S`` is."""
+    if left_s < MIN_ROUND_S:
+        return None
+    search_s = min(s.gart_budget_s, left_s)
+    first_s = min(s.gart_first_budget_s, left_s - search_s)
+    return PlanBudget(search_s, first_path_s=first_s if first_s >= MIN_ROUND_S else None)
 
 
 def retimed_starts(sit: Situation, cand: Candidate) -> list[Candidate]:
