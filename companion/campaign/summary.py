@@ -151,12 +151,16 @@ def _check_columns(cols: Columns) -> None:
 
 @dataclass(frozen=True)
 class LatencySummary:
-    """Decision latency (virtual clock, trigger to first setpoint) of ``n`` decisions."""
+    """Decision latency (virtual clock, trigger to first setpoint: modelled) of ``n`` decisions,
+    and the decisions' own compute as measured on the worker (``m_decide_wall_ms``; NaN in rows
+    without it)."""
 
     kind: str
     n: int
     p50_ms: float
     p99_ms: float
+    compute_p50_ms: float = math.nan
+    compute_p99_ms: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -292,14 +296,19 @@ def _event_summary(cols: Columns, name: str, suffix: str, w: np.ndarray, level: 
 
 
 def _latencies(cols: Columns) -> tuple[LatencySummary, tuple[LatencySummary, ...]]:
-    kinds = [k for row in cols["m_decisions"] for k in row]
+    kinds = np.array([k for row in cols["m_decisions"] for k in row], dtype=object)
     lat = np.array([x for row in cols["m_latency_ms"] for x in row], dtype=float)
-    overall = LatencySummary("all", int(np.isfinite(lat).sum()), *percentiles(lat, (50, 99)))
-    by_kind = []
-    for kind in sorted(set(kinds)):
-        sel = lat[np.array([k == kind for k in kinds], dtype=bool)]
-        by_kind.append(LatencySummary(kind, int(np.isfinite(sel).sum()), *percentiles(sel, (50, 99))))
-    return overall, tuple(by_kind)
+    compute = np.full(lat.shape, math.nan)
+    if "m_decide_wall_ms" in cols:
+        measured = [x for row in cols["m_decide_wall_ms"] for x in (row or ())]
+        if len(measured) == lat.size:
+            compute = np.array(measured, dtype=float)
+
+    def summary(kind: str, sel) -> LatencySummary:
+        return LatencySummary(kind, int(np.isfinite(lat[sel]).sum()), *percentiles(lat[sel], (50, 99)),
+                              *percentiles(compute[sel], (50, 99)))
+
+    return summary("all", slice(None)), tuple(summary(k, kinds == k) for k in sorted(set(kinds)))
 
 
 def summarise_group(cols: Columns, name: str, *, level: float = 0.95) -> GroupSummary:

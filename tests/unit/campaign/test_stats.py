@@ -329,6 +329,9 @@ def test_summary_per_group_matches_the_estimators():
     lat = [x for r in rows for x in r["m_latency_ms"]]
     assert summary.overall.latency.p99_ms == pytest.approx(np.percentile(lat, 99))
     assert {s.kind for s in summary.overall.latency_by_kind} <= set(KINDS)
+    for by_kind in summary.overall.latency_by_kind:       # the measured compute, kind by kind
+        measured = [ms for r in rows for k, ms in zip(r["m_decisions"], r["m_decide_wall_ms"]) if k == by_kind.kind]
+        assert by_kind.compute_p99_ms == pytest.approx(np.percentile(measured, 99))
     assert summary.overall.m_collisions == sum(r["m_collision"] for r in rows)
 
 
