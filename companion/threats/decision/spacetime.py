@@ -241,12 +241,10 @@ def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: flo
     bad = clearance < 0.0
     clear = ~bad.any(axis=1)
     intrusion = (np.square(np.minimum(clearance, 0.0)) * dt[None, :]).sum(axis=1)
-    conflicts = []
-    for c in range(c_n):
-        if clear[c]:
-            conflicts.append(None)
-            continue
-        k = int(np.argmax(bad[c]))
-        conflicts.append(Conflict(sources[source[c, k]], float(t[k]), float(t[k] - t[0]),
-                                  float(clearance[c, k])))
+    first = np.argmax(bad, axis=1)                                          # first bad interval
+    first_clearance = clearance[np.arange(c_n), first]
+    first_source = source[np.arange(c_n), first]
+    conflicts = [None if ok else Conflict(sources[first_source[c]], float(t[k]), float(t[k] - t[0]),
+                                          float(first_clearance[c]))
+                 for c, (ok, k) in enumerate(zip(clear.tolist(), first.tolist()))]
     return BatchCheck(clear, clearance.min(axis=1), intrusion, conflicts, static)
