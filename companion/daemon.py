@@ -95,6 +95,9 @@ log = logging.getLogger(__name__)
 #: GIL switch interval (s): another thread of this process hands the GIL to the setpoint
 #: stream this often.
 GIL_SWITCH_INTERVAL_S = 0.0005
+#: A reference's first setpoint is sent this long after its start (s of wall clock): the
+#: vehicle clock's estimate must have passed the start for the setpoint to be the new one.
+SEND_AT_SLACK_S = 0.0005
 
 
 __all__ = ["CompanionDaemon", "FlightAborted", "FlightSummary", "feasibility_totals", "make_checker",
@@ -369,6 +372,11 @@ class CompanionDaemon:
         self._stop_link_listener = self.link.on_link_change(self._on_link_change)
 
     # ------------------------------------------------------------------ the legs
+    def _send_at(self, t_s: float) -> None:
+        """Send the setpoint when mission time ``t_s`` comes (a reference that starts then)."""
+        wait_s = (t_s - self.clock.now_s()) / self.clock.scale + SEND_AT_SLACK_S
+        asyncio.get_running_loop().call_later(max(wait_s, 0.0), self.streamer.send_now)
+
     def _build_executor(self) -> FlightExecutor:
         """The flight executor with its real-time ports and the daemon's rows."""
         s = self.settings
@@ -381,7 +389,7 @@ class CompanionDaemon:
             avoidance = Avoidance(
                 policy=policy, state=DecisionState.initial(policy, int(self.rng.integers(2**31))),
                 owner=self.owner, threats=self.threats, jobs=jobs, sink=self.sink, now_s=self.clock.now_s,
-                monotonic_s=time.monotonic, send_now=self.streamer.send_now,
+                monotonic_s=time.monotonic, send_now=self.streamer.send_now, send_at=self._send_at,
                 position_ned_m=lambda: self.link.telemetry.pos_ned_m,
                 alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s, f.alternatives_lead_s),
                 commit_gate=self.threats.commit_gate(loop), alerts=s.alerts)

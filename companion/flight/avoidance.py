@@ -158,6 +158,10 @@ class Avoidance:
         The executor's clock (the latency's): wall clock in real time, virtual in fast time.
     send_now : callable ()
         Sends the current setpoint at once (a new reference's first setpoint).
+    send_at : callable (t_s), optional
+        Sends the setpoint when mission time ``t_s`` comes: the first setpoint of a reference
+        engaged to start later (it waits for the stream's next tick otherwise, up to a period
+        more). None: the next tick sends it (fast time, where the vehicle moves at the ticks).
     position_ned_m : callable () -> ndarray or None
         The vehicle's position (for the events).
     alternatives : AlternativesPlan
@@ -173,7 +177,7 @@ class Avoidance:
                  monotonic_s: Callable[[], float], send_now: Callable[[], None],
                  position_ned_m: Callable, alternatives: AlternativesPlan,
                  commit_gate: CommitGate | None = None, steps: DecisionSteps = DecisionSteps(),
-                 alerts=None) -> None:
+                 alerts=None, send_at: Callable[[float], None] | None = None) -> None:
         self.policy = policy
         self.steps = steps
         self.state = state
@@ -184,6 +188,7 @@ class Avoidance:
         self.now_s = now_s
         self.monotonic_s = monotonic_s
         self.send_now = send_now
+        self.send_at = send_at
         self.position_ned_m = position_ned_m
         self.alternatives_plan = alternatives
         self.commit_gate = commit_gate
@@ -374,6 +379,8 @@ class Avoidance:
         ref = self.owner.engage(decision.trajectory, decision.path_id, t0_s=decision.start_t_s,
                                 resume=bool(decision.resume))
         self.send_now()
+        if self.send_at is not None and ref.turn_start_s > self.now_s():
+            self.send_at(ref.turn_start_s)
         event = self._event(decision, trigger)
         self._told.append(_Pending(ref, decision, event, timing, self.monotonic_s() + FIRST_SETPOINT_WAIT_S))
         self.tell_engaged(self.monotonic_s())

@@ -233,6 +233,7 @@ class Harness:
         self.leg = LegContext(1, World([], [-50.0, -50.0, -50.0], [50.0, 50.0, 0.0]), np.array([10.0, 0.0, -10.0]))
         self.workers = PlanningWorkers("thread")
         self.engaged: list[dict] = []
+        self.sent_at: list[float] = []
         self.owner.listen(self._engaged)
 
     def _engaged(self, ref):
@@ -261,7 +262,7 @@ class Harness:
         self.avoidance = Avoidance(
             policy=policy, state=DecisionState.initial(policy, 1), owner=self.owner, threats=self.reactor,
             jobs=WorkerJobs(self.workers, loop), sink=Sink(self), now_s=lambda: 5.0, monotonic_s=time.monotonic,
-            send_now=self.send_now, position_ned_m=lambda: np.array([1.0, 2.0, -10.0]),
+            send_now=self.send_now, send_at=self.sent_at.append, position_ned_m=lambda: np.array([1.0, 2.0, -10.0]),
             alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s, f.alternatives_lead_s),
             steps=DecisionSteps(decide=self.manager.decide, plan_alternatives=self.manager.plan_alternatives))
         self.reactor.on_change = self.avoidance.on_threats_changed
@@ -333,6 +334,22 @@ def test_a_threat_decision_is_engaged_published_recorded_and_told():
         assert text.startswith("AVOID p1: replan, ") and text.endswith(" ms") and severity == "NOTICE"
         assert h.bus.paths[-1]["path_id"] == "replan-1"
         assert h.avoidance.decisions == 1 and len(h.avoidance.latencies_ms["replan"]) == 1
+
+    run(main, h)
+
+
+@pytest.mark.parametrize("t0, sent_at", [(5.0, []), (5.25, [5.25])])
+def test_a_reference_that_starts_later_has_its_first_setpoint_sent_at_its_start(t0, sent_at):
+    """A decision planned from its expected duration starts its reference then: the first
+    setpoint of it goes out at that instant, not at the stream's next tick after it."""
+    h = Harness(monitor_period_s=60.0)
+    h.manager.on_threats_script = [trajectory_decision("evade", t0=t0)]
+
+    async def main(h):
+        await h.start()
+        h.put("p1")
+        await until(lambda: h.engaged, "the engagement")
+        assert h.engaged[0]["t0_s"] == t0 and h.sent_at == sent_at
 
     run(main, h)
 
