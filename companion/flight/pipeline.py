@@ -125,8 +125,7 @@ class TrajectoryPipeline:
     def search_time_s(self, result: PlanResult) -> float:
         """The time ``result``'s searches took on their budget's clock: wall-clock seconds, or
         their iterations at the planner's ``iterations_per_s`` (reproducible)."""
-        iterations_per_s = getattr(self.planner, "iterations_per_s", None)
-        return result.elapsed_s if iterations_per_s is None else result.iterations / iterations_per_s
+        return result.iterations / self.planner.iterations_per_s if self.reproducible else result.elapsed_s
 
     # ------------------------------------------------------------------ the stages
     def plan(self, problem: PlanningProblem, budget: PlanBudget, *, rng: np.random.Generator) -> PlanResult:

@@ -13,9 +13,10 @@ Why these defaults (paper section 3.3, Fig. 5 and Fig. 8; R-50-class helicopter 
 - ``replan_budget_s = 0.15``: a replan's time budget: its searches (every round) share it, and
   it is the first estimate of its duration (then measured), so that with the fast candidates
   before it and the escapes judged after it, a decision that replans puts its first setpoint on
-  the wire within the 250 ms goal; a replan is attempted only when no fast candidate (evade, retime, switch: milliseconds) keeps going to
-  the goal clear and the conflict is further away than that estimate plus the time to stop
-  plus ``urgency_margin_s = 3``; closer conflicts are answered in milliseconds.
+  the wire within the 250 ms goal; a replan is attempted only when no fast candidate (evade,
+  retime, switch: milliseconds) keeps going to the goal clear and the conflict is further away
+  than that estimate plus the time to stop plus ``urgency_margin_s = 3``; closer conflicts are
+  answered in milliseconds.
 - ``switch_range_m = 20``: the paper's switching range (Fig. 5).
 - escape manoeuvres at 2.5 m/s^2 horizontally and 1.5 m/s^2 vertically: the lateral limit of
   the smoothing settings, which the LQI tracks within a few decimetres.
