@@ -3,7 +3,8 @@
 Each benchmark prints its table, writes ``out/bench/<name>.json`` and its markdown table to
 ``docs/benchmarks/<name>.md``; this script runs them in sequence (never in parallel: they
 measure time) and concatenates the tables, with the machine they ran on, into
-``docs/BENCHMARKS.md``.
+``docs/BENCHMARKS.md``, and rewrites the README's "Benchmarks at a glance" from them
+(``benchmarks/headlines.py``).
 
 Usage::
 
@@ -22,6 +23,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import headlines
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -86,7 +88,7 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="the fast version of each benchmark")
     parser.add_argument("--only", nargs="+", choices=sorted(BENCHMARKS), help="run only these")
     parser.add_argument("--assemble-only", action="store_true",
-                        help="only rebuild docs/BENCHMARKS.md from docs/benchmarks/*.md")
+                        help="only rebuild docs/BENCHMARKS.md and the README's figures from docs/benchmarks/*.md")
     args = parser.parse_args()
     failed = []
     if not args.assemble_only:
@@ -100,7 +102,8 @@ def main() -> int:
                     failed.append(name)
                 progress.advance(task)
     (REPO / "docs" / "BENCHMARKS.md").write_text(assemble())
-    print(f"\nwrote docs/BENCHMARKS.md{'; failed: ' + ', '.join(failed) if failed else ''}")
+    headlines.write_readme()
+    print(f"\nwrote docs/BENCHMARKS.md and README.md's figures{'; failed: ' + ', '.join(failed) if failed else ''}")
     return 1 if failed else 0
 
 
