@@ -22,6 +22,7 @@ own trajectory and every decision told.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import heapq
 import itertools
 import logging
@@ -181,7 +182,7 @@ class InlineJobs:
             result = fn(*args)
             outcome = lambda: done(result)          # noqa: E731 - delivered later
         except Exception as exc:  # noqa: BLE001 - a job's failure is the caller's to handle
-            outcome = lambda: failed(exc)           # noqa: E731
+            outcome = functools.partial(failed, exc)     # ``exc`` itself is unbound after the block
         spent = time.perf_counter() - t0
         self.wall_s.setdefault(name, []).append(spent)
         took = spent * self.job_time_scale if self.latency is None else self.latency.of(name, args, result)

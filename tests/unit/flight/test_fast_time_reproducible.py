@@ -68,6 +68,20 @@ def test_modelled_jobs_are_delivered_at_their_modelled_time():
     assert got == ["done"]
 
 
+def test_a_job_that_raises_is_handed_to_failed_with_its_exception_when_done():
+    clock = VirtualClock(0.0)
+    jobs = InlineJobs(clock, latency=JobLatency(replan_s=0.25))
+    done, failed = [], []
+
+    def boom():
+        raise ValueError("no clear candidate")
+
+    jobs.submit("leg_replan", boom, (), done.append, failed.append)
+    jobs.deliver(0.25)
+    assert done == [] and len(failed) == 1
+    assert isinstance(failed[0], ValueError) and str(failed[0]) == "no clear candidate"
+
+
 def test_a_flight_joined_in_the_air_flies_on_as_the_whole_flight():
     from companion.flight.plan import plan_leg
     from companion.mission.model import LocalWaypoint
