@@ -4,6 +4,10 @@ The format MAVProxy writes and ``pymavlink.mavutil.mavlink_connection("x.tlog")`
 and QGroundControl read: for every frame, the wall-clock time in microseconds since the Unix
 epoch as a big-endian unsigned 64-bit integer, then the frame's bytes unchanged (MAVLink 1 or 2,
 signed or not). Both directions go in one file.
+
+pymavlink reads these files, but has no writer of them: ``mavutil.mavlogfile.write`` appends the
+bytes it is given without the stamp (MAVProxy packs each stamp itself, as :func:`tlog_record`
+does), so this module writes them; the tests read them back with pymavlink.
 """
 
 from __future__ import annotations
