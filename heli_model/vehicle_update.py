@@ -24,6 +24,9 @@ compiled kernel (:func:`heli_model.rk4_kernel.integrate_rk4`, through :func:`int
 that gives, bit for bit, what :func:`integrate_numpy` (:func:`heli_model.dynamics.step_rk4` in
 a loop) gives; the numpy loop runs where the compiled kernel would not be exact
 (:func:`heli_model.dynamics.compiled_kernels`). The sub-step plan of each time step is kept.
+:meth:`VehicleUpdate.fly` runs several control periods with one setpoint (a fast-time flight's
+tick) in one call of :func:`heli_model.periods_kernel.fly_periods`: the same kernels, the same
+state to the bit, without the Python between the periods.
 """
 
 from __future__ import annotations
@@ -158,6 +161,60 @@ class VehicleUpdate:
             x = integrate_compiled(kernels, self.model, M, x, delta, h, n, wind)
         return VehicleState(x, delta, controller)
 
+    def fly(self, state: VehicleState, command: VehicleCommand, dt_s: float, periods: int) -> VehicleState:
+        """``periods`` updates of ``dt_s`` with the same command: :meth:`update` in a loop.
+
+        The state is the loop's to the bit. Where the command has a setpoint and no wind and
+        ``dt_s`` is the control period (a fast-time flight's tick), the periods run in one call
+        of :func:`heli_model.periods_kernel.fly_periods` (the same kernels in the same order,
+        without the Python between them); elsewhere, and wherever a kernel would not run, the loop.
+
+        Parameters
+        ----------
+        state : VehicleState
+        command : VehicleCommand
+        dt_s : float
+            As in :meth:`update`.
+        periods : int
+            >= 1.
+
+        Returns
+        -------
+        VehicleState
+        """
+        fused = self._fly_compiled(state, command, dt_s, periods)
+        if fused is not None:
+            return fused
+        for _ in range(periods):
+            state = self.update(state, command, dt_s)
+        return state
+
+    def _fly_compiled(self, state: VehicleState, command: VehicleCommand, dt_s: float,
+                      periods: int) -> VehicleState | None:
+        setpoint, wind = command
+        law = self.law
+        if setpoint is None or wind is not None or dt_s != law.settings.control_dt_s:
+            return None
+        plan = self._plans.get(dt_s) or self._substep_plan(dt_s)
+        n, h, M = plan
+        x = state.x
+        if dynamics.compiled_kernels(M.shape) is None or type(x) is not np.ndarray or x.shape != (M.shape[1] - 3,):
+            return None
+        args = law.compiled_arguments(state.controller, x, setpoint)
+        if args is None:
+            return None
+        kernel = _periods_kernel()
+        params, L, sp, controller = args
+        x_next, delta, raw, vel_cmd, out = np.empty(x.shape[0]), np.empty(N_INPUTS), np.empty(N_INPUTS), np.empty(3), \
+            np.empty(kernel.CONTROLLER_SIZE)
+        status, saturated = kernel.fly_periods(params, L, M, x, sp, controller, float(dt_s), h, n, int(periods),
+                                               x_next, delta, raw, vel_cmd, out)
+        if status != kernel.OK:
+            return None
+        z0, z1, z2, z3, i0, i1, i2, yaw_ref, c0, c1, c2 = out.tolist()
+        return VehicleState(x_next, delta, ControllerState((z0, z1, z2, z3), (i0, i1, i2), yaw_ref, (c0, c1, c2),
+                                                           delta, raw, saturated, vel_cmd))
+
     def _substep_plan(self, dt_s: float) -> tuple[int, float, np.ndarray]:
         """``(n, h, M)`` for an update of ``dt_s``: the sub-steps, their length and RK4 matrix (kept)."""
         n = substeps(dt_s, self.physics_dt_s)
@@ -167,6 +224,17 @@ class VehicleUpdate:
             self._plans.clear()
         self._plans[dt_s] = plan
         return plan
+
+
+_PERIODS: list = []
+
+
+def _periods_kernel() -> ModuleType:
+    """:mod:`heli_model.periods_kernel`, imported on the first call (it imports numba)."""
+    if not _PERIODS:
+        from heli_model import periods_kernel
+        _PERIODS.append(periods_kernel)
+    return _PERIODS[0]
 
 
 _MAX_PLANS = 32

@@ -111,8 +111,7 @@ class ModelVehicle:
     def advance(self, dt_s: float) -> None:
         """Fly ``dt_s`` on the last setpoint: the controller at its own period, RK4 within."""
         n = max(1, math.ceil(dt_s / self.control_dt_s - 1e-9))
-        for _ in range(n):
-            self.state = self.update.update(self.state, VehicleCommand(self.setpoint), dt_s / n)
+        self.state = self.update.fly(self.state, VehicleCommand(self.setpoint), dt_s / n, n)
 
 
 @dataclasses.dataclass(frozen=True)

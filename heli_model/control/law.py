@@ -202,6 +202,35 @@ class ControlLaw:
         self._params = _KERNEL[0].pack_settings(self.settings)
         return self._params
 
+    def compiled_arguments(self, state: ControllerState, x: np.ndarray, setpoint: Setpoint):
+        """What :func:`heli_model.periods_kernel.fly_periods` needs to run :meth:`step` compiled, or None.
+
+        Returns
+        -------
+        tuple (params, matrix, setpoint (13,), controller (11,)) or None
+            None where :meth:`step` would not run its kernel (no compiled kernels, settings the
+            kernel cannot read, a state or setpoint of another kind): the caller steps instead.
+        """
+        if compiled_kernels(self._matrix_shape) is None or type(x) is not np.ndarray or x.dtype is not _FLOAT64 \
+                or x.ndim != 1 or x.shape[0] < STATE_SIZE:
+            return None
+        params = self._params if self._params_of is self.settings else self._pack_settings()
+        if params is None:
+            return None
+        try:
+            sp = np.array([*_kernel_axes(setpoint.pos_ned_m, "pos_ned_m"), *_kernel_axes(setpoint.vel_ned_m_s, "vel_ned_m_s"),
+                           *_kernel_axes(setpoint.acc_ned_m_s2, "acc_ned_m_s2"),
+                           setpoint.yaw_rad is not None, 0.0 if setpoint.yaw_rad is None else float(setpoint.yaw_rad),
+                           setpoint.yaw_rate_rad_s is not None,
+                           0.0 if setpoint.yaw_rate_rad_s is None else float(setpoint.yaw_rate_rad_s)], dtype=float)
+            controller = np.array([*state.z, *state.pos_integral_m, state.yaw_ref_rad, *state.cmd_prev_ned_m_s],
+                                  dtype=float)
+        except Exception:  # noqa: BLE001 - an argument of another kind: step's own checks say what is wrong
+            return None
+        if controller.shape != (11,):
+            return None
+        return params, self.matrix, sp, controller
+
     def step_python(self, state: ControllerState, x: np.ndarray, setpoint: Setpoint, dt_s: float) -> ControllerState:
         """:meth:`step` in Python (the reference of the compiled kernel), after its checks of ``dt_s`` and ``x``.
 
