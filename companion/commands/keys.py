@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import logging
 
+from heli_common.cli_args import add_shared_options
+
 log = logging.getLogger(__name__)
 
 EPILOG = """\
@@ -31,21 +33,26 @@ def register(subparsers) -> None:
                         "certificates, and a zenoh configuration (JSON5) for each.",
                         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     sp.add_argument("directory", help="output directory (refused if not empty, unless --force)")
-    sp.add_argument("--sysid", type=int, default=1, help="vehicle system id of the keys (default 1)")
-    sp.add_argument("--companion", default="companion", help="the companion's name (default companion)")
-    sp.add_argument("--source", action="append", metavar="NAME",
-                    help="an authorised threat source (repeatable; default source1)")
-    sp.add_argument("--observer", action="append", metavar="NAME", default=[],
-                    help="a read-only identity: status, events and path (repeatable)")
-    sp.add_argument("--listen", action="append", metavar="ENDPOINT",
-                    help="the companion's endpoint (repeatable; default tls/0.0.0.0:7447)")
-    sp.add_argument("--connect", action="append", metavar="ENDPOINT",
-                    help="the endpoint sources connect to (repeatable; default tls/localhost:7447)")
-    sp.add_argument("--host", action="append", metavar="NAME", default=[],
-                    help="another host name or IP address of the companion, for its certificate")
-    sp.add_argument("--days", type=int, default=825, help="validity of the identities in days (default 825)")
-    sp.add_argument("--force", action="store_true", help="overwrite the files in a non-empty directory")
     sp.set_defaults(func=run)
+    add_shared_options(p, [sp], _add_init_options)
+
+
+def _add_init_options(p) -> None:
+    """The options of ``keys init`` (``p.add_argument``), accepted before or after ``init``."""
+    p.add_argument("--sysid", type=int, default=1, help="vehicle system id of the keys (default 1)")
+    p.add_argument("--companion", default="companion", help="the companion's name (default companion)")
+    p.add_argument("--source", action="append", metavar="NAME",
+                   help="an authorised threat source (repeatable; default source1)")
+    p.add_argument("--observer", action="append", metavar="NAME", default=[],
+                   help="a read-only identity: status, events and path (repeatable)")
+    p.add_argument("--listen", action="append", metavar="ENDPOINT",
+                   help="the companion's endpoint (repeatable; default tls/0.0.0.0:7447)")
+    p.add_argument("--connect", action="append", metavar="ENDPOINT",
+                   help="the endpoint sources connect to (repeatable; default tls/localhost:7447)")
+    p.add_argument("--host", action="append", metavar="NAME", default=[],
+                   help="another host name or IP address of the companion, for its certificate")
+    p.add_argument("--days", type=int, default=825, help="validity of the identities in days (default 825)")
+    p.add_argument("--force", action="store_true", help="overwrite the files in a non-empty directory")
 
 
 def run(args) -> int:
