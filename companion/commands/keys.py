@@ -22,7 +22,8 @@ Examples:
   companion keys init /etc/companion --listen tls/0.0.0.0:7447 --connect tls/10.0.0.5:7447
 
 Writes ca.key/ca.pem, and <name>.key (mode 0600), <name>.pem, <name>.json5 for the companion,
-every source and every observer, in DIR (default $XDG_CONFIG_HOME/heli-companion/keys, else
+every source and every observer, and mavlink.key (a MAVLink 2 signing key: a random passphrase,
+as MAVProxy's `signing setup PASSPHRASE` takes it; mode 0600; not with --no-mavlink-key), in DIR (default $XDG_CONFIG_HOME/heli-companion/keys, else
 ~/.config/heli-companion/keys; made mode 0700). DIR may hold other files; files of these names
 are overwritten only with --force (the refusal names them). A source may only put and delete threats on
 uav/<sysid>/threats/<its name>/<id>; observers only read status, events and path; anyone else
@@ -60,6 +61,9 @@ def _add_init_options(p) -> None:
                    help="the endpoint sources connect to (repeatable; default tls/localhost:7447)")
     p.add_argument("--host", action="append", metavar="NAME", default=[],
                    help="another host name or IP address of the companion, for its certificate")
+    p.add_argument("--no-mavlink-key", dest="mavlink_key", action="store_false",
+                   help="do not write mavlink.key, the MAVLink 2 signing key (keep the one the flight "
+                   "controller has)")
     p.add_argument("--days", type=int, default=825, help="validity of the identities in days (default 825)")
     p.add_argument("--force", action="store_true",
                    help="overwrite the deployment's files that exist already (a new CA)")
@@ -83,11 +87,14 @@ def run(args) -> int:
                           sources=args.source or ["source1"], observers=args.observer,
                           listen=args.listen or ["tls/0.0.0.0:7447"],
                           connect=args.connect or ["tls/localhost:7447"], hosts=args.host,
-                          days=args.days, force=args.force)
+                          days=args.days, mavlink_key=args.mavlink_key, force=args.force)
     print(f"CA: {dep.ca_cert} (key {dep.ca_key}: keep it offline)")
     for name in [dep.companion, *dep.sources, *dep.observers]:
         role = "companion" if name == dep.companion else ("source" if name in dep.sources else "observer")
         print(f"{role:9s} {name}: {dep.configs[name]} ({dep.certs[name].name}, {dep.keys[name].name})")
+    if dep.mavlink_key is not None:
+        print(f"MAVLink signing key: {dep.mavlink_key} (link.signing_key_file; give the flight controller "
+              f"the same over USB: MAVProxy `signing setup <the file's passphrase>`)")
     print(f"start: companion run --zenoh-config {dep.configs[dep.companion]} ...")
     print(f"       companion threat --zenoh-config {dep.configs[dep.sources[0]]} add --id p1 --pos 75,75,-20 --radius 5")
     return 0

@@ -7,6 +7,8 @@ Layout of the directory (every path inside the configurations is absolute)::
     <source>.key .pem .json5       each threat source: connects with its certificate; may put
                                    and delete uav/<sysid>/threats/<source>/<id> only
     <observer>.key .pem .json5     each observer: may read status, events and path only
+    mavlink.key                    the MAVLink 2 signing key (a passphrase, as MAVProxy's
+                                   ``signing setup``); the settings' ``link.signing_key_file``
 
 Private keys are written with mode 0600. The default directory (``default_keys_dir``) is the
 user's configuration directory, outside any repository; an explicit directory may hold other
@@ -27,7 +29,7 @@ __all__ = ["Deployment", "default_keys_dir", "deployment_files", "init_deploymen
 
 log = logging.getLogger(__name__)
 
-def deployment_files(directory, names) -> list:
+def deployment_files(directory, names, mavlink_key: bool = True) -> list:
     """Every file ``init_deployment`` writes in ``directory`` for the identities ``names``.
 
     Parameters
@@ -36,19 +38,23 @@ def deployment_files(directory, names) -> list:
         The deployment's directory.
     names : sequence of str
         The companion's, the sources' and the observers' names.
+    mavlink_key : bool
+        With the MAVLink signing key (``mavlink.key``).
 
     Returns
     -------
     list of Path
-        ``ca.key``, ``ca.pem``, then ``<name>.key``, ``.pem`` and ``.json5`` of each name.
+        ``ca.key``, ``ca.pem``, then ``<name>.key``, ``.pem`` and ``.json5`` of each name, then
+        ``mavlink.key``.
     """
     d = Path(directory)
-    return [d / "ca.key", d / "ca.pem", *(d / f"{n}{ext}" for n in names for ext in (".key", ".pem", ".json5"))]
+    files = [d / "ca.key", d / "ca.pem", *(d / f"{n}{ext}" for n in names for ext in (".key", ".pem", ".json5"))]
+    return files + ([d / MAVLINK_KEY] if mavlink_key else [])
 
 
-def _check_overwrite(d: Path, names, force: bool) -> None:
+def _check_overwrite(d: Path, names, mavlink_key: bool, force: bool) -> None:
     """Refuse, naming them, the deployment's files that exist already (unless ``force``)."""
-    existing = [p.name for p in deployment_files(d, names) if p.exists()]
+    existing = [p.name for p in deployment_files(d, names, mavlink_key) if p.exists()]
     if existing and not force:
         raise keys.KeyMaterialError(f"{d}: {', '.join(existing)} exist already (a deployment's keys?); "
                                     f"use --force to overwrite them (a new CA: every identity must then be "
@@ -78,6 +84,11 @@ class Deployment:
     certs: dict = field(default_factory=dict)
     keys: dict = field(default_factory=dict)
     configs: dict = field(default_factory=dict)
+    mavlink_key: Path | None = None
+
+
+MAVLINK_KEY = "mavlink.key"
+"""The MAVLink 2 signing key's file name in a deployment (``deploy/companion.toml`` names it)."""
 
 
 def _hosts_of(endpoints) -> list:
@@ -89,9 +100,20 @@ def _hosts_of(endpoints) -> list:
     return out
 
 
+def _write_mavlink_key(path: Path) -> Path:
+    """A new MAVLink 2 signing key file (``mavlink_signing.new_passphrase``, mode 0600)."""
+    from mavlink_signing import SigningKeyError, new_passphrase, write_key_file
+
+    try:
+        return write_key_file(path, new_passphrase())
+    except SigningKeyError as exc:
+        raise keys.KeyMaterialError(str(exc)) from None
+
+
 def init_deployment(directory, *, sysid: int = 1, companion: str = "companion", sources=("source1",),
                     observers=(), listen=("tls/0.0.0.0:7447",), connect=("tls/localhost:7447",),
-                    hosts=(), days: int = keys.DEFAULT_DAYS, force: bool = False) -> Deployment:
+                    hosts=(), days: int = keys.DEFAULT_DAYS, mavlink_key: bool = True,
+                    force: bool = False) -> Deployment:
     """Create the CA, the identities and their zenoh configurations in ``directory``.
 
     Parameters
@@ -114,6 +136,8 @@ def init_deployment(directory, *, sysid: int = 1, companion: str = "companion", 
         More host names or IP addresses for the companion's certificate.
     days : int
         Validity of the identities (days).
+    mavlink_key : bool
+        Also write ``mavlink.key``, a new MAVLink 2 signing key (a random passphrase, mode 0600).
     force : bool
         Overwrite the files of an existing deployment.
 
@@ -146,7 +170,7 @@ def init_deployment(directory, *, sysid: int = 1, companion: str = "companion", 
         raise keys.KeyMaterialError(f"names must be distinct: {', '.join(repeated)} given more than once")
     d = Path(directory).expanduser()
     if d.is_dir():
-        _check_overwrite(d, names, force)
+        _check_overwrite(d, names, mavlink_key, force)
     _make_directory(d)
     d = d.resolve()
     # the names sources may reach the companion by: loopback, the --connect hosts, specific --listen hosts
@@ -167,6 +191,8 @@ def init_deployment(directory, *, sysid: int = 1, companion: str = "companion", 
         for name in [*sources, *observers]:
             cfg = access.peer_config(**common, key=out.keys[name], cert=out.certs[name], connect=connect)
             out.configs[name] = access.write_config(cfg, d / f"{name}.json5")
+        if mavlink_key:
+            out.mavlink_key = _write_mavlink_key(d / MAVLINK_KEY)
     except OSError as exc:
         raise keys.KeyMaterialError(f"{getattr(exc, 'filename', None) or d}: cannot write: "
                                     f"{exc.strerror or exc}") from None

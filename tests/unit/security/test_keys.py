@@ -115,11 +115,31 @@ def test_a_directory_with_other_files_is_taken(tmp_path):
 def test_existing_key_files_are_named_and_kept_unless_forced(tmp_path):
     init_deployment(tmp_path, sources=["radar1"])
     first = (tmp_path / "ca.pem").read_text()
-    with pytest.raises(keys.KeyMaterialError, match="ca.key, ca.pem, companion.key.*radar1.json5 exist already.*--force"):
+    with pytest.raises(keys.KeyMaterialError, match="ca.key, ca.pem, companion.key.*radar1.json5, mavlink.key exist already.*--force"):
         init_deployment(tmp_path, sources=["radar1"])
     assert (tmp_path / "ca.pem").read_text() == first
     init_deployment(tmp_path, sources=["radar1"], force=True)
     assert (tmp_path / "ca.pem").read_text() != first      # a new CA
+
+
+def test_the_mavlink_key_is_a_passphrase_for_mavproxy_readable_by_the_owner_only(tmp_path, deployment):
+    import hashlib
+
+    from mavlink_signing import load_key
+
+    text = deployment.mavlink_key.read_text().strip()
+    assert stat.S_IMODE(deployment.mavlink_key.stat().st_mode) == 0o600
+    assert len(text) >= 43 and load_key(deployment.mavlink_key) == hashlib.sha256(text.encode()).digest()
+    dep = init_deployment(tmp_path, mavlink_key=False)
+    assert dep.mavlink_key is None and not (tmp_path / "mavlink.key").exists()
+
+
+def test_an_existing_mavlink_key_is_kept_with_no_mavlink_key(tmp_path, capsys):
+    (tmp_path / "mavlink.key").write_text("the flight controller's passphrase\n")
+    assert main(["keys", "init", str(tmp_path)]) == 2
+    assert "mavlink.key exist already" in capsys.readouterr().err
+    assert main(["keys", "--no-mavlink-key", "init", str(tmp_path)]) == 0
+    assert (tmp_path / "mavlink.key").read_text() == "the flight controller's passphrase\n"
 
 
 def test_one_existing_file_of_the_deployment_is_enough_to_refuse(tmp_path):
