@@ -73,7 +73,8 @@ def register(subparsers) -> None:
     up.add_argument("--no-share", action="store_true", dest="no_share",
                     help="companions do not share trajectories (companion run --no-fleet): the baseline")
     up.add_argument("--trajectory-delay-ms", type=float, metavar="MS", dest="trajectory_delay_ms",
-                    help="testing: delay every published trajectory MS ms (companion run --fleet-delay-ms)")
+                    help="fault injection: every companion holds each trajectory message MS ms before publishing it "
+                    "(the experiment of a slow network; $HELI_COMPANION_TEST_FLEET_DELAY_MS of the companions)")
     up.add_argument("--seed", type=int, metavar="S", help="seed: vehicle i gets S+i (simulator and companion)")
     up.add_argument("--gcs", default="127.0.0.1:14550", metavar="HOST:PORT",
                     help="every simulator also sends telemetry here (a ground station; default "

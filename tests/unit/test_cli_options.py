@@ -96,3 +96,27 @@ def test_threat_vectors_with_a_minus_sign_are_values():
 ])
 def test_join_negative_values(argv, joined):
     assert join_negative_values(argv, ["--home", "-o"]) == joined
+
+
+def test_run_and_serve_have_no_test_only_options(capsys):
+    for command in ("run", "serve"):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args([command, "--help"])
+        assert "--fleet-delay-ms" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("value, expected", [(None, None), ("", None), ("150", 0.15), ("0", 0.0)])
+def test_the_injected_fleet_delay_comes_from_the_environment(value, expected):
+    from companion.commands.run import injected_fleet_delay_s
+
+    env = {} if value is None else {"HELI_COMPANION_TEST_FLEET_DELAY_MS": value}
+    assert injected_fleet_delay_s(env) == expected
+
+
+@pytest.mark.parametrize("value", ["-5", "x", "nan"])
+def test_a_bad_injected_fleet_delay_names_the_variable(value):
+    from companion.commands.run import injected_fleet_delay_s
+    from companion.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="HELI_COMPANION_TEST_FLEET_DELAY_MS"):
+        injected_fleet_delay_s({"HELI_COMPANION_TEST_FLEET_DELAY_MS": value})
