@@ -17,6 +17,7 @@ import sys
 
 from companion.errors import CompanionError
 from companion.geo import GeoError
+from heli_common.cli_args import ArgumentParser
 
 COMMAND_MODULES = ("run", "serve", "mission_io", "plan", "threat", "keys", "router", "report", "demo", "fleet",
                    "campaign")
@@ -25,7 +26,12 @@ log = logging.getLogger(__name__)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    """The ``companion`` parser: every command of ``COMMAND_MODULES`` that imports.
+
+    Its class (``heli_common.cli_args.ArgumentParser``, inherited by every subcommand's parser)
+    takes option values beginning with a minus sign (``--pos -5,3,-20``).
+    """
+    parser = ArgumentParser(
         prog="companion",
         description="MAVLink companion for an unmanned helicopter: plans (GART/M-GART), smooths "
         "(G1/G2 Bezier) and flies missions, and answers zenoh threats by replanning or switching.",

@@ -15,6 +15,8 @@ import signal
 import sys
 from typing import NoReturn
 
+from heli_common.cli_args import ArgumentParser
+
 DEFAULT_HOME = (47.397742, 8.545594, 488.0, 0.0)
 """Default home: lat, lon (degrees), altitude AMSL (m), heading (degrees) - PX4's SITL field in Zurich."""
 
@@ -27,6 +29,7 @@ examples:
   sim-vehicle --instance 1                      # a second vehicle: port 14565, sysid 2, telemetry
                                                 # to :14550 and :14541 (companion run --instance 1)
   sim-vehicle --home 46.5197,6.6323,372,90 --wind-speed 5 --wind-dir 270 --gust 1 --tlog flight.tlog
+  sim-vehicle --home -35.363261,149.165230,584,353   # ArduPilot SITL's Canberra (or --home=-35.36,...)
   sim-vehicle --origin 47.3970,8.5450,480 --adsb-traffic 3 --seed 7   # EKF origin away from home, traffic
   sim-vehicle --signing-key key.txt             # MAVLink 2 signing; MAVProxy: signing key PASSPHRASE
 
@@ -42,7 +45,10 @@ Modes are ArduCopter's (GUIDED 4, AUTO 3, LOITER 5, RTL 6, LAND 9, BRAKE 17).
 log = logging.getLogger("sim_vehicle")
 
 
-class _Parser(argparse.ArgumentParser):
+class _Parser(ArgumentParser):
+    """``sim-vehicle``'s parser: values such as a southern ``--home -33.8688,151.2093,20,0``
+    (``heli_common.cli_args``), and an error line that points to ``--help``."""
+
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from companion.errors import ConfigError
+from heli_common.cli_args import add_shared_options
 
 log = logging.getLogger(__name__)
 
@@ -69,11 +70,11 @@ def register(subparsers) -> None:
                     help="directory of mission files (*.plan, *.waypoints); the first N by name are flown")
     up.add_argument("--speedup", type=float, default=1.0, metavar="X",
                     help="simulation speed-up (sim-vehicle --speedup, companion --time-scale; default 1)")
-    up.add_argument("--logs", metavar="DIR", help="output directory (default out/fleet-<UTC time>)")
     up.add_argument("--no-share", action="store_true", dest="no_share",
                     help="companions do not share trajectories (companion run --no-fleet): the baseline")
     up.add_argument("--trajectory-delay-ms", type=float, metavar="MS", dest="trajectory_delay_ms",
-                    help="testing: delay every published trajectory MS ms (companion run --fleet-delay-ms)")
+                    help="fault injection: every companion holds each trajectory message MS ms before publishing it "
+                    "(the experiment of a slow network; $HELI_COMPANION_TEST_FLEET_DELAY_MS of the companions)")
     up.add_argument("--seed", type=int, metavar="S", help="seed: vehicle i gets S+i (simulator and companion)")
     up.add_argument("--gcs", default="127.0.0.1:14550", metavar="HOST:PORT",
                     help="every simulator also sends telemetry here (a ground station; default "
@@ -82,7 +83,6 @@ def register(subparsers) -> None:
                     help="let each vehicle take off as soon as its companion is ready (default: hold every "
                     "vehicle's pre-arm checks until all companions are ready, then start them together)")
     up.add_argument("--timeout", type=float, metavar="S", help="stop the fleet after S wall seconds")
-    up.add_argument("--json", action="store_true", help="print the summary as JSON")
     up.set_defaults(func=run_up)
 
     st = sub.add_parser("status", help="one row per vehicle from the companions' zenoh status and events",
@@ -90,12 +90,18 @@ def register(subparsers) -> None:
                         "and uav/*/events for --seconds and print one row per vehicle: mode, leg, outcome, "
                         "position, separation to the nearest other vehicle, decisions.",
                         epilog=STATUS_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    where = st.add_mutually_exclusive_group(required=True)
-    where.add_argument("--router", metavar="ENDPOINT", help="the zenoh router, e.g. tcp/127.0.0.1:7447")
-    where.add_argument("--logs", metavar="DIR", help="a `fleet up` output directory (its fleet.json)")
+    st.add_argument("--router", metavar="ENDPOINT",
+                    help="the zenoh router, e.g. tcp/127.0.0.1:7447 (or --logs, not both)")
     st.add_argument("--seconds", type=float, default=2.0, metavar="S", help="listen this long (default 2)")
-    st.add_argument("--json", action="store_true", help="print the rows as JSON")
     st.set_defaults(func=run_status)
+    add_shared_options(p, [up, st], _add_shared)
+
+
+def _add_shared(p) -> None:
+    """The options of both actions (``p.add_argument``), accepted before or after the action."""
+    p.add_argument("--logs", metavar="DIR", help="up: the output directory (default out/fleet-<UTC time>); "
+                   "status: a `fleet up` output directory, whose fleet.json names the router")
+    p.add_argument("--json", action="store_true", help="print the summary (up) or the rows (status) as JSON")
 
 
 # ------------------------------------------------------------------------------------ up
@@ -155,7 +161,10 @@ def run_up(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------------ status
 def router_of(args: argparse.Namespace) -> str:
-    """The router endpoint: --router, or fleet.json's of --logs."""
+    """The router endpoint: --router, or fleet.json's of --logs (exactly one of them given)."""
+    if bool(args.router) == bool(args.logs):
+        raise ConfigError("--router/--logs: give one of them (the router's endpoint, or a `fleet up` "
+                          f"directory), got {'both' if args.router else 'neither'}")
     if args.router:
         return args.router
     path = Path(args.logs) / "fleet.json"

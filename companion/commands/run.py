@@ -105,8 +105,6 @@ def add_flight_arguments(p) -> None:
                    "read by --resume")
     p.add_argument("--no-fleet", action="store_true", dest="no_fleet",
                    help="neither share this vehicle's trajectory nor avoid the others' (fleet.enabled = false)")
-    p.add_argument("--fleet-delay-ms", type=float, metavar="MS",
-                   help="testing: hold every trajectory message MS ms before publishing it (fleet.inject_delay_s)")
     p.add_argument("--no-feasibility", action="store_true", dest="no_feasibility",
                    help="do not check the legs on the helicopter's closed loop (feasibility.enabled = false)")
     p.add_argument("--print-config", nargs="?", const="toml", choices=("toml", "json"), metavar="FORMAT",
@@ -122,6 +120,36 @@ def instance_overrides(instance: int) -> dict:
     from heli_common.ports import companion_port
 
     return {"link": {"connect": f"udpin://0.0.0.0:{companion_port(instance)}"}, "zenoh": {"sysid": instance + 1}}
+
+
+def injected_fleet_delay_s(environ=None) -> float | None:
+    """The injected trajectory delay of ``$HELI_COMPANION_TEST_FLEET_DELAY_MS``, in s (None: unset).
+
+    Parameters
+    ----------
+    environ : mapping, optional
+        The environment (default ``os.environ``).
+
+    Raises
+    ------
+    ConfigError
+        The variable is not a number >= 0 (the message names it).
+    """
+    import math
+    import os
+
+    from companion.fleet.settings import FLEET_DELAY_ENV
+
+    text = (os.environ if environ is None else environ).get(FLEET_DELAY_ENV, "").strip()
+    if not text:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        raise ConfigError(f"{FLEET_DELAY_ENV}: expected a number of ms >= 0, got {text!r}")
+    return value / 1000.0
 
 
 def settings_overrides(args: argparse.Namespace) -> dict:
@@ -145,8 +173,9 @@ def settings_overrides(args: argparse.Namespace) -> dict:
         out.setdefault("feasibility", {})["enabled"] = False
     if getattr(args, "no_fleet", False):
         out.setdefault("fleet", {})["enabled"] = False
-    if getattr(args, "fleet_delay_ms", None) is not None:
-        out.setdefault("fleet", {})["inject_delay_s"] = args.fleet_delay_ms / 1000.0
+    delay_s = injected_fleet_delay_s()
+    if delay_s is not None:
+        out.setdefault("fleet", {})["inject_delay_s"] = delay_s
     if getattr(args, "interlock", None):
         out.setdefault("startup", {})["interlock"] = args.interlock
     if getattr(args, "adsb", False):

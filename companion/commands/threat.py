@@ -10,15 +10,13 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import re
 import sys
 import time
 
 from companion.errors import ThreatPayloadError
+from heli_common.cli_args import add_shared_options
 
 log = logging.getLogger(__name__)
-
-NEGATIVE_VECTOR = re.compile(r"^-\.?\d")    # -1,1,0 or -.5,2,3: a value, not an option
 
 EPILOG = """\
 Examples:
@@ -32,7 +30,7 @@ Examples:
   companion threat play mission_files/threats/demo.toml --time-scale 5
   companion threat add --id p1 --pos 75,75,-20 --radius 5 --sysid 2     # the companion of system 2
   companion threat add --id p1 --pos 75,75,-20 --radius 5 --sysid 2 --zenoh-connect tcp/10.0.0.5:7447
-  companion threat add --zenoh-config deploy/radar1.json5 --id p1 --pos 75,75,-20 --radius 5
+  companion threat --zenoh-config deploy/radar1.json5 add --id p1 --pos 75,75,-20 --radius 5
                                        # an authenticated source (companion keys init): key
                                        # uav/<sysid>/threats/radar1/p1
 
@@ -41,7 +39,9 @@ WGS-84 --lat/--lon/--alt (altitude AMSL, m). The companion of system N (`compani
 listens on tcp/127.0.0.1:<7447+N> by default (7448 for system 1); this command connects there
 for --sysid N (default 1), or to --zenoh-connect (another machine, a zenoh router). With
 --zenoh-config (a source's file from `companion keys init`) it connects over mutual TLS and puts
-on uav/<sysid>/threats/<source>/<id>, <source> being its certificate's name."""
+on uav/<sysid>/threats/<source>/<id>, <source> being its certificate's name. The options
+--sysid, --zenoh-connect, --zenoh-listen, --zenoh-config, --source and --wait go before or
+after the action (after it wins when given twice)."""
 
 SUBCOMMAND_HELP = {
     "add": "PUT a new threat (replaces one with the same id)",
@@ -63,6 +63,7 @@ def _vector(text: str, option: str) -> tuple:
 
 
 def _add_bus_options(p) -> None:
+    """The options of every action: which bus, which identity, how long to wait (``p.add_argument``)."""
     p.add_argument("--sysid", type=int, default=1, help="vehicle system id: key prefix uav/<sysid> (default 1)")
     p.add_argument("--zenoh-connect", dest="zenoh_connect", nargs="+", metavar="ENDPOINT",
                    help="zenoh endpoints to connect to (default tcp/127.0.0.1:<7447 + --sysid>, the "
@@ -100,11 +101,12 @@ def register(subparsers) -> None:
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="threat_command", metavar="ACTION")
     sub.required = True
+    actions = []
     for name in ("add", "move", "remove", "list", "play"):
+        # NED vectors start with a minus sign (-1,1,0): heli_common.cli_args takes them as values
         sp = sub.add_parser(name, help=SUBCOMMAND_HELP[name], description=SUBCOMMAND_HELP[name],
                             epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-        # NED vectors start with a minus sign (-1,1,0; -5,3,-20): let argparse take them as values
-        sp._negative_number_matcher = NEGATIVE_VECTOR
+        actions.append(sp)
         if name in ("add", "move"):
             _add_threat_options(sp, required=name == "add")
         elif name == "remove":
@@ -116,8 +118,8 @@ def register(subparsers) -> None:
             sp.add_argument("scenario", help="scenario TOML file (see mission_files/threats/)")
             sp.add_argument("--time-scale", dest="time_scale", type=float, default=1.0,
                             help="scenario seconds per wall-clock second (set to sim-vehicle --speedup)")
-        _add_bus_options(sp)
         sp.set_defaults(func=run)
+    add_shared_options(p, actions, _add_bus_options)
 
 
 # ---------------------------------------------------------------------------- building threats

@@ -9,7 +9,7 @@ vehicles meet through a zenoh router and share their committed trajectories):
   --out 127.0.0.1:<companion port> --out <GCS> --speedup X --tlog LOGS/sim<i>.tlog`` and ``companion run --instance i
   --connect udpin://127.0.0.1:<companion port> --mission FILE --zenoh-connect <router>
   --zenoh-listen tcp/127.0.0.1:<free> --record LOGS/uav<i+1>.jsonl --time-scale X`` (with
-  ``--no-fleet`` for the baseline without sharing, ``--fleet-delay-ms`` to delay the shared
+  ``--no-fleet`` for the baseline without sharing, ``$HELI_COMPANION_TEST_FLEET_DELAY_MS`` to delay the shared
   trajectories).
 
 Each process writes its output to ``LOGS/<name>.log``; ``LOGS/fleet.json`` says where everything
@@ -55,6 +55,7 @@ from pathlib import Path
 from companion.errors import ConfigError
 from companion.fleet.missions import first_leg_heading_deg, mission_home
 from companion.fleet.results import FleetResult, VehicleResult, last_json_line
+from companion.fleet.settings import FLEET_DELAY_ENV
 from companion.fleet.start_gate import HOLD_CONFIG, StartGate
 from companion.sitl.processes import Escalation, ManagedProcess, ProcessGroup, python_command, spawn
 from companion.sitl.vehicles import companion_run_args, home_arg, sim_vehicle_args
@@ -133,7 +134,7 @@ class Fleet:
     share : bool
         False: ``companion run --no-fleet`` (the baseline without trajectory sharing).
     trajectory_delay_ms : float, optional
-        ``companion run --fleet-delay-ms``.
+        ``$HELI_COMPANION_TEST_FLEET_DELAY_MS`` of the companions, not a ``companion run`` option.
     seed : int, optional
         Vehicle ``i``: ``sim-vehicle --seed seed + i``, ``companion run --seed seed + i``.
     gcs_out : str or None
@@ -211,9 +212,16 @@ class Fleet:
                 "vehicles": [v.describe() for v in self.vehicles]}
 
     # -------------------------------------------------------------------------- start
-    def _spawn(self, module_args: list[str], log_path: Path) -> ManagedProcess:
-        """``python -m <module_args>`` in the children's environment, ending with the launcher."""
-        return spawn(python_command(module_args), log_path, env=self.env)
+    def _spawn(self, module_args: list[str], log_path: Path, env=None) -> ManagedProcess:
+        """``python -m <module_args>`` in the children's environment (or ``env``), ending with the launcher."""
+        return spawn(python_command(module_args), log_path, env=self.env if env is None else env)
+
+    def companion_env(self) -> dict | None:
+        """The companions' environment: the children's, with the injected trajectory delay
+        (``companion.fleet.settings.FLEET_DELAY_ENV``) when ``trajectory_delay_ms`` is set."""
+        if self.trajectory_delay_ms is None:
+            return self.env
+        return {**(os.environ if self.env is None else self.env), FLEET_DELAY_ENV: f"{self.trajectory_delay_ms:g}"}
 
     def sim_command(self, v: FleetVehicle) -> list[str]:
         outs = [f"127.0.0.1:{v.companion_port}"] + ([self.gcs_out] if self.gcs_out else [])
@@ -229,8 +237,6 @@ class Fleet:
 
     def companion_command(self, v: FleetVehicle) -> list[str]:
         fleet_args = [] if self.share else ["--no-fleet"]
-        if self.trajectory_delay_ms is not None:
-            fleet_args += ["--fleet-delay-ms", f"{self.trajectory_delay_ms:g}"]
         return companion_run_args(f"udpin://127.0.0.1:{v.companion_port}", instance=v.instance, mission=v.mission,
                                   zenoh_connect=self.router_endpoint, zenoh_listen=v.zenoh_listen, record=v.record,
                                   time_scale=self.speedup, seed=None if self.seed is None else self.seed + v.instance,
@@ -251,7 +257,8 @@ class Fleet:
                 v.sim_port, v.companion_port = free_port(), free_port()
                 v.zenoh_listen = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
                 v.sim = self.others.add(self._spawn(self.sim_command(v), v.sim_log))
-                v.companion = self.companions.add(self._spawn(self.companion_command(v), v.companion_log))
+                v.companion = self.companions.add(self._spawn(self.companion_command(v), v.companion_log,
+                                                              env=self.companion_env()))
                 log.info("vehicle %d: sim-vehicle pid %d, companion pid %d, mission %s", v.sysid, v.sim.pid,
                          v.companion.pid, v.mission.name)
             if self.sync_start:

@@ -25,7 +25,12 @@ from dataclasses import dataclass
 from companion.errors import ConfigError
 from heli_common.typed_config import require_numbers
 
-__all__ = ["FleetSettings"]
+__all__ = ["FLEET_DELAY_ENV", "FleetSettings"]
+
+FLEET_DELAY_ENV = "HELI_COMPANION_TEST_FLEET_DELAY_MS"
+"""Fault injection for tests and ``companion fleet up --trajectory-delay-ms``: a companion started
+with this environment variable holds every trajectory message that many ms before publishing it
+(``inject_delay_s``; read by ``companion.commands.run.injected_fleet_delay_s``). Not a user option."""
 
 
 @dataclass(frozen=True)

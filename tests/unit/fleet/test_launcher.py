@@ -146,13 +146,14 @@ def test_fleet_command_lines(tmp_path):
     assert comp[comp.index("--zenoh-listen") + 1] == "tcp/127.0.0.1:40003"
     assert comp[comp.index("--record") + 1] == str(tmp_path / "uav2.jsonl")
     assert comp[comp.index("--time-scale") + 1] == "2"
-    assert "--no-fleet" in comp and comp[comp.index("--fleet-delay-ms") + 1] == "150"
+    assert "--no-fleet" in comp and not any("delay" in arg for arg in comp)
+    assert fleet.companion_env()["HELI_COMPANION_TEST_FLEET_DELAY_MS"] == "150"      # not an option of run
     assert v.sysid == 2 and fleet.paths["vehicles"][2]["tlog"] == tmp_path / "sim1.tlog"
     shared = Fleet(files, tmp_path, gcs_out="127.0.0.1:14550", sync_start=False, face_first_leg=False)
     assert "--config" not in shared.sim_command(shared.vehicles[0])
     assert shared.sim_command(shared.vehicles[0])[4].endswith(",0")
     assert "--no-fleet" not in shared.companion_command(shared.vehicles[0])
-    assert "--fleet-delay-ms" not in shared.companion_command(shared.vehicles[0])
+    assert shared.companion_env() is shared.env and "HELI_COMPANION_TEST_FLEET_DELAY_MS" not in (shared.env or {})
     assert shared.sim_command(shared.vehicles[0]).count("--out") == 2
 
 
@@ -185,7 +186,7 @@ class FakeFleet(Fleet):
         super().__init__(*a, **k)
         self.finish = finish
 
-    def _spawn(self, module_args, log_path):
+    def _spawn(self, module_args, log_path, env=None):
         code = {"companion.cli": self.DONE if self.finish else self.COMPANION, "sim_vehicle.cli": self.ROUTER}
         script = self.ROUTER if module_args[1] == "router" else code[module_args[0]]
         return spawn([sys.executable, "-c", script], log_path)

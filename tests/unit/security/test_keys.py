@@ -104,15 +104,49 @@ def test_the_acl_binds_each_source_to_its_own_key_space(deployment):
     assert rules["telemetry-out"]["flows"] == ["egress"]
 
 
-def test_a_non_empty_directory_is_refused_unless_forced(tmp_path):
-    (tmp_path / "notes.txt").write_text("x")
-    with pytest.raises(keys.KeyMaterialError, match="not empty.*--force"):
-        init_deployment(tmp_path)
-    dep = init_deployment(tmp_path, force=True)
+def test_a_directory_with_other_files_is_taken(tmp_path):
+    (tmp_path / "companion.toml").write_text("seed = 0\n")
+    (tmp_path / "companion.service").write_text("[Unit]\n")
+    dep = init_deployment(tmp_path)
     assert dep.sources == ["source1"] and (tmp_path / "source1.json5").is_file()
+    assert (tmp_path / "companion.toml").read_text() == "seed = 0\n"
+
+
+def test_existing_key_files_are_named_and_kept_unless_forced(tmp_path):
+    init_deployment(tmp_path, sources=["radar1"])
     first = (tmp_path / "ca.pem").read_text()
-    init_deployment(tmp_path, force=True)
+    with pytest.raises(keys.KeyMaterialError, match="ca.key, ca.pem, companion.key.*radar1.json5, mavlink.key exist already.*--force"):
+        init_deployment(tmp_path, sources=["radar1"])
+    assert (tmp_path / "ca.pem").read_text() == first
+    init_deployment(tmp_path, sources=["radar1"], force=True)
     assert (tmp_path / "ca.pem").read_text() != first      # a new CA
+
+
+def test_the_mavlink_key_is_a_passphrase_for_mavproxy_readable_by_the_owner_only(tmp_path, deployment):
+    import hashlib
+
+    from mavlink_signing import load_key
+
+    text = deployment.mavlink_key.read_text().strip()
+    assert stat.S_IMODE(deployment.mavlink_key.stat().st_mode) == 0o600
+    assert len(text) >= 43 and load_key(deployment.mavlink_key) == hashlib.sha256(text.encode()).digest()
+    dep = init_deployment(tmp_path, mavlink_key=False)
+    assert dep.mavlink_key is None and not (tmp_path / "mavlink.key").exists()
+
+
+def test_an_existing_mavlink_key_is_kept_with_no_mavlink_key(tmp_path, capsys):
+    (tmp_path / "mavlink.key").write_text("the flight controller's passphrase\n")
+    assert main(["keys", "init", str(tmp_path)]) == 2
+    assert "mavlink.key exist already" in capsys.readouterr().err
+    assert main(["keys", "--no-mavlink-key", "init", str(tmp_path)]) == 0
+    assert (tmp_path / "mavlink.key").read_text() == "the flight controller's passphrase\n"
+
+
+def test_one_existing_file_of_the_deployment_is_enough_to_refuse(tmp_path):
+    (tmp_path / "radar2.key").write_text("x")
+    with pytest.raises(keys.KeyMaterialError, match=r": radar2.key exist already"):
+        init_deployment(tmp_path, sources=["radar2"])
+    assert not (tmp_path / "ca.key").exists()
 
 
 @pytest.mark.parametrize("kwargs, message", [
@@ -135,7 +169,42 @@ def test_keys_init_command_writes_and_refuses_an_existing_deployment(tmp_path, c
     out = capsys.readouterr().out
     assert "source    radar1" in out and "observer  gcs" in out and "--zenoh-config" in out
     assert main(["keys", "init", str(d)]) == 2
-    assert "not empty" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "ca.key" in err and "exist already" in err and "--force" in err
+
+
+def test_keys_init_writes_to_the_user_config_directory_by_default(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "cfg"))
+    assert main(["keys", "init", "--source", "radar1"]) == 0
+    d = tmp_path / "cfg" / "heli-companion" / "keys"
+    assert (d / "radar1.key").is_file() and str(d / "radar1.json5") in capsys.readouterr().out
+    assert stat.S_IMODE(d.stat().st_mode) == 0o700
+
+
+@pytest.mark.parametrize("env, expected", [
+    ({"XDG_CONFIG_HOME": "/x/cfg", "HOME": "/home/u"}, "/x/cfg/heli-companion/keys"),
+    ({"XDG_CONFIG_HOME": "", "HOME": "/home/u"}, "/home/u/.config/heli-companion/keys"),
+    ({"XDG_CONFIG_HOME": "rel/cfg", "HOME": "/home/u"}, "/home/u/.config/heli-companion/keys"),
+    ({"HOME": "/home/u"}, "/home/u/.config/heli-companion/keys"),
+])
+def test_the_default_keys_directory_follows_xdg(env, expected):
+    from companion.security.paths import default_keys_dir
+
+    assert str(default_keys_dir(env)) == expected
+
+
+@pytest.mark.parametrize("path", ["deploy/ca.key", "deploy/radar1.key", "deploy/radar1.pem", "deploy/gcs.json5",
+                                  "deploy/mavlink.key", "keys/companion.key", "heli.key"])
+def test_key_files_in_the_tree_are_ignored_by_git(path):
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[3]
+    if shutil.which("git") is None or not (repo / ".git").exists():
+        pytest.skip("not a git checkout")
+    done = subprocess.run(["git", "-C", str(repo), "check-ignore", "-q", "--no-index", path])
+    assert done.returncode == 0, f"{path} is not ignored by .gitignore"
 
 
 def test_a_file_path_is_refused(tmp_path):
