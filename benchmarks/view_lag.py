@@ -206,7 +206,9 @@ def _stop(process: subprocess.Popen) -> None:
 
 
 def fly(speedup: float, mission: Path, work: Path, timeout_s: float) -> tuple[Path, Path, int]:
-    """One flight at ``speedup``: (listener file, viewer file, the companion's exit code)."""
+    """One flight at ``speedup``: (listener file, viewer file, the companion's exit code); the
+    flight's record goes to ``work/flight.jsonl`` (its ``setpoint_jitter`` event: the stream's
+    timing with the view on)."""
     work.mkdir(parents=True, exist_ok=True)
     companion_port, listen_port, vehicle_port = free_port(), free_port(), free_port()
     fox_port = free_port(socket.SOCK_STREAM)
@@ -220,7 +222,8 @@ def fly(speedup: float, mission: Path, work: Path, timeout_s: float) -> tuple[Pa
     viewer = _spawn([*me, "view", str(fox_port), str(viewed), str(timeout_s)], work / "viewer.log")
     companion = _spawn([sys.executable, "-m", "companion.cli", "run", "--connect",
                         f"udpin://127.0.0.1:{companion_port}", "--no-zenoh", "--foxglove",
-                        f"127.0.0.1:{fox_port}", "--mission", str(mission)], work / "companion.log")
+                        f"127.0.0.1:{fox_port}", "--mission", str(mission), "--record", str(work / "flight.jsonl")],
+                       work / "companion.log")
     try:
         code = companion.wait(timeout_s)
     except subprocess.TimeoutExpired:
@@ -318,6 +321,14 @@ def _stats(values: list[float], scale: float = 1.0, digits: int = 1) -> dict:
             "p95": round(float(np.percentile(v, 95)), digits), "max": round(float(v.max()), digits)}
 
 
+def setpoint_jitter(record: Path) -> dict:
+    """The flight's setpoint stream timing (its record's ``setpoint_jitter`` event), ms."""
+    for line in _load_jsonl(record):
+        if line.get("type") == "event" and line.get("name") == "setpoint_jitter":
+            return {k: line[k] for k in ("count", "p50_ms", "p99_ms", "max_ms", "missed") if k in line}
+    return {}
+
+
 def analyse(listened: Path, viewed: Path) -> dict:
     """The figures of one flight, per viewer topic and match method."""
     track = _track(_load_jsonl(listened))
@@ -372,8 +383,12 @@ def markdown(report: dict) -> str:
     lines += ["", "Rates received by the viewer (Hz of wall clock):", ""]
     for run in report["runs"]:
         rates = ", ".join(f"`{t}` {run[t]['rate_hz']}" for t in TOPICS if t in run)
+        jitter = run.get("setpoint_jitter_ms") or {}
+        stream = (f"; the 50 Hz setpoint stream |period - 20 ms| p50 {jitter['p50_ms']:.3f} ms, p99 "
+                  f"{jitter['p99_ms']:.3f} ms, max {jitter['max_ms']:.3f} ms, {jitter['missed']} missed"
+                  if jitter else "")
         lines.append(f"- {run['speedup']:g}x (measured {run['speedup_measured']}x): {rates}; "
-                     f"companion exit {run['companion_exit']}")
+                     f"companion exit {run['companion_exit']}{stream}")
     if report.get("note"):
         lines += ["", report["note"]]
     return "\n".join(lines) + "\n"
@@ -411,7 +426,8 @@ def main(argv: list[str] | None = None) -> int:
               else str(args.mission), "runs": [], "note": args.note}
     for speedup in args.speedups:
         listened, viewed, code = fly(speedup, args.mission, args.work / f"x{speedup:g}", args.timeout_s)
-        run = {"speedup": speedup, "companion_exit": code, **analyse(listened, viewed)}
+        run = {"speedup": speedup, "companion_exit": code, **analyse(listened, viewed),
+               "setpoint_jitter_ms": setpoint_jitter(listened.parent / "flight.jsonl")}
         log.info("%gx: %s", speedup, json.dumps(run))
         report["runs"].append(run)
     args.json.parent.mkdir(parents=True, exist_ok=True)
