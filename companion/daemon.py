@@ -153,11 +153,15 @@ class CompanionDaemon:
     bus : ThreatBus, optional
         A zenoh session that outlives this flight (``companion serve``'s): the threat reactor
         subscribes on it for the flight and leaves it open.
+    live : companion.view.live.LiveView, optional
+        A live Foxglove view that outlives this flight (``companion serve``'s, already feeding
+        the vehicle's state): the flight's channels go on it and it stays up. Default: with
+        ``view.foxglove``, a view of its own from the start of ``run`` to its end.
     """
 
     def __init__(self, settings: Settings, *, mission_path=None, world_path=None,
                  record_path=None, resume: bool = False, workers: str = "process",
-                 link: VehicleLink | None = None, bus=None):
+                 link: VehicleLink | None = None, bus=None, live=None):
         if resume and mission_path is not None:
             raise MissionError("--resume flies the mission stored on the vehicle: leave out --mission")
         self.settings = settings
@@ -169,6 +173,8 @@ class CompanionDaemon:
         self.owns_link = link is None
         self.link = link if link is not None else companion_link(settings)
         self.bus = bus
+        self.live = live
+        self._owns_live = False
         self.clock = VehicleClock(settings.link.time_scale or 1.0)   # the vehicle's, once connected
         self.owner = ReferenceOwner(self.clock, turn_rate_rad_s=settings.flight.turn_rate_rad_s,
                                     yaw_now_rad=self._current_yaw)
@@ -192,16 +198,17 @@ class CompanionDaemon:
 
     # ------------------------------------------------------------------ what it tells
     def _open_record(self) -> RecordSinks:
-        """The record's sinks: ``--record`` (MCAP or JSON Lines) and the live Foxglove server."""
+        """The record's sinks: ``--record`` (MCAP or JSON Lines) and the live Foxglove view
+        (its own, fed from the link's telemetry, unless it was given one)."""
         s = self.settings
-        foxglove = parse_foxglove_address(s.view.foxglove, "view.foxglove") if s.view.foxglove else None
         with normal_priority():              # the live server's threads never at the stream's priority
-            sinks = open_record_sinks(self.record_path, foxglove, s.threats.horizon_s, s.threats.uncertainty_m_s)
-        for sink in sinks.sinks:
-            if getattr(sink, "port", None):
-                log.info("Foxglove live view: ws://%s:%d (Foxglove: open connection, Foxglove WebSocket)",
-                         foxglove[0], sink.port)
-        return sinks
+            if self.live is None and s.view.foxglove:
+                from companion.view.live import LiveView              # foxglove-sdk only when used
+
+                self.live = LiveView(self.link, *parse_foxglove_address(s.view.foxglove, "view.foxglove"))
+                self._owns_live = True
+            return open_record_sinks(self.record_path, None, s.threats.horizon_s, s.threats.uncertainty_m_s,
+                                     live=self.live.server if self.live is not None else None)
 
     def status(self) -> dict:
         """The status message of ``uav/<sysid>/status``."""
@@ -482,6 +489,8 @@ class CompanionDaemon:
         self.sink.record("summary", **self.summary.as_dict())
         if self.recorder is not None:
             self.recorder.close()
+        if self._owns_live:
+            self.live.close()
         self.workers.shutdown()
         if self._stop_link_listener is not None:
             self._stop_link_listener()

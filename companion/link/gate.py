@@ -138,6 +138,10 @@ class InboundFilter:
     tapped : set of str
         Message types the link reads itself (``VehicleLink.inbound.messages``): each admitted
         one is also kept in ``taps`` as ``(type, fields)`` (``tapped_fields``) for the gate to hand over.
+    listeners : dict of str to list of callable
+        Message type -> callables given each admitted message's fields at once, on the gate's
+        thread (``VehicleLink.inbound.listen``: the live view, which must not wait for the
+        hand-over). A listener that raises is logged; the frame goes on.
     counts : dict of str to int
         ``passed``, ``not_for_us``, ``onboard``, ``malformed`` and, with a key, each refused
         ``Verdict`` value (``unsigned``, ``bad_signature``, ``replayed``, ``stale``).
@@ -152,6 +156,7 @@ class InboundFilter:
         self.replies: list[bytes] = []          # its answers, for the gate to send
         self.tapped: set[str] = set()           # message types the link reads (``taps``)
         self.taps: list[tuple[str, dict]] = []  # admitted messages of those types, as fields
+        self.listeners: dict[str, list] = {}    # message type -> callables on the gate's thread
         self.parser = new_parser()
         self.autopilot_heard = False
         self._arrival_s: float | None = None
@@ -200,9 +205,19 @@ class InboundFilter:
         self.counts[PASSED] += 1
         kind = msg.get_type()
         self.autopilot_heard |= kind == "HEARTBEAT" and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID
-        if kind in self.tapped:
-            self.taps.append((kind, tapped_fields(msg, self._arrival_s)))
+        if kind in self.tapped or kind in self.listeners:
+            self._tap(kind, tapped_fields(msg, self._arrival_s))
         return True
+
+    def _tap(self, kind: str, fields: dict) -> None:
+        """Keep the message for the hand-over (``taps``) and give it to its ``listeners`` now."""
+        if kind in self.tapped:
+            self.taps.append((kind, fields))
+        for listener in self.listeners.get(kind, ()):
+            try:
+                listener(fields)
+            except Exception:                    # a listener's bug never costs the link a frame
+                log.exception("listener of %s failed", kind)
 
     def _count(self, outcome: str) -> bool:
         """Count a dropped frame; log the first of each kind, then every 1000th."""

@@ -4,6 +4,9 @@ The gate parses every frame it admits anyway (``companion.link.gate``): the type
 are handed to the event loop in batches as field dicts (``tapped_fields``), without MAVSDK's
 JSON round trip. While the daemon's schedule runs, the batches are taken by its ``telemetry``
 task (``take_batches``, right after each setpoint) instead of waking the loop (``batch_reads``).
+A *listener* (``listen``: the live view) gets its messages on the gate's thread as each is read,
+neither waiting for the hand-over nor touching the loop; while one listens, the batches of the
+vehicle's datagrams are read every ``LIVE_READ_PERIOD_S`` instead of ``TAP_HANDOVER_PERIOD_S``.
 """
 
 from __future__ import annotations
@@ -15,6 +18,12 @@ from typing import AsyncIterator, Callable
 from companion.link.ports import Ticking
 from companion.link.session import LinkSession
 from companion.link.transport import TAP_HANDOVER_PERIOD_S
+
+#: While a listener listens (``MessageTap.listen``), the vehicle's datagrams are read in
+#: batches this often (s) during the schedule (``batch_reads``): a listener then hears a
+#: message at most this long after it arrived (the live view's lag), for 40 wake-ups of the
+#: gate's thread a second instead of 10; the hand-overs to the loop stay at 10 a second.
+LIVE_READ_PERIOD_S = 0.025
 
 
 class MessageTap:
@@ -31,6 +40,39 @@ class MessageTap:
         self._readers: dict[str, set[asyncio.Queue]] = {}  # message type -> the queues of messages()
         self._batches: collections.deque = collections.deque()  # what the gate read, for the loop
         self._taker: Ticking | None = None            # the running schedule that takes them
+        self._listeners: dict[str, list[Callable[[dict], None]]] = {}   # shared with each gate's filter
+
+    def attach(self, gate, loop: asyncio.AbstractEventLoop) -> None:
+        """A new connection's gate (``companion.link.transport.GateThread``): its hand-overs
+        come to this tap and its filter calls the listeners (``listen``)."""
+        gate.on_tap = self.gate_callback(loop)
+        gate.inbound.listeners = self._listeners
+
+    def listen(self, name: str, listener: Callable[[dict], None]) -> Callable[[], None]:
+        """Call ``listener(fields)`` with every message named ``name`` the link admits, on the
+        gate's thread, as soon as it is read (the fields ``messages`` yields); for every
+        connection from now on. Returns the function that stops it. A listener must be quick
+        and must not touch the event loop: it runs beside the setpoint stream."""
+        self._listeners[name] = [*self._listeners.get(name, ()), listener]   # copied: the gate may be iterating
+        self._read_period_changed()
+
+        def stop() -> None:
+            left = [f for f in self._listeners.get(name, ()) if f is not listener]
+            if left:
+                self._listeners[name] = left
+            else:
+                self._listeners.pop(name, None)
+            self._read_period_changed()
+        return stop
+
+    def _read_period(self) -> float:
+        """How often the gate reads the vehicle's datagrams while a schedule runs."""
+        return LIVE_READ_PERIOD_S if self._listeners else TAP_HANDOVER_PERIOD_S
+
+    def _read_period_changed(self) -> None:
+        gate = self._session.gate
+        if gate is not None and self._taker is not None:
+            gate.batch_reads(self._read_period())
 
     async def messages(self, name: str) -> AsyncIterator[dict]:
         """Raw MAVLink messages named ``name`` (e.g. ``"SERVO_OUTPUT_RAW"``) as field dicts.
@@ -63,7 +105,7 @@ class MessageTap:
         if gate is None:
             return
         self._taker = taker
-        gate.batch_reads(TAP_HANDOVER_PERIOD_S if taker is not None else 0.0)
+        gate.batch_reads(self._read_period() if taker is not None else 0.0)
         self.take_batches()
 
     def take_batches(self) -> None:

@@ -175,7 +175,7 @@ class VehicleLink:
                 else ComponentType.GROUND_STATION)
         gate = self.session.gate = open_gate(url, self.signing_key, tlog_path=self.tlog_path,
                                              onboard=self.onboard)
-        gate.on_tap = self.inbound.gate_callback(asyncio.get_running_loop())
+        self.inbound.attach(gate, asyncio.get_running_loop())
         mavsdk = self.session.mavsdk = Mavsdk(Configuration.create_with_component_type(kind))
         try:
             await mavsdk.add_any_connection(gate.mavsdk_url)

@@ -19,6 +19,11 @@ One ``CompanionService`` per vehicle, for the life of the companion computer:
 5. **stop**: the flight ends as ``companion run``'s does, including the moment a pilot changes
    the mode away from GUIDED (the companion stops commanding); then back to 3.
 
+With ``view.foxglove`` (``--foxglove``) the live Foxglove view is up for the service's whole
+life, from before the vehicle answers: the vehicle's state from its telemetry
+(``companion.view.live``) between flights as during them, and each flight's scene, plan and
+decisions on the same server while it flies (the last flight's stay shown until the next).
+
 With ``resume`` (``--resume``, the systemd unit's), a service that finds the vehicle hovering in
 GUIDED when it starts (its predecessor crashed or was killed mid-flight) takes it over first and
 flies on from the vehicle's current item (``companion run --resume``).
@@ -106,6 +111,7 @@ class CompanionService:
         self.flights = 0
         self.last_outcome: str | None = None
         self.daemon: CompanionDaemon | None = None
+        self.live = None                      # companion.view.live.LiveView, with view.foxglove
         self._busy = False
         self._lock = threading.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -123,6 +129,7 @@ class CompanionService:
             if self.settings.zenoh.enabled:     # before the priority: zenoh's threads stay normal
                 self._open_presence()
                 presence = self._loop.create_task(self._publish_presence(), name="presence")
+            self._open_live_view()              # before the priority too: the server's threads
             raise_stream_priority()              # before connect: MAVSDK's threads inherit it
             await self._wait_for_vehicle()
             self.link.on_link_change(self._on_link_change)
@@ -169,7 +176,8 @@ class CompanionService:
         self.onboard.active = True
         self._say(mavlink.MAV_SEVERITY_INFO, f"companion: flight {self.flights} ({request.source})")
         self.daemon = CompanionDaemon(self.settings, world_path=self.world_path, record_path=self._record_path(),
-                                      resume=request.resume, workers=self.workers, link=self.link, bus=self.bus)
+                                      resume=request.resume, workers=self.workers, link=self.link, bus=self.bus,
+                                      live=self.live)
         verdict, reason = "completed", ""
         try:
             await self.daemon.run()
@@ -195,7 +203,18 @@ class CompanionService:
         stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
         return self.record_dir / f"flight-{self.flights}-{stamp}.mcap"
 
+    def _open_live_view(self) -> None:
+        """The live Foxglove view for the service's life (``view.foxglove``), fed from the link."""
+        if not self.settings.view.foxglove:
+            return
+        from companion.view.live import LiveView                  # foxglove-sdk only when used
+        from companion.view.sinks import parse_foxglove_address
+
+        self.live = LiveView(self.link, *parse_foxglove_address(self.settings.view.foxglove, "view.foxglove"))
+
     async def _close(self) -> None:
+        if self.live is not None:
+            self.live.close()
         if self._token is not None:
             self._token.undeclare()
         if self.bus is not None:

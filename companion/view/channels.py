@@ -4,12 +4,14 @@ Foxglove's well-known schemas (SceneUpdate, FrameTransform, LocationFix, Log) ca
 scene, the map and the log panel; the flight record's content goes on JSON channels with a
 JSON schema each, one per record line type, the ``sample`` line split into the vehicle's state,
 the reference, the tracking error and the actuator inputs. ``companion report`` reads the JSON
-channels back (``companion.view.mcap_record``).
+channels back (``companion.view.mcap_record``). ``TELEMETRY`` is the live view's vehicle state,
+published as each LOCAL_POSITION_NED arrives (``companion.view.live``), with the vehicle's own
+time stamp.
 """
 
 from __future__ import annotations
 
-__all__ = ["RECORD_TOPICS", "SAMPLE_TOPICS", "SCENE_WORLD", "SCENE_PATHS", "SCENE_THREATS",
+__all__ = ["RECORD_TOPICS", "SAMPLE_TOPICS", "TELEMETRY", "TELEMETRY_PROPERTIES", "SCENE_WORLD", "SCENE_PATHS", "SCENE_THREATS",
            "SCENE_VEHICLE", "TRANSFORMS", "LOCATION", "LOG", "json_schema"]
 
 _NUM = {"type": "number"}
@@ -51,6 +53,11 @@ SAMPLE_TOPICS: dict[str, dict] = {
     "/vehicle/tracking_error": {"t_s": _NUM, "tracking_error_m": _NUM},
     "/vehicle/actuators": {"t_s": _NUM, "servo_us": {"type": ["array", "null"], "items": _INT}},
 }
+#: The vehicle's state as its telemetry reports it, one message per LOCAL_POSITION_NED.
+TELEMETRY = "/vehicle/telemetry"
+TELEMETRY_PROPERTIES: dict = {"time_boot_ms": _INT, "t_s": _NUM, "seq": _INT, "pos_ned_m": _VEC3,
+                              "vel_ned_m_s": _VEC3, "euler_rad": {"type": ["array", "null"], "items": _NUM},
+                              "frame": {"type": "string", "enum": ["home", "vehicle_local"]}}
 SCENE_WORLD = "/scene/world"
 SCENE_PATHS = "/scene/paths"
 SCENE_THREATS = "/scene/threats"

@@ -6,6 +6,12 @@ scene: the static world, the active path, the planned legs and the M-GART altern
 threats as spheres moving along their predicted tubes, the helicopter, and a map fix. Both sinks
 share one ``foxglove.Context``, so a live client and the MCAP file see the same messages.
 Logging costs a few microseconds in the caller's thread (foxglove-sdk's writer is native).
+
+On a live server whose vehicle is fed from the telemetry (``live``: a
+``companion.view.live.LiveServer`` with a ``VehicleFeed``), the helicopter (``/tf``, the map's
+fix, its shape) is the feed's, drawn as each state arrives; the record's samples then only
+fill the JSON channels (``/vehicle/state`` ... , what ``companion report`` reads back). Without
+one, the samples place the helicopter too.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from foxglove.messages import (LocationFix, Log, LogLevel, SceneEntityDeletion,
 from companion.record.flight_record import jsonable
 from companion.view import channels as ch
 from companion.view import scene
+from companion.view.live import FIX_PERIOD_S, REPUBLISH_PERIOD_S, LiveServer
 from heli_common.frames import LocalFrame
 
 __all__ = ["FlightView"]
@@ -36,9 +43,6 @@ log = logging.getLogger(__name__)
 ACTIVE_PATH_RGBA = (0.1, 0.85, 0.3, 1.0)
 PLANNED_RGBA = (0.6, 0.6, 0.6, 0.6)
 ALTERNATIVE_RGBA = (0.3, 0.55, 1.0, 0.7)
-REPUBLISH_PERIOD_S = 2.0
-#: The map's fix is sent at most this often (flight time, s): a map panel needs no more.
-FIX_PERIOD_S = 0.5
 #: MCAP chunk size: a companion killed mid-flight loses at most the chunk being filled.
 CHUNK_BYTES = 64 * 1024
 
@@ -52,7 +56,10 @@ class FlightView:
         Write every channel to this MCAP file (overwritten).
     server : tuple of (str, int), optional
         Serve the channels live over the Foxglove WebSocket protocol on (host, port); port 0
-        picks a free one (``port``).
+        picks a free one (``port``). Stopped by ``close``.
+    live : LiveServer, optional
+        Log into this live server instead (it outlives the view: ``close`` leaves it up), whose
+        ``VehicleFeed`` draws the helicopter.
     horizon_s, uncertainty_m_s : float
         How far ahead a threat's tube is drawn (s) and how its radius grows with age (m/s), as
         the threat settings say.
@@ -62,14 +69,15 @@ class FlightView:
 
     def __init__(self, mcap_path: str | Path | None = None, server: tuple[str, int] | None = None,
                  horizon_s: float = 10.0, uncertainty_m_s: float = 0.3,
-                 clock_ns: Callable[[], int] = time.time_ns) -> None:
-        self.context = foxglove.Context()
+                 clock_ns: Callable[[], int] = time.time_ns, live: LiveServer | None = None) -> None:
+        self._server = LiveServer(*server) if server and live is None else None      # owned
+        self._draws_vehicle = live is None
+        live = live or self._server
+        self.context = live.context if live is not None else foxglove.Context()
         self._mcap = (foxglove.open_mcap(Path(mcap_path), allow_overwrite=True, context=self.context,
                                          writer_options=MCAPWriteOptions(chunk_size=CHUNK_BYTES))
                       if mcap_path else None)
-        self._server = (foxglove.start_server(name="companion", host=server[0], port=server[1],
-                                              context=self.context) if server else None)
-        self.port = self._server.port if self._server else None
+        self.port = live.port if live is not None else None
         self._clock_ns, self._last_ns = clock_ns, 0
         self._lock = threading.Lock()
         self._json = {topic: foxglove.Channel(topic, schema=ch.json_schema(topic, props), context=self.context)
@@ -107,13 +115,13 @@ class FlightView:
                 handler(fields, now_ns)
 
     def close(self) -> None:
-        """Finish the MCAP file and stop the server (idempotent)."""
+        """Finish the MCAP file and stop the server it started (idempotent; a ``live`` server stays up)."""
         with self._lock:
             if self._mcap is not None:
                 self._mcap.close()
                 self._mcap = None
             if self._server is not None:
-                self._server.stop()
+                self._server.close()
                 self._server = None
 
     # -- per line type --------------------------------------------------------------------
@@ -160,12 +168,8 @@ class FlightView:
         t_s, pos = fields["t_s"], fields.get("pos_ned_m")
         if pos is None:
             return
-        self._tf.log(scene.vehicle_transform(pos, fields.get("euler_rad"), t_s), log_time=now_ns)
-        if self._home is not None and t_s - self._fix_t_s >= FIX_PERIOD_S:
-            self._fix_t_s = t_s
-            lat, lon, alt = (float(np.asarray(v).ravel()[0]) for v in self._home.to_lla(*pos))
-            self._fix.log(LocationFix(timestamp=scene.timestamp(t_s), frame_id=scene.MAP_FRAME,
-                                      latitude=lat, longitude=lon, altitude=alt), log_time=now_ns)
+        if self._draws_vehicle:
+            self._draw_vehicle(t_s, pos, fields.get("euler_rad"), now_ns)
         path_changed = bool(fields.get("path_id")) and fields["path_id"] != self._active
         self._active = fields.get("path_id") or self._active
         if self._threats:
@@ -174,10 +178,21 @@ class FlightView:
         republish = wall_s - self._republished_s >= REPUBLISH_PERIOD_S     # for clients that join late
         if republish:
             self._republished_s = wall_s
-            self._scene[ch.SCENE_VEHICLE].log(SceneUpdate(entities=[scene.vehicle_entity(t_s)]), log_time=now_ns)
+            if self._draws_vehicle:
+                self._scene[ch.SCENE_VEHICLE].log(SceneUpdate(entities=[scene.vehicle_entity(t_s)]),
+                                                  log_time=now_ns)
             self._publish_world(now_ns)
         if republish or path_changed:
             self._publish_paths(now_ns)
+
+    def _draw_vehicle(self, t_s: float, pos: list, euler_rad: list | None, now_ns: int) -> None:
+        """The helicopter from a sample (no live feed): ``/tf`` and the map's fix."""
+        self._tf.log(scene.vehicle_transform(pos, euler_rad, t_s), log_time=now_ns)
+        if self._home is not None and t_s - self._fix_t_s >= FIX_PERIOD_S:
+            self._fix_t_s = t_s
+            lat, lon, alt = (float(np.asarray(v).ravel()[0]) for v in self._home.to_lla(*pos))
+            self._fix.log(LocationFix(timestamp=scene.timestamp(t_s), frame_id=scene.MAP_FRAME,
+                                      latitude=lat, longitude=lon, altitude=alt), log_time=now_ns)
 
     # -- scene ----------------------------------------------------------------------------
     def _publish_world(self, now_ns: int) -> None:

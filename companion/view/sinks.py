@@ -79,16 +79,28 @@ def parse_foxglove_address(text: str, name: str = "--foxglove") -> tuple[str, in
 
 
 def open_record_sinks(record_path: str | Path | None, foxglove: tuple[str, int] | None = None,
-                      horizon_s: float = 10.0, uncertainty_m_s: float = 0.3) -> RecordSinks:
-    """The sinks for ``--record`` (MCAP when it ends in ``.mcap``) and ``--foxglove``."""
+                      horizon_s: float = 10.0, uncertainty_m_s: float = 0.3, live=None) -> RecordSinks:
+    """The sinks for ``--record`` (MCAP when it ends in ``.mcap``) and ``--foxglove``.
+
+    Parameters
+    ----------
+    record_path : path, optional
+    foxglove : (host, port), optional
+        A live server of the flight's own (stopped with the sinks).
+    horizon_s, uncertainty_m_s : float
+        The threat tubes' (``FlightView``).
+    live : companion.view.live.LiveServer, optional
+        A live server that outlives the flight, instead of ``foxglove`` (left up by ``close``).
+    """
     sinks: list = []
     mcap = record_path is not None and str(record_path).endswith(".mcap")
     if record_path is not None and not mcap:
         sinks.append(FlightRecorder(record_path))
-    if mcap or foxglove is not None:
+    if mcap or foxglove is not None or live is not None:
         from companion.view.publisher import FlightView            # foxglove-sdk only when used
 
         if mcap:
             Path(record_path).parent.mkdir(parents=True, exist_ok=True)
-        sinks.append(FlightView(record_path if mcap else None, foxglove, horizon_s, uncertainty_m_s))
+        sinks.append(FlightView(record_path if mcap else None, None if live is not None else foxglove,
+                                horizon_s, uncertainty_m_s, live=live))
     return RecordSinks(sinks)

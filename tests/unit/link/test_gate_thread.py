@@ -115,3 +115,48 @@ def test_batched_reads_keep_each_datagrams_kernel_arrival_time():
     assert handed_at - sent["ATTITUDE"] >= 0.2                                  # read late, together
     for kind, t_s in taps:
         assert abs(t_s - sent[kind]) < 0.02, (kind, t_s - sent[kind])          # stamped on arrival
+
+
+def test_a_listener_hears_each_message_on_the_gate_thread_as_it_is_read():
+    """``MessageTap.listen``: the live view's path, no hand-over to the loop; a listener that
+    raises costs the link nothing (MAVSDK still gets the frames)."""
+    import asyncio
+
+    from companion.link.message_tap import LIVE_READ_PERIOD_S, MessageTap
+    from companion.link.session import LinkSession
+
+    vehicle, mavsdk = udp_socket(), udp_socket()
+    identity = Identity()
+    gate = GateThread(f"udpout://127.0.0.1:{vehicle.getsockname()[1]}", InboundFilter(identity),
+                      OutboundSigner(identity))
+    session = LinkSession()
+    session.gate = gate
+    tap = MessageTap(session)
+    loop = asyncio.new_event_loop()
+    tap.attach(gate, loop)
+    heard = []
+    stop_position = tap.listen("LOCAL_POSITION_NED", lambda f: heard.append((threading.current_thread().name, f["time_boot_ms"])))
+    stop_attitude = tap.listen("ATTITUDE", lambda f: 1 / 0)
+    gate.start()
+    try:
+        mav = mavlink.MAVLink(None, srcSystem=US[0], srcComponent=US[1])
+        hb = mav.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+        mavsdk.sendto(hb.pack(mav), gate.local.getsockname())
+        assert "HEARTBEAT" in received_types(vehicle, 0.3)
+        gate_address = ("127.0.0.1", gate.vehicle.sock.getsockname()[1])
+        for frame in frames_from_vehicle():
+            vehicle.sendto(frame, gate_address)
+        seen_by_mavsdk = received_types(mavsdk, 0.5)
+        running = type("Schedule", (), {"running": True})()           # a schedule that runs
+        tap.batch_reads(running)
+        assert gate.read_period_s == LIVE_READ_PERIOD_S                # read often while someone listens
+        stop_attitude()
+        assert gate.read_period_s == LIVE_READ_PERIOD_S
+        stop_position()
+        assert gate.read_period_s == TAP_HANDOVER_PERIOD_S             # nobody listens: the usual batches
+    finally:
+        gate.close()
+        loop.close()
+    assert heard == [("mavlink-gate", 1000)]
+    assert "HEARTBEAT" in seen_by_mavsdk and "COMMAND_ACK" in seen_by_mavsdk   # the raise dropped nothing
+    assert not gate.inbound.taps                                     # nobody reads: nothing kept for the loop
