@@ -35,6 +35,7 @@ BENCHMARKS = {
     "smoothing": [],
     "sitl_realtime": [],
     "setpoint_jitter": ["--sitl"],
+    "view_lag": [],
     "companion_cpu": ["--speedup", "1"],
     "flight_tracking": [],
     "threats": [],

@@ -413,14 +413,17 @@ def main(argv: list[str] | None = None) -> int:
         asyncio.run(view(int(argv[1]), Path(argv[2]), float(argv[3])))
         return 0
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--speedups", type=float, nargs="+", default=[2.0, 8.0])
+    parser.add_argument("--speedups", type=float, nargs="+", default=[1.0, 2.0, 4.0, 8.0])
     parser.add_argument("--mission", type=Path, default=DEFAULT_MISSION)
     parser.add_argument("--work", type=Path, default=REPO / "out" / "bench" / "view_lag")
     parser.add_argument("--timeout-s", type=float, default=400.0)
     parser.add_argument("--json", type=Path, default=OUT_JSON)
     parser.add_argument("--md", type=Path, default=OUT_MD)
     parser.add_argument("--note", default="", help="a paragraph appended to the Markdown")
+    parser.add_argument("--quick", action="store_true", help="one flight at 8x (benchmarks/run_all.py --quick)")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.speedups = [8.0]
     report = {"date": datetime.date.today().isoformat(), "commit": _commit(),
               "mission": str(args.mission.resolve().relative_to(REPO)) if args.mission.resolve().is_relative_to(REPO)
               else str(args.mission), "runs": [], "note": args.note}
