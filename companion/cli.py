@@ -16,6 +16,7 @@ import logging
 import sys
 
 from companion.errors import CompanionError
+from companion.extras import MissingExtra
 from companion.geo import GeoError
 
 COMMAND_MODULES = ("run", "serve", "mission_io", "plan", "threat", "keys", "router", "report", "demo", "fleet",
@@ -58,6 +59,9 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(args.verbose + 1)
     try:
         return int(args.func(args) or 0)
+    except MissingExtra as exc:         # an optional package: one line naming its extra
+        print(f"companion {args.command}: {exc}", file=sys.stderr)
+        return 2
     except (CompanionError, GeoError) as exc:   # GeoError: heli_common's, a ValueError
         print(f"companion: error: {exc}", file=sys.stderr)
         return 2

@@ -49,7 +49,10 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
+    from companion.extras import require
     from companion.security.deployment import init_deployment
+
+    require("keys", "cryptography")           # before any file is written
 
     dep = init_deployment(args.directory, sysid=args.sysid, companion=args.companion,
                           sources=args.source or ["source1"], observers=args.observer,
