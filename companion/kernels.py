@@ -18,7 +18,7 @@ from companion.planning.gart import PLANNER_PROBES, PLANNERS_COMPILE_S, warm
 from companion.smoothing.feasibility import MODEL_COMPILE_S, model_probes, warm_model
 from companion.world import polyhedral_kernels
 
-__all__ = ["ensure_compiled", "announce_if_cold", "COMPILE_S"]
+__all__ = ["COMPILE_S", "announce_if_cold", "ensure_compiled"]
 
 log = logging.getLogger(__name__)
 

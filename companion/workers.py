@@ -31,7 +31,6 @@ import threading
 import time
 from concurrent.futures import Future, Executor, ProcessPoolExecutor, ThreadPoolExecutor
 
-
 from companion.link.setpoints import planning_worker_init, restore_normal_priority
 
 log = logging.getLogger(__name__)

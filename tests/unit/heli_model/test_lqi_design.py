@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from heli_model.control import ControllerSettings
-from heli_model.control.lqi import dlqr_integral, tracked_output_matrix, zoh, model_14
+from heli_model.control.lqi import dlqr_integral, model_14, tracked_output_matrix, zoh
 from heli_model.model import HeliModel
 
 control = pytest.importorskip("control")     # the test extra has it: the reference implementation
