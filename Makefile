@@ -1,4 +1,5 @@
-# Every target bootstraps .venv itself on a fresh machine.
+# Every target bootstraps .venv itself on a fresh machine, with the tested versions
+# (constraints.txt). A companion computer needs only `pip install .` (docs/GUIDE.md).
 PY ?= python3
 VENV := .venv
 VPY := $(VENV)/bin/python
@@ -6,14 +7,16 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test bench clean
 
-$(STAMP): pyproject.toml
+PIP_INSTALL := $(VPY) -m pip install --quiet -c constraints.txt
+
+$(STAMP): pyproject.toml constraints.txt
 	test -x $(VPY) || $(PY) -m venv $(VENV)
 	$(VPY) -m pip install --quiet --upgrade pip
-	$(VPY) -m pip install --quiet -e '.[test]'
+	$(PIP_INSTALL) -e '.[test]'
 	touch $(STAMP)
 
 $(VENV)/.bench: $(STAMP)
-	$(VPY) -m pip install --quiet -e '.[test,bench]'
+	$(PIP_INSTALL) -e '.[test,bench]'
 	touch $(VENV)/.bench
 
 demo: $(STAMP)

@@ -16,6 +16,7 @@ import logging
 import sys
 
 from companion.errors import CompanionError
+from companion.extras import MissingExtra
 from companion.geo import GeoError
 from heli_common.cli_args import ArgumentParser
 
@@ -64,6 +65,9 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(args.verbose + 1)
     try:
         return int(args.func(args) or 0)
+    except MissingExtra as exc:         # an optional package: one line naming its extra
+        print(f"companion {args.command}: {exc}", file=sys.stderr)
+        return 2
     except (CompanionError, GeoError) as exc:   # GeoError: heli_common's, a ValueError
         print(f"companion: error: {exc}", file=sys.stderr)
         return 2

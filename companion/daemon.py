@@ -203,6 +203,9 @@ class CompanionDaemon:
         s = self.settings
         with normal_priority():              # the live server's threads never at the stream's priority
             if self.live is None and s.view.foxglove:
+                from companion.extras import require
+
+                require("view", "foxglove")
                 from companion.view.live import LiveView              # foxglove-sdk only when used
 
                 self.live = LiveView(self.link, *parse_foxglove_address(s.view.foxglove, "view.foxglove"))

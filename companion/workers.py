@@ -31,8 +31,6 @@ import threading
 import time
 from concurrent.futures import Future, Executor, ProcessPoolExecutor, ThreadPoolExecutor
 
-import numpy as np
-
 from companion.link.setpoints import planning_worker_init, restore_normal_priority
 
 log = logging.getLogger(__name__)
@@ -46,10 +44,12 @@ WORKER_NICENESS = 10
 def worker_init(niceness: int, log_level: int, log_format: str | None) -> None:
     """A planning process starts: it ends with its parent (``exit_with_parent``), normal
     scheduling policy, niced (``planning_worker_init``), and logging as in the companion (its
-    lines go to the companion's stderr)."""
+    lines go to the companion's stderr), except the announcement of a compile on a cold numba
+    cache, which the companion makes once for all its workers (``PlanningWorkers.start``)."""
     exit_with_parent()
     planning_worker_init(niceness)
     logging.basicConfig(level=log_level, format=log_format)
+    logging.getLogger("companion.numba_cache").setLevel(max(log_level, logging.WARNING))
 
 
 def exit_with_parent() -> None:
@@ -76,32 +76,19 @@ def _log_format() -> str | None:
 
 
 def warm_up() -> float:
-    """Import the planners and run one tiny GART and M-GART (in a worker); returns the seconds it took.
+    """Import the planners and compile their kernels (in a worker); returns the seconds it took.
 
-    The planners' numba kernels are loaded here, not at the first plan: GART's compiled
-    iteration and shortcut, and M-GART's distinctness test (other code, loaded at its first call);
-    and the helicopter model's (the closed-loop check, fast-time flights), and the prisms' queries.
+    The modules a job needs are imported here, and every numba kernel (GART's and M-GART's, the
+    helicopter model's for the closed-loop check and the fast-time flights, the prisms' queries)
+    is compiled or loaded from numba's cache (``companion.kernels.ensure_compiled``), not at
+    the first plan nor inside any budget.
     """
     t0 = time.perf_counter()
-    from companion.planning import gart, mgart
-    from companion.world import Disc, Sphere, World
-
     for module in ("companion.flight.plan", "companion.threats.decision.step", "companion.smoothing.feasibility"):
         importlib.import_module(module)      # smoothing and timing; the threat decision and M-GART
+    from companion.kernels import ensure_compiled
 
-    from heli_model.model import HeliModel
-    from heli_model.vehicle_update import VehicleUpdate
-
-    VehicleUpdate.build(HeliModel.default())     # the model's compiled RK4 and control kernels
-    from companion.world import polyhedral_kernels
-
-    polyhedral_kernels.warm_up()                 # exclusion zones (prisms)
-    # 2D and 3D: numba specialises on the points' tuple length; no straight line: iterations run
-    for world in (World([Disc((5.0, 5.0), 1.5)], np.zeros(2), np.full(2, 10.0)),
-                  World([Sphere((5.0, 5.0, 5.0), 1.5)], np.zeros(3), np.full(3, 10.0))):
-        start, goal = np.full(world.dim, 1.0), np.full(world.dim, 9.0)
-        gart(world, start, goal, rng=np.random.default_rng(0), stop_at_first=True, max_time_s=60.0)
-        mgart(world, start, goal, 1, rng=np.random.default_rng(0), max_time_s=60.0)
+    ensure_compiled()
     return time.perf_counter() - t0
 
 
@@ -140,10 +127,15 @@ class PlanningWorkers:
         return self._executor
 
     def start(self) -> asyncio.Future:
-        """Start every worker now (from the calling thread) and warm it up (imports, one tiny
-        GART) in the background; await the future returned to wait until they are ready."""
+        """Start every worker now (from the calling thread) and warm it up (imports, the
+        kernels compiled or loaded: ``warm_up``) in the background; await the future returned
+        to wait until they are ready. A cold numba cache is announced here, once."""
+        from companion.kernels import announce_if_cold
+
         loop = asyncio.get_running_loop()
         t0 = time.perf_counter()
+        if self.kind == "process":
+            announce_if_cold()           # the workers themselves do not (worker_init)
         warming = [loop.run_in_executor(self.executor, warm_up) for _ in range(self.workers)]
 
         async def ready() -> None:

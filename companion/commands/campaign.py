@@ -87,7 +87,16 @@ def register(subparsers) -> None:
     p.set_defaults(func=main)
 
 
+#: Campaign subcommand -> the optional modules it needs (all from the ``campaign`` extra).
+CAMPAIGN_NEEDS = {"run": ("pyarrow", "distributed"), "status": ("pyarrow",), "label": ("pyarrow",),
+                  "report": ("pyarrow", "matplotlib"), "pack": ("pyarrow",), "replay": ("pyarrow",), "strata": ()}
+
+
 def main(args) -> int:
+    from companion.extras import require
+
+    for module in CAMPAIGN_NEEDS[args.campaign_command]:
+        require("campaign", module)
     return {"run": _run, "status": _status, "label": _label, "report": _report, "pack": _pack,
             "replay": _replay, "strata": _strata}[args.campaign_command](args)
 
@@ -116,6 +125,9 @@ def _progress_bar(enabled: bool):
             log.info("campaign: %d/%d pairs, %.2f pairs/s%s", p.done, p.total, p.pairs_per_s,
                      "".join(f", {k} RR {v.ratio:.3g}" for k, v in p.ratios.items()))
         return log_progress, lambda: None
+    from companion.extras import require
+
+    require("campaign", "rich")
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     bar = Progress(TextColumn("campaign"), BarColumn(), TextColumn("{task.completed}/{task.total}"),

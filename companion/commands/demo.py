@@ -24,9 +24,17 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+#: What the demo needs beyond a flight: its MCAP record and report, its progress on the terminal.
+DEMO_NEEDS = (("view", "foxglove"), ("view", "mcap"), ("report", "matplotlib"), ("report", "rich"))
+
+
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from companion.extras import require
+
+    for extra, module in DEMO_NEEDS:
+        require(extra, module)
     from companion.demo import DEMO_RECORD, run_demo
     from companion.errors import CompanionError
     from companion.progress import FlightProgress

@@ -79,8 +79,11 @@ def default_dir_text() -> str:
 
 
 def run(args) -> int:
+    from companion.extras import require
     from companion.security.deployment import init_deployment
     from companion.security.paths import default_keys_dir
+
+    require("keys", "cryptography")           # before any file is written
 
     directory = args.directory if args.directory is not None else default_keys_dir()
     dep = init_deployment(directory, sysid=args.sysid, companion=args.companion,

@@ -157,9 +157,12 @@ def time_and_check(pipeline, smoothed) -> list:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from companion.extras import require
     from companion.planning import gart, mgart
     from companion.world import read_world_file
 
+    if args.plot:
+        require("report", "matplotlib")       # before the planning, not after it
     wf = read_world_file(args.world)
     world = wf.world
     start = parse_point(args.start, wf.start, world.dim, "--start")
@@ -297,11 +300,12 @@ def _draw_obstacles_3d(ax, world) -> None:
 
 def plot_plan(filename, world, results, smoothed, start, goal, kappa, title: str = "") -> None:
     """Tree, obstacles and paths (Fig. 6a / 7); with smoothing, curvature vs arc length (Fig. 6c)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
+
+    from companion.extras import require
+
+    require("report", "matplotlib").use("Agg")
+    plt = require("report", "matplotlib.pyplot")
 
     three_d = world.dim == 3
     has_smooth = any(s is not None for s in smoothed)

@@ -19,8 +19,11 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from companion.extras import require
     from companion.record.report import render_report
     from companion.view.mcap_record import load_flight
+
+    require("report", "matplotlib")           # before reading the record
 
     for path in render_report(load_flight(args.record), args.out):
         print(path)

@@ -32,7 +32,7 @@ from companion.errors import PlanningError
 from companion.planning.compiled_mgart import CompiledMgartSearch
 from companion.planning.compiled_search import compiled_case
 from companion.planning.cost import path_cost, path_length_m
-from companion.planning.gart import finish_path
+from companion.planning.gart import finish_path, warm
 from companion.planning.hausdorff_kernel import UNSURE, resample_points, separated_kernel
 from companion.planning.portals import GoalPortals
 from companion.planning.problem import validate_problem
@@ -120,7 +120,13 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
         The paths found (status 'exact'), sorted by cost; fewer than ``k`` when the budget ran
         out. When none was found: one result with status 'timeout', 'invalid_start' or
         'invalid_goal'. All results share the final tree (with ``forbidden`` nodes marked).
+
+    Notes
+    -----
+    The first call in a process compiles the planners' kernels before the budget's clock
+    starts (:func:`companion.planning.gart.warm`).
     """
+    warm()
     t0 = time.perf_counter()
     settings = settings or MgartSettings()
     if not isinstance(settings, MgartSettings):

@@ -237,11 +237,16 @@ def render_report(record: FlightRecord, out_dir: str | Path) -> list[Path]:
     """Render the plots and ``summary.json`` of a flight record into ``out_dir``.
 
     Returns the paths written. Plots that need samples are skipped for a record without any.
-    """
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Raises
+    ------
+    companion.extras.MissingExtra
+        Without matplotlib (the ``report`` extra).
+    """
+    from companion.extras import require
+
+    require("report", "matplotlib").use("Agg")
+    plt = require("report", "matplotlib.pyplot")
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -5,7 +5,8 @@ A deployment has one CA (``ca.key``, ``ca.pem``) and one identity per zenoh part
 The identity's certificate common name (CN) is what zenoh's access control matches
 (``access_control.subjects[].cert_common_names``), so it is the name the companion records as
 the source of a threat. Keys are ECDSA P-256 (accepted by zenoh's rustls), in PKCS#8 PEM,
-written with mode 0600; certificates are PEM.
+written with mode 0600; certificates are PEM. cryptography (the ``keys`` extra) is imported by
+the functions that need it: without it they raise ``companion.extras.MissingExtra``.
 
 Every certificate carries both the server and the client extended key usage (a zenoh peer may
 listen or connect), and subject alternative names: the identity's name as a DNS name, plus the
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from companion.errors import ConfigError
+from companion.extras import require
 
 __all__ = ["Identity", "KeyMaterialError", "NAME_PATTERN", "check_name", "create_ca", "issue_identity",
            "load_certificate", "load_identity", "common_name", "verify_signed_by", "write_private_key", "write_certificate"]
@@ -73,6 +75,7 @@ def _now() -> _dt.datetime:
 
 
 def _name(cn: str):
+    require("keys", "cryptography")
     from cryptography import x509
     from cryptography.x509.oid import NameOID
 
@@ -82,6 +85,7 @@ def _name(cn: str):
 
 def create_ca(name: str = "companion-ca", days: int = 3650) -> Identity:
     """A self-signed CA certificate and its key (ECDSA P-256)."""
+    require("keys", "cryptography")
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes
     from cryptography.hazmat.primitives.asymmetric import ec
@@ -119,6 +123,7 @@ def issue_identity(ca: Identity, name: str, *, hosts=(), days: int = DEFAULT_DAY
     days : int
         Validity (days).
     """
+    require("keys", "cryptography")
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes
     from cryptography.hazmat.primitives.asymmetric import ec
@@ -158,6 +163,7 @@ def issue_identity(ca: Identity, name: str, *, hosts=(), days: int = DEFAULT_DAY
 
 def write_private_key(identity: Identity, path: str | Path) -> Path:
     """Write the key as unencrypted PKCS#8 PEM, mode 0600 (created so: never readable by others)."""
+    require("keys", "cryptography")
     from cryptography.hazmat.primitives import serialization
 
     path = Path(path)
@@ -175,6 +181,7 @@ def write_private_key(identity: Identity, path: str | Path) -> Path:
 
 def write_certificate(identity: Identity, path: str | Path) -> Path:
     """Write the certificate as PEM (mode 0644)."""
+    require("keys", "cryptography")
     from cryptography.hazmat.primitives import serialization
 
     path = Path(path)
@@ -185,6 +192,7 @@ def write_certificate(identity: Identity, path: str | Path) -> Path:
 
 def load_identity(key_path: str | Path, cert_path: str | Path) -> Identity:
     """Read a PEM private key and its certificate (e.g. the CA, to issue one more identity)."""
+    require("keys", "cryptography")
     from cryptography.hazmat.primitives import serialization
 
     key_path = Path(key_path)
@@ -200,6 +208,7 @@ def load_identity(key_path: str | Path, cert_path: str | Path) -> Identity:
 
 def load_certificate(path: str | Path):
     """Read a PEM certificate; ``KeyMaterialError`` names the file when it is missing or not a certificate."""
+    require("keys", "cryptography")
     from cryptography import x509
 
     path = Path(path)
@@ -215,6 +224,7 @@ def load_certificate(path: str | Path):
 
 def common_name(cert) -> str:
     """The certificate's subject common name (``KeyMaterialError`` if it has none)."""
+    require("keys", "cryptography")
     from cryptography.x509.oid import NameOID
 
     attrs = cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
@@ -225,6 +235,7 @@ def common_name(cert) -> str:
 
 def verify_signed_by(cert, ca_cert) -> None:
     """Raise ``KeyMaterialError`` unless ``cert`` was issued and signed by ``ca_cert`` and is valid now."""
+    require("keys", "cryptography")
     from cryptography.exceptions import InvalidSignature
 
     if cert.issuer != ca_cert.subject:

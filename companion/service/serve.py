@@ -207,6 +207,9 @@ class CompanionService:
         """The live Foxglove view for the service's life (``view.foxglove``), fed from the link."""
         if not self.settings.view.foxglove:
             return
+        from companion.extras import require
+
+        require("view", "foxglove")
         from companion.view.live import LiveView                  # foxglove-sdk only when used
         from companion.view.sinks import parse_foxglove_address
 

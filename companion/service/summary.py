@@ -42,7 +42,7 @@ class FlightSummary:
 
 def make_checker(settings):
     """The closed-loop checker of every leg, on the default (R-50-class) model, its LQI
-    designed now (python-control, about 2.5 s once; cached on the model)."""
+    designed now (about 0.4 s once; cached on the model)."""
     from companion.smoothing.feasibility import FeasibilityChecker
     from heli_model.model import HeliModel
 

@@ -121,7 +121,7 @@ class FeasibilitySettings:
         Whether ``companion run`` checks every planned leg (and ``companion plan`` every
         smoothed path) on the closed loop and stretches its timing where it is infeasible.
         Default True. The check costs about 40 ms per minute of trajectory, after a one-off
-        LQI design of about 2.5 s before the first leg.
+        LQI design of about 0.4 s before the first leg.
     max_abs_delta : float
         Largest normalised actuator input accepted (|delta| <= 1 is full travel). Default 0.8,
         a 20 % reserve for gusts and model error.

@@ -12,10 +12,8 @@ import logging
 import struct
 from pathlib import Path
 
-from mcap.exceptions import McapError
-from mcap.reader import NonSeekingReader
-
 from companion.errors import CompanionError
+from companion.extras import require
 from companion.record.flight_record import SAMPLE_KEYS, FlightRecord, load_record, samples_from_columns
 from companion.view import channels as ch
 
@@ -43,7 +41,11 @@ def load_mcap_record(path: str | Path) -> FlightRecord:
     ------
     CompanionError
         When the file is missing or is not MCAP (naming the file and what is wrong).
+    companion.extras.MissingExtra
+        Without the mcap package (the ``view`` extra).
     """
+    McapError = require("view", "mcap.exceptions").McapError
+    NonSeekingReader = require("view", "mcap.reader").NonSeekingReader
     path = Path(path)
     record = FlightRecord()
     columns: dict[str, list] = {k: [] for k in SAMPLE_KEYS}

@@ -15,6 +15,7 @@ import logging
 from pathlib import Path
 
 from companion.errors import ConfigError
+from companion.extras import require
 from companion.record.flight_record import FlightRecorder
 
 __all__ = ["RecordSinks", "open_record_sinks", "parse_foxglove_address"]
@@ -91,13 +92,19 @@ def open_record_sinks(record_path: str | Path | None, foxglove: tuple[str, int] 
         The threat tubes' (``FlightView``).
     live : companion.view.live.LiveServer, optional
         A live server that outlives the flight, instead of ``foxglove`` (left up by ``close``).
+
+    Raises
+    ------
+    companion.extras.MissingExtra
+        For an MCAP record or the live view without foxglove-sdk (the ``view`` extra).
     """
     sinks: list = []
     mcap = record_path is not None and str(record_path).endswith(".mcap")
     if record_path is not None and not mcap:
         sinks.append(FlightRecorder(record_path))
     if mcap or foxglove is not None or live is not None:
-        from companion.view.publisher import FlightView            # foxglove-sdk only when used
+        require("view", "foxglove")                                  # foxglove-sdk only when used
+        from companion.view.publisher import FlightView
 
         if mcap:
             Path(record_path).parent.mkdir(parents=True, exist_ok=True)

@@ -3,8 +3,9 @@
 Paper section 2.2, eqs. 5-7. The 13-state hover model (:mod:`heli_model.model`) plus the
 heading ``psi`` (``dpsi/dt = r``) is discretised with a zero-order hold at the control rate
 (100 Hz) and augmented with four integrators of the tracking error of the outputs
-``y = [u, v, w, psi]``; python-control's ``dlqr(sys, Q, R, integral_action=C dt)`` gives the
-gain ``K = [Kx Kz]`` (4 x 18) of ``delta = -Kx (x - x_ff) - Kz z + delta_ff``, with
+``y = [u, v, w, psi]``; the discrete LQR of the system augmented with the integrators
+(``dlqr_integral``: python-control's ``dlqr(sys, Q, R, integral_action=C dt)``, its
+operations on scipy's DARE solver) gives the gain ``K = [Kx Kz]`` (4 x 18) of ``delta = -Kx (x - x_ff) - Kz z + delta_ff``, with
 ``z[k+1] = z[k] + dt (y[k] - y_ref[k])``.
 
 The quasi-steady feed-forward map solves, once per design, the linear trim equations
@@ -12,7 +13,8 @@ The quasi-steady feed-forward map solves, once per design, the linear trim equat
     [A14 B; C 0] [x_ff; delta_ff] = [xdot_ff; y_ref],
     xdot_ff = (u', v', w' = body acceleration, 0 ... 0, psi' = r_ref).
 
-Pure numerics; python-control is imported lazily (it costs about 1.6 s).
+Pure numerics (numpy and scipy; python-control is not needed, so neither is the matplotlib
+it requires).
 """
 
 from __future__ import annotations
@@ -124,7 +126,7 @@ def feedforward_map(model: HeliModel) -> np.ndarray:
 
 
 def design_lqi(model: HeliModel, dt_s: float, q_weights, r_weights) -> LqiGains:
-    """Design the discrete LQI with python-control (cached per model, step and weights).
+    """Design the discrete LQI (``dlqr_integral``; cached per model, step and weights).
 
     Parameters
     ----------
@@ -148,14 +150,46 @@ def design_lqi(model: HeliModel, dt_s: float, q_weights, r_weights) -> LqiGains:
     return model.cached(("lqi", dt_s, q, r), lambda: _design(model, dt_s, q, r))
 
 
-def _design(model: HeliModel, dt_s: float, q: tuple, r: tuple) -> LqiGains:
-    import control  # lazy: about 1.6 s
+def dlqr_integral(Ad: np.ndarray, Bd: np.ndarray, integral_action: np.ndarray, Q: np.ndarray,
+                  R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The discrete LQR of ``(Ad, Bd)`` augmented with integrators ``z+ = z + integral_action x``.
 
+    The operations of python-control's ``dlqr(sys, Q, R, integral_action=...)`` (0.10, its
+    scipy method: the DARE by ``scipy.linalg.solve_discrete_are`` with a zero cross term), in
+    the same order, so the gains are bit-identical (``tests/unit/heli_model``) without
+    python-control and the matplotlib it requires on a companion computer.
+
+    Parameters
+    ----------
+    Ad : (n, n) array
+    Bd : (n, m) array
+    integral_action : (p, n) array
+    Q : (n + p, n + p) array
+    R : (m, m) array
+
+    Returns
+    -------
+    K : (m, n + p) array
+        The gain: ``u = -K [x, z]``.
+    E : (n + p,) complex array
+        The closed-loop eigenvalues.
+    """
+    n, m, p = Ad.shape[0], Bd.shape[1], integral_action.shape[0]
+    A = np.block([[np.array(Ad, ndmin=2, dtype=float), np.zeros((n, p))],
+                  [integral_action, np.eye(p)]])
+    B = np.vstack([np.array(Bd, ndmin=2, dtype=float), np.zeros((p, m))])
+    S = np.zeros((n + p, m))
+    X = scipy.linalg.solve_discrete_are(A, B, Q, R, e=None, s=S)
+    K = scipy.linalg.solve(B.T @ X @ B + R, B.T @ X @ A + S.T)
+    return K, scipy.linalg.eigvals(A - B @ K)
+
+
+def _design(model: HeliModel, dt_s: float, q: tuple, r: tuple) -> LqiGains:
     A14, B14 = model_14(model)
     Ad, Bd = zoh(A14, B14, dt_s)
     C = tracked_output_matrix()
-    sysd = control.ss(Ad, Bd, C, np.zeros((N_TRACKED, N_INPUTS)), dt_s)
-    K, _S, E = control.dlqr(sysd, np.diag(q), np.diag(r), integral_action=C * dt_s)
+    K, E = dlqr_integral(Ad, Bd, C * dt_s, np.array(np.diag(q), ndmin=2, dtype=float),
+                         np.array(np.diag(r), ndmin=2, dtype=float))
     K = np.asarray(K, dtype=float)
     E = np.asarray(E)
     if np.max(np.abs(E)) >= 1.0:

@@ -43,6 +43,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from companion.kernels import ensure_compiled
 from companion.threats.decision import candidates as gen
 from companion.threats.decision.alternatives import Alternative, airspace_for, plan_alternatives
 from companion.threats.decision.choice import Candidate, Decision, ReferenceState, choose
@@ -163,7 +164,14 @@ def decide(state: DecisionState, obs: Observation, leg: LegContext,
         to the next observation as the active reference.
     state : DecisionState
         The state for the next decision (a new value; ``state`` is unchanged).
+
+    Notes
+    -----
+    The first call in a process compiles the kernels before any clock of the decision
+    (``companion.kernels.ensure_compiled``): the budgets and the measured durations never
+    include numba's compile.
     """
+    ensure_compiled()
     if obs.trigger is Trigger.RESUME:
         return _resume(state, obs, leg, policy)
     return _on_threats(state, obs, leg, policy)
@@ -333,6 +341,7 @@ def plan_alternatives_for(state: DecisionState, obs: Observation, leg: LegContex
         Ids ``alt<i>-<counter>``; empty when M-GART found nothing.
     state : DecisionState
     """
+    ensure_compiled()                    # numba's compile never inside max_time_s
     if start_ned_m is None:
         if obs.active is None:
             raise DecisionError("start_ned_m: needed when no trajectory is active")
