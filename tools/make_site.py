@@ -34,7 +34,9 @@ sys.path.insert(0, str(ROOT))
 from companion.mission.model import (MAV_CMD_NAV_LAND, MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT,  # noqa: E402
                                      MissionItem, MissionPlan)
 from companion.mission.plan_file import plan_to_document  # noqa: E402
+from companion.world.mapdata import flat_ground, footprint_deg  # noqa: E402
 from heli_common.frames import LocalFrame  # noqa: E402
+from shapely.geometry import MultiPoint  # noqa: E402
 
 log = logging.getLogger("make_site")
 
@@ -72,11 +74,10 @@ NUMBER_LIST_RE = re.compile(r"\[\s*-?[\d.]+(?:,\s*-?[\d.]+)*\s*\]")
 
 
 def lon_lat(frame: LocalFrame, points_ne_m) -> list[list[float]]:
-    """``(K, 2)`` north-east metres at the home's level -> ``[[lon, lat], ...]`` degrees."""
-    north = [float(p[0]) for p in points_ne_m]
-    east = [float(p[1]) for p in points_ne_m]
-    lat, lon, _ = frame.to_lla(north, east, [0.0] * len(north))
-    return [[round(float(x), DIGITS), round(float(y), DIGITS)] for x, y in zip(lon, lat)]
+    """``(K, 2)`` north-east metres on the (flat) ground -> ``[[lon, lat], ...]`` degrees, the
+    inverse of the conversion the companion reads them with."""
+    ground = footprint_deg(MultiPoint([(float(n), float(e)) for n, e in points_ne_m]), frame, flat_ground(frame))
+    return [[round(p.x, DIGITS), round(p.y, DIGITS)] for p in ground.geoms]
 
 
 def geometry(frame: LocalFrame, kind: str, coords_ne_m) -> dict:

@@ -45,7 +45,7 @@ from companion.world.world import World
 from heli_common.frames import GeoError, LocalFrame
 
 __all__ = ["MapFeature", "MapDocument", "GroundAltitude", "DEFAULT_CEILING_M", "DEFAULT_PADDING_M",
-           "flat_ground", "footprint_ne_m", "simple_pieces_ne_m", "feature_obstacles", "map_world"]
+           "flat_ground", "footprint_ne_m", "footprint_deg", "simple_pieces_ne_m", "feature_obstacles", "map_world"]
 
 log = logging.getLogger(__name__)
 
@@ -154,6 +154,42 @@ def footprint_ne_m(geometry_deg: BaseGeometry, frame: LocalFrame, ground_alt_m: 
         return np.column_stack([north_m, east_m])
 
     return shapely.transform(geometry_deg, to_ne)
+
+
+def footprint_deg(geometry_ne_m: BaseGeometry, frame: LocalFrame, ground_alt_m: GroundAltitude,
+                  tolerance_m: float = 1e-6, max_iterations: int = 10) -> BaseGeometry:
+    """Inverse of :func:`footprint_ne_m`: local north-east metres on the ground -> degrees.
+
+    The point of the ground above or below ``(north, east)`` is found by fixed-point iteration
+    on its *down* coordinate (the ground's altitude there, ``ground_alt_m``); on flat ground the
+    first step is exact to the millimetre and the second to the nanometre.
+
+    Parameters
+    ----------
+    geometry_ne_m : shapely geometry, x = north (m), y = east (m)
+    frame : LocalFrame
+    ground_alt_m : GroundAltitude
+    tolerance_m : float
+        Stop when no vertex's altitude is further than this from the ground.
+    max_iterations : int
+
+    Returns
+    -------
+    shapely geometry of the same type, x = longitude, y = latitude (degrees)
+    """
+    def to_deg(ne_m: np.ndarray) -> np.ndarray:                # (K, 2) -> (K, 2)
+        north_m, east_m = ne_m[:, 0], ne_m[:, 1]
+        down_m = np.zeros(len(ne_m))
+        for _ in range(max_iterations):
+            lat, lon, alt_m = frame.to_lla(north_m, east_m, down_m)
+            error_m = alt_m - ground_alt_m(lat, lon)
+            down_m = down_m + error_m
+            if np.all(np.abs(error_m) <= tolerance_m):
+                break
+        lat, lon, _ = frame.to_lla(north_m, east_m, down_m)
+        return np.column_stack([lon, lat])
+
+    return shapely.transform(geometry_ne_m, to_deg)
 
 
 def _cut_through_hole(polygon_ne: Polygon) -> list[Polygon]:
