@@ -360,3 +360,10 @@ def test_a_bad_kml_names_the_file_the_placemark_and_the_element(tmp_path, body, 
         '<?xml version="1.0"?>\n<kml><Document>' + body
     with pytest.raises(WorldError, match=r"^" + str(tmp_path / "site.kml").replace("\\", "\\\\") + ": " + message):
         load(tmp_path, text, name="site.kml", home_lla=HOME)
+
+
+def test_toml_worlds_do_not_need_shapely():
+    code = ("import sys, companion.world as w; w.load_world('mission_files/worlds/city_3d.toml'); "
+            "assert 'shapely' not in sys.modules, 'shapely imported'")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
