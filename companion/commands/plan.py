@@ -26,8 +26,10 @@ Examples:
   companion plan --world mission_files/worlds/paper_2d.toml --start 0,0 --goal 99,99 --plot out/plan.png
   companion plan --world mission_files/worlds/city_3d.toml --planner mgart -k 4 --smooth g2 \\
       --kappa-max 0.1 --json out/plan.json --plot out/plan3d.png
+  companion plan --world mission_files/sites/cmac/buildings.geojson --smooth g2 --plot out/cmac.png
 Start and goal are local NED metres (north,east[,down]); when omitted, the world file's
-[world] start/goal are used."""
+[world] start/goal are used. A map file (.geojson, .kml) is converted about --home LAT,LON,ALT
+(default: its companion.home); start and goal are then metres about that home."""
 
 
 def register(subparsers) -> None:
@@ -36,7 +38,11 @@ def register(subparsers) -> None:
         description="Plan a collision-free path (GART) or several distinct ones (M-GART) through "
         "the obstacles of a world file; optionally smooth it (G1/G2 Bezier), write JSON and plot.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--world", required=True, help="world file (.toml or .json)")
+    p.add_argument("--world", required=True,
+                   help="world file (.toml or .json in local NED; .geojson or .kml map in longitude/latitude)")
+    p.add_argument("--home", type=home_lla, metavar="LAT,LON,ALT",
+                   help="home of a map world (degrees, metres AMSL): the origin of local NED and of "
+                   "--start/--goal (default: the file's companion.home)")
     p.add_argument("--start", help="start N,E[,D] in metres (default: the world file's start)")
     p.add_argument("--goal", help="goal N,E[,D] in metres (default: the world file's goal)")
     p.add_argument("--planner", choices=("gart", "mgart"), default="gart", help="planner (default gart)")
@@ -60,6 +66,24 @@ def register(subparsers) -> None:
     p.add_argument("--json", dest="json_out", help="write the result as JSON to this file")
     p.add_argument("--plot", help="draw tree, obstacles and paths to this PNG file")
     p.set_defaults(func=run)
+
+
+def home_lla(text: str) -> tuple[float, float, float]:
+    """``"LAT,LON,ALT"`` -> degrees, degrees, metres AMSL (``sim-vehicle --origin``'s rules)."""
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"expected LAT,LON,ALT, got {text!r}")
+    try:
+        lat, lon, alt = (float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers LAT,LON,ALT, got {text!r}") from None
+    if not all(math.isfinite(v) for v in (lat, lon, alt)):
+        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
+    if not -90.0 <= lat <= 90.0 or not -180.0 <= lon <= 180.0:
+        raise argparse.ArgumentTypeError(f"latitude must be -90..90 and longitude -180..180, got {text!r}")
+    if not -500.0 <= alt <= 9000.0:
+        raise argparse.ArgumentTypeError(f"altitude must be -500..9000 m AMSL, got {alt:g}")
+    return lat, lon, alt
 
 
 def parse_point(text: str | None, default, dim: int, option: str) -> tuple:
@@ -163,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.plot:
         require("report", "matplotlib")       # before the planning, not after it
-    wf = read_world_file(args.world)
+    wf = read_world_file(args.world, home_lla=args.home)
     world = wf.world
     start = parse_point(args.start, wf.start, world.dim, "--start")
     goal = parse_point(args.goal, wf.goal, world.dim, "--goal")
@@ -193,7 +217,8 @@ def print_summary(args, wf, results, smoothed, start, goal, timed=()) -> None:
 
     first = results[0]
     tree = first.tree
-    print(f"world: {wf.name} ({wf.world.dim}D, {len(wf.world.obstacles)} obstacles, margin {wf.world.margin_m} m)")
+    about = "" if wf.home_lla is None else " about home {:.7f}, {:.7f}, {:.1f} m".format(*wf.home_lla)
+    print(f"world: {wf.name} ({wf.world.dim}D, {len(wf.world.obstacles)} obstacles, margin {wf.world.margin_m} m){about}")
     print(f"planner: {args.planner}  seed {args.seed}  start {list(start)}  goal {list(goal)}")
     if not first.solved:
         print(f"status: {first.status}  iterations {first.iterations}  elapsed {first.elapsed_s * 1e3:.1f} ms")
@@ -218,7 +243,7 @@ def print_summary(args, wf, results, smoothed, start, goal, timed=()) -> None:
 def write_json(args, wf, results, smoothed, start, goal, kappa, timed=()) -> None:
     tree = results[0].tree
     out = {
-        "world": str(args.world), "world_name": wf.name, "dim": wf.world.dim,
+        "world": str(args.world), "world_name": wf.name, "dim": wf.world.dim, "home_lla": wf.home_lla,
         "planner": args.planner, "seed": args.seed, "budget_s": args.budget,
         "start": list(start), "goal": list(goal), "kappa_max_1_m": kappa, "smooth": args.smooth,
         "status": results[0].status,

@@ -72,7 +72,8 @@ def add_flight_arguments(p) -> None:
                    "tcp/127.0.0.1:<7448+N> (--connect and the --zenoh options still win)")
     p.add_argument("--config", help="settings file (TOML); see --print-config")
     add_signing_argument(p)
-    p.add_argument("--world", help="world file with extra obstacles (local NED about home)")
+    p.add_argument("--world", help="world file with extra obstacles: .toml/.json in local NED about home, "
+                   "or a .geojson/.kml map converted about home")
     p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", default=None,
                    help="zenoh endpoint to listen on (repeatable; default tcp/127.0.0.1:<7447+sysid>), "
                    "e.g. tcp/0.0.0.0:7448")

@@ -9,7 +9,8 @@ plus a margin. A ground station's mission gives that workspace:
   polygon itself are rejected); without one, the bounds are the extent of home, the waypoints
   and the exclusion zones plus ``padding_m``;
 - altitude bounds from the ground (home level) to ``ceiling_m``;
-- an optional world file adds obstacles (``companion.world.load_world``).
+- an optional world file adds obstacles (``companion.world.load_world``): TOML/JSON in local
+  NED about home, or a GeoJSON/KML map converted about this mission's home.
 
 Each navigation item becomes a ``LocalWaypoint``. Unreachable goals (inside an exclusion zone
 or an obstacle inflated by the margin, outside the inclusion fence, above the ceiling, below
@@ -86,7 +87,8 @@ def mission_to_local(plan: MissionPlan, home_lla: tuple[float, float, float] | N
         Origin of the local frame: the vehicle's home. Default: ``plan.planned_home``.
     settings : ConversionSettings, optional
     world_file : path, optional
-        TOML/JSON world file whose obstacles are added (already in local NED about home).
+        World file whose obstacles are added: TOML/JSON (already in local NED about home) or
+        GeoJSON/KML (longitude/latitude, converted about ``home_lla``).
     dim : int
         2 (north-east plane) or 3 (north-east-down) world.
 
@@ -113,7 +115,7 @@ def mission_to_local(plan: MissionPlan, home_lla: tuple[float, float, float] | N
     frame = LocalFrame(*home)
     waypoints, end_action = items_to_waypoints(plan, frame, settings)
     zones = exclusion_zones(plan, frame)
-    extra = load_world_obstacles(world_file, dim)
+    extra = load_world_obstacles(world_file, dim, frame)
     zones += [Zone(ob, f"obstacle {k} of world file {world_file}") for k, ob in enumerate(extra)]
     inclusion_ne_m = inclusion_polygon_ne(plan, frame)
     bounds_min, bounds_max = world_bounds(waypoints, zones, inclusion_ne_m, settings, dim)
@@ -232,13 +234,15 @@ def exclusion_zones(plan: MissionPlan, frame: LocalFrame) -> list[Zone]:
     return zones
 
 
-def load_world_obstacles(world_file, dim: int) -> list:
-    """Obstacles of an optional world file (its bounds are ignored: the mission gives them)."""
+def load_world_obstacles(world_file, dim: int, frame: LocalFrame | None = None) -> list:
+    """Obstacles of an optional world file (its bounds are ignored: the mission gives them); a
+    map file (GeoJSON, KML) is converted about ``frame``'s origin, the mission's home."""
     if world_file is None:
         return []
     from companion.world import load_world
 
-    world = load_world(world_file)
+    home_lla = None if frame is None else (frame.lat0_deg, frame.lon0_deg, frame.alt0_m)
+    world = load_world(world_file, home_lla=home_lla)
     obstacles = list(world.obstacles)
     for ob in obstacles:
         ob.check_dim(dim)

@@ -24,6 +24,11 @@ Format (TOML; JSON has the same keys)::
 ``cylinder`` takes ``center`` (north, east), ``radius`` and the same optional vertical limits;
 ``box`` takes ``min`` and ``max`` corners. Errors name the file and the key at fault (for
 example ``obstacles[3].radius``) or, for a syntax error, the line.
+
+Map files in longitude/latitude are read too, by suffix: ``.geojson`` (or a ``.json`` whose top
+level has a GeoJSON ``type``) through :mod:`companion.world.geojson`, ``.kml`` through
+:mod:`companion.world.kml`; their features become obstacles in local NED about a home
+(:mod:`companion.world.mapdata`), which the caller gives (``home_lla``) or the file does.
 """
 
 from __future__ import annotations
@@ -56,12 +61,15 @@ _OBSTACLE_KEYS = {
 
 @dataclass(frozen=True)
 class WorldFile:
-    """A world file's content: the world plus optional name and default start/goal (d,)."""
+    """A world file's content: the world plus optional name and default start/goal (d,);
+    ``home_lla`` (lat_deg, lon_deg, alt_m AMSL) is the origin of a map file's local frame
+    (None for a TOML/JSON world, already in local NED)."""
 
     world: World
     name: str
     start: tuple | None
     goal: tuple | None
+    home_lla: tuple | None = None
 
 
 def _require(table: dict, key: str, where: str):
@@ -180,18 +188,69 @@ def world_from_dict(data, source: str = "world") -> WorldFile:
     return WorldFile(world=world, name=str(name), start=start, goal=goal)
 
 
-def read_world_file(path) -> WorldFile:
-    """Read a ``.toml`` or ``.json`` world file (see the module docstring for the format)."""
-    p = Path(path)
+_MAP_SUFFIXES = (".geojson", ".kml")
+
+
+def _read_text(p: Path) -> str:
     try:
-        text = p.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise WorldError(f"{p}: cannot read world file ({exc.strerror or exc})") from None
+        return p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = getattr(exc, "strerror", None) or exc
+        raise WorldError(f"{p}: cannot read world file ({reason})") from None
+
+
+def _is_geojson(data) -> bool:
+    """Whether parsed JSON is GeoJSON (a top-level ``type``) rather than a JSON world file."""
+    return isinstance(data, dict) and "type" in data and "world" not in data
+
+
+def _map_world_file(doc, home_lla, ground_alt_m) -> WorldFile:
+    """A map document's world about the home (``companion.world.mapdata``)."""
+    from companion.world.mapdata import map_world
+
+    world, frame, start, goal = map_world(doc, home_lla, ground_alt_m)
+    return WorldFile(world=world, name=doc.name, start=start, goal=goal,
+                     home_lla=(frame.lat0_deg, frame.lon0_deg, frame.alt0_m))
+
+
+def _read_map_document(p: Path, text: str, data=None):
+    """The :class:`~companion.world.mapdata.MapDocument` of a GeoJSON or KML file."""
+    if p.suffix.lower() == ".kml":
+        from companion.world.kml import parse_kml
+
+        return parse_kml(text.encode("utf-8"), str(p), p.stem)
+    from companion.world.geojson import parse_geojson, parse_geojson_text
+
+    if data is not None:
+        return parse_geojson(data, str(p), p.stem)
+    return parse_geojson_text(text, str(p), p.stem)
+
+
+def read_world_file(path, home_lla: tuple | None = None, ground_alt_m=None) -> WorldFile:
+    """Read a world file: ``.toml`` or ``.json`` in local NED (the module docstring gives the
+    format), or a ``.geojson`` / ``.kml`` map file in longitude/latitude.
+
+    Parameters
+    ----------
+    path : path
+    home_lla : (lat_deg, lon_deg, alt_m AMSL), optional
+        The local frame's origin for a map file (default: the file's ``companion.home``);
+        ignored by a TOML/JSON world.
+    ground_alt_m : callable, optional
+        ``ground_alt_m(lat_deg (K,), lon_deg (K,)) -> (K,)`` metres AMSL, the ground under a
+        map feature (default: the home's altitude).
+    """
+    p = Path(path)
+    text = _read_text(p)
+    if p.suffix.lower() in _MAP_SUFFIXES:
+        return _map_world_file(_read_map_document(p, text), home_lla, ground_alt_m)
     if p.suffix.lower() == ".json":
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise WorldError(f"{p}: line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
+        if _is_geojson(data):
+            return _map_world_file(_read_map_document(p, text, data), home_lla, ground_alt_m)
     else:
         try:
             data = tomllib.loads(text)
@@ -200,9 +259,10 @@ def read_world_file(path) -> WorldFile:
     return world_from_dict(data, str(p))
 
 
-def load_world(path) -> World:
-    """Load a world file (TOML or JSON) and return its :class:`World`."""
-    return read_world_file(path).world
+def load_world(path, home_lla: tuple | None = None, ground_alt_m=None) -> World:
+    """Load a world file (TOML, JSON, GeoJSON or KML: :func:`read_world_file`) and return its
+    :class:`World`."""
+    return read_world_file(path, home_lla, ground_alt_m).world
 
 
 def world_to_dict(world: World, name: str | None = None, start=None, goal=None) -> dict:
