@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
-def point_in_polygon(point: Sequence[float], polygon: Sequence[Sequence[float]]) -> bool:
+def point_in_polygon(point: Sequence[float] | np.ndarray, polygon: Sequence[Sequence[float]] | np.ndarray) -> bool:
     """Even-odd rule (crossing number): is the 2D ``point`` inside ``polygon``?
 
     Parameters

@@ -40,7 +40,10 @@ def _libm_pow_address() -> int:
         fn = ctypes.CDLL(None).pow
     except AttributeError:       # an interpreter that does not export libm's symbols
         fn = ctypes.CDLL(ctypes.util.find_library("m")).pow
-    return ctypes.cast(fn, ctypes.c_void_p).value
+    address = ctypes.cast(fn, ctypes.c_void_p).value
+    if address is None:          # a NULL pointer: no symbol to hand LLVM
+        raise OSError("the C library's pow has no address")
+    return address
 
 
 llvm_binding.add_symbol(POW_SYMBOL, _libm_pow_address())

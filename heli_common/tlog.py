@@ -17,6 +17,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import BinaryIO
 
 __all__ = ["TlogWriter", "tlog_record"]
 
@@ -49,7 +50,7 @@ class TlogWriter:
     def __init__(self, path: str | Path, flush_period_s: float = 0.5,
                  clock: Callable[[], float] = time.time) -> None:
         self.path = Path(path)
-        self._file = open(self.path, "ab")
+        self._file: BinaryIO | None = open(self.path, "ab")  # None once closed
         self._clock = clock
         self._flush_period_s = flush_period_s
         self._last_flush_s = clock()

@@ -14,9 +14,12 @@ import tomllib
 import types
 import typing
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
-T = TypeVar("T")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+T = TypeVar("T", bound="DataclassInstance")
 
 
 class SettingsError(ValueError):
@@ -47,13 +50,13 @@ def _check_scalar(kind: Any, value: Any, key: str, error: type[Exception]) -> An
 
 def _convert(kind: Any, value: Any, key: str, error: type[Exception]) -> Any:
     origin = typing.get_origin(kind)
-    if dataclasses.is_dataclass(kind):
+    if isinstance(kind, type) and dataclasses.is_dataclass(kind):  # a hint is a class, never an instance
         return from_dict(kind, value, key, error)
     if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(kind) if a is not type(None)]
+        members = [a for a in typing.get_args(kind) if a is not type(None)]
         if value is None:
             return None
-        return _convert(args[0], value, key, error)
+        return _convert(members[0], value, key, error)
     if origin is typing.Literal:
         allowed = typing.get_args(kind)
         if value not in allowed:

@@ -275,8 +275,9 @@ class HeliModel:
         option. The result has fresh caches.
         """
         params = dict(self.params)
-        options = {"gravity_m_s2": self.gravity_m_s2, "servo_tau_s": self.servo_tau_s,
-                   "wind": self.wind, "name": self.name, "source": self.source}
+        # the values come from ``changes`` (Any); from_params checks each option
+        options: dict[str, Any] = {"gravity_m_s2": self.gravity_m_s2, "servo_tau_s": self.servo_tau_s,
+                                   "wind": self.wind, "name": self.name, "source": self.source}
         for key, value in changes.items():
             if key in options:
                 options[key] = value

@@ -19,8 +19,8 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from companion.flight.reference import ActiveReference, VehicleClock
-from companion.flight.setpoint import Setpoint, hold_position
+from companion.flight.reference import ActiveReference, MissionClock
+from companion.flight.setpoint import Setpoint, SetpointSource, hold_position
 
 __all__ = ["ReferenceOwner", "ReferenceListener"]
 
@@ -38,21 +38,22 @@ class ReferenceOwner:
 
     Parameters
     ----------
-    clock : VehicleClock
-        Mission time (the vehicle's seconds), also of a monotonic instant.
+    clock : MissionClock
+        Mission time (the vehicle's seconds: a VehicleClock; fast time's VirtualClock), also of
+        a monotonic instant.
     turn_rate_rad_s : float
         How fast a leg that starts at rest turns on the spot to its heading first.
     yaw_now_rad : callable () -> float
         The vehicle's heading now (where a turn starts from, and a hover's heading).
     """
 
-    def __init__(self, clock: VehicleClock, *, turn_rate_rad_s: float,
+    def __init__(self, clock: MissionClock, *, turn_rate_rad_s: float,
                  yaw_now_rad: Callable[[], float]) -> None:
         self.clock = clock
         self.turn_rate_rad_s = float(turn_rate_rad_s)
         self.yaw_now_rad = yaw_now_rad
         self.current: ActiveReference | None = None
-        self._hover = None                      # the hover source when no trajectory is active
+        self._hover: SetpointSource | None = None  # the hover source when no trajectory is active
         self._listeners: list[ReferenceListener] = []
 
     def listen(self, listener: ReferenceListener) -> Callable[[], None]:

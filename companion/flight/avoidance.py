@@ -40,7 +40,7 @@ import dataclasses
 import functools
 import logging
 import math
-from typing import Callable, Protocol
+from typing import TYPE_CHECKING, Callable, Protocol
 
 from companion.flight.active import ReferenceOwner
 from companion.flight.alerting import TrafficAlerts
@@ -51,6 +51,9 @@ from companion.threats.decision.prediction import is_manned
 from companion.threats.decision.screen import MonitorScreen, same_reports
 from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
                                              Observation, active_conflict, decide, plan_alternatives_for)
+
+if TYPE_CHECKING:
+    from companion.threats.decision.choice import Decision
 
 __all__ = ["Avoidance", "ThreatSource", "CommitGate", "AlternativesPlan", "DecisionSteps", "active_trajectory"]
 
@@ -133,7 +136,7 @@ class _Timing:
 @dataclasses.dataclass
 class _Pending:
     ref: ActiveReference
-    decision: object
+    decision: Decision
     event: dict
     timing: _Timing
     deadline_mono_s: float
@@ -302,8 +305,10 @@ class Avoidance:
             return False
 
     def _screened(self, obs: Observation) -> bool:
-        return obs.active is not None and self.screen.proves_clear(obs.active, obs.threats, obs.t_s,
-                                                                   self.leg.world.dim)
+        if obs.active is None:
+            return False
+        assert self.leg is not None  # a decision starts with a leg (_request)
+        return self.screen.proves_clear(obs.active, obs.threats, obs.t_s, self.leg.world.dim)
 
     def _decided(self, asked, trigger: Trigger, timing: _Timing, answered, result) -> None:
         leg, ref, sent, reports = asked
@@ -438,6 +443,7 @@ class Avoidance:
 
     def _plan_alternatives(self) -> None:
         plan = self.alternatives_plan
+        assert self.leg is not None  # refresh_alternatives checks
         obs = self._observation(Trigger.MONITOR)
         ref = self.owner.current
         # planned again when the reference or the set of threats known changes, not on every
@@ -454,7 +460,7 @@ class Avoidance:
                          done=functools.partial(self._alternatives_done, self.leg, self.state, key, obs.t_s),
                          failed=self._alternatives_failed)
 
-    def _alternatives_done(self, leg, sent, key, t_s: float, result) -> None:
+    def _alternatives_done(self, leg: LegContext, sent, key, t_s: float, result) -> None:
         alternatives, state = result
         self._alt_busy = False
         if leg is self.leg and alternatives:           # none found: keep the previous ones

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -21,6 +21,9 @@ from companion.flight.stages import PipelineError
 from companion.flight.trajectory import Trajectory
 from companion.smoothing.bezier_maths import bernstein
 from companion.world import World
+
+if TYPE_CHECKING:
+    from companion.smoothing.feasibility import FeasibilityReport
 
 __all__ = ["TrajectoryStatus", "Checked", "Checker", "TrajectoryChecker", "CORNER_SAMPLES"]
 
@@ -59,12 +62,20 @@ class Checked:
 
     status: TrajectoryStatus
     trajectory: Trajectory
-    report: object = None
+    report: FeasibilityReport | None = None
     reason: str = ""
 
 
 class Checker(Protocol):
     def check(self, trajectory: Trajectory, world: World | None = None, *, stretch: bool = True) -> Checked: ...
+
+
+class ClosedLoopCheck(Protocol):
+    """The closed-loop check (a :class:`~companion.smoothing.feasibility.FeasibilityChecker`)."""
+
+    def check(self, trajectory: Trajectory) -> FeasibilityReport: ...
+
+    def check_and_stretch(self, trajectory: Trajectory) -> FeasibilityReport: ...
 
 
 # ---------------------------------------------------------------------------- checker
@@ -80,7 +91,7 @@ class TrajectoryChecker:
         Clearance below zero still accepted (m): the rounding of a path that grazes the margin.
     """
 
-    closed_loop: object = field(default=None, compare=False)
+    closed_loop: ClosedLoopCheck | None = field(default=None, compare=False)
     tolerance_m: float = 1e-6
 
     def check(self, trajectory: Trajectory, world: World | None = None, *, stretch: bool = True) -> Checked:

@@ -349,7 +349,7 @@ class FastTimeFlight:
                                     yaw_now_rad=lambda: self.vehicle.yaw_rad)
         self.feed = ThreatFeed(threats, home) if threats is not None else None
         self.avoidance = None if self.feed is None else \
-            self._avoidance(policy or DecisionPolicy.from_settings(settings, strategy), seed)
+            self._avoidance(self.feed, policy or DecisionPolicy.from_settings(settings, strategy), seed)
         s = settings
         self.executor = FlightExecutor(
             legs, owner=self.owner, vehicle=self.vehicle, jobs=self.jobs, sink=self.log, stream=self._stream,
@@ -360,10 +360,10 @@ class FastTimeFlight:
             alternatives_rate_hz=1.0 / s.flight.alternatives_period_s, alerts_rate_hz=s.alerts.rate_hz, seed=seed)
         self._refs: list[np.ndarray] = []
 
-    def _avoidance(self, policy: DecisionPolicy, seed: int) -> Avoidance:
+    def _avoidance(self, feed: ThreatFeed, policy: DecisionPolicy, seed: int) -> Avoidance:
         f = self.settings.flight
         return Avoidance(policy=policy, state=DecisionState.initial(policy, seed), owner=self.owner,
-                         threats=self.feed, jobs=self.jobs, sink=self.log, now_s=self.clock.now_s,
+                         threats=feed, jobs=self.jobs, sink=self.log, now_s=self.clock.now_s,
                          monotonic_s=self.clock.now_s, send_now=lambda: self.executor.send_now(),
                          position_ned_m=lambda: self.vehicle.pos_ned_m,
                          alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s,
@@ -398,6 +398,7 @@ class FastTimeFlight:
         while not self.executor.done and self.clock.t_s < max_s:
             now = self.clock.t_s
             if self.feed is not None and self.feed.deliver(now):
+                assert self.avoidance is not None  # made with the feed
                 self.avoidance.on_threats_changed(now)
             self.jobs.deliver(now)
             self.executor.tick(now)

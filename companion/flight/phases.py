@@ -180,7 +180,7 @@ def leg_step(state: LegState, obs: LegObservation) -> tuple[LegState, LegAction]
     if obs.dist_to_goal_m <= obs.acceptance_radius_m:
         return _end(state, LegPhase.REACHED, "")
     if obs.ref_ends_short:
-        return _stopped_short(state, obs)
+        return _stopped_short(state, obs, obs.ref_end_t_s)
     if obs.t_s > obs.ref_end_t_s + obs.timeout_margin_s:
         return _end(state, LegPhase.TIMED_OUT,
                     f"item {obs.seq} not reached: {obs.dist_to_goal_m:.1f} m away "
@@ -188,9 +188,10 @@ def leg_step(state: LegState, obs: LegObservation) -> tuple[LegState, LegAction]
     return replace(state, phase=LegPhase.ARRIVING), KEEP
 
 
-def _stopped_short(state: LegState, obs: LegObservation) -> tuple[LegState, LegAction]:
+def _stopped_short(state: LegState, obs: LegObservation, ref_end_t_s: float) -> tuple[LegState, LegAction]:
+    """The reference ended short of the goal at ``ref_end_t_s`` (``obs.ref_end_t_s``, known here)."""
     stopped = replace(state, phase=LegPhase.STOPPED_SHORT)
-    due_t_s = obs.ref_end_t_s + (0.0 if obs.ref_resume else obs.resume_after_s)
+    due_t_s = ref_end_t_s + (0.0 if obs.ref_resume else obs.resume_after_s)
     if obs.t_s < due_t_s or obs.t_s < state.last_resume_t_s + obs.resume_retry_s:
         return stopped, KEEP
     return (replace(stopped, last_resume_t_s=obs.t_s),

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, TypeVar, cast
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from companion.planning import GartSettings, MgartSettings, PlanResult
 from companion.smoothing import FeasibilitySettings, SmoothingSettings, TrajectoryLimits
 from companion.world import World
 
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
 __all__ = ["TrajectoryPipeline", "PipelineError", "PlanningProblem", "PlanBudget", "TrajectoryStatus", "Checked"]
 
 
@@ -36,6 +40,19 @@ def planner_settings(smoothing: SmoothingSettings, planning: GartSettings) -> Ga
     if planning.kappa_max_1_m is not None or smoothing.method != "g2":
         return planning
     return dataclasses.replace(planning, kappa_max_1_m=smoothing.kappa_max_1_m)
+
+
+_P = TypeVar("_P")
+
+
+def _with_budget(planner: _P, iterations_per_s: float | None) -> _P:
+    """``planner`` with another ``iterations_per_s``.
+
+    The planners of ``TrajectoryPipeline.from_settings`` (GartPlanner, MgartPlanner) are
+    dataclasses with that field, which the Planner protocols do not say: hence the casts
+    (``dataclasses.replace`` raises TypeError for another planner).
+    """
+    return cast(_P, dataclasses.replace(cast("DataclassInstance", planner), iterations_per_s=iterations_per_s))
 
 
 @dataclass(frozen=True)
@@ -113,8 +130,8 @@ class TrajectoryPipeline:
     def with_iteration_budgets(self, iterations_per_s: float | None) -> "TrajectoryPipeline":
         """This pipeline with its searches budgeted in iterations (see ``from_settings``)."""
         return dataclasses.replace(
-            self, planner=dataclasses.replace(self.planner, iterations_per_s=iterations_per_s),
-            alternatives_planner=dataclasses.replace(self.alternatives_planner, iterations_per_s=iterations_per_s))
+            self, planner=_with_budget(self.planner, iterations_per_s),
+            alternatives_planner=_with_budget(self.alternatives_planner, iterations_per_s))
 
     @property
     def reproducible(self) -> bool:
@@ -125,7 +142,8 @@ class TrajectoryPipeline:
     def search_time_s(self, result: PlanResult) -> float:
         """The time ``result``'s searches took on their budget's clock: wall-clock seconds, or
         their iterations at the planner's ``iterations_per_s`` (reproducible)."""
-        return result.iterations / self.planner.iterations_per_s if self.reproducible else result.elapsed_s
+        iterations_per_s = getattr(self.planner, "iterations_per_s", None)  # (as reproducible reads it)
+        return result.iterations / iterations_per_s if iterations_per_s is not None else result.elapsed_s
 
     # ------------------------------------------------------------------ the stages
     def plan(self, problem: PlanningProblem, budget: PlanBudget, *, rng: np.random.Generator) -> PlanResult:

@@ -284,6 +284,7 @@ def plan_level(level_start: np.ndarray, goal: np.ndarray, slab: World, waypoint,
                   "invalid_goal": "the goal is inside an obstacle (with the safety margin)",
                   "timeout": f"no path found in {budget.total_s:g} s of search"}[result.status]
         raise MissionError(f"{where}: unreachable: {reason}")
+    assert result.path is not None  # an 'exact' result has a path
     path = level(result.path, goal[2], slab)
     checked = pipeline.trajectory(path, slab, limits=leg_limits(waypoint, pipeline.limits))
     if checked.status is TrajectoryStatus.BLOCKED:

@@ -24,13 +24,15 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 
 from companion.flight.setpoint import Setpoint
 from companion.flight.trajectory import FlyableReference
 
-__all__ = ["VehicleClock", "ActiveReference", "ReferenceTable", "wrap_pi"]
+__all__ = ["MissionClock", "VehicleClock", "ActiveReference", "ReferenceTable", "wrap_pi"]
 
 #: Spacing of the knots of ``ReferenceTable`` (trajectory s).
 TABLE_STEP_S = 0.02
@@ -42,6 +44,13 @@ TABLE_CHUNKS_KEPT = 3
 #: ``ActiveReference.prepare`` evaluates the chunk this far ahead of the last setpoint (s).
 PREPARE_AHEAD_S = 1.0
 _ZERO3 = (0.0, 0.0, 0.0)
+
+
+class MissionClock(Protocol):
+    """Mission time now, or of a monotonic instant: a :class:`VehicleClock`, or fast time's
+    ``VirtualClock`` (``companion.flight.fast_time``)."""
+
+    def now_s(self, monotonic_s: float | None = None) -> float: ...
 
 
 class VehicleClock:
@@ -176,7 +185,7 @@ class ActiveReference:
     state its commit time will find, so the setpoint does not jump whatever the decision took).
     """
 
-    def __init__(self, trajectory: FlyableReference, t0_s: float, clock: VehicleClock, path_id: str, *,
+    def __init__(self, trajectory: FlyableReference, t0_s: float, clock: MissionClock, path_id: str, *,
                  turn_from_yaw_rad: float | None = None, turn_rate_rad_s: float = 0.6,
                  resume: bool = False, previous: "ActiveReference | None" = None):
         self.trajectory = trajectory
@@ -204,7 +213,7 @@ class ActiveReference:
         p, v, a, yaw, rate = self.state_lists(t_s)
         return np.array(p), np.array(v), np.array(a), yaw, rate
 
-    def state_lists(self, t_s: float) -> tuple[list, list, list, float, float]:
+    def state_lists(self, t_s: float) -> tuple[Sequence[float], Sequence[float], Sequence[float], float, float]:
         """``state`` with the vectors as sequences of 3 floats (the setpoint stream's fast path)."""
         if self.previous is not None:
             if t_s < self.turn_start_s:

@@ -7,6 +7,7 @@ the helicopter model (``companion.flight.fast_time``); the active reference prod
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Callable, NamedTuple
 
 import numpy as np
@@ -25,9 +26,9 @@ class Setpoint(NamedTuple):
         With ``yaw_rad``: the heading's rate of change, a feed-forward for the yaw loop.
     """
 
-    pos_ned_m: np.ndarray | None
-    vel_ned_m_s: np.ndarray | None = None
-    acc_ned_m_s2: np.ndarray | None = None
+    pos_ned_m: np.ndarray | Sequence[float] | None
+    vel_ned_m_s: np.ndarray | Sequence[float] | None = None
+    acc_ned_m_s2: np.ndarray | Sequence[float] | None = None
     yaw_rad: float | None = None
     yaw_rate_rad_s: float | None = None
 

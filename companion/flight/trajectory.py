@@ -30,9 +30,9 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -41,10 +41,13 @@ from companion.errors import TrajectoryError
 # The ufunc that ``np.clip`` calls, without its Python wrappers: the same results (NaN and signed
 # zeros included) for a fraction of the cost. Not imported from ``companion.smoothing`` (which
 # imports this module).
-try:                                        # numpy >= 2
-    from numpy._core.umath import clip as clip_ufunc
-except ImportError:                         # numpy 1.26
-    from numpy.core.umath import clip as clip_ufunc
+if TYPE_CHECKING:                           # numpy's stubs do not declare the private umath.clip
+    clip_ufunc: np.ufunc
+else:
+    try:                                    # numpy >= 2
+        from numpy._core.umath import clip as clip_ufunc
+    except ImportError:                     # numpy 1.26
+        from numpy.core.umath import clip as clip_ufunc
 
 __all__ = ["Trajectory", "RawProfile", "FlyableReference"]
 
@@ -116,6 +119,10 @@ class RawProfile:
     window_s: float
     start_speed_m_s: float
     end_speed_m_s: float
+    if TYPE_CHECKING:
+        # the double integral of the speed at the knots, set by __post_init__; not a field at run
+        # time (a class-level annotation would make it one)
+        _s2: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         h = np.diff(self.tau_s)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -33,6 +34,9 @@ from companion.mission.model import (AMSL_FRAMES, MAV_CMD_DO_CHANGE_SPEED, MAV_C
                                      MAV_CMD_NAV_RETURN_TO_LAUNCH, MAV_CMD_NAV_TAKEOFF,
                                      MAV_CMD_NAV_WAYPOINT, LocalMission, LocalWaypoint,
                                      MissionItem, MissionPlan)
+
+if TYPE_CHECKING:
+    from companion.world import Obstacle
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +75,7 @@ class ConversionSettings:
 class Zone:
     """An exclusion zone or world-file obstacle with the name errors use for it."""
 
-    obstacle: object
+    obstacle: Obstacle
     name: str
 
 
@@ -278,11 +282,11 @@ def world_bounds(waypoints: list[LocalWaypoint], zones: list[Zone],
         lo_ne = inclusion_ne_m.min(axis=0)
         hi_ne = inclusion_ne_m.max(axis=0)
     else:
-        pts = [np.zeros(2)] + [w.pos_ned_m[:2] for w in waypoints]
+        corners = [np.zeros(2)] + [w.pos_ned_m[:2] for w in waypoints]
         for zone in zones:
             lo, hi = zone.obstacle.aabb(2)
-            pts += [np.asarray(lo[:2], dtype=float), np.asarray(hi[:2], dtype=float)]
-        pts = np.vstack(pts)
+            corners += [np.asarray(lo[:2], dtype=float), np.asarray(hi[:2], dtype=float)]
+        pts = np.vstack(corners)
         pts = pts[np.all(np.isfinite(pts), axis=1)]
         pad = settings.padding_m + settings.margin_m
         lo_ne = pts.min(axis=0) - pad

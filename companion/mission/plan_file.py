@@ -170,8 +170,8 @@ def parse_geofence(fence, source: str) -> tuple[tuple[FencePolygon, ...], tuple[
             require_type(vertex, list, f"{where}.polygon[{j}]", source)
             if len(vertex) != 2:
                 raise MissionError(f"{source}: {where}.polygon[{j}] must be [lat, lon]")
-            pairs.append(tuple(float(require_type(v, (int, float), f"{where}.polygon[{j}]",
-                                                  source)) for v in vertex))
+            lat, lon = (float(require_type(v, (int, float), f"{where}.polygon[{j}]", source)) for v in vertex)
+            pairs.append((lat, lon))
         inclusion = bool(entry.get("inclusion", True))
         try:
             polygons.append(FencePolygon(tuple(pairs), inclusion))

@@ -15,6 +15,8 @@ Latitude and longitude travel as degrees * 1e7 integers. Pure data conversion: t
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from heli_common.mavlink_ids import mavlink
 from heli_common.mission_item import MissionItemInt
 
@@ -162,7 +164,7 @@ def raw_to_rally(raw: list[RawItem]) -> tuple[RallyPoint, ...]:
     return tuple(points)
 
 
-def raw_to_plan(mission: list[RawItem], fence: list[RawItem] = (), rally: list[RawItem] = (),
+def raw_to_plan(mission: Sequence[RawItem], fence: Sequence[RawItem] = (), rally: Sequence[RawItem] = (),
                 *, with_home: bool = True) -> MissionPlan:
     """The three downloaded lists -> ``MissionPlan`` (not validated: a download keeps any item)."""
     items, home = raw_to_mission_items(list(mission), with_home=with_home)

@@ -30,31 +30,35 @@ _MAX_BATCH = 4096
 _SLICE_S = 1e-3
 
 
-class _Points:
-    """``search.pts[i]``: node i's position as a tuple of d floats."""
+class _View:
+    """A view of the search's arrays under one of GartSearch's attribute names."""
 
     def __init__(self, search: CompiledGart):
         self.s = search
+
+
+class _Points(_View):
+    """``search.pts[i]``: node i's position as a tuple of d floats."""
 
     def __getitem__(self, i: int) -> tuple:
         return tuple(self.s.coords[i].tolist())
 
 
-class _Directions(_Points):
+class _Directions(_View):
     """``search.u_in[i]``: node i's incoming unit direction (None at the root)."""
 
     def __getitem__(self, i: int) -> tuple | None:
         return tuple(self.s.u[i].tolist()) if self.s.has_u[i] else None
 
 
-class _Lengths(_Points):
+class _Lengths(_View):
     """``search.len_in[i]``: node i's incoming edge length (m)."""
 
     def __getitem__(self, i: int) -> float:
         return float(self.s.length[i])
 
 
-class _Forbidden(_Points):
+class _Forbidden(_View):
     """``search.forbidden[i]``: whether node i is forbidden (readable and writable)."""
 
     def __init__(self, search: CompiledGart):

@@ -85,6 +85,23 @@ class CompiledGart:
     rng : numpy.random.Generator
     """
 
+    # the tree's and the goal links' arrays, (re)bound by _allocate
+    tree_arrays: tuple[np.ndarray, ...]
+    links: tuple[np.ndarray, ...]
+    coords: np.ndarray
+    keys: np.ndarray
+    active: np.ndarray
+    parent: np.ndarray
+    cost: np.ndarray
+    u: np.ndarray
+    has_u: np.ndarray
+    length: np.ndarray
+    edge: np.ndarray
+    first_child: np.ndarray
+    next_sib: np.ndarray
+    prev_sib: np.ndarray
+    link_of: np.ndarray
+
     def __init__(self, world: World, start: tuple, goal: tuple, settings: GartSettings, rng: np.random.Generator):
         self.world, self.start, self.goal, self.s = world, start, goal, settings
         self.dim = d = world.dim

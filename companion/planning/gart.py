@@ -154,6 +154,7 @@ def _plan(world: World, start, goal, *, rng: np.random.Generator, max_time_s: fl
         max_time_s = settings.time_budget_s
     deadline = t0 + max_time_s if max_time_s is not None else math.inf
     iter_limit = max_iterations if max_iterations is not None else math.inf
+    search: CompiledGart | GartSearch
     if compiled_case(world, settings):   # the whole iteration compiled (numba), the tree in arrays
         search = CompiledGart(world, start_t, goal_t, settings, rng)
         history, first_s = grow_compiled(search, t0, deadline, iter_limit, stop_at_first)

@@ -25,6 +25,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from typing import Protocol, TypeVar
 
 import numpy as np
 
@@ -37,7 +38,7 @@ from companion.planning.hausdorff_kernel import UNSURE, resample_points, separat
 from companion.planning.portals import GoalPortals
 from companion.planning.problem import validate_problem
 from companion.planning.search import GartSearch
-from companion.planning.result import PlanResult
+from companion.planning.result import PlanResult, Status
 from companion.planning.settings import MgartSettings
 
 __all__ = ["mgart", "hausdorff_m", "hausdorff_of_points", "resample_path", "separated"]
@@ -75,7 +76,48 @@ def separated(a: np.ndarray, b: np.ndarray, threshold_m: float) -> bool:
     return bool(answer)
 
 
-def forbid_branch(search: GartSearch, node: int, keep_near_root_m: float, tube_m: float) -> int:
+_T_co = TypeVar("_T_co", covariant=True)
+
+
+class _Indexed(Protocol[_T_co]):
+    def __getitem__(self, i: int, /) -> _T_co: ...
+
+
+class _Flags(Protocol):
+    def __getitem__(self, i: int, /) -> bool: ...
+
+    def __setitem__(self, i: int, value: bool, /) -> None: ...
+
+
+class _Neighbours(Protocol):
+    def within(self, p: tuple, radius_m: float) -> list[tuple[int, float]]: ...
+
+    def remove(self, node: int) -> None: ...
+
+
+class BranchSearch(Protocol):
+    """What :func:`forbid_branch` reads and writes: a :class:`GartSearch` (lists, a NodeGrid) or a
+    :class:`CompiledMgartSearch` (views of its arrays under the same names)."""
+
+    @property
+    def start(self) -> tuple: ...
+
+    @property
+    def goal(self) -> tuple: ...
+
+    @property
+    def pts(self) -> _Indexed[tuple]: ...
+
+    @property
+    def forbidden(self) -> _Flags: ...
+
+    @property
+    def nn(self) -> _Neighbours: ...
+
+    def branch(self, node: int) -> list[int]: ...
+
+
+def forbid_branch(search: BranchSearch, node: int, keep_near_root_m: float, tube_m: float) -> int:
     """Forbid extension of the branch root -> ``node`` and of the nodes within ``tube_m`` of it.
 
     Nodes within ``keep_near_root_m`` of the start or the goal stay extendable. Returns the
@@ -136,7 +178,7 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
     start_t, goal_t = validate_problem(world, start, goal, rng, max_time_s, max_iterations)
     gs = settings.gart
     if not world.point_free(start_t) or not world.point_free(goal_t):
-        status = "invalid_start" if not world.point_free(start_t) else "invalid_goal"
+        status: Status = "invalid_start" if not world.point_free(start_t) else "invalid_goal"
         return [PlanResult(status=status, path=None, cost=math.inf, length_m=math.inf, iterations=0,
                            elapsed_s=time.perf_counter() - t0, time_to_first_s=None, tree=None)]
     if max_time_s is None and max_iterations is None:
@@ -168,7 +210,8 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
     if world.segment_free(start_t, goal_t):
         consider(np.array([start_t, goal_t]))
     while len(found) < k and clock() < deadline and search.iterations < iter_limit:
-        node = search.iterate(bool(portals.items), iter_limit - search.iterations) if compiled else search.iterate()
+        node = (search.iterate(bool(portals.items), iter_limit - search.iterations)
+                if isinstance(search, CompiledMgartSearch) else search.iterate())  # i.e. if compiled
         if node < 0:
             continue
         raw = search.path_to_goal(node) if node in search.goal_links else portals.join(node)

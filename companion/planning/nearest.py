@@ -79,6 +79,7 @@ class NodeGrid:
         while len(self._rings) <= ring:
             k = len(self._rings)
             rng = range(-k, k + 1)
+            offs: list[tuple]
             if self.dim == 2:
                 offs = [(a, b) for a in rng for b in rng if max(abs(a), abs(b)) == k]
             else:

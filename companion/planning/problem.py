@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from companion.errors import PlanningError
-from companion.planning.result import PlanResult
+from companion.planning.result import PlanResult, Status
 from companion.world import World
 
 __all__ = ["validate_problem", "failed_result"]
@@ -55,7 +55,7 @@ def validate_problem(world, start, goal, rng, max_time_s, max_iterations) -> tup
     return points[0], points[1]
 
 
-def failed_result(status: str, t0: float, iterations: int = 0, tree=None) -> PlanResult:
+def failed_result(status: Status, t0: float, iterations: int = 0, tree=None) -> PlanResult:
     """A result without a path: ``status`` ('timeout', 'invalid_start', 'invalid_goal')."""
     return PlanResult(status=status, path=None, cost=math.inf, length_m=math.inf, iterations=iterations,
                       elapsed_s=time.perf_counter() - t0, time_to_first_s=None, tree=tree)

@@ -121,9 +121,9 @@ class Sampler:
                 scale = (r_major if k == 0 else r_minor) * x[k]
                 for m in range(dim):
                     p[m] += scale * b[m]
-            p = tuple(p)
-            if self.world.in_bounds(p):
-                return p
+            point = tuple(p)
+            if self.world.in_bounds(point):
+                return point
         return None
 
 

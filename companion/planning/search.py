@@ -28,6 +28,7 @@ this class is the reference and serves every other case.
 from __future__ import annotations
 
 import math
+from typing import cast
 
 import numpy as np
 
@@ -116,8 +117,9 @@ class GartSearch:
             self.fast = ParentArrays(d)
             self.fast.set(0, 0.0, None)
             self.fast_world = (rule_of(settings), space_of(world))
-        # goal links: node -> (edge cost, u, length)
-        self.goal_links: dict[int, tuple[float, tuple, float]] = {}
+        # goal links: node -> (edge cost, u, length); u is None only for the root's straight
+        # line to the goal (gart.grow's trivial problem)
+        self.goal_links: dict[int, tuple[float, tuple | None, float]] = {}
         self.best_node = -1
         self.best_cost = math.inf
         self.iterations = 0
@@ -198,7 +200,11 @@ class GartSearch:
 
     def rewire(self, node: int, neighbours: list) -> bool:
         """Re-parent neighbours that get cheaper through ``node``; True if any changed."""
-        pts, cost, u_in, len_in = self.pts, self.cost, self.u_in, self.len_in
+        # only the root's u_in and goal link have no direction, and the root is never ``node``,
+        # a neighbour rewired (i == 0 is skipped) nor anyone's child
+        u_in = cast("list[tuple]", self.u_in)
+        goal_links = cast("dict[int, tuple[float, tuple, float]]", self.goal_links)
+        pts, cost, len_in = self.pts, self.cost, self.len_in
         x_new = pts[node]
         c_new = cost[node]
         u_node, len_node = u_in[node], len_in[node]
@@ -222,7 +228,7 @@ class GartSearch:
                 continue
             if any(not ok(u, dist, u_in[ch], len_in[ch]) for ch in self.children[i]):
                 continue
-            link = self.goal_links.get(i)
+            link = goal_links.get(i)
             if link is not None and not ok(u, dist, link[1], link[2]):
                 continue
             if not free(x_new, p):
@@ -244,7 +250,8 @@ class GartSearch:
 
     def propagate(self, root: int) -> None:
         """Recompute cost-to-come below ``root`` after it changed parent."""
-        cost, u_in, edge_in, children = self.cost, self.u_in, self.edge_in, self.children
+        cost, edge_in, children = self.cost, self.edge_in, self.children
+        u_in = cast("list[tuple]", self.u_in)  # a child's direction: only the root's is None
         corner = self.ec.corner
         mirror = self.fast.cost if self.fast is not None else None
         stack = [root]
@@ -280,7 +287,8 @@ class GartSearch:
     def goal_cost(self, node: int) -> float:
         """Cost of reaching the goal through the goal link of ``node``."""
         e, u, _ = self.goal_links[node]
-        return self.cost[node] + e + (self.ec.corner(self.u_in[node], u) if e > 0.0 else 0.0)
+        # u is None only for the root's straight line, whose corner costs nothing (no u_in)
+        return self.cost[node] + e + (self.ec.corner(self.u_in[node], u) if e > 0.0 and u is not None else 0.0)
 
     def update_best(self) -> bool:
         """Refresh the best goal link; True when the best cost went down."""
@@ -329,6 +337,7 @@ class GartSearch:
     def extend_compiled(self, near: int, x_new: tuple) -> int:
         """Steps 4 to 6 from the steered ``x_new`` (plain length cost, no K_max, compiled obstacles)."""
         fast, arrays, energy = self.fast, self.nn.arrays, self.s.cost.energy
+        assert fast is not None  # iterate calls this only with the compiled arrays
         free, pos, ids, dists = extend(np.array(x_new), near, math.dist(self.pts[near], x_new), self.radius(),
                                        arrays.coords, arrays.keys, arrays.active, arrays.count, fast.cost, fast.u,
                                        fast.has_u, fast.length, energy, 0.0, *self.fast_world)

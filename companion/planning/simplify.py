@@ -54,12 +54,12 @@ class CornerRule:
         need = G2_CORNER_COEFF * sin_beta / (self.kappa * cos2_beta)
         if need > self.fraction * (len_in if len_in < len_out else len_out):
             return False
-        if corner is None or self.world is None:
+        free = self.segment_free  # None exactly when self.world is None
+        if corner is None or free is None:
             return True
         b0 = tuple(w - need * u for w, u in zip(corner, u_in))
         e0 = tuple(w + need * u for w, u in zip(corner, u_out))
         mid = tuple(0.5 * (x + y) for x, y in zip(b0, e0))
-        free = self.segment_free
         return free(b0, e0) and free(corner, mid)
 
 

@@ -16,8 +16,10 @@ kilobytes cost fresh pages, and page faults, on every call).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TypeVar, cast
 
 import numpy as np
 
@@ -176,8 +178,10 @@ def build_table(ctrl: np.ndarray, degrees: np.ndarray, hod1: np.ndarray, hod2: n
                           u_ss=u_ss_knots.ravel())
 
 
-def _hermite_quintic(x: np.ndarray, m0: np.ndarray, m1: np.ndarray, c0: np.ndarray,
-                     c1: np.ndarray) -> np.ndarray:
+_Num = TypeVar("_Num", float, np.ndarray)   # all floats (one setpoint) or all arrays
+
+
+def _hermite_quintic(x: _Num, m0: _Num, m1: _Num, c0: _Num, c1: _Num) -> _Num:
     """Quintic Hermite on [0, 1] from 0 to 1 with end slopes m0, m1 and second derivatives c0, c1."""
     x2 = x * x
     x3 = x2 * x
@@ -261,7 +265,7 @@ def arc_length_at(table: ArcLengthTable, piece: np.ndarray, u: np.ndarray) -> np
     return table.s_lo[j] + table.h[j] * x
 
 
-def arc_derivatives(du: list[np.ndarray | None]) -> list[np.ndarray | None]:
+def arc_derivatives(du: Sequence[np.ndarray | None]) -> list[np.ndarray | None]:
     """Derivatives with respect to arc length from those with respect to the parameter.
 
     Parameters
@@ -279,6 +283,7 @@ def arc_derivatives(du: list[np.ndarray | None]) -> list[np.ndarray | None]:
     out = [du[0]]
     if len(du) == 1:
         return out
+    du = cast("Sequence[np.ndarray]", du)  # only the position du[0] may be None, and it is only passed through
     add = np.add.reduce                                  # np.sum without its Python wrappers
     a = du[1]
     sig2 = np.maximum(add(a * a, axis=1, keepdims=True), 1e-300)

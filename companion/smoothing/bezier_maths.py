@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,10 +24,13 @@ from companion.errors import SmoothingError
 # ``clip_ufunc(a, lo, hi)``: the ufunc that ``np.clip`` calls, without its Python wrappers (a few
 # microseconds a call); the same results, NaN and signed zeros included (``np.minimum(np.maximum(
 # a, lo), hi)`` would turn -0.0 into 0.0).
-try:                                        # numpy >= 2
-    from numpy._core.umath import clip as clip_ufunc
-except ImportError:                         # numpy 1.26
-    from numpy.core.umath import clip as clip_ufunc
+if TYPE_CHECKING:                           # numpy's stubs do not declare the private umath.clip
+    clip_ufunc: np.ufunc
+else:
+    try:                                    # numpy >= 2
+        from numpy._core.umath import clip as clip_ufunc
+    except ImportError:                     # numpy 1.26
+        from numpy.core.umath import clip as clip_ufunc
 
 __all__ = ["bernstein", "bernstein_family", "clip_ufunc", "evaluate", "derivative_control_points", "derivative",
            "norm_rows", "curvature_from_derivatives", "curvature", "gauss_legendre", "arc_length", "split",

@@ -250,6 +250,7 @@ class BezierPath:
         s, scalar = self._check_s(s_m)
         piece, u = self.locate(s)
         out = self._arc_derivatives(piece, u, order, position=order == 0)[order]
+        assert out is not None  # only the position can be None, and it is evaluated for order 0
         return out[0] if scalar else out
 
     def _arc_derivatives(self, piece: np.ndarray, u: np.ndarray, order: int, *,

@@ -147,7 +147,7 @@ def _straight_at(arr: np.ndarray, prev: int, node: int, nxt: int) -> bool:
     """Whether the heading change at ``node`` (from ``prev``, to ``nxt``) is below ``STRAIGHT_RAD``."""
     a, b = arr[node] - arr[prev], arr[nxt] - arr[node]
     cos = float(np.dot(a, b)) / (np.linalg.norm(a) * np.linalg.norm(b))
-    sin = float(np.linalg.norm(np.cross(a, b) if a.size == 3 else a[0] * b[1] - a[1] * b[0]))
+    sin: float | np.floating = float(np.linalg.norm(np.cross(a, b) if a.size == 3 else a[0] * b[1] - a[1] * b[0]))
     sin /= np.linalg.norm(a) * np.linalg.norm(b)
     return math.atan2(sin, cos) < STRAIGHT_RAD
 

@@ -141,7 +141,7 @@ def _obstacle_from_dict(table, where: str, dim: int) -> Obstacle:
             raise WorldError(f"{where}.vertices: expected a list of [north, east] pairs")
         pts = [_vector(v, f"{where}.vertices[{i}]", 2) for i, v in enumerate(verts)]
         lo, hi = _vertical_limits(table, where)
-        return Prism(pts, lo, hi)
+        return Prism(tuple(pts), lo, hi)
     except WorldError as exc:
         msg = str(exc)
         if msg.startswith(where):

@@ -24,6 +24,7 @@ they share.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import ClassVar
 
 import numpy as np
@@ -106,7 +107,7 @@ class Obstacle:
         """Axis-aligned bounding box ``(lo, hi)`` of the (un-inflated) shape in ``dim`` D."""
         raise NotImplementedError
 
-    def sdf(self, p: tuple) -> float:  # pragma: no cover - abstract
+    def sdf(self, p: Sequence[float]) -> float:  # pragma: no cover - abstract
         """Signed distance (m) from point ``p`` (tuple of d floats) to the surface."""
         raise NotImplementedError
 

@@ -6,8 +6,9 @@ along *down*, a fence exclusion zone), each with an exact signed distance and se
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import ClassVar
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -59,7 +60,7 @@ class Box(Obstacle):
     def aabb(self, dim: int) -> tuple[tuple, tuple]:
         return self.min_m, self.max_m
 
-    def sdf(self, p: tuple) -> float:
+    def sdf(self, p: Sequence[float]) -> float:
         out2 = 0.0
         inner = -math.inf
         for x, lo, hi in zip(p, self.min_m, self.max_m):
@@ -139,6 +140,10 @@ class Prism(Obstacle):
     down_min_m: float = -math.inf
     down_max_m: float = math.inf
     kind: ClassVar[str] = "prism"
+    if TYPE_CHECKING:
+        # set by __post_init__, not a field at run time; to the type checker an attribute
+        # outside __init__ (a class-level annotation would make it a dataclass field)
+        _vertices_array: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         try:
@@ -167,7 +172,7 @@ class Prism(Obstacle):
             return (min(xs), min(ys)), (max(xs), max(ys))
         return (min(xs), min(ys), self.down_min_m), (max(xs), max(ys), self.down_max_m)
 
-    def sdf(self, p: tuple) -> float:
+    def sdf(self, p: Sequence[float]) -> float:
         kern = _KERNELS or _load_kernels()
         if len(p) == 2:
             return kern.polygon_sdf(float(p[0]), float(p[1]), self._vertices_array)
@@ -215,7 +220,7 @@ class Prism(Obstacle):
         return np.hypot(np.maximum(dxy, 0.0), np.maximum(dz, 0.0)) + inside
 
     def to_dict(self) -> dict:
-        out = {"type": "prism", "vertices": [list(v) for v in self.vertices_ne_m]}
+        out: dict[str, Any] = {"type": "prism", "vertices": [list(v) for v in self.vertices_ne_m]}
         if math.isfinite(self.down_min_m):
             out["down_min"] = self.down_min_m
         if math.isfinite(self.down_max_m):

@@ -6,6 +6,7 @@ distance (see ``companion.world.obstacles`` for the conventions).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -45,7 +46,7 @@ class Disc(Obstacle):
         (cx, cy), r = self.center_m, self.radius_m
         return (cx - r, cy - r), (cx + r, cy + r)
 
-    def sdf(self, p: tuple) -> float:
+    def sdf(self, p: Sequence[float]) -> float:
         return math.hypot(p[0] - self.center_m[0], p[1] - self.center_m[1]) - self.radius_m
 
     def gradient(self, p: tuple) -> tuple:
@@ -90,7 +91,7 @@ class Sphere(Obstacle):
         r = self.radius_m
         return tuple(c - r for c in self.center_m), tuple(c + r for c in self.center_m)
 
-    def sdf(self, p: tuple) -> float:
+    def sdf(self, p: Sequence[float]) -> float:
         c = self.center_m
         return math.sqrt((p[0] - c[0]) ** 2 + (p[1] - c[1]) ** 2 + (p[2] - c[2]) ** 2) - self.radius_m
 
@@ -142,13 +143,13 @@ class Cylinder(Obstacle):
             return (cx - r, cy - r), (cx + r, cy + r)
         return (cx - r, cy - r, self.down_min_m), (cx + r, cy + r, self.down_max_m)
 
-    def _radial(self, p: tuple) -> float:
+    def _radial(self, p: Sequence[float]) -> float:
         return math.hypot(p[0] - self.center_ne_m[0], p[1] - self.center_ne_m[1]) - self.radius_m
 
     def _dz(self, z: float) -> float:
         return max(self.down_min_m - z, z - self.down_max_m)
 
-    def sdf(self, p: tuple) -> float:
+    def sdf(self, p: Sequence[float]) -> float:
         dr = self._radial(p)
         if len(p) == 2:
             return dr

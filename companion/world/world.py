@@ -173,7 +173,7 @@ class World:
         cell = 0.5 * float(np.median(sizes)) if sizes else extent
         cell = min(max(cell, extent / max_cells), extent)
         grid = UniformGrid(self._lo, self._hi, cell, boxes)
-        balls = []
+        balls: list[tuple[float, ...]] = []  # centre, then r * r and r (r inflated by the margin)
         ball_ids = {}
         other_ids = {}
         for i, ob in enumerate(self._obstacles):
@@ -418,6 +418,7 @@ class World:
         if type(p) is not tuple:
             p = tuple(float(v) for v in p)
         m = self._margin
+        obs: Sequence[Obstacle]
         if math.isinf(max_range_m):
             obs = self._obstacles
         else:

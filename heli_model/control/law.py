@@ -296,8 +296,8 @@ def _step_compiled(kernel, params: np.ndarray, L: np.ndarray, state: ControllerS
         a0, a1, a2 = (acc.tolist() if type(acc) is _NDARRAY and acc.dtype is _FLOAT64 and acc.shape == _SHAPE3
                       else _kernel_axes(acc, "acc_ned_m_s2"))
         has_yaw, has_rate = yaw is not None, rate is not None
-        yaw = float(yaw) if has_yaw else 0.0
-        rate = float(rate) if has_rate else 0.0
+        yaw = float(yaw) if yaw is not None else 0.0
+        rate = float(rate) if rate is not None else 0.0
         z0, z1, z2, z3 = state.z
         i0, i1, i2 = state.pos_integral_m
         prev0, prev1, prev2 = state.cmd_prev_ned_m_s
@@ -320,7 +320,8 @@ def _kernel_axes(v, name: str) -> tuple[float, float, float]:
         return _NOT_COMMANDED
     if type(v) is np.ndarray and v.dtype is _FLOAT64 and v.shape == _SHAPE3:
         return v.tolist()
-    return setpoint_axes(v, name)
+    axes = setpoint_axes(v, name)  # not None: v is not None here
+    return _NOT_COMMANDED if axes is None else axes
 
 
 def law_output(L: np.ndarray, x: np.ndarray, c: float, s: float, cmd0: float, cmd1: float, cmd2: float,
