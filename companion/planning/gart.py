@@ -49,7 +49,7 @@ def _tiny_worlds() -> tuple[World, ...]:
     """A world of each kind the kernels specialise on: discs (2D) and spheres (3D) on the
     compiled iteration, a prism (the polyhedral queries), a box (the Python iteration's kernels)."""
     lo2, hi2, lo3, hi3 = np.zeros(2), np.full(2, 10.0), np.zeros(3), np.full(3, 10.0)
-    square = [(4.0, 4.0), (6.0, 4.0), (6.0, 6.0), (4.0, 6.0)]
+    square = ((4.0, 4.0), (6.0, 4.0), (6.0, 6.0), (4.0, 6.0))
     return (World([Disc((5.0, 5.0), 1.5)], lo2, hi2), World([Sphere((5.0, 5.0, 5.0), 1.5)], lo3, hi3),
             World([Prism(square)], lo2, hi2), World([Box((4.0, 4.0), (6.0, 6.0))], lo2, hi2))
 

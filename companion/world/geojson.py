@@ -65,8 +65,8 @@ def _metres(value, where: str, *, positive: bool) -> float:
     number = None
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         number = float(value)
-    elif isinstance(value, str) and _NUMBER_RE.match(value):
-        number = float(_NUMBER_RE.match(value).group(1))
+    elif isinstance(value, str) and (match := _NUMBER_RE.match(value)) is not None:
+        number = float(match.group(1))
     if number is None or not math.isfinite(number) or number < 0.0 or (positive and number == 0.0):
         raise WorldError(f"{where}: expected {want}, got {_shown(value)}")
     return number
@@ -199,7 +199,7 @@ def _feature(raw, where: str, default_height_m: float | None) -> MapFeature:
         raise WorldError(f"{where}.properties: expected an object, got {_shown(props)}")
     at = f"{where}.properties"
     height_m = _height_m(props, at, default_height_m)
-    extra = {"min_height_m": _min_height_m(props, at, height_m)}
+    extra: dict[str, float] = {"min_height_m": _min_height_m(props, at, height_m)}
     if isinstance(geometry, (Point, MultiPoint)):
         if "radius" not in props:
             raise WorldError(f"{at}.radius: missing (a {raw['geometry']['type']} needs a radius in m)")
@@ -208,7 +208,8 @@ def _feature(raw, where: str, default_height_m: float | None) -> MapFeature:
         if "width" not in props:
             raise WorldError(f"{at}.width: missing (a {raw['geometry']['type']} needs a width in m)")
         extra["width_m"] = _metres(props["width"], f"{at}.width", positive=True)
-    return MapFeature(where=where, geometry_deg=geometry, height_m=height_m, **extra)
+    return MapFeature(where=where, geometry_deg=geometry, height_m=height_m, min_height_m=extra["min_height_m"],
+                      radius_m=extra.get("radius_m"), width_m=extra.get("width_m"))
 
 
 # ----------------------------------------------------------------------------- the collection

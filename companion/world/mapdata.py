@@ -229,6 +229,7 @@ def simple_pieces_ne_m(polygon_ne: Polygon) -> list[Polygon]:
 def _polygons_ne_m(feature: MapFeature, footprint: BaseGeometry) -> list[Polygon]:
     """The feature's footprint as valid polygons (a line buffered to its width)."""
     if isinstance(footprint, (LineString, MultiLineString)):
+        assert feature.width_m is not None        # the reader requires a width of every line
         footprint = footprint.buffer(0.5 * feature.width_m, cap_style="flat", join_style="mitre")
     parts = list(footprint.geoms) if isinstance(footprint, MultiPolygon) else [footprint]
     out = []
@@ -299,6 +300,7 @@ def feature_obstacles(feature: MapFeature, frame: LocalFrame, ground_alt_m: Grou
     _log_if_far(feature, footprint)
     if isinstance(footprint, (Point, MultiPoint)):
         points = list(footprint.geoms) if isinstance(footprint, MultiPoint) else [footprint]
+        assert feature.radius_m is not None       # the reader requires a radius of every point
         return [Cylinder((p.x, p.y), feature.radius_m, down_min_m, down_max_m) for p in points]
     prisms: list[Obstacle] = []
     for polygon in _polygons_ne_m(feature, footprint):
@@ -332,11 +334,11 @@ def _bounds_ne_m(doc: MapDocument, obstacles: list[Obstacle], frame: LocalFrame,
         lat = np.array([south, south, north, north, south, north, 0.5 * (south + north), 0.5 * (south + north)])
         n, e, _ = frame.to_ned(lat, lon, np.full(lat.shape, frame.alt0_m))
         return np.array([n.min(), e.min()]), np.array([n.max(), e.max()])
-    pts = [np.zeros(2)] + [np.asarray(p[:2], dtype=float) for p in extra_ne_m]
+    corners = [np.zeros(2)] + [np.asarray(p[:2], dtype=float) for p in extra_ne_m]
     for ob in obstacles:
         lo, hi = ob.aabb(2)
-        pts += [np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)]
-    pts = np.vstack(pts)
+        corners += [np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)]
+    pts = np.vstack(corners)
     pad_m = doc.padding_m + doc.margin_m
     return pts.min(axis=0) - pad_m, pts.max(axis=0) + pad_m
 
