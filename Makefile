@@ -5,7 +5,7 @@ VENV := .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench clean
+.PHONY: demo test test-unit lint bench clean
 
 PIP_INSTALL := $(VPY) -m pip install --quiet -c constraints.txt
 
@@ -24,6 +24,16 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(VPY) -m pytest -q
+
+# the unit and property tests alone (about 2 minutes on two cores)
+test-unit: $(STAMP)
+	$(VPY) -m pytest -q -n 2 tests/unit
+
+# ruff (lint and format) over the tree, mypy over the core packages ([tool.mypy] in pyproject.toml)
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/mypy
 
 bench: $(VENV)/.bench
 	$(VPY) benchmarks/run_all.py

@@ -87,13 +87,13 @@ class CpuSampler:
     def __init__(self, pid: int, in_legs, on_legs=None) -> None:
         self.pid = pid
         self.in_legs = in_legs
-        self.on_legs = on_legs          # on_legs(True) when the legs begin, on_legs(False) when they end
+        self.on_legs = on_legs  # on_legs(True) when the legs begin, on_legs(False) when they end
         self._legs_state: bool | None = None
         self.samples: list[tuple[float, float, float, bool]] = []
         self._children: dict[int, float] = {}
-        self.threads: dict[int, tuple[str, float, int]] = {}   # tid -> (name, CPU s, wake-ups)
-        self.legs_first: tuple[float, dict] | None = None     # (monotonic s, threads) at the legs' start
-        self.legs_last: tuple[float, dict] | None = None      # ... and at their latest sample
+        self.threads: dict[int, tuple[str, float, int]] = {}  # tid -> (name, CPU s, wake-ups)
+        self.legs_first: tuple[float, dict] | None = None  # (monotonic s, threads) at the legs' start
+        self.legs_last: tuple[float, dict] | None = None  # ... and at their latest sample
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="cpu-sampler", daemon=True)
 
@@ -113,7 +113,7 @@ class CpuSampler:
                 return
             legs = bool(self.in_legs())
             if self.on_legs is not None and legs is not self._legs_state and (legs or self._legs_state):
-                self._legs_state = legs                   # None (before) -> True -> False (after)
+                self._legs_state = legs  # None (before) -> True -> False (after)
                 self.on_legs(legs)
             self.samples.append((time.monotonic(), own, self._children_cpu_s(waited), legs))
             self._sample_threads()
@@ -134,10 +134,13 @@ class CpuSampler:
                     text = fh.read()
             except FileNotFoundError:
                 continue
-            name = text[text.index("(") + 1:text.rindex(")")]
+            name = text[text.index("(") + 1 : text.rindex(")")]
             fields = text.rsplit(")", 1)[1].split()
-            self.threads[int(tid)] = (name, (int(fields[11]) + int(fields[12])) / CLOCK_TICKS_S,
-                                      voluntary_switches(self.pid, tid))
+            self.threads[int(tid)] = (
+                name,
+                (int(fields[11]) + int(fields[12])) / CLOCK_TICKS_S,
+                voluntary_switches(self.pid, tid),
+            )
 
     def _legs_delta(self, column: int) -> tuple[dict[str, float], float]:
         """Each thread's increase of ``column`` (1: CPU s, 2: wake-ups) over the legs, by
@@ -145,8 +148,9 @@ class CpuSampler:
         if self.legs_first is None or self.legs_last is None:
             return {}, 0.0
         (t0, first), (t1, last) = self.legs_first, self.legs_last
-        return {f"{row[0]}/{tid}": row[column] - first.get(tid, (0, 0, 0))[column]
-                for tid, row in last.items()}, t1 - t0
+        return {
+            f"{row[0]}/{tid}": row[column] - first.get(tid, (0, 0, 0))[column] for tid, row in last.items()
+        }, t1 - t0
 
     def thread_cpu_s(self) -> dict[str, float]:
         """CPU seconds per thread over the legs ("name/tid", the largest first)."""
@@ -159,10 +163,11 @@ class CpuSampler:
         out, wall_s = self._legs_delta(2)
         if wall_s <= 0.0:
             return {}
-        return dict(sorted(((k, round(v / wall_s, 1)) for k, v in out.items() if v / wall_s >= 0.5),
-                           key=lambda kv: -kv[1]))
+        return dict(
+            sorted(((k, round(v / wall_s, 1)) for k, v in out.items() if v / wall_s >= 0.5), key=lambda kv: -kv[1])
+        )
 
-    def __enter__(self) -> "CpuSampler":
+    def __enter__(self) -> CpuSampler:
         self._thread.start()
         return self
 
@@ -185,8 +190,9 @@ class CpuSampler:
         return out
 
 
-def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path | None,
-                    companion_args=(), account: bool = False) -> dict:
+def fly_and_measure(
+    name: str, out_dir: Path, speedup: float, profile_dir: Path | None, companion_args=(), account: bool = False
+) -> dict:
     """One flight of the demo mission; its CPU figures and summary."""
     injections = demo.DEMO_INJECTIONS if name == "threats" else ()
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -199,8 +205,9 @@ def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path 
         env["PYTHONPATH"] = str(REPO / "benchmarks") + os.pathsep + env["PYTHONPATH"]
         accounts.unlink(missing_ok=True)
         prefix = ["loop_account", str(accounts)]
-    with flight_processes(out_dir, MISSION, speedup=speedup, env=env, extra_args=companion_args,
-                          companion_prefix=prefix) as flight:
+    with flight_processes(
+        out_dir, MISSION, speedup=speedup, env=env, extra_args=companion_args, companion_prefix=prefix
+    ) as flight:
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             watcher = demo.FlightWatcher(bus)
 
@@ -208,8 +215,11 @@ def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path 
                 st = watcher.status
                 return bool(st) and st.get("leg", -1) >= 0 and st.get("mode") == "GUIDED"
 
-            signal_legs = (lambda legs: os.kill(flight.companion.pid, signal.SIGUSR1 if legs else signal.SIGUSR2)) \
-                if account else None
+            signal_legs = (
+                (lambda legs: os.kill(flight.companion.pid, signal.SIGUSR1 if legs else signal.SIGUSR2))
+                if account
+                else None
+            )
             with CpuSampler(flight.companion.pid, in_legs, signal_legs) as sampler:
                 done = lambda: flight.companion.poll() is not None  # noqa: E731
                 sent = demo.inject(watcher, injections, 300, done=done) if injections else []
@@ -219,36 +229,53 @@ def fly_and_measure(name: str, out_dir: Path, speedup: float, profile_dir: Path 
                         bus.client.delete_threat(threat.id)
                 flight.companion.wait(300)
     summary = demo.last_json_line(flight.log) or {}
-    return {"flight": name, "speedup": speedup, "rc": flight.companion.returncode,
-            "outcome": summary.get("outcome"), "decisions": summary.get("decisions"),
-            **sampler.rates(), "threads_cpu_s": sampler.thread_cpu_s(),
-            "threads_wakeups_per_s": sampler.thread_wakeups_per_s(),
-            "loop_account": json.loads(accounts.read_text()) if account and accounts.exists() else None}
+    return {
+        "flight": name,
+        "speedup": speedup,
+        "rc": flight.companion.returncode,
+        "outcome": summary.get("outcome"),
+        "decisions": summary.get("decisions"),
+        **sampler.rates(),
+        "threads_cpu_s": sampler.thread_cpu_s(),
+        "threads_wakeups_per_s": sampler.thread_wakeups_per_s(),
+        "loop_account": json.loads(accounts.read_text()) if account and accounts.exists() else None,
+    }
 
 
 def table(results: list[dict]) -> str:
-    head = ("| flight | outcome | wall (s) | CPU (s) | CPU/s whole life | CPU/s legs | workers CPU/s legs |"
-            " goal legs <= 5 % |\n|---|---|---|---|---|---|---|---|")
+    head = (
+        "| flight | outcome | wall (s) | CPU (s) | CPU/s whole life | CPU/s legs | workers CPU/s legs |"
+        " goal legs <= 5 % |\n|---|---|---|---|---|---|---|---|"
+    )
     rows = []
     for r in results:
         legs = r.get("legs_cpu_per_s", float("nan"))
-        rows.append(f"| {r['flight']} | {r['outcome']} | {r['wall_s']:.1f} | {r['cpu_s']:.2f} | "
-                    f"{100 * r['cpu_per_s']:.1f} % | {100 * legs:.1f} % | "
-                    f"{100 * r.get('legs_children_cpu_per_s', float('nan')):.1f} % | "
-                    f"{'yes' if legs <= GOAL_LEGS_CPU else 'no'} |")
+        rows.append(
+            f"| {r['flight']} | {r['outcome']} | {r['wall_s']:.1f} | {r['cpu_s']:.2f} | "
+            f"{100 * r['cpu_per_s']:.1f} % | {100 * legs:.1f} % | "
+            f"{100 * r.get('legs_children_cpu_per_s', float('nan')):.1f} % | "
+            f"{'yes' if legs <= GOAL_LEGS_CPU else 'no'} |"
+        )
     return "\n".join([head] + rows)
 
 
 def doc(results: list[dict], meta: dict, argv) -> str:
     """``docs/benchmarks/companion_cpu.md``: the run's table and where each thread's CPU went."""
-    lines = ["# CPU of `companion run` per second of flight (`benchmarks/companion_cpu.py`)", "",
-             f"Generated by `benchmarks/companion_cpu.py {' '.join(argv)}` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
-             f"{meta['cpus']} shared CPUs, 1-min load average {meta['load_average_1min']:.2f} at the end. "
-             "\"legs\": from the first leg to the landing; \"workers\": the planning worker processes.", "",
-             table(results), ""]
+    lines = [
+        "# CPU of `companion run` per second of flight (`benchmarks/companion_cpu.py`)",
+        "",
+        f"Generated by `benchmarks/companion_cpu.py {' '.join(argv)}` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
+        f"{meta['cpus']} shared CPUs, 1-min load average {meta['load_average_1min']:.2f} at the end. "
+        '"legs": from the first leg to the landing; "workers": the planning worker processes.',
+        "",
+        table(results),
+        "",
+    ]
     for r in results:
-        lines.append(f"- {r['flight']}: CPU s per thread over {r.get('legs_wall_s', float('nan')):.0f} s of legs "
-                     f"{r['threads_cpu_s']}; wake-ups per second {r['threads_wakeups_per_s']}")
+        lines.append(
+            f"- {r['flight']}: CPU s per thread over {r.get('legs_wall_s', float('nan')):.0f} s of legs "
+            f"{r['threads_cpu_s']}; wake-ups per second {r['threads_wakeups_per_s']}"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -258,18 +285,31 @@ def main(argv=None) -> int:
     parser.add_argument("--flights", nargs="+", default=["plain", "threats"], choices=["plain", "threats"])
     parser.add_argument("--profile", type=Path, default=None, help="cProfile the companion into DIR")
     parser.add_argument("--quick", action="store_true", help="the plain flight only, at speed-up 4")
-    parser.add_argument("--account", action="store_true",
-                        help="the event loop's CPU over the legs per callback (benchmarks/loop_account.py)")
-    parser.add_argument("--companion-args", default="",
-                        help="more arguments for companion run (one string, split on spaces)")
+    parser.add_argument(
+        "--account",
+        action="store_true",
+        help="the event loop's CPU over the legs per callback (benchmarks/loop_account.py)",
+    )
+    parser.add_argument(
+        "--companion-args", default="", help="more arguments for companion run (one string, split on spaces)"
+    )
     parser.add_argument("--out", default=str(REPO / "out" / "bench" / "companion_cpu.json"))
     args = parser.parse_args(argv)
     if args.quick:
         args.flights, args.speedup = ["plain"], 4.0
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     out = Path(args.out)
-    results = [fly_and_measure(name, out.parent / f"companion_cpu_{name}", args.speedup, args.profile,
-                               args.companion_args.split(), args.account) for name in args.flights]
+    results = [
+        fly_and_measure(
+            name,
+            out.parent / f"companion_cpu_{name}",
+            args.speedup,
+            args.profile,
+            args.companion_args.split(),
+            args.account,
+        )
+        for name in args.flights
+    ]
     meta = {"cpus": os.cpu_count(), "load_average_1min": os.getloadavg()[0], "mission": MISSION.name}
     print(table(results))
     for r in results:

@@ -88,7 +88,7 @@ class FleetSampler:
 
     def __init__(self, fleet: Fleet) -> None:
         self.fleet = fleet
-        self.cpu: dict[int, dict[int, float]] = {v.sysid: {} for v in fleet.vehicles}     # sysid -> pid -> s
+        self.cpu: dict[int, dict[int, float]] = {v.sysid: {} for v in fleet.vehicles}  # sysid -> pid -> s
         self.sim_cpu: dict[int, float] = {v.sysid: 0.0 for v in fleet.vehicles}
         self.router_cpu = 0.0
         self._stop = threading.Event()
@@ -155,8 +155,7 @@ class ZenohCounter:
             self.bus.close()
 
 
-def fly(n: int, mode: str, missions: list[Path], out_dir: Path, speedup: float, seed: int,
-        timeout_s: float) -> dict:
+def fly(n: int, mode: str, missions: list[Path], out_dir: Path, speedup: float, seed: int, timeout_s: float) -> dict:
     """One fleet flight; its numbers."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     fleet = Fleet(missions, out_dir, speedup=speedup, share=(mode == "share"), seed=seed, gcs_out=None, env=env)
@@ -193,27 +192,44 @@ def fly(n: int, mode: str, missions: list[Path], out_dir: Path, speedup: float, 
     total_cpu = sum(comp_cpu.values()) + sum(sampler.sim_cpu.values()) + sampler.router_cpu
     cores = os.cpu_count() or 1
     return {
-        "n": n, "mode": mode, "speedup": speedup, "wall_s": wall,
-        "completed": sum(1 for v in result.vehicles if v.completed), "outcomes": [v.outcome for v in result.vehicles],
-        "min_separation_m": sep.min_m, "closest_pair": numbers["closest_pair"],
-        "losses": sep.losses(required), "pairs": len(sep.pair_min_m), "required_m": required,
+        "n": n,
+        "mode": mode,
+        "speedup": speedup,
+        "wall_s": wall,
+        "completed": sum(1 for v in result.vehicles if v.completed),
+        "outcomes": [v.outcome for v in result.vehicles],
+        "min_separation_m": sep.min_m,
+        "closest_pair": numbers["closest_pair"],
+        "losses": sep.losses(required),
+        "pairs": len(sep.pair_min_m),
+        "required_m": required,
         "pair_min_m": numbers["pair_min_m"],
-        "extra_path": extra, "extra_path_mean": float(np.mean(list(extra.values()))),
+        "extra_path": extra,
+        "extra_path_mean": float(np.mean(list(extra.values()))),
         "extra_path_max": float(np.max(list(extra.values()))),
-        "planned_m": planned, "flown_m": numbers["path_length_m"],
-        "decisions": decisions, "max_tracking_error_m": max(tracking) if tracking else None,
-        "companion_cpu_s": comp_cpu, "sim_cpu_s": sampler.sim_cpu, "router_cpu_s": sampler.router_cpu,
+        "planned_m": planned,
+        "flown_m": numbers["path_length_m"],
+        "decisions": decisions,
+        "max_tracking_error_m": max(tracking) if tracking else None,
+        "companion_cpu_s": comp_cpu,
+        "sim_cpu_s": sampler.sim_cpu,
+        "router_cpu_s": sampler.router_cpu,
         "companion_cpu_per_s": {s: c / wall for s, c in comp_cpu.items()},
         "companion_cpu_mean": float(np.mean(list(comp_cpu.values()))) / wall,
         "sim_cpu_mean": float(np.mean(list(sampler.sim_cpu.values()))) / wall,
-        "fleet_cores": total_cpu / wall, "cores": cores,
-        "zenoh_msgs_per_s": msgs, "zenoh_msgs_mean": float(np.mean(list(msgs.values()))),
+        "fleet_cores": total_cpu / wall,
+        "cores": cores,
+        "zenoh_msgs_per_s": msgs,
+        "zenoh_msgs_mean": float(np.mean(list(msgs.values()))),
         "zenoh_bytes": dict(counter.bytes) if counter else {},
-        "sim_speedup": speeds, "sim_max_lag_s": numbers["max_lag_s"],
+        "sim_speedup": speeds,
+        "sim_max_lag_s": numbers["max_lag_s"],
         "real_time": not slow and not lagged and total_cpu / wall < SATURATED * cores,
-        "real_time_note": ("" if not slow and not lagged and total_cpu / wall < SATURATED * cores else
-                           f"simulators slow {slow}, lagging {lagged}, fleet CPU {total_cpu / wall:.2f} of {cores} "
-                           f"cores"),
+        "real_time_note": (
+            ""
+            if not slow and not lagged and total_cpu / wall < SATURATED * cores
+            else f"simulators slow {slow}, lagging {lagged}, fleet CPU {total_cpu / wall:.2f} of {cores} cores"
+        ),
         "logs": str(out_dir),
     }
 
@@ -225,17 +241,21 @@ def fmt(value, spec: str = ".2f") -> str:
 
 
 def table(rows: list[dict], meta: dict) -> str:
-    lines = [f"## Fleet: N helicopters crossing at one point, trajectory sharing against none "
-             f"(real processes at {meta['speedup']:g}x, {meta['cores']} cores)", "",
-             f"Crossing missions on a circle of radius {meta['radius_m']:g} m, {meta['alt_m']:g} m up, "
-             f"{meta['speed_m_s']:g} m/s, through the centre to {meta['beyond_m']:g} m beyond and back (RTL). "
-             f"Separation required: {meta['required_m']:.1f} m (2 rotor radii + margin); judged from the "
-             f"simulators' own tlogs. CPU: % of one core over the fleet's wall time (companion with its "
-             f"planning workers; simulator). zenoh: samples on uav/** per second per vehicle.", "",
-             "| N | mode | completed | min separation (m) | losses (pairs) | extra path mean / max | "
-             "decisions | max tracking error (m) | companion CPU | sim CPU | fleet cores | zenoh msg/s/vehicle | "
-             "real time | wall (s) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"## Fleet: N helicopters crossing at one point, trajectory sharing against none "
+        f"(real processes at {meta['speedup']:g}x, {meta['cores']} cores)",
+        "",
+        f"Crossing missions on a circle of radius {meta['radius_m']:g} m, {meta['alt_m']:g} m up, "
+        f"{meta['speed_m_s']:g} m/s, through the centre to {meta['beyond_m']:g} m beyond and back (RTL). "
+        f"Separation required: {meta['required_m']:.1f} m (2 rotor radii + margin); judged from the "
+        f"simulators' own tlogs. CPU: % of one core over the fleet's wall time (companion with its "
+        f"planning workers; simulator). zenoh: samples on uav/** per second per vehicle.",
+        "",
+        "| N | mode | completed | min separation (m) | losses (pairs) | extra path mean / max | "
+        "decisions | max tracking error (m) | companion CPU | sim CPU | fleet cores | zenoh msg/s/vehicle | "
+        "real time | wall (s) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         decisions = sum(d for d in r["decisions"].values() if isinstance(d, int))
         lines.append(
@@ -243,7 +263,8 @@ def table(rows: list[dict], meta: dict) -> str:
             f"{r['losses']}/{r['pairs']} | {100 * r['extra_path_mean']:.1f} % / {100 * r['extra_path_max']:.1f} % | "
             f"{decisions} | {fmt(r.get('max_tracking_error_m'))} | {100 * r['companion_cpu_mean']:.1f} % | {100 * r['sim_cpu_mean']:.1f} % | "
             f"{r['fleet_cores']:.2f} | {r['zenoh_msgs_mean']:.1f} | {'yes' if r['real_time'] else 'no'} | "
-            f"{r['wall_s']:.0f} |")
+            f"{r['wall_s']:.0f} |"
+        )
     for note in meta.get("notes", []):
         lines += ["", note]
     return "\n".join(lines) + "\n"
@@ -276,28 +297,44 @@ def main(argv=None) -> int:
         parser.error(f"--modes: expected some of {','.join(MODES)}, got {args.modes!r}")
     out = Path(args.out)
     runs_dir = out.parent / "fleet"
-    meta = {"speedup": args.speedup, "cores": os.cpu_count(), "radius_m": args.radius, "beyond_m": args.beyond,
-            "alt_m": args.alt, "speed_m_s": args.speed, "required_m": FleetSettings().separation_m,
-            "load_average_1min_start": os.getloadavg()[0], "notes": []}
+    meta = {
+        "speedup": args.speedup,
+        "cores": os.cpu_count(),
+        "radius_m": args.radius,
+        "beyond_m": args.beyond,
+        "alt_m": args.alt,
+        "speed_m_s": args.speed,
+        "required_m": FleetSettings().separation_m,
+        "load_average_1min_start": os.getloadavg()[0],
+        "notes": [],
+    }
     rows: list[dict] = []
     for n in sorted(ns):
         with tempfile.TemporaryDirectory(prefix=f"fleet{n}-") as tmp:
-            missions = write_missions(crossing_missions(n, radius_m=args.radius, beyond_m=args.beyond,
-                                                        alt_m=args.alt, speed_m_s=args.speed), tmp)
+            missions = write_missions(
+                crossing_missions(n, radius_m=args.radius, beyond_m=args.beyond, alt_m=args.alt, speed_m_s=args.speed),
+                tmp,
+            )
             kept_up = True
             for mode in modes:
                 row = fly(n, mode, missions, runs_dir / f"n{n}-{mode}", args.speedup, args.seed, args.timeout)
                 rows.append(row)
-                print(f"N={n} {mode}: completed {row['completed']}/{n}, min separation "
-                      f"{fmt(row['min_separation_m'])} m, losses {row['losses']}/{row['pairs']}, extra path "
-                      f"{100 * row['extra_path_mean']:.1f} %, companion CPU {100 * row['companion_cpu_mean']:.1f} %, "
-                      f"fleet {row['fleet_cores']:.2f} cores, zenoh {row['zenoh_msgs_mean']:.1f} msg/s/vehicle, "
-                      f"simulators {row['sim_speedup']}, wall {row['wall_s']:.0f} s", file=sys.stderr, flush=True)
+                print(
+                    f"N={n} {mode}: completed {row['completed']}/{n}, min separation "
+                    f"{fmt(row['min_separation_m'])} m, losses {row['losses']}/{row['pairs']}, extra path "
+                    f"{100 * row['extra_path_mean']:.1f} %, companion CPU {100 * row['companion_cpu_mean']:.1f} %, "
+                    f"fleet {row['fleet_cores']:.2f} cores, zenoh {row['zenoh_msgs_mean']:.1f} msg/s/vehicle, "
+                    f"simulators {row['sim_speedup']}, wall {row['wall_s']:.0f} s",
+                    file=sys.stderr,
+                    flush=True,
+                )
                 kept_up = kept_up and row["real_time"]
         if not kept_up:
-            note = (f"N={n}: {os.cpu_count()} cores did not keep real time at speed-up {args.speedup:g} "
-                    f"({'; '.join(r['real_time_note'] for r in rows if r['n'] == n and r['real_time_note'])}); "
-                    f"larger N not flown.")
+            note = (
+                f"N={n}: {os.cpu_count()} cores did not keep real time at speed-up {args.speedup:g} "
+                f"({'; '.join(r['real_time_note'] for r in rows if r['n'] == n and r['real_time_note'])}); "
+                f"larger N not flown."
+            )
             meta["notes"].append(note)
             print(note, file=sys.stderr, flush=True)
             break

@@ -26,8 +26,9 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
-from companion.record.flight_record import load_record  # noqa: E402
 from flight_support import fly  # noqa: E402
+
+from companion.record.flight_record import load_record  # noqa: E402
 
 MISSIONS = ("exclusion_zones.plan", "square.waypoints", "paper_cluttered_100m.plan")
 GOAL_RMS_M = 0.3
@@ -47,21 +48,31 @@ def run(missions, speedup: float) -> list[dict]:
         for name in missions:
             summary = fly(Path(tmp) / name, REPO / "mission_files" / name, speedup=speedup)
             jitter = stream_jitter(summary["record"])
-            rows.append({"mission": name, "legs": summary["legs_reached"],
-                         "rms_m": summary["rms_tracking_error_m"],
-                         "max_m": summary["max_tracking_error_m"],
-                         "jitter_p99_ms": jitter.get("p99_ms"), "outcome": summary["outcome"]})
+            rows.append(
+                {
+                    "mission": name,
+                    "legs": summary["legs_reached"],
+                    "rms_m": summary["rms_tracking_error_m"],
+                    "max_m": summary["max_tracking_error_m"],
+                    "jitter_p99_ms": jitter.get("p99_ms"),
+                    "outcome": summary["outcome"],
+                }
+            )
     return rows
 
 
 def table(rows: list[dict], speedup: float) -> str:
-    lines = [f"SITL flights at {speedup:g}x, G2 smoothing, default limits (goal RMS <= {GOAL_RMS_M} m)", "",
-             "| mission | legs | RMS error (m) | max error (m) | stream jitter p99 (ms) | outcome |",
-             "|---|---|---|---|---|---|"]
+    lines = [
+        f"SITL flights at {speedup:g}x, G2 smoothing, default limits (goal RMS <= {GOAL_RMS_M} m)",
+        "",
+        "| mission | legs | RMS error (m) | max error (m) | stream jitter p99 (ms) | outcome |",
+        "|---|---|---|---|---|---|",
+    ]
     for r in rows:
         jitter = "-" if r["jitter_p99_ms"] is None else f"{r['jitter_p99_ms']:.2f}"
-        lines.append(f"| {r['mission']} | {r['legs']} | {r['rms_m']:.3f} | {r['max_m']:.3f} | "
-                     f"{jitter} | {r['outcome']} |")
+        lines.append(
+            f"| {r['mission']} | {r['legs']} | {r['rms_m']:.3f} | {r['max_m']:.3f} | {jitter} | {r['outcome']} |"
+        )
     return "\n".join(lines)
 
 
@@ -77,7 +88,8 @@ def main() -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / "flight_tracking.json").write_text(json.dumps({"speedup": args.speedup, "rows": rows}, indent=2))
     (REPO / "docs" / "benchmarks" / "flight_tracking.md").write_text(
-        "# Tracking error of SITL flights\n\n" + text + "\n")
+        "# Tracking error of SITL flights\n\n" + text + "\n"
+    )
     return 0
 
 

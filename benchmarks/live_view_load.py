@@ -26,7 +26,7 @@ from companion.demo import DEMO_HOME  # noqa: E402
 from companion.view.sinks import open_record_sinks  # noqa: E402
 from companion.world.io import world_to_dict  # noqa: E402
 
-CONNECT_S = 2.0            # the viewer's time to connect and subscribe before the stream starts
+CONNECT_S = 2.0  # the viewer's time to connect and subscribe before the stream starts
 
 
 class LiveViewLoad:
@@ -43,8 +43,10 @@ class LiveViewLoad:
         self.sinks.write("world", **world_to_dict(bench.world))
         self.sinks.write("plan", leg=0, seq=1, path_id="leg0", path_ned_m=self.path_ned_m)
         self.client = subprocess.Popen(
-            [sys.executable, str(REPO / "tests" / "foxglove_client.py"), str(self.port),
-             str(seconds + 2 * CONNECT_S)], stdout=subprocess.PIPE, text=True)
+            [sys.executable, str(REPO / "tests" / "foxglove_client.py"), str(self.port), str(seconds + 2 * CONNECT_S)],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         time.sleep(CONNECT_S)
         self.replans = 0
 
@@ -55,20 +57,43 @@ class LiveViewLoad:
         while (now := time.monotonic()) < stop_at_s:
             u = ((now - t0) / 30.0) % 1.0
             pos = (1 - u) * self.path_ned_m[0] + u * self.path_ned_m[1]
-            self.sinks.write("sample", t_s=now - t0, ref_pos_ned_m=pos, ref_vel_ned_m_s=[3.0, 3.0, 0.0],
-                             pos_ned_m=pos + 0.1, vel_ned_m_s=[3.0, 3.0, 0.0], servo_us=[1500, 1500, 1500, 1500],
-                             tracking_error_m=0.17, leg=0, path_id=f"replan-{self.replans}",
-                             euler_rad=[0.01, -0.02, 0.78])
+            self.sinks.write(
+                "sample",
+                t_s=now - t0,
+                ref_pos_ned_m=pos,
+                ref_vel_ned_m_s=[3.0, 3.0, 0.0],
+                pos_ned_m=pos + 0.1,
+                vel_ned_m_s=[3.0, 3.0, 0.0],
+                servo_us=[1500, 1500, 1500, 1500],
+                tracking_error_m=0.17,
+                leg=0,
+                path_id=f"replan-{self.replans}",
+                euler_rad=[0.01, -0.02, 0.78],
+            )
             await asyncio.sleep(period)
 
     def on_replan(self, path_ned_m=None) -> None:
         """A threat and the decision that answers it (as the threat reactor records them)."""
         self.replans += 1
         t_s = time.monotonic()
-        self.sinks.write("threat", id=f"t{self.replans}", source="bench", kind="moving",
-                         position_ned_m=[50.0, 50.0, -10.0], velocity_ned_m_s=[-2.0, 0.0, 0.0], radius_m=3.0, t_s=t_s)
-        self.sinks.write("decision", kind="replan", reason="benchmark", path_id=f"replan-{self.replans}",
-                         path_ned_m=self.path_ned_m if path_ned_m is None else path_ned_m, t_s=t_s)
+        self.sinks.write(
+            "threat",
+            id=f"t{self.replans}",
+            source="bench",
+            kind="moving",
+            position_ned_m=[50.0, 50.0, -10.0],
+            velocity_ned_m_s=[-2.0, 0.0, 0.0],
+            radius_m=3.0,
+            t_s=t_s,
+        )
+        self.sinks.write(
+            "decision",
+            kind="replan",
+            reason="benchmark",
+            path_id=f"replan-{self.replans}",
+            path_ned_m=self.path_ned_m if path_ned_m is None else path_ned_m,
+            t_s=t_s,
+        )
 
     def close(self) -> dict:
         """Stop the server; the viewer's message counts per topic."""

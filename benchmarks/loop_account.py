@@ -22,7 +22,7 @@ import time
 
 _cpu_ns: collections.Counter = collections.Counter()
 _calls: collections.Counter = collections.Counter()
-_started: list = []            # [(monotonic s, thread CPU ns)] once SIGUSR1 came
+_started: list = []  # [(monotonic s, thread CPU ns)] once SIGUSR1 came
 
 
 def callback_name(handle: asyncio.Handle) -> str:
@@ -44,6 +44,7 @@ def _timed(function, name_of):
                 name = name_of(args)
                 _cpu_ns[name] += time.thread_time_ns() - start
                 _calls[name] += 1
+
     return timed
 
 
@@ -62,11 +63,16 @@ def install(out_path: str) -> None:
         if not _started:
             return
         wall_s = time.monotonic() - _started[0][0]
-        by = {name: [round(ns / 1e9 / wall_s * 100, 3), round(_calls[name] / wall_s, 1)]
-              for name, ns in _cpu_ns.most_common()}
+        by = {
+            name: [round(ns / 1e9 / wall_s * 100, 3), round(_calls[name] / wall_s, 1)]
+            for name, ns in _cpu_ns.most_common()
+        }
         with open(out_path, "w", encoding="utf-8") as fh:
-            json.dump({"wall_s": wall_s, "loop_thread_cpu_s": (time.thread_time_ns() - _started[0][1]) / 1e9,
-                       "by": by}, fh, indent=1)
+            json.dump(
+                {"wall_s": wall_s, "loop_thread_cpu_s": (time.thread_time_ns() - _started[0][1]) / 1e9, "by": by},
+                fh,
+                indent=1,
+            )
 
     signal.signal(signal.SIGUSR1, start)
     signal.signal(signal.SIGUSR2, write)

@@ -61,27 +61,52 @@ def warm_up(settings: GartSettings) -> dict:
     cpu0, t0 = time.process_time(), time.perf_counter()
     for name in ("2d", "3d_dense"):
         bw = make_world(name, 0)
-        gart(bw.world, bw.start, bw.goal, rng=np.random.default_rng(0), stop_at_first=True, max_time_s=60.0,
-             settings=settings)   # to a path: every kernel of the call, the shortcut's too
-        mgart(bw.world, bw.start, bw.goal, 2, rng=np.random.default_rng(0), max_time_s=60.0,
-              settings=MgartSettings(gart=settings))   # and M-GART's distinctness test
+        gart(
+            bw.world,
+            bw.start,
+            bw.goal,
+            rng=np.random.default_rng(0),
+            stop_at_first=True,
+            max_time_s=60.0,
+            settings=settings,
+        )  # to a path: every kernel of the call, the shortcut's too
+        mgart(
+            bw.world,
+            bw.start,
+            bw.goal,
+            2,
+            rng=np.random.default_rng(0),
+            max_time_s=60.0,
+            settings=MgartSettings(gart=settings),
+        )  # and M-GART's distinctness test
     return {"cpu_ms": 1e3 * (time.process_time() - cpu0), "wall_ms": 1e3 * (time.perf_counter() - t0)}
 
 
 def run_gart(bw: BenchWorld, budgets: tuple, settings: GartSettings, anytime: bool = True) -> dict:
     """First-path and anytime runs of GART on one world."""
     cpu0 = time.process_time()
-    first = gart(bw.world, bw.start, bw.goal, rng=np.random.default_rng(bw.seed), stop_at_first=True,
-                 max_time_s=FIRST_TIMEOUT_S, settings=settings)
+    first = gart(
+        bw.world,
+        bw.start,
+        bw.goal,
+        rng=np.random.default_rng(bw.seed),
+        stop_at_first=True,
+        max_time_s=FIRST_TIMEOUT_S,
+        settings=settings,
+    )
     cpu_ms = 1e3 * (time.process_time() - cpu0)
     out = {"solved": first.solved, "exact_valid": first.solved and bw.world.path_free(first.path)}
     if first.solved:
-        out.update(first_ms=1e3 * first.time_to_first_s, first_cpu_ms=cpu_ms, iterations_first=first.iterations,
-                   first_cost=first.cost_history[0][1], first_cost_shortcut=first.cost)
+        out.update(
+            first_ms=1e3 * first.time_to_first_s,
+            first_cpu_ms=cpu_ms,
+            iterations_first=first.iterations,
+            first_cost=first.cost_history[0][1],
+            first_cost_shortcut=first.cost,
+        )
     if anytime:
         for t in budgets:
-            r = gart(bw.world, bw.start, bw.goal, rng=np.random.default_rng(bw.seed), max_time_s=t,
-                     settings=settings)
+            r = gart(bw.world, bw.start, bw.goal, rng=np.random.default_rng(bw.seed), max_time_s=t, settings=settings)
             out[f"cost_{t}"] = r.cost if r.solved else None
             out[f"iters_per_s_{t}"] = r.iterations / r.elapsed_s
             out["exact_valid"] = out["exact_valid"] and (not r.solved or bw.world.path_free(r.path))
@@ -91,18 +116,33 @@ def run_gart(bw: BenchWorld, budgets: tuple, settings: GartSettings, anytime: bo
 def run_mgart(bw: BenchWorld, settings: MgartSettings) -> dict:
     """Time to eight distinct M-GART paths on one world."""
     cpu0 = time.process_time()
-    res = mgart(bw.world, bw.start, bw.goal, MGART_K, rng=np.random.default_rng(bw.seed),
-                max_time_s=MGART_TIMEOUT_S, settings=settings)
+    res = mgart(
+        bw.world,
+        bw.start,
+        bw.goal,
+        MGART_K,
+        rng=np.random.default_rng(bw.seed),
+        max_time_s=MGART_TIMEOUT_S,
+        settings=settings,
+    )
     cpu_ms = 1e3 * (time.process_time() - cpu0)
     paths = [r for r in res if r.solved]
-    distinct = all(hausdorff_m(a.path, b.path, settings.separation_sample_m) >= settings.min_separation_m
-                   for i, a in enumerate(paths) for b in paths[i + 1:])
+    distinct = all(
+        hausdorff_m(a.path, b.path, settings.separation_sample_m) >= settings.min_separation_m
+        for i, a in enumerate(paths)
+        for b in paths[i + 1 :]
+    )
     valid = all(bw.world.path_free(r.path) for r in paths)
     done = len(paths) == MGART_K
-    return {"paths": len(paths), "distinct": distinct, "exact_valid": valid,
-            "time_to_k_ms": 1e3 * max(r.time_to_first_s for r in paths) if done else None,
-            "cpu_to_k_ms": cpu_ms if done else None,
-            "iterations": res[0].iterations, "costs": [r.cost for r in paths]}
+    return {
+        "paths": len(paths),
+        "distinct": distinct,
+        "exact_valid": valid,
+        "time_to_k_ms": 1e3 * max(r.time_to_first_s for r in paths) if done else None,
+        "cpu_to_k_ms": cpu_ms if done else None,
+        "iterations": res[0].iterations,
+        "costs": [r.cost for r in paths],
+    }
 
 
 # ---------------------------------------------------------------------- OMPL
@@ -155,19 +195,28 @@ class OmplProblem:
         if not self.ss.haveExactSolutionPath():
             return {"solved": False, "elapsed_s": elapsed, "cpu_s": cpu_s}
         path = self.ss.getSolutionPath()
-        pts = np.array([[path.getState(i)[k] for k in range(self.bw.world.dim)]
-                        for i in range(path.getStateCount())])
+        pts = np.array([[path.getState(i)[k] for k in range(self.bw.world.dim)] for i in range(path.getStateCount())])
         iterations = planner.numIterations() if hasattr(planner, "numIterations") else None
-        return {"solved": True, "elapsed_s": elapsed, "cpu_s": cpu_s, "cost": float(path.length()), "iterations": iterations,
-                "exact_valid": self.bw.world.path_free(pts)}
+        return {
+            "solved": True,
+            "elapsed_s": elapsed,
+            "cpu_s": cpu_s,
+            "cost": float(path.length()),
+            "iterations": iterations,
+            "exact_valid": self.bw.world.path_free(pts),
+        }
 
 
 def run_ompl(problem: OmplProblem, name: str, budgets: tuple) -> dict:
     first = problem.solve(name, FIRST_TIMEOUT_S, first_only=True)
     out = {"solved": first["solved"], "exact_valid": first.get("exact_valid", False)}
     if first["solved"]:
-        out.update(first_ms=1e3 * first["elapsed_s"], first_cpu_ms=1e3 * first["cpu_s"],
-                   iterations_first=first["iterations"], first_cost=first["cost"])
+        out.update(
+            first_ms=1e3 * first["elapsed_s"],
+            first_cpu_ms=1e3 * first["cpu_s"],
+            iterations_first=first["iterations"],
+            first_cost=first["cost"],
+        )
     if name != "RRTConnect":
         for t in budgets:
             r = problem.solve(name, t, first_only=False)
@@ -209,17 +258,28 @@ def world_query_costs(quick: bool) -> list[dict]:
             t = time.process_time()
             world.clearance_m(arr)
             t_clear = (time.process_time() - t) / n_q
-            rows.append({"dim": d, "obstacles": n, "point_us": 1e6 * t_point, "segment_10m_us": 1e6 * t_seg,
-                         "clearance_batch_us": 1e6 * t_clear})
+            rows.append(
+                {
+                    "dim": d,
+                    "obstacles": n,
+                    "point_us": 1e6 * t_point,
+                    "segment_10m_us": 1e6 * t_seg,
+                    "clearance_batch_us": 1e6 * t_clear,
+                }
+            )
     return rows
 
 
 def world_table(rows: list[dict]) -> str:
-    lines = ["| d | obstacles | point_free (us) | exact segment_free, 10 m (us) | clearance_m batch (us/point) |",
-             "|---|---|---|---|---|"]
+    lines = [
+        "| d | obstacles | point_free (us) | exact segment_free, 10 m (us) | clearance_m batch (us/point) |",
+        "|---|---|---|---|---|",
+    ]
     for r in rows:
-        lines.append(f"| {r['dim']} | {r['obstacles']} | {r['point_us']:.2f} | {r['segment_10m_us']:.2f} | "
-                     f"{r['clearance_batch_us']:.2f} |")
+        lines.append(
+            f"| {r['dim']} | {r['obstacles']} | {r['point_us']:.2f} | {r['segment_10m_us']:.2f} | "
+            f"{r['clearance_batch_us']:.2f} |"
+        )
     return "\n".join(lines)
 
 
@@ -230,11 +290,15 @@ def median_of(runs: list, key: str):
 
 
 def summarise(runs: list, budgets: tuple, best: float) -> dict:
-    s = {"solved": sum(bool(r["solved"]) for r in runs), "runs": len(runs),
-         "exact_valid": sum(bool(r.get("exact_valid")) for r in runs),
-         "first_ms": median_of(runs, "first_ms"), "first_cpu_ms": median_of(runs, "first_cpu_ms"),
-         "iterations_first": median_of(runs, "iterations_first"),
-         "first_cost": median_of(runs, "first_cost")}
+    s = {
+        "solved": sum(bool(r["solved"]) for r in runs),
+        "runs": len(runs),
+        "exact_valid": sum(bool(r.get("exact_valid")) for r in runs),
+        "first_ms": median_of(runs, "first_ms"),
+        "first_cpu_ms": median_of(runs, "first_cpu_ms"),
+        "iterations_first": median_of(runs, "iterations_first"),
+        "first_cost": median_of(runs, "first_cost"),
+    }
     for t in budgets:
         c = median_of(runs, f"cost_{t}")
         s[f"cost_{t}"] = c
@@ -250,12 +314,16 @@ def fmt(v, spec: str = ".1f", none: str = "-") -> str:
 def table(world: str, summary: dict, budgets: tuple, best: float) -> str:
     head = ["planner", "solved", "first path (ms)", "first path CPU (ms)", "iters at first", "first cost"]
     head += [f"cost @{t} s (% above {best})" for t in budgets] + ["iterations/s", "exact-valid"]
-    lines = [f"### {world} (best known {best})", "", "| " + " | ".join(head) + " |",
-             "|" + "---|" * len(head)]
+    lines = [f"### {world} (best known {best})", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, s in summary.items():
-        row = [name, f"{s['solved']}/{s['runs']}", fmt(s["first_ms"], ".2f"), fmt(s["first_cpu_ms"], ".2f"),
-               fmt(s["iterations_first"], ".0f"),
-               fmt(s["first_cost"])]
+        row = [
+            name,
+            f"{s['solved']}/{s['runs']}",
+            fmt(s["first_ms"], ".2f"),
+            fmt(s["first_cpu_ms"], ".2f"),
+            fmt(s["iterations_first"], ".0f"),
+            fmt(s["first_cost"]),
+        ]
         for t in budgets:
             c, p = s.get(f"cost_{t}"), s.get(f"pct_{t}")
             row.append("-" if c is None else f"{c:.1f} ({p:+.2f} %)")
@@ -271,9 +339,12 @@ def percentile_of(runs: list, key: str, q: float):
 
 
 def mgart_table(results: dict) -> str:
-    lines = ["| world | 8 distinct paths found | time to 8 paths, median / p95 / max (ms) | within 0.5 s | "
-             "CPU to 8 paths, median / p95 / max (ms) | CPU within 0.5 s | median iterations | "
-             "paths exact-valid and distinct |", "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| world | 8 distinct paths found | time to 8 paths, median / p95 / max (ms) | within 0.5 s | "
+        "CPU to 8 paths, median / p95 / max (ms) | CPU within 0.5 s | median iterations | "
+        "paths exact-valid and distinct |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for world, runs in results.items():
         done = [r for r in runs if r["paths"] == MGART_K]
         spread = {}
@@ -283,9 +354,11 @@ def mgart_table(results: dict) -> str:
         within = sum(1 for r in done if r["time_to_k_ms"] <= 500.0)
         within_cpu = sum(1 for r in done if r["cpu_to_k_ms"] <= 500.0)
         ok = sum(1 for r in runs if r["exact_valid"] and r["distinct"])
-        lines.append(f"| {world} | {len(done)}/{len(runs)} | {spread['time_to_k_ms']} | {within}/{len(runs)} | "
-                     f"{spread['cpu_to_k_ms']} | {within_cpu}/{len(runs)} | "
-                     f"{fmt(median_of(runs, 'iterations'), '.0f')} | {ok}/{len(runs)} |")
+        lines.append(
+            f"| {world} | {len(done)}/{len(runs)} | {spread['time_to_k_ms']} | {within}/{len(runs)} | "
+            f"{spread['cpu_to_k_ms']} | {within_cpu}/{len(runs)} | "
+            f"{fmt(median_of(runs, 'iterations'), '.0f')} | {ok}/{len(runs)} |"
+        )
     return "\n".join(lines)
 
 
@@ -309,14 +382,19 @@ def main(argv=None) -> int:
     if use_ompl:
         try:
             from ompl import util as ou
+
             ou.setLogLevel(ou.LogLevel.LOG_ERROR)
             ou.RNG.setSeed(1)
         except ImportError:
             print("ompl is not installed (pip install '.[bench]'): OMPL columns skipped", file=sys.stderr)
             use_ompl = False
     first_call = warm_up(gs)
-    print(f"first GART and M-GART calls in this process (numba kernels compiled or loaded from the cache): "
-          f"{first_call['cpu_ms']:.0f} ms CPU, {first_call['wall_ms']:.0f} ms wall", file=sys.stderr, flush=True)
+    print(
+        f"first GART and M-GART calls in this process (numba kernels compiled or loaded from the cache): "
+        f"{first_call['cpu_ms']:.0f} ms CPU, {first_call['wall_ms']:.0f} ms wall",
+        file=sys.stderr,
+        flush=True,
+    )
     raw: dict = {}
     summaries: dict = {}
     mg: dict = {}
@@ -336,35 +414,59 @@ def main(argv=None) -> int:
                 problem = OmplProblem(bw)
                 for p in OMPL_PLANNERS:
                     runs[f"OMPL {p}"].append(run_ompl(problem, p, budgets))
-            print(f"{world} seed {seed}: GART first {fmt(runs['GART'][-1].get('first_ms'), '.2f')} ms, "
-                  f"M-GART {mg[world][-1]['paths']} paths in {fmt(mg[world][-1]['time_to_k_ms'], '.0f')} ms "
-                  f"({fmt(mg[world][-1]['cpu_to_k_ms'], '.0f')} ms CPU)",
-                  file=sys.stderr, flush=True)
+            print(
+                f"{world} seed {seed}: GART first {fmt(runs['GART'][-1].get('first_ms'), '.2f')} ms, "
+                f"M-GART {mg[world][-1]['paths']} paths in {fmt(mg[world][-1]['time_to_k_ms'], '.0f')} ms "
+                f"({fmt(mg[world][-1]['cpu_to_k_ms'], '.0f')} ms CPU)",
+                file=sys.stderr,
+                flush=True,
+            )
         raw[world] = runs
         summaries[world] = {name: summarise(r, budgets, best) for name, r in runs.items()}
-    text = [f"## Planning: GART / M-GART vs OMPL ({n_seeds} seeds, medians)", "",
-            f"Machine: {platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores, "
-            f"shared with other jobs while measured (absolute times are noisy; compare within a table; "
-            f"'first path CPU' is the process CPU time of the whole call, less sensitive to load). "
-            f"Run: `python benchmarks/planning.py{' --quick' if args.quick else ''}`. Costs are path lengths "
-            "(m); GART's cost at a budget is its returned (shortcut) path, its first cost the raw tree path. "
-            "OMPL checks motions by sampling (1 % resolution); 'exact-valid' counts seeds whose paths pass "
-            "the exact segment check. GART's first path CPU covers the whole call (argument checks, set-up, "
-            "search, shortcut, tree snapshot); OMPL's covers `solve` alone (set-up excluded, no simplifier); the "
-            "row 'tree path without shortcut' leaves GART's shortcut step out. The first GART and M-GART calls of the process (numba kernels compiled, or loaded "
-            f"from numba's cache) took {first_call['cpu_ms']:.0f} ms CPU / {first_call['wall_ms']:.0f} ms wall "
-            "before the measurements and is not in the figures.", ""]
+    text = [
+        f"## Planning: GART / M-GART vs OMPL ({n_seeds} seeds, medians)",
+        "",
+        f"Machine: {platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores, "
+        f"shared with other jobs while measured (absolute times are noisy; compare within a table; "
+        f"'first path CPU' is the process CPU time of the whole call, less sensitive to load). "
+        f"Run: `python benchmarks/planning.py{' --quick' if args.quick else ''}`. Costs are path lengths "
+        "(m); GART's cost at a budget is its returned (shortcut) path, its first cost the raw tree path. "
+        "OMPL checks motions by sampling (1 % resolution); 'exact-valid' counts seeds whose paths pass "
+        "the exact segment check. GART's first path CPU covers the whole call (argument checks, set-up, "
+        "search, shortcut, tree snapshot); OMPL's covers `solve` alone (set-up excluded, no simplifier); the "
+        "row 'tree path without shortcut' leaves GART's shortcut step out. The first GART and M-GART calls of the process (numba kernels compiled, or loaded "
+        f"from numba's cache) took {first_call['cpu_ms']:.0f} ms CPU / {first_call['wall_ms']:.0f} ms wall "
+        "before the measurements and is not in the figures.",
+        "",
+    ]
     for world in worlds:
         text += [table(world, summaries[world], budgets, BEST_KNOWN_COST[world]), ""]
     text += ["### M-GART: eight distinct paths (Hausdorff distance >= 4 m), cheapest first", "", mgart_table(mg), ""]
     wq = world_query_costs(args.quick)
-    text += ["### World queries: 30 vs 1000 obstacles (same covered fraction, margin 0.5 m), CPU time", "",
-             world_table(wq), ""]
+    text += [
+        "### World queries: 30 vs 1000 obstacles (same covered fraction, margin 0.5 m), CPU time",
+        "",
+        world_table(wq),
+        "",
+    ]
     markdown = "\n".join(text)
     print(markdown)
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps({"seeds": n_seeds, "budgets_s": budgets, "first_call": first_call, "summary": summaries,
-                                           "mgart": mg, "world_queries": wq, "runs": raw}, indent=1, default=float))
+    Path(args.json).write_text(
+        json.dumps(
+            {
+                "seeds": n_seeds,
+                "budgets_s": budgets,
+                "first_call": first_call,
+                "summary": summaries,
+                "mgart": mg,
+                "world_queries": wq,
+                "runs": raw,
+            },
+            indent=1,
+            default=float,
+        )
+    )
     Path(args.markdown).parent.mkdir(parents=True, exist_ok=True)
     Path(args.markdown).write_text(markdown + "\n")
     if use_ompl:

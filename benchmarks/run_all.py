@@ -67,18 +67,22 @@ def run(name: str, quick: bool) -> bool:
 
 
 def assemble() -> str:
-    parts = ["# Benchmarks", "",
-             f"Latest run: {datetime.date.today().isoformat()} on {machine()}. Every table compares "
-             "side by side in one run; absolute times drift between machines. Regenerate with "
-             "`make bench` (or `.venv/bin/python benchmarks/run_all.py`).", ""]
+    parts = [
+        "# Benchmarks",
+        "",
+        f"Latest run: {datetime.date.today().isoformat()} on {machine()}. Every table compares "
+        "side by side in one run; absolute times drift between machines. Regenerate with "
+        "`make bench` (or `.venv/bin/python benchmarks/run_all.py`).",
+        "",
+    ]
     for name in BENCHMARKS:
         path = REPO / "docs" / "benchmarks" / f"{name}.md"
         if path.exists():
             text = path.read_text().strip()
             if text.startswith("# "):
-                text = "#" + text            # one level down
+                text = "#" + text  # one level down
             parts += [text, ""]
-        notes = REPO / "docs" / "benchmarks" / f"{name}.notes.md"     # hand-written: analysis, history
+        notes = REPO / "docs" / "benchmarks" / f"{name}.notes.md"  # hand-written: analysis, history
         if notes.exists():
             parts += [notes.read_text().strip(), ""]
     return "\n".join(parts)
@@ -88,14 +92,22 @@ def main() -> int:
     parser = argparse.ArgumentParser(description="Run the benchmarks and rebuild docs/BENCHMARKS.md")
     parser.add_argument("--quick", action="store_true", help="the fast version of each benchmark")
     parser.add_argument("--only", nargs="+", choices=sorted(BENCHMARKS), help="run only these")
-    parser.add_argument("--assemble-only", action="store_true",
-                        help="only rebuild docs/BENCHMARKS.md and the README's figures from docs/benchmarks/*.md")
+    parser.add_argument(
+        "--assemble-only",
+        action="store_true",
+        help="only rebuild docs/BENCHMARKS.md and the README's figures from docs/benchmarks/*.md",
+    )
     args = parser.parse_args()
     failed = []
     if not args.assemble_only:
         names = args.only or list(BENCHMARKS)
-        with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                      TimeElapsedColumn(), console=Console(stderr=True)) as progress:
+        with Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=Console(stderr=True),
+        ) as progress:
             task = progress.add_task("benchmarks", total=len(names))
             for name in names:
                 progress.update(task, description=f"benchmark {name}")

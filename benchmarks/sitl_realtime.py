@@ -72,10 +72,12 @@ def run_realtime_once(model: HeliModel, sim_s: float, gusts: bool) -> dict:
     state = vehicle.hover_state((0.0, 0.0, -10.0))
     wind = WindModel(WindSettings((3.0, 1.0, 0.0), 1.5 if gusts else 0.0, 2.0), np.random.default_rng(0))
     per_control = PHYSICS_HZ // CONTROL_HZ
-    winds = np.zeros((per_control, 3))            # the gusts of each RK4 sub-step of a control period
+    winds = np.zeros((per_control, 3))  # the gusts of each RK4 sub-step of a control period
     n = int(round(sim_s * CONTROL_HZ))
-    targets = [Setpoint(pos_ned_m=(20.0 * math.cos(0.3 * k), 20.0 * math.sin(0.3 * k), -15.0), yaw_rad=0.3 * k)
-               for k in range(8)]
+    targets = [
+        Setpoint(pos_ned_m=(20.0 * math.cos(0.3 * k), 20.0 * math.sin(0.3 * k), -15.0), yaw_rad=0.3 * k)
+        for k in range(8)
+    ]
     t0, c0 = time.perf_counter(), time.process_time()
     for k in range(n):
         if gusts:
@@ -85,8 +87,15 @@ def run_realtime_once(model: HeliModel, sim_s: float, gusts: bool) -> dict:
         state = vehicle.update(state, command, control_dt)
     wall = time.perf_counter() - t0
     cpu = time.process_time() - c0
-    return {"sim_s": sim_s, "wall_s": wall, "cpu_s": cpu, "rtf": sim_s / cpu, "rtf_wall": sim_s / wall,
-            "gusts": gusts, "us_per_control_period": cpu / n * 1e6}
+    return {
+        "sim_s": sim_s,
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "rtf": sim_s / cpu,
+        "rtf_wall": sim_s / wall,
+        "gusts": gusts,
+        "us_per_control_period": cpu / n * 1e6,
+    }
 
 
 def measure_kernels(model: HeliModel, reps: int) -> dict:
@@ -132,10 +141,17 @@ def measure_circle(model: HeliModel, duration_s: float, heading: str) -> dict:
         flown.append(dynamics.pos_ned_m(state.x))
     err = np.linalg.norm(np.array(flown) - pos, axis=1)
     pred = simulate_closed_loop(model, t, pos, vel, acc, yaw)
-    return {"heading": heading, "duration_s": duration_s, "rms_m": float(np.sqrt(np.mean(err**2))),
-            "max_m": float(np.max(err)), "max_abs_delta": max_delta, "saturated": bool(saturated),
-            "predicted_rms_m": pred.rms_tracking_error_m, "predicted_max_m": pred.max_tracking_error_m,
-            "prediction_vs_full_max_m": float(np.max(np.linalg.norm(pred.pos_ned_m - np.array(flown), axis=1)))}
+    return {
+        "heading": heading,
+        "duration_s": duration_s,
+        "rms_m": float(np.sqrt(np.mean(err**2))),
+        "max_m": float(np.max(err)),
+        "max_abs_delta": max_delta,
+        "saturated": bool(saturated),
+        "predicted_rms_m": pred.rms_tracking_error_m,
+        "predicted_max_m": pred.max_tracking_error_m,
+        "prediction_vs_full_max_m": float(np.max(np.linalg.norm(pred.pos_ned_m - np.array(flown), axis=1))),
+    }
 
 
 def measure_prediction(model: HeliModel, reps: int) -> dict:
@@ -143,15 +159,20 @@ def measure_prediction(model: HeliModel, reps: int) -> dict:
     t = np.arange(0.0, 60.0, 0.01)
     pos, vel, acc, yaw = circle_reference(t)
     settings = ControllerSettings()
-    simulate_closed_loop(model, t, pos, vel, acc, yaw, settings)          # design + cache
+    simulate_closed_loop(model, t, pos, vel, acc, yaw, settings)  # design + cache
     times, cpu = [], []
     for _ in range(reps):
         t0, c0 = time.perf_counter(), time.process_time()
         simulate_closed_loop(model, t, pos, vel, acc, yaw, settings)
         times.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
-    return {"trajectory_s": 60.0, "median_ms": statistics.median(times) * 1e3, "max_ms": max(times) * 1e3,
-            "median_cpu_ms": statistics.median(cpu) * 1e3, "reps": reps}
+    return {
+        "trajectory_s": 60.0,
+        "median_ms": statistics.median(times) * 1e3,
+        "max_ms": max(times) * 1e3,
+        "median_cpu_ms": statistics.median(cpu) * 1e3,
+        "reps": reps,
+    }
 
 
 def markdown(result: dict) -> str:
@@ -163,17 +184,18 @@ def markdown(result: dict) -> str:
         f"Machine: {result['machine']}, {os.cpu_count()} cores, load average {result['load_average']:.1f} "
         f"at the start; Python {result['python']}; mode: {result['mode']}. The machine is shared: "
         "rates are given in CPU time of this process (one core), with wall-clock figures beside them.",
-        "Physics RK4 at 400 Hz, LQI + PID at 100 Hz, one process, one core; vehicle numerics only "
-        "(no MAVLink I/O).",
+        "Physics RK4 at 400 Hz, LQI + PID at 100 Hz, one process, one core; vehicle numerics only (no MAVLink I/O).",
         "",
         "| measure | value | goal | met |",
         "|---|---|---|---|",
     ]
     for r in rt:
         label = "with gusts" if r["gusts"] else "calm"
-        lines.append(f"| real-time factor ({label}, CPU time, median of {r['repeats']}) | {r['rtf']:.0f}x "
-                     f"({r['us_per_control_period']:.0f} us CPU per 10 ms; {r['rtf_wall']:.0f}x by wall clock) "
-                     f"| >= {GOAL_RTF:.0f}x | {'yes' if r['rtf'] >= GOAL_RTF else 'NO'} |")
+        lines.append(
+            f"| real-time factor ({label}, CPU time, median of {r['repeats']}) | {r['rtf']:.0f}x "
+            f"({r['us_per_control_period']:.0f} us CPU per 10 ms; {r['rtf_wall']:.0f}x by wall clock) "
+            f"| >= {GOAL_RTF:.0f}x | {'yes' if r['rtf'] >= GOAL_RTF else 'NO'} |"
+        )
     step_ok = "yes" if k["step_rk4_us"] <= 40 else "NO"
     lines.append(f"| `step_rk4` (CPU) | {k['step_rk4_us']:.1f} us | <= 40 us | {step_ok} |")
     lines.append(f"| `FlightController.update` (CPU) | {k['controller_update_us']:.1f} us | | |")
@@ -183,14 +205,18 @@ def markdown(result: dict) -> str:
         lines.append(
             f"| circle 5 m/s r 30 m, heading {c['heading']}: RMS / max error | {c['rms_m']:.3f} / {c['max_m']:.3f} m, "
             f"max abs(delta) {c['max_abs_delta']:.2f}{', SATURATED' if c['saturated'] else ''} "
-            f"| <= {GOAL_RMS_M} / {GOAL_MAX_M} m, no saturation | {'yes' if ok else 'NO'} |")
+            f"| <= {GOAL_RMS_M} / {GOAL_MAX_M} m, no saturation | {'yes' if ok else 'NO'} |"
+        )
         lines.append(
             f"| same, `simulate_closed_loop` prediction | {c['predicted_rms_m']:.3f} / {c['predicted_max_m']:.3f} m, "
-            f"differs from the full loop by <= {c['prediction_vs_full_max_m'] * 100:.1f} cm | | |")
+            f"differs from the full loop by <= {c['prediction_vs_full_max_m'] * 100:.1f} cm | | |"
+        )
     p = result["prediction"]
-    lines.append(f"| `simulate_closed_loop`, 60 s circle | {p['median_cpu_ms']:.1f} ms CPU median "
-                 f"({p['median_ms']:.1f} ms wall median, {p['max_ms']:.1f} max) "
-                 f"| < {GOAL_PREDICT_MS:.0f} ms | {'yes' if p['median_cpu_ms'] < GOAL_PREDICT_MS else 'NO'} |")
+    lines.append(
+        f"| `simulate_closed_loop`, 60 s circle | {p['median_cpu_ms']:.1f} ms CPU median "
+        f"({p['median_ms']:.1f} ms wall median, {p['max_ms']:.1f} max) "
+        f"| < {GOAL_PREDICT_MS:.0f} ms | {'yes' if p['median_cpu_ms'] < GOAL_PREDICT_MS else 'NO'} |"
+    )
     lines.append("")
     return "\n".join(lines)
 
@@ -207,8 +233,7 @@ def main(argv=None) -> int:
         "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
         "python": platform.python_version(),
         "load_average": os.getloadavg()[0],
-        "realtime": [measure_realtime(model, sim_s, gusts=False),
-                     measure_realtime(model, sim_s, gusts=True)],
+        "realtime": [measure_realtime(model, sim_s, gusts=False), measure_realtime(model, sim_s, gusts=True)],
         "kernels": measure_kernels(model, 2000 if args.quick else 20000),
         "circle": [measure_circle(model, circle_s, "path"), measure_circle(model, circle_s, "fixed")],
         "prediction": measure_prediction(model, 5 if args.quick else 20),

@@ -131,8 +131,13 @@ def time_smoothers(seeds: int, repeat: int) -> dict[str, dict[str, list[float]]]
 
 def summarise(samples: dict[str, list[float]]) -> dict[str, float]:
     wall = np.asarray(samples["wall"])
-    return {"median_ms": float(np.median(wall)), "p95_ms": float(np.percentile(wall, 95)),
-            "min_ms": float(wall.min()), "cpu_median_ms": float(np.median(samples["cpu"])), "n": int(wall.size)}
+    return {
+        "median_ms": float(np.median(wall)),
+        "p95_ms": float(np.percentile(wall, 95)),
+        "min_ms": float(wall.min()),
+        "cpu_median_ms": float(np.median(samples["cpu"])),
+        "n": int(wall.size),
+    }
 
 
 def smoother_rows(seeds: int, repeat: int, baseline: str | None, rounds: int = 2) -> dict:
@@ -144,15 +149,25 @@ def smoother_rows(seeds: int, repeat: int, baseline: str | None, rounds: int = 2
     if baseline is None:
         return {"current": {k: summarise(v) for k, v in time_smoothers(seeds, repeat).items()}}
     with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(["git", "archive", baseline, "companion", "heli_common"], cwd=REPO,
-                                 check=True, capture_output=True).stdout
+        archive = subprocess.run(
+            ["git", "archive", baseline, "companion", "heli_common"], cwd=REPO, check=True, capture_output=True
+        ).stdout
         with tarfile.open(fileobj=__import__("io").BytesIO(archive)) as tar:
             tar.extractall(tmp, filter="data")
         pooled: dict[str, dict] = {"baseline": {}, "current": {}}
         for _ in range(rounds):
             for label, tree in (("baseline", tmp), ("current", str(REPO))):
-                cmd = [sys.executable, __file__, "--smoothers-json", "--tree", tree, "--seeds", str(seeds),
-                       "--repeat", str(max(1, repeat // rounds))]
+                cmd = [
+                    sys.executable,
+                    __file__,
+                    "--smoothers-json",
+                    "--tree",
+                    tree,
+                    "--seeds",
+                    str(seeds),
+                    "--repeat",
+                    str(max(1, repeat // rounds)),
+                ]
                 env = {**os.environ, "PYTHONPATH": tree}
                 res = json.loads(subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout)
                 for key, samples in res.items():
@@ -187,8 +202,14 @@ def run(seeds: int, repeat: int, baseline: str | None = None) -> dict:
     checker = FeasibilityChecker()
     rows: dict[str, dict] = {}
     samples: dict[str, list[float]] = {}
-    extra: dict[str, list[float]] = {"pieces_g2": [], "length_m": [], "duration_s": [], "traj60_s": [],
-                                     "max_abs_delta": [], "max_error_m": []}
+    extra: dict[str, list[float]] = {
+        "pieces_g2": [],
+        "length_m": [],
+        "duration_s": [],
+        "traj60_s": [],
+        "max_abs_delta": [],
+        "max_error_m": [],
+    }
     for dim in (2, 3):
         for seed in range(seeds):
             rng = np.random.default_rng(seed)
@@ -204,14 +225,16 @@ def run(seeds: int, repeat: int, baseline: str | None = None) -> dict:
             extra["length_m"].append(curves[0].length_m)
             extra["duration_s"].append(traj.duration_s)
             samples.setdefault(f"sample1_{dim}d", []).extend(
-                timed(lambda: traj.sample(np.array([traj.duration_s / 3])), repeat * 10))
+                timed(lambda: traj.sample(np.array([traj.duration_s / 3])), repeat * 10)
+            )
             t3000 = np.linspace(0.0, traj.duration_s, 3000)
             samples.setdefault(f"sample3000_{dim}d", []).extend(timed(lambda: traj.sample(t3000), repeat))
             if dim == 2:
                 traj60 = path_of_duration(np.random.default_rng(1000 + seed), 60.0)
                 extra["traj60_s"].append(traj60.duration_s)
-                samples.setdefault("feasibility_60s", []).extend(timed(lambda: checker.check(traj60),
-                                                                       max(1, repeat // 2)))
+                samples.setdefault("feasibility_60s", []).extend(
+                    timed(lambda: checker.check(traj60), max(1, repeat // 2))
+                )
                 report = checker.check(traj60)
                 extra["max_abs_delta"].append(report.max_abs_delta)
                 extra["max_error_m"].append(report.max_tracking_error_m)
@@ -220,14 +243,25 @@ def run(seeds: int, repeat: int, baseline: str | None = None) -> dict:
     stretch = checker.check_and_stretch(fast)
     for name, vals in samples.items():
         rows[name] = {"median_ms": statistics.median(vals), "min_ms": min(vals), "n": len(vals)}
-    return {"smoothers": smoothers, "baseline": baseline, "rows": rows, "extra": {k: (statistics.median(v) if v else None) for k, v in extra.items()},
-            "stretch_example": {"initial_max_abs_delta": stretch.initial_max_abs_delta,
-                                "stretch": stretch.stretch, "attempts": stretch.attempts,
-                                "final_max_abs_delta": stretch.max_abs_delta, "feasible": stretch.feasible,
-                                "elapsed_ms": stretch.elapsed_s * 1e3,
-                                "duration_s": [fast.duration_s, stretch.trajectory.duration_s]},
-            "seeds": seeds, "repeat": repeat, "python": platform.python_version(),
-            "machine": platform.machine()}
+    return {
+        "smoothers": smoothers,
+        "baseline": baseline,
+        "rows": rows,
+        "extra": {k: (statistics.median(v) if v else None) for k, v in extra.items()},
+        "stretch_example": {
+            "initial_max_abs_delta": stretch.initial_max_abs_delta,
+            "stretch": stretch.stretch,
+            "attempts": stretch.attempts,
+            "final_max_abs_delta": stretch.max_abs_delta,
+            "feasible": stretch.feasible,
+            "elapsed_ms": stretch.elapsed_s * 1e3,
+            "duration_s": [fast.duration_s, stretch.trajectory.duration_s],
+        },
+        "seeds": seeds,
+        "repeat": repeat,
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+    }
 
 
 LABELS = [
@@ -246,18 +280,29 @@ def smoother_table(result: dict) -> list[str]:
     sm = result["smoothers"]
     trees = [t for t in ("baseline", "current") if t in sm]
     names = {"baseline": f"before ({result['baseline']})", "current": "after" if len(trees) > 1 else "this tree"}
-    head = "| set | smoother, 100 nodes | " + " | ".join(
-        f"{names[t]}: median / p95 wall, median CPU (ms)" for t in trees) + " | goal (ms) | met |"
+    head = (
+        "| set | smoother, 100 nodes | "
+        + " | ".join(f"{names[t]}: median / p95 wall, median CPU (ms)" for t in trees)
+        + " | goal (ms) | met |"
+    )
     lines = [head, "|" + "---|" * (4 + len(trees))]
     for key in sm["current"]:
         set_name, alg, dim = key.split("_")
-        cells = [f"{sm[t][key]['median_ms']:.3f} / {sm[t][key]['p95_ms']:.3f}, {sm[t][key]['cpu_median_ms']:.3f}"
-                 for t in trees]
+        cells = [
+            f"{sm[t][key]['median_ms']:.3f} / {sm[t][key]['p95_ms']:.3f}, {sm[t][key]['cpu_median_ms']:.3f}"
+            for t in trees
+        ]
         cur = sm["current"][key]
-        met = "yes" if max(cur["median_ms"], cur["cpu_median_ms"]) <= GOALS_MS[alg] else \
-            ("CPU only" if cur["cpu_median_ms"] <= GOALS_MS[alg] else "no")
-        lines.append(f"| {set_name} | {SMOOTHER_LABELS[alg]}, {dim.upper()} | " + " | ".join(cells)
-                     + f" | <= {GOALS_MS[alg]:g} | {met} |")
+        met = (
+            "yes"
+            if max(cur["median_ms"], cur["cpu_median_ms"]) <= GOALS_MS[alg]
+            else ("CPU only" if cur["cpu_median_ms"] <= GOALS_MS[alg] else "no")
+        )
+        lines.append(
+            f"| {set_name} | {SMOOTHER_LABELS[alg]}, {dim.upper()} | "
+            + " | ".join(cells)
+            + f" | <= {GOALS_MS[alg]:g} | {met} |"
+        )
     return lines
 
 
@@ -265,35 +310,48 @@ def table(result: dict) -> str:
     rows = result["rows"]
     ex = result["extra"]
     n = result["smoothers"]["current"]["walk_g1_2d"]["n"]
-    lines = [f"Smoothers, K_max {KAPPA_MAX_1_M} 1/m (G2); sets `walk` (heading changes within +-90 deg, "
-             f"segments 10-30 m) and `sharp` (turns uniform in [0, 170] deg, segments 2-40 m); "
-             f"{result['seeds']} seeds x 2D/3D, {n} timed calls per row and tree", ""]
+    lines = [
+        f"Smoothers, K_max {KAPPA_MAX_1_M} 1/m (G2); sets `walk` (heading changes within +-90 deg, "
+        f"segments 10-30 m) and `sharp` (turns uniform in [0, 170] deg, segments 2-40 m); "
+        f"{result['seeds']} seeds x 2D/3D, {n} timed calls per row and tree",
+        "",
+    ]
     lines += smoother_table(result)
     if result.get("baseline"):
-        lines += ["", f"`before` is revision {result['baseline']}, `after` this tree; both were timed in the same "
-                  "run, in subprocesses that alternate (two rounds each), on the same paths. 'met' asks for "
-                  "the median wall and CPU times of `after` within the goal ('CPU only': the wall time "
-                  "was not, under the machine's load)."]
-    lines += ["", f"Time-parameterisation and checks, default limits; {result['seeds']} seeds x "
-              f"{result['repeat']} repeats (median / min over all runs)", "",
-              "| operation | median (ms) | min (ms) | goal (ms) |", "|---|---|---|---|"]
+        lines += [
+            "",
+            f"`before` is revision {result['baseline']}, `after` this tree; both were timed in the same "
+            "run, in subprocesses that alternate (two rounds each), on the same paths. 'met' asks for "
+            "the median wall and CPU times of `after` within the goal ('CPU only': the wall time "
+            "was not, under the machine's load).",
+        ]
+    lines += [
+        "",
+        f"Time-parameterisation and checks, default limits; {result['seeds']} seeds x "
+        f"{result['repeat']} repeats (median / min over all runs)",
+        "",
+        "| operation | median (ms) | min (ms) | goal (ms) |",
+        "|---|---|---|---|",
+    ]
     for key, label, goal in LABELS:
         if key in rows:
             r = rows[key]
             g = f"<= {GOALS_MS[goal]:g}" if goal else "-"
             lines.append(f"| {label} | {r['median_ms']:.3f} | {r['min_ms']:.3f} | {g} |")
     st = result["stretch_example"]
-    lines += ["",
-              f"100-node `walk` paths: {ex['length_m']:.0f} m, {ex['pieces_g2']:.0f} G2 pieces, "
-              f"{ex['duration_s']:.0f} s at the default limits (medians).",
-              f"60 s trajectories ({ex['traj60_s']:.1f} s): max |delta| {ex['max_abs_delta']:.2f}, max "
-              f"tracking error {ex['max_error_m']:.2f} m (medians; feasible below 0.8 and 2 m).",
-              f"Aggressive limits (15 m/s, 5 m/s^2, 6 m/s^2 lateral, 20 m/s^3): max |delta| "
-              f"{st['initial_max_abs_delta']:.2f} (saturated); stretched x{st['stretch']:.2f} in "
-              f"{st['attempts']} simulations ({st['elapsed_ms']:.0f} ms) to max |delta| "
-              f"{st['final_max_abs_delta']:.2f}, {st['duration_s'][0]:.1f} s -> {st['duration_s'][1]:.1f} s.",
-              f"Machine load (1-min average) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores at the end "
-              f"of the run; Python {result['python']}."]
+    lines += [
+        "",
+        f"100-node `walk` paths: {ex['length_m']:.0f} m, {ex['pieces_g2']:.0f} G2 pieces, "
+        f"{ex['duration_s']:.0f} s at the default limits (medians).",
+        f"60 s trajectories ({ex['traj60_s']:.1f} s): max |delta| {ex['max_abs_delta']:.2f}, max "
+        f"tracking error {ex['max_error_m']:.2f} m (medians; feasible below 0.8 and 2 m).",
+        f"Aggressive limits (15 m/s, 5 m/s^2, 6 m/s^2 lateral, 20 m/s^3): max |delta| "
+        f"{st['initial_max_abs_delta']:.2f} (saturated); stretched x{st['stretch']:.2f} in "
+        f"{st['attempts']} simulations ({st['elapsed_ms']:.0f} ms) to max |delta| "
+        f"{st['final_max_abs_delta']:.2f}, {st['duration_s'][0]:.1f} s -> {st['duration_s'][1]:.1f} s.",
+        f"Machine load (1-min average) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores at the end "
+        f"of the run; Python {result['python']}.",
+    ]
     return "\n".join(lines)
 
 
@@ -302,14 +360,15 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="2 seeds, 5 repeats")
     ap.add_argument("--seeds", type=int, default=None)
     ap.add_argument("--repeat", type=int, default=None)
-    ap.add_argument("--baseline", default=None, metavar="REF",
-                    help="also time the smoothers of git revision REF, side by side")
+    ap.add_argument(
+        "--baseline", default=None, metavar="REF", help="also time the smoothers of git revision REF, side by side"
+    )
     ap.add_argument("--tree", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--smoothers-json", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     seeds = args.seeds or (2 if args.quick else 5)
     repeat = args.repeat or (5 if args.quick else 20)
-    if args.smoothers_json:                      # one tree's raw smoother samples, for --baseline
+    if args.smoothers_json:  # one tree's raw smoother samples, for --baseline
         print(json.dumps(time_smoothers(seeds, repeat)))
         return 0
     result = run(seeds, repeat, args.baseline)

@@ -60,15 +60,15 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
+from flight_support import DEMO_MISSION, TrackListener, flight_processes  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+from support import MavlinkPeer  # noqa: E402
 
 from companion.demo import FlightWatcher, last_json_line  # noqa: E402
 from companion.record.flight_record import load_record  # noqa: E402
+from companion.threats.model import Threat  # noqa: E402
 from companion.threats.transport import codec  # noqa: E402
 from companion.threats.transport.bus import ThreatBus  # noqa: E402
-from companion.threats.model import Threat  # noqa: E402
-from flight_support import DEMO_MISSION, TrackListener, flight_processes  # noqa: E402
-from support import MavlinkPeer  # noqa: E402
 
 log = logging.getLogger("soak")
 
@@ -79,8 +79,16 @@ VEHICLE_SYSID = 1
 VEHICLE_SHARE = 0.75
 VALID_EVERY = 100
 #: Frame kinds and their shares of the mix.
-FRAME_MIX = {"random": 0.2, "bad_crc": 0.2, "truncated": 0.15, "unknown_id": 0.05, "nan_setpoint": 0.15,
-             "bad_command": 0.15, "bad_param": 0.05, "abandoned_upload": 0.05}
+FRAME_MIX = {
+    "random": 0.2,
+    "bad_crc": 0.2,
+    "truncated": 0.15,
+    "unknown_id": 0.05,
+    "nan_setpoint": 0.15,
+    "bad_command": 0.15,
+    "bad_param": 0.05,
+    "abandoned_upload": 0.05,
+}
 #: Kinds that may go to the companion's port (mission uploads and parameters are the vehicle's).
 COMPANION_KINDS = ("random", "bad_crc", "truncated", "unknown_id", "nan_setpoint", "bad_command")
 NAN, INF = math.nan, math.inf
@@ -118,10 +126,12 @@ class FrameFactory:
         if k == 0:
             return self.mav.heartbeat_encode(6, 8, 0, 0, 0).pack(self.mav)
         if k == 1:
-            return self.mav.command_long_encode(VEHICLE_SYSID, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0,
-                                                0, FORCE_DISARM, 0, 0, 0, 0, 0).pack(self.mav)
-        return self.mav.set_position_target_local_ned_encode(0, VEHICLE_SYSID, 1, M.MAV_FRAME_LOCAL_NED, 0,
-                                                             0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(self.mav)
+            return self.mav.command_long_encode(
+                VEHICLE_SYSID, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, FORCE_DISARM, 0, 0, 0, 0, 0
+            ).pack(self.mav)
+        return self.mav.set_position_target_local_ned_encode(
+            0, VEHICLE_SYSID, 1, M.MAV_FRAME_LOCAL_NED, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0
+        ).pack(self.mav)
 
     def build(self, kind: str) -> list[bytes]:
         """The datagram(s) of one frame of ``kind`` (an abandoned upload is two datagrams)."""
@@ -134,18 +144,32 @@ class FrameFactory:
             return [bytes(data)]
         if kind == "truncated":
             data = self._valid()
-            return [data[:int(rng.integers(1, len(data)))]]
+            return [data[: int(rng.integers(1, len(data)))]]
         if kind == "unknown_id":
             msgid = int(rng.integers(20000, 0xFFFFFF))
             payload = rng.integers(0, 256, int(rng.integers(1, 40)), dtype=np.uint8).tobytes()
-            header = bytes([0xFD, len(payload), 0, 0, int(rng.integers(256)), FOREIGN_SYSID, 190,
-                            msgid & 0xFF, (msgid >> 8) & 0xFF, msgid >> 16])
+            header = bytes(
+                [
+                    0xFD,
+                    len(payload),
+                    0,
+                    0,
+                    int(rng.integers(256)),
+                    FOREIGN_SYSID,
+                    190,
+                    msgid & 0xFF,
+                    (msgid >> 8) & 0xFF,
+                    msgid >> 16,
+                ]
+            )
             return [header + payload + rng.integers(0, 256, 2, dtype=np.uint8).tobytes()]
         if kind == "nan_setpoint":  # refused: yaw NaN (or infinite fields); never "hold here"
             bad = INF if rng.random() < 0.3 else NAN
-            return [self.mav.set_position_target_local_ned_encode(
-                0, VEHICLE_SYSID, 1, M.MAV_FRAME_LOCAL_NED, 0, bad, bad, bad, bad, bad, bad, bad, bad, bad,
-                NAN, NAN).pack(self.mav)]
+            return [
+                self.mav.set_position_target_local_ned_encode(
+                    0, VEHICLE_SYSID, 1, M.MAV_FRAME_LOCAL_NED, 0, bad, bad, bad, bad, bad, bad, bad, bad, bad, NAN, NAN
+                ).pack(self.mav)
+            ]
         if kind == "bad_command":
             command, params = BAD_COMMANDS[int(rng.integers(len(BAD_COMMANDS)))]
             return [self.mav.command_long_encode(VEHICLE_SYSID, 1, command, 0, *params).pack(self.mav)]
@@ -155,8 +179,9 @@ class FrameFactory:
             return [self.mav.param_set_encode(VEHICLE_SYSID, 1, name, value, M.MAV_PARAM_TYPE_REAL32).pack(self.mav)]
         if kind == "abandoned_upload":  # MISSION_COUNT, then an item out of order, then nothing
             count = int(rng.integers(2, 20))
-            item = self.mav.mission_item_int_encode(VEHICLE_SYSID, 1, count - 1, 3, 16, 0, 1, 0, 0, 0, 0,
-                                                    473977420, 85455940, 10.0, 0)
+            item = self.mav.mission_item_int_encode(
+                VEHICLE_SYSID, 1, count - 1, 3, 16, 0, 1, 0, 0, 0, 0, 473977420, 85455940, 10.0, 0
+            )
             return [self.mav.mission_count_encode(VEHICLE_SYSID, 1, count, 0).pack(self.mav), item.pack(self.mav)]
         raise ValueError(kind)
 
@@ -180,8 +205,7 @@ def make_frames(n: int, seed: int) -> list[tuple[str, str, bytes]]:
     return out
 
 
-def send_frames(frames, vehicle_port: int, companion_port: int, rate_hz: float,
-                stop: threading.Event) -> dict:
+def send_frames(frames, vehicle_port: int, companion_port: int, rate_hz: float, stop: threading.Event) -> dict:
     """Send the frames paced at ``rate_hz`` (absolute deadlines, in bursts); returns counts and times."""
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
@@ -229,11 +253,26 @@ def make_payloads(n: int, seed: int) -> list[tuple[str, bytes, bool]]:
         elif k == 1:
             payload = json.dumps([float(x) for x in rng.normal(size=int(rng.integers(0, 5)))]).encode()
         else:
-            data = {"v": 1, "id": tid, "kind": "popup", "frame": "local_ned", "position": [2000.0, 2000.0, -20.0],
-                    "radius_m": 5.0, "ttl_s": 5.0}
+            data = {
+                "v": 1,
+                "id": tid,
+                "kind": "popup",
+                "frame": "local_ned",
+                "position": [2000.0, 2000.0, -20.0],
+                "radius_m": 5.0,
+                "ttl_s": 5.0,
+            }
             broken = ["v", "id", "kind", "frame", "position", "radius_m", "ttl_s", "colour"][int(rng.integers(8))]
-            data[broken] = {"v": 2, "id": "other", "kind": "ufo", "frame": "enu", "position": [1.0, NAN, 2.0],
-                            "radius_m": -1.0, "ttl_s": INF, "colour": "red"}[broken]
+            data[broken] = {
+                "v": 2,
+                "id": "other",
+                "kind": "ufo",
+                "frame": "enu",
+                "position": [1.0, NAN, 2.0],
+                "radius_m": -1.0,
+                "ttl_s": INF,
+                "colour": "red",
+            }[broken]
             payload = json.dumps(data, allow_nan=True).encode()
         out.append((tid, payload, False))
     return out
@@ -290,8 +329,11 @@ def stored_lists(gcs: MavlinkPeer) -> dict:
             items = gcs.download(mission_type)
             if items is not None:
                 break
-        out[name] = None if items is None else [
-            (i.seq, i.frame, i.command, i.param1, i.param2, i.param3, i.param4, i.x, i.y, i.z) for i in items]
+        out[name] = (
+            None
+            if items is None
+            else [(i.seq, i.frame, i.command, i.param1, i.param2, i.param3, i.param4, i.x, i.y, i.z) for i in items]
+        )
     return out
 
 
@@ -327,10 +369,10 @@ def vehicle_cost(frames, log_dir: Path) -> dict:
     The server of ``sim-vehicle`` (hovering on the ground, its log to a file as in the real
     process) handles each datagram through ``_receive``; the process CPU time per kind is measured.
     """
+    from heli_model.model import HeliModel
     from sim_vehicle.autopilot import Autopilot
     from sim_vehicle.config import VehicleSettings, replace_path
     from sim_vehicle.mavlink import MavlinkServer
-    from heli_model.model import HeliModel
 
     settings = replace_path(VehicleSettings(), "link.out", ())
     vehicle = Autopilot(HeliModel.default(), settings, (47.397742, 8.545594, 488.0, 0.0), np.random.default_rng(0))
@@ -357,13 +399,17 @@ def vehicle_cost(frames, log_dir: Path) -> dict:
         handler.close()
         real.close()
     total = sum(cpu.values())
-    return {"per_kind_us": {k: round(cpu[k] / count[k] * 1e6, 1) for k in sorted(count)},
-            "frames": sum(count.values()), "cpu_s": round(total, 3),
-            "frames_per_cpu_s": round(sum(count.values()) / total, 0) if total > 0 else None}
+    return {
+        "per_kind_us": {k: round(cpu[k] / count[k] * 1e6, 1) for k in sorted(count)},
+        "frames": sum(count.values()),
+        "cpu_s": round(total, 3),
+        "frames_per_cpu_s": round(sum(count.values()) / total, 0) if total > 0 else None,
+    }
 
 
-def run(frames_n: int, payloads_n: int, rate_hz: float, payload_rate_hz: float, speedup: float = SPEEDUP,
-        seed: int = 11) -> dict:
+def run(
+    frames_n: int, payloads_n: int, rate_hz: float, payload_rate_hz: float, speedup: float = SPEEDUP, seed: int = 11
+) -> dict:
     frames = make_frames(frames_n, seed)
     payloads = make_payloads(payloads_n, seed)
     with tempfile.TemporaryDirectory(prefix="soak_") as tmp, TrackListener(rate_hz=5.0) as track:
@@ -382,10 +428,16 @@ def run(frames_n: int, payloads_n: int, rate_hz: float, payload_rate_hz: float, 
                 drops0 = {"vehicle": kernel_drops(flight.vehicle_port), "companion": kernel_drops(mav_port)}
                 stop = threading.Event()
                 payload_result: dict = {}
-                sender = threading.Thread(target=send_payloads, args=(bus, payloads, payload_rate_hz, stop,
-                                                                      payload_result), daemon=True)
-                log.info("injecting %d frames at %g/s and %d payloads at %g/s", len(frames), rate_hz,
-                         len(payloads), payload_rate_hz)
+                sender = threading.Thread(
+                    target=send_payloads, args=(bus, payloads, payload_rate_hz, stop, payload_result), daemon=True
+                )
+                log.info(
+                    "injecting %d frames at %g/s and %d payloads at %g/s",
+                    len(frames),
+                    rate_hz,
+                    len(payloads),
+                    payload_rate_hz,
+                )
                 sender.start()
                 frame_result = send_frames(frames, flight.vehicle_port, mav_port, rate_hz, stop)
                 sender.join()
@@ -407,33 +459,46 @@ def run(frames_n: int, payloads_n: int, rate_hz: float, payload_rate_hz: float, 
     to_vehicle = sum(v for (target, _), v in sent.items() if target == "vehicle")
     to_companion = sum(v for (target, _), v in sent.items() if target == "companion")
     lost = {k: (None if drops0[k] is None or drops1[k] is None else drops1[k] - drops0[k]) for k in drops0}
-    valid_sent = sum(1 for _, _, valid in payloads[:payload_result.get("sent", 0)] if valid)
+    valid_sent = sum(1 for _, _, valid in payloads[: payload_result.get("sent", 0)] if valid)
     final = track_pos[-1] if len(track_pos) else np.full(3, np.nan)
     return {
-        "frames": {"to_vehicle": to_vehicle, "to_companion": to_companion,
-                   "by_kind": {f"{t}/{k}": v for (t, k), v in sorted(sent.items())},
-                   "send_errors": frame_result["send_errors"], "seconds": round(frame_result["seconds"], 2),
-                   "rate_hz": round((to_vehicle + to_companion) / frame_result["seconds"], 1),
-                   "vehicle_rate_hz": round(to_vehicle / frame_result["seconds"], 1),
-                   "still_flying_at_end": in_flight},
+        "frames": {
+            "to_vehicle": to_vehicle,
+            "to_companion": to_companion,
+            "by_kind": {f"{t}/{k}": v for (t, k), v in sorted(sent.items())},
+            "send_errors": frame_result["send_errors"],
+            "seconds": round(frame_result["seconds"], 2),
+            "rate_hz": round((to_vehicle + to_companion) / frame_result["seconds"], 1),
+            "vehicle_rate_hz": round(to_vehicle / frame_result["seconds"], 1),
+            "still_flying_at_end": in_flight,
+        },
         "kernel_drops": lost,
-        "vehicle_cost": cost, "speedup": speedup,
+        "vehicle_cost": cost,
+        "speedup": speedup,
         "vehicle": counters,
         "mission_unchanged": repr(before) == repr(after) and before.get("mission") is not None,  # NaN == NaN
         "lists_before": before if repr(before) != repr(after) else None,
         "lists_after": after if repr(before) != repr(after) else None,
         "mission_items": None if before.get("mission") is None else len(before["mission"]),
         "fence_items": None if before.get("fence") is None else len(before["fence"]),
-        "payloads": {"sent": payload_result.get("sent"), "valid_sent": valid_sent,
-                     "seconds": round(payload_result.get("seconds", math.nan), 2),
-                     "received": bus_counts.get("received"), "put": bus_counts.get("put"),
-                     "rejected": bus_counts.get("rejected"), "handler_errors": bus_counts.get("handler_errors"),
-                     "lost": None if bus_counts.get("received") is None else
-                     payload_result.get("sent", 0) - bus_counts["received"]},
-        "outcome": summary.get("outcome"), "legs": f"{summary.get('legs_reached')}/{summary.get('legs_planned')}",
+        "payloads": {
+            "sent": payload_result.get("sent"),
+            "valid_sent": valid_sent,
+            "seconds": round(payload_result.get("seconds", math.nan), 2),
+            "received": bus_counts.get("received"),
+            "put": bus_counts.get("put"),
+            "rejected": bus_counts.get("rejected"),
+            "handler_errors": bus_counts.get("handler_errors"),
+            "lost": None
+            if bus_counts.get("received") is None
+            else payload_result.get("sent", 0) - bus_counts["received"],
+        },
+        "outcome": summary.get("outcome"),
+        "legs": f"{summary.get('legs_reached')}/{summary.get('legs_planned')}",
         "rms_tracking_error_m": summary.get("rms_tracking_error_m"),
         "max_tracking_error_m": summary.get("max_tracking_error_m"),
-        "decisions": dict(decisions), "setpoint_jitter_p99_ms": jitter.get("p99_ms"),
+        "decisions": dict(decisions),
+        "setpoint_jitter_p99_ms": jitter.get("p99_ms"),
         "vehicle_disarmed_at_end": track.armed is False,
         "vehicle_final_height_m": None if not np.all(np.isfinite(final)) else round(float(-final[2]), 2),
     }
@@ -443,11 +508,17 @@ def ok(r: dict) -> bool:
     """Nothing lost, everything refused, the flight completed and the mission unchanged."""
     v = r["vehicle"]
     p = r["payloads"]
-    return (r["outcome"] == "completed" and r["mission_unchanged"] and r["vehicle_disarmed_at_end"]
-            and all(d == 0 for d in r["kernel_drops"].values() if d is not None)
-            and v.get("packets_in", 0) >= r["frames"]["to_vehicle"]
-            and p["lost"] == 0 and p["put"] == p["valid_sent"] and p["rejected"] == p["sent"] - p["valid_sent"]
-            and p["handler_errors"] == 0)
+    return (
+        r["outcome"] == "completed"
+        and r["mission_unchanged"]
+        and r["vehicle_disarmed_at_end"]
+        and all(d == 0 for d in r["kernel_drops"].values() if d is not None)
+        and v.get("packets_in", 0) >= r["frames"]["to_vehicle"]
+        and p["lost"] == 0
+        and p["put"] == p["valid_sent"]
+        and p["rejected"] == p["sent"] - p["valid_sent"]
+        and p["handler_errors"] == 0
+    )
 
 
 def table(r: dict) -> str:
@@ -457,40 +528,50 @@ def table(r: dict) -> str:
         target, kind = key.split("/")
         kinds[kind][target] = n
     cost = r["vehicle_cost"]
-    rows = [f"| {kind} | {d.get('vehicle', 0)} | {d.get('companion', 0)} | {cost['per_kind_us'].get(kind, '-')} |"
-            for kind, d in kinds.items()]
+    rows = [
+        f"| {kind} | {d.get('vehicle', 0)} | {d.get('companion', 0)} | {cost['per_kind_us'].get(kind, '-')} |"
+        for kind, d in kinds.items()
+    ]
     drops = r["kernel_drops"]
-    return "\n".join([
-        f"{f['to_vehicle'] + f['to_companion']} bad MAVLink frames ({f['to_vehicle']} to the vehicle, "
-        f"{f['to_companion']} to the companion's MAVLink port) in {f['seconds']:g} s and {p['sent']} threat payloads "
-        f"over zenoh in {p['seconds']:g} s, during one flight of `exclusion_zones.plan` (real `sim-vehicle` and "
-        f"`companion run` processes, SITL at {r['speedup']:g}x, no MAVLink signing, so no MISSION_CLEAR_ALL: unsigned, "
-        "a vehicle obeys it from anyone). Goals: nothing lost, every bad frame counted and refused, the flight "
-        "completes, the mission on the vehicle unchanged.", "",
-        "| frame kind | to the vehicle | to the companion | vehicle CPU per frame (us, in-process) |",
-        "|---|---|---|---|", *rows, "",
-        f"The vehicle's MAVLink input costs {cost['cpu_s']:g} s of CPU for these {cost['frames']} frames in-process "
-        f"(its log to a file, as in the process): {cost['frames_per_cpu_s']:g} frames per CPU second. In the flight "
-        "below they arrived at the rate in the first column; 'kernel drops' are the datagrams the kernel "
-        "discarded because a socket's buffer was full (UDP's only way to lose one).", "",
-        "| vehicle: frames handled per s | packets in | messages in | bad CRC | unknown id | bad data | truncated | "
-        "kernel drops vehicle / companion |",
-        "|---|---|---|---|---|---|---|---|",
-        f"| {f['vehicle_rate_hz']:g} | {v.get('packets_in')} | {v.get('messages_in')} | {v.get('bad_crc')} | "
-        f"{v.get('unknown_id')} | {v.get('bad_data')} | {v.get('truncated')} | {drops['vehicle']} / "
-        f"{drops['companion']} |", "",
-        "| threat payloads sent | valid | received by the companion | put | rejected | handler errors | lost |",
-        "|---|---|---|---|---|---|---|",
-        f"| {p['sent']} | {p['valid_sent']} | {p['received']} | {p['put']} | {p['rejected']} | {p['handler_errors']} "
-        f"| {p['lost']} |", "",
-        "| flight outcome | legs | still flying when the injection ended | vehicle disarmed at the end | mission / "
-        "fence items unchanged | RMS / max tracking error (m) | setpoint jitter p99 (ms) |",
-        "|---|---|---|---|---|---|---|",
-        f"| {r['outcome']} | {r['legs']} | {f['still_flying_at_end']} | {r['vehicle_disarmed_at_end']} | "
-        f"{r['mission_unchanged']} ({r['mission_items']} / {r['fence_items']}) | "
-        f"{_round(r.get('rms_tracking_error_m'))} / {_round(r.get('max_tracking_error_m'))} | "
-        f"{_round(r.get('setpoint_jitter_p99_ms'), 2)} |",
-    ])
+    return "\n".join(
+        [
+            f"{f['to_vehicle'] + f['to_companion']} bad MAVLink frames ({f['to_vehicle']} to the vehicle, "
+            f"{f['to_companion']} to the companion's MAVLink port) in {f['seconds']:g} s and {p['sent']} threat payloads "
+            f"over zenoh in {p['seconds']:g} s, during one flight of `exclusion_zones.plan` (real `sim-vehicle` and "
+            f"`companion run` processes, SITL at {r['speedup']:g}x, no MAVLink signing, so no MISSION_CLEAR_ALL: unsigned, "
+            "a vehicle obeys it from anyone). Goals: nothing lost, every bad frame counted and refused, the flight "
+            "completes, the mission on the vehicle unchanged.",
+            "",
+            "| frame kind | to the vehicle | to the companion | vehicle CPU per frame (us, in-process) |",
+            "|---|---|---|---|",
+            *rows,
+            "",
+            f"The vehicle's MAVLink input costs {cost['cpu_s']:g} s of CPU for these {cost['frames']} frames in-process "
+            f"(its log to a file, as in the process): {cost['frames_per_cpu_s']:g} frames per CPU second. In the flight "
+            "below they arrived at the rate in the first column; 'kernel drops' are the datagrams the kernel "
+            "discarded because a socket's buffer was full (UDP's only way to lose one).",
+            "",
+            "| vehicle: frames handled per s | packets in | messages in | bad CRC | unknown id | bad data | truncated | "
+            "kernel drops vehicle / companion |",
+            "|---|---|---|---|---|---|---|---|",
+            f"| {f['vehicle_rate_hz']:g} | {v.get('packets_in')} | {v.get('messages_in')} | {v.get('bad_crc')} | "
+            f"{v.get('unknown_id')} | {v.get('bad_data')} | {v.get('truncated')} | {drops['vehicle']} / "
+            f"{drops['companion']} |",
+            "",
+            "| threat payloads sent | valid | received by the companion | put | rejected | handler errors | lost |",
+            "|---|---|---|---|---|---|---|",
+            f"| {p['sent']} | {p['valid_sent']} | {p['received']} | {p['put']} | {p['rejected']} | {p['handler_errors']} "
+            f"| {p['lost']} |",
+            "",
+            "| flight outcome | legs | still flying when the injection ended | vehicle disarmed at the end | mission / "
+            "fence items unchanged | RMS / max tracking error (m) | setpoint jitter p99 (ms) |",
+            "|---|---|---|---|---|---|---|",
+            f"| {r['outcome']} | {r['legs']} | {f['still_flying_at_end']} | {r['vehicle_disarmed_at_end']} | "
+            f"{r['mission_unchanged']} ({r['mission_items']} / {r['fence_items']}) | "
+            f"{_round(r.get('rms_tracking_error_m'))} / {_round(r.get('max_tracking_error_m'))} | "
+            f"{_round(r.get('setpoint_jitter_p99_ms'), 2)} |",
+        ]
+    )
 
 
 def _round(value, digits: int = 3):
@@ -501,10 +582,18 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=100_000, help="MAVLink datagrams to send")
     parser.add_argument("--payloads", type=int, default=10_000, help="threat payloads to PUT")
-    parser.add_argument("--rate", type=float, default=2000.0,
-                        help="datagrams per second (the injection must end before the flight does)")
-    parser.add_argument("--payload-rate", type=float, default=None,
-                        help="threat payloads per second (default: spread over the frames' injection)")
+    parser.add_argument(
+        "--rate",
+        type=float,
+        default=2000.0,
+        help="datagrams per second (the injection must end before the flight does)",
+    )
+    parser.add_argument(
+        "--payload-rate",
+        type=float,
+        default=None,
+        help="threat payloads per second (default: spread over the frames' injection)",
+    )
     parser.add_argument("--speedup", type=float, default=SPEEDUP, help="SITL speed-up of the flight")
     parser.add_argument("--quick", action="store_true", help="10,000 frames and 1,000 payloads")
     args = parser.parse_args()
@@ -517,8 +606,9 @@ def main() -> int:
     bench = REPO / "out" / "bench"
     bench.mkdir(parents=True, exist_ok=True)
     (bench / "soak.json").write_text(json.dumps(result, indent=2, default=str))
-    (REPO / "docs" / "benchmarks" / "soak.md").write_text("# Soak: bad MAVLink frames and threat payloads during a "
-                                                          "flight\n\n" + text + "\n")
+    (REPO / "docs" / "benchmarks" / "soak.md").write_text(
+        "# Soak: bad MAVLink frames and threat payloads during a flight\n\n" + text + "\n"
+    )
     return 0 if ok(result) else 1
 
 

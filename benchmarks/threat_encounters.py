@@ -52,9 +52,23 @@ from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
 from companion.threats.model import Threat
 from companion.world import Cylinder, World
 
-__all__ = ["CATEGORIES", "WORLD_KINDS", "Leg", "Encounter", "make_leg", "encounter_world",
-           "make_encounter", "closest_approach", "LIMITS", "KAPPA_MAX_1_M", "DOWN_M", "MARGIN_M",
-           "CRUISE_SPEED_M_S", "N_WORLD_SEEDS", "START_MARGIN_M"]
+__all__ = [
+    "CATEGORIES",
+    "WORLD_KINDS",
+    "Leg",
+    "Encounter",
+    "make_leg",
+    "encounter_world",
+    "make_encounter",
+    "closest_approach",
+    "LIMITS",
+    "KAPPA_MAX_1_M",
+    "DOWN_M",
+    "MARGIN_M",
+    "CRUISE_SPEED_M_S",
+    "N_WORLD_SEEDS",
+    "START_MARGIN_M",
+]
 
 CATEGORIES = ("head_on", "crossing", "overtaking", "popup_near", "popup_far", "multi")
 WORLD_KINDS = ("open", "cluttered")
@@ -175,9 +189,8 @@ def make_leg(world_kind: str, seed: int = 0) -> Leg:
         bw = make_world("2d", seed)
         flat = World(bw.world.obstacles, bw.world.bounds_min, bw.world.bounds_max, margin_m=MARGIN_M)
         gs = GartSettings(kappa_max_1_m=KAPPA_MAX_1_M)
-        for iterations in NOMINAL_GART_ITERATIONS:          # more only where the first finds nothing
-            res = gart(flat, bw.start, bw.goal, rng=np.random.default_rng(seed),
-                       max_iterations=iterations, settings=gs)
+        for iterations in NOMINAL_GART_ITERATIONS:  # more only where the first finds nothing
+            res = gart(flat, bw.start, bw.goal, rng=np.random.default_rng(seed), max_iterations=iterations, settings=gs)
             if res.status == "exact":
                 break
         if res.status != "exact":
@@ -203,8 +216,9 @@ def encounter_world(index: int) -> tuple[str, str, int]:
 
 
 # ---------------------------------------------------------------------------- threats
-def closest_approach(trajectory, threat: Threat, t_enc_s: float, scan_s: float = SCAN_S,
-                     step_s: float = SCAN_STEP_S) -> tuple[float, float, float]:
+def closest_approach(
+    trajectory, threat: Threat, t_enc_s: float, scan_s: float = SCAN_S, step_s: float = SCAN_STEP_S
+) -> tuple[float, float, float]:
     """Closest approach of ``threat`` to the reference (not reacting) over [t_enc, t_enc + scan].
 
     Returns
@@ -230,8 +244,9 @@ def _rotate_horizontal(u: np.ndarray, angle_rad: float) -> np.ndarray:
     return np.array([c * u[0] - s * u[1], s * u[0] + c * u[1], 0.0])
 
 
-def _draw_threat(kind: str, window: tuple[float, float], leg: Leg, t_enc_s: float, tid: str,
-                 rng: np.random.Generator) -> Threat:
+def _draw_threat(
+    kind: str, window: tuple[float, float], leg: Leg, t_enc_s: float, tid: str, rng: np.random.Generator
+) -> Threat:
     """One threat of geometry ``kind`` aimed at the reference ``t_ca`` s ahead (not yet validated)."""
     traj = leg.trajectory
     t_ca = rng.uniform(*window)
@@ -257,13 +272,21 @@ def _draw_threat(kind: str, window: tuple[float, float], leg: Leg, t_enc_s: floa
     else:
         raise ValueError(f"kind: unknown threat geometry {kind!r}")
     center = aim - vel * t_ca
-    return Threat(tid, "popup" if kind == "popup" else "moving", "local_ned",
-                  tuple(float(x) for x in center), tuple(float(x) for x in vel), float(radius),
-                  None, float(t_enc_s))
+    return Threat(
+        tid,
+        "popup" if kind == "popup" else "moving",
+        "local_ned",
+        tuple(float(x) for x in center),
+        tuple(float(x) for x in vel),
+        float(radius),
+        None,
+        float(t_enc_s),
+    )
 
 
-def _valid(threat: Threat, window: tuple[float, float], leg: Leg, t_enc_s: float,
-           start_margin_m: float) -> tuple[float, float] | None:
+def _valid(
+    threat: Threat, window: tuple[float, float], leg: Leg, t_enc_s: float, start_margin_m: float
+) -> tuple[float, float] | None:
     """(t_ca, miss) when ``threat`` is a real encounter (module docstring), else None."""
     t_ca, miss, start = closest_approach(leg.trajectory, threat, t_enc_s)
     if not (window[0] <= t_ca <= window[1]) or miss >= threat.radius_m:
@@ -278,8 +301,7 @@ def _valid(threat: Threat, window: tuple[float, float], leg: Leg, t_enc_s: float
     return t_ca, miss
 
 
-def make_encounter(index: int, leg: Leg, seed: int = 0, *,
-                   start_margin_m: float = START_MARGIN_M) -> Encounter | None:
+def make_encounter(index: int, leg: Leg, seed: int = 0, *, start_margin_m: float = START_MARGIN_M) -> Encounter | None:
     """Encounter ``index`` on ``leg`` (which must be ``encounter_world(index)``'s leg).
 
     Parameters
@@ -331,6 +353,7 @@ def make_encounter(index: int, leg: Leg, seed: int = 0, *,
             threats.append(th)
             cpa.append(got)
         if len(threats) == len(kinds):
-            return Encounter(index, category, world_kind, world_seed, t_enc, tuple(threats),
-                             tuple(str(k) for k in kinds), tuple(cpa))
+            return Encounter(
+                index, category, world_kind, world_seed, t_enc, tuple(threats), tuple(str(k) for k in kinds), tuple(cpa)
+            )
     return None

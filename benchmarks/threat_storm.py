@@ -27,11 +27,12 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
+from flight_support import DEMO_MISSION, flight_processes  # noqa: E402
+
 from companion.demo import FlightWatcher, last_json_line  # noqa: E402
 from companion.record.flight_record import load_record  # noqa: E402
-from companion.threats.transport.bus import ThreatBus  # noqa: E402
 from companion.threats.model import Threat  # noqa: E402
-from flight_support import DEMO_MISSION, flight_processes  # noqa: E402
+from companion.threats.transport.bus import ThreatBus  # noqa: E402
 
 SPEEDUP = 4.0
 
@@ -42,8 +43,11 @@ def storm(bus: ThreatBus, rate_hz: float, seconds: float) -> int:
     total = int(rate_hz * seconds)
     while sent < total:
         k = sent % 50
-        bus.client.put_threat(Threat(f"storm{k}", "moving", "local_ned", (300.0 + k, 300.0 + 0.01 * sent, -15.0),
-                              (0.0, 1.0, 0.0), 2.0, 60.0))
+        bus.client.put_threat(
+            Threat(
+                f"storm{k}", "moving", "local_ned", (300.0 + k, 300.0 + 0.01 * sent, -15.0), (0.0, 1.0, 0.0), 2.0, 60.0
+            )
+        )
         sent += 1
         delay = t0 + sent / rate_hz - time.monotonic()
         if delay > 0:
@@ -64,23 +68,33 @@ def run(rate_hz: float, seconds: float) -> dict:
                 achieved_hz = sent / (time.monotonic() - t_start)
                 flight.companion.wait(300)
         summary = last_json_line(flight.log) or {}
-        jitter = next((e for e in load_record(flight.record).events
-                       if e.get("name") == "setpoint_jitter"), {})
-        return {"sent": sent, "rate_hz": round(achieved_hz, 1), "received": summary.get("threat_updates"),
-                "lost": sent - (summary.get("threat_updates") or 0), "outcome": summary.get("outcome"),
-                "jitter_p50_ms": jitter.get("p50_ms"), "jitter_p99_ms": jitter.get("p99_ms"),
-                "jitter_max_ms": jitter.get("max_ms"), "rms_tracking_error_m": summary.get("rms_tracking_error_m")}
+        jitter = next((e for e in load_record(flight.record).events if e.get("name") == "setpoint_jitter"), {})
+        return {
+            "sent": sent,
+            "rate_hz": round(achieved_hz, 1),
+            "received": summary.get("threat_updates"),
+            "lost": sent - (summary.get("threat_updates") or 0),
+            "outcome": summary.get("outcome"),
+            "jitter_p50_ms": jitter.get("p50_ms"),
+            "jitter_p99_ms": jitter.get("p99_ms"),
+            "jitter_max_ms": jitter.get("max_ms"),
+            "rms_tracking_error_m": summary.get("rms_tracking_error_m"),
+        }
 
 
 def table(r: dict, seconds: float) -> str:
-    return "\n".join([
-        f"Storm of {r['sent']} threat PUTs over {seconds:g} s ({r['rate_hz']} per s) into a flying "
-        f"companion (real processes, zenoh on loopback TCP, SITL at {SPEEDUP:g}x); goals: none lost, "
-        "setpoint jitter p99 <= 5 ms, the flight completes.", "",
-        "| sent | received by the companion | lost | setpoint jitter p50 / p99 / max (ms) | RMS tracking error (m) | outcome |",
-        "|---|---|---|---|---|---|",
-        f"| {r['sent']} | {r['received']} | {r['lost']} | {r['jitter_p50_ms']:.2f} / {r['jitter_p99_ms']:.2f} / "
-        f"{r['jitter_max_ms']:.2f} | {r['rms_tracking_error_m']:.3f} | {r['outcome']} |"])
+    return "\n".join(
+        [
+            f"Storm of {r['sent']} threat PUTs over {seconds:g} s ({r['rate_hz']} per s) into a flying "
+            f"companion (real processes, zenoh on loopback TCP, SITL at {SPEEDUP:g}x); goals: none lost, "
+            "setpoint jitter p99 <= 5 ms, the flight completes.",
+            "",
+            "| sent | received by the companion | lost | setpoint jitter p50 / p99 / max (ms) | RMS tracking error (m) | outcome |",
+            "|---|---|---|---|---|---|",
+            f"| {r['sent']} | {r['received']} | {r['lost']} | {r['jitter_p50_ms']:.2f} / {r['jitter_p99_ms']:.2f} / "
+            f"{r['jitter_max_ms']:.2f} | {r['rms_tracking_error_m']:.3f} | {r['outcome']} |",
+        ]
+    )
 
 
 def main() -> int:

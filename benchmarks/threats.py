@@ -55,7 +55,7 @@ from __future__ import annotations
 import os
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")        # one thread per worker process: 2 workers, 2 cores
+    os.environ.setdefault(_var, "1")  # one thread per worker process: 2 workers, 2 cores
 
 import argparse  # noqa: E402
 import asyncio  # noqa: E402
@@ -74,8 +74,15 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.threat_encounters import (CATEGORIES, KAPPA_MAX_1_M, LIMITS, WORLD_KINDS,  # noqa: E402
-                                          encounter_world, make_encounter, make_leg)
+from benchmarks.threat_encounters import (  # noqa: E402
+    CATEGORIES,
+    KAPPA_MAX_1_M,
+    LIMITS,
+    WORLD_KINDS,
+    encounter_world,
+    make_encounter,
+    make_leg,
+)
 from companion.campaign.oracle import label_encounter  # noqa: E402
 from companion.config import Settings  # noqa: E402
 from companion.flight.fast_time import FastTimeFlight  # noqa: E402
@@ -84,10 +91,10 @@ from companion.flight.plan import LegPlan  # noqa: E402
 from companion.mission.model import LocalWaypoint  # noqa: E402
 from companion.threats.decision.kinds import Strategy  # noqa: E402
 from companion.threats.decision.step import DecisionPolicy  # noqa: E402
-from heli_model.model import HeliModel  # noqa: E402
-from heli_model.vehicle_update import VehicleUpdate  # noqa: E402
 from companion.threats.model import Threat, ThreatTable  # noqa: E402
 from heli_common.ports import free_port  # noqa: E402
+from heli_model.model import HeliModel  # noqa: E402
+from heli_model.vehicle_update import VehicleUpdate  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The strategies compared, in table order; those not a ``Strategy`` are skipped.
@@ -103,19 +110,19 @@ def threat_settings():
 
 
 # ---------------------------------------------------------------------------- encounters
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def leg_of(world_kind: str, seed: int):
     """The leg (cached per worker process: a cluttered leg's GART takes ~0.5 s)."""
     return make_leg(world_kind, seed)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def vehicle_update() -> VehicleUpdate:
     """The helicopter (cached per worker: its LQI is designed once)."""
     return VehicleUpdate.build(HeliModel.default())
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def companion_settings() -> Settings:
     """The companion's default settings (the executor's rates, the flight's alternatives)."""
     return Settings()
@@ -129,8 +136,16 @@ def make_policy(settings, strategy: str) -> DecisionPolicy:
 def leg_plan(leg):
     """The benchmark's leg as the executor flies a mission leg (one waypoint, 3 m acceptance)."""
     waypoint = LocalWaypoint(1, "waypoint", leg.goal_ned_m, GOAL_RADIUS_M, 0.0, None)
-    return LegPlan(0, waypoint, leg.start_ned_m, leg.goal_ned_m, None,
-                   np.vstack([leg.start_ned_m, leg.goal_ned_m]), leg.trajectory, leg.world)
+    return LegPlan(
+        0,
+        waypoint,
+        leg.start_ned_m,
+        leg.goal_ned_m,
+        None,
+        np.vstack([leg.start_ned_m, leg.goal_ned_m]),
+        leg.trajectory,
+        leg.world,
+    )
 
 
 def fly_encounter(leg, enc, strategy: str, settings, seed: int, update) -> dict:
@@ -140,10 +155,15 @@ def fly_encounter(leg, enc, strategy: str, settings, seed: int, update) -> dict:
     goal = leg.goal_ned_m
     threats = list(enc.threats)
     t_enc = enc.t_enc_s
-    flight = FastTimeFlight([leg_plan(leg)], companion_settings(), threats=[(t_enc, th, th.id) for th in threats],
-                            policy=make_policy(settings, strategy),
-                            seed=int(np.random.default_rng([seed, enc.index, 2]).integers(2**31)),
-                            start_yaw_rad=float(leg.trajectory.yaw_rad(np.array([0.0]))[0]), update=update)
+    flight = FastTimeFlight(
+        [leg_plan(leg)],
+        companion_settings(),
+        threats=[(t_enc, th, th.id) for th in threats],
+        policy=make_policy(settings, strategy),
+        seed=int(np.random.default_rng([seed, enc.index, 2]).integers(2**31)),
+        start_yaw_rad=float(leg.trajectory.yaw_rad(np.array([0.0]))[0]),
+        update=update,
+    )
     result = flight.run(max_s=t_enc + MAX_AFTER_S)
     after = result.t_s >= t_enc
     veh, ts = result.pos_ned_m[after], result.t_s[after]
@@ -156,18 +176,35 @@ def fly_encounter(leg, enc, strategy: str, settings, seed: int, update) -> dict:
     success = sep >= 0.0 and static >= 0.0
     flown = float(np.sum(np.linalg.norm(np.diff(veh, axis=0), axis=1)))
     nominal_rest = float(leg.trajectory.length_m - leg.trajectory.s_at(np.array([t_enc]))[0])
-    decisions = [{"t_s": round(d["t_s"] - t_enc, 3), "via": d["trigger"], "kind": d["event"],
-                  "decide_ms": float(d["decide_ms"]), "latency_ms": d["latency_ms"], "label": d["label"],
-                  "branch": d.get("branch"),
-                  "reason": str(d["reason"])[:160]} for d in result.decisions]
+    decisions = [
+        {
+            "t_s": round(d["t_s"] - t_enc, 3),
+            "via": d["trigger"],
+            "kind": d["event"],
+            "decide_ms": float(d["decide_ms"]),
+            "latency_ms": d["latency_ms"],
+            "label": d["label"],
+            "branch": d.get("branch"),
+            "reason": str(d["reason"])[:160],
+        }
+        for d in result.decisions
+    ]
     errors = np.linalg.norm(result.pos_ned_m - result.ref_pos_ned_m, axis=1)
-    return {"success": success, "completed": success and reached, "reached": reached,
-            "min_sep_m": sep, "static_clearance_m": static if math.isfinite(static) else None,
-            "in_bounds": in_bounds, "extra_length_m": flown - nominal_rest if success and reached else None,
-            "decisions": decisions, "outcome": result.outcome.value,
-            "decision_jobs": len(result.job_wall_s.get("decision", ())),
-            "alternatives_jobs": len(result.job_wall_s.get("alternatives", ())),
-            "max_tracking_error_m": float(np.max(errors)), "wall_s": time.perf_counter() - wall0}
+    return {
+        "success": success,
+        "completed": success and reached,
+        "reached": reached,
+        "min_sep_m": sep,
+        "static_clearance_m": static if math.isfinite(static) else None,
+        "in_bounds": in_bounds,
+        "extra_length_m": flown - nominal_rest if success and reached else None,
+        "decisions": decisions,
+        "outcome": result.outcome.value,
+        "decision_jobs": len(result.job_wall_s.get("decision", ())),
+        "alternatives_jobs": len(result.job_wall_s.get("alternatives", ())),
+        "max_tracking_error_m": float(np.max(errors)),
+        "wall_s": time.perf_counter() - wall0,
+    }
 
 
 def run_encounter(job: tuple) -> dict:
@@ -184,21 +221,46 @@ def run_encounter(job: tuple) -> dict:
         return row
     p, v, _ = leg.trajectory.sample(np.array([enc.t_enc_s]))
     oracle = label_encounter(p[0], v[0], enc.threats, enc.t_enc_s, leg.raw_world)
-    row.update({"t_enc_s": enc.t_enc_s, "kinds": list(enc.kinds),
-                "threats": [{"pos": list(th.position), "vel": list(th.velocity_ned_m_s), "radius_m": th.radius_m,
-                             "cpa_s": c[0], "miss_m": c[1]} for th, c in zip(enc.threats, enc.cpa)],
-                "avoidable": oracle.avoidable, "oracle": {
-                    "tried": oracle.tried, "best_margin_m": oracle.best_margin_m, "ms": oracle.elapsed_ms,
-                    "witness": oracle.witness.manoeuvre.name if oracle.witness is not None else None}})
+    row.update(
+        {
+            "t_enc_s": enc.t_enc_s,
+            "kinds": list(enc.kinds),
+            "threats": [
+                {
+                    "pos": list(th.position),
+                    "vel": list(th.velocity_ned_m_s),
+                    "radius_m": th.radius_m,
+                    "cpa_s": c[0],
+                    "miss_m": c[1],
+                }
+                for th, c in zip(enc.threats, enc.cpa)
+            ],
+            "avoidable": oracle.avoidable,
+            "oracle": {
+                "tried": oracle.tried,
+                "best_margin_m": oracle.best_margin_m,
+                "ms": oracle.elapsed_ms,
+                "witness": oracle.witness.manoeuvre.name if oracle.witness is not None else None,
+            },
+        }
+    )
     update = vehicle_update()
     for strategy in strategies:
         try:
             row[strategy] = fly_encounter(leg, enc, strategy, settings, seed, update)
         except Exception as exc:  # noqa: BLE001 - one failing policy call must not end a long run
             logging.getLogger(__name__).exception("encounter %d, %s", index, strategy)
-            row[strategy] = {"error": f"{type(exc).__name__}: {exc}", "success": False, "completed": False,
-                             "reached": False, "min_sep_m": None, "static_clearance_m": None,
-                             "extra_length_m": None, "decisions": [], "wall_s": 0.0}
+            row[strategy] = {
+                "error": f"{type(exc).__name__}: {exc}",
+                "success": False,
+                "completed": False,
+                "reached": False,
+                "min_sep_m": None,
+                "static_clearance_m": None,
+                "extra_length_m": None,
+                "decisions": [],
+                "wall_s": 0.0,
+            }
     row["wall_s"] = time.perf_counter() - wall0
     return row
 
@@ -213,8 +275,12 @@ def run_encounters(n: int, strategies: tuple[str, ...], workers: int, seed: int)
     def progress() -> None:
         done = [r for r in rows if "skipped" not in r]
         ok = ", ".join(f"{s} {sum(r[s]['success'] for r in done)}" for s in strategies)
-        print(f"  {len(rows)}/{n} encounters, {time.perf_counter() - t0:.0f} s; avoidable "
-              f"{sum(r['avoidable'] for r in done)}; success {ok}", file=sys.stderr, flush=True)
+        print(
+            f"  {len(rows)}/{n} encounters, {time.perf_counter() - t0:.0f} s; avoidable "
+            f"{sum(r['avoidable'] for r in done)}; success {ok}",
+            file=sys.stderr,
+            flush=True,
+        )
 
     if workers <= 1:
         for job in jobs:
@@ -251,30 +317,39 @@ def summarize_group(rows: list[dict], strategy: str) -> dict:
     res = [r[strategy] for r in rows]
     avoid = [r[strategy] for r in rows if r["avoidable"]]
     extra = [x["extra_length_m"] for x in res if x["extra_length_m"] is not None]
-    latency = [d["latency_ms"] for x in res for d in x["decisions"]
-               if d["latency_ms"] is not None and d["via"] != "resume"]
-    back = [d["latency_ms"] for x in res for d in x["decisions"] if d["latency_ms"] is not None and d["via"] == "resume"]
+    latency = [
+        d["latency_ms"] for x in res for d in x["decisions"] if d["latency_ms"] is not None and d["via"] != "resume"
+    ]
+    back = [
+        d["latency_ms"] for x in res for d in x["decisions"] if d["latency_ms"] is not None and d["via"] == "resume"
+    ]
     kinds: dict[str, int] = {}
     for x in res:
         for d in x["decisions"]:
             kinds[d["kind"]] = kinds.get(d["kind"], 0) + 1
     seps = [x["min_sep_m"] for x in res if x["min_sep_m"] is not None]
-    return {"n": len(res), "avoidable": len(avoid),
-            "success_avoidable": _rate(x["success"] for x in avoid),
-            "success_all": _rate(x["success"] for x in res),
-            "completion": _rate(x["completed"] for x in res),
-            "completion_avoidable": _rate(x["completed"] for x in avoid),
-            "threat_intrusions": sum(x["min_sep_m"] is not None and x["min_sep_m"] < 0.0 for x in res),
-            "errors": sum("error" in x for x in res),
-            "static_collisions": sum(x["static_clearance_m"] is not None and x["static_clearance_m"] < 0.0
-                                     for x in res),
-            "min_sep_m": {"min": min(seps) if seps else None, "p5": percentile(seps, 5),
-                          "median": percentile(seps, 50)},
-            "extra_length_m": {"median": percentile(extra, 50), "p95": percentile(extra, 95)},
-            "latency_ms": {"n": len(latency), "p50": percentile(latency, 50), "p99": percentile(latency, 99),
-                           "max": max(latency) if latency else None},
-            "back_latency_ms": {"n": len(back), "p50": percentile(back, 50), "p99": percentile(back, 99)},
-            "decisions": kinds, "wall_s_mean": float(np.mean([x["wall_s"] for x in res])) if res else None}
+    return {
+        "n": len(res),
+        "avoidable": len(avoid),
+        "success_avoidable": _rate(x["success"] for x in avoid),
+        "success_all": _rate(x["success"] for x in res),
+        "completion": _rate(x["completed"] for x in res),
+        "completion_avoidable": _rate(x["completed"] for x in avoid),
+        "threat_intrusions": sum(x["min_sep_m"] is not None and x["min_sep_m"] < 0.0 for x in res),
+        "errors": sum("error" in x for x in res),
+        "static_collisions": sum(x["static_clearance_m"] is not None and x["static_clearance_m"] < 0.0 for x in res),
+        "min_sep_m": {"min": min(seps) if seps else None, "p5": percentile(seps, 5), "median": percentile(seps, 50)},
+        "extra_length_m": {"median": percentile(extra, 50), "p95": percentile(extra, 95)},
+        "latency_ms": {
+            "n": len(latency),
+            "p50": percentile(latency, 50),
+            "p99": percentile(latency, 99),
+            "max": max(latency) if latency else None,
+        },
+        "back_latency_ms": {"n": len(back), "p50": percentile(back, 50), "p99": percentile(back, 99)},
+        "decisions": kinds,
+        "wall_s_mean": float(np.mean([x["wall_s"] for x in res])) if res else None,
+    }
 
 
 def groups(rows: list[dict]) -> dict[str, list[dict]]:
@@ -295,8 +370,11 @@ def summarize(rows: list[dict], strategies) -> dict:
     flown = [r for r in rows if "skipped" not in r]
     out = {}
     for name, sub in groups(flown).items():
-        out[name] = {"n": len(sub), "unavoidable": sum(not r["avoidable"] for r in sub),
-                     "strategies": {s: summarize_group(sub, s) for s in strategies}}
+        out[name] = {
+            "n": len(sub),
+            "unavoidable": sum(not r["avoidable"] for r in sub),
+            "strategies": {s: summarize_group(sub, s) for s in strategies},
+        }
     return out
 
 
@@ -349,8 +427,9 @@ def run_storm(duration_s: float, rate_hz: float = 1000.0, ids: int = 50) -> dict
                     delay = t0 + k / rate_hz - time.monotonic()
                     if delay > 0:
                         time.sleep(delay)
-                    th = Threat(f"s{k % ids}", "moving", "local_ned", (float(k), 1.0, -20.0),
-                                (1.0, 0.0, 0.0), 3.0, 60.0, 0.0)
+                    th = Threat(
+                        f"s{k % ids}", "moving", "local_ned", (float(k), 1.0, -20.0), (1.0, 0.0, 0.0), 3.0, 60.0, 0.0
+                    )
                     sent_at[k] = time.monotonic()
                     pub.client.put_threat(th)
 
@@ -360,7 +439,7 @@ def run_storm(duration_s: float, rate_hz: float = 1000.0, ids: int = 50) -> dict
             t_sent = time.monotonic() - t_start
             try:
                 await asyncio.wait_for(done.wait(), 10.0)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 pass
             done.set()
             await timer
@@ -370,15 +449,28 @@ def run_storm(duration_s: float, rate_hz: float = 1000.0, ids: int = 50) -> dict
             sub.close()
         lat_ms = (recv_at - sent_at)[np.isfinite(recv_at)] * 1e3
         jitter_ms = np.abs(np.array(ticks)) * 1e3
-        return {"sent": n, "send_duration_s": t_sent, "rate_hz": n / t_sent,
-                "received": stats["received"], "handled": counts["handled"],
-                "lost": n - counts["handled"], "rejected": counts["rejected"],
-                "handler_errors": stats["handler_errors"], "table_active": len(table),
-                "latency_ms": {"p50": percentile(lat_ms, 50), "p99": percentile(lat_ms, 99),
-                               "max": float(lat_ms.max()) if lat_ms.size else None},
-                "timer_50hz_jitter_ms": {"p50": percentile(jitter_ms, 50), "p99": percentile(jitter_ms, 99),
-                                         "max": float(jitter_ms.max()) if jitter_ms.size else None,
-                                         "ticks": int(jitter_ms.size)}}
+        return {
+            "sent": n,
+            "send_duration_s": t_sent,
+            "rate_hz": n / t_sent,
+            "received": stats["received"],
+            "handled": counts["handled"],
+            "lost": n - counts["handled"],
+            "rejected": counts["rejected"],
+            "handler_errors": stats["handler_errors"],
+            "table_active": len(table),
+            "latency_ms": {
+                "p50": percentile(lat_ms, 50),
+                "p99": percentile(lat_ms, 99),
+                "max": float(lat_ms.max()) if lat_ms.size else None,
+            },
+            "timer_50hz_jitter_ms": {
+                "p50": percentile(jitter_ms, 50),
+                "p99": percentile(jitter_ms, 99),
+                "max": float(jitter_ms.max()) if jitter_ms.size else None,
+                "ticks": int(jitter_ms.size),
+            },
+        }
 
     sys.setswitchinterval(0.0005)
     return asyncio.run(main())
@@ -400,28 +492,36 @@ def pct(x) -> str:
 def encounter_tables(summary: dict, strategies, n: int, wall_s: float, workers: int) -> str:
     rows = [k for k in summary if "/" in k] + list(WORLD_KINDS) + ["all"]
     total = summary["all"]
-    lines = [f"Encounters: {n} ({total['n'] - total['unavoidable']} avoidable, {total['unavoidable']} "
-             f"unavoidable by the oracle); strategies: {', '.join(strategies)}; "
-             f"{wall_s:.0f} s wall time on {workers} worker processes.", "",
-             "| strategy | success (avoidable) | success (all) | completion | extra length median (m) | "
-             "avoidance decision p50 / p99 (ms) | way back p50 / p99 (ms) | intrusions / static collisions "
-             "| decisions |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"Encounters: {n} ({total['n'] - total['unavoidable']} avoidable, {total['unavoidable']} "
+        f"unavoidable by the oracle); strategies: {', '.join(strategies)}; "
+        f"{wall_s:.0f} s wall time on {workers} worker processes.",
+        "",
+        "| strategy | success (avoidable) | success (all) | completion | extra length median (m) | "
+        "avoidance decision p50 / p99 (ms) | way back p50 / p99 (ms) | intrusions / static collisions "
+        "| decisions |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for s in strategies:
         x = total["strategies"][s]
         kinds = ", ".join(f"{k} {v}" for k, v in sorted(x["decisions"].items(), key=lambda kv: -kv[1]))
-        lines.append(f"| {s} | {pct(x['success_avoidable'])} | {pct(x['success_all'])} | {pct(x['completion'])} | "
-                     f"{fmt(x['extra_length_m']['median'])} | {fmt(x['latency_ms']['p50'])} / "
-                     f"{fmt(x['latency_ms']['p99'])} | {fmt(x['back_latency_ms']['p50'])} / "
-                     f"{fmt(x['back_latency_ms']['p99'])} | {x['threat_intrusions']} / {x['static_collisions']} | "
-                     f"{kinds} |")
+        lines.append(
+            f"| {s} | {pct(x['success_avoidable'])} | {pct(x['success_all'])} | {pct(x['completion'])} | "
+            f"{fmt(x['extra_length_m']['median'])} | {fmt(x['latency_ms']['p50'])} / "
+            f"{fmt(x['latency_ms']['p99'])} | {fmt(x['back_latency_ms']['p50'])} / "
+            f"{fmt(x['back_latency_ms']['p99'])} | {x['threat_intrusions']} / {x['static_collisions']} | "
+            f"{kinds} |"
+        )
     head = "| category | n | unavoidable | " + " | ".join(strategies) + " |"
     sep = "|---|---|---|" + "---|" * len(strategies)
     lines += ["", "Success on the avoidable encounters / success on all / completion, by category:", "", head, sep]
     for k in rows:
         g = summary[k]
-        cells = [f"{pct(g['strategies'][s]['success_avoidable'])} / {pct(g['strategies'][s]['success_all'])} / "
-                 f"{pct(g['strategies'][s]['completion'])}" for s in strategies]
+        cells = [
+            f"{pct(g['strategies'][s]['success_avoidable'])} / {pct(g['strategies'][s]['success_all'])} / "
+            f"{pct(g['strategies'][s]['completion'])}"
+            for s in strategies
+        ]
         lines.append(f"| {k} | {g['n']} | {g['unavoidable']} | " + " | ".join(cells) + " |")
     lines += ["", "Extra length median (m) / avoidance decision p50 / p99 (ms), by category:", "", head, sep]
     for k in rows:
@@ -429,8 +529,9 @@ def encounter_tables(summary: dict, strategies, n: int, wall_s: float, workers: 
         cells = []
         for s in strategies:
             x = g["strategies"][s]
-            cells.append(f"{fmt(x['extra_length_m']['median'])} / {fmt(x['latency_ms']['p50'])} / "
-                         f"{fmt(x['latency_ms']['p99'])}")
+            cells.append(
+                f"{fmt(x['extra_length_m']['median'])} / {fmt(x['latency_ms']['p50'])} / {fmt(x['latency_ms']['p99'])}"
+            )
         lines.append(f"| {k} | {g['n']} | {g['unavoidable']} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -438,13 +539,17 @@ def encounter_tables(summary: dict, strategies, n: int, wall_s: float, workers: 
 def storm_table(storm: dict) -> str:
     lat = storm["latency_ms"]
     jit = storm["timer_50hz_jitter_ms"]
-    lines = [f"Threat storm: {storm['sent']} PUTs at {storm['rate_hz']:.0f}/s over real zenoh (loopback TCP) "
-             "into a ThreatBus handing them to an asyncio loop (decode, validate, table update):", "",
-             "| sent | handled | lost | rejected | PUT -> handler p50 / p99 / max (ms) | "
-             "50 Hz timer jitter p50 / p99 / max (ms) |", "|---|---|---|---|---|---|",
-             f"| {storm['sent']} | {storm['handled']} | {storm['lost']} | {storm['rejected']} | "
-             f"{fmt(lat['p50'], 2)} / {fmt(lat['p99'], 2)} / {fmt(lat['max'], 2)} | "
-             f"{fmt(jit['p50'], 2)} / {fmt(jit['p99'], 2)} / {fmt(jit['max'], 2)} |"]
+    lines = [
+        f"Threat storm: {storm['sent']} PUTs at {storm['rate_hz']:.0f}/s over real zenoh (loopback TCP) "
+        "into a ThreatBus handing them to an asyncio loop (decode, validate, table update):",
+        "",
+        "| sent | handled | lost | rejected | PUT -> handler p50 / p99 / max (ms) | "
+        "50 Hz timer jitter p50 / p99 / max (ms) |",
+        "|---|---|---|---|---|---|",
+        f"| {storm['sent']} | {storm['handled']} | {storm['lost']} | {storm['rejected']} | "
+        f"{fmt(lat['p50'], 2)} / {fmt(lat['p99'], 2)} / {fmt(lat['max'], 2)} | "
+        f"{fmt(jit['p50'], 2)} / {fmt(jit['p99'], 2)} / {fmt(jit['max'], 2)} |",
+    ]
     return "\n".join(lines)
 
 
@@ -461,8 +566,11 @@ def main(argv=None) -> int:
     parser.add_argument("--encounters", type=int, default=None, help="number of encounters (default 1008)")
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     parser.add_argument("--storm-s", type=float, default=None, help="storm duration in s (default 10; 0: none)")
-    parser.add_argument("--strategies", default=None,
-                        help=f"comma-separated (default {','.join(STRATEGIES)}; those that are not a Strategy are skipped)")
+    parser.add_argument(
+        "--strategies",
+        default=None,
+        help=f"comma-separated (default {','.join(STRATEGIES)}; those that are not a Strategy are skipped)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="master seed of the encounters (default 0)")
     parser.add_argument("--no-docs", action="store_true", help="do not write docs/benchmarks/threats.md")
     args = parser.parse_args(argv)
@@ -479,7 +587,7 @@ def main(argv=None) -> int:
     rows = run_encounters(n, strategies, args.workers, args.seed)
     enc_wall = time.perf_counter() - t0
     summary = summarize(rows, strategies)
-    storm = run_storm(storm_s) if storm_s > 0 else None     # after the pool: no fork under zenoh
+    storm = run_storm(storm_s) if storm_s > 0 else None  # after the pool: no fork under zenoh
     elapsed = time.perf_counter() - t0
     flown = [r for r in rows if "skipped" not in r]
     text = encounter_tables(summary, strategies, len(flown), enc_wall, args.workers)
@@ -487,31 +595,57 @@ def main(argv=None) -> int:
         text += f"\n\nNot flown (not a `Strategy` of this build): {', '.join(missing)}."
     errors = {s: summary["all"]["strategies"][s]["errors"] for s in strategies}
     if any(errors.values()):
-        text += ("\n\nEncounters in which the policy raised (counted as failures): "
-                 + ", ".join(f"{s} {k}" for s, k in errors.items() if k) + ".")
+        text += (
+            "\n\nEncounters in which the policy raised (counted as failures): "
+            + ", ".join(f"{s} {k}" for s, k in errors.items() if k)
+            + "."
+        )
     if storm is not None:
         text += "\n\n" + storm_table(storm)
     cpu = [r["wall_s"] for r in flown]
-    machine = (f"Machine: {platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores "
-               f"(shared); encounters {enc_wall:.0f} s wall ({np.mean(cpu) if cpu else 0:.1f} s per encounter "
-               f"in a worker, {args.workers} workers), whole run {elapsed:.0f} s"
-               f"{' (--quick)' if args.quick else ''}; flown by {FastTimeFlight.__module__}.")
+    machine = (
+        f"Machine: {platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores "
+        f"(shared); encounters {enc_wall:.0f} s wall ({np.mean(cpu) if cpu else 0:.1f} s per encounter "
+        f"in a worker, {args.workers} workers), whole run {elapsed:.0f} s"
+        f"{' (--quick)' if args.quick else ''}; flown by {FastTimeFlight.__module__}."
+    )
     print(text)
     print(machine)
     out = ROOT / "out" / "bench"
     out.mkdir(parents=True, exist_ok=True)
     settings = threat_settings()
-    (out / "threats.json").write_text(json.dumps(
-        {"summary": summary, "storm": storm, "settings": settings.__dict__, "strategies": strategies,
-         "skipped_strategies": missing, "encounters": rows, "quick": args.quick, "seed": args.seed,
-         "workers": args.workers, "encounter_wall_s": enc_wall, "elapsed_s": elapsed,
-         "flown_by": FastTimeFlight.__module__}, indent=1, default=float))
+    (out / "threats.json").write_text(
+        json.dumps(
+            {
+                "summary": summary,
+                "storm": storm,
+                "settings": settings.__dict__,
+                "strategies": strategies,
+                "skipped_strategies": missing,
+                "encounters": rows,
+                "quick": args.quick,
+                "seed": args.seed,
+                "workers": args.workers,
+                "encounter_wall_s": enc_wall,
+                "elapsed_s": elapsed,
+                "flown_by": FastTimeFlight.__module__,
+            },
+            indent=1,
+            default=float,
+        )
+    )
     if not args.no_docs:
         doc = ROOT / "docs" / "benchmarks" / "threats.md"
         doc.parent.mkdir(parents=True, exist_ok=True)
-        doc.write_text("# Threat reaction benchmark (`benchmarks/threats.py`)\n\n"
-                       + (__doc__.split("\n\n", 1)[1].split("Prints a table")[0]).strip() + "\n\n"
-                       + text + "\n\n" + machine + "\n")
+        doc.write_text(
+            "# Threat reaction benchmark (`benchmarks/threats.py`)\n\n"
+            + (__doc__.split("\n\n", 1)[1].split("Prints a table")[0]).strip()
+            + "\n\n"
+            + text
+            + "\n\n"
+            + machine
+            + "\n"
+        )
     return 0
 
 

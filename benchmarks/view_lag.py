@@ -89,21 +89,32 @@ def listen(port: int, vehicle_port: int, speedup: float, out_path: Path) -> None
     asked_s = -math.inf
     with open(out_path, "w") as out:
         while True:
-            if time.monotonic() - asked_s > 1.0:        # ask again each second (a lost request)
+            if time.monotonic() - asked_s > 1.0:  # ask again each second (a lost request)
                 asked_s = time.monotonic()
-                request = mav.command_long_encode(0, 0, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-                                                  mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, interval_us,
-                                                  0, 0, 0, 0, 0)
+                request = mav.command_long_encode(
+                    0,
+                    0,
+                    mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                    0,
+                    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+                    interval_us,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                )
                 sock.sendto(request.pack(mav), ("127.0.0.1", vehicle_port))
             try:
                 data, ancillary, _, _ = sock.recvmsg(65535, 64)
-            except socket.timeout:
+            except TimeoutError:
                 continue
             wall_s = _kernel_time_s(ancillary)
             for msg in mav.parse_buffer(data) or []:
                 if msg.get_type() == "LOCAL_POSITION_NED":
-                    out.write(json.dumps({"wall_s": wall_s, "boot_ms": msg.time_boot_ms,
-                                          "pos": [msg.x, msg.y, msg.z]}) + "\n")
+                    out.write(
+                        json.dumps({"wall_s": wall_s, "boot_ms": msg.time_boot_ms, "pos": [msg.x, msg.y, msg.z]}) + "\n"
+                    )
                     out.flush()
 
 
@@ -111,7 +122,7 @@ def _kernel_time_s(ancillary) -> float:
     """SO_TIMESTAMP's arrival time (struct timeval, wall clock), else now."""
     for level, kind, data in ancillary:
         if level == socket.SOL_SOCKET and kind == SO_TIMESTAMP:
-            sec, usec = struct.unpack("@ll", data[:struct.calcsize("@ll")])
+            sec, usec = struct.unpack("@ll", data[: struct.calcsize("@ll")])
             return sec + usec * 1e-6
     return time.time()
 
@@ -123,14 +134,14 @@ async def view(port: int, out_path: Path, seconds: float) -> None:
 
     ws = await _connect(f"ws://127.0.0.1:{port}", seconds)
     channels: dict[int, dict] = {}
-    subscribed: dict[int, int] = {}                     # subscription id -> channel id
+    subscribed: dict[int, int] = {}  # subscription id -> channel id
     end = time.monotonic() + seconds
     with open(out_path, "w") as out:
         async with ws:
             while time.monotonic() < end:
                 try:
                     frame = await asyncio.wait_for(ws.recv(), 0.5)
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     continue
                 except websockets.ConnectionClosed:
                     return
@@ -184,8 +195,12 @@ def _write_data(frame: bytes, wall_s: float, channels: dict, subscribed: dict, o
     channel = channels.get(subscribed.get(sid))
     if channel is None:
         return
-    out.write(json.dumps({"wall_s": wall_s, "topic": channel["topic"], "log_time_ns": log_time_ns,
-                          "data": json.loads(frame[13:])}) + "\n")
+    out.write(
+        json.dumps(
+            {"wall_s": wall_s, "topic": channel["topic"], "log_time_ns": log_time_ns, "data": json.loads(frame[13:])}
+        )
+        + "\n"
+    )
     out.flush()
 
 
@@ -214,16 +229,45 @@ def fly(speedup: float, mission: Path, work: Path, timeout_s: float) -> tuple[Pa
     fox_port = free_port(socket.SOCK_STREAM)
     me = [sys.executable, str(Path(__file__).resolve())]
     listened, viewed = work / "listener.jsonl", work / "viewer.jsonl"
-    vehicle = _spawn([sys.executable, "-m", "sim_vehicle.cli", "--port", str(vehicle_port),
-                      "--out", f"127.0.0.1:{companion_port}", "--out", f"127.0.0.1:{listen_port}",
-                      "--speedup", str(speedup), "-q"], work / "sim_vehicle.log")
-    listener = _spawn([*me, "listen", str(listen_port), str(vehicle_port), str(speedup), str(listened)],
-                      work / "listener.log")
+    vehicle = _spawn(
+        [
+            sys.executable,
+            "-m",
+            "sim_vehicle.cli",
+            "--port",
+            str(vehicle_port),
+            "--out",
+            f"127.0.0.1:{companion_port}",
+            "--out",
+            f"127.0.0.1:{listen_port}",
+            "--speedup",
+            str(speedup),
+            "-q",
+        ],
+        work / "sim_vehicle.log",
+    )
+    listener = _spawn(
+        [*me, "listen", str(listen_port), str(vehicle_port), str(speedup), str(listened)], work / "listener.log"
+    )
     viewer = _spawn([*me, "view", str(fox_port), str(viewed), str(timeout_s)], work / "viewer.log")
-    companion = _spawn([sys.executable, "-m", "companion.cli", "run", "--connect",
-                        f"udpin://127.0.0.1:{companion_port}", "--no-zenoh", "--foxglove",
-                        f"127.0.0.1:{fox_port}", "--mission", str(mission), "--record", str(work / "flight.jsonl")],
-                       work / "companion.log")
+    companion = _spawn(
+        [
+            sys.executable,
+            "-m",
+            "companion.cli",
+            "run",
+            "--connect",
+            f"udpin://127.0.0.1:{companion_port}",
+            "--no-zenoh",
+            "--foxglove",
+            f"127.0.0.1:{fox_port}",
+            "--mission",
+            str(mission),
+            "--record",
+            str(work / "flight.jsonl"),
+        ],
+        work / "companion.log",
+    )
     try:
         code = companion.wait(timeout_s)
     except subprocess.TimeoutExpired:
@@ -243,7 +287,7 @@ def _load_jsonl(path: Path) -> list[dict]:
     for line in path.read_text().splitlines():
         try:
             lines.append(json.loads(line))
-        except json.JSONDecodeError:                  # the last line, cut by the stop
+        except json.JSONDecodeError:  # the last line, cut by the stop
             pass
     return lines
 
@@ -255,7 +299,11 @@ def _track(listened: list[dict]) -> dict[str, np.ndarray]:
     pos = np.array([r["pos"] for r in rows])
     boot = np.array([r["boot_ms"] for r in rows], dtype=float)
     dt = np.gradient(wall) if len(wall) > 1 else np.ones(len(wall))
-    speed = np.linalg.norm(np.gradient(pos, axis=0), axis=1) / np.maximum(dt, 1e-6) if len(wall) > 1 else np.zeros(len(wall))
+    speed = (
+        np.linalg.norm(np.gradient(pos, axis=0), axis=1) / np.maximum(dt, 1e-6)
+        if len(wall) > 1
+        else np.zeros(len(wall))
+    )
     return {"wall": wall, "boot": boot, "pos": pos, "speed_wall": speed}
 
 
@@ -280,7 +328,7 @@ def lag_by_stamp(track: dict, samples: list[dict]) -> tuple[list[float], list[fl
 
 def _closest_time(track: dict, pos: np.ndarray, lo: int, hi: int) -> tuple[float, float]:
     """(wall time, distance) of the point of the track's segments ``lo..hi`` closest to ``pos``."""
-    a, b = track["pos"][lo:hi - 1], track["pos"][lo + 1:hi]
+    a, b = track["pos"][lo : hi - 1], track["pos"][lo + 1 : hi]
     ab = b - a
     u = np.clip(np.einsum("ij,ij->i", pos - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0.0, 1.0)
     d = np.linalg.norm(a + u[:, None] * ab - pos, axis=1)
@@ -292,7 +340,7 @@ def _closest_time(track: dict, pos: np.ndarray, lo: int, hi: int) -> tuple[float
 def lag_by_position(track: dict, samples: list[dict]) -> tuple[list[float], list[float]]:
     """(lag s, position error m) of the samples taken while the vehicle moves (see the module docstring)."""
     lags, errors = [], []
-    fast_m_s = MOVING_M_S * _speedup_of(track)          # m per wall-clock second
+    fast_m_s = MOVING_M_S * _speedup_of(track)  # m per wall-clock second
     for s in samples:
         pos = s["data"].get("pos_ned_m")
         if pos is None:
@@ -317,8 +365,12 @@ def _stats(values: list[float], scale: float = 1.0, digits: int = 1) -> dict:
     if not values:
         return {"n": 0}
     v = np.asarray(values) * scale
-    return {"n": len(v), "p50": round(float(np.percentile(v, 50)), digits),
-            "p95": round(float(np.percentile(v, 95)), digits), "max": round(float(v.max()), digits)}
+    return {
+        "n": len(v),
+        "p50": round(float(np.percentile(v, 50)), digits),
+        "p95": round(float(np.percentile(v, 95)), digits),
+        "max": round(float(v.max()), digits),
+    }
 
 
 def setpoint_jitter(record: Path) -> dict:
@@ -341,8 +393,7 @@ def analyse(listened: Path, viewed: Path) -> dict:
         if not samples:
             continue
         walls = np.array([s["wall_s"] for s in samples])
-        entry = {"samples": len(samples),
-                 "rate_hz": round((len(walls) - 1) / max(walls[-1] - walls[0], 1e-9), 1)}
+        entry = {"samples": len(samples), "rate_hz": round((len(walls) - 1) / max(walls[-1] - walls[0], 1e-9), 1)}
         for method, match in (("stamp", lag_by_stamp), ("position", lag_by_position)):
             lags, errors = match(track, samples)
             if lags:
@@ -354,8 +405,10 @@ def analyse(listened: Path, viewed: Path) -> dict:
 # ---------------------------------------------------------------------- the report
 def _row(speedup: float, topic: str, method: str, figures: dict) -> str:
     lag, err = figures["lag_ms"], figures["position_error_m"]
-    return (f"| {speedup:g}x | `{topic}` | {method} | {lag['n']} | {lag['p50']} | {lag['p95']} | {lag['max']} "
-            f"| {err['p50']} | {err['p95']} |")
+    return (
+        f"| {speedup:g}x | `{topic}` | {method} | {lag['n']} | {lag['p50']} | {lag['p95']} | {lag['max']} "
+        f"| {err['p50']} | {err['p95']} |"
+    )
 
 
 def markdown(report: dict) -> str:
@@ -384,11 +437,16 @@ def markdown(report: dict) -> str:
     for run in report["runs"]:
         rates = ", ".join(f"`{t}` {run[t]['rate_hz']}" for t in TOPICS if t in run)
         jitter = run.get("setpoint_jitter_ms") or {}
-        stream = (f"; the 50 Hz setpoint stream |period - 20 ms| p50 {jitter['p50_ms']:.3f} ms, p99 "
-                  f"{jitter['p99_ms']:.3f} ms, max {jitter['max_ms']:.3f} ms, {jitter['missed']} missed"
-                  if jitter else "")
-        lines.append(f"- {run['speedup']:g}x (measured {run['speedup_measured']}x): {rates}; "
-                     f"companion exit {run['companion_exit']}{stream}")
+        stream = (
+            f"; the 50 Hz setpoint stream |period - 20 ms| p50 {jitter['p50_ms']:.3f} ms, p99 "
+            f"{jitter['p99_ms']:.3f} ms, max {jitter['max_ms']:.3f} ms, {jitter['missed']} missed"
+            if jitter
+            else ""
+        )
+        lines.append(
+            f"- {run['speedup']:g}x (measured {run['speedup_measured']}x): {rates}; "
+            f"companion exit {run['companion_exit']}{stream}"
+        )
     if report.get("note"):
         lines += ["", report["note"]]
     return "\n".join(lines) + "\n"
@@ -396,8 +454,9 @@ def markdown(report: dict) -> str:
 
 def _commit() -> str:
     try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,
-                              text=True, check=True).stdout.strip()
+        return subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
 
@@ -424,13 +483,23 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.quick:
         args.speedups = [8.0]
-    report = {"date": datetime.date.today().isoformat(), "commit": _commit(),
-              "mission": str(args.mission.resolve().relative_to(REPO)) if args.mission.resolve().is_relative_to(REPO)
-              else str(args.mission), "runs": [], "note": args.note}
+    report = {
+        "date": datetime.date.today().isoformat(),
+        "commit": _commit(),
+        "mission": str(args.mission.resolve().relative_to(REPO))
+        if args.mission.resolve().is_relative_to(REPO)
+        else str(args.mission),
+        "runs": [],
+        "note": args.note,
+    }
     for speedup in args.speedups:
         listened, viewed, code = fly(speedup, args.mission, args.work / f"x{speedup:g}", args.timeout_s)
-        run = {"speedup": speedup, "companion_exit": code, **analyse(listened, viewed),
-               "setpoint_jitter_ms": setpoint_jitter(listened.parent / "flight.jsonl")}
+        run = {
+            "speedup": speedup,
+            "companion_exit": code,
+            **analyse(listened, viewed),
+            "setpoint_jitter_ms": setpoint_jitter(listened.parent / "flight.jsonl"),
+        }
         log.info("%gx: %s", speedup, json.dumps(run))
         report["runs"].append(run)
     args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -50,8 +50,7 @@ def make_world(name: str, seed: int) -> BenchWorld:
     while len(centers) < spec.n_obstacles:
         c = rs.uniform(0.0, 100.0, spec.dim)
         r = rs.uniform(spec.r_min_m, spec.r_max_m)
-        if (np.linalg.norm(c - start) - r < CLEARANCE_TO_ENDS_M
-                or np.linalg.norm(c - goal) - r < CLEARANCE_TO_ENDS_M):
+        if np.linalg.norm(c - start) - r < CLEARANCE_TO_ENDS_M or np.linalg.norm(c - goal) - r < CLEARANCE_TO_ENDS_M:
             continue
         centers.append(c)
         radii.append(r)

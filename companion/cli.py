@@ -20,8 +20,19 @@ from companion.extras import MissingExtra
 from companion.geo import GeoError
 from heli_common.cli_args import ArgumentParser
 
-COMMAND_MODULES = ("run", "serve", "mission_io", "plan", "threat", "keys", "router", "report", "demo", "fleet",
-                   "campaign")
+COMMAND_MODULES = (
+    "run",
+    "serve",
+    "mission_io",
+    "plan",
+    "threat",
+    "keys",
+    "router",
+    "report",
+    "demo",
+    "fleet",
+    "campaign",
+)
 
 log = logging.getLogger(__name__)
 
@@ -55,8 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def configure_logging(verbosity: int) -> None:
     level = logging.WARNING - 10 * verbosity if verbosity < 3 else logging.DEBUG
-    logging.basicConfig(level=max(level, logging.DEBUG),
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(level=max(level, logging.DEBUG), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -65,10 +75,10 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(args.verbose + 1)
     try:
         return int(args.func(args) or 0)
-    except MissingExtra as exc:         # an optional package: one line naming its extra
+    except MissingExtra as exc:  # an optional package: one line naming its extra
         print(f"companion {args.command}: {exc}", file=sys.stderr)
         return 2
-    except (CompanionError, GeoError) as exc:   # GeoError: heli_common's, a ValueError
+    except (CompanionError, GeoError) as exc:  # GeoError: heli_common's, a ValueError
         print(f"companion: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

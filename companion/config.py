@@ -36,14 +36,14 @@ from typing import Literal
 from companion.errors import ConfigError
 from companion.fleet.settings import FleetSettings
 from companion.flight.plan import FlightPlanSettings
-from companion.service.startup import StartupSettings
 from companion.link.streams import StreamSettings
 from companion.mission.convert import ConversionSettings
 from companion.planning import GartSettings
+from companion.service.startup import StartupSettings
 from companion.smoothing import FeasibilitySettings, SmoothingSettings
 from companion.threats.alerts import AlertSettings
-from companion.threats.transport.adsb import AdsbSettings
 from companion.threats.settings import ThreatSettings, ZenohSettings
+from companion.threats.transport.adsb import AdsbSettings
 from companion.view.sinks import parse_foxglove_address
 from heli_common.typed_config import from_dict, load_toml, require_numbers
 
@@ -102,9 +102,20 @@ class LinkSettings:
     tlog_file: str = ""
 
     def __post_init__(self) -> None:
-        require_numbers(ConfigError, "link", self, positive=(
-            "connect_timeout_s", "setpoint_rate_hz", "leg_timeout_margin_s", "record_rate_hz",
-            "status_rate_hz", "origin_timeout_s") + (() if self.time_scale is None else ("time_scale",)))
+        require_numbers(
+            ConfigError,
+            "link",
+            self,
+            positive=(
+                "connect_timeout_s",
+                "setpoint_rate_hz",
+                "leg_timeout_margin_s",
+                "record_rate_hz",
+                "status_rate_hz",
+                "origin_timeout_s",
+            )
+            + (() if self.time_scale is None else ("time_scale",)),
+        )
         if self.setpoint_rate_hz > 200:
             raise ConfigError(f"link.setpoint_rate_hz: at most 200, got {self.setpoint_rate_hz}")
 
@@ -238,7 +249,7 @@ def _toml_value(value) -> str:
     if isinstance(value, (int, float)):
         return repr(value)
     if isinstance(value, str):
-        return json.dumps(value)                  # a JSON string is a valid TOML basic string
+        return json.dumps(value)  # a JSON string is a valid TOML basic string
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     raise TypeError(f"no TOML form for {value!r}")

@@ -100,16 +100,28 @@ GIL_SWITCH_INTERVAL_S = 0.0005
 SEND_AT_SLACK_S = 0.0005
 
 
-__all__ = ["CompanionDaemon", "FlightAborted", "FlightSummary", "feasibility_totals", "make_checker",
-           "GUIDED", "ZENOH_WATCH_PERIOD_S"]
+__all__ = [
+    "CompanionDaemon",
+    "FlightAborted",
+    "FlightSummary",
+    "feasibility_totals",
+    "make_checker",
+    "GUIDED",
+    "ZENOH_WATCH_PERIOD_S",
+]
 
 
 def companion_link(settings: Settings, onboard=None) -> VehicleLink:
     """The companion's link to its vehicle, as ``settings.link`` and ``settings.adsb`` say (not
     connected yet); ``onboard``: speak as the companion component too (``companion serve``)."""
-    return VehicleLink("companion", streams=settings.link.streams, adsb=settings.adsb.enabled,
-                       signing_key=SigningKey.from_file(settings.link.signing_key_file),
-                       tlog_path=settings.link.tlog_file or None, onboard=onboard)
+    return VehicleLink(
+        "companion",
+        streams=settings.link.streams,
+        adsb=settings.adsb.enabled,
+        signing_key=SigningKey.from_file(settings.link.signing_key_file),
+        tlog_path=settings.link.tlog_file or None,
+        onboard=onboard,
+    )
 
 
 class LinkVehicle:
@@ -121,8 +133,14 @@ class LinkVehicle:
     def view(self) -> VehicleView:
         tele = self.link.telemetry
         att = tele.attitude_rad
-        return VehicleView(tele.connected, tele.armed, None if tele.mode is None else tele.mode == GUIDED,
-                           tele.mode_name, tele.pos_ned_m, float(att[2]) if att is not None else 0.0)
+        return VehicleView(
+            tele.connected,
+            tele.armed,
+            None if tele.mode is None else tele.mode == GUIDED,
+            tele.mode_name,
+            tele.pos_ned_m,
+            float(att[2]) if att is not None else 0.0,
+        )
 
 
 class CompanionDaemon:
@@ -159,9 +177,19 @@ class CompanionDaemon:
         ``view.foxglove``, a view of its own from the start of ``run`` to its end.
     """
 
-    def __init__(self, settings: Settings, *, mission_path=None, world_path=None,
-                 record_path=None, resume: bool = False, workers: str = "process",
-                 link: VehicleLink | None = None, bus=None, live=None):
+    def __init__(
+        self,
+        settings: Settings,
+        *,
+        mission_path=None,
+        world_path=None,
+        record_path=None,
+        resume: bool = False,
+        workers: str = "process",
+        link: VehicleLink | None = None,
+        bus=None,
+        live=None,
+    ):
         if resume and mission_path is not None:
             raise MissionError("--resume flies the mission stored on the vehicle: leave out --mission")
         self.settings = settings
@@ -175,16 +203,17 @@ class CompanionDaemon:
         self.bus = bus
         self.live = live
         self._owns_live = False
-        self.clock = VehicleClock(settings.link.time_scale or 1.0)   # the vehicle's, once connected
-        self.owner = ReferenceOwner(self.clock, turn_rate_rad_s=settings.flight.turn_rate_rad_s,
-                                    yaw_now_rad=self._current_yaw)
+        self.clock = VehicleClock(settings.link.time_scale or 1.0)  # the vehicle's, once connected
+        self.owner = ReferenceOwner(
+            self.clock, turn_rate_rad_s=settings.flight.turn_rate_rad_s, yaw_now_rad=self._current_yaw
+        )
         self.summary = FlightSummary()
         self.workers = PlanningWorkers(workers)
         self.recorder: RecordSinks | None = None
         self.sink = DaemonSink(self)
         self.home_lla: tuple | None = None
         self.mission: MissionService | None = None
-        self.threats: ThreatReactor | None = None      # when zenoh is enabled
+        self.threats: ThreatReactor | None = None  # when zenoh is enabled
         self.watchers: TelemetryWatchers | None = None
         self.streamer: SetpointStreamer | None = None
         self.driver: PeriodicDriver | None = None
@@ -201,17 +230,22 @@ class CompanionDaemon:
         """The record's sinks: ``--record`` (MCAP or JSON Lines) and the live Foxglove view
         (its own, fed from the link's telemetry, unless it was given one)."""
         s = self.settings
-        with normal_priority():              # the live server's threads never at the stream's priority
+        with normal_priority():  # the live server's threads never at the stream's priority
             if self.live is None and s.view.foxglove:
                 from companion.extras import require
 
                 require("view", "foxglove")
-                from companion.view.live import LiveView              # foxglove-sdk only when used
+                from companion.view.live import LiveView  # foxglove-sdk only when used
 
                 self.live = LiveView(self.link, *parse_foxglove_address(s.view.foxglove, "view.foxglove"))
                 self._owns_live = True
-            return open_record_sinks(self.record_path, None, s.threats.horizon_s, s.threats.uncertainty_m_s,
-                                     live=self.live.server if self.live is not None else None)
+            return open_record_sinks(
+                self.record_path,
+                None,
+                s.threats.horizon_s,
+                s.threats.uncertainty_m_s,
+                live=self.live.server if self.live is not None else None,
+            )
 
     def status(self) -> dict:
         """The status message of ``uav/<sysid>/status``."""
@@ -219,13 +253,20 @@ class CompanionDaemon:
         ref = self.owner.current
         errors = self.watchers.errors_m if self.watchers is not None else []
         legs = self.mission.legs if self.mission is not None else []
-        return {"t_s": round(self.clock.now_s(), 3), "sysid": self.settings.zenoh.sysid,
-                "home_lla": self.home_lla, "mode": tele.mode_name, "armed": tele.armed,
-                "leg": self.leg_index, "legs": len(legs),
-                "path_id": ref.path_id if ref else None,
-                "pos_ned_m": None if tele.pos_ned_m is None else [round(float(v), 3) for v in tele.pos_ned_m],
-                "tracking_error_m": round(errors[-1], 3) if errors else None,
-                "link": tele.connected, "outcome": self.summary.outcome}
+        return {
+            "t_s": round(self.clock.now_s(), 3),
+            "sysid": self.settings.zenoh.sysid,
+            "home_lla": self.home_lla,
+            "mode": tele.mode_name,
+            "armed": tele.armed,
+            "leg": self.leg_index,
+            "legs": len(legs),
+            "path_id": ref.path_id if ref else None,
+            "pos_ned_m": None if tele.pos_ned_m is None else [round(float(v), 3) for v in tele.pos_ned_m],
+            "tracking_error_m": round(errors[-1], 3) if errors else None,
+            "link": tele.connected,
+            "outcome": self.summary.outcome,
+        }
 
     @property
     def leg_index(self) -> int:
@@ -268,7 +309,7 @@ class CompanionDaemon:
         self._workers_ready = self.workers.start()
         self.recorder = self._open_record()
         if self.owns_link:
-            raise_stream_priority()          # before connect: MAVSDK's threads inherit it
+            raise_stream_priority()  # before connect: MAVSDK's threads inherit it
             await self.link.connect(s.link.connect, s.link.connect_timeout_s)
         try:
             await self._take_time_scale()
@@ -298,8 +339,11 @@ class CompanionDaemon:
         if scale is None:
             got = await self.link.commands.read_params(["SIM_SPEEDUP"], timeout_s=self.settings.startup.param_timeout_s)
             value = got.get("SIM_SPEEDUP", math.nan)
-            scale, source = ((value, "the vehicle's SIM_SPEEDUP") if math.isfinite(value) and value > 0
-                             else (1.0, "real time: the vehicle has no SIM_SPEEDUP"))
+            scale, source = (
+                (value, "the vehicle's SIM_SPEEDUP")
+                if math.isfinite(value) and value > 0
+                else (1.0, "real time: the vehicle has no SIM_SPEEDUP")
+            )
         self.settings = dataclasses.replace(self.settings, link=dataclasses.replace(link, time_scale=float(scale)))
         self.clock.scale = float(scale)
         log.info("time scale %g (%s)", scale, source)
@@ -320,12 +364,25 @@ class CompanionDaemon:
         await self.link.waits.wait_origin(s.link.origin_timeout_s)
         frames = self.link.set_planning_home(home)
         self.home_lla = home
-        self.sink.event("frames", home_lla=home, ekf_origin_lla=frames.origin_lla,
-                        home_in_origin_ned_m=np.round(frames.home_in_origin_ned_m, 3))
-        self.mission = MissionService(s, link=self.link, sink=self.sink, workers=self.workers,
-                                      workers_ready=self._workers_ready, summary=self.summary, clock=self.clock,
-                                      mission_path=self.mission_path, world_path=self.world_path,
-                                      resume=self.resume, rng=self.rng)
+        self.sink.event(
+            "frames",
+            home_lla=home,
+            ekf_origin_lla=frames.origin_lla,
+            home_in_origin_ned_m=np.round(frames.home_in_origin_ned_m, 3),
+        )
+        self.mission = MissionService(
+            s,
+            link=self.link,
+            sink=self.sink,
+            workers=self.workers,
+            workers_ready=self._workers_ready,
+            summary=self.summary,
+            clock=self.clock,
+            mission_path=self.mission_path,
+            world_path=self.world_path,
+            resume=self.resume,
+            rng=self.rng,
+        )
         previous = await self._plan(home)
         if s.zenoh.enabled:
             await self._start_threats(home)
@@ -334,7 +391,7 @@ class CompanionDaemon:
         if self.resume:
             restore_threats(self)
         elif self.snapshots is not None:
-            self.threats.table_changed()       # a new flight: the previous flight's threats go
+            self.threats.table_changed()  # a new flight: the previous flight's threats go
         self.summary.outcome = "flying"
         try:
             await self.mission.start_or_join(self.takeoff_alt_m)
@@ -350,24 +407,30 @@ class CompanionDaemon:
     async def _plan(self, home):
         """Take and plan the mission (upload it when it came from a file); returns the
         vehicle's previous lists (None when the vehicle's own mission is flown)."""
-        tele = self.link.telemetry                   # positions about home from here on
+        tele = self.link.telemetry  # positions about home from here on
         current_seq = await self.mission.resume_point() if self.resume else None
         plan = await self.mission.take_mission()
         self.takeoff_alt_m = await self.mission.plan_flight(plan, home, tele, current_seq)
         if self.mission_path is None:
             return None
-        previous = await self.link.missions.download_plan()       # planned: every item is reachable
+        previous = await self.link.missions.download_plan()  # planned: every item is reachable
         await self.link.missions.upload_plan(plan)
         self.sink.event("mission_uploaded", file=str(self.mission_path), items=len(plan.items))
         return previous
 
     async def _start_threats(self, home) -> None:
-        self.threats = ThreatReactor(self.settings, clock_now_s=self.clock.now_s, record=self.sink.record,
-                                     statustext=self.send_statustext, bus=self.bus,
-                                     keep_bus_open=self.bus is not None)
-        with normal_priority():          # zenoh's threads never at the stream's priority
-            await self.threats.start(home, reference=lambda: self.owner.current,
-                                     position_ned_m=lambda: self.link.telemetry.pos_ned_m)
+        self.threats = ThreatReactor(
+            self.settings,
+            clock_now_s=self.clock.now_s,
+            record=self.sink.record,
+            statustext=self.send_statustext,
+            bus=self.bus,
+            keep_bus_open=self.bus is not None,
+        )
+        with normal_priority():  # zenoh's threads never at the stream's priority
+            await self.threats.start(
+                home, reference=lambda: self.owner.current, position_ned_m=lambda: self.link.telemetry.pos_ned_m
+            )
         self.owner.listen(lambda ref: self.threats.fleet_publish())
         self.snapshots = open_snapshots(self.settings, self.threats, home)
 
@@ -375,9 +438,15 @@ class CompanionDaemon:
         s = self.settings
         if s.adsb.enabled and self.threats is None:
             log.warning("ADS-B traffic is ignored: threats need zenoh (zenoh.enabled)")
-        self.watchers = TelemetryWatchers(self.link, self.clock, self.owner, reactor=self.threats,
-                                          adsb_settings=s.adsb if s.adsb.enabled else None,
-                                          home_lla=home, now_s=self.clock.now_s)
+        self.watchers = TelemetryWatchers(
+            self.link,
+            self.clock,
+            self.owner,
+            reactor=self.threats,
+            adsb_settings=s.adsb if s.adsb.enabled else None,
+            home_lla=home,
+            now_s=self.clock.now_s,
+        )
         self.watchers.start()
         self._stop_link_listener = self.link.on_link_change(self._on_link_change)
 
@@ -397,46 +466,79 @@ class CompanionDaemon:
             policy = DecisionPolicy.from_settings(s)
             f = s.flight
             avoidance = Avoidance(
-                policy=policy, state=DecisionState.initial(policy, int(self.rng.integers(2**31))),
-                owner=self.owner, threats=self.threats, jobs=jobs, sink=self.sink, now_s=self.clock.now_s,
-                monotonic_s=time.monotonic, send_now=self.streamer.send_now, send_at=self._send_at,
+                policy=policy,
+                state=DecisionState.initial(policy, int(self.rng.integers(2**31))),
+                owner=self.owner,
+                threats=self.threats,
+                jobs=jobs,
+                sink=self.sink,
+                now_s=self.clock.now_s,
+                monotonic_s=time.monotonic,
+                send_now=self.streamer.send_now,
+                send_at=self._send_at,
                 position_ned_m=lambda: self.link.telemetry.pos_ned_m,
                 alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s, f.alternatives_lead_s),
-                commit_gate=self.threats.commit_gate(loop), alerts=s.alerts)
+                commit_gate=self.threats.commit_gate(loop),
+                alerts=s.alerts,
+            )
             self.threats.on_change = avoidance.on_threats_changed
         mission = self.mission
         executor = FlightExecutor(
-            mission.legs, owner=self.owner, vehicle=LinkVehicle(self.link), jobs=jobs, sink=self.sink,
-            stream=self.streamer.tick, now_s=self.clock.now_s, clock_s=time.monotonic,
-            setpoint_rate_hz=s.link.setpoint_rate_hz, timeout_margin_s=s.link.leg_timeout_margin_s,
+            mission.legs,
+            owner=self.owner,
+            vehicle=LinkVehicle(self.link),
+            jobs=jobs,
+            sink=self.sink,
+            stream=self.streamer.tick,
+            now_s=self.clock.now_s,
+            clock_s=time.monotonic,
+            setpoint_rate_hz=s.link.setpoint_rate_hz,
+            timeout_margin_s=s.link.leg_timeout_margin_s,
             replanner=LegReplanner.in_world(mission.local_mission.world, mission.pipeline(), s.flight),
             avoidance=avoidance,
             alternatives_rate_hz=s.link.time_scale / s.flight.alternatives_period_s,
-            alerts_rate_hz=s.link.time_scale * s.alerts.rate_hz, leg_started=self._leg_started, seed=int(self.rng.integers(2**31)),
-            slack_s=0.5 / s.link.setpoint_rate_hz)
-        tasks = DaemonTasks(s, link=self.link, owner=self.owner, watchers=self.watchers, summary=self.summary,
-                            sink=self.sink, status=self.status, reactor=self.threats, recorder=self.recorder,
-                            leg_index=lambda: self.leg_index)
+            alerts_rate_hz=s.link.time_scale * s.alerts.rate_hz,
+            leg_started=self._leg_started,
+            seed=int(self.rng.integers(2**31)),
+            slack_s=0.5 / s.link.setpoint_rate_hz,
+        )
+        tasks = DaemonTasks(
+            s,
+            link=self.link,
+            owner=self.owner,
+            watchers=self.watchers,
+            summary=self.summary,
+            sink=self.sink,
+            status=self.status,
+            reactor=self.threats,
+            recorder=self.recorder,
+            leg_index=lambda: self.leg_index,
+        )
         for row in tasks.rows():
             executor.schedule.add(row)
         return executor
 
     def _leg_started(self, leg) -> None:
         """A leg starts: its goal becomes the vehicle's current mission item (in the background)."""
-        self._tasks.append(asyncio.get_running_loop().create_task(
-            self.mission.set_mission_current(leg.waypoint.seq), name="set-mission-current"))
+        self._tasks.append(
+            asyncio.get_running_loop().create_task(
+                self.mission.set_mission_current(leg.waypoint.seq), name="set-mission-current"
+            )
+        )
 
     async def _fly_legs(self) -> None:
         """Stream and fly every leg on the executor's schedule, then hover where it ends."""
         s = self.settings
-        self.streamer = SetpointStreamer(self.link.direct.send_setpoint, self.owner.setpoint_at,
-                                         rate_hz=s.link.setpoint_rate_hz)
+        self.streamer = SetpointStreamer(
+            self.link.direct.send_setpoint, self.owner.setpoint_at, rate_hz=s.link.setpoint_rate_hz
+        )
         self.executor = self._build_executor()
         self.driver = PeriodicDriver(s.link.setpoint_rate_hz, self.executor.tick)
-        self.hold_here(self.link.telemetry.pos_ned_m,
-                       "joined in the air" if self.summary.joined else "takeoff complete")
-        self.recorder.pace(True)                                  # the record is written between sends
-        self.link.inbound.batch_reads(self.driver)                # telemetry taken at the schedule's ticks
+        self.hold_here(
+            self.link.telemetry.pos_ned_m, "joined in the air" if self.summary.joined else "takeoff complete"
+        )
+        self.recorder.pace(True)  # the record is written between sends
+        self.link.inbound.batch_reads(self.driver)  # telemetry taken at the schedule's ticks
         self.driver.start()
         self.executor.start()
         await self.driver.until(lambda: self.executor.done)
@@ -506,8 +608,14 @@ class CompanionDaemon:
             self.summary.decisions = self.threats.rejected + (avoidance.decisions if avoidance else 0)
         if avoidance is not None:
             self.summary.latency_ms = {
-                kind: {"n": len(v), "p50": float(np.percentile(v, 50)), "p99": float(np.percentile(v, 99)),
-                       "max": float(np.max(v))} for kind, v in avoidance.latencies_ms.items()}
+                kind: {
+                    "n": len(v),
+                    "p50": float(np.percentile(v, 50)),
+                    "p99": float(np.percentile(v, 99)),
+                    "max": float(np.max(v)),
+                }
+                for kind, v in avoidance.latencies_ms.items()
+            }
         errors = self.watchers.errors_m if self.watchers is not None else []
         if errors:
             err = np.asarray(errors)

@@ -108,11 +108,19 @@ class Injection:
 #: The demo's threats on ``exclusion_zones.plan``: a threat coming head-on along leg 1 at
 #: 3 m/s (an evasion: no retiming or path helps against it), a pop-up on leg 3 once its M-GART
 #: alternatives are ready (a switch), an invalid payload (rejected).
-DEMO_HEAD_ON = Injection("mover1", "moving", leg=1, after_s=2.0, ahead_s=5.0, radius_m=3.0,
-                         speed_m_s=3.0, heading="head_on")
+DEMO_HEAD_ON = Injection(
+    "mover1", "moving", leg=1, after_s=2.0, ahead_s=5.0, radius_m=3.0, speed_m_s=3.0, heading="head_on"
+)
 DEMO_POPUP = Injection("popup1", "popup", leg=3, after_s=4.0, ahead_s=5.0, radius_m=5.0)
-DEMO_INVALID = Injection("broken", "popup", leg=3, after_s=3.0, ahead_s=0.0, radius_m=1.0,
-                         raw_payload=b'{"v": 1, "id": "broken", "kind": "popup"}')
+DEMO_INVALID = Injection(
+    "broken",
+    "popup",
+    leg=3,
+    after_s=3.0,
+    ahead_s=0.0,
+    radius_m=1.0,
+    raw_payload=b'{"v": 1, "id": "broken", "kind": "popup"}',
+)
 DEMO_INJECTIONS = (DEMO_HEAD_ON, DEMO_POPUP, DEMO_INVALID)
 
 
@@ -121,7 +129,7 @@ class FlightWatcher:
 
     def __init__(self, bus: ThreatBus, listener=None):
         self.bus = bus
-        self.listener = listener                 # on_status(msg) / on_event(msg), e.g. FlightProgress
+        self.listener = listener  # on_status(msg) / on_event(msg), e.g. FlightProgress
         self._lock = threading.Lock()
         self.status: dict | None = None
         self.path: dict | None = None
@@ -192,8 +200,15 @@ def place(injection: Injection, watcher: FlightWatcher) -> Threat:
     if injection.frame == "global":
         lat, lon, alt = LocalFrame(*DEMO_HOME).to_lla(*meet)
         position = (float(lat), float(lon), float(alt))
-    return Threat(injection.threat_id, injection.kind, injection.frame, position,
-                  tuple(map(float, velocity)), injection.radius_m, injection.ttl_s)
+    return Threat(
+        injection.threat_id,
+        injection.kind,
+        injection.frame,
+        position,
+        tuple(map(float, velocity)),
+        injection.radius_m,
+        injection.ttl_s,
+    )
 
 
 def inject(watcher: FlightWatcher, injections, timeout_s: float, *, done=None) -> list[Threat]:
@@ -230,9 +245,19 @@ def last_json_line(path: Path) -> dict | None:
     return None
 
 
-def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
-        timeout_s: float = 300.0, gcs_out: str | None = None, extra_args=(), env: dict | None = None,
-        listener=None, record_name: str = "flight.jsonl") -> dict:
+def fly(
+    out_dir: Path,
+    mission: Path,
+    *,
+    speedup: float = 4.0,
+    injections=(),
+    timeout_s: float = 300.0,
+    gcs_out: str | None = None,
+    extra_args=(),
+    env: dict | None = None,
+    listener=None,
+    record_name: str = "flight.jsonl",
+) -> dict:
     """Fly ``mission`` with a fresh ``sim-vehicle`` and ``companion run`` (separate processes).
 
     This process watches the flight over zenoh (telling ``listener`` every status and event
@@ -240,8 +265,9 @@ def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
     are due, then removes them. Returns the companion's summary plus ``events`` (seen on zenoh) and
     ``record`` (the flight record's path).
     """
-    with flight_processes(out_dir, mission, speedup=speedup, gcs_out=gcs_out,
-                          extra_args=extra_args, env=env, record_name=record_name) as flight:
+    with flight_processes(
+        out_dir, mission, speedup=speedup, gcs_out=gcs_out, extra_args=extra_args, env=env, record_name=record_name
+    ) as flight:
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             watcher = FlightWatcher(bus, listener)
             if injections:
@@ -252,16 +278,23 @@ def fly(out_dir: Path, mission: Path, *, speedup: float = 4.0, injections=(),
             flight.companion.wait(timeout_s)
     summary = last_json_line(flight.log)
     if flight.companion.returncode != 0 or summary is None:
-        raise CompanionError(f"the flight of {mission.name} failed (companion exit "
-                             f"{flight.companion.returncode}); see {flight.log}")
+        raise CompanionError(
+            f"the flight of {mission.name} failed (companion exit {flight.companion.returncode}); see {flight.log}"
+        )
     summary["events"] = list(watcher.events)
     summary["record"] = str(flight.record)
     return summary
 
 
-def run_demo(out_dir: Path, *, speedup: float = 4.0, gcs_out: str | None = "127.0.0.1:14550",
-             listener=None) -> dict:
+def run_demo(out_dir: Path, *, speedup: float = 4.0, gcs_out: str | None = "127.0.0.1:14550", listener=None) -> dict:
     """The demo flight: the demo mission (``demo_mission``) with ``DEMO_INJECTIONS``."""
     with demo_mission() as mission:
-        return fly(out_dir, mission, speedup=speedup, injections=DEMO_INJECTIONS, gcs_out=gcs_out,
-                   listener=listener, record_name=DEMO_RECORD)
+        return fly(
+            out_dir,
+            mission,
+            speedup=speedup,
+            injections=DEMO_INJECTIONS,
+            gcs_out=gcs_out,
+            listener=listener,
+            record_name=DEMO_RECORD,
+        )

@@ -31,8 +31,15 @@ __all__ = ["DISTRIBUTION", "EXTRA_PACKAGES", "MissingExtra", "require"]
 DISTRIBUTION = "heli-companion"
 #: Optional top-level module -> the distribution that provides it (each listed in the extras
 #: that :func:`require` names for it; ``tests/unit/test_extras.py`` checks pyproject).
-EXTRA_PACKAGES = {"foxglove": "foxglove-sdk", "mcap": "mcap", "matplotlib": "matplotlib", "rich": "rich",
-                  "cryptography": "cryptography", "pyarrow": "pyarrow", "distributed": "distributed"}
+EXTRA_PACKAGES = {
+    "foxglove": "foxglove-sdk",
+    "mcap": "mcap",
+    "matplotlib": "matplotlib",
+    "rich": "rich",
+    "cryptography": "cryptography",
+    "pyarrow": "pyarrow",
+    "distributed": "distributed",
+}
 
 
 class MissingExtra(CompanionError):

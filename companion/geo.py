@@ -7,7 +7,6 @@ The frame itself is the project's one local-frame conversion, :mod:`heli_common.
 
 from __future__ import annotations
 
-from heli_common.frames import (LAT_LIMIT_DEG, LON_LIMIT_DEG, GeoError, LocalFrame, check_finite,
-                                check_lat_lon)
+from heli_common.frames import LAT_LIMIT_DEG, LON_LIMIT_DEG, GeoError, LocalFrame, check_finite, check_lat_lon
 
 __all__ = ["LAT_LIMIT_DEG", "LON_LIMIT_DEG", "GeoError", "LocalFrame", "check_finite", "check_lat_lon"]

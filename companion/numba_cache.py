@@ -50,7 +50,7 @@ def cache_is_cold(probes: Iterable) -> bool:
     """
     try:
         return any(_index_of(kernel) == {} for kernel in probes)
-    except (AttributeError, OSError, EOFError, ValueError) as exc:   # numba's private cache API
+    except (AttributeError, OSError, EOFError, ValueError) as exc:  # numba's private cache API
         log.debug("numba's cache index not readable (%s): compile not announced", exc)
         return False
 
@@ -80,6 +80,11 @@ def compile_once(what: str, workload: Callable[[], object], probes: Iterable, es
     start = time.perf_counter()
     workload()
     took = time.perf_counter() - start
-    log.log(logging.INFO if cold else logging.DEBUG, "%s %s in %.1f s", what,
-            "compiled" if cold else "loaded from numba's cache", took)
+    log.log(
+        logging.INFO if cold else logging.DEBUG,
+        "%s %s in %.1f s",
+        what,
+        "compiled" if cold else "loaded from numba's cache",
+        took,
+    )
     return took

@@ -55,7 +55,7 @@ class FlightProgress:
         self._last: dict = {}
         self._status: Status | None = None
 
-    def __enter__(self) -> "FlightProgress":
+    def __enter__(self) -> FlightProgress:
         self._status = self.console.status(f"{self.title}: waiting for the companion")
         self._status.start()
         return self
@@ -85,4 +85,4 @@ class FlightProgress:
                 self._print(f"{self.title}: {line}")
 
     def _print(self, text: str) -> None:
-        self.console.print(text, markup=False, highlight=False)     # "[radar1]" is not a style
+        self.console.print(text, markup=False, highlight=False)  # "[radar1]" is not a style

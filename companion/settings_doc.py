@@ -15,14 +15,24 @@ import typing
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-__all__ = ["SettingDoc", "setting_docs", "field_descriptions", "unit_of", "settings_markdown",
-           "reference_markdown"]
+__all__ = ["SettingDoc", "setting_docs", "field_descriptions", "unit_of", "settings_markdown", "reference_markdown"]
 
 #: Name suffix -> unit, longest first.
 UNITS: tuple[tuple[str, str], ...] = (
-    ("_m_s2", "m/s²"), ("_m_s3", "m/s³"), ("_rad_s2", "rad/s²"), ("_rad_s", "rad/s"), ("_m_s", "m/s"),
-    ("_1_m", "1/m"), ("_deg", "deg"), ("_rad", "rad"), ("_hz", "Hz"), ("_ms", "ms"), ("_us", "µs"),
-    ("_m", "m"), ("_s", "s"), ("_pct", "%"),
+    ("_m_s2", "m/s²"),
+    ("_m_s3", "m/s³"),
+    ("_rad_s2", "rad/s²"),
+    ("_rad_s", "rad/s"),
+    ("_m_s", "m/s"),
+    ("_1_m", "1/m"),
+    ("_deg", "deg"),
+    ("_rad", "rad"),
+    ("_hz", "Hz"),
+    ("_ms", "ms"),
+    ("_us", "µs"),
+    ("_m", "m"),
+    ("_s", "s"),
+    ("_pct", "%"),
 )
 _ENTRY = re.compile(r"^(\w+(?:\s*,\s*\w+)*)\s*:\s*(.*)$")
 _SECTIONS = ("Parameters", "Attributes")
@@ -55,7 +65,7 @@ def field_descriptions(cls: type) -> dict[str, str]:
     lines = inspect.cleandoc(cls.__doc__ or "").splitlines()
     out: dict[str, str] = {}
     current: list[str] = []
-    pending = ""                                        # a wrapped ``a, b,`` entry name line
+    pending = ""  # a wrapped ``a, b,`` entry name line
     in_section = False
     for i, line in enumerate(lines):
         nxt = lines[i + 1] if i + 1 < len(lines) else ""
@@ -74,7 +84,7 @@ def field_descriptions(cls: type) -> dict[str, str]:
             out.update({name: "" for name in current})
             pending = ""
         elif line.strip():
-            in_section, current = False, []             # the next section (Raises, Notes ...)
+            in_section, current = False, []  # the next section (Raises, Notes ...)
     return out
 
 
@@ -106,8 +116,9 @@ def setting_docs(cls: type, instance: object | None = None, prefix: str = "") ->
         if dataclasses.is_dataclass(value):
             yield from setting_docs(type(value), value, key + ".")
             continue
-        yield SettingDoc(key, _type_text(hints[f.name]), _default_text(value), unit_of(f.name),
-                         meanings.get(f.name, ""))
+        yield SettingDoc(
+            key, _type_text(hints[f.name]), _default_text(value), unit_of(f.name), meanings.get(f.name, "")
+        )
 
 
 def _cell(text: str) -> str:
@@ -122,10 +133,14 @@ def settings_markdown(cls: type, title: str) -> str:
         top = doc.key.split(".")[0] if "." in doc.key else ""
         if top != section:
             section = top
-            out += ["", f"### `[{top}]`" if top else "### Top level", "",
-                    "| key | type | default | unit | meaning |", "|---|---|---|---|---|"]
-        out.append(f"| `{doc.key}` | {_cell(doc.type)} | `{_cell(doc.default)}` | {doc.unit} | "
-                   f"{_cell(doc.meaning)} |")
+            out += [
+                "",
+                f"### `[{top}]`" if top else "### Top level",
+                "",
+                "| key | type | default | unit | meaning |",
+                "|---|---|---|---|---|",
+            ]
+        out.append(f"| `{doc.key}` | {_cell(doc.type)} | `{_cell(doc.default)}` | {doc.unit} | {_cell(doc.meaning)} |")
     return "\n".join(out) + "\n"
 
 

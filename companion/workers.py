@@ -29,7 +29,7 @@ import multiprocessing.connection
 import os
 import threading
 import time
-from concurrent.futures import Future, Executor, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
 
 from companion.link.setpoints import planning_worker_init, restore_normal_priority
 
@@ -85,7 +85,7 @@ def warm_up() -> float:
     """
     t0 = time.perf_counter()
     for module in ("companion.flight.plan", "companion.threats.decision.step", "companion.smoothing.feasibility"):
-        importlib.import_module(module)      # smoothing and timing; the threat decision and M-GART
+        importlib.import_module(module)  # smoothing and timing; the threat decision and M-GART
     from companion.kernels import ensure_compiled
 
     ensure_compiled()
@@ -118,12 +118,15 @@ class PlanningWorkers:
         if self._executor is None:
             if self.kind == "process":
                 self._executor = ProcessPoolExecutor(
-                    self.workers, mp_context=multiprocessing.get_context("forkserver"),
+                    self.workers,
+                    mp_context=multiprocessing.get_context("forkserver"),
                     initializer=worker_init,
-                    initargs=(WORKER_NICENESS, logging.getLogger().getEffectiveLevel(), _log_format()))
+                    initargs=(WORKER_NICENESS, logging.getLogger().getEffectiveLevel(), _log_format()),
+                )
             else:
-                self._executor = ThreadPoolExecutor(self.workers, thread_name_prefix="planning",
-                                                    initializer=restore_normal_priority)
+                self._executor = ThreadPoolExecutor(
+                    self.workers, thread_name_prefix="planning", initializer=restore_normal_priority
+                )
         return self._executor
 
     def start(self) -> asyncio.Future:
@@ -135,14 +138,19 @@ class PlanningWorkers:
         loop = asyncio.get_running_loop()
         t0 = time.perf_counter()
         if self.kind == "process":
-            announce_if_cold()           # the workers themselves do not (worker_init)
+            announce_if_cold()  # the workers themselves do not (worker_init)
         warming = [loop.run_in_executor(self.executor, warm_up) for _ in range(self.workers)]
 
         async def ready() -> None:
             spent = await asyncio.gather(*warming)
-            log.info("planning workers (%d %s) ready in %.2f s (warm-up %s s)", self.workers,
-                     "processes" if self.kind == "process" else "threads", time.perf_counter() - t0,
-                     ", ".join(f"{s:.2f}" for s in spent))
+            log.info(
+                "planning workers (%d %s) ready in %.2f s (warm-up %s s)",
+                self.workers,
+                "processes" if self.kind == "process" else "threads",
+                time.perf_counter() - t0,
+                ", ".join(f"{s:.2f}" for s in spent),
+            )
+
         return asyncio.ensure_future(ready())
 
     async def run(self, fn, /, *args, **kwargs):

@@ -8,8 +8,7 @@ from __future__ import annotations
 
 from heli_common.mavlink_ids import mavlink
 
-__all__ = ["AUX_FUNCTION_MOTOR_INTERLOCK", "FORCE_DISARM_MAGIC", "SWITCH_LOW", "SWITCH_MIDDLE",
-           "SWITCH_HIGH"]
+__all__ = ["AUX_FUNCTION_MOTOR_INTERLOCK", "FORCE_DISARM_MAGIC", "SWITCH_LOW", "SWITCH_MIDDLE", "SWITCH_HIGH"]
 
 #: ``RC_Channel::AUX_FUNC::MOTOR_INTERLOCK``: the RCx_OPTION / DO_AUX_FUNCTION number.
 AUX_FUNCTION_MOTOR_INTERLOCK = 32

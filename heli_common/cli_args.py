@@ -77,8 +77,7 @@ class ArgumentParser(argparse.ArgumentParser):
         list of str
             e.g. ``["--home", "--origin", "--out", ...]``.
         """
-        return [s for action in self._actions if action.nargs in ONE_VALUE_NARGS
-                for s in action.option_strings]
+        return [s for action in self._actions if action.nargs in ONE_VALUE_NARGS for s in action.option_strings]
 
     def parse_known_args(self, args=None, namespace=None):
         """``argparse.ArgumentParser.parse_known_args`` after :func:`join_negative_values`."""
@@ -127,8 +126,12 @@ class BeforeAction:
     def add_argument(self, *args, **kwargs) -> argparse.Action:
         """``parser.add_argument``, an option of ``nargs`` ``"+"`` or ``"*"`` made repeatable instead."""
         if kwargs.get("nargs") in ("+", "*"):
-            kwargs = {**kwargs, "nargs": 1, "action": "extend",
-                      "help": f"{kwargs.get('help', '')} (before the action: one per option, repeat it)"}
+            kwargs = {
+                **kwargs,
+                "nargs": 1,
+                "action": "extend",
+                "help": f"{kwargs.get('help', '')} (before the action: one per option, repeat it)",
+            }
         return self._parser.add_argument(*args, **kwargs)
 
     def add_mutually_exclusive_group(self, **kwargs) -> BeforeAction:
@@ -136,8 +139,9 @@ class BeforeAction:
         return BeforeAction(self._parser.add_mutually_exclusive_group(**kwargs))
 
 
-def add_shared_options(command: argparse.ArgumentParser, actions: Iterable[argparse.ArgumentParser],
-                       add: Callable[[object], None]) -> None:
+def add_shared_options(
+    command: argparse.ArgumentParser, actions: Iterable[argparse.ArgumentParser], add: Callable[[object], None]
+) -> None:
     """Accept the options ``add`` defines both before and after a command's action.
 
     Parameters

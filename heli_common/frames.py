@@ -51,12 +51,10 @@ def check_lat_lon(lat_deg, lon_deg, *, what: str = "position") -> tuple[np.ndarr
         raise GeoError(f"{what}: longitude is not a finite number")
     bad_lat = np.abs(lat) > LAT_LIMIT_DEG
     if np.any(bad_lat):
-        raise GeoError(f"{what}: latitude {float(lat[bad_lat].flat[0])} deg is out of range "
-                       f"[-90, 90]")
+        raise GeoError(f"{what}: latitude {float(lat[bad_lat].flat[0])} deg is out of range [-90, 90]")
     bad_lon = np.abs(lon) > LON_LIMIT_DEG
     if np.any(bad_lon):
-        raise GeoError(f"{what}: longitude {float(lon[bad_lon].flat[0])} deg is out of range "
-                       f"[-180, 180]")
+        raise GeoError(f"{what}: longitude {float(lon[bad_lon].flat[0])} deg is out of range [-180, 180]")
     return lat, lon
 
 
@@ -115,8 +113,7 @@ class LocalFrame:
         lat, lon = check_lat_lon(lat_deg, lon_deg, what="to_ned")
         alt = check_finite(alt_m, what="to_ned: alt_m")
         n, e, d = pymap3d.geodetic2ned(lat, lon, alt, self.lat0_deg, self.lon0_deg, self.alt0_m)
-        return np.asarray(n, dtype=np.float64), np.asarray(e, dtype=np.float64), \
-            np.asarray(d, dtype=np.float64)
+        return np.asarray(n, dtype=np.float64), np.asarray(e, dtype=np.float64), np.asarray(d, dtype=np.float64)
 
     def to_lla(self, north_m, east_m, down_m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Local NED -> geodetic.
@@ -133,8 +130,7 @@ class LocalFrame:
         e = check_finite(east_m, what="to_lla: east_m")
         d = check_finite(down_m, what="to_lla: down_m")
         lat, lon, alt = pymap3d.ned2geodetic(n, e, d, self.lat0_deg, self.lon0_deg, self.alt0_m)
-        return np.asarray(lat, dtype=np.float64), np.asarray(lon, dtype=np.float64), \
-            np.asarray(alt, dtype=np.float64)
+        return np.asarray(lat, dtype=np.float64), np.asarray(lon, dtype=np.float64), np.asarray(alt, dtype=np.float64)
 
     def to_ned_array(self, lla) -> np.ndarray:
         """Geodetic rows -> NED rows.

@@ -11,7 +11,6 @@ import dataclasses
 from heli_common.mavlink_ids import mavlink
 
 
-
 @dataclasses.dataclass(frozen=True)
 class MissionItemInt:
     """One mission, fence or rally item with the fields of ``MISSION_ITEM_INT``.

@@ -29,7 +29,7 @@ from numba.extending import intrinsic
 
 __all__ = ["libm_pow", "py_square", "py_min", "py_max", "exact_product", "scaled_norm2", "py_hypot"]
 
-_SPLITTER = 134217729.0          # 2**27 + 1: Veltkamp's split of a double into two halves
+_SPLITTER = 134217729.0  # 2**27 + 1: Veltkamp's split of a double into two halves
 _DBL_MIN = 2.2250738585072014e-308
 POW_SYMBOL = "heli_common_libm_pow"
 
@@ -38,10 +38,10 @@ def _libm_pow_address() -> int:
     """Address of the C library's ``pow`` (the one CPython's ``float.__pow__`` calls)."""
     try:
         fn = ctypes.CDLL(None).pow
-    except AttributeError:       # an interpreter that does not export libm's symbols
+    except AttributeError:  # an interpreter that does not export libm's symbols
         fn = ctypes.CDLL(ctypes.util.find_library("m")).pow
     address = ctypes.cast(fn, ctypes.c_void_p).value
-    if address is None:          # a NULL pointer: no symbol to hand LLVM
+    if address is None:  # a NULL pointer: no symbol to hand LLVM
         raise OSError("the C library's pow has no address")
     return address
 
@@ -104,9 +104,9 @@ def scaled_norm2(x0: float, x1: float, largest: float) -> float:
     """Norm of ``(x0, x1)`` (non-negative, finite, largest ``largest`` > 0), CPython's way."""
     _, exponent = math.frexp(largest)
     scale = math.ldexp(1.0, -exponent)
-    total = 1.0      # compensated sum started at 1 (subtracted at the end)
-    frac_sq = 0.0    # low parts of the squares
-    frac_sum = 0.0   # rounding errors of the sum
+    total = 1.0  # compensated sum started at 1 (subtracted at the end)
+    frac_sq = 0.0  # low parts of the squares
+    frac_sum = 0.0  # rounding errors of the sum
     for x in (x0 * scale, x1 * scale):
         sq, sq_lo = exact_product(x, x)
         s = total + sq
@@ -135,6 +135,6 @@ def py_hypot(x: float, y: float) -> float:
     if math.isinf(largest) or largest == 0.0:
         return largest
     _, exponent = math.frexp(largest)
-    if exponent < -1023:     # subnormal arguments: lift them to normal numbers first
+    if exponent < -1023:  # subnormal arguments: lift them to normal numbers first
         return _DBL_MIN * scaled_norm2(x0 / _DBL_MIN, x1 / _DBL_MIN, largest / _DBL_MIN)
     return scaled_norm2(x0, x1, largest)

@@ -47,8 +47,7 @@ class TlogWriter:
         When ``path`` cannot be opened for writing.
     """
 
-    def __init__(self, path: str | Path, flush_period_s: float = 0.5,
-                 clock: Callable[[], float] = time.time) -> None:
+    def __init__(self, path: str | Path, flush_period_s: float = 0.5, clock: Callable[[], float] = time.time) -> None:
         self.path = Path(path)
         self._file: BinaryIO | None = open(self.path, "ab")  # None once closed
         self._clock = clock

@@ -111,23 +111,35 @@ def from_dict(cls: type[T], data: Any, prefix: str = "", error: type[Exception] 
         raise error(f"{prefix or cls.__name__}: {exc}") from None
 
 
-def require_numbers(error: type[Exception], owner: str, obj: Any = None, *,
-                    positive: tuple = (), non_negative: tuple = (), **values: float) -> None:
+def require_numbers(
+    error: type[Exception],
+    owner: str,
+    obj: Any = None,
+    *,
+    positive: tuple = (),
+    non_negative: tuple = (),
+    **values: float,
+) -> None:
     """Check settings values: finite numbers, > 0 (``positive``) or >= 0 (``non_negative``).
 
     Values are the attributes of ``obj`` named in ``positive`` / ``non_negative``, or the keyword
     arguments (checked as > 0). The first bad one raises ``error`` naming it, e.g.
     ``link.time_scale: must be a finite number > 0, got -1``.
     """
-    checks = [(n, getattr(obj, n), True) for n in positive] + \
-             [(n, getattr(obj, n), False) for n in non_negative] + \
-             [(n, v, True) for n, v in values.items()]
+    checks = (
+        [(n, getattr(obj, n), True) for n in positive]
+        + [(n, getattr(obj, n), False) for n in non_negative]
+        + [(n, v, True) for n, v in values.items()]
+    )
     for name, value, strict in checks:
-        ok = (not isinstance(value, bool) and isinstance(value, (int, float))
-              and math.isfinite(value) and (value > 0 if strict else value >= 0))
+        ok = (
+            not isinstance(value, bool)
+            and isinstance(value, (int, float))
+            and math.isfinite(value)
+            and (value > 0 if strict else value >= 0)
+        )
         if not ok:
-            raise error(f"{owner}.{name}: must be a finite number {'>' if strict else '>='} 0, "
-                        f"got {value!r}")
+            raise error(f"{owner}.{name}: must be a finite number {'>' if strict else '>='} 0, got {value!r}")
 
 
 def require_int(error: type[Exception], owner: str, name: str, value: Any, lo: int, hi: int) -> None:

@@ -42,8 +42,16 @@ from numba import njit
 from heli_common.pyfloat import py_hypot, py_max, py_min
 
 __all__ = [
-    "FALL_BACK", "N_PARAMS", "OK", "SETTINGS_FIELDS", "law_output", "law_step", "pack_settings", "py_hypot",
-    "py_remainder", "py_square",
+    "FALL_BACK",
+    "N_PARAMS",
+    "OK",
+    "SETTINGS_FIELDS",
+    "law_output",
+    "law_step",
+    "pack_settings",
+    "py_hypot",
+    "py_remainder",
+    "py_square",
 ]
 
 N_STATES = 13
@@ -55,13 +63,39 @@ FALL_BACK = 1
 """Status of :func:`law_step`: the Python code would raise here (outputs undefined): run it."""
 
 SETTINGS_FIELDS = (
-    "kp_xy_1_s", "ki_xy_1_s2", "kd_xy", "kp_z_1_s", "ki_z_1_s2", "kd_z", "pos_integral_max_m_s",
-    "max_speed_xy_m_s", "max_climb_m_s", "max_descent_m_s", "max_accel_m_s2", "cmd_accel_xy_m_s2",
-    "cmd_accel_z_m_s2", "max_yaw_rate_rad_s",
+    "kp_xy_1_s",
+    "ki_xy_1_s2",
+    "kd_xy",
+    "kp_z_1_s",
+    "ki_z_1_s2",
+    "kd_z",
+    "pos_integral_max_m_s",
+    "max_speed_xy_m_s",
+    "max_climb_m_s",
+    "max_descent_m_s",
+    "max_accel_m_s2",
+    "cmd_accel_xy_m_s2",
+    "cmd_accel_z_m_s2",
+    "max_yaw_rate_rad_s",
 )
 """The :class:`~heli_model.control.settings.ControllerSettings` the kernel reads, in the order of ``P``."""
-(_KP_XY, _KI_XY, _KD_XY, _KP_Z, _KI_Z, _KD_Z, _POS_INT_MAX, _MAX_SPEED_XY, _MAX_CLIMB, _MAX_DESCENT, _MAX_ACCEL,
- _CMD_ACCEL_XY, _CMD_ACCEL_Z, _MAX_YAW_RATE, _TWO) = range(len(SETTINGS_FIELDS) + 1)
+(
+    _KP_XY,
+    _KI_XY,
+    _KD_XY,
+    _KP_Z,
+    _KI_Z,
+    _KD_Z,
+    _POS_INT_MAX,
+    _MAX_SPEED_XY,
+    _MAX_CLIMB,
+    _MAX_DESCENT,
+    _MAX_ACCEL,
+    _CMD_ACCEL_XY,
+    _CMD_ACCEL_Z,
+    _MAX_YAW_RATE,
+    _TWO,
+) = range(len(SETTINGS_FIELDS) + 1)
 N_PARAMS = len(SETTINGS_FIELDS) + 1
 """Length of ``P``: the settings, then the exponent 2.0 of :func:`py_square`."""
 
@@ -136,8 +170,31 @@ def _clip_unit(d: float) -> float:
 
 
 @njit(cache=True)
-def law_output(L, x, c, s, cmd0, cmd1, cmd2, vf0, vf1, a0, a1, a2, rate_ref, psi_err, z0, z1, z2, z3, dt,
-               integrate_vel, integrate_yaw, delta, raw):
+def law_output(
+    L,
+    x,
+    c,
+    s,
+    cmd0,
+    cmd1,
+    cmd2,
+    vf0,
+    vf1,
+    a0,
+    a1,
+    a2,
+    rate_ref,
+    psi_err,
+    z0,
+    z1,
+    z2,
+    z3,
+    dt,
+    integrate_vel,
+    integrate_yaw,
+    delta,
+    raw,
+):
     """The linear part of one control period (the LQI with its feed-forward) and its integrators.
 
     Parameters
@@ -178,7 +235,7 @@ def law_output(L, x, c, s, cmd0, cmd1, cmd2, vf0, vf1, a0, a1, a2, rate_ref, psi
     vec[0] = c * a0 + s * a1 + rate_ref * vfy
     vec[1] = -s * a0 + c * a1 - rate_ref * vfx
     vec[2], vec[3], vec[4], vec[5], vec[6], vec[7] = a2, rate_ref, ub, vb, wb, 0.0
-    vec[8:8 + N_STATES] = x[:N_STATES]
+    vec[8 : 8 + N_STATES] = x[:N_STATES]
     vec[8 + N_STATES] = psi_err
     vec[9 + N_STATES], vec[10 + N_STATES], vec[11 + N_STATES], vec[12 + N_STATES] = z0, z1, z2, z3
     raw[:] = np.dot(L, vec)
@@ -225,8 +282,39 @@ def _integrate_position(integral, dt, p, now, ki, pos_int_max):
 
 
 @njit(cache=True)
-def law_step(P, L, x, p0, p1, p2, v0, v1, v2, a0, a1, a2, has_yaw, yaw, has_rate, rate, z0, z1, z2, z3, i0, i1, i2, yaw_ref,
-             prev0, prev1, prev2, dt, delta, raw, vel_cmd):
+def law_step(
+    P,
+    L,
+    x,
+    p0,
+    p1,
+    p2,
+    v0,
+    v1,
+    v2,
+    a0,
+    a1,
+    a2,
+    has_yaw,
+    yaw,
+    has_rate,
+    rate,
+    z0,
+    z1,
+    z2,
+    z3,
+    i0,
+    i1,
+    i2,
+    yaw_ref,
+    prev0,
+    prev1,
+    prev2,
+    dt,
+    delta,
+    raw,
+    vel_cmd,
+):
     """One control period of :meth:`heli_model.control.law.ControlLaw.step` (after its argument checks).
 
     Parameters
@@ -354,8 +442,31 @@ def law_step(P, L, x, p0, p1, p2, v0, v1, v2, a0, a1, a2, has_yaw, yaw, has_rate
         return nothing
     psi_err = _wrap_pi(psi - yaw_ref)
     # the LQI with its feed-forward, its integrators, then the position integrators
-    saturated, z = law_output(L, x, c, s, cmd0, cmd1, cmd2, vf0, vf1, af0, af1, af2, rate_ref, psi_err,
-                              z0, z1, z2, z3, dt, not (lim0 or lim1 or lim2), not yaw_limited, delta, raw)
+    saturated, z = law_output(
+        L,
+        x,
+        c,
+        s,
+        cmd0,
+        cmd1,
+        cmd2,
+        vf0,
+        vf1,
+        af0,
+        af1,
+        af2,
+        rate_ref,
+        psi_err,
+        z0,
+        z1,
+        z2,
+        z3,
+        dt,
+        not (lim0 or lim1 or lim2),
+        not yaw_limited,
+        delta,
+        raw,
+    )
     if not saturated:
         ki_xy, ki_z, pos_int_max = P[_KI_XY], P[_KI_Z], P[_POS_INT_MAX]
         if pid0 and not lim0:

@@ -59,9 +59,23 @@ import numpy as np
 from heli_model.model import N_INPUTS, N_STATES, HeliModel
 
 __all__ = [
-    "ACT_SLICE", "IDX_PSI", "POS_SLICE", "STATE_SIZE", "DynamicsError", "actuator", "body_rates_rad_s",
-    "check_state", "compiled_kernels", "derivative", "euler_rad", "hover_state", "pos_ned_m", "rk4_matrices",
-    "state_size", "step_rk4", "vel_ned_m_s",
+    "ACT_SLICE",
+    "IDX_PSI",
+    "POS_SLICE",
+    "STATE_SIZE",
+    "DynamicsError",
+    "actuator",
+    "body_rates_rad_s",
+    "check_state",
+    "compiled_kernels",
+    "derivative",
+    "euler_rad",
+    "hover_state",
+    "pos_ned_m",
+    "rk4_matrices",
+    "state_size",
+    "step_rk4",
+    "vel_ned_m_s",
 ]
 
 log = logging.getLogger(__name__)
@@ -301,7 +315,7 @@ def step_rk4(model: HeliModel, x: np.ndarray, delta, dt_s: float, wind_ned_m_s=N
     vec[n_core + 2] = d2
     vec[n_core + 3] = d3
     if wind_ned_m_s is None:
-        vec[n_core + 4:] = 0.0
+        vec[n_core + 4 :] = 0.0
     else:
         if type(wind_ned_m_s) is np.ndarray and wind_ned_m_s.shape == (3,):
             wn, we, wd = wind_ned_m_s.tolist()  # the fast path of the line below
@@ -373,7 +387,10 @@ def _check_kernel_shape(shape: tuple[int, int]) -> bool:
         _KERNELS.append(rk4_kernel)
     ok = _KERNELS[0].matvec_matches_numpy(shape)
     if not ok:
-        log.warning("compiled matrix-vector product for shape %s differs from numpy's in the last bits: "
-                    "the numpy code runs instead (slower, same results)", shape)
+        log.warning(
+            "compiled matrix-vector product for shape %s differs from numpy's in the last bits: "
+            "the numpy code runs instead (slower, same results)",
+            shape,
+        )
     _EXACT_SHAPES[shape] = ok
     return ok

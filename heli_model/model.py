@@ -55,9 +55,46 @@ N_STATES = 13
 N_INPUTS = 4
 
 PARAM_NAMES: tuple[str, ...] = (
-    "Xu", "Xa", "Yv", "Yb", "Lu", "Lv", "Lb", "Lw", "Mu", "Mv", "Ma", "Mw", "tau_f", "Ab", "Ac",
-    "Ba", "Bd", "Za", "Zb", "Zw", "Zr", "Nv", "Np", "Nw", "Nr", "Nrfb", "Kr", "Krfb", "tau_s",
-    "Yped", "Mcol", "Alat", "Alon", "Blat", "Blon", "Zcol", "Nped", "Ncol", "Clon", "Dlat",
+    "Xu",
+    "Xa",
+    "Yv",
+    "Yb",
+    "Lu",
+    "Lv",
+    "Lb",
+    "Lw",
+    "Mu",
+    "Mv",
+    "Ma",
+    "Mw",
+    "tau_f",
+    "Ab",
+    "Ac",
+    "Ba",
+    "Bd",
+    "Za",
+    "Zb",
+    "Zw",
+    "Zr",
+    "Nv",
+    "Np",
+    "Nw",
+    "Nr",
+    "Nrfb",
+    "Kr",
+    "Krfb",
+    "tau_s",
+    "Yped",
+    "Mcol",
+    "Alat",
+    "Alon",
+    "Blat",
+    "Blon",
+    "Zcol",
+    "Nped",
+    "Ncol",
+    "Clon",
+    "Dlat",
 )
 POSITIVE_PARAMS: tuple[str, ...] = ("tau_f", "tau_s")
 
@@ -108,31 +145,63 @@ def assemble_matrices(params: Mapping[str, float], gravity_m_s2: float) -> tuple
         B[_IDX[row], _IN[col]] += value
 
     # translational dynamics
-    a("u", "u", p["Xu"]); a("u", "theta", -g); a("u", "a", p["Xa"])
-    a("v", "v", p["Yv"]); a("v", "phi", g); a("v", "b", p["Yb"]); b("v", "d_ped", p["Yped"])
-    a("w", "a", p["Za"]); a("w", "b", p["Zb"]); a("w", "w", p["Zw"]); a("w", "r", p["Zr"])
+    a("u", "u", p["Xu"])
+    a("u", "theta", -g)
+    a("u", "a", p["Xa"])
+    a("v", "v", p["Yv"])
+    a("v", "phi", g)
+    a("v", "b", p["Yb"])
+    b("v", "d_ped", p["Yped"])
+    a("w", "a", p["Za"])
+    a("w", "b", p["Zb"])
+    a("w", "w", p["Zw"])
+    a("w", "r", p["Zr"])
     b("w", "d_col", p["Zcol"])
     # angular dynamics
-    a("p", "u", p["Lu"]); a("p", "v", p["Lv"]); a("p", "w", p["Lw"]); a("p", "b", p["Lb"])
-    a("q", "u", p["Mu"]); a("q", "v", p["Mv"]); a("q", "w", p["Mw"]); a("q", "a", p["Ma"])
+    a("p", "u", p["Lu"])
+    a("p", "v", p["Lv"])
+    a("p", "w", p["Lw"])
+    a("p", "b", p["Lb"])
+    a("q", "u", p["Mu"])
+    a("q", "v", p["Mv"])
+    a("q", "w", p["Mw"])
+    a("q", "a", p["Ma"])
     b("q", "d_col", p["Mcol"])
-    a("r", "v", p["Nv"]); a("r", "p", p["Np"]); a("r", "w", p["Nw"]); a("r", "r", p["Nr"])
-    a("r", "r_fb", p["Nrfb"]); b("r", "d_ped", p["Nped"]); b("r", "d_col", p["Ncol"])
+    a("r", "v", p["Nv"])
+    a("r", "p", p["Np"])
+    a("r", "w", p["Nw"])
+    a("r", "r", p["Nr"])
+    a("r", "r_fb", p["Nrfb"])
+    b("r", "d_ped", p["Nped"])
+    b("r", "d_col", p["Ncol"])
     # attitude kinematics (hover, small angles)
     a("phi", "p", 1.0)
     a("theta", "q", 1.0)
     # main-rotor flapping: rows divided by tau_f
     tf = p["tau_f"]
-    a("a", "q", -1.0); a("a", "a", -1.0 / tf); a("a", "b", p["Ab"] / tf); a("a", "c", p["Ac"] / tf)
-    b("a", "d_lat", p["Alat"] / tf); b("a", "d_lon", p["Alon"] / tf)
-    a("b", "p", -1.0); a("b", "b", -1.0 / tf); a("b", "a", p["Ba"] / tf); a("b", "d", p["Bd"] / tf)
-    b("b", "d_lat", p["Blat"] / tf); b("b", "d_lon", p["Blon"] / tf)
+    a("a", "q", -1.0)
+    a("a", "a", -1.0 / tf)
+    a("a", "b", p["Ab"] / tf)
+    a("a", "c", p["Ac"] / tf)
+    b("a", "d_lat", p["Alat"] / tf)
+    b("a", "d_lon", p["Alon"] / tf)
+    a("b", "p", -1.0)
+    a("b", "b", -1.0 / tf)
+    a("b", "a", p["Ba"] / tf)
+    a("b", "d", p["Bd"] / tf)
+    b("b", "d_lat", p["Blat"] / tf)
+    b("b", "d_lon", p["Blon"] / tf)
     # yaw damper (rate gyro feedback)
-    a("r_fb", "r", p["Kr"]); a("r_fb", "r_fb", p["Krfb"])
+    a("r_fb", "r", p["Kr"])
+    a("r_fb", "r_fb", p["Krfb"])
     # stabiliser bar: rows divided by tau_s
     ts = p["tau_s"]
-    a("c", "q", -1.0); a("c", "c", -1.0 / ts); b("c", "d_lon", p["Clon"] / ts)
-    a("d", "p", -1.0); a("d", "d", -1.0 / ts); b("d", "d_lat", p["Dlat"] / ts)
+    a("c", "q", -1.0)
+    a("c", "c", -1.0 / ts)
+    b("c", "d_lon", p["Clon"] / ts)
+    a("d", "p", -1.0)
+    a("d", "d", -1.0 / ts)
+    b("d", "d_lat", p["Dlat"] / ts)
     return A, B
 
 
@@ -209,7 +278,7 @@ class HeliModel:
         wind: WindSettings | None = None,
         name: str = "custom",
         source: str = "",
-    ) -> "HeliModel":
+    ) -> HeliModel:
         """Build a model from the 40 parameters; raises :class:`ModelError` naming a bad key."""
         checked = _check_params(params)
         if not (isinstance(gravity_m_s2, (int, float)) and math.isfinite(gravity_m_s2) and gravity_m_s2 > 0):
@@ -231,7 +300,7 @@ class HeliModel:
         )
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], *, where: str = "profile") -> "HeliModel":
+    def from_dict(cls, data: Mapping[str, Any], *, where: str = "profile") -> HeliModel:
         """Build a model from a parsed profile table (the TOML layout of ``default.toml``)."""
         if not isinstance(data, Mapping):
             raise ModelError(f"{where}: expected a table, got {data!r}")
@@ -251,7 +320,7 @@ class HeliModel:
         )
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> "HeliModel":
+    def from_toml(cls, path: str | Path) -> HeliModel:
         """Load a profile TOML; every error is a :class:`ModelError` naming the file and key."""
         data = load_toml(path, error=ModelError)
         try:
@@ -260,14 +329,14 @@ class HeliModel:
             raise ModelError(f"{path}: {exc}") from None
 
     @classmethod
-    def default(cls) -> "HeliModel":
+    def default(cls) -> HeliModel:
         """The R-50-class reference hover model shipped as ``profiles/default.toml``."""
         ref = resources.files("heli_model").joinpath("profiles/default.toml")
         with resources.as_file(ref) as path:
             return cls.from_toml(path)
 
     # ------------------------------------------------------------------ derived
-    def replace(self, **changes: Any) -> "HeliModel":
+    def replace(self, **changes: Any) -> HeliModel:
         """A new model with some options or parameters changed.
 
         Keyword arguments named like a parameter (``Xu=...``) change that parameter; the
@@ -276,8 +345,13 @@ class HeliModel:
         """
         params = dict(self.params)
         # the values come from ``changes`` (Any); from_params checks each option
-        options: dict[str, Any] = {"gravity_m_s2": self.gravity_m_s2, "servo_tau_s": self.servo_tau_s,
-                                   "wind": self.wind, "name": self.name, "source": self.source}
+        options: dict[str, Any] = {
+            "gravity_m_s2": self.gravity_m_s2,
+            "servo_tau_s": self.servo_tau_s,
+            "wind": self.wind,
+            "name": self.name,
+            "source": self.source,
+        }
         for key, value in changes.items():
             if key in options:
                 options[key] = value

@@ -35,8 +35,9 @@ CONTROLLER_SIZE = 11
 
 
 @njit(cache=True)
-def fly_periods(P, L, M, x, setpoint, controller, law_dt, h, n_sub, periods, x_out, delta, raw, vel_cmd,
-                controller_out):
+def fly_periods(
+    P, L, M, x, setpoint, controller, law_dt, h, n_sub, periods, x_out, delta, raw, vel_cmd, controller_out
+):
     """``periods`` control periods of ``law_dt``, each with ``n_sub`` RK4 sub-steps of ``h``.
 
     Parameters
@@ -69,8 +70,17 @@ def fly_periods(P, L, M, x, setpoint, controller, law_dt, h, n_sub, periods, x_o
     saturated : bool
         The last period's.
     """
-    p0, p1, p2, v0, v1, v2, a0, a1, a2 = (setpoint[0], setpoint[1], setpoint[2], setpoint[3], setpoint[4],
-                                          setpoint[5], setpoint[6], setpoint[7], setpoint[8])
+    p0, p1, p2, v0, v1, v2, a0, a1, a2 = (
+        setpoint[0],
+        setpoint[1],
+        setpoint[2],
+        setpoint[3],
+        setpoint[4],
+        setpoint[5],
+        setpoint[6],
+        setpoint[7],
+        setpoint[8],
+    )
     has_yaw, yaw, has_rate, rate = setpoint[9] != 0.0, setpoint[10], setpoint[11] != 0.0, setpoint[12]
     z0, z1, z2, z3 = controller[0], controller[1], controller[2], controller[3]
     i0, i1, i2, yaw_ref = controller[4], controller[5], controller[6], controller[7]
@@ -80,8 +90,38 @@ def fly_periods(P, L, M, x, setpoint, controller, law_dt, h, n_sub, periods, x_o
     saturated = False
     for _ in range(periods):
         status, saturated, z, integral, yaw_ref, cmd = control_kernel.law_step(
-            P, L, src, p0, p1, p2, v0, v1, v2, a0, a1, a2, has_yaw, yaw, has_rate, rate, z0, z1, z2, z3,
-            i0, i1, i2, yaw_ref, prev0, prev1, prev2, law_dt, delta, raw, vel_cmd)
+            P,
+            L,
+            src,
+            p0,
+            p1,
+            p2,
+            v0,
+            v1,
+            v2,
+            a0,
+            a1,
+            a2,
+            has_yaw,
+            yaw,
+            has_rate,
+            rate,
+            z0,
+            z1,
+            z2,
+            z3,
+            i0,
+            i1,
+            i2,
+            yaw_ref,
+            prev0,
+            prev1,
+            prev2,
+            law_dt,
+            delta,
+            raw,
+            vel_cmd,
+        )
         if status != control_kernel.OK:
             return FALL_BACK, False
         z0, z1, z2, z3 = z

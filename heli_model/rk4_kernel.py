@@ -29,8 +29,15 @@ import numpy as np
 from numba import njit
 
 __all__ = [
-    "OK", "BAD_ANGLE", "BAD_DELTA", "WIND_CALM", "WIND_CONSTANT", "WIND_PER_SUBSTEP",
-    "integrate_rk4", "matvec", "matvec_matches_numpy",
+    "OK",
+    "BAD_ANGLE",
+    "BAD_DELTA",
+    "WIND_CALM",
+    "WIND_CONSTANT",
+    "WIND_PER_SUBSTEP",
+    "integrate_rk4",
+    "matvec",
+    "matvec_matches_numpy",
 ]
 
 N_STATES = 13
@@ -91,7 +98,7 @@ def _core_vector(M, x, d, wn, we, wd, calm, c1, s1):
     for k in range(4):
         vec[n_core + k] = d[k]
     if calm:
-        vec[n_core + 4:] = 0.0
+        vec[n_core + 4 :] = 0.0
     else:
         vec[n_core + 4] = c1 * wn + s1 * we
         vec[n_core + 5] = -s1 * wn + c1 * we

@@ -39,12 +39,18 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from heli_model import dynamics
-from heli_model.control import ControllerSettings, ControllerState, ControlLaw, Setpoint
+from heli_model.control import ControlLaw, ControllerSettings, ControllerState, Setpoint
 from heli_model.model import N_INPUTS, HeliModel
 
 __all__ = [
-    "PHYSICS_DT_S", "VehicleCommand", "VehicleState", "VehicleUpdate", "integrate_compiled", "integrate_numpy",
-    "stop_on_ground", "substeps",
+    "PHYSICS_DT_S",
+    "VehicleCommand",
+    "VehicleState",
+    "VehicleUpdate",
+    "integrate_compiled",
+    "integrate_numpy",
+    "stop_on_ground",
+    "substeps",
 ]
 
 PHYSICS_DT_S = 1.0 / 400.0
@@ -103,8 +109,9 @@ class VehicleUpdate:
     _plans: dict = dataclasses.field(default_factory=dict, init=False, repr=False, compare=False)
 
     @classmethod
-    def build(cls, model: HeliModel, controller_settings: ControllerSettings | None = None,
-              physics_dt_s: float = PHYSICS_DT_S) -> "VehicleUpdate":
+    def build(
+        cls, model: HeliModel, controller_settings: ControllerSettings | None = None, physics_dt_s: float = PHYSICS_DT_S
+    ) -> VehicleUpdate:
         """Design the controller for ``controller_settings`` (cached on the model) and keep the step.
 
         Also runs one update of a hover, so that the compiled kernels are loaded here (numba's
@@ -144,7 +151,8 @@ class VehicleUpdate:
         control_dt_s = law.settings.control_dt_s
         if not 0.0 < dt_s <= control_dt_s * (1.0 + 1e-9):
             raise dynamics.DynamicsError(
-                f"dt_s: expected 0 < dt_s <= the control period {control_dt_s:g} s, got {dt_s!r}")
+                f"dt_s: expected 0 < dt_s <= the control period {control_dt_s:g} s, got {dt_s!r}"
+            )
         x, delta, controller = state
         setpoint, wind = command
         if setpoint is not None:
@@ -189,8 +197,9 @@ class VehicleUpdate:
             state = self.update(state, command, dt_s)
         return state
 
-    def _fly_compiled(self, state: VehicleState, command: VehicleCommand, dt_s: float,
-                      periods: int) -> VehicleState | None:
+    def _fly_compiled(
+        self, state: VehicleState, command: VehicleCommand, dt_s: float, periods: int
+    ) -> VehicleState | None:
         setpoint, wind = command
         law = self.law
         if setpoint is None or wind is not None or dt_s != law.settings.control_dt_s:
@@ -205,15 +214,24 @@ class VehicleUpdate:
             return None
         kernel = _periods_kernel()
         params, L, sp, controller = args
-        x_next, delta, raw, vel_cmd, out = np.empty(x.shape[0]), np.empty(N_INPUTS), np.empty(N_INPUTS), np.empty(3), \
-            np.empty(kernel.CONTROLLER_SIZE)
-        status, saturated = kernel.fly_periods(params, L, M, x, sp, controller, float(dt_s), h, n, int(periods),
-                                               x_next, delta, raw, vel_cmd, out)
+        x_next, delta, raw, vel_cmd, out = (
+            np.empty(x.shape[0]),
+            np.empty(N_INPUTS),
+            np.empty(N_INPUTS),
+            np.empty(3),
+            np.empty(kernel.CONTROLLER_SIZE),
+        )
+        status, saturated = kernel.fly_periods(
+            params, L, M, x, sp, controller, float(dt_s), h, n, int(periods), x_next, delta, raw, vel_cmd, out
+        )
         if status != kernel.OK:
             return None
         z0, z1, z2, z3, i0, i1, i2, yaw_ref, c0, c1, c2 = out.tolist()
-        return VehicleState(x_next, delta, ControllerState((z0, z1, z2, z3), (i0, i1, i2), yaw_ref, (c0, c1, c2),
-                                                           delta, raw, saturated, vel_cmd))
+        return VehicleState(
+            x_next,
+            delta,
+            ControllerState((z0, z1, z2, z3), (i0, i1, i2), yaw_ref, (c0, c1, c2), delta, raw, saturated, vel_cmd),
+        )
 
     def _substep_plan(self, dt_s: float) -> tuple[int, float, np.ndarray]:
         """``(n, h, M)`` for an update of ``dt_s``: the sub-steps, their length and RK4 matrix (kept)."""
@@ -233,6 +251,7 @@ def _periods_kernel() -> ModuleType:
     """:mod:`heli_model.periods_kernel`, imported on the first call (it imports numba)."""
     if not _PERIODS:
         from heli_model import periods_kernel
+
         _PERIODS.append(periods_kernel)
     return _PERIODS[0]
 
@@ -262,8 +281,9 @@ def integrate_numpy(model: HeliModel, x: np.ndarray, delta, h: float, n: int, wi
     return x
 
 
-def integrate_compiled(kernels: ModuleType, model: HeliModel, M: np.ndarray, x, delta, h: float, n: int,
-                       wind) -> np.ndarray:
+def integrate_compiled(
+    kernels: ModuleType, model: HeliModel, M: np.ndarray, x, delta, h: float, n: int, wind
+) -> np.ndarray:
     """:func:`integrate_numpy` in one call of the compiled kernel (:func:`heli_model.rk4_kernel.integrate_rk4`).
 
     Parameters
@@ -322,7 +342,8 @@ def _wind_rows(kernels: ModuleType, wind, n: int) -> tuple[np.ndarray, int]:
     if rows.shape == (3,):
         return rows, kernels.WIND_CONSTANT
     raise dynamics.DynamicsError(
-        f"wind_ned_m_s: expected (3,) or one row of 3 per RK4 sub-step ({n}, 3), got shape {rows.shape}")
+        f"wind_ned_m_s: expected (3,) or one row of 3 per RK4 sub-step ({n}, 3), got shape {rows.shape}"
+    )
 
 
 def _raise_for(kernels: ModuleType, status: int, delta, wind, mode: int) -> None:

@@ -10,5 +10,16 @@ from mavlink_signing.keys import SigningKeyError, key_from_text, load_key, new_p
 from mavlink_signing.sign import signing_encoder, signing_timestamp_now
 from mavlink_signing.verify import SignatureCheck, Verdict, frame_timestamp, signature_matches
 
-__all__ = ["SigningKeyError", "key_from_text", "load_key", "new_passphrase", "write_key_file", "signing_encoder", "signing_timestamp_now",
-           "SignatureCheck", "Verdict", "frame_timestamp", "signature_matches"]
+__all__ = [
+    "SigningKeyError",
+    "key_from_text",
+    "load_key",
+    "new_passphrase",
+    "write_key_file",
+    "signing_encoder",
+    "signing_timestamp_now",
+    "SignatureCheck",
+    "Verdict",
+    "frame_timestamp",
+    "signature_matches",
+]

@@ -56,15 +56,20 @@ class AdsbSettings:
     def __post_init__(self) -> None:
         if not (isinstance(self.count, int) and 0 <= self.count <= 100):
             raise ValueError(f"count: expected an integer 0..100, got {self.count!r}")
-        for name, lo, hi in (("radius_m", 50.0, 100_000.0), ("alt_m", -100.0, 10_000.0),
-                             ("alt_spread_m", 0.0, 1000.0), ("speed_min_m_s", 0.5, 400.0),
-                             ("speed_max_m_s", 0.5, 400.0)):
+        for name, lo, hi in (
+            ("radius_m", 50.0, 100_000.0),
+            ("alt_m", -100.0, 10_000.0),
+            ("alt_spread_m", 0.0, 1000.0),
+            ("speed_min_m_s", 0.5, 400.0),
+            ("speed_max_m_s", 0.5, 400.0),
+        ):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and lo <= value <= hi):
                 raise ValueError(f"{name}: expected {lo:g}..{hi:g}, got {value!r}")
         if self.speed_max_m_s < self.speed_min_m_s:
-            raise ValueError(f"speed_max_m_s: expected >= speed_min_m_s ({self.speed_min_m_s:g}), "
-                             f"got {self.speed_max_m_s!r}")
+            raise ValueError(
+                f"speed_max_m_s: expected >= speed_min_m_s ({self.speed_min_m_s:g}), got {self.speed_max_m_s!r}"
+            )
 
 
 @dataclasses.dataclass
@@ -169,9 +174,13 @@ class TrafficModel:
         address = self._icao()
         emitter = int(self.rng.choice(EMITTER_TYPES))
         self.spawned += 1
-        return Aircraft(icao_address=address, callsign=f"SIM{address}", emitter_type=emitter,
-                        pos_ned_m=np.array([start[0], start[1], -height]),
-                        vel_ned_m_s=np.array([direction[0] * speed, direction[1] * speed, 0.0]))
+        return Aircraft(
+            icao_address=address,
+            callsign=f"SIM{address}",
+            emitter_type=emitter,
+            pos_ned_m=np.array([start[0], start[1], -height]),
+            vel_ned_m_s=np.array([direction[0] * speed, direction[1] * speed, 0.0]),
+        )
 
 
 class RoundRobin:

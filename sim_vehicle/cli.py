@@ -128,44 +128,100 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--instance", type=int, default=0, metavar="N",
-                        help="vehicle number: system id 1+N, default port 14555+10*N, telemetry to "
-                        "127.0.0.1:14550 and the companion's 127.0.0.1:<14540+N> (default 0)")
-    parser.add_argument("--home", type=_home, default=None, metavar="LAT,LON,ALT,YAW",
-                        help="home: degrees, metres AMSL, heading in degrees "
-                        "(default 47.397742,8.545594,488,0: PX4's SITL field)")
-    parser.add_argument("--origin", type=_origin, default=None, metavar="LAT,LON,ALT",
-                        help="EKF origin (GPS_GLOBAL_ORIGIN), the frame of LOCAL_POSITION_NED and "
-                        "SET_POSITION_TARGET_LOCAL_NED (default: the home)")
-    parser.add_argument("--adsb-traffic", type=_count, default=None, metavar="N",
-                        help="simulate N aircraft crossing the area around home, reported as ADSB_VEHICLE when "
-                        "asked (SIM_ADSB_COUNT; default 0)")
-    parser.add_argument("--speedup", type=_positive, default=None, metavar="X",
-                        help="run X times faster than real time (heartbeats stay at 1 Hz wall clock; default 1)")
-    parser.add_argument("--out", type=_address, action="append", default=None, metavar="HOST:PORT",
-                        help="send telemetry to this address (repeatable; replaces the defaults "
-                        "127.0.0.1:14550 and 127.0.0.1:<14540+instance>)")
-    parser.add_argument("--no-default-out", action="store_true",
-                        help="no --out addresses at all: only peers that send to the vehicle get telemetry")
+    parser.add_argument(
+        "--instance",
+        type=int,
+        default=0,
+        metavar="N",
+        help="vehicle number: system id 1+N, default port 14555+10*N, telemetry to "
+        "127.0.0.1:14550 and the companion's 127.0.0.1:<14540+N> (default 0)",
+    )
+    parser.add_argument(
+        "--home",
+        type=_home,
+        default=None,
+        metavar="LAT,LON,ALT,YAW",
+        help="home: degrees, metres AMSL, heading in degrees (default 47.397742,8.545594,488,0: PX4's SITL field)",
+    )
+    parser.add_argument(
+        "--origin",
+        type=_origin,
+        default=None,
+        metavar="LAT,LON,ALT",
+        help="EKF origin (GPS_GLOBAL_ORIGIN), the frame of LOCAL_POSITION_NED and "
+        "SET_POSITION_TARGET_LOCAL_NED (default: the home)",
+    )
+    parser.add_argument(
+        "--adsb-traffic",
+        type=_count,
+        default=None,
+        metavar="N",
+        help="simulate N aircraft crossing the area around home, reported as ADSB_VEHICLE when "
+        "asked (SIM_ADSB_COUNT; default 0)",
+    )
+    parser.add_argument(
+        "--speedup",
+        type=_positive,
+        default=None,
+        metavar="X",
+        help="run X times faster than real time (heartbeats stay at 1 Hz wall clock; default 1)",
+    )
+    parser.add_argument(
+        "--out",
+        type=_address,
+        action="append",
+        default=None,
+        metavar="HOST:PORT",
+        help="send telemetry to this address (repeatable; replaces the defaults "
+        "127.0.0.1:14550 and 127.0.0.1:<14540+instance>)",
+    )
+    parser.add_argument(
+        "--no-default-out",
+        action="store_true",
+        help="no --out addresses at all: only peers that send to the vehicle get telemetry",
+    )
     parser.add_argument("--port", type=int, default=None, metavar="N", help="UDP port to bind (default 14555+10*N)")
     parser.add_argument("--bind", default=None, metavar="HOST", help="address to bind (default 0.0.0.0)")
     parser.add_argument("--profile", default=None, metavar="FILE", help="vehicle profile TOML (default: R-50-class)")
-    parser.add_argument("--seed", type=int, default=None, metavar="N",
-                        help="random seed of the wind gusts and the ADS-B traffic (default 0)")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        metavar="N",
+        help="random seed of the wind gusts and the ADS-B traffic (default 0)",
+    )
     parser.add_argument("--tlog", default=None, metavar="FILE", help="record all MAVLink traffic to a .tlog file")
     parser.add_argument("--wind-speed", type=_non_negative, default=None, metavar="M_S", help="steady wind speed, m/s")
-    parser.add_argument("--wind-dir", type=float, default=None, metavar="DEG",
-                        help="direction the wind blows FROM, degrees clockwise from north")
-    parser.add_argument("--gust", type=_non_negative, default=None, metavar="M_S",
-                        help="gust standard deviation per axis, m/s")
-    parser.add_argument("--physics-rate", type=_positive, default=None, metavar="HZ",
-                        help="physics rate in simulated Hz (default 400; a multiple of the 100 Hz control rate)")
-    parser.add_argument("--signing-key", default=None, metavar="FILE",
-                        help="MAVLink 2 signing: the key file (64 hex digits, or a passphrase whose SHA-256 is the "
-                        "key, as MAVProxy's 'signing key PASSPHRASE'); sign everything sent, drop what is not "
-                        "signed with the key (RADIO_STATUS excepted)")
-    parser.add_argument("--accept-signing-setup", action="store_true",
-                        help="take SETUP_SIGNING while there is no key (with a key it must be signed with it)")
+    parser.add_argument(
+        "--wind-dir",
+        type=float,
+        default=None,
+        metavar="DEG",
+        help="direction the wind blows FROM, degrees clockwise from north",
+    )
+    parser.add_argument(
+        "--gust", type=_non_negative, default=None, metavar="M_S", help="gust standard deviation per axis, m/s"
+    )
+    parser.add_argument(
+        "--physics-rate",
+        type=_positive,
+        default=None,
+        metavar="HZ",
+        help="physics rate in simulated Hz (default 400; a multiple of the 100 Hz control rate)",
+    )
+    parser.add_argument(
+        "--signing-key",
+        default=None,
+        metavar="FILE",
+        help="MAVLink 2 signing: the key file (64 hex digits, or a passphrase whose SHA-256 is the "
+        "key, as MAVProxy's 'signing key PASSPHRASE'); sign everything sent, drop what is not "
+        "signed with the key (RADIO_STATUS excepted)",
+    )
+    parser.add_argument(
+        "--accept-signing-setup",
+        action="store_true",
+        help="take SETUP_SIGNING while there is no key (with a key it must be signed with it)",
+    )
     parser.add_argument("--config", default=None, metavar="FILE", help="settings TOML (see sim_vehicle/config.py)")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging (-v debug)")
     parser.add_argument("-q", "--quiet", action="store_true", help="warnings and errors only")
@@ -186,24 +242,28 @@ def _settings_from_args(args: argparse.Namespace):
         settings = replace_path(settings, "adsb.count", args.adsb_traffic)
     if args.out is not None or args.no_default_out:
         settings = replace_path(settings, "link.out", tuple(args.out or ()))
-    elif args.instance and settings.link.out == LinkSettings.out:     # the defaults, not a file's
+    elif args.instance and settings.link.out == LinkSettings.out:  # the defaults, not a file's
         settings = replace_path(settings, "link.out", instance_out(args.instance))
     if args.bind is not None:
         settings = replace_path(settings, "link.bind_host", args.bind)
     if args.wind_speed is not None or args.wind_dir is not None or args.gust is not None:
         wind = settings.wind
-        settings = dataclasses.replace(settings, wind=dataclasses.replace(
-            wind, enabled=True,
-            speed_m_s=wind.speed_m_s if args.wind_speed is None else args.wind_speed,
-            from_deg=wind.from_deg if args.wind_dir is None else args.wind_dir,
-            gust_m_s=wind.gust_m_s if args.gust is None else args.gust))
+        settings = dataclasses.replace(
+            settings,
+            wind=dataclasses.replace(
+                wind,
+                enabled=True,
+                speed_m_s=wind.speed_m_s if args.wind_speed is None else args.wind_speed,
+                from_deg=wind.from_deg if args.wind_dir is None else args.wind_dir,
+                gust_m_s=wind.gust_m_s if args.gust is None else args.gust,
+            ),
+        )
     return settings
 
 
 def _configure_logging(args: argparse.Namespace) -> None:
     level = logging.WARNING if args.quiet else (logging.DEBUG if args.verbose else logging.INFO)
-    logging.basicConfig(level=level, stream=sys.stderr,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(level=level, stream=sys.stderr, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 
 
 def _signing_key(path: str | None) -> bytes | None:
@@ -223,11 +283,11 @@ def run(args: argparse.Namespace) -> int:
     """Build the vehicle from parsed arguments and fly until a signal arrives."""
     import numpy as np
 
+    from heli_model.model import HeliModel, ModelError
     from sim_vehicle.adsb import TrafficModel
     from sim_vehicle.autopilot import Autopilot
     from sim_vehicle.config import SimConfigError
     from sim_vehicle.mavlink import MavlinkServer
-    from heli_model.model import HeliModel, ModelError
     from sim_vehicle.realtime import RealtimeLoop
 
     if not 0 <= args.instance <= 200:
@@ -255,8 +315,16 @@ def run(args: argparse.Namespace) -> int:
     vehicle = Autopilot(model, settings, home, np.random.default_rng(settings.seed), origin_lla=origin)
     traffic = TrafficModel(settings.adsb, np.random.default_rng([settings.seed, 0xAD5B]))
     try:
-        server = MavlinkServer(vehicle, settings, sysid, port, tlog_path=args.tlog, traffic=traffic,
-                               signing_key=signing_key, accept_signing_setup=args.accept_signing_setup)
+        server = MavlinkServer(
+            vehicle,
+            settings,
+            sysid,
+            port,
+            tlog_path=args.tlog,
+            traffic=traffic,
+            signing_key=signing_key,
+            accept_signing_setup=args.accept_signing_setup,
+        )
     except OSError as exc:
         raise SimConfigError(f"cannot use UDP port {port} ({exc.strerror or exc}); pick another with --port") from None
     loop = RealtimeLoop(server)
@@ -267,15 +335,31 @@ def run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGINT, on_signal)  # from now on a signal ends the main loop cleanly
     signal.signal(signal.SIGTERM, on_signal)
-    log.info("vehicle '%s', home %.6f,%.6f,%.1f m, heading %.0f deg, seed %d, physics %g Hz, control %g Hz",
-             model.name, home[0], home[1], home[2], home[3], settings.seed, settings.timing.physics_rate_hz,
-             settings.timing.control_rate_hz)
+    log.info(
+        "vehicle '%s', home %.6f,%.6f,%.1f m, heading %.0f deg, seed %d, physics %g Hz, control %g Hz",
+        model.name,
+        home[0],
+        home[1],
+        home[2],
+        home[3],
+        settings.seed,
+        settings.timing.physics_rate_hz,
+        settings.timing.control_rate_hz,
+    )
     if args.origin is not None:
-        log.info("EKF origin %.6f,%.6f,%.1f m: home is N %.1f E %.1f D %.1f m from it", *origin,
-                 *vehicle.frames.home_local_ned_m)
+        log.info(
+            "EKF origin %.6f,%.6f,%.1f m: home is N %.1f E %.1f D %.1f m from it",
+            *origin,
+            *vehicle.frames.home_local_ned_m,
+        )
     if settings.adsb.count:
-        log.info("ADS-B traffic: %d aircraft crossing %g m around home at %g +- %g m", settings.adsb.count,
-                 settings.adsb.radius_m, settings.adsb.alt_m, settings.adsb.alt_spread_m)
+        log.info(
+            "ADS-B traffic: %d aircraft crossing %g m around home at %g +- %g m",
+            settings.adsb.count,
+            settings.adsb.radius_m,
+            settings.adsb.alt_m,
+            settings.adsb.alt_spread_m,
+        )
     try:
         loop.run()
     finally:

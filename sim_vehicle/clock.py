@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 log = logging.getLogger(__name__)
 
@@ -35,8 +35,13 @@ class SimClock:
         Monotonic wall clock in seconds (default ``time.monotonic``).
     """
 
-    def __init__(self, physics_dt_s: float, speedup: float = 1.0, max_lag_s: float = 0.5,
-                 wall_s: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        physics_dt_s: float,
+        speedup: float = 1.0,
+        max_lag_s: float = 0.5,
+        wall_s: Callable[[], float] = time.monotonic,
+    ) -> None:
         if not physics_dt_s > 0.0:
             raise ValueError(f"physics_dt_s: expected > 0, got {physics_dt_s!r}")
         self.physics_dt_s = float(physics_dt_s)
@@ -88,9 +93,14 @@ class SimClock:
             self._anchor_wall_s += slip
             if now - self._last_slip_log_s >= 10.0:  # at most one line per 10 s
                 self._last_slip_log_s = now
-                log.warning("simulation %.3f s (wall) behind: slipping; the host cannot run %.3g x real time "
-                            "(%d slips, %.1f s lost so far)", lag_wall_s, self._speedup, self.slips,
-                            self.slipped_wall_s)
+                log.warning(
+                    "simulation %.3f s (wall) behind: slipping; the host cannot run %.3g x real time "
+                    "(%d slips, %.1f s lost so far)",
+                    lag_wall_s,
+                    self._speedup,
+                    self.slips,
+                    self.slipped_wall_s,
+                )
             behind = self._target_steps(now) - self.steps
         return max(0, int(behind + 1e-6))  # tolerate float rounding of the wall clock
 

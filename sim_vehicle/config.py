@@ -30,10 +30,10 @@ from pathlib import Path
 from typing import Any
 
 from heli_common.ports import GCS_PORT, companion_port
-from sim_vehicle.adsb import AdsbSettings
-from heli_model.control import ControllerSettings
-from sim_vehicle.rsc import RscSettings
 from heli_common.typed_config import from_dict, load_toml
+from heli_model.control import ControllerSettings
+from sim_vehicle.adsb import AdsbSettings
+from sim_vehicle.rsc import RscSettings
 
 
 class SimConfigError(ValueError):
@@ -70,13 +70,18 @@ class TimingSettings:
 
     def __post_init__(self) -> None:
         _require(0.0 < self.speedup <= 1000.0, f"speedup: expected a number in (0, 1000], got {self.speedup!r}")
-        _require(10.0 <= self.physics_rate_hz <= 5000.0,
-                 f"physics_rate_hz: expected 10..5000, got {self.physics_rate_hz!r}")
-        _require(1.0 <= self.control_rate_hz <= self.physics_rate_hz,
-                 f"control_rate_hz: expected 1..physics_rate_hz, got {self.control_rate_hz!r}")
+        _require(
+            10.0 <= self.physics_rate_hz <= 5000.0, f"physics_rate_hz: expected 10..5000, got {self.physics_rate_hz!r}"
+        )
+        _require(
+            1.0 <= self.control_rate_hz <= self.physics_rate_hz,
+            f"control_rate_hz: expected 1..physics_rate_hz, got {self.control_rate_hz!r}",
+        )
         ratio = self.physics_rate_hz / self.control_rate_hz
-        _require(abs(ratio - round(ratio)) < 1e-9,
-                 f"control_rate_hz: physics_rate_hz ({self.physics_rate_hz:g}) must be a whole multiple of it")
+        _require(
+            abs(ratio - round(ratio)) < 1e-9,
+            f"control_rate_hz: physics_rate_hz ({self.physics_rate_hz:g}) must be a whole multiple of it",
+        )
         _require(self.max_lag_s > 0.0, f"max_lag_s: expected > 0, got {self.max_lag_s!r}")
 
     @property
@@ -158,22 +163,38 @@ class FlightSettings:
         _require(self.prearm_fail in (0, 1), f"prearm_fail: expected 0 or 1, got {self.prearm_fail!r}")
         _require(self.fence_enable in (0, 1), f"fence_enable: expected 0 or 1, got {self.fence_enable!r}")
         _require(self.fence_action in (0, 1, 2, 4), f"fence_action: expected 0, 1, 2 or 4, got {self.fence_action!r}")
-        _require(10.0 <= self.fence_alt_max_m <= 1000.0,
-                 f"fence_alt_max_m: expected 10..1000 m, got {self.fence_alt_max_m!r}")
+        _require(
+            10.0 <= self.fence_alt_max_m <= 1000.0,
+            f"fence_alt_max_m: expected 10..1000 m, got {self.fence_alt_max_m!r}",
+        )
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             _require(math.isfinite(value), f"{f.name}: expected a finite number, got {value!r}")
-        _require(0.1 <= self.guided_timeout_s <= 120.0, f"guided_timeout_s: expected 0.1..120 s, got {self.guided_timeout_s}")
-        for name in ("wp_speed_m_s", "wp_speed_up_m_s", "wp_speed_down_m_s", "takeoff_speed_m_s",
-                     "land_speed_m_s", "land_speed_high_m_s"):
+        _require(
+            0.1 <= self.guided_timeout_s <= 120.0, f"guided_timeout_s: expected 0.1..120 s, got {self.guided_timeout_s}"
+        )
+        for name in (
+            "wp_speed_m_s",
+            "wp_speed_up_m_s",
+            "wp_speed_down_m_s",
+            "takeoff_speed_m_s",
+            "land_speed_m_s",
+            "land_speed_high_m_s",
+        ):
             value = getattr(self, name)
-            _require(0.1 <= value <= self.max_speed_m_s, f"{name}: expected 0.1..{self.max_speed_m_s:g} m/s, got {value}")
+            _require(
+                0.1 <= value <= self.max_speed_m_s, f"{name}: expected 0.1..{self.max_speed_m_s:g} m/s, got {value}"
+            )
         _require(0.1 <= self.wp_accel_m_s2 <= 10.0, f"wp_accel_m_s2: expected 0.1..10, got {self.wp_accel_m_s2}")
         _require(0.05 <= self.wp_radius_m <= 100.0, f"wp_radius_m: expected 0.05..100 m, got {self.wp_radius_m}")
-        _require(0.0 <= self.land_slow_alt_m <= 100.0, f"land_slow_alt_m: expected 0..100 m, got {self.land_slow_alt_m}")
+        _require(
+            0.0 <= self.land_slow_alt_m <= 100.0, f"land_slow_alt_m: expected 0..100 m, got {self.land_slow_alt_m}"
+        )
         _require(0.0 <= self.rtl_alt_m <= 300.0, f"rtl_alt_m: expected 0..300 m, got {self.rtl_alt_m}")
         _require(0.0 <= self.disarm_delay_s <= 127.0, f"disarm_delay_s: expected 0..127 s, got {self.disarm_delay_s}")
-        _require(0.1 <= self.brake_accel_m_s2 <= 10.0, f"brake_accel_m_s2: expected 0.1..10, got {self.brake_accel_m_s2}")
+        _require(
+            0.1 <= self.brake_accel_m_s2 <= 10.0, f"brake_accel_m_s2: expected 0.1..10, got {self.brake_accel_m_s2}"
+        )
         _require(1.0 <= self.max_speed_m_s <= 50.0, f"max_speed_m_s: expected 1..50 m/s, got {self.max_speed_m_s}")
 
 
@@ -202,14 +223,22 @@ class WindConfig:
     gust_tau_s: float = 2.0
 
     def __post_init__(self) -> None:
-        _require(math.isfinite(self.speed_m_s) and 0.0 <= self.speed_m_s <= 40.0,
-                 f"speed_m_s: expected 0..40 m/s, got {self.speed_m_s!r}")
-        _require(math.isfinite(self.from_deg) and -360.0 <= self.from_deg <= 360.0,
-                 f"from_deg: expected -360..360 degrees, got {self.from_deg!r}")
-        _require(math.isfinite(self.gust_m_s) and 0.0 <= self.gust_m_s <= 20.0,
-                 f"gust_m_s: expected 0..20 m/s, got {self.gust_m_s!r}")
-        _require(math.isfinite(self.gust_tau_s) and 0.05 <= self.gust_tau_s <= 100.0,
-                 f"gust_tau_s: expected 0.05..100 s, got {self.gust_tau_s!r}")
+        _require(
+            math.isfinite(self.speed_m_s) and 0.0 <= self.speed_m_s <= 40.0,
+            f"speed_m_s: expected 0..40 m/s, got {self.speed_m_s!r}",
+        )
+        _require(
+            math.isfinite(self.from_deg) and -360.0 <= self.from_deg <= 360.0,
+            f"from_deg: expected -360..360 degrees, got {self.from_deg!r}",
+        )
+        _require(
+            math.isfinite(self.gust_m_s) and 0.0 <= self.gust_m_s <= 20.0,
+            f"gust_m_s: expected 0..20 m/s, got {self.gust_m_s!r}",
+        )
+        _require(
+            math.isfinite(self.gust_tau_s) and 0.05 <= self.gust_tau_s <= 100.0,
+            f"gust_tau_s: expected 0.05..100 s, got {self.gust_tau_s!r}",
+        )
 
     def steady_ned_m_s(self) -> tuple[float, float, float]:
         """Velocity of the air in NED, m/s (blowing *towards* ``from_deg + 180``)."""
@@ -283,7 +312,7 @@ class LinkSettings:
 
     port: int = 0
     bind_host: str = "0.0.0.0"
-    out: tuple[str, ...] = instance_out(0)          # instance N: ``instance_out(N)``
+    out: tuple[str, ...] = instance_out(0)  # instance N: ``instance_out(N)``
     peer_timeout_s: float = 10.0
     mission_upload_timeout_s: float = 5.0
     mav1: StreamGroupRates = dataclasses.field(default_factory=StreamGroupRates)
@@ -292,14 +321,18 @@ class LinkSettings:
     gcs_sysid: int = 255
 
     def __post_init__(self) -> None:
-        _require(isinstance(self.gcs_sysid, int) and 1 <= self.gcs_sysid <= 255,
-                 f"gcs_sysid: expected 1..255, got {self.gcs_sysid!r}")
+        _require(
+            isinstance(self.gcs_sysid, int) and 1 <= self.gcs_sysid <= 255,
+            f"gcs_sysid: expected 1..255, got {self.gcs_sysid!r}",
+        )
         _require(0 <= self.port <= 65535, f"port: expected 0..65535, got {self.port!r}")
         for address in self.out:
             parse_host_port(address, "out")
         _require(self.peer_timeout_s > 0.0, f"peer_timeout_s: expected > 0, got {self.peer_timeout_s!r}")
-        _require(self.mission_upload_timeout_s > 0.0,
-                 f"mission_upload_timeout_s: expected > 0, got {self.mission_upload_timeout_s!r}")
+        _require(
+            self.mission_upload_timeout_s > 0.0,
+            f"mission_upload_timeout_s: expected > 0, got {self.mission_upload_timeout_s!r}",
+        )
 
 
 @dataclasses.dataclass(frozen=True)

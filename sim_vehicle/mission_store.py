@@ -34,8 +34,9 @@ MAX_ITEMS = 700
 
 
 #: ``MAV_MISSION_RESULT`` values (names and numbers from pymavlink's generated enum).
-MissionResult = enum.IntEnum("MissionResult", {name: value for value, name in
-                                               enum_names("MAV_MISSION_RESULT", "MAV_MISSION_").items()})
+MissionResult = enum.IntEnum(
+    "MissionResult", {name: value for value, name in enum_names("MAV_MISSION_RESULT", "MAV_MISSION_").items()}
+)
 
 
 # frames the vehicle can fly (MAV_FRAME numbers)
@@ -47,12 +48,29 @@ FRAME_GLOBAL_INT = mavlink.MAV_FRAME_GLOBAL_INT
 FRAME_GLOBAL_RELATIVE_ALT_INT = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 FRAME_GLOBAL_TERRAIN_ALT = mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT
 FRAME_GLOBAL_TERRAIN_ALT_INT = mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT
-SUPPORTED_FRAMES = frozenset({FRAME_GLOBAL, FRAME_LOCAL_NED, FRAME_MISSION, FRAME_GLOBAL_RELATIVE_ALT,
-                              FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT_INT, FRAME_GLOBAL_TERRAIN_ALT,
-                              FRAME_GLOBAL_TERRAIN_ALT_INT})
+SUPPORTED_FRAMES = frozenset(
+    {
+        FRAME_GLOBAL,
+        FRAME_LOCAL_NED,
+        FRAME_MISSION,
+        FRAME_GLOBAL_RELATIVE_ALT,
+        FRAME_GLOBAL_INT,
+        FRAME_GLOBAL_RELATIVE_ALT_INT,
+        FRAME_GLOBAL_TERRAIN_ALT,
+        FRAME_GLOBAL_TERRAIN_ALT_INT,
+    }
+)
 #: the frames whose x, y are latitude and longitude (degE7 in MISSION_ITEM_INT, degrees in MISSION_ITEM)
-GLOBAL_FRAMES = frozenset({FRAME_GLOBAL, FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT,
-                           FRAME_GLOBAL_TERRAIN_ALT, FRAME_GLOBAL_TERRAIN_ALT_INT})
+GLOBAL_FRAMES = frozenset(
+    {
+        FRAME_GLOBAL,
+        FRAME_GLOBAL_INT,
+        FRAME_GLOBAL_RELATIVE_ALT,
+        FRAME_GLOBAL_RELATIVE_ALT_INT,
+        FRAME_GLOBAL_TERRAIN_ALT,
+        FRAME_GLOBAL_TERRAIN_ALT_INT,
+    }
+)
 
 
 #: one stored item: the project's one ``MISSION_ITEM_INT`` record
@@ -157,8 +175,10 @@ class MissionStore:
             log.warning("%s upload refused: %d items > %d", MISSION_TYPE_NAMES[mission_type], count, MAX_ITEMS)
             return MissionResult.NO_SPACE
         if mission_type in self._uploads:
-            log.warning("%s upload restarted before it completed; the partial upload is dropped",
-                        MISSION_TYPE_NAMES[mission_type])
+            log.warning(
+                "%s upload restarted before it completed; the partial upload is dropped",
+                MISSION_TYPE_NAMES[mission_type],
+            )
             del self._uploads[mission_type]
         if count == 0:
             self._lists[mission_type] = ()
@@ -187,13 +207,24 @@ class MissionStore:
             upload.last_activity_s = now_s
             return MissionResult.ACCEPTED, False
         if item.seq != upload.next_seq:
-            log.warning("%s upload: got item %d, expected %d of %d: refused (INVALID_SEQUENCE)",
-                        MISSION_TYPE_NAMES[item.mission_type], item.seq, upload.next_seq, upload.count)
+            log.warning(
+                "%s upload: got item %d, expected %d of %d: refused (INVALID_SEQUENCE)",
+                MISSION_TYPE_NAMES[item.mission_type],
+                item.seq,
+                upload.next_seq,
+                upload.count,
+            )
             return MissionResult.INVALID_SEQUENCE, False
         result = validate_item(item)
         if result != MissionResult.ACCEPTED:
-            log.warning("%s upload aborted at item %d (command %d, frame %d): %s; previous list kept",
-                        MISSION_TYPE_NAMES[item.mission_type], item.seq, item.command, item.frame, result.name)
+            log.warning(
+                "%s upload aborted at item %d (command %d, frame %d): %s; previous list kept",
+                MISSION_TYPE_NAMES[item.mission_type],
+                item.seq,
+                item.command,
+                item.frame,
+                result.name,
+            )
             del self._uploads[item.mission_type]
             return result, False
         upload.items.append(item)
@@ -207,8 +238,13 @@ class MissionStore:
         """Drop the upload of ``mission_type`` (the stored list stays); True if there was one."""
         upload = self._uploads.pop(mission_type, None)
         if upload is not None:
-            log.warning("%s upload cancelled after %d of %d items (%s); previous list kept",
-                        MISSION_TYPE_NAMES[mission_type], len(upload.items), upload.count, reason)
+            log.warning(
+                "%s upload cancelled after %d of %d items (%s); previous list kept",
+                MISSION_TYPE_NAMES[mission_type],
+                len(upload.items),
+                upload.count,
+                reason,
+            )
         return upload is not None
 
     def expire_uploads(self, now_s: float) -> list[Upload]:

@@ -15,7 +15,6 @@ import logging
 import math
 
 from heli_common.mavlink_ids import mavlink
-
 from sim_vehicle.config import VehicleSettings, get_path, replace_path
 
 log = logging.getLogger(__name__)
@@ -61,23 +60,46 @@ class ParamSpec:
 
 
 def _weights(prefix: str, field: str, first_index: int, names: tuple[str, ...], what: str) -> list[ParamSpec]:
-    return [ParamSpec(f"{prefix}{n.upper()}", f"controller.{field}#{first_index + i}", 1.0, 1e-4, 1e4,
-                      description=f"LQI weight on {what} {n}")
-            for i, n in enumerate(names)]
+    return [
+        ParamSpec(
+            f"{prefix}{n.upper()}",
+            f"controller.{field}#{first_index + i}",
+            1.0,
+            1e-4,
+            1e4,
+            description=f"LQI weight on {what} {n}",
+        )
+        for i, n in enumerate(names)
+    ]
 
 
 def _stream_rates(link: int) -> list[ParamSpec]:
     """ArduPilot 4.7's per-link stream-rate parameters ``MAVn_<group>`` (n = 1..3)."""
     groups = ("RAW_SENS", "EXT_STAT", "RC_CHAN", "RAW_CTRL", "POSITION", "EXTRA1", "EXTRA2", "EXTRA3", "PARAMS", "ADSB")
-    return [ParamSpec(f"MAV{link}_{g}", f"link.mav{link}.{g.lower()}", 1.0, 0.0, 50.0, MAV_PARAM_TYPE_INT16,
-                      description=f"out address {link}: {g} stream rate at start, Hz (as ArduPilot: read at boot)")
-            for g in groups]
+    return [
+        ParamSpec(
+            f"MAV{link}_{g}",
+            f"link.mav{link}.{g.lower()}",
+            1.0,
+            0.0,
+            50.0,
+            MAV_PARAM_TYPE_INT16,
+            description=f"out address {link}: {g} stream rate at start, Hz (as ArduPilot: read at boot)",
+        )
+        for g in groups
+    ]
 
 
 PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("SIM_SPEEDUP", "timing.speedup", 1.0, 0.1, 1000.0, description="simulation speed-up, x real time"),
-    ParamSpec("GUID_TIMEOUT", "flight.guided_timeout_s", 1.0, 0.1, 120.0,
-              description="GUIDED setpoint timeout before braking, s"),
+    ParamSpec(
+        "GUID_TIMEOUT",
+        "flight.guided_timeout_s",
+        1.0,
+        0.1,
+        120.0,
+        description="GUIDED setpoint timeout before braking, s",
+    ),
     ParamSpec("WPNAV_SPEED", "flight.wp_speed_m_s", 100.0, 20.0, 1500.0, description="waypoint speed, cm/s"),
     ParamSpec("WPNAV_SPEED_UP", "flight.wp_speed_up_m_s", 100.0, 10.0, 1000.0, description="climb speed, cm/s"),
     ParamSpec("WPNAV_SPEED_DN", "flight.wp_speed_down_m_s", 100.0, 10.0, 500.0, description="descent speed, cm/s"),
@@ -85,35 +107,103 @@ PARAM_SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("WPNAV_RADIUS", "flight.wp_radius_m", 100.0, 5.0, 1000.0, description="waypoint radius, cm"),
     ParamSpec("PILOT_SPEED_UP", "flight.takeoff_speed_m_s", 100.0, 10.0, 500.0, description="takeoff climb, cm/s"),
     ParamSpec("LAND_SPEED", "flight.land_speed_m_s", 100.0, 30.0, 200.0, description="final descent, cm/s"),
-    ParamSpec("LAND_SPEED_HIGH", "flight.land_speed_high_m_s", 100.0, 30.0, 500.0,
-              description="descent above the slow-down height, cm/s"),
+    ParamSpec(
+        "LAND_SPEED_HIGH",
+        "flight.land_speed_high_m_s",
+        100.0,
+        30.0,
+        500.0,
+        description="descent above the slow-down height, cm/s",
+    ),
     ParamSpec("RTL_ALT", "flight.rtl_alt_m", 100.0, 200.0, 30000.0, description="RTL return height, cm"),
-    ParamSpec("DISARM_DELAY", "flight.disarm_delay_s", 1.0, 0.0, 127.0, MAV_PARAM_TYPE_INT8,
-              description="disarm after landed this long, s (0 = never)"),
-    ParamSpec("FENCE_ENABLE", "flight.fence_enable", 1.0, 0.0, 1.0, MAV_PARAM_TYPE_INT8,
-              description="enforce the uploaded fence (0/1)"),
-    ParamSpec("FENCE_ACTION", "flight.fence_action", 1.0, 0.0, 4.0, MAV_PARAM_TYPE_INT8,
-              description="fence breach: 0 report, 1 RTL, 2 LAND, 4 BRAKE"),
+    ParamSpec(
+        "DISARM_DELAY",
+        "flight.disarm_delay_s",
+        1.0,
+        0.0,
+        127.0,
+        MAV_PARAM_TYPE_INT8,
+        description="disarm after landed this long, s (0 = never)",
+    ),
+    ParamSpec(
+        "FENCE_ENABLE",
+        "flight.fence_enable",
+        1.0,
+        0.0,
+        1.0,
+        MAV_PARAM_TYPE_INT8,
+        description="enforce the uploaded fence (0/1)",
+    ),
+    ParamSpec(
+        "FENCE_ACTION",
+        "flight.fence_action",
+        1.0,
+        0.0,
+        4.0,
+        MAV_PARAM_TYPE_INT8,
+        description="fence breach: 0 report, 1 RTL, 2 LAND, 4 BRAKE",
+    ),
     ParamSpec("FENCE_ALT_MAX", "flight.fence_alt_max_m", 1.0, 10.0, 1000.0, description="fence ceiling, m"),
-    ParamSpec("SIM_PREARM_FAIL", "flight.prearm_fail", 1.0, 0.0, 1.0, MAV_PARAM_TYPE_INT8,
-              description="fault injection: pre-arm checks fail (0/1)"),
-    ParamSpec("H_RSC_MODE", "rsc.mode", 1.0, 1.0, 4.0, MAV_PARAM_TYPE_INT8,
-              description="rotor speed control mode 1..4 (all run up alike here)"),
-    ParamSpec("H_RSC_RUNUP_TIME", "rsc.runup_time_s", 1.0, 1.0, 60.0, MAV_PARAM_TYPE_INT8,
-              description="rotor run-up time, s"),
-    ParamSpec("H_RSC_RAMP_TIME", "rsc.ramp_time_s", 1.0, 0.0, 60.0, MAV_PARAM_TYPE_INT8,
-              description="RSC output ramp time, s"),
-    ParamSpec("H_RSC_CRITICAL", "rsc.critical_pct", 1.0, 0.0, 100.0, MAV_PARAM_TYPE_INT16,
-              description="critical rotor speed, percent"),
-    ParamSpec("H_RSC_SETPOINT", "rsc.setpoint_pct", 1.0, 0.0, 100.0, MAV_PARAM_TYPE_INT16,
-              description="RSC output at full speed, percent"),
-    ParamSpec("MAV_GCS_SYSID", "link.gcs_sysid", 1.0, 1.0, 255.0, MAV_PARAM_TYPE_INT16,
-              description="system id allowed to override RC channels"),
-    *_stream_rates(1), *_stream_rates(2), *_stream_rates(3),
-    ParamSpec("SIM_ADSB_COUNT", "adsb.count", 1.0, 0.0, 100.0, MAV_PARAM_TYPE_INT16,
-              description="simulated ADS-B aircraft"),
-    ParamSpec("SIM_ADSB_RADIUS", "adsb.radius_m", 1.0, 50.0, 100000.0,
-              description="radius of the area the traffic crosses, m"),
+    ParamSpec(
+        "SIM_PREARM_FAIL",
+        "flight.prearm_fail",
+        1.0,
+        0.0,
+        1.0,
+        MAV_PARAM_TYPE_INT8,
+        description="fault injection: pre-arm checks fail (0/1)",
+    ),
+    ParamSpec(
+        "H_RSC_MODE",
+        "rsc.mode",
+        1.0,
+        1.0,
+        4.0,
+        MAV_PARAM_TYPE_INT8,
+        description="rotor speed control mode 1..4 (all run up alike here)",
+    ),
+    ParamSpec(
+        "H_RSC_RUNUP_TIME", "rsc.runup_time_s", 1.0, 1.0, 60.0, MAV_PARAM_TYPE_INT8, description="rotor run-up time, s"
+    ),
+    ParamSpec(
+        "H_RSC_RAMP_TIME", "rsc.ramp_time_s", 1.0, 0.0, 60.0, MAV_PARAM_TYPE_INT8, description="RSC output ramp time, s"
+    ),
+    ParamSpec(
+        "H_RSC_CRITICAL",
+        "rsc.critical_pct",
+        1.0,
+        0.0,
+        100.0,
+        MAV_PARAM_TYPE_INT16,
+        description="critical rotor speed, percent",
+    ),
+    ParamSpec(
+        "H_RSC_SETPOINT",
+        "rsc.setpoint_pct",
+        1.0,
+        0.0,
+        100.0,
+        MAV_PARAM_TYPE_INT16,
+        description="RSC output at full speed, percent",
+    ),
+    ParamSpec(
+        "MAV_GCS_SYSID",
+        "link.gcs_sysid",
+        1.0,
+        1.0,
+        255.0,
+        MAV_PARAM_TYPE_INT16,
+        description="system id allowed to override RC channels",
+    ),
+    *_stream_rates(1),
+    *_stream_rates(2),
+    *_stream_rates(3),
+    ParamSpec(
+        "SIM_ADSB_COUNT", "adsb.count", 1.0, 0.0, 100.0, MAV_PARAM_TYPE_INT16, description="simulated ADS-B aircraft"
+    ),
+    ParamSpec(
+        "SIM_ADSB_RADIUS", "adsb.radius_m", 1.0, 50.0, 100000.0, description="radius of the area the traffic crosses, m"
+    ),
     ParamSpec("SIM_ADSB_ALT", "adsb.alt_m", 1.0, -100.0, 10000.0, description="mean traffic height above home, m"),
     ParamSpec("SIM_WIND_SPD", "wind.speed_m_s", 1.0, 0.0, 40.0, description="steady wind, m/s"),
     ParamSpec("SIM_WIND_DIR", "wind.from_deg", 1.0, 0.0, 360.0, description="wind from, degrees"),

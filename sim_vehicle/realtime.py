@@ -51,12 +51,21 @@ class RealtimeLoop:
         """Simulate, receive, send until :meth:`stop` (or for ``duration_wall_s``); log the link statistics."""
         server = self.server
         start = server.wall_s()
-        log.info("sim-vehicle sysid %d listening on UDP %s:%d, telemetry to %s and peers; speed-up %g",
-                 server.sysid, server.settings.link.bind_host, server.endpoint.port,
-                 ", ".join(f"{h}:{p}" for h, p in server.endpoint.outs) or "(no --out)", self.clock.speedup)
+        log.info(
+            "sim-vehicle sysid %d listening on UDP %s:%d, telemetry to %s and peers; speed-up %g",
+            server.sysid,
+            server.settings.link.bind_host,
+            server.endpoint.port,
+            ", ".join(f"{h}:{p}" for h, p in server.endpoint.outs) or "(no --out)",
+            self.clock.speedup,
+        )
         signing = server.endpoint.signing
-        log.info("MAVLink 2 signing: %s", f"on, key {signing.fingerprint}" if signing.enabled else
-                 "off" + (", SETUP_SIGNING accepted" if signing.accept_setup else ""))
+        log.info(
+            "MAVLink 2 signing: %s",
+            f"on, key {signing.fingerprint}"
+            if signing.enabled
+            else "off" + (", SETUP_SIGNING accepted" if signing.accept_setup else ""),
+        )
         while not self._stop:
             if duration_wall_s is not None and server.wall_s() - start >= duration_wall_s:
                 break

@@ -9,8 +9,15 @@ from __future__ import annotations
 import numpy as np
 
 
-def circle_reference(t_s, radius_m: float = 30.0, speed_m_s: float = 5.0, ramp_s: float = 5.0,
-                     down_m: float = -20.0, heading: str = "path", yaw_fixed_rad: float = 0.0):
+def circle_reference(
+    t_s,
+    radius_m: float = 30.0,
+    speed_m_s: float = 5.0,
+    ramp_s: float = 5.0,
+    down_m: float = -20.0,
+    heading: str = "path",
+    yaw_fixed_rad: float = 0.0,
+):
     """Counter-clockwise circle (seen from above) about the origin with a smoothstep speed ramp.
 
     Parameters
@@ -31,8 +38,9 @@ def circle_reference(t_s, radius_m: float = 30.0, speed_m_s: float = 5.0, ramp_s
     tau = np.clip(t / ramp_s, 0.0, 1.0)
     speed = speed_m_s * (3 * tau**2 - 2 * tau**3)
     dspeed = np.where(t < ramp_s, speed_m_s * (6 * tau - 6 * tau**2) / ramp_s, 0.0)
-    arc = np.where(t < ramp_s, speed_m_s * ramp_s * (tau**3 - tau**4 / 2),
-                   speed_m_s * ramp_s / 2 + speed_m_s * (t - ramp_s))
+    arc = np.where(
+        t < ramp_s, speed_m_s * ramp_s * (tau**3 - tau**4 / 2), speed_m_s * ramp_s / 2 + speed_m_s * (t - ramp_s)
+    )
     th = arc / radius_m
     tangent = np.stack([-np.sin(th), np.cos(th), 0 * th], axis=-1)
     normal = np.stack([-np.cos(th), -np.sin(th), 0 * th], axis=-1)

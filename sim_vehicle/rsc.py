@@ -79,9 +79,14 @@ class RscSettings:
     def __post_init__(self) -> None:
         if self.mode not in ROTOR_CONTROL_MODES:
             raise ValueError(f"mode: expected one of {sorted(ROTOR_CONTROL_MODES)}, got {self.mode!r}")
-        for name, lo, hi in (("runup_time_s", 0.5, 60.0), ("ramp_time_s", 0.0, 60.0), ("critical_pct", 0.0, 100.0),
-                             ("setpoint_pct", 0.0, 100.0),
-                             ("arming_delay_s", 0.0, 60.0), ("rc_override_timeout_s", 0.1, 120.0)):
+        for name, lo, hi in (
+            ("runup_time_s", 0.5, 60.0),
+            ("ramp_time_s", 0.0, 60.0),
+            ("critical_pct", 0.0, 100.0),
+            ("setpoint_pct", 0.0, 100.0),
+            ("arming_delay_s", 0.0, 60.0),
+            ("rc_override_timeout_s", 0.1, 120.0),
+        ):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and lo <= value <= hi):
                 raise ValueError(f"{name}: expected {lo:g}..{hi:g}, got {value!r}")
@@ -241,10 +246,14 @@ class RotorControl:
         if position != self.rc8_position:
             self.rc8_position = position
             ok, reason = self.set_switch(position, flying)
-            texts.append((self.SEVERITY_INFO, f"RC8: MotorInterlock {SWITCH_NAMES[position]}") if ok
-                         else (self.SEVERITY_WARNING, reason))
-        self.state = update(self.state, armed=armed, armed_for_s=now_s - self.armed_at_s, dt_s=dt_s,
-                            settings=self.settings)
+            texts.append(
+                (self.SEVERITY_INFO, f"RC8: MotorInterlock {SWITCH_NAMES[position]}")
+                if ok
+                else (self.SEVERITY_WARNING, reason)
+            )
+        self.state = update(
+            self.state, armed=armed, armed_for_s=now_s - self.armed_at_s, dt_s=dt_s, settings=self.settings
+        )
         return texts
 
 
@@ -253,6 +262,20 @@ def output_pwm_us(state: RotorState, settings: RscSettings) -> int:
     return int(round(1000.0 + 10.0 * settings.setpoint_pct * state.ramp))
 
 
-__all__ = ["RscSettings", "RotorState", "RotorControl", "update", "with_switch", "switch_position", "engages", "rc8_pwm_us",
-           "output_pwm_us", "AUX_FUNCTION_MOTOR_INTERLOCK", "SWITCH_LOW", "SWITCH_MIDDLE", "SWITCH_HIGH",
-           "SWITCH_NAMES", "ROTOR_RPM_NOMINAL"]
+__all__ = [
+    "RscSettings",
+    "RotorState",
+    "RotorControl",
+    "update",
+    "with_switch",
+    "switch_position",
+    "engages",
+    "rc8_pwm_us",
+    "output_pwm_us",
+    "AUX_FUNCTION_MOTOR_INTERLOCK",
+    "SWITCH_LOW",
+    "SWITCH_MIDDLE",
+    "SWITCH_HIGH",
+    "SWITCH_NAMES",
+    "ROTOR_RPM_NOMINAL",
+]

@@ -48,8 +48,9 @@ class VehicleSigning:
         Link id of the outgoing signatures.
     """
 
-    def __init__(self, encoder: Any, key: bytes | None = None, accept_setup: bool = False,
-                 link_id: int = SIGNING_LINK_ID) -> None:
+    def __init__(
+        self, encoder: Any, key: bytes | None = None, accept_setup: bool = False, link_id: int = SIGNING_LINK_ID
+    ) -> None:
         self.encoder = encoder
         self.accept_setup = bool(accept_setup)
         self.link_id = int(link_id) & 0xFF
@@ -119,8 +120,9 @@ class VehicleSigning:
             return "an all-zero key only disables signing, with initial_timestamp 0"
         if self.check is None:
             return "" if self.accept_setup else "no signing key and no --accept-signing-setup"
-        if not (msg.get_msgbuf()[2] & mavlink.MAVLINK_IFLAG_SIGNED and signature_matches(self.check.key,
-                                                                                           msg.get_msgbuf())):
+        if not (
+            msg.get_msgbuf()[2] & mavlink.MAVLINK_IFLAG_SIGNED and signature_matches(self.check.key, msg.get_msgbuf())
+        ):
             return "not signed with the current key"
         return ""
 

@@ -35,23 +35,24 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 log = logging.getLogger(__name__)
 
 GROUPS: dict[str, tuple[str, ...]] = {
-    "RAW_SENS": (),                                                   # RAW_IMU, SCALED_* (not simulated)
-    "EXT_STAT": ("SYS_STATUS", "MISSION_CURRENT", "GPS_RAW_INT"),     # observed (+ POWER_STATUS, MEMINFO, ...)
-    "RC_CHAN": ("SERVO_OUTPUT_RAW", "RC_CHANNELS"),                   # observed
-    "RAW_CTRL": (),                                                   # unused in Copter (observed: nothing)
-    "POSITION": ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),        # observed
-    "EXTRA1": ("ATTITUDE", "RPM"),                                    # observed (+ AHRS2, SIMSTATE, ESC_TELEMETRY)
-    "EXTRA2": ("VFR_HUD",),                                           # observed
-    "EXTRA3": ("SYSTEM_TIME",),                                       # observed (+ AHRS, WIND, EKF_STATUS_REPORT, ...)
-    "PARAMS": (),                                                     # parameter streaming, not a telemetry rate
-    "ADSB": ("ADSB_VEHICLE",),                                        # observed with SIM_ADSB_COUNT
+    "RAW_SENS": (),  # RAW_IMU, SCALED_* (not simulated)
+    "EXT_STAT": ("SYS_STATUS", "MISSION_CURRENT", "GPS_RAW_INT"),  # observed (+ POWER_STATUS, MEMINFO, ...)
+    "RC_CHAN": ("SERVO_OUTPUT_RAW", "RC_CHANNELS"),  # observed
+    "RAW_CTRL": (),  # unused in Copter (observed: nothing)
+    "POSITION": ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),  # observed
+    "EXTRA1": ("ATTITUDE", "RPM"),  # observed (+ AHRS2, SIMSTATE, ESC_TELEMETRY)
+    "EXTRA2": ("VFR_HUD",),  # observed
+    "EXTRA3": ("SYSTEM_TIME",),  # observed (+ AHRS, WIND, EKF_STATUS_REPORT, ...)
+    "PARAMS": (),  # parameter streaming, not a telemetry rate
+    "ADSB": ("ADSB_VEHICLE",),  # observed with SIM_ADSB_COUNT
 }
 """Stream group (``MAVn_`` parameter suffix, in ArduPilot's order) -> messages of the group."""
 GROUP_NAMES = tuple(GROUPS)
@@ -71,8 +72,10 @@ DATA_STREAM_GROUPS: dict[int, str] = {
 UNGROUPED = ("EXTENDED_SYS_STATE", "HOME_POSITION", "GPS_GLOBAL_ORIGIN")
 """Messages that stream only when set one by one with SET_MESSAGE_INTERVAL."""
 
-MESSAGE_IDS: dict[str, int] = {name: getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
-                               for name in [m for g in GROUPS.values() for m in g] + list(UNGROUPED)}
+MESSAGE_IDS: dict[str, int] = {
+    name: getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
+    for name in [m for g in GROUPS.values() for m in g] + list(UNGROUPED)
+}
 """Every message a link can stream -> its MAVLink id."""
 NAMES_BY_ID: dict[int, str] = {v: k for k, v in MESSAGE_IDS.items()}
 GROUP_OF: dict[str, str] = {m: g for g, messages in GROUPS.items() for m in messages}
@@ -175,8 +178,12 @@ def decode_interval(msg_id: float, interval_us: float) -> tuple[int, str, str | 
         return mavlink.MAV_RESULT_DENIED, "", name, None
     interval_ms = max(1, int(interval_us // 1000))
     if interval_ms * LOOP_RATE_HZ < 1000.0:
-        return (mavlink.MAV_RESULT_DENIED,
-                f"Requested rate for message ID {int(msg_id)} too fast. Increase SCHED_LOOP_RATE", name, None)
+        return (
+            mavlink.MAV_RESULT_DENIED,
+            f"Requested rate for message ID {int(msg_id)} too fast. Increase SCHED_LOOP_RATE",
+            name,
+            None,
+        )
     return mavlink.MAV_RESULT_ACCEPTED, "", name, min(interval_ms / 1000.0, MAX_INTERVAL_S)
 
 
@@ -217,12 +224,14 @@ class StreamTable:
                 del self.links[oldest]
             link = self.links[address] = LinkStreams(rates, now_s)
             if rates and any(rates.values()):
-                log.info("link %s:%d (MAV%d) starts with streams %s", *address, n,
-                         {g: hz for g, hz in rates.items() if hz})
+                log.info(
+                    "link %s:%d (MAV%d) starts with streams %s", *address, n, {g: hz for g, hz in rates.items() if hz}
+                )
         return link
 
-    def set_message_interval(self, address: Address, msg_id: float, interval_us: float,
-                             now_s: float) -> tuple[int, str]:
+    def set_message_interval(
+        self, address: Address, msg_id: float, interval_us: float, now_s: float
+    ) -> tuple[int, str]:
         """SET_MESSAGE_INTERVAL from ``address``; returns (MAV_RESULT, STATUSTEXT or "")."""
         result, text, name, interval = decode_interval(msg_id, interval_us)
         if result != mavlink.MAV_RESULT_ACCEPTED:
@@ -231,12 +240,17 @@ class StreamTable:
         if interval == "default":
             interval = link.default_interval_s(name)
         link.set_interval(name, interval, now_s)
-        log.info("%s:%d: %s %s (SET_MESSAGE_INTERVAL)", *address, name,
-                 "off" if interval is None else f"every {interval:g} s")
+        log.info(
+            "%s:%d: %s %s (SET_MESSAGE_INTERVAL)",
+            *address,
+            name,
+            "off" if interval is None else f"every {interval:g} s",
+        )
         return result, ""
 
-    def request_data_stream(self, address: Address, stream_id: int, rate_hz: int, start_stop: int,
-                            now_s: float) -> list[tuple[str, int]]:
+    def request_data_stream(
+        self, address: Address, stream_id: int, rate_hz: int, start_stop: int, now_s: float
+    ) -> list[tuple[str, int]]:
         """REQUEST_DATA_STREAM from ``address``; returns the (group, Hz) pairs it set."""
         if start_stop not in (0, 1):
             return []
@@ -251,10 +265,24 @@ class StreamTable:
         link = self.link(address, now_s)
         for group in groups:
             link.set_group(group, hz, now_s)
-        log.info("%s:%d: stream group%s %s at %d Hz (REQUEST_DATA_STREAM)", *address, "s" if len(groups) > 1 else "",
-                 ",".join(groups), hz)
+        log.info(
+            "%s:%d: stream group%s %s at %d Hz (REQUEST_DATA_STREAM)",
+            *address,
+            "s" if len(groups) > 1 else "",
+            ",".join(groups),
+            hz,
+        )
         return [(g, hz) for g in groups]
 
 
-__all__ = ["GROUPS", "GROUP_NAMES", "DATA_STREAM_GROUPS", "UNGROUPED", "MESSAGE_IDS", "NAMES_BY_ID", "LinkStreams",
-           "StreamTable", "decode_interval"]
+__all__ = [
+    "GROUPS",
+    "GROUP_NAMES",
+    "DATA_STREAM_GROUPS",
+    "UNGROUPED",
+    "MESSAGE_IDS",
+    "NAMES_BY_ID",
+    "LinkStreams",
+    "StreamTable",
+    "decode_interval",
+]

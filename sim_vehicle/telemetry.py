@@ -29,22 +29,42 @@ from sim_vehicle.mission_store import MISSION_TYPE_MISSION, MissionStore
 from sim_vehicle.streams import LinkStreams
 
 FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (0 << 8) | 255  # "4.5.0 official", like ArduCopter 4.5
-CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-                | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
-                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY)
-SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-           | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-           | mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-           | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION | mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION
-           | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
-           | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | mavlink.MAV_SYS_STATUS_AHRS)
-ADSB_FLAGS = (mavlink.ADSB_FLAGS_VALID_COORDS | mavlink.ADSB_FLAGS_VALID_ALTITUDE | mavlink.ADSB_FLAGS_VALID_HEADING
-              | mavlink.ADSB_FLAGS_VALID_VELOCITY | mavlink.ADSB_FLAGS_VALID_CALLSIGN | mavlink.ADSB_FLAGS_VALID_SQUAWK
-              | mavlink.ADSB_FLAGS_SIMULATED | mavlink.ADSB_FLAGS_VERTICAL_VELOCITY_VALID
-              | mavlink.ADSB_FLAGS_BARO_VALID)
+CAPABILITIES = (
+    mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+)
+SENSORS = (
+    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+    | mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+    | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    | mavlink.MAV_SYS_STATUS_AHRS
+)
+ADSB_FLAGS = (
+    mavlink.ADSB_FLAGS_VALID_COORDS
+    | mavlink.ADSB_FLAGS_VALID_ALTITUDE
+    | mavlink.ADSB_FLAGS_VALID_HEADING
+    | mavlink.ADSB_FLAGS_VALID_VELOCITY
+    | mavlink.ADSB_FLAGS_VALID_CALLSIGN
+    | mavlink.ADSB_FLAGS_VALID_SQUAWK
+    | mavlink.ADSB_FLAGS_SIMULATED
+    | mavlink.ADSB_FLAGS_VERTICAL_VELOCITY_VALID
+    | mavlink.ADSB_FLAGS_BARO_VALID
+)
 """511, as the reference firmware reports its simulated traffic."""
 ADSB_SQUAWK_VFR = 1200
 RC_CHANNEL_COUNT = 16
@@ -72,8 +92,16 @@ class Telemetry:
         Returns the count of malformed packets dropped (SYS_STATUS ``errors_comm``).
     """
 
-    def __init__(self, mav: Any, autopilot: Autopilot, clock: SimClock, store: MissionStore, traffic: TrafficModel,
-                 sysid: int, dropped: Any = lambda: 0) -> None:
+    def __init__(
+        self,
+        mav: Any,
+        autopilot: Autopilot,
+        clock: SimClock,
+        store: MissionStore,
+        traffic: TrafficModel,
+        sysid: int,
+        dropped: Any = lambda: 0,
+    ) -> None:
         self.mav = mav
         self.autopilot = autopilot
         self.clock = clock
@@ -109,12 +137,26 @@ class Telemetry:
         if a.armed:
             base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         status = mavlink.MAV_STATE_ACTIVE if a.armed else mavlink.MAV_STATE_STANDBY
-        return self.mav.heartbeat_encode(mavlink.MAV_TYPE_HELICOPTER, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, base, a.mode,
-                                         status)
+        return self.mav.heartbeat_encode(
+            mavlink.MAV_TYPE_HELICOPTER, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, base, a.mode, status
+        )
 
     def msg_sys_status(self) -> Any:
-        return self.mav.sys_status_encode(SENSORS, SENSORS, SENSORS, 250, 22200, 1000 if self.autopilot.armed else 0,
-                                          100, 0, self.dropped() & 0xFFFF, 0, 0, 0, 0)
+        return self.mav.sys_status_encode(
+            SENSORS,
+            SENSORS,
+            SENSORS,
+            250,
+            22200,
+            1000 if self.autopilot.armed else 0,
+            100,
+            0,
+            self.dropped() & 0xFFFF,
+            0,
+            0,
+            0,
+            0,
+        )
 
     def msg_extended_sys_state(self) -> Any:
         a = self.autopilot
@@ -145,8 +187,9 @@ class Telemetry:
         return self.mav.system_time_encode(int(time.time() * 1e6), self.time_boot_ms())
 
     def msg_autopilot_version(self) -> Any:
-        return self.mav.autopilot_version_encode(CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
-                                                 0, 0, 0x5157_0000 + self.sysid)
+        return self.mav.autopilot_version_encode(
+            CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x5157_0000 + self.sysid
+        )
 
     # ------------------------------------------------------------------ position and attitude
     def msg_global_position_int(self) -> Any:
@@ -156,9 +199,16 @@ class Telemetry:
         heading = math.degrees(a.euler_rad[2]) % 360.0
         relative_mm = (alt - a.frames.home_alt_m) * 1000.0
         return self.mav.global_position_int_encode(
-            self.time_boot_ms(), int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)),
-            int(round(relative_mm)), _i16(vel[0] * 100.0), _i16(vel[1] * 100.0), _i16(vel[2] * 100.0),
-            int(round(heading * 100.0)) % 36000)
+            self.time_boot_ms(),
+            int(round(lat * 1e7)),
+            int(round(lon * 1e7)),
+            int(round(alt * 1000.0)),
+            int(round(relative_mm)),
+            _i16(vel[0] * 100.0),
+            _i16(vel[1] * 100.0),
+            _i16(vel[2] * 100.0),
+            int(round(heading * 100.0)) % 36000,
+        )
 
     def msg_local_position_ned(self) -> Any:
         a = self.autopilot
@@ -187,21 +237,42 @@ class Telemetry:
         lat, lon, alt = a.position_lla()
         v = a.vel_ned_m_s
         cog = int(round(math.degrees(math.atan2(v[1], v[0])) % 360.0 * 100.0)) % 36000
-        return self.mav.gps_raw_int_encode(self._time_usec(), 3, int(round(lat * 1e7)), int(round(lon * 1e7)),
-                                           int(round(alt * 1000.0)), 70, 90, int(round(math.hypot(v[0], v[1]) * 100.0)),
-                                           cog, 14)
+        return self.mav.gps_raw_int_encode(
+            self._time_usec(),
+            3,
+            int(round(lat * 1e7)),
+            int(round(lon * 1e7)),
+            int(round(alt * 1000.0)),
+            70,
+            90,
+            int(round(math.hypot(v[0], v[1]) * 100.0)),
+            cog,
+            14,
+        )
 
     def msg_home_position(self) -> Any:
         frames = self.autopilot.frames
         lat, lon, alt = frames.home_lla
         x, y, z = (float(v) for v in frames.home_local_ned_m)
-        return self.mav.home_position_encode(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)),
-                                             x, y, z, NAN_QUATERNION, 0.0, 0.0, 0.0, self._time_usec())
+        return self.mav.home_position_encode(
+            int(round(lat * 1e7)),
+            int(round(lon * 1e7)),
+            int(round(alt * 1000.0)),
+            x,
+            y,
+            z,
+            NAN_QUATERNION,
+            0.0,
+            0.0,
+            0.0,
+            self._time_usec(),
+        )
 
     def msg_gps_global_origin(self) -> Any:
         lat, lon, alt = self.autopilot.frames.origin_lla
-        return self.mav.gps_global_origin_encode(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)),
-                                                 self._time_usec())
+        return self.mav.gps_global_origin_encode(
+            int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000.0)), self._time_usec()
+        )
 
     # ------------------------------------------------------------------ rotor, servos, RC
     def msg_servo_output_raw(self) -> Any:
@@ -209,8 +280,9 @@ class Telemetry:
         us = [int(round(1500.0 + 500.0 * max(-1.0, min(1.0, float(v))))) for v in a.airframe.delta]
         rsc_us = rsc.output_pwm_us(a.arming.rotor, a.settings.rsc)
         # servo1 lateral cyclic, servo2 longitudinal cyclic, servo3 collective, servo4 tail rotor, servo8 RSC
-        return self.mav.servo_output_raw_encode(self._time_usec() & 0xFFFFFFFF, 0, us[0], us[1], us[3], us[2], 0, 0, 0,
-                                                rsc_us)
+        return self.mav.servo_output_raw_encode(
+            self._time_usec() & 0xFFFFFFFF, 0, us[0], us[1], us[3], us[2], 0, 0, 0, rsc_us
+        )
 
     def msg_rpm(self) -> Any:
         return self.mav.rpm_encode(float(self.autopilot.arming.rotor.speed * rsc.ROTOR_RPM_NOMINAL), -1.0)
@@ -231,10 +303,20 @@ class Telemetry:
         plane = aircraft[index]
         lat, lon, alt = self.autopilot.frames.to_lla(plane.pos_ned_m)
         return self.mav.adsb_vehicle_encode(
-            plane.icao_address, int(round(lat * 1e7)), int(round(lon * 1e7)), mavlink.ADSB_ALTITUDE_TYPE_PRESSURE_QNH,
-            int(round(alt * 1000.0)), int(round(plane.heading_deg * 100.0)) % 36000,
-            int(round(plane.ground_speed_m_s * 100.0)), _i16(-plane.vel_ned_m_s[2] * 100.0),
-            plane.callsign.encode()[:9], plane.emitter_type, 1, ADSB_FLAGS, ADSB_SQUAWK_VFR)
+            plane.icao_address,
+            int(round(lat * 1e7)),
+            int(round(lon * 1e7)),
+            mavlink.ADSB_ALTITUDE_TYPE_PRESSURE_QNH,
+            int(round(alt * 1000.0)),
+            int(round(plane.heading_deg * 100.0)) % 36000,
+            int(round(plane.ground_speed_m_s * 100.0)),
+            _i16(-plane.vel_ned_m_s[2] * 100.0),
+            plane.callsign.encode()[:9],
+            plane.emitter_type,
+            1,
+            ADSB_FLAGS,
+            ADSB_SQUAWK_VFR,
+        )
 
 
 def _i16(value: float) -> int:

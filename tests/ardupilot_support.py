@@ -24,16 +24,16 @@ import socket
 import subprocess
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
+from support import REPO_ROOT
 
 from companion.errors import ProcessError
 from companion.sitl.processes import ManagedProcess
 from heli_common.mavlink_ids import COPTER_MODES
 from heli_common.ports import free_port
-from support import REPO_ROOT
 
 ARDUPILOT_DIR = REPO_ROOT.parent / "shared" / "ardupilot"
 ARDUPILOT_BIN = ARDUPILOT_DIR / "arducopter-heli"
@@ -72,8 +72,9 @@ def free_instance() -> int:
     """A SITL instance number whose own ports (TCP 5760-5763 and UDP 5501 + 10 x N) are free."""
     for _ in range(200):
         n = random.randint(20, 400)
-        if all(_port_free(socket.SOCK_STREAM, 5760 + 10 * n + k) for k in range(4)) and \
-                _port_free(socket.SOCK_DGRAM, 5501 + 10 * n):
+        if all(_port_free(socket.SOCK_STREAM, 5760 + 10 * n + k) for k in range(4)) and _port_free(
+            socket.SOCK_DGRAM, 5501 + 10 * n
+        ):
             return n
     raise RuntimeError("no free ArduPilot SITL instance number")
 
@@ -83,10 +84,10 @@ class ArduPilotSitl:
     """A running ``arducopter-heli``: ``companion_port`` is where it sends MAVLink for the
     companion (``udpin://127.0.0.1:<port>``); ``observer`` watches it on its own port."""
 
-    proc: ManagedProcess           # its log: directory / "sitl.log"
+    proc: ManagedProcess  # its log: directory / "sitl.log"
     directory: Path
     companion_port: int
-    observer: "VehicleObserver"
+    observer: VehicleObserver
     speedup: float
     home: tuple
 
@@ -95,24 +96,45 @@ class ArduPilotSitl:
 
 
 @contextlib.contextmanager
-def start_ardupilot(directory, *, speedup: float = 8.0, home=(47.397742, 8.545594, 488.0, 0.0),
-                    adsb_count: int = 0, adsb_radius_m: float = 400.0,
-                    adsb_alt_m: float = 900.0) -> Iterator[ArduPilotSitl]:
+def start_ardupilot(
+    directory,
+    *,
+    speedup: float = 8.0,
+    home=(47.397742, 8.545594, 488.0, 0.0),
+    adsb_count: int = 0,
+    adsb_radius_m: float = 400.0,
+    adsb_alt_m: float = 900.0,
+) -> Iterator[ArduPilotSitl]:
     """Start ``arducopter-heli`` (fresh parameters in ``directory``) and its observer."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     defaults = [str(ARDUPILOT_PARAMS)]
     if adsb_count:
         extra = directory / "adsb.parm"
-        extra.write_text(f"ADSB_TYPE 1\nSIM_ADSB_COUNT {adsb_count}\nSIM_ADSB_RADIUS {adsb_radius_m:g}\n"
-                         f"SIM_ADSB_ALT {adsb_alt_m:g}\n")
+        extra.write_text(
+            f"ADSB_TYPE 1\nSIM_ADSB_COUNT {adsb_count}\nSIM_ADSB_RADIUS {adsb_radius_m:g}\n"
+            f"SIM_ADSB_ALT {adsb_alt_m:g}\n"
+        )
         defaults.append(str(extra))
     companion_port = free_port()
     observer = VehicleObserver()
-    cmd = [str(ARDUPILOT_BIN), "--model", "heli", "--speedup", f"{speedup:g}", "--defaults", ",".join(defaults),
-           "-I", str(free_instance()), "--home", ",".join(f"{v:.7f}" for v in home),
-           "--serial0", f"udpclient:127.0.0.1:{companion_port}",
-           "--serial2", f"udpclient:127.0.0.1:{observer.port}"]
+    cmd = [
+        str(ARDUPILOT_BIN),
+        "--model",
+        "heli",
+        "--speedup",
+        f"{speedup:g}",
+        "--defaults",
+        ",".join(defaults),
+        "-I",
+        str(free_instance()),
+        "--home",
+        ",".join(f"{v:.7f}" for v in home),
+        "--serial0",
+        f"udpclient:127.0.0.1:{companion_port}",
+        "--serial2",
+        f"udpclient:127.0.0.1:{observer.port}",
+    ]
     proc = ManagedProcess(cmd, directory / "sitl.log", name="arducopter-heli", cwd=directory)
     sitl = ArduPilotSitl(proc, directory, companion_port, observer, speedup, tuple(home[:3]))
     with proc:
@@ -146,11 +168,10 @@ class VehicleObserver:
         from pymavlink import mavutil
 
         self.port = free_port()
-        self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}", source_system=253,
-                                               source_component=190)
+        self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}", source_system=253, source_component=190)
         self.mavlink = mavutil.mavlink
         self.track: list[tuple] = []
-        self.clock: list[tuple[float, float]] = []     # (monotonic_s, time_boot_s)
+        self.clock: list[tuple[float, float]] = []  # (monotonic_s, time_boot_s)
         self.global_track: list[tuple] = []
         self.armed: bool | None = None
         self.mode: int | None = None
@@ -194,8 +215,9 @@ class VehicleObserver:
                 self.track.append((self.boot_s, msg.x, msg.y, msg.z))
                 self.clock.append((time.monotonic(), self.boot_s))
             elif kind == "GLOBAL_POSITION_INT":
-                self.global_track.append((msg.time_boot_ms / 1000.0, msg.lat / 1e7, msg.lon / 1e7,
-                                          msg.alt / 1e3, msg.relative_alt / 1e3))
+                self.global_track.append(
+                    (msg.time_boot_ms / 1000.0, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3, msg.relative_alt / 1e3)
+                )
             elif kind == "COMMAND_ACK":
                 self._acks.put(msg)
             elif kind == "STATUSTEXT":
@@ -248,10 +270,15 @@ class VehicleObserver:
     def request_streams(self) -> None:
         """This connection's own streams (ArduPilot's rates are per link)."""
         m = self.mavlink
-        for msg_id, hz in ((m.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 10), (m.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10),
-                           (m.MAVLINK_MSG_ID_SYS_STATUS, 2), (m.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 2),
-                           (m.MAVLINK_MSG_ID_HOME_POSITION, 1), (m.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, 1),
-                           (m.MAVLINK_MSG_ID_RPM, 4)):
+        for msg_id, hz in (
+            (m.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 10),
+            (m.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 10),
+            (m.MAVLINK_MSG_ID_SYS_STATUS, 2),
+            (m.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 2),
+            (m.MAVLINK_MSG_ID_HOME_POSITION, 1),
+            (m.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, 1),
+            (m.MAVLINK_MSG_ID_RPM, 4),
+        ):
             self.command(m.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
 
     def wait_ready_to_arm(self, timeout_s: float = 120.0) -> None:
@@ -261,8 +288,7 @@ class VehicleObserver:
         deadline = time.monotonic() + timeout_s
         while not (self.prearm_ok and self.home is not None and self.origin is not None):
             if time.monotonic() > deadline:
-                raise AssertionError(f"the vehicle is not ready to arm after {timeout_s:g} s: "
-                                     f"{self.statustexts[-3:]}")
+                raise AssertionError(f"the vehicle is not ready to arm after {timeout_s:g} s: {self.statustexts[-3:]}")
             # the switch is read again when the RC input starts: say it again until it holds
             self.command(m.MAV_CMD_DO_AUX_FUNCTION, 32, 0)
             time.sleep(1.0)
@@ -272,10 +298,26 @@ class VehicleObserver:
         m = self.mavlink
         while not self._acks.empty():
             self._acks.get_nowait()
-        self.conn.mav.command_int_send(1, 1, m.MAV_FRAME_GLOBAL, m.MAV_CMD_DO_SET_HOME, 0, 0, 0, 0, 0, 0,
-                                       int(round(lat_deg * 1e7)), int(round(lon_deg * 1e7)), float(alt_m))
-        self.wait_until(lambda: self.home is not None and abs(self.home[0] - lat_deg) < 1e-6
-                        and abs(self.home[1] - lon_deg) < 1e-6, 10.0, "the new home")
+        self.conn.mav.command_int_send(
+            1,
+            1,
+            m.MAV_FRAME_GLOBAL,
+            m.MAV_CMD_DO_SET_HOME,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            int(round(lat_deg * 1e7)),
+            int(round(lon_deg * 1e7)),
+            float(alt_m),
+        )
+        self.wait_until(
+            lambda: self.home is not None and abs(self.home[0] - lat_deg) < 1e-6 and abs(self.home[1] - lon_deg) < 1e-6,
+            10.0,
+            "the new home",
+        )
 
     def take_off_and_hover(self, alt_m: float, runup_s: float = 12.0) -> None:
         """The safety pilot: GUIDED, arm, engage the interlock after the arming delay, wait
@@ -292,8 +334,9 @@ class VehicleObserver:
         assert self.command(m.MAV_CMD_DO_AUX_FUNCTION, 32, 2) == 0
         self.wait_vehicle_s(runup_s)
         assert self.command(m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, alt_m) == 0
-        self.wait_until(lambda: bool(self.track) and -self.track[-1][3] > alt_m - 0.7, 60.0,
-                        f"the pilot's takeoff to {alt_m} m")
+        self.wait_until(
+            lambda: bool(self.track) and -self.track[-1][3] > alt_m - 0.7, 60.0, f"the pilot's takeoff to {alt_m} m"
+        )
 
     # ------------------------------------------------------------------ the record
     def local_positions(self, since_boot_s: float = 0.0) -> np.ndarray:
@@ -304,8 +347,7 @@ class VehicleObserver:
     def positions_about(self, frame, since_boot_s: float = 0.0) -> np.ndarray:
         """(K, 3) NED positions about ``frame`` (a ``companion.geo.LocalFrame``) from
         GLOBAL_POSITION_INT: judged without the companion's own frame conversion."""
-        rows = np.array([g[1:4] for g in list(self.global_track) if g[0] >= since_boot_s],
-                        dtype=float).reshape(-1, 3)
+        rows = np.array([g[1:4] for g in list(self.global_track) if g[0] >= since_boot_s], dtype=float).reshape(-1, 3)
         if not len(rows):
             return rows
         return frame.to_ned_array(rows)

@@ -27,5 +27,9 @@ def blocks(text: str):
 
 def python_snippets() -> list[tuple[str, str]]:
     """(``file:line``, code) of every ```python block of the docs."""
-    return [(f"{path.relative_to(ROOT)}:{start}", "\n".join(lines) + "\n")
-            for path in DOCS for lang, start, lines in blocks(path.read_text()) if lang == "python"]
+    return [
+        (f"{path.relative_to(ROOT)}:{start}", "\n".join(lines) + "\n")
+        for path in DOCS
+        for lang, start, lines in blocks(path.read_text())
+        if lang == "python"
+    ]

@@ -25,12 +25,12 @@ import threading
 import time
 
 import numpy as np
+from support import REPO_ROOT, checkout_env
 
 from companion import demo as _demo
 from companion.demo import DEMO_HOME, FlightWatcher, Injection, inject, last_json_line, place  # noqa: F401
 from companion.sitl import processes, vehicles
 from heli_common.ports import free_port
-from support import REPO_ROOT, checkout_env
 
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 
@@ -58,10 +58,10 @@ class TrackListener:
         self._mav = mavlink2.MAVLink(None, srcSystem=253, srcComponent=191)
         self._mav.robust_parsing = True
         self._requested_wall_s = -1e9
-        self.track: list[tuple[float, float, float, float]] = []   # (time_boot_s, n, e, d)
+        self.track: list[tuple[float, float, float, float]] = []  # (time_boot_s, n, e, d)
         self.armed: bool | None = None
         self.mode: int | None = None
-        self.collisions: list[tuple[float, object]] = []     # (monotonic s, COLLISION)
+        self.collisions: list[tuple[float, object]] = []  # (monotonic s, COLLISION)
         self.companion_texts: list[tuple[float, object]] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -74,7 +74,7 @@ class TrackListener:
         while not self._stop.is_set():
             try:
                 data, vehicle = self._sock.recvfrom(65535)
-            except (socket.timeout, OSError):
+            except (TimeoutError, OSError):
                 continue
             for msg in self._mav.parse_buffer(data) or []:
                 kind = msg.get_type()
@@ -96,9 +96,19 @@ class TrackListener:
             return
         self._requested_wall_s = now
         m = self.mavlink
-        request = self._mav.command_long_encode(sysid, 1, m.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-                                                m.MAVLINK_MSG_ID_LOCAL_POSITION_NED, int(round(1e6 / self.rate_hz)),
-                                                0, 0, 0, 0, 0)
+        request = self._mav.command_long_encode(
+            sysid,
+            1,
+            m.MAV_CMD_SET_MESSAGE_INTERVAL,
+            0,
+            m.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+            int(round(1e6 / self.rate_hz)),
+            0,
+            0,
+            0,
+            0,
+            0,
+        )
         try:
             self._sock.sendto(request.pack(self._mav), vehicle)
         except OSError:
@@ -114,7 +124,7 @@ class TrackListener:
         track = np.array(list(self.track), dtype=float).reshape(-1, 4)
         return track[:, 0], track[:, 1:]
 
-    def __enter__(self) -> "TrackListener":
+    def __enter__(self) -> TrackListener:
         self._thread.start()
         return self
 
@@ -127,8 +137,14 @@ class TrackListener:
 def run_companion(*args: str, timeout_s: float = 240.0) -> subprocess.CompletedProcess:
     """Run ``companion ARGS`` to completion (stdout, stderr captured as text)."""
     env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
-    return subprocess.run([sys.executable, "-m", "companion.cli", *args], cwd=str(REPO_ROOT), capture_output=True,
-                          text=True, timeout=timeout_s, env=env)
+    return subprocess.run(
+        [sys.executable, "-m", "companion.cli", *args],
+        cwd=str(REPO_ROOT),
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        env=env,
+    )
 
 
 def wait_until(predicate, timeout_s: float, what: str, poll_s: float = 0.1) -> None:

@@ -19,8 +19,8 @@ MESSAGE_DATA = 0x01
 
 @dataclass
 class Received:
-    channels: dict[int, dict] = field(default_factory=dict)      # id -> advertised channel
-    messages: dict[str, list] = field(default_factory=dict)      # topic -> payloads
+    channels: dict[int, dict] = field(default_factory=dict)  # id -> advertised channel
+    messages: dict[str, list] = field(default_factory=dict)  # topic -> payloads
 
     def topics(self) -> set[str]:
         return {c["topic"] for c in self.channels.values()}
@@ -39,12 +39,18 @@ async def connect(url: str, within_s: float):
             await asyncio.sleep(0.2)
 
 
-async def collect(port: int, topics: set[str] | None, seconds: float, host: str = "127.0.0.1",
-                  until=None, connect_within_s: float = 30.0) -> Received:
+async def collect(
+    port: int,
+    topics: set[str] | None,
+    seconds: float,
+    host: str = "127.0.0.1",
+    until=None,
+    connect_within_s: float = 30.0,
+) -> Received:
     """Subscribe to ``topics`` (None: every topic; as soon as they are advertised) and collect
     for ``seconds``, or until ``until()`` is true (polled every 0.2 s) or the server closes."""
     got = Received()
-    subscribed: dict[int, str] = {}                              # subscription id -> topic
+    subscribed: dict[int, str] = {}  # subscription id -> topic
     ws = await connect(f"ws://{host}:{port}", connect_within_s)
     async with ws:
         loop = asyncio.get_running_loop()
@@ -52,7 +58,7 @@ async def collect(port: int, topics: set[str] | None, seconds: float, host: str 
         while (left := end - loop.time()) > 0 and not (until and until()):
             try:
                 frame = await asyncio.wait_for(ws.recv(), min(left, 0.2))
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 continue
             except websockets.ConnectionClosed:
                 break

@@ -20,8 +20,8 @@ import os
 import socket
 import tempfile
 import time
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Iterator, Sequence
 
 from companion.errors import ProcessError
 from companion.sitl.processes import ManagedProcess, python_command
@@ -111,15 +111,17 @@ class HeartbeatProbe:
         self.sock.sendto(self.heartbeat.pack(self.mav), self.address)
         try:
             data = self.sock.recv(65535)
-        except (socket.timeout, ConnectionRefusedError):
+        except (TimeoutError, ConnectionRefusedError):
             return False
-        return any(msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == self.sysid
-                   for msg in self.mav.parse_buffer(data) or [])
+        return any(
+            msg.get_type() == "HEARTBEAT" and msg.get_srcSystem() == self.sysid
+            for msg in self.mav.parse_buffer(data) or []
+        )
 
     def close(self) -> None:
         self.sock.close()
 
-    def __enter__(self) -> "HeartbeatProbe":
+    def __enter__(self) -> HeartbeatProbe:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -141,10 +143,16 @@ def sign_with(mav, key: bytes, link_id: int = 1) -> None:
 
 
 @contextlib.contextmanager
-def start_sim_vehicle(port: int | None = None, out: Sequence[str] = (), speedup: float = 1.0,
-                      instance: int = 0, extra_args: Sequence[str] = (), ready_timeout_s: float = 20.0,
-                      log_dir: str | os.PathLike | None = None,
-                      signing_key: bytes | None = None) -> Iterator[SimVehicle]:
+def start_sim_vehicle(
+    port: int | None = None,
+    out: Sequence[str] = (),
+    speedup: float = 1.0,
+    instance: int = 0,
+    extra_args: Sequence[str] = (),
+    ready_timeout_s: float = 20.0,
+    log_dir: str | os.PathLike | None = None,
+    signing_key: bytes | None = None,
+) -> Iterator[SimVehicle]:
     """Start a real ``sim-vehicle`` process and wait until it sends heartbeats.
 
     Parameters
@@ -177,8 +185,13 @@ def start_sim_vehicle(port: int | None = None, out: Sequence[str] = (), speedup:
     directory = Path(log_dir) if log_dir is not None else Path(tempfile.mkdtemp(prefix="sim_vehicle_"))
     directory.mkdir(parents=True, exist_ok=True)
     args = sim_vehicle_args(port, outs=out, speedup=speedup, instance=instance, default_outs=False, extra=extra_args)
-    proc = ManagedProcess(python_command(args), directory / f"sim_vehicle_{instance}_{port}.log",
-                          name=f"sim-vehicle on port {port}", env=checkout_env(), cwd=REPO_ROOT)
+    proc = ManagedProcess(
+        python_command(args),
+        directory / f"sim_vehicle_{instance}_{port}.log",
+        name=f"sim-vehicle on port {port}",
+        env=checkout_env(),
+        cwd=REPO_ROOT,
+    )
     sim = SimVehicle(port=port, sysid=1 + instance, instance=instance, proc=proc, out=list(out))
     with proc:
         with HeartbeatProbe(port, sim.sysid, signing_key) as probe:
@@ -209,8 +222,14 @@ class MavlinkPeer:
         Sign what we send and accept only what is signed with this key (:func:`sign_with`).
     """
 
-    def __init__(self, port: int, sysid: int = 1, source_system: int = 250, source_component: int = 190,
-                 signing_key: bytes | None = None) -> None:
+    def __init__(
+        self,
+        port: int,
+        sysid: int = 1,
+        source_system: int = 250,
+        source_component: int = 190,
+        signing_key: bytes | None = None,
+    ) -> None:
         from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
         self.mavlink = mavlink2
@@ -230,7 +249,7 @@ class MavlinkPeer:
     def close(self) -> None:
         self.sock.close()
 
-    def __enter__(self) -> "MavlinkPeer":
+    def __enter__(self) -> MavlinkPeer:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -256,7 +275,7 @@ class MavlinkPeer:
         self.sock.settimeout(timeout_s)
         try:
             data = self.sock.recv(65535)
-        except (socket.timeout, ConnectionRefusedError):
+        except (TimeoutError, ConnectionRefusedError):
             return []
         out = []
         for msg in self.mav.parse_buffer(data) or []:
@@ -279,16 +298,20 @@ class MavlinkPeer:
         """Send COMMAND_LONG (or COMMAND_INT in ``frame``) and return its COMMAND_ACK (None if none came)."""
         p = list(params) + [0.0] * (7 - len(params))
         if use_int:
-            self.send(self.mav.command_int_encode(self.sysid, 1, frame, command, 0, 0, p[0], p[1], p[2], p[3],
-                                                  int(p[4]), int(p[5]), p[6]))
+            self.send(
+                self.mav.command_int_encode(
+                    self.sysid, 1, frame, command, 0, 0, p[0], p[1], p[2], p[3], int(p[4]), int(p[5]), p[6]
+                )
+            )
         else:
             self.send(self.mav.command_long_encode(self.sysid, 1, command, 0, *p))
         return self.wait("COMMAND_ACK", timeout_s, lambda m: m.command == command)
 
     def set_mode(self, custom_mode: int):
         """DO_SET_MODE with an ArduCopter mode number; returns the COMMAND_ACK."""
-        return self.command(self.mavlink.MAV_CMD_DO_SET_MODE, self.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                            custom_mode)
+        return self.command(
+            self.mavlink.MAV_CMD_DO_SET_MODE, self.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode
+        )
 
     def request(self, *messages: str, rate_hz: float = 10.0) -> None:
         """Ask for ``messages`` (names, e.g. ``"GLOBAL_POSITION_INT"``) at ``rate_hz`` (0 stops them).
@@ -310,9 +333,11 @@ class MavlinkPeer:
     def arm_heli(self) -> None:
         """ArduCopter heli start-up: interlock low, arm, interlock high (it takes effect 2 s after arming)."""
         m = self.mavlink
-        for step, ack in (("interlock low", lambda: self.set_interlock(False)),
-                          ("arm", lambda: self.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)),
-                          ("interlock high", lambda: self.set_interlock(True))):
+        for step, ack in (
+            ("interlock low", lambda: self.set_interlock(False)),
+            ("arm", lambda: self.command(m.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)),
+            ("interlock high", lambda: self.set_interlock(True)),
+        ):
             result = ack()
             if result is None or result.result != m.MAV_RESULT_ACCEPTED:
                 raise AssertionError(f"{step}: {result}")
@@ -345,7 +370,7 @@ class MavlinkPeer:
         items = []
         for seq in range(count.count):
             self.send(self.mav.mission_request_int_encode(self.sysid, 1, seq, mission_type))
-            item = self.wait("MISSION_ITEM_INT", timeout_s, lambda m: m.seq == seq)
+            item = self.wait("MISSION_ITEM_INT", timeout_s, lambda m, seq=seq: m.seq == seq)
             if item is None:
                 return None
             items.append(item)
@@ -363,6 +388,9 @@ class MavlinkPeer:
                     return msg.type
                 if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST") and msg.seq < len(items):
                     frame, cmd, p1, p2, p3, p4, x, y, z = items[msg.seq]
-                    self.send(self.mav.mission_item_int_encode(self.sysid, 1, msg.seq, frame, cmd, 0, 1, p1, p2, p3,
-                                                               p4, x, y, z, mission_type))
+                    self.send(
+                        self.mav.mission_item_int_encode(
+                            self.sysid, 1, msg.seq, frame, cmd, 0, 1, p1, p2, p3, p4, x, y, z, mission_type
+                        )
+                    )
         return None

@@ -16,7 +16,9 @@ Checks, over ``companion/``, ``sim_vehicle/``, ``heli_model/``, ``heli_common/``
 6. the ``MISSION_ITEM_INT`` record is defined once (``heli_common/mission_item.py``);
 7. the ArduPilot numbers pymavlink lacks (force-disarm magic, aux function MOTOR_INTERLOCK) are
    written once (``heli_common/ardupilot_ids.py``);
-8. no class over 400 lines or 30 methods and no function or method over 60 lines, except the
+8. no class over 280 statement lines or 30 methods and no function or method over 45 statement
+   lines (the lines on which a statement begins, its docstring left out: a measure the formatter
+   does not change, where wrapping an argument list over several lines would), except the
    few named in ``SIZE_EXCEPTIONS`` (each with its reason; an entry that no longer exceeds is a
    finding, so the list only shrinks);
 9. no import cycle between the project's modules (every import counts: those inside functions and
@@ -50,78 +52,130 @@ from typing import NamedTuple
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("companion", "sim_vehicle", "heli_model", "heli_common", "mavlink_signing")
-MODE_NAMES = ("STABILIZE", "ACRO", "ALT_HOLD", "AUTO", "GUIDED", "LOITER", "RTL", "CIRCLE", "LAND",
-              "POSHOLD", "BRAKE", "SMART_RTL")
+MODE_NAMES = (
+    "STABILIZE",
+    "ACRO",
+    "ALT_HOLD",
+    "AUTO",
+    "GUIDED",
+    "LOITER",
+    "RTL",
+    "CIRCLE",
+    "LAND",
+    "POSHOLD",
+    "BRAKE",
+    "SMART_RTL",
+)
 _MODES = "|".join(MODE_NAMES)
 MODE_DICT_RE = re.compile(rf"""["']({_MODES})["']\s*:\s*\d+|\b\d+\s*:\s*["']({_MODES})["']""")
 MODE_ASSIGN_RE = re.compile(rf"^\s*({_MODES})\s*=\s*\d+\s*(#.*)?$", re.M)
-MAV_INT_RE = re.compile(r"^\s*(MAV_CMD_\w+|CMD_\w+|MAV_FRAME_\w+|FRAME_\w+|MAV_RESULT_\w+|MAVLINK_MSG_ID_\w+)"
-                        r"\s*=\s*\d+\s*(#.*)?$", re.M)
+MAV_INT_RE = re.compile(
+    r"^\s*(MAV_CMD_\w+|CMD_\w+|MAV_FRAME_\w+|FRAME_\w+|MAV_RESULT_\w+|MAVLINK_MSG_ID_\w+)"
+    r"\s*=\s*\d+\s*(#.*)?$",
+    re.M,
+)
 LOCAL_FRAME_CLASS_RE = re.compile(r"^class\s+(LocalFrame|\w*(Flat|Ned|NED)Frame)\b", re.M)
 POINT_IN_POLYGON_RE = re.compile(r"^\s*def\s+point_in_polygon\b", re.M)
 ARDUPILOT_NUMBER_RE = re.compile(r"^\s*(FORCE_DISARM_MAGIC|AUX_\w*MOTOR_INTERLOCK)\s*=\s*\d", re.M)
-MAX_CLASS_LINES = 400
+MAX_CLASS_LINES = 280
 MAX_CLASS_METHODS = 30
-MAX_FUNCTION_LINES = 60
+MAX_FUNCTION_LINES = 45
 #: ``"path::qualname"`` -> why it may exceed MAX_CLASS_LINES / MAX_CLASS_METHODS / MAX_FUNCTION_LINES
 #: today. Shrink it: an entry whose file exists but which no longer exceeds is a finding; an entry
 #: whose file does not exist (yet, or any more: the move to the new layout) is only a note.
 SIZE_EXCEPTIONS = {
-    "companion/commands/plan.py::plot_plan":
-        "one matplotlib figure (tree, obstacles, paths, curvature panel) drawn inline; split by layer",
-    "companion/service/startup.py::start_vehicle":
-        "the start-up procedure as one awaited sequence (GUIDED, interlock, arm, run-up, takeoff, climb)",
-    "companion/planning/iteration_kernel.py::grow_batch":
-        "the compiled GART inner loop: one numba function, splitting it costs a call per iteration",
-    "companion/planning/mgart.py::mgart":
-        "M-GART's outer loop (plan, forbid, repeat) with its long numpydoc; steps not yet named",
-    "companion/security/deployment.py::init_deployment":
-        "writes the CA, every identity and their zenoh configurations in one pass; docstring is half",
-    "companion/smoothing/g1.py::smooth_g1":
-        "numpydoc of 25 lines plus the halving loop of the collision repair",
-    "companion/smoothing/g2.py::smooth_g2":
-        "numpydoc of 25 lines plus the halving loop of the collision repair",
-    "companion/smoothing/repair.py::corners_clear":
-        "the vectorised certification of every corner curve at once, kept together for speed",
-    "companion/smoothing/timing.py::time_parameterize":
-        "argument checks, forward/backward passes and yaw in one place; passes to be named",
-    "companion/threats/decision/join.py::join_trajectory": "the one splice (lead, G2 corners, repair, profile from the current speed) and its checks",
-    "companion/threats/scenario.py::_event":
-        "validates every key of a scenario event, naming the key",
-    "companion/world/world.py::World":
-        "427 lines: the world's exact queries (free, segment, clearance, overlay) and their numpydoc",
-    "companion/world/world.py::World.segment_free":
-        "the exact segment test per obstacle kind with its bounds handling and numpydoc",
-    "sim_vehicle/cli.py::run":
-        "builds the whole vehicle (model, autopilot, server, traffic, clock) from the arguments",
-    "heli_model/control/closed_loop.py::simulate_closed_loop":
-        "the closed-loop prediction's argument checks, state set-up and loop with a long numpydoc",
+    "companion/commands/plan.py::plot_plan": "one matplotlib figure (tree, obstacles, paths, curvature panel) drawn inline; split by layer",
+    "companion/service/startup.py::start_vehicle": "the start-up procedure as one awaited sequence (GUIDED, interlock, arm, run-up, takeoff, climb)",
+    "companion/planning/mgart.py::mgart": "M-GART's outer loop (plan, forbid, repeat) with its long numpydoc; steps not yet named",
+    "companion/smoothing/g1.py::smooth_g1": "numpydoc of 25 lines plus the halving loop of the collision repair",
+    "companion/smoothing/g2.py::smooth_g2": "numpydoc of 25 lines plus the halving loop of the collision repair",
+    "companion/smoothing/repair.py::corners_clear": "the vectorised certification of every corner curve at once, kept together for speed",
+    "companion/threats/scenario.py::_event": "validates every key of a scenario event, naming the key",
+    "companion/world/world.py::World": "427 lines: the world's exact queries (free, segment, clearance, overlay) and their numpydoc",
+    "companion/world/world.py::World.segment_free": "the exact segment test per obstacle kind with its bounds handling and numpydoc",
+    "sim_vehicle/cli.py::run": "builds the whole vehicle (model, autopilot, server, traffic, clock) from the arguments",
+    "heli_model/control/closed_loop.py::simulate_closed_loop": "the closed-loop prediction's argument checks, state set-up and loop with a long numpydoc",
     "heli_model/control_kernel.py::law_step": "one control period (outer PID, LQI, integrators, saturation) in one numba kernel, the Python step's operations in its order (bit-identical)",
     "heli_model/control/modal.py::run_modal": "the modal recursion with its rotation correction, one numerical routine",
-    "heli_model/dynamics.py::step_rk4":
-        "one RK4 step written out (four stages, yaw and position kinematics) for speed",
+    "heli_model/model.py::assemble_matrices": "the hover model's A and B written entry by entry, as the paper's equations (one statement an entry)",
+    "heli_model/control/closed_loop_model.py::build_closed_loop": "the closed loop's matrices assembled block by block in one place, each block one statement",
+    "companion/fleet/start_gate.py::StartGate._run": "the start gate's one loop over the vehicles' states (wait, release, time out), each step one statement",
+    "heli_model/dynamics.py::step_rk4": "one RK4 step written out (four stages, yaw and position kinematics) for speed",
 }
 #: ``"path::qualname"`` -> why this class may be or use a mixin today.
-MIXIN_EXCEPTIONS = {
-}
+MIXIN_EXCEPTIONS = {}
 #: Package -> why an import cycle wholly inside it is tolerated today (an entry of a package with
 #: no cycle left is a finding; of a package that does not exist, a note).
-CYCLE_EXCEPTIONS = {
-}
+CYCLE_EXCEPTIONS = {}
 #: Base classes that never make a class a mixin (stdlib and library bases, by their last name).
-LIBRARY_BASES = frozenset({"object", "Exception", "BaseException", "ValueError", "TypeError", "RuntimeError",
-                           "KeyError", "LookupError", "OSError", "Warning", "Enum", "IntEnum", "StrEnum",
-                           "Flag", "IntFlag", "NamedTuple", "TypedDict", "Protocol", "Generic", "ABC"})
+LIBRARY_BASES = frozenset(
+    {
+        "object",
+        "Exception",
+        "BaseException",
+        "ValueError",
+        "TypeError",
+        "RuntimeError",
+        "KeyError",
+        "LookupError",
+        "OSError",
+        "Warning",
+        "Enum",
+        "IntEnum",
+        "StrEnum",
+        "Flag",
+        "IntFlag",
+        "NamedTuple",
+        "TypedDict",
+        "Protocol",
+        "Generic",
+        "ABC",
+    }
+)
 #: Modules (prefixes) that must compute only: numbers in, numbers out. Old and new paths of the
 #: restructuring are both listed while it is under way; only existing modules are checked.
-NUMERICS = ("companion.planning", "companion.smoothing", "companion.world", "companion.threats.decision",
-            "companion.flight", "companion.view.geometry", "heli_model",
-            "sim_vehicle.rsc", "sim_vehicle.autopilot", "heli_common.geometry", "heli_common.frames")
+NUMERICS = (
+    "companion.planning",
+    "companion.smoothing",
+    "companion.world",
+    "companion.threats.decision",
+    "companion.flight",
+    "companion.view.geometry",
+    "heli_model",
+    "sim_vehicle.rsc",
+    "sim_vehicle.autopilot",
+    "heli_common.geometry",
+    "heli_common.frames",
+)
 #: Top-level modules that do I/O (network, processes, MAVLink transports, logs on disk).
-IO_LIBRARIES = ("socket", "asyncio", "selectors", "subprocess", "zenoh", "mavsdk", "pymavlink",
-                "http", "urllib", "mcap", "foxglove", "serial")
-MISSION_ITEM_INT_FIELDS = ("seq", "frame", "command", "current", "autocontinue", "param1", "param2",
-                           "param3", "param4", "x", "y", "z")
+IO_LIBRARIES = (
+    "socket",
+    "asyncio",
+    "selectors",
+    "subprocess",
+    "zenoh",
+    "mavsdk",
+    "pymavlink",
+    "http",
+    "urllib",
+    "mcap",
+    "foxglove",
+    "serial",
+)
+MISSION_ITEM_INT_FIELDS = (
+    "seq",
+    "frame",
+    "command",
+    "current",
+    "autocontinue",
+    "param1",
+    "param2",
+    "param3",
+    "param4",
+    "x",
+    "y",
+    "z",
+)
 EXECUTOR = "companion.flight.executor"
 #: Modules that fly the executor: itself, and its fast-time driver.
 EXECUTOR_MODULES = (EXECUTOR, "companion.flight.fast_time")
@@ -137,6 +191,7 @@ def sources(root: Path = ROOT) -> list[Path]:
 
 def imports_package(tree: ast.AST, package: str) -> list[int]:
     """Line numbers of ``import package...`` / ``from package... import`` anywhere in ``tree``."""
+
     def named(name: str | None) -> bool:
         return bool(name) and (name == package or name.startswith(package + "."))
 
@@ -154,8 +209,7 @@ def mission_item_records(tree: ast.AST) -> list[tuple[str, int]]:
     found = []
     for node in ast.walk(tree):
         if isinstance(node, ast.ClassDef):
-            fields = {s.target.id for s in node.body
-                      if isinstance(s, ast.AnnAssign) and isinstance(s.target, ast.Name)}
+            fields = {s.target.id for s in node.body if isinstance(s, ast.AnnAssign) and isinstance(s.target, ast.Name)}
             if set(MISSION_ITEM_INT_FIELDS) <= fields:
                 found.append((node.name, node.lineno))
     return found
@@ -167,8 +221,7 @@ def module_name(rel: str) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def imported_modules(tree: ast.AST, module: str, is_package: bool,
-                     modules: frozenset[str] = frozenset()) -> set[str]:
+def imported_modules(tree: ast.AST, module: str, is_package: bool, modules: frozenset[str] = frozenset()) -> set[str]:
     """Absolute names of the modules ``tree`` imports, at any depth (``if TYPE_CHECKING:`` too).
 
     ``from a import b`` imports ``a.b`` when that is one of ``modules`` (a submodule), else ``a``.
@@ -243,6 +296,7 @@ def import_graph(trees: dict[str, tuple[ast.AST, bool]]) -> dict[str, set[str]]:
 
 def definitions(tree: ast.AST):
     """Every class and function of ``tree``: (qualname, node), outermost first."""
+
     def walk(node: ast.AST, prefix: str):
         for child in ast.iter_child_nodes(node):
             if isinstance(child, (ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
@@ -255,25 +309,43 @@ def definitions(tree: ast.AST):
     yield from walk(tree, "")
 
 
+def statement_lines(node: ast.AST) -> int:
+    """Lines of ``node`` (a class or function) on which a statement begins, its ``def`` or
+    ``class`` line included and its docstring left out: the formatter's wrapping changes none."""
+    body = list(getattr(node, "body", []))
+    if (
+        body
+        and isinstance(body[0], ast.Expr)
+        and isinstance(body[0].value, ast.Constant)
+        and isinstance(body[0].value.value, str)
+    ):
+        body = body[1:]
+    return 1 + len({n.lineno for b in body for n in ast.walk(b) if isinstance(n, ast.stmt)})
+
+
 def size_findings(rel: str, tree: ast.AST) -> dict[str, str]:
-    """``"rel::qualname"`` -> finding, for each class over MAX_CLASS_LINES or MAX_CLASS_METHODS
-    and each function or method over MAX_FUNCTION_LINES (``def`` line to last line)."""
+    """``"rel::qualname"`` -> finding, for each class over MAX_CLASS_LINES statement lines or
+    MAX_CLASS_METHODS methods and each function or method over MAX_FUNCTION_LINES statement
+    lines (``statement_lines``)."""
     found = {}
     for qualname, node in definitions(tree):
-        lines = node.end_lineno - node.lineno + 1
+        lines = statement_lines(node)
         where = f"{rel}:{node.lineno}: {qualname}"
         if isinstance(node, ast.ClassDef):
             methods = sum(isinstance(s, (ast.FunctionDef, ast.AsyncFunctionDef)) for s in node.body)
             if lines > MAX_CLASS_LINES or methods > MAX_CLASS_METHODS:
-                found[f"{rel}::{qualname}"] = (f"{where}: class of {lines} lines, {methods} methods "
-                                               f"(max {MAX_CLASS_LINES} lines, {MAX_CLASS_METHODS} methods)")
+                found[f"{rel}::{qualname}"] = (
+                    f"{where}: class of {lines} statement lines, {methods} methods "
+                    f"(max {MAX_CLASS_LINES} lines, {MAX_CLASS_METHODS} methods)"
+                )
         elif lines > MAX_FUNCTION_LINES:
-            found[f"{rel}::{qualname}"] = f"{where}: function of {lines} lines (max {MAX_FUNCTION_LINES})"
+            found[f"{rel}::{qualname}"] = f"{where}: function of {lines} statement lines (max {MAX_FUNCTION_LINES})"
     return found
 
 
-def exception_findings(found: dict[str, str], exceptions: dict[str, str], root: Path,
-                       what: str) -> tuple[list[str], list[str]]:
+def exception_findings(
+    found: dict[str, str], exceptions: dict[str, str], root: Path, what: str
+) -> tuple[list[str], list[str]]:
     """(findings, notes): what ``found`` holds outside ``exceptions``, plus each entry of
     ``exceptions`` whose file exists but which is no longer found; entries of files that do not
     exist are notes."""
@@ -312,8 +384,11 @@ def _is_exception(name: str, classes, seen: frozenset[str] = frozenset()) -> boo
     """True when class ``name`` is an exception: so named, or deriving from one."""
     if name.endswith(("Error", "Exception", "Warning")) or name in ("Exception", "BaseException"):
         return True
-    return name in classes and name not in seen and any(
-        _is_exception(b, classes, seen | {name}) for _, _, bases in classes[name] for b in bases)
+    return (
+        name in classes
+        and name not in seen
+        and any(_is_exception(b, classes, seen | {name}) for _, _, bases in classes[name] for b in bases)
+    )
 
 
 def _counts_as_project_base(name: str, classes) -> bool:
@@ -337,8 +412,7 @@ def mixin_findings(trees: dict[str, tuple[str, ast.AST]]) -> dict[str, str]:
                 continue
             project = [b for b in bases if _counts_as_project_base(b, classes)]
             if len(project) >= 2:
-                found[key] = (f"{rel}:{line}: {qualname}: {len(project)} project base classes "
-                              f"({', '.join(project)})")
+                found[key] = f"{rel}:{line}: {qualname}: {len(project)} project base classes ({', '.join(project)})"
     return found
 
 
@@ -471,16 +545,25 @@ def check(root: Path = ROOT) -> list[Result]:
         Result("local-frame class defined once", len(frames) == 1, frames, []),
         Result("no hand-written MAV_CMD/MAV_FRAME/MAV_RESULT/MSG_ID integers", not mav_ints, mav_ints, []),
         Result("MISSION_ITEM_INT record defined once", len(records) == 1, records, []),
-        Result("ArduPilot numbers pymavlink lacks written once",
-               len(ardupilot_numbers) == len({fact for fact, _ in ardupilot_numbers}),
-               [where for _, where in ardupilot_numbers], []),
-        Result(f"no class over {MAX_CLASS_LINES} lines or {MAX_CLASS_METHODS} methods, no function over "
-               f"{MAX_FUNCTION_LINES} lines", not too_big, too_big, size_notes),
+        Result(
+            "ArduPilot numbers pymavlink lacks written once",
+            len(ardupilot_numbers) == len({fact for fact, _ in ardupilot_numbers}),
+            [where for _, where in ardupilot_numbers],
+            [],
+        ),
+        Result(
+            f"no class over {MAX_CLASS_LINES} statement lines or {MAX_CLASS_METHODS} methods, no function "
+            f"over {MAX_FUNCTION_LINES} statement lines",
+            not too_big,
+            too_big,
+            size_notes,
+        ),
         Result("no import cycle", not cycles, cycles, cycle_notes),
         Result("numerics import no I/O library", not io_in_numerics, io_in_numerics, []),
         Result("no mixins", not mixins, mixins, mixin_notes),
-        Result("companion, heli_model and heli_common never import sim_vehicle", not sim_imports, sim_imports,
-               sim_notes),
+        Result(
+            "companion, heli_model and heli_common never import sim_vehicle", not sim_imports, sim_imports, sim_notes
+        ),
         Result("benchmarks and campaign fly with the flight executor", not emulating, emulating, executor_notes),
     ]
 

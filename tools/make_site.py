@@ -31,41 +31,69 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from companion.mission.model import (MAV_CMD_NAV_LAND, MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT,  # noqa: E402
-                                     MissionItem, MissionPlan)
+from shapely.geometry import MultiPoint  # noqa: E402
+
+from companion.mission.model import (  # noqa: E402
+    MAV_CMD_NAV_LAND,
+    MAV_CMD_NAV_TAKEOFF,
+    MAV_CMD_NAV_WAYPOINT,
+    MissionItem,
+    MissionPlan,
+)
 from companion.mission.plan_file import plan_to_document  # noqa: E402
 from companion.world.mapdata import flat_ground, footprint_deg  # noqa: E402
 from heli_common.frames import LocalFrame  # noqa: E402
-from shapely.geometry import MultiPoint  # noqa: E402
 
 log = logging.getLogger("make_site")
 
-HOME_LLA = (-35.363261, 149.165230, 584.0)        # ArduPilot SITL's default home (CMAC)
-CRUISE_ALT_M = 10.0                                # the mission's altitude above home
-MARGIN_M = 3.0                                     # as the companion's mission.margin_m
-DIGITS = 8                                         # degrees to 1e-8 (about 1 mm)
+HOME_LLA = (-35.363261, 149.165230, 584.0)  # ArduPilot SITL's default home (CMAC)
+CRUISE_ALT_M = 10.0  # the mission's altitude above home
+MARGIN_M = 3.0  # as the companion's mission.margin_m
+DIGITS = 8  # degrees to 1e-8 (about 1 mm)
 
 #: (name, GeoJSON geometry type, north-east metres, properties). Rings are closed.
 FEATURES_NE_M = (
-    ("hangar", "Polygon", [[(55, -25), (55, 15), (75, 15), (75, -25), (55, -25)]],
-     {"building": "hangar", "height": 12}),
-    ("office", "Polygon", [[(105, -30), (105, 10), (120, 10), (120, -15), (135, -15), (135, -30), (105, -30)]],
-     {"building": "office", "building:levels": "4"}),
-    ("workshop", "Polygon", [[(160, -20), (160, 10), (190, 10), (190, -20), (160, -20)],
-                             [(168, -12), (182, -12), (182, 2), (168, 2), (168, -12)]],
-     {"building": "industrial", "building:levels": 3}),
-    ("canopy", "Polygon", [[(80, 44), (80, 56), (100, 56), (100, 44), (80, 44)]],
-     {"building": "roof", "min_height": 5, "height": 9}),
-    ("sheds", "MultiPolygon", [[[(128, 50), (128, 58), (136, 58), (136, 50), (128, 50)]],
-                               [[(140, 50), (140, 58), (146, 58), (146, 50), (140, 50)]]],
-     {"building": "shed", "height": "4 m"}),
+    (
+        "hangar",
+        "Polygon",
+        [[(55, -25), (55, 15), (75, 15), (75, -25), (55, -25)]],
+        {"building": "hangar", "height": 12},
+    ),
+    (
+        "office",
+        "Polygon",
+        [[(105, -30), (105, 10), (120, 10), (120, -15), (135, -15), (135, -30), (105, -30)]],
+        {"building": "office", "building:levels": "4"},
+    ),
+    (
+        "workshop",
+        "Polygon",
+        [
+            [(160, -20), (160, 10), (190, 10), (190, -20), (160, -20)],
+            [(168, -12), (182, -12), (182, 2), (168, 2), (168, -12)],
+        ],
+        {"building": "industrial", "building:levels": 3},
+    ),
+    (
+        "canopy",
+        "Polygon",
+        [[(80, 44), (80, 56), (100, 56), (100, 44), (80, 44)]],
+        {"building": "roof", "min_height": 5, "height": 9},
+    ),
+    (
+        "sheds",
+        "MultiPolygon",
+        [
+            [[(128, 50), (128, 58), (136, 58), (136, 50), (128, 50)]],
+            [[(140, 50), (140, 58), (146, 58), (146, 50), (140, 50)]],
+        ],
+        {"building": "shed", "height": "4 m"},
+    ),
     ("radio mast", "Point", (110, 52), {"man_made": "mast", "radius": 1.5, "height": 30}),
-    ("power line", "LineString", [(40, 28), (40, 64)],
-     {"power": "line", "width": 0.5, "min_height": 8, "height": 14}),
+    ("power line", "LineString", [(40, 28), (40, 64)], {"power": "line", "width": 0.5, "min_height": 8, "height": 14}),
     ("pole west", "Point", (40, 28), {"power": "pole", "radius": 0.3, "height": 14}),
     ("pole east", "Point", (40, 64), {"power": "pole", "radius": 0.3, "height": 14}),
-    ("garden wall", "LineString", [(0, -40), (20, -40), (30, -50)],
-     {"barrier": "wall", "width": 0.4, "height": 2.5}),
+    ("garden wall", "LineString", [(0, -40), (20, -40), (30, -50)], {"barrier": "wall", "width": 0.4, "height": 2.5}),
 )
 #: The mission's waypoints (north, east) at CRUISE_ALT_M, then a landing at home.
 WAYPOINTS_NE_M = ((200.0, 0.0), (200.0, 60.0), (20.0, 45.0))
@@ -98,12 +126,19 @@ def position(frame: LocalFrame, point_ne_m, height_m: float) -> list[float]:
 
 def buildings_geojson(frame: LocalFrame, name: str) -> dict:
     """The FeatureCollection, with the world's settings in its ``companion`` member."""
-    features = [{"type": "Feature", "properties": {"name": label, **props},
-                 "geometry": geometry(frame, kind, coords)}
-                for label, kind, coords, props in FEATURES_NE_M]
-    header = {"name": name, "home": [HOME_LLA[1], HOME_LLA[0], HOME_LLA[2]], "margin_m": MARGIN_M,
-              "ceiling_m": 60.0, "padding_m": 30.0,
-              "start": position(frame, START_NE_M, CRUISE_ALT_M), "goal": position(frame, GOAL_NE_M, CRUISE_ALT_M)}
+    features = [
+        {"type": "Feature", "properties": {"name": label, **props}, "geometry": geometry(frame, kind, coords)}
+        for label, kind, coords, props in FEATURES_NE_M
+    ]
+    header = {
+        "name": name,
+        "home": [HOME_LLA[1], HOME_LLA[0], HOME_LLA[2]],
+        "margin_m": MARGIN_M,
+        "ceiling_m": 60.0,
+        "padding_m": 30.0,
+        "start": position(frame, START_NE_M, CRUISE_ALT_M),
+        "goal": position(frame, GOAL_NE_M, CRUISE_ALT_M),
+    }
     return {"type": "FeatureCollection", "companion": header, "features": features}
 
 
@@ -138,8 +173,9 @@ def mission(frame: LocalFrame) -> MissionPlan:
     items = [MissionItem(MAV_CMD_NAV_TAKEOFF, alt_m=CRUISE_ALT_M)]
     for point in WAYPOINTS_NE_M:
         lon, lat = lon_lat(frame, [point])[0]
-        items.append(MissionItem(MAV_CMD_NAV_WAYPOINT, param2=2.0, param4=math.nan, lat_deg=lat, lon_deg=lon,
-                                 alt_m=CRUISE_ALT_M))
+        items.append(
+            MissionItem(MAV_CMD_NAV_WAYPOINT, param2=2.0, param4=math.nan, lat_deg=lat, lon_deg=lon, alt_m=CRUISE_ALT_M)
+        )
     items.append(MissionItem(MAV_CMD_NAV_LAND, param4=math.nan, lat_deg=HOME_LLA[0], lon_deg=HOME_LLA[1]))
     return MissionPlan(items=tuple(items), planned_home=HOME_LLA, cruise_speed_m_s=5.0, hover_speed_m_s=3.0)
 
@@ -153,9 +189,11 @@ def json_text(document: dict) -> str:
 def site_files(name: str) -> dict[str, str]:
     """File name -> text of the site."""
     frame = LocalFrame(*HOME_LLA)
-    return {"buildings.geojson": json_text(buildings_geojson(frame, name)),
-            "hangar.kml": hangar_kml(frame, name),
-            "mission.plan": json.dumps(plan_to_document(mission(frame)), indent=4) + "\n"}
+    return {
+        "buildings.geojson": json_text(buildings_geojson(frame, name)),
+        "hangar.kml": hangar_kml(frame, name),
+        "mission.plan": json.dumps(plan_to_document(mission(frame)), indent=4) + "\n",
+    }
 
 
 def main(argv: list[str] | None = None) -> int:

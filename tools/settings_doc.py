@@ -19,8 +19,10 @@ from companion.settings_doc import reference_markdown  # noqa: E402
 from sim_vehicle.config import VehicleSettings  # noqa: E402
 
 #: The settings trees documented, in order: (root class, section title).
-SETTINGS_TREES = ((Settings, "The companion (`companion run --config`)"),
-                  (VehicleSettings, "The simulator (`sim-vehicle --config`)"))
+SETTINGS_TREES = (
+    (Settings, "The companion (`companion run --config`)"),
+    (VehicleSettings, "The simulator (`sim-vehicle --config`)"),
+)
 
 TARGET = ROOT / "docs" / "SETTINGS.md"
 

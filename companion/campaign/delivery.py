@@ -31,8 +31,9 @@ DEFAULT_DELIVERY = {"noise_pos_m": 0.0, "noise_vel_m_s": 0.0, "update_hz": 2.0, 
 MANNED_UPDATE_HZ = 1.0
 #: A drone-scale threat not heard for this many report periods (at least TTL_MIN_S) expires.
 TTL_PERIODS, TTL_MIN_S = 3.0, 3.0
-_ADSB_FLAGS = (adsb.FLAG_COORDS | adsb.FLAG_ALTITUDE | adsb.FLAG_HEADING | adsb.FLAG_VELOCITY
-               | adsb.FLAG_VERTICAL_VELOCITY)
+_ADSB_FLAGS = (
+    adsb.FLAG_COORDS | adsb.FLAG_ALTITUDE | adsb.FLAG_HEADING | adsb.FLAG_VELOCITY | adsb.FLAG_VERTICAL_VELOCITY
+)
 
 
 def report_times(track: IntruderTrack, update_hz: float) -> np.ndarray:
@@ -53,8 +54,16 @@ def _measured(track: IntruderTrack, t: np.ndarray, delivery: dict, rng: np.rando
 
 
 def _zenoh_threat(track: IntruderTrack, pos, vel, ttl_s: float, received_t_s: float) -> Threat:
-    sent = Threat(track.id, "popup" if track.popup else "moving", "local_ned", tuple(float(x) for x in pos),
-                  (0.0, 0.0, 0.0) if track.popup else tuple(float(x) for x in vel), track.radius_m, ttl_s, 0.0)
+    sent = Threat(
+        track.id,
+        "popup" if track.popup else "moving",
+        "local_ned",
+        tuple(float(x) for x in pos),
+        (0.0, 0.0, 0.0) if track.popup else tuple(float(x) for x in vel),
+        track.radius_m,
+        ttl_s,
+        0.0,
+    )
     return codec.decode(codec.encode(sent), received_t_s=received_t_s, key_id=track.id)
 
 
@@ -64,10 +73,20 @@ def adsb_fields(track: IntruderTrack, pos_ned_m, vel_ned_m_s, home, link: mavlin
     vn, ve, vd = (float(x) for x in vel_ned_m_s)
     heading_cdeg = int(round(math.degrees(math.atan2(ve, vn)) * 100.0)) % 36000
     msg = mavlink.MAVLink_adsb_vehicle_message(
-        track.icao_address, int(round(float(lat) * 1e7)), int(round(float(lon) * 1e7)),
-        mavlink.ADSB_ALTITUDE_TYPE_GEOMETRIC, int(round(float(alt) * 1000.0)), heading_cdeg,
-        min(int(round(math.hypot(vn, ve) * 100.0)), 65535), int(np.clip(round(-vd * 100.0), -32768, 32767)),
-        f"N{track.icao_address % 100000:05d}".encode(), track.emitter_type, 0, _ADSB_FLAGS, 1200)
+        track.icao_address,
+        int(round(float(lat) * 1e7)),
+        int(round(float(lon) * 1e7)),
+        mavlink.ADSB_ALTITUDE_TYPE_GEOMETRIC,
+        int(round(float(alt) * 1000.0)),
+        heading_cdeg,
+        min(int(round(math.hypot(vn, ve) * 100.0)), 65535),
+        int(np.clip(round(-vd * 100.0), -32768, 32767)),
+        f"N{track.icao_address % 100000:05d}".encode(),
+        track.emitter_type,
+        0,
+        _ADSB_FLAGS,
+        1200,
+    )
     packed = msg.pack(link)
     return link.decode(bytearray(packed)).to_dict()
 
@@ -77,7 +96,7 @@ def _reports(track: IntruderTrack, update_hz: float, delivery: dict, rng: np.ran
     arrives, in time order (the draws: dropouts, then noise)."""
     t = report_times(track, update_hz)
     kept = rng.random(t.size) >= float(delivery["dropout"])
-    kept[0] = True                      # the first report is what makes it an encounter
+    kept[0] = True  # the first report is what makes it an encounter
     pos, vel = _measured(track, t, delivery, rng)
     return [(float(t[k] + delivery["latency_s"]), pos[k], vel[k]) for k in np.flatnonzero(kept)]
 
@@ -86,14 +105,18 @@ def adsb_reports(intruders, delivery: dict, rng: np.random.Generator, *, home) -
     """Manned traffic's ADSB_VEHICLE reports as received: (receive time, the message's fields
     packed and unpacked), in time order; the same draws as ``feed_updates`` (SITL sends these)."""
     link = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
-    out = [(t, adsb_fields(track, pos, vel, home, link))
-           for track in intruders for t, pos, vel in _reports(track, MANNED_UPDATE_HZ, delivery, rng)]
+    out = [
+        (t, adsb_fields(track, pos, vel, home, link))
+        for track in intruders
+        for t, pos, vel in _reports(track, MANNED_UPDATE_HZ, delivery, rng)
+    ]
     out.sort(key=lambda u: u[0])
     return out
 
 
-def feed_updates(intruders, traffic: str, delivery: dict, rng: np.random.Generator, *, home=None,
-                 adsb_settings=None) -> list[tuple[float, Threat, str]]:
+def feed_updates(
+    intruders, traffic: str, delivery: dict, rng: np.random.Generator, *, home=None, adsb_settings=None
+) -> list[tuple[float, Threat, str]]:
     """The threat updates the companion receives: (receive time, Threat, id), in time order.
 
     Parameters
@@ -111,11 +134,16 @@ def feed_updates(intruders, traffic: str, delivery: dict, rng: np.random.Generat
         The companion's ``[adsb]`` settings (radius by emitter type, ttl).
     """
     if traffic != "drone":
-        threats = ((t, adsb.threat_from_adsb(fields, adsb_settings, t, home))
-                   for t, fields in adsb_reports(intruders, delivery, rng, home=home))
+        threats = (
+            (t, adsb.threat_from_adsb(fields, adsb_settings, t, home))
+            for t, fields in adsb_reports(intruders, delivery, rng, home=home)
+        )
         return [(t, threat, threat.id) for t, threat in threats if threat is not None]
     ttl_s = max(TTL_PERIODS / float(delivery["update_hz"]), TTL_MIN_S)
-    updates = [(t, _zenoh_threat(track, pos, vel, ttl_s, t), track.id) for track in intruders
-               for t, pos, vel in _reports(track, float(delivery["update_hz"]), delivery, rng)]
+    updates = [
+        (t, _zenoh_threat(track, pos, vel, ttl_s, t), track.id)
+        for track in intruders
+        for t, pos, vel in _reports(track, float(delivery["update_hz"]), delivery, rng)
+    ]
     updates.sort(key=lambda u: u[0])
     return updates

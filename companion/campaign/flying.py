@@ -113,10 +113,14 @@ class CampaignWorker:
         self.settings = settings
         self.spec_hash = spec_hash
         self.update = VehicleUpdate.build(HeliModel.default())
-        self.pipeline = TrajectoryPipeline.from_settings(settings.smoothing, settings.planning,
-                                                         iterations_per_s=spec.iterations_per_s)
-        self.policy = dataclasses.replace(DecisionPolicy.from_settings(settings), pipeline=self.pipeline,
-                                          modelled_lead_s=(spec.latency.decision_s, spec.latency.replan_s))
+        self.pipeline = TrajectoryPipeline.from_settings(
+            settings.smoothing, settings.planning, iterations_per_s=spec.iterations_per_s
+        )
+        self.policy = dataclasses.replace(
+            DecisionPolicy.from_settings(settings),
+            pipeline=self.pipeline,
+            modelled_lead_s=(spec.latency.decision_s, spec.latency.replan_s),
+        )
         self._missions: dict[str, Mission] = {}
         self._unmitigated: dict[str, FastTimeResult] = {}
         self._models: dict[str, object] = {}
@@ -132,9 +136,14 @@ class CampaignWorker:
         if name not in self._unmitigated:
             m = self.mission(name)
             self._unmitigated[name] = FastTimeFlight(
-                m.legs, self.settings, start_yaw_rad=m.start_yaw_rad, update=self.update, world=m.world,
+                m.legs,
+                self.settings,
+                start_yaw_rad=m.start_yaw_rad,
+                update=self.update,
+                world=m.world,
                 replanner=LegReplanner.in_world(m.world, self.pipeline, self.settings.flight),
-                job_latency=self.spec.latency).run(max_s=m.duration_s + SLACK_S)
+                job_latency=self.spec.latency,
+            ).run(max_s=m.duration_s + SLACK_S)
         return self._unmitigated[name]
 
     def traffic_model(self, kind: str):
@@ -182,11 +191,27 @@ class CampaignWorker:
         own = OwnFlight(base.t_s, base.pos_ned_m)
         rng = np.random.default_rng([self.spec.seed, index])
         if stratum.source == "manned":
-            enc = make_manned(index, stratum.name, stratum.geometry, self.traffic_model(stratum.geometry), own,
-                              self.spec.manned, self.settings.adsb, rng)
+            enc = make_manned(
+                index,
+                stratum.name,
+                stratum.geometry,
+                self.traffic_model(stratum.geometry),
+                own,
+                self.spec.manned,
+                self.settings.adsb,
+                rng,
+            )
         else:
-            enc = make_parametric(index, stratum.name, stratum.geometry, stratum.mission, own, mission.goal_ned_m,
-                                  self._delivery(stratum, rng), rng)
+            enc = make_parametric(
+                index,
+                stratum.name,
+                stratum.geometry,
+                stratum.mission,
+                own,
+                mission.goal_ned_m,
+                self._delivery(stratum, rng),
+                rng,
+            )
         return dataclasses.replace(enc, mission=name)
 
     def fly(self, index: int) -> PairFlight:
@@ -194,20 +219,36 @@ class CampaignWorker:
         enc = self.encounter(index)
         m = self.mission(enc.mission)
         rng = np.random.default_rng([self.spec.seed, index, 1])
-        updates = feed_updates(enc.intruders, enc.traffic, enc.delivery, rng, home=HOME,
-                               adsb_settings=self.settings.adsb)
-        flight = FastTimeFlight(m.legs, self.settings, threats=updates, policy=self.policy,
-                                seed=int(rng.integers(2 ** 31)), start_yaw_rad=m.start_yaw_rad, update=self.update,
-                                world=m.world, job_latency=self.spec.latency, home=HOME,
-                                replanner=LegReplanner.in_world(m.world, self.pipeline, self.settings.flight))
+        updates = feed_updates(
+            enc.intruders, enc.traffic, enc.delivery, rng, home=HOME, adsb_settings=self.settings.adsb
+        )
+        flight = FastTimeFlight(
+            m.legs,
+            self.settings,
+            threats=updates,
+            policy=self.policy,
+            seed=int(rng.integers(2**31)),
+            start_yaw_rad=m.start_yaw_rad,
+            update=self.update,
+            world=m.world,
+            job_latency=self.spec.latency,
+            home=HOME,
+            replanner=LegReplanner.in_world(m.world, self.pipeline, self.settings.flight),
+        )
         base = self.unmitigated(enc.mission)
         k = min(int(np.searchsorted(base.t_s, enc.first_report_t_s - JOIN_LEAD_S)), len(base.states) - 1)
         mitigated = flight.run(max_s=enc.end_t_s, from_s=float(base.t_s[k]), from_state=base.states[k])
         dt = 1.0 / self.settings.link.setpoint_rate_hz
         grid = np.arange(enc.first_report_t_s, enc.end_t_s + 0.5 * dt, dt)
         threats = [tr.position_at(grid) for tr in enc.intruders]
-        return PairFlight(grid, _on_grid(grid, base.t_s, base.pos_ned_m),
-                          _on_grid(grid, mitigated.t_s, mitigated.pos_ned_m), threats, enc, mitigated)
+        return PairFlight(
+            grid,
+            _on_grid(grid, base.t_s, base.pos_ned_m),
+            _on_grid(grid, mitigated.t_s, mitigated.pos_ned_m),
+            threats,
+            enc,
+            mitigated,
+        )
 
     def row(self, index: int) -> dict:
         """Encounter ``index``'s row (``companion.campaign.store.SCHEMA``)."""
@@ -215,23 +256,40 @@ class CampaignWorker:
         pair = self.fly(index)
         enc, m = pair.encounter, self.mission(pair.encounter.mission)
         manned = enc.traffic != "drone"
-        row = {"id": int(index), "stratum": enc.stratum, "source": "manned" if manned else "parametric",
-               "traffic": enc.traffic, "world": STRATA[enc.stratum].world, "mission": enc.mission,
-               "seed": int(self.spec.seed), "spec_hash": self.spec_hash, "weight": float(enc.weight),
-               "n_threats": len(enc.intruders)}
+        row = {
+            "id": int(index),
+            "stratum": enc.stratum,
+            "source": "manned" if manned else "parametric",
+            "traffic": enc.traffic,
+            "world": STRATA[enc.stratum].world,
+            "mission": enc.mission,
+            "seed": int(self.spec.seed),
+            "spec_hash": self.spec_hash,
+            "weight": float(enc.weight),
+            "n_threats": len(enc.intruders),
+        }
         base = self.unmitigated(enc.mission)
-        for prefix, track, outcome in (("u_", pair.own_u_ned_m, base.outcome),
-                                       ("m_", pair.own_m_ned_m, pair.mitigated.outcome)):
+        for prefix, track, outcome in (
+            ("u_", pair.own_u_ned_m, base.outcome),
+            ("m_", pair.own_m_ned_m, pair.mitigated.outcome),
+        ):
             sep = judge.separation(pair.t_s, track, enc.intruders, manned, self.spec.volumes)
-            row.update({f"{prefix}collision": sep.collision, f"{prefix}nmac": sep.nmac, f"{prefix}lowc": sep.lowc,
-                        f"{prefix}min_sep_m": sep.min_sep_m, f"{prefix}hmd_m": list(sep.hmd_m),
-                        f"{prefix}vmd_m": list(sep.vmd_m),
-                        f"{prefix}obstacle_entries": judge.entries(track, m.obstacles, m.bounds_min_ned_m,
-                                                                   m.bounds_max_ned_m),
-                        f"{prefix}fence_entries": judge.entries(track, m.fences, m.bounds_min_ned_m,
-                                                                m.bounds_max_ned_m),
-                        f"{prefix}completed": outcome == FlightOutcome.COMPLETED,
-                        f"{prefix}path_m": judge.path_length_m(track)})
+            row.update(
+                {
+                    f"{prefix}collision": sep.collision,
+                    f"{prefix}nmac": sep.nmac,
+                    f"{prefix}lowc": sep.lowc,
+                    f"{prefix}min_sep_m": sep.min_sep_m,
+                    f"{prefix}hmd_m": list(sep.hmd_m),
+                    f"{prefix}vmd_m": list(sep.vmd_m),
+                    f"{prefix}obstacle_entries": judge.entries(
+                        track, m.obstacles, m.bounds_min_ned_m, m.bounds_max_ned_m
+                    ),
+                    f"{prefix}fence_entries": judge.entries(track, m.fences, m.bounds_min_ned_m, m.bounds_max_ned_m),
+                    f"{prefix}completed": outcome == FlightOutcome.COMPLETED,
+                    f"{prefix}path_m": judge.path_length_m(track),
+                }
+            )
         row.update(self._decision_columns(pair.mitigated.decisions, enc.first_report_t_s))
         row["m_extra_path_m"] = row["m_path_m"] - row["u_path_m"]
         row.update({key: float(enc.delivery[key]) for key in DEFAULT_DELIVERY})
@@ -244,9 +302,13 @@ class CampaignWorker:
         kinds = ["resume" if d.get("trigger") == "resume" else str(d["event"]) for d in decisions]
         manoeuvres = [k for k in kinds if k in MANOEUVRES]
         first = next((d["t_s"] for d, k in zip(decisions, kinds) if k in MANOEUVRES), None)
-        return {"m_alerted": bool(manoeuvres), "m_manoeuvred": bool(manoeuvres),
-                "m_alert_t_s": float("nan") if first is None else float(first - first_report_t_s),
-                "m_decisions": kinds,
-                "m_latency_ms": [float(d["latency_ms"]) if d.get("latency_ms") is not None else float("nan")
-                                 for d in decisions],
-                "m_decide_wall_ms": [float(d.get("decide_ms") or 0.0) for d in decisions]}
+        return {
+            "m_alerted": bool(manoeuvres),
+            "m_manoeuvred": bool(manoeuvres),
+            "m_alert_t_s": float("nan") if first is None else float(first - first_report_t_s),
+            "m_decisions": kinds,
+            "m_latency_ms": [
+                float(d["latency_ms"]) if d.get("latency_ms") is not None else float("nan") for d in decisions
+            ],
+            "m_decide_wall_ms": [float(d.get("decide_ms") or 0.0) for d in decisions],
+        }

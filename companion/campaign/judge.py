@@ -48,8 +48,15 @@ class Volumes:
     wc_v_ft: float = 250.0
 
     def __post_init__(self) -> None:
-        for name in ("collision_extra_m", "nmac_extra_m", "lowc_extra_m", "nmac_h_ft", "nmac_v_ft", "wc_h_ft",
-                     "wc_v_ft"):
+        for name in (
+            "collision_extra_m",
+            "nmac_extra_m",
+            "lowc_extra_m",
+            "nmac_h_ft",
+            "nmac_v_ft",
+            "wc_h_ft",
+            "wc_v_ft",
+        ):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
                 raise ValueError(f"volumes.{name}: must be a finite number >= 0, got {value!r}")

@@ -37,9 +37,17 @@ EVENTS = {"collision": "collision_extra_m", "nmac": "nmac_extra_m"}
 #: The oracle's window runs this long past the last closest approach (s).
 PAST_CPA_S = 2.0
 
-LABEL_SCHEMA = pa.schema([("id", pa.int64()), ("event", pa.string()), ("avoidable", pa.bool_()),
-                          ("best_margin_m", pa.float64()), ("witness", pa.string()), ("horizon_s", pa.float64()),
-                          ("oracle_ms", pa.float64())])
+LABEL_SCHEMA = pa.schema(
+    [
+        ("id", pa.int64()),
+        ("event", pa.string()),
+        ("avoidable", pa.bool_()),
+        ("best_margin_m", pa.float64()),
+        ("witness", pa.string()),
+        ("horizon_s", pa.float64()),
+        ("oracle_ms", pa.float64()),
+    ]
+)
 
 
 def _horizon_s(enc, limits: OracleLimits) -> float:
@@ -70,12 +78,19 @@ def label_event(worker, index: int, event: str) -> dict:
     allowance = getattr(worker.spec.volumes, EVENTS[event])
     limits = OracleLimits(threat_allowance_m=allowance)
     limits = dataclasses.replace(limits, horizon_s=_horizon_s(enc, limits))
-    world = World(list(mission.obstacles) + list(mission.fences), mission.bounds_min_ned_m, mission.bounds_max_ned_m,
-                  margin_m=0.0)
+    world = World(
+        list(mission.obstacles) + list(mission.fences), mission.bounds_min_ned_m, mission.bounds_max_ned_m, margin_m=0.0
+    )
     res = label_encounter(pos0, vel0, list(enc.intruders), t0, world, limits=limits)
-    return {"id": int(index), "event": event, "avoidable": bool(res.avoidable), "best_margin_m": float(res.best_margin_m),
-            "witness": "" if res.witness is None else res.witness.manoeuvre.name, "horizon_s": float(limits.horizon_s),
-            "oracle_ms": float(res.elapsed_ms)}
+    return {
+        "id": int(index),
+        "event": event,
+        "avoidable": bool(res.avoidable),
+        "best_margin_m": float(res.best_margin_m),
+        "witness": "" if res.witness is None else res.witness.manoeuvre.name,
+        "horizon_s": float(limits.horizon_s),
+        "oracle_ms": float(res.elapsed_ms),
+    }
 
 
 def read_labels(root: str | Path) -> pa.Table:
@@ -101,8 +116,13 @@ def label_campaign(worker, table: pa.Table, root: str | Path) -> pa.Table:
     done = read_labels(root)
     have = set(zip(done.column("id").to_pylist(), done.column("event").to_pylist()))
     rows = table.select(["id", "traffic"] + [f"m_{e}" for e in EVENTS]).to_pylist()
-    todo = [(r["id"], e) for r in rows if r["traffic"] == "drone" for e in EVENTS
-            if r[f"m_{e}"] and (r["id"], e) not in have]
+    todo = [
+        (r["id"], e)
+        for r in rows
+        if r["traffic"] == "drone"
+        for e in EVENTS
+        if r[f"m_{e}"] and (r["id"], e) not in have
+    ]
     if not todo:
         return done
     new = pa.Table.from_pylist([label_event(worker, i, e) for i, e in todo], schema=LABEL_SCHEMA)

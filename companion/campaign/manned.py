@@ -40,7 +40,7 @@ def miss_weight(hmd_m: float, vmd_m: float, spec, own_alt_m: float) -> float:
     s, H, Hn = spec.near_share, spec.hmd_max_m, spec.hmd_near_m
     v_lo, V = _vmd_range(spec, own_alt_m)
     vn_lo, Vn = max(-spec.vmd_near_m, v_lo), spec.vmd_near_m
-    p = (2.0 * hmd_m / H ** 2) * (1.0 / (V - v_lo))
+    p = (2.0 * hmd_m / H**2) * (1.0 / (V - v_lo))
     q_h = s * (hmd_m <= Hn) / Hn + (1.0 - s) / H
     q_v = s * (vn_lo <= vmd_m <= Vn) / (Vn - vn_lo) + (1.0 - s) / (V - v_lo)
     return float(p / (q_h * q_v))
@@ -57,8 +57,9 @@ def draw_miss(spec, own_alt_m: float, rng: np.random.Generator) -> tuple[float, 
     return float(hmd), float(vmd), miss_weight(hmd, vmd, spec, own_alt_m)
 
 
-def make_manned(index: int, stratum: str, model_kind: str, model, own: OwnFlight, spec, adsb_settings,
-                rng: np.random.Generator) -> Encounter:
+def make_manned(
+    index: int, stratum: str, model_kind: str, model, own: OwnFlight, spec, adsb_settings, rng: np.random.Generator
+) -> Encounter:
     """Encounter ``index`` with one manned intruder of ``model`` (an ``EncounterModel``)."""
     duration = spec.before_s + spec.after_s
     track = sample_track(model, rng, duration_s=duration)
@@ -77,12 +78,32 @@ def make_manned(index: int, stratum: str, model_kind: str, model, own: OwnFlight
     pos[:, 2] = np.minimum(pos[:, 2], -spec.min_agl_m)
     t = t_cpa - spec.before_s + track.t_s
     emitter = EMITTERS[model_kind]
-    intruder = IntruderTrack(f"adsb-{ICAO_BASE + index % 0x100000:06x}", t, pos,
-                             emitter_radius_m(emitter, adsb_settings), float(t[0]), float(t[-1]),
-                             icao_address=ICAO_BASE + index % 0x100000, emitter_type=int(emitter))
+    intruder = IntruderTrack(
+        f"adsb-{ICAO_BASE + index % 0x100000:06x}",
+        t,
+        pos,
+        emitter_radius_m(emitter, adsb_settings),
+        float(t[0]),
+        float(t[-1]),
+        icao_address=ICAO_BASE + index % 0x100000,
+        emitter_type=int(emitter),
+    )
     speed = float(np.hypot(*track.vel_neu_m_s[k_cpa, :2]))
-    params = {"t_cpa_s": t_cpa, "hmd_target_m": hmd, "vmd_target_m": vmd, "intruder_speed_m_s": speed,
-              "t_report_s": float(t[0])}
-    return Encounter(index, stratum, "long", model_kind, (intruder,), weight, own.end_t_s + FLY_ON_S,
-                     {"noise_pos_m": 0.0, "noise_vel_m_s": 0.0, "update_hz": 1.0, "latency_s": 0.0,
-                      "dropout": 0.0}, params)
+    params = {
+        "t_cpa_s": t_cpa,
+        "hmd_target_m": hmd,
+        "vmd_target_m": vmd,
+        "intruder_speed_m_s": speed,
+        "t_report_s": float(t[0]),
+    }
+    return Encounter(
+        index,
+        stratum,
+        "long",
+        model_kind,
+        (intruder,),
+        weight,
+        own.end_t_s + FLY_ON_S,
+        {"noise_pos_m": 0.0, "noise_vel_m_s": 0.0, "update_hz": 1.0, "latency_s": 0.0, "dropout": 0.0},
+        params,
+    )

@@ -118,8 +118,10 @@ def _cylinders(seed: int, start: np.ndarray, goal: np.ndarray, down: tuple[float
 
 def _fences() -> list:
     """Two exclusion zones beside the route (all altitudes)."""
-    return [Prism(((60.0, 8.0), (120.0, 8.0), (120.0, 45.0), (60.0, 45.0))),
-            Prism(((95.0, -10.0), (150.0, -10.0), (150.0, -50.0), (95.0, -50.0)))]
+    return [
+        Prism(((60.0, 8.0), (120.0, 8.0), (120.0, 45.0), (60.0, 45.0))),
+        Prism(((95.0, -10.0), (150.0, -10.0), (150.0, -50.0), (95.0, -50.0))),
+    ]
 
 
 def build_mission(name: str, settings, *, iterations_per_s: float) -> Mission:
@@ -147,12 +149,14 @@ def build_mission(name: str, settings, *, iterations_per_s: float) -> Mission:
     obstacles = _cylinders(seed, start, goal, (float(lo[2]), float(hi[2]))) if kind == "cluttered" else []
     fences = _fences() if kind == "fenced" else []
     world = World(obstacles + fences, lo, hi, margin_m=MARGIN_M)
-    pipeline = TrajectoryPipeline.from_settings(settings.smoothing, settings.planning,
-                                                iterations_per_s=iterations_per_s)
+    pipeline = TrajectoryPipeline.from_settings(
+        settings.smoothing, settings.planning, iterations_per_s=iterations_per_s
+    )
     waypoint = LocalWaypoint(1, "waypoint", goal, ACCEPTANCE_M, 0.0, None)
-    leg = plan_leg(0, waypoint, start, world, pipeline=pipeline, settings=settings.flight,
-                   rng=np.random.default_rng([7412, seed]))
-    leg = dataclasses.replace(leg, world=world)       # a replan may leave the leg's slab
+    leg = plan_leg(
+        0, waypoint, start, world, pipeline=pipeline, settings=settings.flight, rng=np.random.default_rng([7412, seed])
+    )
+    leg = dataclasses.replace(leg, world=world)  # a replan may leave the leg's slab
     return Mission(name, (leg,), world, tuple(obstacles), tuple(fences), lo, hi)
 
 

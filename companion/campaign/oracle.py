@@ -67,9 +67,21 @@ import numpy as np
 
 from companion.threats.model import Threat
 
-__all__ = ["OracleLimits", "Phase", "Manoeuvre", "Flight", "OracleResult", "label_encounter",
-           "manoeuvres", "fly", "sample_flights", "flight_margins", "CRUISE_SPEED_M_S", "TRACKING_ALLOWANCE_M",
-           "WORLD_CLEARANCE_M"]
+__all__ = [
+    "OracleLimits",
+    "Phase",
+    "Manoeuvre",
+    "Flight",
+    "OracleResult",
+    "label_encounter",
+    "manoeuvres",
+    "fly",
+    "sample_flights",
+    "flight_margins",
+    "CRUISE_SPEED_M_S",
+    "TRACKING_ALLOWANCE_M",
+    "WORLD_CLEARANCE_M",
+]
 
 #: Cruise speed of the benchmark's trajectories (m/s): ``TrajectoryLimits(speed_m_s=6.0)``.
 CRUISE_SPEED_M_S = 6.0
@@ -255,24 +267,37 @@ def _heading_frame(vel_ned_m_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _first_phases(vel_ned_m_s: np.ndarray, limits: OracleLimits) -> list[Phase]:
     fwd, right = _heading_frame(vel_ned_m_s)
     ah, av = limits.accel_horizontal_m_s2, limits.accel_vertical_m_s2
-    out = [Phase(ACCEL, (0.0, 0.0, 0.0), "keep going"), Phase(BRAKE, name="hard stop"),
-           Phase(BRAKE_H, (0.0, 0.0, -av), "stop and climb"), Phase(BRAKE_H, (0.0, 0.0, av), "stop and descend"),
-           Phase(ACCEL, (0.0, 0.0, -av), "climb"), Phase(ACCEL, (0.0, 0.0, av), "descend")]
+    out = [
+        Phase(ACCEL, (0.0, 0.0, 0.0), "keep going"),
+        Phase(BRAKE, name="hard stop"),
+        Phase(BRAKE_H, (0.0, 0.0, -av), "stop and climb"),
+        Phase(BRAKE_H, (0.0, 0.0, av), "stop and descend"),
+        Phase(ACCEL, (0.0, 0.0, -av), "climb"),
+        Phase(ACCEL, (0.0, 0.0, av), "descend"),
+    ]
     for frac in (1.0, 0.5):
         for deg in range(0, 360, 30):
             d = math.cos(math.radians(deg)) * fwd + math.sin(math.radians(deg)) * right
             for vz, vname in ((0.0, ""), (-av, " climbing"), (av, " descending")):
-                out.append(Phase(ACCEL, (frac * ah * d[0], frac * ah * d[1], vz),
-                                 f"accelerate {frac:g} g_h at {deg} deg{vname}"))
+                out.append(
+                    Phase(
+                        ACCEL, (frac * ah * d[0], frac * ah * d[1], vz), f"accelerate {frac:g} g_h at {deg} deg{vname}"
+                    )
+                )
     return out
 
 
 def _second_phases(vel_ned_m_s: np.ndarray, limits: OracleLimits) -> list[Phase]:
     fwd, right = _heading_frame(vel_ned_m_s)
     ah, av = limits.accel_horizontal_m_s2, limits.accel_vertical_m_s2
-    out = [Phase(BRAKE, name="hard stop"), Phase(BRAKE_H, (0.0, 0.0, -av), "stop and climb"),
-           Phase(BRAKE_H, (0.0, 0.0, av), "stop and descend"), Phase(ACCEL, (0.0, 0.0, 0.0), "coast"),
-           Phase(ACCEL, (0.0, 0.0, -av), "climb"), Phase(ACCEL, (0.0, 0.0, av), "descend")]
+    out = [
+        Phase(BRAKE, name="hard stop"),
+        Phase(BRAKE_H, (0.0, 0.0, -av), "stop and climb"),
+        Phase(BRAKE_H, (0.0, 0.0, av), "stop and descend"),
+        Phase(ACCEL, (0.0, 0.0, 0.0), "coast"),
+        Phase(ACCEL, (0.0, 0.0, -av), "climb"),
+        Phase(ACCEL, (0.0, 0.0, av), "descend"),
+    ]
     for deg in range(0, 360, 45):
         d = math.cos(math.radians(deg)) * fwd + math.sin(math.radians(deg)) * right
         out.append(Phase(ACCEL, (ah * d[0], ah * d[1], 0.0), f"accelerate at {deg} deg"))
@@ -301,8 +326,9 @@ def manoeuvres(vel_ned_m_s, limits: OracleLimits = OracleLimits()) -> list[Manoe
 
 
 # ---------------------------------------------------------------------------- flying
-def fly(pos0_ned_m, vel0_ned_m_s, batch: list[Manoeuvre],
-        limits: OracleLimits = OracleLimits()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def fly(
+    pos0_ned_m, vel0_ned_m_s, batch: list[Manoeuvre], limits: OracleLimits = OracleLimits()
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fly a batch of manoeuvres from one state (applied accelerations constant per control step).
 
     Each control step: the phase's commanded acceleration (a brake asks for the acceleration
@@ -332,21 +358,20 @@ def fly(pos0_ned_m, vel0_ned_m_s, batch: list[Manoeuvre],
     acc = np.empty((m, n, 3))
     p = np.tile(np.asarray(pos0_ned_m, dtype=float), (m, 1))
     v = np.tile(np.asarray(vel0_ned_m_s, dtype=float), (m, 1))
-    vmax = max(limits.speed_max_m_s, float(np.linalg.norm(v[0])))   # a start above the cap keeps its speed
+    vmax = max(limits.speed_max_m_s, float(np.linalg.norm(v[0])))  # a start above the cap keeps its speed
     pos[:, 0], vel[:, 0] = p, v
     a = np.empty((m, 3))
     for k in range(n):
         second = k >= switch
         const = np.where(second[:, None], a2, a1)
-        stop_h = -v[:, :2] / dt                            # stop within this step ...
+        stop_h = -v[:, :2] / dt  # stop within this step ...
         norm = np.sqrt(stop_h[:, 0] ** 2 + stop_h[:, 1] ** 2)
-        stop_h *= np.minimum(1.0, ah / np.maximum(norm, 1e-12))[:, None]     # ... within the limit
+        stop_h *= np.minimum(1.0, ah / np.maximum(norm, 1e-12))[:, None]  # ... within the limit
         a[:, :2] = np.where(np.where(second[:, None], brake_h[1], brake_h[0]), stop_h, const[:, :2])
-        a[:, 2] = np.where(np.where(second, brake_v[1], brake_v[0]),
-                           np.clip(-v[:, 2] / dt, -av, av), const[:, 2])
+        a[:, 2] = np.where(np.where(second, brake_v[1], brake_v[0]), np.clip(-v[:, 2] / dt, -av, av), const[:, 2])
         w = v + a * dt
         sp = np.sqrt(np.einsum("ij,ij->i", w, w))
-        w *= np.minimum(1.0, vmax / np.maximum(sp, 1e-12))[:, None]      # onto the speed ball
+        w *= np.minimum(1.0, vmax / np.maximum(sp, 1e-12))[:, None]  # onto the speed ball
         applied = (w - v) / dt
         # the projection can tilt the acceleration beyond one axis group's limit: shrink it
         # towards zero (v + s (w - v), s in [0, 1], stays in the ball)
@@ -363,9 +388,12 @@ def fly(pos0_ned_m, vel0_ned_m_s, batch: list[Manoeuvre],
 def sample_flights(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray, limits: OracleLimits) -> np.ndarray:
     """Exact positions (M, S + 1, 3) every ``step_s`` from the control-step states of ``fly``."""
     sub = limits.substeps
-    tau = limits.step_s * np.arange(sub)                                  # (sub,)
-    inner = (pos[:, :-1, None, :] + vel[:, :-1, None, :] * tau[None, None, :, None]
-             + 0.5 * acc[:, :, None, :] * (tau * tau)[None, None, :, None])
+    tau = limits.step_s * np.arange(sub)  # (sub,)
+    inner = (
+        pos[:, :-1, None, :]
+        + vel[:, :-1, None, :] * tau[None, None, :, None]
+        + 0.5 * acc[:, :, None, :] * (tau * tau)[None, None, :, None]
+    )
     m = pos.shape[0]
     return np.concatenate([inner.reshape(m, -1, 3), pos[:, -1:, :]], axis=1)
 
@@ -456,8 +484,8 @@ def _first_clear(pos0, vel0, batch: list, tracks, coarse_tracks, world, limits: 
         return None, float(margin.max())
     best = -math.inf
     start, chunk = 0, 16
-    while start < ok.size:                   # world and bounds, in order, until one is clear
-        idx = ok[start:start + chunk]
+    while start < ok.size:  # world and bounds, in order, until one is clear
+        idx = ok[start : start + chunk]
         start, chunk = start + chunk, 4 * chunk
         both = margin[idx]
         if world is not None:
@@ -476,8 +504,16 @@ def _first_clear(pos0, vel0, batch: list, tracks, coarse_tracks, world, limits: 
 
 
 # ---------------------------------------------------------------------------- the label
-def label_encounter(pos0_ned_m, vel0_ned_m_s, threats, t0_s: float, world=None, *,
-                    limits: OracleLimits = OracleLimits(), batch_size: int = 4000) -> OracleResult:
+def label_encounter(
+    pos0_ned_m,
+    vel0_ned_m_s,
+    threats,
+    t0_s: float,
+    world=None,
+    *,
+    limits: OracleLimits = OracleLimits(),
+    batch_size: int = 4000,
+) -> OracleResult:
     """Is the encounter avoidable? Brute force over ``manoeuvres`` (see the module docstring).
 
     Parameters
@@ -507,15 +543,18 @@ def label_encounter(pos0_ned_m, vel0_ned_m_s, threats, t0_s: float, world=None, 
         if not (hasattr(th, "position_at") and hasattr(th, "radius_m")):
             raise ValueError(f"threats: expected Threat records or tracks (position_at, radius_m), got {th!r}")
     tracks = _threat_tracks(threats, t0_s, limits)
-    coarse_tracks = [(centers[::limits.substeps], limit - limits.sampling_slack_m(speed))
-                     for (centers, limit), speed in zip(tracks, _speeds(threats))]
+    coarse_tracks = [
+        (centers[:: limits.substeps], limit - limits.sampling_slack_m(speed))
+        for (centers, limit), speed in zip(tracks, _speeds(threats))
+    ]
     candidates = manoeuvres(vel0, limits)
     best = -math.inf
     tried = 0
     # the single phases first (cheap, and most avoidable encounters end there), then the pairs
     n_single = sum(1 for c in candidates if c.switch_s >= 1e6)
-    bounds = [(0, n_single)] + [(s, min(s + batch_size, len(candidates)))
-                                for s in range(n_single, len(candidates), batch_size)]
+    bounds = [(0, n_single)] + [
+        (s, min(s + batch_size, len(candidates))) for s in range(n_single, len(candidates), batch_size)
+    ]
     for lo, hi in bounds:
         batch = candidates[lo:hi]
         tried += len(batch)

@@ -44,8 +44,19 @@ from companion.campaign.tracks import Encounter, IntruderTrack, straight_track
 
 __all__ = ["GEOMETRIES", "OwnFlight", "make_parametric", "MISS_EXTRA_M", "CRUISE_M_S"]
 
-GEOMETRIES = ("head_on", "crossing", "overtaking", "above", "below", "popup_near", "popup_far", "popup_mover",
-              "multi", "turning", "climbing")
+GEOMETRIES = (
+    "head_on",
+    "crossing",
+    "overtaking",
+    "above",
+    "below",
+    "popup_near",
+    "popup_far",
+    "popup_mover",
+    "multi",
+    "turning",
+    "climbing",
+)
 CRUISE_M_S = 6.0
 RADIUS_M = (2.0, 6.0)
 MISS_EXTRA_M = 6.0
@@ -118,7 +129,7 @@ def _velocity(kind: str, tangent: np.ndarray, v_own: np.ndarray, rng: np.random.
         return tangent * rng.uniform(lo, max(lo, 2.0 * CRUISE_M_S))
     if kind in ("above", "below"):
         horizontal = _rotate_ne(np.array([1.0, 0.0, 0.0]), rng.uniform(0.0, 2 * math.pi))
-        vertical = rng.uniform(1.0, 3.0) * (1.0 if kind == "above" else -1.0)   # down positive
+        vertical = rng.uniform(1.0, 3.0) * (1.0 if kind == "above" else -1.0)  # down positive
         return horizontal * rng.uniform(0.0, 1.0) * CRUISE_M_S + np.array([0.0, 0.0, vertical])
     raise ValueError(f"geometry: unknown intruder geometry {kind!r}")
 
@@ -126,8 +137,9 @@ def _velocity(kind: str, tangent: np.ndarray, v_own: np.ndarray, rng: np.random.
 def _manoeuvre(kind: str, v: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """The velocity after a ``turning`` or ``climbing`` intruder's manoeuvre."""
     if kind == "turning":
-        return _rotate_ne(v, math.radians(rng.uniform(30.0, 90.0)) * rng.choice([-1.0, 1.0])) + \
-            np.array([0.0, 0.0, v[2]])
+        return _rotate_ne(v, math.radians(rng.uniform(30.0, 90.0)) * rng.choice([-1.0, 1.0])) + np.array(
+            [0.0, 0.0, v[2]]
+        )
     return v + np.array([0.0, 0.0, rng.uniform(1.0, 3.0) * rng.choice([-1.0, 1.0])])
 
 
@@ -135,7 +147,7 @@ def _aim_times(kind: str, own: OwnFlight, rng: np.random.Generator, vertical: bo
     """(first report time, closest-approach delay) for one intruder."""
     window = POPUP_CPA_S.get(kind, MOVER_CPA_S)
     t_ca = float(rng.uniform(*window))
-    if vertical:        # aim inside the climb or descent
+    if vertical:  # aim inside the climb or descent
         speeds = np.abs(np.gradient(own.pos_ned_m[:, 2], own.t_s))
         moving = own.t_s[speeds > 0.5]
         t_aim = float(rng.uniform(moving[0], moving[-1])) if moving.size else float(rng.uniform(2.0, 10.0))
@@ -143,18 +155,29 @@ def _aim_times(kind: str, own: OwnFlight, rng: np.random.Generator, vertical: bo
     return float(rng.uniform(3.0, max(own.end_t_s - 12.0, 4.0))), t_ca
 
 
-def _draw_intruder(kind: str, tid: str, own: OwnFlight, goal_ned_m: np.ndarray, t_report: float, t_ca: float,
-                   end_t_s: float, rng: np.random.Generator, manoeuvre: str | None) -> IntruderTrack | None:
+def _draw_intruder(
+    kind: str,
+    tid: str,
+    own: OwnFlight,
+    goal_ned_m: np.ndarray,
+    t_report: float,
+    t_ca: float,
+    end_t_s: float,
+    rng: np.random.Generator,
+    manoeuvre: str | None,
+) -> IntruderTrack | None:
     radius = float(rng.uniform(*RADIUS_M))
     p_ca, v_ca = own.at(t_report + t_ca)
     p_now, v_now = own.at(t_report)
     if float(np.linalg.norm(v_now)) < 1.0 and kind not in ("above", "below"):
         return None
-    tangent = _unit(np.array([v_ca[0], v_ca[1], 0.0]) if np.hypot(v_ca[0], v_ca[1]) > 0.5 else
-                    goal_ned_m - p_ca)
+    tangent = _unit(np.array([v_ca[0], v_ca[1], 0.0]) if np.hypot(v_ca[0], v_ca[1]) > 0.5 else goal_ned_m - p_ca)
     tangent[2] = 0.0
-    base = "head_on" if kind == "turning" and rng.random() < 0.5 else ("crossing" if kind in ("turning", "climbing")
-                                                                        else kind)
+    base = (
+        "head_on"
+        if kind == "turning" and rng.random() < 0.5
+        else ("crossing" if kind in ("turning", "climbing") else kind)
+    )
     v = _velocity(base, tangent, v_now, rng)
     miss = _across(v - v_ca, rng) * rng.uniform(0.0, radius + MISS_EXTRA_M)
     start = p_ca + miss - v * t_ca
@@ -167,12 +190,21 @@ def _draw_intruder(kind: str, tid: str, own: OwnFlight, goal_ned_m: np.ndarray, 
     if manoeuvre is not None:
         turn_t = t_report + float(rng.uniform(1.0, 3.0))
         v_after = _manoeuvre(manoeuvre, v, rng)
-    return straight_track(tid, t_report, end_t_s, start, v, radius, turn_t_s=turn_t, v_after_ned_m_s=v_after,
-                          popup=popup)
+    return straight_track(
+        tid, t_report, end_t_s, start, v, radius, turn_t_s=turn_t, v_after_ned_m_s=v_after, popup=popup
+    )
 
 
-def make_parametric(index: int, stratum: str, geometry: str, mission: str, own: OwnFlight, goal_ned_m: np.ndarray,
-                    delivery: dict, rng: np.random.Generator) -> Encounter:
+def make_parametric(
+    index: int,
+    stratum: str,
+    geometry: str,
+    mission: str,
+    own: OwnFlight,
+    goal_ned_m: np.ndarray,
+    delivery: dict,
+    rng: np.random.Generator,
+) -> Encounter:
     """Encounter ``index`` of a parametric stratum against the unmitigated flight ``own``.
 
     Raises
@@ -185,8 +217,9 @@ def make_parametric(index: int, stratum: str, geometry: str, mission: str, own: 
     vertical = geometry in ("above", "below")
     for _ in range(MAX_DRAWS):
         if geometry == "multi":
-            kinds = [str(k) for k in rng.choice(["head_on", "crossing", "overtaking", "popup"],
-                                                size=int(rng.integers(2, 4)))]
+            kinds = [
+                str(k) for k in rng.choice(["head_on", "crossing", "overtaking", "popup"], size=int(rng.integers(2, 4)))
+            ]
         else:
             kinds = [geometry]
         t_report, _ = _aim_times(kinds[0], own, rng, vertical)
@@ -205,7 +238,6 @@ def make_parametric(index: int, stratum: str, geometry: str, mission: str, own: 
         if len(intruders) == len(kinds):
             end = max(max(cpas) + AFTER_S, own.end_t_s + 10.0)
             params = {"t_report_s": t_report, "t_cpa_s": max(cpas), "kinds": kinds}
-            heard = tuple(dataclasses.replace(tr, last_report_t_s=end) for tr in intruders)   # to the end
+            heard = tuple(dataclasses.replace(tr, last_report_t_s=end) for tr in intruders)  # to the end
             return Encounter(index, stratum, mission, "drone", heard, 1.0, end, delivery, params)
     raise RuntimeError(f"encounter {index} ({stratum}): no valid geometry in {MAX_DRAWS} draws")
-

@@ -83,10 +83,19 @@ class ReplayResult:
 
     def outcome(self) -> dict:
         s = self.separation
-        return {"id": self.encounter.id, "stratum": self.encounter.stratum, "collision": s.collision,
-                "nmac": s.nmac, "lowc": s.lowc, "min_sep_m": s.min_sep_m, "hmd_m": list(s.hmd_m),
-                "vmd_m": list(s.vmd_m), "leg_t0_s": self.leg_t0_s, "puts": self.puts,
-                "record": str(self.out_dir / "flight.jsonl")}
+        return {
+            "id": self.encounter.id,
+            "stratum": self.encounter.stratum,
+            "collision": s.collision,
+            "nmac": s.nmac,
+            "lowc": s.lowc,
+            "min_sep_m": s.min_sep_m,
+            "hmd_m": list(s.hmd_m),
+            "vmd_m": list(s.vmd_m),
+            "leg_t0_s": self.leg_t0_s,
+            "puts": self.puts,
+            "record": str(self.out_dir / "flight.jsonl"),
+        }
 
 
 def write_mission(mission, path: Path) -> Path:
@@ -96,22 +105,33 @@ def write_mission(mission, path: Path) -> Path:
     start, goal = mission.legs[0].start_ned_m, mission.goal_ned_m
     lat, lon, _ = HOME.to_lla(goal[0], goal[1], goal[2])
     relative = mavutil.mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT
-    items = (MissionItem(mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, relative, alt_m=-float(start[2])),
-             MissionItem(mavutil.mavlink.MAV_CMD_NAV_WAYPOINT, relative, param2=ACCEPTANCE_M, lat_deg=float(lat),
-                         lon_deg=float(lon), alt_m=-float(goal[2])),
-             MissionItem(mavutil.mavlink.MAV_CMD_NAV_LAND, relative, lat_deg=float(lat), lon_deg=float(lon)))
+    items = (
+        MissionItem(mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, relative, alt_m=-float(start[2])),
+        MissionItem(
+            mavutil.mavlink.MAV_CMD_NAV_WAYPOINT,
+            relative,
+            param2=ACCEPTANCE_M,
+            lat_deg=float(lat),
+            lon_deg=float(lon),
+            alt_m=-float(goal[2]),
+        ),
+        MissionItem(mavutil.mavlink.MAV_CMD_NAV_LAND, relative, lat_deg=float(lat), lon_deg=float(lon)),
+    )
     (n0, e0), (n1, e1) = mission.world.bounds_min[:2], mission.world.bounds_max[:2]
     corners = [HOME.to_lla(n, e, 0.0)[:2] for n, e in ((n0, e0), (n1, e0), (n1, e1), (n0, e1))]
     fence = FencePolygon(tuple((float(la), float(lo)) for la, lo in corners), inclusion=True)
-    write_plan_file(MissionPlan(items, polygons=(fence,), planned_home=(HOME.lat0_deg, HOME.lon0_deg, HOME.alt0_m)),
-                    path)
+    write_plan_file(
+        MissionPlan(items, polygons=(fence,), planned_home=(HOME.lat0_deg, HOME.lon0_deg, HOME.alt0_m)), path
+    )
     return path
 
 
 def mission_settings(mission, path: Path) -> Path:
     """The companion's settings for the campaign mission: its world's ceiling and margin."""
-    path.write_text(f"[mission]\nceiling_m = {-float(mission.world.bounds_min[2]):.3f}\n"
-                    f"margin_m = {float(mission.world.margin_m):.3f}\n")
+    path.write_text(
+        f"[mission]\nceiling_m = {-float(mission.world.bounds_min[2]):.3f}\n"
+        f"margin_m = {float(mission.world.margin_m):.3f}\n"
+    )
     return path
 
 
@@ -120,7 +140,7 @@ class _LegClock:
 
     def __init__(self, bus: ThreatBus, speedup: float) -> None:
         self.speedup = speedup
-        self.status: tuple[float, float] | None = None      # (mission time, wall time)
+        self.status: tuple[float, float] | None = None  # (mission time, wall time)
         self.leg_t0_s: float | None = None
         bus.subscribe_json("status", self._on_status)
         bus.subscribe_json("path", self._on_path)
@@ -162,8 +182,9 @@ def _play(send, clock: _LegClock, updates, done, timeout_s: float) -> int:
 
 def _adsb_sender(vehicle_port: int):
     """(send(fields), close()) of an ADS-B receiver component talking to the vehicle."""
-    conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{vehicle_port}", source_system=1,
-                                      source_component=mavutil.mavlink.MAV_COMP_ID_ADSB)
+    conn = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{vehicle_port}", source_system=1, source_component=mavutil.mavlink.MAV_COMP_ID_ADSB
+    )
 
     def send(fields: dict) -> None:
         args = {k: v for k, v in fields.items() if k != "mavpackettype"}
@@ -187,9 +208,17 @@ def recorded_track(record_path: Path) -> tuple[float, np.ndarray, np.ndarray]:
     return starts[0], t[keep] - starts[0], pos[keep]
 
 
-def replay(worker: CampaignWorker, index: int, out_dir: Path, *, speedup: float = 2.0,
-           foxglove: str | None = None, gcs_out: str | None = None, timeout_s: float = 600.0,
-           mitigated: bool = True) -> ReplayResult:
+def replay(
+    worker: CampaignWorker,
+    index: int,
+    out_dir: Path,
+    *,
+    speedup: float = 2.0,
+    foxglove: str | None = None,
+    gcs_out: str | None = None,
+    timeout_s: float = 600.0,
+    mitigated: bool = True,
+) -> ReplayResult:
     """Fly encounter ``index`` of ``worker``'s campaign in SITL (module docstring); with
     ``mitigated`` False no report is put (the unmitigated flight, judged all the same)."""
     out_dir = Path(out_dir)
@@ -212,11 +241,12 @@ def replay(worker: CampaignWorker, index: int, out_dir: Path, *, speedup: float 
     else:
         updates = feed_updates(enc.intruders, enc.traffic, enc.delivery, rng, home=HOME) if mitigated else []
     home_arg = f"--home={HOME.lat0_deg},{HOME.lon0_deg},{HOME.alt0_m},0"
-    with flight_processes(out_dir, mission_file, speedup=speedup, gcs_out=gcs_out, extra_args=extra,
-                          sim_args=[home_arg]) as flight:
+    with flight_processes(
+        out_dir, mission_file, speedup=speedup, gcs_out=gcs_out, extra_args=extra, sim_args=[home_arg]
+    ) as flight:
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             clock = _LegClock(bus, speedup)
-            done = lambda: flight.companion.poll() is not None       # noqa: E731
+            done = lambda: flight.companion.poll() is not None  # noqa: E731
             send, close = _adsb_sender(flight.vehicle_port) if manned else (bus.client.put_threat, lambda: None)
             try:
                 puts = _play(send, clock, updates, done, timeout_s)
@@ -232,8 +262,15 @@ def judged(worker: CampaignWorker, enc: Encounter, record_path: Path, puts: int 
     """A replay's flight record judged against its encounter (also to judge a record again)."""
     leg_t0, t_enc, pos = recorded_track(record_path)
     sep = judge_track(enc, t_enc, pos, worker.spec.volumes)
-    log.info("replay %d (%s): min separation %.2f m, collision %s, NMAC %s, LoWC %s", enc.id, enc.stratum,
-             sep.min_sep_m, sep.collision, sep.nmac, sep.lowc)
+    log.info(
+        "replay %d (%s): min separation %.2f m, collision %s, NMAC %s, LoWC %s",
+        enc.id,
+        enc.stratum,
+        sep.min_sep_m,
+        sep.collision,
+        sep.nmac,
+        sep.lowc,
+    )
     return ReplayResult(enc, leg_t0, sep, puts, Path(record_path).parent, t_enc, pos)
 
 

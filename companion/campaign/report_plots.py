@@ -7,8 +7,8 @@ altitude is ``-down``.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import matplotlib
 
@@ -23,7 +23,7 @@ from companion.campaign.summary import Columns, GroupSummary  # noqa: E402
 __all__ = ["plot_miss_distances", "plot_convergence", "plot_ratio_bars", "plot_flight"]
 
 _U_STYLE = {"color": "tab:red", "label": "without the system"}
-_U_TRACK = {**_U_STYLE, "linewidth": 2.6, "alpha": 0.6}   # wider: visible under the other track
+_U_TRACK = {**_U_STYLE, "linewidth": 2.6, "alpha": 0.6}  # wider: visible under the other track
 _M_STYLE = {"color": "tab:blue", "label": "with the system"}
 
 
@@ -56,8 +56,14 @@ def _weighted_hist(ax, u: tuple[np.ndarray, np.ndarray], m: tuple[np.ndarray, np
     bins = np.linspace(lo, hi if hi > lo else lo + 1.0, 40)
     for (x, w), style in ((u, _U_STYLE), (m, _M_STYLE)):
         if x.size:
-            ax.hist(np.clip(x, bins[0], bins[-1]), bins=bins, weights=w / w.sum() if w.sum() > 0 else None,
-                    histtype="step", linewidth=1.6, **style)
+            ax.hist(
+                np.clip(x, bins[0], bins[-1]),
+                bins=bins,
+                weights=w / w.sum() if w.sum() > 0 else None,
+                histtype="step",
+                linewidth=1.6,
+                **style,
+            )
     ax.set_xlabel(xlabel)
     ax.set_ylabel("weighted fraction")
     ax.legend(fontsize=8)
@@ -66,12 +72,22 @@ def _weighted_hist(ax, u: tuple[np.ndarray, np.ndarray], m: tuple[np.ndarray, np
 def plot_miss_distances(cols: Columns, path: Path) -> Path:
     """Weighted histograms of min separation, and of per-threat HMD and VMD when present."""
     w = cols["weight"].astype(float)
-    panels = [("min separation beyond the threat radius (m)",
-               (cols["u_min_sep_m"].astype(float), w), (cols["m_min_sep_m"].astype(float), w))]
+    panels = [
+        (
+            "min separation beyond the threat radius (m)",
+            (cols["u_min_sep_m"].astype(float), w),
+            (cols["m_min_sep_m"].astype(float), w),
+        )
+    ]
     for kind in ("hmd", "vmd"):
         if f"u_{kind}_m" in cols and f"m_{kind}_m" in cols:
-            panels.append((f"{kind.upper()} at closest approach, per threat (m)",
-                           _per_threat(cols[f"u_{kind}_m"], w), _per_threat(cols[f"m_{kind}_m"], w)))
+            panels.append(
+                (
+                    f"{kind.upper()} at closest approach, per threat (m)",
+                    _per_threat(cols[f"u_{kind}_m"], w),
+                    _per_threat(cols[f"m_{kind}_m"], w),
+                )
+            )
     fig, axes = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 3.6), squeeze=False)
     for ax, (label, u, m) in zip(axes[0], panels):
         _weighted_hist(ax, _finite(*u), _finite(*m), label)
@@ -169,7 +185,7 @@ def plot_flight(flight, title: str, path: Path) -> Path:
         top.plot(th[:, 1], th[:, 0], color="black", linestyle="--", linewidth=1, label=label)
         top.plot(th[0, 1], th[0, 0], "k^", markersize=5)
         alt.plot(t[: th.shape[0]], -th[:, 2], color="black", linestyle="--", linewidth=1, label=label)
-    for th in threats:   # closest approach with the system
+    for th in threats:  # closest approach with the system
         k = _closest_index(own_m, th)
         top.plot([own_m[k, 1], th[k, 1]], [own_m[k, 0], th[k, 0]], "x-", color="tab:blue", linewidth=0.8)
     top.plot(own_u[0, 1], own_u[0, 0], "go", markersize=5, label="start")

@@ -25,8 +25,8 @@ import multiprocessing
 import os
 import time
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from companion.campaign.flying import CampaignWorker
 from companion.campaign.spec import CampaignSpec, SpecError
@@ -58,7 +58,7 @@ def worker_context(spec_text: str, settings_text: str, digest: str) -> CampaignW
     worker = _CONTEXT.get(digest)
     if worker is None:
         for name in ("companion", "heli_model"):
-            logging.getLogger(name).setLevel(logging.ERROR)     # a decision logs a warning: not here
+            logging.getLogger(name).setLevel(logging.ERROR)  # a decision logs a warning: not here
         worker = CampaignWorker(_spec_from_text(spec_text), _settings_from_text(settings_text), digest)
         worker.warm()
         _CONTEXT.clear()
@@ -88,8 +88,9 @@ def convergence_verdicts(table, tolerance: float) -> dict[str, object]:
         for metric in ("nmac", "lowc"):
             curve = event_convergence(rows, metric)
             verdict = is_converged(curve, tol=tolerance)
-            out[f"{kind} {metric}"] = RatioVerdict(verdict.converged, verdict.reason,
-                                                   float(curve.ratio[-1]) if len(curve.ratio) else float("nan"))
+            out[f"{kind} {metric}"] = RatioVerdict(
+                verdict.converged, verdict.reason, float(curve.ratio[-1]) if len(curve.ratio) else float("nan")
+            )
     return out
 
 
@@ -130,9 +131,17 @@ class CampaignRun:
     progress : callable (RunProgress) -> None, optional
     """
 
-    def __init__(self, spec: CampaignSpec, store: CampaignStore, settings_text: str = "", *, workers: int | None = None,
-                 cluster: str | None = None, progress: Callable[[RunProgress], None] | None = None,
-                 max_pairs: int | None = None) -> None:
+    def __init__(
+        self,
+        spec: CampaignSpec,
+        store: CampaignStore,
+        settings_text: str = "",
+        *,
+        workers: int | None = None,
+        cluster: str | None = None,
+        progress: Callable[[RunProgress], None] | None = None,
+        max_pairs: int | None = None,
+    ) -> None:
         self.spec = spec
         self.store = store
         self.settings_text = settings_text
@@ -180,18 +189,30 @@ class CampaignRun:
             submit, close = self._executor()
             try:
                 flown, stop, verdicts = self._drive(pending, submit, done_before, t0)
-            except BaseException as exc:        # killed (Ctrl-C) or failed: say so, keep the parts
-                self.store.log_run({"event": "interrupted", "reason": type(exc).__name__,
-                                    "stored": self._contiguous(self.store.done_batches()),
-                                    "wall_s": time.perf_counter() - t0})
+            except BaseException as exc:  # killed (Ctrl-C) or failed: say so, keep the parts
+                self.store.log_run(
+                    {
+                        "event": "interrupted",
+                        "reason": type(exc).__name__,
+                        "stored": self._contiguous(self.store.done_batches()),
+                        "wall_s": time.perf_counter() - t0,
+                    }
+                )
                 raise
             finally:
                 close()
         wall = time.perf_counter() - t0
-        result = {"event": "end", "flown": flown, "stored": self._contiguous(self.store.done_batches()), "wall_s": wall,
-                  "workers": self.workers, "cluster": self.cluster or "",
-                  "pairs_per_s": flown / wall if wall > 0 else 0.0, "converged": stop,
-                  "verdicts": {k: v.reason if not v.converged else "converged" for k, v in verdicts.items()}}
+        result = {
+            "event": "end",
+            "flown": flown,
+            "stored": self._contiguous(self.store.done_batches()),
+            "wall_s": wall,
+            "workers": self.workers,
+            "cluster": self.cluster or "",
+            "pairs_per_s": flown / wall if wall > 0 else 0.0,
+            "converged": stop,
+            "verdicts": {k: v.reason if not v.converged else "converged" for k, v in verdicts.items()},
+        }
         self.store.log_run(result)
         return result
 
@@ -215,8 +236,9 @@ class CampaignRun:
                 stop, verdicts = self.check()
             if self.progress is not None:
                 wall = time.perf_counter() - t0
-                self.progress(RunProgress(done_before + flown, self.max_pairs, t0, flown / max(wall, 1e-9),
-                                          verdicts, stop))
+                self.progress(
+                    RunProgress(done_before + flown, self.max_pairs, t0, flown / max(wall, 1e-9), verdicts, stop)
+                )
         for fut in running:
             fut.cancel()
         return flown, stop, verdicts
@@ -237,14 +259,17 @@ class CampaignRun:
 
             def close():
                 client.close()
+
             return _DaskFutures(submit), close
-        for var in BLAS_THREADS:       # as a Dask worker's: a multi-threaded BLAS sums in another order
+        for var in BLAS_THREADS:  # as a Dask worker's: a multi-threaded BLAS sums in another order
             os.environ[var] = "1"
-        pool = futures.ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
-                                           initializer=warm_worker, initargs=args)
+        pool = futures.ProcessPoolExecutor(
+            self.workers, mp_context=multiprocessing.get_context("spawn"), initializer=warm_worker, initargs=args
+        )
 
         def submit_local(first, n):
             return pool.submit(run_batch, first, n, *args)
+
         return submit_local, lambda: pool.shutdown(cancel_futures=True)
 
 
@@ -263,6 +288,7 @@ class _DaskFutures:
                 fut.set_result(f.result())
             except BaseException as exc:  # noqa: BLE001 - handed to the driver
                 fut.set_exception(exc)
+
         dask_future.add_done_callback(relay)
-        fut._dask = dask_future          # keep it alive while it runs
+        fut._dask = dask_future  # keep it alive while it runs
         return fut

@@ -31,9 +31,9 @@ from pathlib import Path
 
 from companion.campaign.judge import Volumes
 from companion.campaign.strata import STRATA, stratum_names
-from companion.flight.fast_time import JobLatency
 from companion.config import dict_to_toml
 from companion.errors import CompanionError
+from companion.flight.fast_time import JobLatency
 from heli_common.typed_config import SettingsError, from_dict, load_toml, require_numbers
 
 __all__ = ["CampaignSpec", "MannedSpec", "RobustnessSpec", "SpecError", "load_spec", "spec_hash", "spec_to_toml"]
@@ -64,9 +64,13 @@ class MannedSpec:
     after_s: float = 20.0
 
     def __post_init__(self) -> None:
-        require_numbers(SpecError, "manned", self, positive=("hmd_max_m", "hmd_near_m", "vmd_max_m", "vmd_near_m",
-                                                               "before_s", "after_s"),
-                        non_negative=("near_share", "min_agl_m"))
+        require_numbers(
+            SpecError,
+            "manned",
+            self,
+            positive=("hmd_max_m", "hmd_near_m", "vmd_max_m", "vmd_near_m", "before_s", "after_s"),
+            non_negative=("near_share", "min_agl_m"),
+        )
         if self.near_share >= 1.0 or self.hmd_near_m > self.hmd_max_m or self.vmd_near_m > self.vmd_max_m:
             raise SpecError("manned: expected near_share < 1, hmd_near_m <= hmd_max_m, vmd_near_m <= vmd_max_m")
 
@@ -85,8 +89,9 @@ class RobustnessSpec:
         for f in dataclasses.fields(self):
             lo, hi = getattr(self, f.name)
             if not 0.0 <= lo <= hi or (f.name == "update_hz" and lo <= 0) or (f.name == "dropout" and hi >= 1):
-                raise SpecError(f"robustness.{f.name}: expected 0 <= low <= high (rates > 0, dropout < 1), "
-                                f"got [{lo}, {hi}]")
+                raise SpecError(
+                    f"robustness.{f.name}: expected 0 <= low <= high (rates > 0, dropout < 1), got [{lo}, {hi}]"
+                )
 
 
 @dataclass(frozen=True)

@@ -44,10 +44,25 @@ from scipy import stats as sps
 from companion.errors import CompanionError
 
 __all__ = [
-    "MEASURED_COLUMNS", "CONVERGENCE_TOL", "CONVERGENCE_FLOOR", "CONVERGENCE_HALF_WIDTH",
-    "CONVERGENCE_TAIL", "CONVERGENCE_MIN_CHECKPOINTS", "StatsError", "Estimate", "Verdict", "ConvergenceCurve",
-    "weighted_rate", "risk_ratio", "induced_rate", "unnecessary_rate", "percentiles",
-    "weighted_quantile", "default_checkpoints", "convergence", "is_converged",
+    "MEASURED_COLUMNS",
+    "CONVERGENCE_TOL",
+    "CONVERGENCE_FLOOR",
+    "CONVERGENCE_HALF_WIDTH",
+    "CONVERGENCE_TAIL",
+    "CONVERGENCE_MIN_CHECKPOINTS",
+    "StatsError",
+    "Estimate",
+    "Verdict",
+    "ConvergenceCurve",
+    "weighted_rate",
+    "risk_ratio",
+    "induced_rate",
+    "unnecessary_rate",
+    "percentiles",
+    "weighted_quantile",
+    "default_checkpoints",
+    "convergence",
+    "is_converged",
 ]
 
 #: Row columns that are measured on the machine, not reproduced by a seed: leave them out when
@@ -196,7 +211,7 @@ def weighted_rate(events, weights=None, *, level: float = 0.95) -> Estimate:
     if n == 0 or sw <= 0:
         return Estimate(math.nan, math.nan, math.nan, n, 0.0, level, "none", "empty")
     p = float(np.sum(w * e)) / sw
-    var_p = float(np.sum(w * w * (e - p) ** 2)) / sw ** 2
+    var_p = float(np.sum(w * w * (e - p) ** 2)) / sw**2
     n_eff = _kish_n_eff(w)
     lo, hi, method = _rate_interval(p, n, n_eff, var_p, level)
     return Estimate(p, lo, hi, n, n_eff, level, method)
@@ -222,8 +237,16 @@ def unnecessary_rate(manoeuvred, without_lowc, weights=None, *, level: float = 0
     return weighted_rate(m & ~u, w, level=level)
 
 
-def risk_ratio(with_events, without_events, weights=None, *, level: float = 0.95,
-               method: str = "delta", n_boot: int = 2000, seed: int = 0) -> Estimate:
+def risk_ratio(
+    with_events,
+    without_events,
+    weights=None,
+    *,
+    level: float = 0.95,
+    method: str = "delta",
+    n_boot: int = 2000,
+    seed: int = 0,
+) -> Estimate:
     """Paired, importance-weighted risk ratio ``P(event | with) / P(event | without)``.
 
     Parameters
@@ -266,11 +289,12 @@ def risk_ratio(with_events, without_events, weights=None, *, level: float = 0.95
     return Estimate(rr, min(lo, lo_g), max(hi, hi_g), n, n_eff, level, "delta-log")
 
 
-def _delta_log_interval(ta: float, tb: float, saa: float, sab: float, sbb: float, n: int,
-                        z: float) -> tuple[float, float]:
+def _delta_log_interval(
+    ta: float, tb: float, saa: float, sab: float, sbb: float, n: int, z: float
+) -> tuple[float, float]:
     """Delta method on log(ta/tb) from the paired weighted sums (``saa = sum(w^2 a)`` etc.)."""
     rr = ta / tb
-    var_log = n / max(n - 1, 1) * max(saa - 2 * rr * sab + rr * rr * sbb, 0.0) / ta ** 2
+    var_log = n / max(n - 1, 1) * max(saa - 2 * rr * sab + rr * rr * sbb, 0.0) / ta**2
     half = z * math.sqrt(var_log)
     return rr * math.exp(-half), rr * math.exp(half)
 
@@ -288,11 +312,11 @@ def _undefined_ratio(a, b, w, n_eff, ta, tb, level) -> Estimate:
     n = a.size
     if ta <= 0 and tb <= 0:
         return Estimate(math.nan, math.nan, math.nan, n, n_eff, level, "none", "no_events")
-    if ta <= 0:   # no event with the system: RR = 0, bounded above by p_a's upper bound / p_b
+    if ta <= 0:  # no event with the system: RR = 0, bounded above by p_a's upper bound / p_b
         p_b = tb / float(np.sum(w))
         hi = _upper_rule_of_three(n_eff, level) / p_b
         return Estimate(0.0, 0.0, hi, n, n_eff, level, "zero-upper", "zero_with")
-    p_a = weighted_rate(a, w, level=level)   # no event without it: RR = inf, bounded below
+    p_a = weighted_rate(a, w, level=level)  # no event without it: RR = inf, bounded below
     lo = p_a.lo / _upper_rule_of_three(n_eff, level)
     return Estimate(math.inf, lo, math.inf, n, n_eff, level, "zero-upper", "zero_without")
 
@@ -346,8 +370,9 @@ def default_checkpoints(n: int, *, n_min: int = 20, n_log: int = 15, n_tail: int
     return pts[pts >= 1]
 
 
-def convergence(with_events, without_events, weights=None, checkpoints=None, *,
-                level: float = 0.95) -> ConvergenceCurve:
+def convergence(
+    with_events, without_events, weights=None, checkpoints=None, *, level: float = 0.95
+) -> ConvergenceCurve:
     """The risk ratio over the first ``N_k`` encounters (rows in their campaign order, by id).
 
     Parameters
@@ -368,13 +393,23 @@ def convergence(with_events, without_events, weights=None, checkpoints=None, *,
     if ks.size and (ks.min() < 1 or ks.max() > a.size):
         raise StatsError(f"checkpoints must lie in 1..{a.size}, got {ks.min()}..{ks.max()}")
     ests = [risk_ratio(a[:k], b[:k], w[:k], level=level) for k in ks]
-    return ConvergenceCurve(ks, np.array([e.value for e in ests], float),
-                            np.array([e.lo for e in ests], float), np.array([e.hi for e in ests], float))
+    return ConvergenceCurve(
+        ks,
+        np.array([e.value for e in ests], float),
+        np.array([e.lo for e in ests], float),
+        np.array([e.hi for e in ests], float),
+    )
 
 
-def is_converged(curve: ConvergenceCurve, *, tol: float = CONVERGENCE_TOL, floor: float = CONVERGENCE_FLOOR,
-                 max_rel_half_width: float = CONVERGENCE_HALF_WIDTH, tail_fraction: float = CONVERGENCE_TAIL,
-                 min_checkpoints: int = CONVERGENCE_MIN_CHECKPOINTS) -> Verdict:
+def is_converged(
+    curve: ConvergenceCurve,
+    *,
+    tol: float = CONVERGENCE_TOL,
+    floor: float = CONVERGENCE_FLOOR,
+    max_rel_half_width: float = CONVERGENCE_HALF_WIDTH,
+    tail_fraction: float = CONVERGENCE_TAIL,
+    min_checkpoints: int = CONVERGENCE_MIN_CHECKPOINTS,
+) -> Verdict:
     """Whether a running ratio has settled, with the reason when not.
 
     The rule, in order (``R`` the final ratio, ``s = max(R, floor)``):
@@ -407,14 +442,15 @@ def is_converged(curve: ConvergenceCurve, *, tol: float = CONVERGENCE_TOL, floor
         return Verdict(False, f"ratio undefined at N={int(curve.n[-1])} (ratio {r:.3g})")
     tail = curve.n >= (1.0 - tail_fraction) * float(curve.n[-1])
     if int(tail.sum()) < min_checkpoints:
-        return Verdict(False, f"{int(tail.sum())} checkpoints in the last {tail_fraction:.0%}, "
-                              f"need {min_checkpoints}")
+        return Verdict(False, f"{int(tail.sum())} checkpoints in the last {tail_fraction:.0%}, need {min_checkpoints}")
     scale = max(r, floor)
     drift = np.abs(curve.ratio[tail] - r)
     worst = float(np.nanmax(np.where(np.isfinite(drift), drift, np.inf)))
     if worst > tol * scale:
-        return Verdict(False, f"ratio moved by {worst / scale:.3g} (relative) over the last "
-                              f"{tail_fraction:.0%}, tolerance {tol:.3g}")
+        return Verdict(
+            False,
+            f"ratio moved by {worst / scale:.3g} (relative) over the last {tail_fraction:.0%}, tolerance {tol:.3g}",
+        )
     half = (hi - lo) / 2.0
     if half > max_rel_half_width * scale:
         return Verdict(False, f"CI half-width {half / scale:.3g} of the ratio, bound {max_rel_half_width:.3g}")

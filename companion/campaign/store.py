@@ -37,20 +37,50 @@ class StoreError(SpecError):
 
 
 _FLOAT_LIST = pa.list_(pa.float64())
-_RUN_COLUMNS = [("collision", pa.bool_()), ("nmac", pa.bool_()), ("lowc", pa.bool_()), ("min_sep_m", pa.float64()),
-                ("hmd_m", _FLOAT_LIST), ("vmd_m", _FLOAT_LIST), ("obstacle_entries", pa.int64()),
-                ("fence_entries", pa.int64()), ("completed", pa.bool_()), ("path_m", pa.float64())]
+_RUN_COLUMNS = [
+    ("collision", pa.bool_()),
+    ("nmac", pa.bool_()),
+    ("lowc", pa.bool_()),
+    ("min_sep_m", pa.float64()),
+    ("hmd_m", _FLOAT_LIST),
+    ("vmd_m", _FLOAT_LIST),
+    ("obstacle_entries", pa.int64()),
+    ("fence_entries", pa.int64()),
+    ("completed", pa.bool_()),
+    ("path_m", pa.float64()),
+]
 #: One row per encounter pair.
 SCHEMA = pa.schema(
-    [("id", pa.int64()), ("stratum", pa.string()), ("source", pa.string()), ("traffic", pa.string()),
-     ("world", pa.string()), ("mission", pa.string()), ("seed", pa.int64()), ("spec_hash", pa.string()),
-     ("weight", pa.float64()), ("n_threats", pa.int64())]
+    [
+        ("id", pa.int64()),
+        ("stratum", pa.string()),
+        ("source", pa.string()),
+        ("traffic", pa.string()),
+        ("world", pa.string()),
+        ("mission", pa.string()),
+        ("seed", pa.int64()),
+        ("spec_hash", pa.string()),
+        ("weight", pa.float64()),
+        ("n_threats", pa.int64()),
+    ]
     + [(f"{p}{name}", kind) for p in ("u_", "m_") for name, kind in _RUN_COLUMNS]
-    + [("m_alerted", pa.bool_()), ("m_alert_t_s", pa.float64()), ("m_manoeuvred", pa.bool_()),
-       ("m_decisions", pa.list_(pa.string())), ("m_latency_ms", _FLOAT_LIST), ("m_decide_wall_ms", _FLOAT_LIST),
-       ("m_extra_path_m", pa.float64()), ("noise_pos_m", pa.float64()), ("noise_vel_m_s", pa.float64()),
-       ("update_hz", pa.float64()), ("latency_s", pa.float64()), ("dropout", pa.float64()), ("wall_ms", pa.float64()),
-       ("cpu_ms", pa.float64())])
+    + [
+        ("m_alerted", pa.bool_()),
+        ("m_alert_t_s", pa.float64()),
+        ("m_manoeuvred", pa.bool_()),
+        ("m_decisions", pa.list_(pa.string())),
+        ("m_latency_ms", _FLOAT_LIST),
+        ("m_decide_wall_ms", _FLOAT_LIST),
+        ("m_extra_path_m", pa.float64()),
+        ("noise_pos_m", pa.float64()),
+        ("noise_vel_m_s", pa.float64()),
+        ("update_hz", pa.float64()),
+        ("latency_s", pa.float64()),
+        ("dropout", pa.float64()),
+        ("wall_ms", pa.float64()),
+        ("cpu_ms", pa.float64()),
+    ]
+)
 #: Measured columns a part written before they existed may lack (read as nulls).
 LATER_COLUMNS = ("cpu_ms",)
 #: A pack's metadata key holding its batches' first ids (JSON list).
@@ -86,8 +116,10 @@ class CampaignStore:
         if spec_file.exists():
             held = spec_hash(load_spec(spec_file), self.settings_text())
             if held != digest:
-                raise StoreError(f"{self.root}: holds the campaign of another spec (hash {held}, this one {digest}); "
-                                 "use another --out directory")
+                raise StoreError(
+                    f"{self.root}: holds the campaign of another spec (hash {held}, this one {digest}); "
+                    "use another --out directory"
+                )
         else:
             self._write_text(spec_file, spec_to_toml(spec))
             if settings_text:
@@ -99,10 +131,12 @@ class CampaignStore:
         here = code_hash()
         if last is not None and last["code"] != here and self.done_batches():
             commit = last.get("commit", "")
-            raise StoreError(f"{self.root}: its rows were flown by other code (code {last['code']}, at commit "
-                             f"{commit or '?'}), this is code {here}; resume it with that code "
-                             f"(git worktree add DIR {commit.split('+')[0] or 'COMMIT'}) or use another --out "
-                             "directory")
+            raise StoreError(
+                f"{self.root}: its rows were flown by other code (code {last['code']}, at commit "
+                f"{commit or '?'}), this is code {here}; resume it with that code "
+                f"(git worktree add DIR {commit.split('+')[0] or 'COMMIT'}) or use another --out "
+                "directory"
+            )
 
     def spec(self) -> CampaignSpec:
         """The spec the directory was made for."""
@@ -124,8 +158,12 @@ class CampaignStore:
     def log_run(self, record: dict) -> None:
         """Append one record to ``runs.jsonl``, stamped with the time, the commit and the code's hash
         (``code_hash``): a run logs one when it starts and one when it ends."""
-        line = {"at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-                "commit": code_version(), "code": code_hash(), **record}
+        line = {
+            "at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+            "commit": code_version(),
+            "code": code_hash(),
+            **record,
+        }
         with open(self.root / "runs.jsonl", "a", encoding="utf-8") as fh:
             fh.write(json.dumps(line) + "\n")
 
@@ -218,8 +256,11 @@ class CampaignStore:
                         table = table.append_column(name, pa.nulls(table.num_rows, pa.float64()))
                 tables.append(table.select(SCHEMA.names).cast(SCHEMA))
             except (pa.ArrowInvalid, pa.ArrowTypeError, KeyError, OSError) as exc:
-                remedy = ("restore it from where it was kept, or delete it and resume to fly its batches again"
-                          if path.name.startswith("pack-") else "delete it and resume to fly its batch again")
+                remedy = (
+                    "restore it from where it was kept, or delete it and resume to fly its batches again"
+                    if path.name.startswith("pack-")
+                    else "delete it and resume to fly its batch again"
+                )
                 raise StoreError(f"{path}: unreadable {path.name.split('-')[0]} ({exc}); {remedy}") from None
         return pa.concat_tables(tables).sort_by("id")
 
@@ -228,9 +269,16 @@ class CampaignStore:
 CODE_DIRS = ("companion", "heli_model", "heli_common", "mavlink_signing", "sim_vehicle")
 #: Modules that only drive, store, read, report or replay rows: changing them changes no row (the
 #: runner chooses which batches fly where; a test shows that where changes no row).
-ROWLESS_MODULES = ("companion/campaign/runner.py", "companion/campaign/store.py", "companion/campaign/report.py",
-                   "companion/campaign/report_plots.py", "companion/campaign/summary.py",
-                   "companion/campaign/labels.py", "companion/campaign/replay.py", "companion/commands")
+ROWLESS_MODULES = (
+    "companion/campaign/runner.py",
+    "companion/campaign/store.py",
+    "companion/campaign/report.py",
+    "companion/campaign/report_plots.py",
+    "companion/campaign/summary.py",
+    "companion/campaign/labels.py",
+    "companion/campaign/replay.py",
+    "companion/commands",
+)
 _ROOT = Path(__file__).resolve().parents[2]
 
 

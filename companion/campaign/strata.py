@@ -24,8 +24,17 @@ from dataclasses import dataclass
 __all__ = ["Stratum", "STRATA", "stratum_names", "ROBUSTNESS_QUALITIES"]
 
 WORLDS = ("open", "cluttered", "fenced")
-LEVEL_GEOMETRIES = ("head_on", "crossing", "overtaking", "popup_near", "popup_far", "popup_mover", "multi",
-                    "turning", "climbing")
+LEVEL_GEOMETRIES = (
+    "head_on",
+    "crossing",
+    "overtaking",
+    "popup_near",
+    "popup_far",
+    "popup_mover",
+    "multi",
+    "turning",
+    "climbing",
+)
 ROBUSTNESS_QUALITIES = ("noise", "rate", "latency", "dropout")
 
 

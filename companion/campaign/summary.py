@@ -11,21 +11,40 @@ decision, whatever the encounter's weight).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Iterable, Mapping
 
 import numpy as np
 import pyarrow as pa
 
 from companion.campaign.stats import (
-    ConvergenceCurve, Estimate, StatsError, Verdict, convergence, induced_rate, is_converged, percentiles,
-    risk_ratio, unnecessary_rate, weighted_quantile, weighted_rate,
+    ConvergenceCurve,
+    Estimate,
+    StatsError,
+    Verdict,
+    convergence,
+    induced_rate,
+    is_converged,
+    percentiles,
+    risk_ratio,
+    unnecessary_rate,
+    weighted_quantile,
+    weighted_rate,
 )
 
 __all__ = [
-    "EVENTS", "REQUIRED_COLUMNS", "LIST_COLUMNS", "Columns", "campaign_columns",
-    "LatencySummary", "EventSummary", "GroupSummary", "CampaignSummary", "summarise",
-    "summarise_group", "event_convergence",
+    "EVENTS",
+    "REQUIRED_COLUMNS",
+    "LIST_COLUMNS",
+    "Columns",
+    "campaign_columns",
+    "LatencySummary",
+    "EventSummary",
+    "GroupSummary",
+    "CampaignSummary",
+    "summarise",
+    "summarise_group",
+    "event_convergence",
 ]
 
 #: The events whose risk ratio the campaign reports: (name, column suffix).
@@ -33,18 +52,52 @@ EVENTS: tuple[tuple[str, str], ...] = (("NMAC", "nmac"), ("LoWC", "lowc"))
 
 #: Columns :func:`summarise` reads.
 REQUIRED_COLUMNS: tuple[str, ...] = (
-    "id", "stratum", "traffic", "weight",
-    "u_collision", "u_nmac", "u_lowc", "u_min_sep_m", "u_completed", "u_path_m",
-    "m_collision", "m_nmac", "m_lowc", "m_min_sep_m", "m_completed", "m_path_m",
-    "m_alerted", "m_manoeuvred", "m_decisions", "m_latency_ms", "m_extra_path_m",
+    "id",
+    "stratum",
+    "traffic",
+    "weight",
+    "u_collision",
+    "u_nmac",
+    "u_lowc",
+    "u_min_sep_m",
+    "u_completed",
+    "u_path_m",
+    "m_collision",
+    "m_nmac",
+    "m_lowc",
+    "m_min_sep_m",
+    "m_completed",
+    "m_path_m",
+    "m_alerted",
+    "m_manoeuvred",
+    "m_decisions",
+    "m_latency_ms",
+    "m_extra_path_m",
 )
 
 #: Columns holding one list per row.
-LIST_COLUMNS: tuple[str, ...] = ("u_hmd_m", "u_vmd_m", "m_hmd_m", "m_vmd_m", "m_decisions",
-                                 "m_latency_ms", "m_decide_wall_ms")
+LIST_COLUMNS: tuple[str, ...] = (
+    "u_hmd_m",
+    "u_vmd_m",
+    "m_hmd_m",
+    "m_vmd_m",
+    "m_decisions",
+    "m_latency_ms",
+    "m_decide_wall_ms",
+)
 
-_BOOL_COLUMNS = ("u_collision", "u_nmac", "u_lowc", "u_completed", "m_collision", "m_nmac",
-                 "m_lowc", "m_completed", "m_alerted", "m_manoeuvred")
+_BOOL_COLUMNS = (
+    "u_collision",
+    "u_nmac",
+    "u_lowc",
+    "u_completed",
+    "m_collision",
+    "m_nmac",
+    "m_lowc",
+    "m_completed",
+    "m_alerted",
+    "m_manoeuvred",
+)
 
 
 @dataclass(frozen=True)
@@ -145,8 +198,7 @@ def _check_columns(cols: Columns) -> None:
     if "m_decisions" in cols and "m_latency_ms" in cols:
         for i, (d, lat) in enumerate(zip(cols["m_decisions"], cols["m_latency_ms"])):
             if len(d) != len(lat):
-                raise StatsError(f"campaign rows: id {int(ids[i])}: {len(d)} m_decisions but "
-                                 f"{len(lat)} m_latency_ms")
+                raise StatsError(f"campaign rows: id {int(ids[i])}: {len(d)} m_decisions but {len(lat)} m_latency_ms")
 
 
 @dataclass(frozen=True)
@@ -284,15 +336,26 @@ def event_convergence(rows, metric: str, checkpoints=None, *, level: float = 0.9
     if metric not in ("nmac", "lowc", "collision"):
         raise StatsError(f"metric {metric!r}: expected 'nmac', 'lowc' or 'collision'")
     cols = rows if isinstance(rows, Columns) else campaign_columns(rows)
-    return convergence(cols[f"m_{metric}"].astype(bool), cols[f"u_{metric}"].astype(bool),
-                       cols["weight"].astype(float), checkpoints, level=level)
+    return convergence(
+        cols[f"m_{metric}"].astype(bool),
+        cols[f"u_{metric}"].astype(bool),
+        cols["weight"].astype(float),
+        checkpoints,
+        level=level,
+    )
 
 
 def _event_summary(cols: Columns, name: str, suffix: str, w: np.ndarray, level: float) -> EventSummary:
     a, b = cols[f"m_{suffix}"].astype(bool), cols[f"u_{suffix}"].astype(bool)
     verdict = is_converged(event_convergence(cols, suffix, level=level)) if a.size else Verdict(False, "no encounters")
-    return EventSummary(name, weighted_rate(b, w, level=level), weighted_rate(a, w, level=level),
-                        risk_ratio(a, b, w, level=level), induced_rate(a, b, w, level=level), verdict)
+    return EventSummary(
+        name,
+        weighted_rate(b, w, level=level),
+        weighted_rate(a, w, level=level),
+        risk_ratio(a, b, w, level=level),
+        induced_rate(a, b, w, level=level),
+        verdict,
+    )
 
 
 def _latencies(cols: Columns) -> tuple[LatencySummary, tuple[LatencySummary, ...]]:
@@ -305,8 +368,12 @@ def _latencies(cols: Columns) -> tuple[LatencySummary, tuple[LatencySummary, ...
             compute = np.array(measured, dtype=float)
 
     def summary(kind: str, sel) -> LatencySummary:
-        return LatencySummary(kind, int(np.isfinite(lat[sel]).sum()), *percentiles(lat[sel], (50, 99)),
-                              *percentiles(compute[sel], (50, 99)))
+        return LatencySummary(
+            kind,
+            int(np.isfinite(lat[sel]).sum()),
+            *percentiles(lat[sel], (50, 99)),
+            *percentiles(compute[sel], (50, 99)),
+        )
 
     return summary("all", slice(None)), tuple(summary(k, kinds == k) for k in sorted(set(kinds)))
 
@@ -320,8 +387,9 @@ def summarise_group(cols: Columns, name: str, *, level: float = 0.95) -> GroupSu
     fin = np.isfinite(extra)
     mean_extra = float(np.sum(w[fin] * extra[fin]) / np.sum(w[fin])) if fin.any() and np.sum(w[fin]) > 0 else math.nan
     return GroupSummary(
-        name=name, n=cols.n,
-        n_eff=total_w ** 2 / float(np.sum(w * w)) if total_w > 0 else 0.0,
+        name=name,
+        n=cols.n,
+        n_eff=total_w**2 / float(np.sum(w * w)) if total_w > 0 else 0.0,
         nmac=_event_summary(cols, "NMAC", "nmac", w, level),
         lowc=_event_summary(cols, "LoWC", "lowc", w, level),
         unnecessary=unnecessary_rate(cols["m_manoeuvred"].astype(bool), cols["u_lowc"].astype(bool), w, level=level),
@@ -332,14 +400,14 @@ def summarise_group(cols: Columns, name: str, *, level: float = 0.95) -> GroupSu
         m_completion=weighted_rate(cols["m_completed"].astype(bool), w, level=level),
         extra_path_mean_m=mean_extra,
         extra_path_p50_m=weighted_quantile(extra, w, 0.5),
-        latency=latency, latency_by_kind=by_kind,
+        latency=latency,
+        latency_by_kind=by_kind,
     )
 
 
 def _groups(cols: Columns, column: str, level: float) -> tuple[GroupSummary, ...]:
     values = cols[column]
-    return tuple(summarise_group(cols.subset(values == v), str(v), level=level)
-                 for v in sorted(set(values.tolist())))
+    return tuple(summarise_group(cols.subset(values == v), str(v), level=level) for v in sorted(set(values.tolist())))
 
 
 def summarise(table, *, level: float = 0.95) -> CampaignSummary:
@@ -357,5 +425,6 @@ def summarise(table, *, level: float = 0.95) -> CampaignSummary:
     CampaignSummary
     """
     cols = table if isinstance(table, Columns) else campaign_columns(table)
-    return CampaignSummary(summarise_group(cols, "all", level=level),
-                           _groups(cols, "stratum", level), _groups(cols, "traffic", level))
+    return CampaignSummary(
+        summarise_group(cols, "all", level=level), _groups(cols, "stratum", level), _groups(cols, "traffic", level)
+    )

@@ -80,8 +80,18 @@ class IntruderTrack:
         return dp / (self.t_s[seg + 1] - self.t_s[seg])[:, None]
 
 
-def straight_track(threat_id: str, start_t_s: float, end_t_s: float, p0_ned_m, v_ned_m_s, radius_m: float,
-                   *, turn_t_s: float | None = None, v_after_ned_m_s=None, popup: bool = False) -> IntruderTrack:
+def straight_track(
+    threat_id: str,
+    start_t_s: float,
+    end_t_s: float,
+    p0_ned_m,
+    v_ned_m_s,
+    radius_m: float,
+    *,
+    turn_t_s: float | None = None,
+    v_after_ned_m_s=None,
+    popup: bool = False,
+) -> IntruderTrack:
     """A track at constant velocity from ``p0`` at ``start_t_s``, optionally changing to
     ``v_after`` at ``turn_t_s`` (an intruder that turns or climbs)."""
     p0 = np.asarray(p0_ned_m, dtype=float)

@@ -31,16 +31,33 @@ from numpy.typing import ArrayLike
 
 from companion.errors import CompanionError
 
-__all__ = ["TrafficModelError", "BayesNet", "EncounterModel", "read_model", "load_model",
-           "sample_initial", "sample_dynamic", "MODEL_FILES", "MODELS_ENV"]
+__all__ = [
+    "TrafficModelError",
+    "BayesNet",
+    "EncounterModel",
+    "read_model",
+    "load_model",
+    "sample_initial",
+    "sample_dynamic",
+    "MODEL_FILES",
+    "MODELS_ENV",
+]
 
 MODELS_ENV = "COMPANION_ENCOUNTER_MODELS"
-MODEL_FILES = {"rotorcraft": "uncor_1200only_rotorcraft_v1p2.txt",
-               "fixedwing": "uncor_1200only_fwse_v1p2.txt"}
-_SECTIONS = ("labels_initial", "G_initial", "r_initial", "N_initial",
-             "labels_transition", "G_transition", "r_transition", "N_transition",
-             "boundaries", "resample_rates")
-_Lines = list[tuple[int, str]]    # (line number, stripped text) of one section
+MODEL_FILES = {"rotorcraft": "uncor_1200only_rotorcraft_v1p2.txt", "fixedwing": "uncor_1200only_fwse_v1p2.txt"}
+_SECTIONS = (
+    "labels_initial",
+    "G_initial",
+    "r_initial",
+    "N_initial",
+    "labels_transition",
+    "G_transition",
+    "r_transition",
+    "N_transition",
+    "boundaries",
+    "resample_rates",
+)
+_Lines = list[tuple[int, str]]  # (line number, stripped text) of one section
 
 
 class TrafficModelError(CompanionError, ValueError):
@@ -48,7 +65,7 @@ class TrafficModelError(CompanionError, ValueError):
     wrong), cannot be found, or cannot give what is asked of it."""
 
 
-@dataclass(frozen=True, eq=False)   # holds arrays: compared by identity
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity
 class BayesNet:
     """A discrete Bayesian network with its counts.
 
@@ -80,8 +97,10 @@ class BayesNet:
 
     @functools.cached_property
     def _strides(self) -> tuple[np.ndarray, ...]:
-        return tuple(np.cumprod([1, *self.bins[list(p)][:-1]]).astype(np.intp) if p
-                     else np.zeros(0, np.intp) for p in self.parents)
+        return tuple(
+            np.cumprod([1, *self.bins[list(p)][:-1]]).astype(np.intp) if p else np.zeros(0, np.intp)
+            for p in self.parents
+        )
 
     def parent_index(self, i: int, values: ArrayLike) -> int | np.ndarray:
         """Column of ``counts[i]`` for the parents' configuration in ``values``.
@@ -95,7 +114,7 @@ class BayesNet:
         return int(column) if values.ndim == 1 else column
 
 
-@dataclass(frozen=True, eq=False)   # holds arrays: compared by identity
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity
 class EncounterModel:
     """An uncorrelated encounter model: its two networks, bin edges and resample rates.
 
@@ -141,6 +160,7 @@ class EncounterModel:
 
 # ---------------------------------------------------------------------------- reading
 
+
 def _fail(path: Path, section: str, what: str, line: int | None = None) -> TrafficModelError:
     where = f", line {line}" if line is not None else ""
     return TrafficModelError(f"{path}: section '{section}'{where}: {what}")
@@ -155,8 +175,7 @@ def _split_sections(path: Path, text: str) -> dict[str, _Lines]:
         if stripped.startswith("#"):
             current = stripped.lstrip("#").strip()
             if current not in _SECTIONS or current in sections:
-                raise _fail(path, current, "unknown section" if current not in _SECTIONS
-                            else "appears twice", line_no)
+                raise _fail(path, current, "unknown section" if current not in _SECTIONS else "appears twice", line_no)
             sections[current] = []
         elif stripped:
             if current is None:
@@ -164,8 +183,9 @@ def _split_sections(path: Path, text: str) -> dict[str, _Lines]:
             sections[current].append((line_no, stripped))
     missing = [name for name in _SECTIONS if not sections.get(name)]
     if missing:
-        raise TrafficModelError(f"{path}: missing or empty section(s) {', '.join(missing)} "
-                                f"(truncated, or not an encounter model file?)")
+        raise TrafficModelError(
+            f"{path}: missing or empty section(s) {', '.join(missing)} (truncated, or not an encounter model file?)"
+        )
     return sections
 
 
@@ -220,29 +240,32 @@ def _dag(path: Path, section: str, lines: _Lines, n: int) -> tuple[tuple[tuple[i
     g = np.array(rows, dtype=bool)
     parents = tuple(tuple(int(p) for p in np.flatnonzero(g[:, i])) for i in range(n))
     order: list[int] = []
-    while len(order) < n:   # Kahn's algorithm, lowest index first (MATLAB toposort 'stable')
+    while len(order) < n:  # Kahn's algorithm, lowest index first (MATLAB toposort 'stable')
         ready = [i for i in range(n) if i not in order and all(p in order for p in parents[i])]
         if not ready:
-            raise _fail(path, section, f"is not a DAG: a cycle among variables "
-                        f"{sorted(set(range(n)) - set(order))}")
+            raise _fail(path, section, f"is not a DAG: a cycle among variables {sorted(set(range(n)) - set(order))}")
         order.append(ready[0])
     return parents, tuple(order)
 
 
-def _counts(path: Path, section: str, lines: _Lines, bins: np.ndarray,
-            parents: tuple[tuple[int, ...], ...], sampled: range) -> tuple[np.ndarray, ...]:
+def _counts(
+    path: Path, section: str, lines: _Lines, bins: np.ndarray, parents: tuple[tuple[int, ...], ...], sampled: range
+) -> tuple[np.ndarray, ...]:
     """Cut the flat counts into one column-major ``(r_i, q_i)`` matrix per sampled variable."""
     flat = np.concatenate([_numbers(path, section, line_no, text) for line_no, text in lines])
-    shapes = [(int(bins[i]), int(np.prod(bins[list(parents[i])])) if i in sampled else 0)
-              for i in range(bins.size)]
+    shapes = [(int(bins[i]), int(np.prod(bins[list(parents[i])])) if i in sampled else 0) for i in range(bins.size)]
     expected = sum(r * q for r, q in shapes)
     if flat.size != expected:
-        raise _fail(path, section, f"{flat.size} numbers, expected {expected} (sum of r_i * q_i over "
-                    f"variables {sampled.start + 1}..{sampled.stop})")
+        raise _fail(
+            path,
+            section,
+            f"{flat.size} numbers, expected {expected} (sum of r_i * q_i over "
+            f"variables {sampled.start + 1}..{sampled.stop})",
+        )
     if np.any(flat < 0):
         raise _fail(path, section, "negative counts")
     ends = np.cumsum([r * q for r, q in shapes])
-    counts = tuple(flat[end - r * q:end].reshape((r, q), order="F") for (r, q), end in zip(shapes, ends))
+    counts = tuple(flat[end - r * q : end].reshape((r, q), order="F") for (r, q), end in zip(shapes, ends))
     for c in counts:
         c.flags.writeable = False
     return counts
@@ -256,8 +279,7 @@ def _network(path: Path, sections: dict[str, _Lines], suffix: str, sampled_from:
         raise _fail(path, f"r_{suffix}", "bin counts must be integers >= 1", line_no)
     bins = r.astype(np.intp)
     bins.flags.writeable = False
-    counts = _counts(path, f"N_{suffix}", sections[f"N_{suffix}"], bins, parents,
-                     range(sampled_from, len(labels)))
+    counts = _counts(path, f"N_{suffix}", sections[f"N_{suffix}"], bins, parents, range(sampled_from, len(labels)))
     return BayesNet(labels, parents, bins, counts, order)
 
 
@@ -265,11 +287,16 @@ def _boundaries(path: Path, lines: _Lines, initial: BayesNet) -> tuple[np.ndarra
     if len(lines) != initial.n:
         raise _fail(path, "boundaries", f"{len(lines)} lines, expected {initial.n} (one per variable)")
     edges: list[np.ndarray | None] = []
-    for i, (line_no, text) in enumerate(lines[:initial.n]):
+    for i, (line_no, text) in enumerate(lines[: initial.n]):
         e = None if text == "*" else _numbers(path, "boundaries", line_no, text)
         if e is not None and (e.size != initial.bins[i] + 1 or np.any(np.diff(e) < 0)):
-            raise _fail(path, "boundaries", f"variable {initial.labels[i]!r}: {e.size} edges, expected "
-                        f"{initial.bins[i] + 1} non-decreasing (its bins + 1) or '*'", line_no)
+            raise _fail(
+                path,
+                "boundaries",
+                f"variable {initial.labels[i]!r}: {e.size} edges, expected "
+                f"{initial.bins[i] + 1} non-decreasing (its bins + 1) or '*'",
+                line_no,
+            )
         if e is not None:
             e.flags.writeable = False
         edges.append(e)
@@ -281,8 +308,11 @@ def _temporal_map(path: Path, initial: BayesNet, transition: BayesNet) -> tuple[
     n0 = initial.n
     now = tuple(label.removesuffix("(t)") for label in transition.labels[:n0])
     if now != initial.labels or not np.array_equal(transition.bins[:n0], initial.bins):
-        raise _fail(path, "labels_transition", f"the first {n0} variables must be the initial ones "
-                    f"with the same bins, got {transition.labels[:n0]}")
+        raise _fail(
+            path,
+            "labels_transition",
+            f"the first {n0} variables must be the initial ones with the same bins, got {transition.labels[:n0]}",
+        )
     pairs = []
     for i, label in enumerate(transition.labels[:n0]):
         if label.endswith("(t)"):
@@ -291,8 +321,9 @@ def _temporal_map(path: Path, initial: BayesNet, transition: BayesNet) -> tuple[
                 raise _fail(path, "labels_transition", f"{label!r} has no {nxt!r} with its bins")
             pairs.append((i, transition.labels.index(nxt)))
     if sorted(nxt for _, nxt in pairs) != list(range(n0, transition.n)):
-        raise _fail(path, "labels_transition", f"variables {n0 + 1}..{transition.n} must be the "
-                    f"'(t+1)' twins of the '(t)' ones")
+        raise _fail(
+            path, "labels_transition", f"variables {n0 + 1}..{transition.n} must be the '(t+1)' twins of the '(t)' ones"
+        )
     return tuple(pairs)
 
 
@@ -345,20 +376,24 @@ def load_model(kind: str, directory: str | os.PathLike | None = None) -> Encount
         raise TrafficModelError(f"unknown encounter model kind {kind!r} (known: {', '.join(MODEL_FILES)})")
     path = models_directory(directory) / MODEL_FILES[kind]
     if not path.is_file():
-        raise TrafficModelError(f"encounter model file {path} not found (pass directory= or set "
-                                f"{MODELS_ENV} to the folder holding {MODEL_FILES[kind]})")
+        raise TrafficModelError(
+            f"encounter model file {path} not found (pass directory= or set "
+            f"{MODELS_ENV} to the folder holding {MODEL_FILES[kind]})"
+        )
     return _read_cached(path)
 
 
 # ---------------------------------------------------------------------------- sampling
 
+
 def _draw(counts: np.ndarray, columns: np.ndarray, prior: float, u: np.ndarray) -> np.ndarray:
     """Bins drawn from the (counts + prior) columns, one per uniform ``u`` in [0, 1)."""
-    cumulative = np.cumsum(counts[:, columns] + prior, axis=0)     # (r, m)
+    cumulative = np.cumsum(counts[:, columns] + prior, axis=0)  # (r, m)
     total = cumulative[-1]
     if np.any(total <= 0):
-        raise TrafficModelError(f"a parents' configuration without counts (column "
-                                f"{int(columns[np.argmax(total <= 0)])}); use prior > 0")
+        raise TrafficModelError(
+            f"a parents' configuration without counts (column {int(columns[np.argmax(total <= 0)])}); use prior > 0"
+        )
     return np.sum(cumulative <= _threshold(u, total), axis=0)
 
 
@@ -367,8 +402,9 @@ def _threshold(u: np.ndarray | float, total: np.ndarray | float) -> np.ndarray:
     return np.minimum(u * total, np.nextafter(total, 0.0))
 
 
-def sample_initial(model: EncounterModel, rng: np.random.Generator, *, size: int | None = None,
-                   prior: float = 0.0) -> np.ndarray:
+def sample_initial(
+    model: EncounterModel, rng: np.random.Generator, *, size: int | None = None, prior: float = 0.0
+) -> np.ndarray:
     """Sample the initial network in topological order (the reference's ``bn_sample``).
 
     Returns the ``(n,)`` 0-based bins of the initial variables (G, A, L, v, v-dot, h-dot,
@@ -383,8 +419,9 @@ def sample_initial(model: EncounterModel, rng: np.random.Generator, *, size: int
     return bins[0] if size is None else bins
 
 
-def sample_dynamic(model: EncounterModel, initial_bins: ArrayLike, duration_s: float, rng: np.random.Generator,
-                   *, prior: float = 0.0) -> np.ndarray:
+def sample_dynamic(
+    model: EncounterModel, initial_bins: ArrayLike, duration_s: float, rng: np.random.Generator, *, prior: float = 0.0
+) -> np.ndarray:
     """Step the transition network once a second from an initial sample.
 
     Parameters
@@ -410,7 +447,7 @@ def sample_dynamic(model: EncounterModel, initial_bins: ArrayLike, duration_s: f
     sampled = [i for i in net.order if i in model.dynamic_next]
     held = dict((n1, n0) for n0, n1 in model.temporal_map)
     state = np.zeros(net.n, dtype=np.intp)
-    state[:model.initial.n] = np.asarray(initial_bins, dtype=np.intp)
+    state[: model.initial.n] = np.asarray(initial_bins, dtype=np.intp)
     out = np.empty((steps, now.size), dtype=np.intp)
     out[0] = state[now]
     u = rng.random((steps, len(sampled)))

@@ -23,16 +23,25 @@ from numpy.typing import ArrayLike
 
 from companion.campaign.traffic_model import EncounterModel, TrafficModelError, sample_dynamic, sample_initial
 
-__all__ = ["KT_TO_M_S", "FT_TO_M", "FT_MIN_TO_M_S", "TrafficTrack", "dediscretize", "resample_mask",
-           "dynamic_values", "integrate", "sample_track"]
+__all__ = [
+    "KT_TO_M_S",
+    "FT_TO_M",
+    "FT_MIN_TO_M_S",
+    "TrafficTrack",
+    "dediscretize",
+    "resample_mask",
+    "dynamic_values",
+    "integrate",
+    "sample_track",
+]
 
-KT_TO_M_S = 1852.0 / 3600.0      # 0.514444 m/s per knot
+KT_TO_M_S = 1852.0 / 3600.0  # 0.514444 m/s per knot
 FT_TO_M = 0.3048
 FT_MIN_TO_M_S = FT_TO_M / 60.0
 _LABELS = {"layer": "L", "speed": "v", "accel": "\\dot v", "climb": "\\dot h", "turn": "\\dot \\psi"}
 
 
-@dataclass(frozen=True, eq=False)   # holds arrays: compared by identity
+@dataclass(frozen=True, eq=False)  # holds arrays: compared by identity
 class TrafficTrack:
     """One aircraft's sampled track, K points ``dt`` apart.
 
@@ -65,7 +74,9 @@ class TrafficTrack:
     attempts: int
 
 
-def dediscretize(bins: ArrayLike, edges: np.ndarray | None, rng: np.random.Generator, *, zero_bin: bool = True) -> np.ndarray:
+def dediscretize(
+    bins: ArrayLike, edges: np.ndarray | None, rng: np.random.Generator, *, zero_bin: bool = True
+) -> np.ndarray:
     """Values drawn uniformly inside their bins.
 
     Parameters
@@ -140,8 +151,9 @@ def _prefix_sum(rate: np.ndarray, dt_s: float) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(rate[:-1] * dt_s)])
 
 
-def integrate(speed0_kt: float, altitude0_ft: float, heading0_deg: float, rates: np.ndarray,
-              dt_s: float) -> tuple[np.ndarray, ...]:
+def integrate(
+    speed0_kt: float, altitude0_ft: float, heading0_deg: float, rates: np.ndarray, dt_s: float
+) -> tuple[np.ndarray, ...]:
     """Forward Euler of ``sample2track.m``.
 
     Parameters
@@ -158,10 +170,12 @@ def integrate(speed0_kt: float, altitude0_ft: float, heading0_deg: float, rates:
     climb_m_s = rates[:, 1] * FT_MIN_TO_M_S
     altitude_ft = altitude0_ft + _prefix_sum(rates[:, 1] / 60.0, dt_s)
     heading_rad = np.radians(heading_deg)
-    vel = np.column_stack([speed_kt * KT_TO_M_S * np.cos(heading_rad),
-                           speed_kt * KT_TO_M_S * np.sin(heading_rad), climb_m_s])
-    pos = np.column_stack([_prefix_sum(vel[:, 0], dt_s), _prefix_sum(vel[:, 1], dt_s),
-                           (altitude_ft - altitude0_ft) * FT_TO_M])
+    vel = np.column_stack(
+        [speed_kt * KT_TO_M_S * np.cos(heading_rad), speed_kt * KT_TO_M_S * np.sin(heading_rad), climb_m_s]
+    )
+    pos = np.column_stack(
+        [_prefix_sum(vel[:, 0], dt_s), _prefix_sum(vel[:, 1], dt_s), (altitude_ft - altitude0_ft) * FT_TO_M]
+    )
     return speed_kt, heading_deg, altitude_ft, pos, vel
 
 
@@ -174,13 +188,22 @@ def _wrap_deg(angle_deg: np.ndarray) -> np.ndarray:
 def _inside(model: EncounterModel, speed_kt: np.ndarray, altitude_ft: np.ndarray) -> bool:
     alt_edges = model.boundaries[model.index(_LABELS["layer"])]
     speed_edges = model.boundaries[model.index(_LABELS["speed"])]
-    return bool(np.all((altitude_ft >= alt_edges[0]) & (altitude_ft <= alt_edges[-1]))
-                and np.all((speed_kt > speed_edges[0]) & (speed_kt < speed_edges[-1])))
+    return bool(
+        np.all((altitude_ft >= alt_edges[0]) & (altitude_ft <= alt_edges[-1]))
+        and np.all((speed_kt > speed_edges[0]) & (speed_kt < speed_edges[-1]))
+    )
 
 
-def sample_track(model: EncounterModel, rng: np.random.Generator, duration_s: float = 120.0,
-                 dt_s: float = 1.0, heading0_deg: float | None = None, *, max_attempts: int = 1000,
-                 prior: float = 0.0) -> TrafficTrack:
+def sample_track(
+    model: EncounterModel,
+    rng: np.random.Generator,
+    duration_s: float = 120.0,
+    dt_s: float = 1.0,
+    heading0_deg: float | None = None,
+    *,
+    max_attempts: int = 1000,
+    prior: float = 0.0,
+) -> TrafficTrack:
     """Sample one aircraft's track from the model.
 
     Parameters
@@ -217,12 +240,22 @@ def sample_track(model: EncounterModel, rng: np.random.Generator, duration_s: fl
         speed0_kt = float(dediscretize(initial[idx["speed"]], model.boundaries[idx["speed"]], rng))
         per_s = dynamic_values(model, sample_dynamic(model, initial, seconds + 1, rng, prior=prior), rng)
         if speed0_kt * KT_TO_M_S <= abs(per_s[0, 1]) * FT_MIN_TO_M_S:
-            continue                                          # climbing faster than flying
-        rates = np.repeat(per_s, per_second, axis=0)[:seconds * per_second + 1]
+            continue  # climbing faster than flying
+        rates = np.repeat(per_s, per_second, axis=0)[: seconds * per_second + 1]
         speed_kt, heading_deg, altitude_ft, pos, vel = integrate(speed0_kt, altitude0_ft, heading0, rates, dt_s)
         if _inside(model, speed_kt, altitude_ft):
             codes = [int(initial[model.index(label)]) + 1 for label in ("G", "A", "L")]
-            return TrafficTrack(np.arange(rates.shape[0]) * dt_s, pos, vel, speed_kt, _wrap_deg(heading_deg),
-                                altitude_ft, *codes, attempts=attempt)
-    raise TrafficModelError(f"model {model.name}: no {duration_s:g} s track inside the bounds (altitude in the "
-                            f"L edges, speed inside the v edges) in {max_attempts} samples")
+            return TrafficTrack(
+                np.arange(rates.shape[0]) * dt_s,
+                pos,
+                vel,
+                speed_kt,
+                _wrap_deg(heading_deg),
+                altitude_ft,
+                *codes,
+                attempts=attempt,
+            )
+    raise TrafficModelError(
+        f"model {model.name}: no {duration_s:g} s track inside the bounds (altitude in the "
+        f"L edges, speed inside the v edges) in {max_attempts} samples"
+    )

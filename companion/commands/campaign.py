@@ -50,26 +50,38 @@ class CampaignCommandError(CompanionError):
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("campaign", help="validation campaign: encounters flown twice, risk ratios",
-                              description=__doc__.split("\n\n")[1] if __doc__ else None, epilog=EPILOG,
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "campaign",
+        help="validation campaign: encounters flown twice, risk ratios",
+        description=__doc__.split("\n\n")[1] if __doc__ else None,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     sub = p.add_subparsers(dest="campaign_command", metavar="ACTION")
     sub.required = True
-    run = sub.add_parser("run", help="run (or resume) a campaign", epilog=EPILOG,
-                         formatter_class=argparse.RawDescriptionHelpFormatter)
+    run = sub.add_parser(
+        "run", help="run (or resume) a campaign", epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     run.add_argument("spec", help="campaign spec (TOML; see mission_files/campaigns/)")
     run.add_argument("--out", required=True, help="campaign directory (made, or resumed)")
     where = run.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, help="local worker processes (default: every core)")
     where.add_argument("--cluster", help="Dask scheduler address, e.g. tcp://127.0.0.1:8786")
-    run.add_argument("--max-pairs", dest="max_pairs", type=int,
-                     help="stop after this many pairs in all (at most the spec's max_pairs)")
+    run.add_argument(
+        "--max-pairs",
+        dest="max_pairs",
+        type=int,
+        help="stop after this many pairs in all (at most the spec's max_pairs)",
+    )
     run.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     status = sub.add_parser("status", help="pairs stored and the current ratios")
     status.add_argument("dir", help="campaign directory")
     status.add_argument("--json", action="store_true", help="print the summary as JSON")
-    label = sub.add_parser("label", help="label the mitigated drone-scale collisions and NMACs with the oracle "
-                                         "(DIR/labels.parquet: avoidable or not)")
+    label = sub.add_parser(
+        "label",
+        help="label the mitigated drone-scale collisions and NMACs with the oracle "
+        "(DIR/labels.parquet: avoidable or not)",
+    )
     label.add_argument("dir", help="campaign directory")
     report = sub.add_parser("report", help="write DIR/report/report.md and its plots")
     report.add_argument("dir", help="campaign directory")
@@ -88,8 +100,15 @@ def register(subparsers) -> None:
 
 
 #: Campaign subcommand -> the optional modules it needs (all from the ``campaign`` extra).
-CAMPAIGN_NEEDS = {"run": ("pyarrow", "distributed"), "status": ("pyarrow",), "label": ("pyarrow",),
-                  "report": ("pyarrow", "matplotlib"), "pack": ("pyarrow",), "replay": ("pyarrow",), "strata": ()}
+CAMPAIGN_NEEDS = {
+    "run": ("pyarrow", "distributed"),
+    "status": ("pyarrow",),
+    "label": ("pyarrow",),
+    "report": ("pyarrow", "matplotlib"),
+    "pack": ("pyarrow",),
+    "replay": ("pyarrow",),
+    "strata": (),
+}
 
 
 def main(args) -> int:
@@ -97,8 +116,15 @@ def main(args) -> int:
 
     for module in CAMPAIGN_NEEDS[args.campaign_command]:
         require("campaign", module)
-    return {"run": _run, "status": _status, "label": _label, "report": _report, "pack": _pack,
-            "replay": _replay, "strata": _strata}[args.campaign_command](args)
+    return {
+        "run": _run,
+        "status": _status,
+        "label": _label,
+        "report": _report,
+        "pack": _pack,
+        "replay": _replay,
+        "strata": _strata,
+    }[args.campaign_command](args)
 
 
 def _spec_and_settings(path: str):
@@ -115,29 +141,43 @@ def _spec_and_settings(path: str):
         text = settings_path.read_text()
         from companion.config import load_settings
 
-        load_settings(settings_path)            # a bad settings file fails here, not in a worker
+        load_settings(settings_path)  # a bad settings file fails here, not in a worker
     return spec, text
 
 
 def _progress_bar(enabled: bool):
     if not enabled or not sys.stderr.isatty():
+
         def log_progress(p) -> None:
-            log.info("campaign: %d/%d pairs, %.2f pairs/s%s", p.done, p.total, p.pairs_per_s,
-                     "".join(f", {k} RR {v.ratio:.3g}" for k, v in p.ratios.items()))
+            log.info(
+                "campaign: %d/%d pairs, %.2f pairs/s%s",
+                p.done,
+                p.total,
+                p.pairs_per_s,
+                "".join(f", {k} RR {v.ratio:.3g}" for k, v in p.ratios.items()),
+            )
+
         return log_progress, lambda: None
     from companion.extras import require
 
     require("campaign", "rich")
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-    bar = Progress(TextColumn("campaign"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                   TimeRemainingColumn(), TextColumn("{task.fields[ratios]}"), transient=False)
+    bar = Progress(
+        TextColumn("campaign"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        TimeRemainingColumn(),
+        TextColumn("{task.fields[ratios]}"),
+        transient=False,
+    )
     bar.start()
     task = bar.add_task("pairs", total=None, ratios="")
 
     def show(p) -> None:
         ratios = " ".join(f"{k} {v.ratio:.3g}{'' if v.converged else '?'}" for k, v in p.ratios.items())
         bar.update(task, completed=p.done, total=p.total, ratios=f"{p.pairs_per_s:.2f}/s {ratios}")
+
     return show, bar.stop
 
 
@@ -152,8 +192,15 @@ def _run(args) -> int:
     spec, settings_text = _spec_and_settings(args.spec)
     show, stop = _progress_bar(args.progress)
     try:
-        run = CampaignRun(spec, CampaignStore(args.out), settings_text, workers=args.workers, cluster=args.cluster,
-                          progress=show, max_pairs=args.max_pairs)
+        run = CampaignRun(
+            spec,
+            CampaignStore(args.out),
+            settings_text,
+            workers=args.workers,
+            cluster=args.cluster,
+            progress=show,
+            max_pairs=args.max_pairs,
+        )
         result = run.run()
     finally:
         stop()
@@ -176,21 +223,32 @@ def _status(args) -> int:
     verdicts = convergence_verdicts(table, spec.tolerance)
     cpu_ms = [c for c in table.column("cpu_ms").to_pylist() if c is not None]
     cpu_s = sum(cpu_ms) / 1e3
-    out = {"campaign": spec.name, "pairs": table.num_rows, "max_pairs": spec.max_pairs,
-           "cpu_s_measured_pairs": cpu_s, "pairs_per_cpu_s": len(cpu_ms) / cpu_s if cpu_s > 0 else None,
-           "converged": {k: (v.converged, v.reason) for k, v in verdicts.items()},
-           "summary": summary.to_dict()}
+    out = {
+        "campaign": spec.name,
+        "pairs": table.num_rows,
+        "max_pairs": spec.max_pairs,
+        "cpu_s_measured_pairs": cpu_s,
+        "pairs_per_cpu_s": len(cpu_ms) / cpu_s if cpu_s > 0 else None,
+        "converged": {k: (v.converged, v.reason) for k, v in verdicts.items()},
+        "summary": summary.to_dict(),
+    }
     if args.json:
         print(json.dumps(out, indent=2, allow_nan=True))
         return 0
-    print(f"campaign {spec.name!r}: {table.num_rows} pairs of {spec.max_pairs}, "
-          f"{out['pairs_per_cpu_s'] or 0:.2f} pairs per CPU second (flying and judging, over the pairs timed)")
+    print(
+        f"campaign {spec.name!r}: {table.num_rows} pairs of {spec.max_pairs}, "
+        f"{out['pairs_per_cpu_s'] or 0:.2f} pairs per CPU second (flying and judging, over the pairs timed)"
+    )
     for group in summary.traffic:
-        print(f"  {group.name:10s} n={group.n:7d}  NMAC RR {_estimate(group.nmac.risk_ratio)}  "
-              f"LoWC RR {_estimate(group.lowc.risk_ratio)}")
+        print(
+            f"  {group.name:10s} n={group.n:7d}  NMAC RR {_estimate(group.nmac.risk_ratio)}  "
+            f"LoWC RR {_estimate(group.lowc.risk_ratio)}"
+        )
     for key, verdict in verdicts.items():
-        print(f"  {key:16s} RR {verdict.ratio:.3g}: "
-              f"{'converged' if verdict.converged else 'not converged: ' + verdict.reason}")
+        print(
+            f"  {key:16s} RR {verdict.ratio:.3g}: "
+            f"{'converged' if verdict.converged else 'not converged: ' + verdict.reason}"
+        )
     return 0
 
 
@@ -218,8 +276,13 @@ def _label(args) -> int:
 
     store, table, worker = _stored(args.dir)
     labels = label_campaign(worker, table, store.root).to_pylist()
-    counts = {e: (sum(1 for lab in labels if lab["event"] == e and lab["avoidable"]),
-                  sum(1 for lab in labels if lab["event"] == e)) for e in ("collision", "nmac")}
+    counts = {
+        e: (
+            sum(1 for lab in labels if lab["event"] == e and lab["avoidable"]),
+            sum(1 for lab in labels if lab["event"] == e),
+        )
+        for e in ("collision", "nmac")
+    }
     print(json.dumps({f"{e}_avoidable_of_labelled": list(v) for e, v in counts.items()}))
     return 0
 
@@ -228,7 +291,7 @@ def _pack(args) -> int:
     from companion.campaign.store import CampaignStore
 
     store = CampaignStore(args.dir)
-    store.spec()                                      # a campaign directory, or a clear error
+    store.spec()  # a campaign directory, or a clear error
     path = store.pack()
     if path is None:
         print(f"{args.dir}: nothing to pack (no parts)")
@@ -242,8 +305,14 @@ def _report(args) -> int:
     from companion.campaign.report import write_report
 
     store, table, worker = _stored(args.dir)
-    path = write_report(table, store.root / "report", spec_name=store.spec().name, worst=args.worst,
-                        flight_of=worker.fly, labels=read_labels(store.root).to_pylist())
+    path = write_report(
+        table,
+        store.root / "report",
+        spec_name=store.spec().name,
+        worst=args.worst,
+        flight_of=worker.fly,
+        labels=read_labels(store.root).to_pylist(),
+    )
     print(path)
     return 0
 
@@ -265,8 +334,10 @@ def _replay(args) -> int:
     out = Path(args.out) if args.out else store.root / "replay" / str(args.id)
     result = replay(worker, args.id, out, speedup=args.speedup, foxglove=args.foxglove, gcs_out=args.gcs)
     outcome = result.outcome()
-    row = next((r for r in store.table().filter([i == args.id for i in store.table().column("id").to_pylist()])
-                .to_pylist()), None)
+    row = next(
+        (r for r in store.table().filter([i == args.id for i in store.table().column("id").to_pylist()]).to_pylist()),
+        None,
+    )
     if row is not None:
         outcome["fast_time"] = {k: row[f"m_{k}"] for k in ("collision", "nmac", "lowc", "min_sep_m")}
     print(json.dumps(outcome, indent=2))
@@ -277,6 +348,7 @@ def _strata(args) -> int:
     from companion.campaign.strata import STRATA
 
     for s in STRATA.values():
-        print(f"{s.name:24s} {s.source:10s} mission {s.mission:8s}"
-              f"{' robustness ' + s.robustness if s.robustness else ''}")
+        print(
+            f"{s.name:24s} {s.source:10s} mission {s.mission:8s}{' robustness ' + s.robustness if s.robustness else ''}"
+        )
     return 0

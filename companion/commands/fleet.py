@@ -53,45 +53,84 @@ vehicle was heard."""
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("fleet", help="fly several simulated vehicles through one zenoh router; watch them",
-                              description="Fly several simulated helicopters, each with its companion, through "
-                              "one zenoh router (up), and watch them (status).", epilog=EPILOG,
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "fleet",
+        help="fly several simulated vehicles through one zenoh router; watch them",
+        description="Fly several simulated helicopters, each with its companion, through "
+        "one zenoh router (up), and watch them (status).",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     sub = p.add_subparsers(dest="fleet_command", metavar="SUBCOMMAND")
     sub.required = True
 
-    up = sub.add_parser("up", help="start a router, N sim-vehicle and N companion run; wait for the missions",
-                        description="Start one zenoh router, N SITL helicopters (sim-vehicle) and their "
-                        "companions (companion run), each flying one mission file of --mission-dir from that "
-                        "file's home; wait until every companion exits and print a summary.",
-                        epilog=UP_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    up = sub.add_parser(
+        "up",
+        help="start a router, N sim-vehicle and N companion run; wait for the missions",
+        description="Start one zenoh router, N SITL helicopters (sim-vehicle) and their "
+        "companions (companion run), each flying one mission file of --mission-dir from that "
+        "file's home; wait until every companion exits and print a summary.",
+        epilog=UP_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     up.add_argument("--vehicles", type=int, required=True, metavar="N", help="number of vehicles (>= 1)")
-    up.add_argument("--mission-dir", required=True, metavar="DIR",
-                    help="directory of mission files (*.plan, *.waypoints); the first N by name are flown")
-    up.add_argument("--speedup", type=float, default=1.0, metavar="X",
-                    help="simulation speed-up (sim-vehicle --speedup, companion --time-scale; default 1)")
-    up.add_argument("--no-share", action="store_true", dest="no_share",
-                    help="companions do not share trajectories (companion run --no-fleet): the baseline")
-    up.add_argument("--trajectory-delay-ms", type=float, metavar="MS", dest="trajectory_delay_ms",
-                    help="fault injection: every companion holds each trajectory message MS ms before publishing it "
-                    "(the experiment of a slow network; $HELI_COMPANION_TEST_FLEET_DELAY_MS of the companions)")
+    up.add_argument(
+        "--mission-dir",
+        required=True,
+        metavar="DIR",
+        help="directory of mission files (*.plan, *.waypoints); the first N by name are flown",
+    )
+    up.add_argument(
+        "--speedup",
+        type=float,
+        default=1.0,
+        metavar="X",
+        help="simulation speed-up (sim-vehicle --speedup, companion --time-scale; default 1)",
+    )
+    up.add_argument(
+        "--no-share",
+        action="store_true",
+        dest="no_share",
+        help="companions do not share trajectories (companion run --no-fleet): the baseline",
+    )
+    up.add_argument(
+        "--trajectory-delay-ms",
+        type=float,
+        metavar="MS",
+        dest="trajectory_delay_ms",
+        help="fault injection: every companion holds each trajectory message MS ms before publishing it "
+        "(the experiment of a slow network; $HELI_COMPANION_TEST_FLEET_DELAY_MS of the companions)",
+    )
     up.add_argument("--seed", type=int, metavar="S", help="seed: vehicle i gets S+i (simulator and companion)")
-    up.add_argument("--gcs", default="127.0.0.1:14550", metavar="HOST:PORT",
-                    help="every simulator also sends telemetry here (a ground station; default "
-                    "127.0.0.1:14550; 'none' for no ground station)")
-    up.add_argument("--no-sync-start", action="store_false", dest="sync_start",
-                    help="let each vehicle take off as soon as its companion is ready (default: hold every "
-                    "vehicle's pre-arm checks until all companions are ready, then start them together)")
+    up.add_argument(
+        "--gcs",
+        default="127.0.0.1:14550",
+        metavar="HOST:PORT",
+        help="every simulator also sends telemetry here (a ground station; default "
+        "127.0.0.1:14550; 'none' for no ground station)",
+    )
+    up.add_argument(
+        "--no-sync-start",
+        action="store_false",
+        dest="sync_start",
+        help="let each vehicle take off as soon as its companion is ready (default: hold every "
+        "vehicle's pre-arm checks until all companions are ready, then start them together)",
+    )
     up.add_argument("--timeout", type=float, metavar="S", help="stop the fleet after S wall seconds")
     up.set_defaults(func=run_up)
 
-    st = sub.add_parser("status", help="one row per vehicle from the companions' zenoh status and events",
-                        description="Connect to the fleet's zenoh router as a client, listen to uav/*/status "
-                        "and uav/*/events for --seconds and print one row per vehicle: mode, leg, outcome, "
-                        "position, separation to the nearest other vehicle, decisions.",
-                        epilog=STATUS_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    st.add_argument("--router", metavar="ENDPOINT",
-                    help="the zenoh router, e.g. tcp/127.0.0.1:7447 (or --logs, not both)")
+    st = sub.add_parser(
+        "status",
+        help="one row per vehicle from the companions' zenoh status and events",
+        description="Connect to the fleet's zenoh router as a client, listen to uav/*/status "
+        "and uav/*/events for --seconds and print one row per vehicle: mode, leg, outcome, "
+        "position, separation to the nearest other vehicle, decisions.",
+        epilog=STATUS_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    st.add_argument(
+        "--router", metavar="ENDPOINT", help="the zenoh router, e.g. tcp/127.0.0.1:7447 (or --logs, not both)"
+    )
     st.add_argument("--seconds", type=float, default=2.0, metavar="S", help="listen this long (default 2)")
     st.set_defaults(func=run_status)
     add_shared_options(p, [up, st], _add_shared)
@@ -99,8 +138,12 @@ def register(subparsers) -> None:
 
 def _add_shared(p) -> None:
     """The options of both actions (``p.add_argument``), accepted before or after the action."""
-    p.add_argument("--logs", metavar="DIR", help="up: the output directory (default out/fleet-<UTC time>); "
-                   "status: a `fleet up` output directory, whose fleet.json names the router")
+    p.add_argument(
+        "--logs",
+        metavar="DIR",
+        help="up: the output directory (default out/fleet-<UTC time>); "
+        "status: a `fleet up` output directory, whose fleet.json names the router",
+    )
     p.add_argument("--json", action="store_true", help="print the summary (up) or the rows (status) as JSON")
 
 
@@ -113,8 +156,9 @@ def check_up_args(args: argparse.Namespace) -> None:
         raise ConfigError(f"--mission-dir: {args.mission_dir} is not a directory")
     if not (math.isfinite(args.speedup) and args.speedup > 0):
         raise ConfigError(f"--speedup: expected a number > 0, got {args.speedup:g}")
-    if args.trajectory_delay_ms is not None and not (math.isfinite(args.trajectory_delay_ms)
-                                                     and args.trajectory_delay_ms >= 0):
+    if args.trajectory_delay_ms is not None and not (
+        math.isfinite(args.trajectory_delay_ms) and args.trajectory_delay_ms >= 0
+    ):
         raise ConfigError(f"--trajectory-delay-ms: expected a number >= 0, got {args.trajectory_delay_ms:g}")
     if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
         raise ConfigError(f"--timeout: expected a number of seconds > 0, got {args.timeout:g}")
@@ -133,16 +177,26 @@ def run_up(args: argparse.Namespace) -> int:
     missions = select_missions(args.mission_dir, args.vehicles)
     logs = Path(args.logs) if args.logs else default_logs_dir()
     gcs = None if str(args.gcs).lower() == "none" else args.gcs
-    fleet = Fleet(missions, logs, speedup=args.speedup, share=not args.no_share,
-                  trajectory_delay_ms=args.trajectory_delay_ms, seed=args.seed, gcs_out=gcs,
-                  sync_start=args.sync_start)
+    fleet = Fleet(
+        missions,
+        logs,
+        speedup=args.speedup,
+        share=not args.no_share,
+        trajectory_delay_ms=args.trajectory_delay_ms,
+        seed=args.seed,
+        gcs_out=gcs,
+        sync_start=args.sync_start,
+    )
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     interrupted = False
     try:
         fleet.start()
-        print(f"fleet: {len(missions)} vehicles, router {fleet.router_endpoint}, logs {logs} "
-              f"(companion fleet status --logs {logs})", flush=True)
+        print(
+            f"fleet: {len(missions)} vehicles, router {fleet.router_endpoint}, logs {logs} "
+            f"(companion fleet status --logs {logs})",
+            flush=True,
+        )
         try:
             fleet.wait(args.timeout, stop_event=stop)
         except TimeoutError as exc:
@@ -163,8 +217,10 @@ def run_up(args: argparse.Namespace) -> int:
 def router_of(args: argparse.Namespace) -> str:
     """The router endpoint: --router, or fleet.json's of --logs (exactly one of them given)."""
     if bool(args.router) == bool(args.logs):
-        raise ConfigError("--router/--logs: give one of them (the router's endpoint, or a `fleet up` "
-                          f"directory), got {'both' if args.router else 'neither'}")
+        raise ConfigError(
+            "--router/--logs: give one of them (the router's endpoint, or a `fleet up` "
+            f"directory), got {'both' if args.router else 'neither'}"
+        )
     if args.router:
         return args.router
     path = Path(args.logs) / "fleet.json"
@@ -191,8 +247,10 @@ def listen_fleet(router: str, seconds: float):
     view = FleetView()
     with ThreatBus(255, listen=(), connect=(router,), mode="client") as bus:
         session = bus.session
-        subs = [session.declare_subscriber("uav/*/status", _json_handler(view.on_status)),
-                session.declare_subscriber("uav/*/events", _json_handler(view.on_event))]
+        subs = [
+            session.declare_subscriber("uav/*/status", _json_handler(view.on_status)),
+            session.declare_subscriber("uav/*/events", _json_handler(view.on_event)),
+        ]
         time.sleep(seconds)
         for sub in subs:
             sub.undeclare()
@@ -206,6 +264,7 @@ def _json_handler(callback):
         except ValueError:
             return
         callback(str(sample.key_expr), msg)
+
     return on_sample
 
 
@@ -229,7 +288,7 @@ def run_status(args: argparse.Namespace) -> int:
     router = router_of(args)
     view = listen_fleet(router, args.seconds)
     statuses, decisions = view.snapshot()
-    if args.logs:                       # every decision so far, from the flight records
+    if args.logs:  # every decision so far, from the flight records
         decisions.update(decisions_of_records(Path(args.logs)))
     rows = vehicle_rows(statuses, decisions)
     if args.json:

@@ -31,18 +31,29 @@ uav/<sysid>/threats/<its name>/<id>; observers only read status, events and path
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("keys", help="create certificates and zenoh configs for authenticated threat sources",
-                              description=__doc__, epilog=EPILOG,
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = subparsers.add_parser(
+        "keys",
+        help="create certificates and zenoh configs for authenticated threat sources",
+        description=__doc__,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     sub = p.add_subparsers(dest="keys_command", metavar="ACTION")
     sub.required = True
-    sp = sub.add_parser("init", help="create a CA, the identities and their zenoh configurations",
-                        description="Create a CA, the companion's, sources' and observers' keys and "
-                        "certificates, and a zenoh configuration (JSON5) for each.",
-                        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sp.add_argument("directory", nargs="?", default=None,
-                    help=f"output directory (default {default_dir_text()}); its files of the same names are "
-                    "refused unless --force")
+    sp = sub.add_parser(
+        "init",
+        help="create a CA, the identities and their zenoh configurations",
+        description="Create a CA, the companion's, sources' and observers' keys and "
+        "certificates, and a zenoh configuration (JSON5) for each.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    sp.add_argument(
+        "directory",
+        nargs="?",
+        default=None,
+        help=f"output directory (default {default_dir_text()}); its files of the same names are refused unless --force",
+    )
     sp.set_defaults(func=run)
     add_shared_options(p, [sp], _add_init_options)
 
@@ -51,22 +62,45 @@ def _add_init_options(p) -> None:
     """The options of ``keys init`` (``p.add_argument``), accepted before or after ``init``."""
     p.add_argument("--sysid", type=int, default=1, help="vehicle system id of the keys (default 1)")
     p.add_argument("--companion", default="companion", help="the companion's name (default companion)")
-    p.add_argument("--source", action="append", metavar="NAME",
-                   help="an authorised threat source (repeatable; default source1)")
-    p.add_argument("--observer", action="append", metavar="NAME", default=[],
-                   help="a read-only identity: status, events and path (repeatable)")
-    p.add_argument("--listen", action="append", metavar="ENDPOINT",
-                   help="the companion's endpoint (repeatable; default tls/0.0.0.0:7447)")
-    p.add_argument("--connect", action="append", metavar="ENDPOINT",
-                   help="the endpoint sources connect to (repeatable; default tls/localhost:7447)")
-    p.add_argument("--host", action="append", metavar="NAME", default=[],
-                   help="another host name or IP address of the companion, for its certificate")
-    p.add_argument("--no-mavlink-key", dest="mavlink_key", action="store_false",
-                   help="do not write mavlink.key, the MAVLink 2 signing key (keep the one the flight "
-                   "controller has)")
+    p.add_argument(
+        "--source", action="append", metavar="NAME", help="an authorised threat source (repeatable; default source1)"
+    )
+    p.add_argument(
+        "--observer",
+        action="append",
+        metavar="NAME",
+        default=[],
+        help="a read-only identity: status, events and path (repeatable)",
+    )
+    p.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help="the companion's endpoint (repeatable; default tls/0.0.0.0:7447)",
+    )
+    p.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help="the endpoint sources connect to (repeatable; default tls/localhost:7447)",
+    )
+    p.add_argument(
+        "--host",
+        action="append",
+        metavar="NAME",
+        default=[],
+        help="another host name or IP address of the companion, for its certificate",
+    )
+    p.add_argument(
+        "--no-mavlink-key",
+        dest="mavlink_key",
+        action="store_false",
+        help="do not write mavlink.key, the MAVLink 2 signing key (keep the one the flight controller has)",
+    )
     p.add_argument("--days", type=int, default=825, help="validity of the identities in days (default 825)")
-    p.add_argument("--force", action="store_true",
-                   help="overwrite the deployment's files that exist already (a new CA)")
+    p.add_argument(
+        "--force", action="store_true", help="overwrite the deployment's files that exist already (a new CA)"
+    )
 
 
 def default_dir_text() -> str:
@@ -83,21 +117,33 @@ def run(args) -> int:
     from companion.security.deployment import init_deployment
     from companion.security.paths import default_keys_dir
 
-    require("keys", "cryptography")           # before any file is written
+    require("keys", "cryptography")  # before any file is written
 
     directory = args.directory if args.directory is not None else default_keys_dir()
-    dep = init_deployment(directory, sysid=args.sysid, companion=args.companion,
-                          sources=args.source or ["source1"], observers=args.observer,
-                          listen=args.listen or ["tls/0.0.0.0:7447"],
-                          connect=args.connect or ["tls/localhost:7447"], hosts=args.host,
-                          days=args.days, mavlink_key=args.mavlink_key, force=args.force)
+    dep = init_deployment(
+        directory,
+        sysid=args.sysid,
+        companion=args.companion,
+        sources=args.source or ["source1"],
+        observers=args.observer,
+        listen=args.listen or ["tls/0.0.0.0:7447"],
+        connect=args.connect or ["tls/localhost:7447"],
+        hosts=args.host,
+        days=args.days,
+        mavlink_key=args.mavlink_key,
+        force=args.force,
+    )
     print(f"CA: {dep.ca_cert} (key {dep.ca_key}: keep it offline)")
     for name in [dep.companion, *dep.sources, *dep.observers]:
         role = "companion" if name == dep.companion else ("source" if name in dep.sources else "observer")
         print(f"{role:9s} {name}: {dep.configs[name]} ({dep.certs[name].name}, {dep.keys[name].name})")
     if dep.mavlink_key is not None:
-        print(f"MAVLink signing key: {dep.mavlink_key} (link.signing_key_file; give the flight controller "
-              f"the same over USB: MAVProxy `signing setup <the file's passphrase>`)")
+        print(
+            f"MAVLink signing key: {dep.mavlink_key} (link.signing_key_file; give the flight controller "
+            f"the same over USB: MAVProxy `signing setup <the file's passphrase>`)"
+        )
     print(f"start: companion run --zenoh-config {dep.configs[dep.companion]} ...")
-    print(f"       companion threat --zenoh-config {dep.configs[dep.sources[0]]} add --id p1 --pos 75,75,-20 --radius 5")
+    print(
+        f"       companion threat --zenoh-config {dep.configs[dep.sources[0]]} add --id p1 --pos 75,75,-20 --radius 5"
+    )
     return 0

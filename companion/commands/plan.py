@@ -34,35 +34,63 @@ Start and goal are local NED metres (north,east[,down]); when omitted, the world
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "plan", help="plan paths with GART / M-GART on a world file",
+        "plan",
+        help="plan paths with GART / M-GART on a world file",
         description="Plan a collision-free path (GART) or several distinct ones (M-GART) through "
         "the obstacles of a world file; optionally smooth it (G1/G2 Bezier), write JSON and plot.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--world", required=True,
-                   help="world file (.toml or .json in local NED; .geojson or .kml map in longitude/latitude)")
-    p.add_argument("--home", type=home_lla, metavar="LAT,LON,ALT",
-                   help="home of a map world (degrees, metres AMSL): the origin of local NED and of "
-                   "--start/--goal (default: the file's companion.home)")
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--world",
+        required=True,
+        help="world file (.toml or .json in local NED; .geojson or .kml map in longitude/latitude)",
+    )
+    p.add_argument(
+        "--home",
+        type=home_lla,
+        metavar="LAT,LON,ALT",
+        help="home of a map world (degrees, metres AMSL): the origin of local NED and of "
+        "--start/--goal (default: the file's companion.home)",
+    )
     p.add_argument("--start", help="start N,E[,D] in metres (default: the world file's start)")
     p.add_argument("--goal", help="goal N,E[,D] in metres (default: the world file's goal)")
     p.add_argument("--planner", choices=("gart", "mgart"), default="gart", help="planner (default gart)")
     p.add_argument("-k", type=int, default=8, help="number of M-GART paths (default 8)")
-    p.add_argument("--smooth", choices=("none", "g1", "g2"), default="none",
-                   help="smooth the path(s): G1 quartic or G2 cubic-spiral Bezier (default none)")
-    p.add_argument("--kappa-max", type=float, default=None, dest="kappa_max",
-                   help="vehicle K_max in 1/m: limits corners in the planner and bounds G2 (default 0.1 with g2)")
+    p.add_argument(
+        "--smooth",
+        choices=("none", "g1", "g2"),
+        default="none",
+        help="smooth the path(s): G1 quartic or G2 cubic-spiral Bezier (default none)",
+    )
+    p.add_argument(
+        "--kappa-max",
+        type=float,
+        default=None,
+        dest="kappa_max",
+        help="vehicle K_max in 1/m: limits corners in the planner and bounds G2 (default 0.1 with g2)",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--budget", type=float, default=None,
-                   help="planning time budget in s (default: 1.0 for gart; 3.0 for mgart, which stops "
-                   "as soon as it has k paths)")
+    p.add_argument(
+        "--budget",
+        type=float,
+        default=None,
+        help="planning time budget in s (default: 1.0 for gart; 3.0 for mgart, which stops as soon as it has k paths)",
+    )
     p.add_argument("--step", type=float, default=None, help="steering step in m (default 20)")
-    p.add_argument("--speed", type=float, default=None,
-                   help="cruise speed limit of the timing of smoothed paths, m/s (default 8)")
-    p.add_argument("--accel", type=float, default=None,
-                   help="longitudinal acceleration limit of the timing, m/s^2 (default 2)")
+    p.add_argument(
+        "--speed", type=float, default=None, help="cruise speed limit of the timing of smoothed paths, m/s (default 8)"
+    )
+    p.add_argument(
+        "--accel", type=float, default=None, help="longitudinal acceleration limit of the timing, m/s^2 (default 2)"
+    )
     p.add_argument("--jerk", type=float, default=None, help="jerk limit of the timing, m/s^3 (default 3)")
-    p.add_argument("--no-feasibility", action="store_true", dest="no_feasibility",
-                   help="do not check the timed smoothed paths on the helicopter's closed loop")
+    p.add_argument(
+        "--no-feasibility",
+        action="store_true",
+        dest="no_feasibility",
+        help="do not check the timed smoothed paths on the helicopter's closed loop",
+    )
     p.add_argument("--json", dest="json_out", help="write the result as JSON to this file")
     p.add_argument("--plot", help="draw tree, obstacles and paths to this PNG file")
     p.set_defaults(func=run)
@@ -90,8 +118,9 @@ def parse_point(text: str | None, default, dim: int, option: str) -> tuple:
     """``"N,E[,D]"`` -> tuple of ``dim`` floats, or the world file's ``default``."""
     if text is None:
         if default is None:
-            raise PlanningError(f"{option}: missing (give {option} N,E{',D' if dim == 3 else ''} "
-                                "or set it in the world file)")
+            raise PlanningError(
+                f"{option}: missing (give {option} N,E{',D' if dim == 3 else ''} or set it in the world file)"
+            )
         return tuple(default)
     try:
         values = tuple(float(v) for v in text.split(","))
@@ -132,8 +161,11 @@ def timing_limits(args):
     from companion.errors import SmoothingError
     from companion.smoothing import TrajectoryLimits
 
-    changes = {name: value for name, value in (("speed_m_s", args.speed), ("accel_m_s2", args.accel),
-                                              ("jerk_m_s3", args.jerk)) if value is not None}
+    changes = {
+        name: value
+        for name, value in (("speed_m_s", args.speed), ("accel_m_s2", args.accel), ("jerk_m_s3", args.jerk))
+        if value is not None
+    }
     try:
         return replace(TrajectoryLimits(), **changes)
     except SmoothingError as exc:
@@ -152,7 +184,7 @@ def trajectory_pipeline(args, gart_settings, kappa: float | None):
         from heli_model.model import HeliModel
 
         checker = FeasibilityChecker(HeliModel.default())
-        checker.warm_up()          # the one-off LQI design is not any path's check time
+        checker.warm_up()  # the one-off LQI design is not any path's check time
     smoothing = SmoothingSettings(method=args.smooth, kappa_max_1_m=kappa or 0.1, limits=timing_limits(args))
     return TrajectoryPipeline.from_settings(smoothing, gart_settings, closed_loop=checker)
 
@@ -173,8 +205,13 @@ def time_and_check(pipeline, smoothed) -> list:
             continue
         trajectory = pipeline.timer.time(curve, pipeline.limits)
         report = pipeline.checker.check(trajectory).report
-        out.append({"duration_s": float(trajectory.duration_s), "limits": asdict(pipeline.limits),
-                    "feasibility": report.summary() if report is not None else None})
+        out.append(
+            {
+                "duration_s": float(trajectory.duration_s),
+                "limits": asdict(pipeline.limits),
+                "feasibility": report.summary() if report is not None else None,
+            }
+        )
     return out
 
 
@@ -186,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
     from companion.world import read_world_file
 
     if args.plot:
-        require("report", "matplotlib")       # before the planning, not after it
+        require("report", "matplotlib")  # before the planning, not after it
     wf = read_world_file(args.world, home_lla=args.home)
     world = wf.world
     start = parse_point(args.start, wf.start, world.dim, "--start")
@@ -218,17 +255,23 @@ def print_summary(args, wf, results, smoothed, start, goal, timed=()) -> None:
     first = results[0]
     tree = first.tree
     about = "" if wf.home_lla is None else " about home {:.7f}, {:.7f}, {:.1f} m".format(*wf.home_lla)
-    print(f"world: {wf.name} ({wf.world.dim}D, {len(wf.world.obstacles)} obstacles, margin {wf.world.margin_m} m){about}")
+    print(
+        f"world: {wf.name} ({wf.world.dim}D, {len(wf.world.obstacles)} obstacles, margin {wf.world.margin_m} m){about}"
+    )
     print(f"planner: {args.planner}  seed {args.seed}  start {list(start)}  goal {list(goal)}")
     if not first.solved:
         print(f"status: {first.status}  iterations {first.iterations}  elapsed {first.elapsed_s * 1e3:.1f} ms")
         return
-    print(f"status: exact  paths {len(results)}  iterations {first.iterations}  "
-          f"tree {tree.size} nodes  elapsed {first.elapsed_s * 1e3:.1f} ms")
+    print(
+        f"status: exact  paths {len(results)}  iterations {first.iterations}  "
+        f"tree {tree.size} nodes  elapsed {first.elapsed_s * 1e3:.1f} ms"
+    )
     for i, r in enumerate(results):
         when = "first path after" if args.planner == "gart" else "found after"
-        line = (f"  path {i}: cost {r.cost:.2f}  length {r.length_m:.2f} m  waypoints {len(r.path)}  "
-                f"{when} {r.time_to_first_s * 1e3:.1f} ms")
+        line = (
+            f"  path {i}: cost {r.cost:.2f}  length {r.length_m:.2f} m  waypoints {len(r.path)}  "
+            f"{when} {r.time_to_first_s * 1e3:.1f} ms"
+        )
         if smoothed and smoothed[i] is not None:
             s = smoothed[i]
             line += f"  smoothed {s.length_m:.2f} m, max curvature {s.max_curvature_1_m:.3f} 1/m"
@@ -243,13 +286,26 @@ def print_summary(args, wf, results, smoothed, start, goal, timed=()) -> None:
 def write_json(args, wf, results, smoothed, start, goal, kappa, timed=()) -> None:
     tree = results[0].tree
     out = {
-        "world": str(args.world), "world_name": wf.name, "dim": wf.world.dim, "home_lla": wf.home_lla,
-        "planner": args.planner, "seed": args.seed, "budget_s": args.budget,
-        "start": list(start), "goal": list(goal), "kappa_max_1_m": kappa, "smooth": args.smooth,
+        "world": str(args.world),
+        "world_name": wf.name,
+        "dim": wf.world.dim,
+        "home_lla": wf.home_lla,
+        "planner": args.planner,
+        "seed": args.seed,
+        "budget_s": args.budget,
+        "start": list(start),
+        "goal": list(goal),
+        "kappa_max_1_m": kappa,
+        "smooth": args.smooth,
         "status": results[0].status,
-        "tree": None if tree is None else {
-            "nodes": tree.size, "forbidden": int(tree.forbidden.sum()),
-            "iterations": results[0].iterations, "elapsed_s": results[0].elapsed_s},
+        "tree": None
+        if tree is None
+        else {
+            "nodes": tree.size,
+            "forbidden": int(tree.forbidden.sum()),
+            "iterations": results[0].iterations,
+            "elapsed_s": results[0].elapsed_s,
+        },
         "paths": [],
     }
     for i, r in enumerate(results):
@@ -257,10 +313,13 @@ def write_json(args, wf, results, smoothed, start, goal, kappa, timed=()) -> Non
         entry.pop("tree_nodes")
         if smoothed and smoothed[i] is not None:
             s = smoothed[i]
-            entry["smoothed"] = {"length_m": float(s.length_m), "max_curvature_1_m": float(s.max_curvature_1_m),
-                                 "kappa_ok": bool(getattr(s, "kappa_ok", True)),
-                                 "notes": list(getattr(s, "notes", [])),
-                                 "polyline": s.polyline(1.0).tolist()}
+            entry["smoothed"] = {
+                "length_m": float(s.length_m),
+                "max_curvature_1_m": float(s.max_curvature_1_m),
+                "kappa_ok": bool(getattr(s, "kappa_ok", True)),
+                "notes": list(getattr(s, "notes", [])),
+                "polyline": s.polyline(1.0).tolist(),
+            }
             if timed and timed[i] is not None:
                 entry["smoothed"].update(timed[i])
         out["paths"].append(entry)
@@ -283,8 +342,9 @@ def _draw_obstacles_2d(ax, world) -> None:
         elif isinstance(ob, Cylinder):
             ax.add_patch(Circle((ob.center_ne_m[1], ob.center_ne_m[0]), ob.radius_m, **style))
         elif isinstance(ob, Box):
-            ax.add_patch(Rectangle((ob.min_m[1], ob.min_m[0]), ob.max_m[1] - ob.min_m[1],
-                                   ob.max_m[0] - ob.min_m[0], **style))
+            ax.add_patch(
+                Rectangle((ob.min_m[1], ob.min_m[0]), ob.max_m[1] - ob.min_m[1], ob.max_m[0] - ob.min_m[0], **style)
+            )
         elif isinstance(ob, Prism):
             ax.add_patch(Polygon([(e, n) for n, e in ob.vertices_ne_m], closed=True, **style))
 
@@ -349,6 +409,7 @@ def plot_plan(filename, world, results, smoothed, start, goal, kappa, title: str
                 ax.plot(seg[:, 1], seg[:, 0], -seg[:, 2], color="tab:cyan", linewidth=0.3, alpha=0.5)
         else:
             from matplotlib.collections import LineCollection
+
             ax.add_collection(LineCollection(edges[:, :, ::-1], colors="tab:cyan", linewidths=0.4, alpha=0.6, zorder=2))
     for i, r in enumerate(results):
         if not r.solved:
@@ -365,8 +426,7 @@ def plot_plan(filename, world, results, smoothed, start, goal, kappa, title: str
             if three_d:
                 ax.plot(q[:, 1], q[:, 0], -q[:, 2], color="k", linewidth=1.6)
             else:
-                ax.plot(q[:, 1], q[:, 0], color="k", linewidth=1.6, zorder=5,
-                        label="smoothed" if i == 0 else None)
+                ax.plot(q[:, 1], q[:, 0], color="k", linewidth=1.6, zorder=5, label="smoothed" if i == 0 else None)
     s, g = np.asarray(start), np.asarray(goal)
     if three_d:
         ax.scatter([s[1]], [s[0]], [-s[2]], color="green", s=40, label="start")

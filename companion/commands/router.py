@@ -24,14 +24,23 @@ It runs until SIGINT or SIGTERM."""
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "router", help="run a zenoh router (companions and threat sources connect to it)",
+        "router",
+        help="run a zenoh router (companions and threat sources connect to it)",
         description="Open a zenoh session in router mode listening on ENDPOINT (repeatable), "
         "multicast scouting off, and route until SIGINT or SIGTERM.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--listen", action="append", metavar="ENDPOINT", required=True,
-                   help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
-    p.add_argument("--connect", action="append", metavar="ENDPOINT", default=[],
-                   help="another router to connect to (repeatable)")
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        required=True,
+        help="zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)",
+    )
+    p.add_argument(
+        "--connect", action="append", metavar="ENDPOINT", default=[], help="another router to connect to (repeatable)"
+    )
     p.set_defaults(func=run)
 
 
@@ -45,7 +54,7 @@ def open_router(listen, connect=()):
     config = session_config(mode="router", listen=listen, connect=connect)
     try:
         return zenoh.open(config)
-    except Exception as exc:      # zenoh.ZError: port in use ...
+    except Exception as exc:  # zenoh.ZError: port in use ...
         raise ThreatBusError(f"zenoh router (listen {list(listen)}): {exc}") from None
 
 

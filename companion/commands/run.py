@@ -46,71 +46,127 @@ their remaining TTL. --resume refuses (status 2) a vehicle without a mission or 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "run", help="fly a mission: plan, smooth, stream setpoints, answer threats",
+        "run",
+        help="fly a mission: plan, smooth, stream setpoints, answer threats",
         description="Connect to the vehicle, take the mission (--mission FILE, else the one "
         "stored on the vehicle), plan every leg around the exclusion zones (GART), smooth it "
         "(G2 by default), take off and fly it in GUIDED by 50 Hz setpoints; answer zenoh "
         "threats by replanning or switching; land or RTL as the mission says.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     add_flight_arguments(p)
     p.add_argument("--mission", help=".plan or QGC WPL 110 file to upload and fly")
-    p.add_argument("--record", metavar="FILE",
-                   help="write the flight record here: MCAP (Foxglove opens it) when FILE ends in "
-                   ".mcap, else JSON Lines")
-    p.add_argument("--resume", action="store_true",
-                   help="take over a vehicle already flying its mission after a companion crash: "
-                   "fly on from its current mission item, with the threats of the --state-dir snapshot")
+    p.add_argument(
+        "--record",
+        metavar="FILE",
+        help="write the flight record here: MCAP (Foxglove opens it) when FILE ends in .mcap, else JSON Lines",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="take over a vehicle already flying its mission after a companion crash: "
+        "fly on from its current mission item, with the threats of the --state-dir snapshot",
+    )
     p.set_defaults(func=run)
 
 
 def add_flight_arguments(p) -> None:
     """The options ``companion run`` and ``companion serve`` share (vehicle, zenoh, view, planners)."""
     p.add_argument("--connect", help="MAVSDK URL of the vehicle (default udpin://0.0.0.0:14540)")
-    p.add_argument("--instance", type=int, metavar="N",
-                   help="the companion of `sim-vehicle --instance N` (as PX4 SITL numbers them): "
-                   "--connect udpin://0.0.0.0:<14540+N>, zenoh prefix uav/<N+1> and endpoint "
-                   "tcp/127.0.0.1:<7448+N> (--connect and the --zenoh options still win)")
+    p.add_argument(
+        "--instance",
+        type=int,
+        metavar="N",
+        help="the companion of `sim-vehicle --instance N` (as PX4 SITL numbers them): "
+        "--connect udpin://0.0.0.0:<14540+N>, zenoh prefix uav/<N+1> and endpoint "
+        "tcp/127.0.0.1:<7448+N> (--connect and the --zenoh options still win)",
+    )
     p.add_argument("--config", help="settings file (TOML); see --print-config")
     add_signing_argument(p)
-    p.add_argument("--world", help="world file with extra obstacles: .toml/.json in local NED about home, "
-                   "or a .geojson/.kml map converted about home")
-    p.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT", default=None,
-                   help="zenoh endpoint to listen on (repeatable; default tcp/127.0.0.1:<7447+sysid>), "
-                   "e.g. tcp/0.0.0.0:7448")
-    p.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT", default=None,
-                   help="zenoh endpoint to connect to (repeatable)")
-    p.add_argument("--zenoh-config", metavar="FILE",
-                   help="zenoh configuration file (JSON5, e.g. from `companion keys init`): mutual TLS "
-                   "and access control; its endpoints replace the default ones")
+    p.add_argument(
+        "--world",
+        help="world file with extra obstacles: .toml/.json in local NED about home, "
+        "or a .geojson/.kml map converted about home",
+    )
+    p.add_argument(
+        "--zenoh-listen",
+        action="append",
+        metavar="ENDPOINT",
+        default=None,
+        help="zenoh endpoint to listen on (repeatable; default tcp/127.0.0.1:<7447+sysid>), e.g. tcp/0.0.0.0:7448",
+    )
+    p.add_argument(
+        "--zenoh-connect",
+        action="append",
+        metavar="ENDPOINT",
+        default=None,
+        help="zenoh endpoint to connect to (repeatable)",
+    )
+    p.add_argument(
+        "--zenoh-config",
+        metavar="FILE",
+        help="zenoh configuration file (JSON5, e.g. from `companion keys init`): mutual TLS "
+        "and access control; its endpoints replace the default ones",
+    )
     p.add_argument("--no-zenoh", action="store_true", help="fly without zenoh (no threats, no status)")
-    p.add_argument("--foxglove", metavar="[HOST:]PORT",
-                   help="serve the flight live to Foxglove (WebSocket; host 127.0.0.1 unless given): "
-                   "3D scene, map, decisions, threats (view.foxglove)")
-    p.add_argument("--tlog", metavar="FILE",
-                   help="record the MAVLink traffic with the vehicle, both ways, to this .tlog (link.tlog_file)")
+    p.add_argument(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        help="serve the flight live to Foxglove (WebSocket; host 127.0.0.1 unless given): "
+        "3D scene, map, decisions, threats (view.foxglove)",
+    )
+    p.add_argument(
+        "--tlog",
+        metavar="FILE",
+        help="record the MAVLink traffic with the vehicle, both ways, to this .tlog (link.tlog_file)",
+    )
     p.add_argument("--seed", type=int, help="random seed of the planners (default from settings)")
-    p.add_argument("--time-scale", type=float, metavar="X",
-                   help="vehicle seconds per wall-clock second (default: read from the vehicle, "
-                   "its SIM_SPEEDUP; 1 without it)")
+    p.add_argument(
+        "--time-scale",
+        type=float,
+        metavar="X",
+        help="vehicle seconds per wall-clock second (default: read from the vehicle, its SIM_SPEEDUP; 1 without it)",
+    )
     p.add_argument("--smooth", choices=("g1", "g2", "none"), help="smoother (default g2)")
-    p.add_argument("--vehicle", choices=("helicopter", "multirotor"),
-                   help="vehicle profile (default helicopter: motor interlock and rotor run-up "
-                   "when the vehicle has them; multirotor: none)")
-    p.add_argument("--interlock", choices=("command", "pilot"),
-                   help="who engages a helicopter's motor interlock: the companion (DO_AUX_FUNCTION, "
-                   "default) or the safety pilot's RC switch")
-    p.add_argument("--adsb", action="store_true",
-                   help="treat ADS-B traffic (ADSB_VEHICLE) as moving threats")
-    p.add_argument("--state-dir", metavar="DIR",
-                   help="keep the threat snapshot here (state.dir): written as threats change, "
-                   "read by --resume")
-    p.add_argument("--no-fleet", action="store_true", dest="no_fleet",
-                   help="neither share this vehicle's trajectory nor avoid the others' (fleet.enabled = false)")
-    p.add_argument("--no-feasibility", action="store_true", dest="no_feasibility",
-                   help="do not check the legs on the helicopter's closed loop (feasibility.enabled = false)")
-    p.add_argument("--print-config", nargs="?", const="toml", choices=("toml", "json"), metavar="FORMAT",
-                   help="print the effective settings and exit, as TOML that --config reads back "
-                   "(default) or as JSON")
+    p.add_argument(
+        "--vehicle",
+        choices=("helicopter", "multirotor"),
+        help="vehicle profile (default helicopter: motor interlock and rotor run-up "
+        "when the vehicle has them; multirotor: none)",
+    )
+    p.add_argument(
+        "--interlock",
+        choices=("command", "pilot"),
+        help="who engages a helicopter's motor interlock: the companion (DO_AUX_FUNCTION, "
+        "default) or the safety pilot's RC switch",
+    )
+    p.add_argument("--adsb", action="store_true", help="treat ADS-B traffic (ADSB_VEHICLE) as moving threats")
+    p.add_argument(
+        "--state-dir",
+        metavar="DIR",
+        help="keep the threat snapshot here (state.dir): written as threats change, read by --resume",
+    )
+    p.add_argument(
+        "--no-fleet",
+        action="store_true",
+        dest="no_fleet",
+        help="neither share this vehicle's trajectory nor avoid the others' (fleet.enabled = false)",
+    )
+    p.add_argument(
+        "--no-feasibility",
+        action="store_true",
+        dest="no_feasibility",
+        help="do not check the legs on the helicopter's closed loop (feasibility.enabled = false)",
+    )
+    p.add_argument(
+        "--print-config",
+        nargs="?",
+        const="toml",
+        choices=("toml", "json"),
+        metavar="FORMAT",
+        help="print the effective settings and exit, as TOML that --config reads back (default) or as JSON",
+    )
 
 
 def instance_overrides(instance: int) -> dict:
@@ -205,11 +261,14 @@ def flight_settings(args: argparse.Namespace):
 
     settings = load_settings(args.config, settings_overrides(args))
     if args.print_config:
-        text = (json.dumps(settings_to_dict(settings), indent=2) if args.print_config == "json"
-                else settings_to_toml(settings))
+        text = (
+            json.dumps(settings_to_dict(settings), indent=2)
+            if args.print_config == "json"
+            else settings_to_toml(settings)
+        )
         sys.stdout.write(text if text.endswith("\n") else text + "\n")
         return None
-    if settings.zenoh.enabled and settings.zenoh.config:      # a bad file: refused before any flight
+    if settings.zenoh.enabled and settings.zenoh.config:  # a bad file: refused before any flight
         from companion.threats.transport.access import load_config
 
         load_config(settings.zenoh.config)
@@ -235,8 +294,9 @@ def run(args: argparse.Namespace) -> int:
     settings = flight_settings(args)
     if settings is None:
         return 0
-    daemon = CompanionDaemon(settings, mission_path=args.mission, world_path=args.world,
-                             record_path=args.record, resume=args.resume)
+    daemon = CompanionDaemon(
+        settings, mission_path=args.mission, world_path=args.world, record_path=args.record, resume=args.resume
+    )
 
     async def main() -> int:
         cancel_on_signals()
@@ -251,7 +311,7 @@ def run(args: argparse.Namespace) -> int:
         except FlightAborted as exc:
             print(f"companion: error: flight aborted: {exc}", file=sys.stderr)
             status = EXIT_ABORTED
-        print(json.dumps(daemon.summary.as_dict()))      # the last line: the flight's summary
+        print(json.dumps(daemon.summary.as_dict()))  # the last line: the flight's summary
         return status
 
     return asyncio.run(main())

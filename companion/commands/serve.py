@@ -28,19 +28,27 @@ link.on_interrupt says: hold, land or RTL); 2 bad input."""
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "serve", help="the long-running companion service: fly the stored mission on MISSION_START",
+        "serve",
+        help="the long-running companion service: fly the stored mission on MISSION_START",
         description="Wait for the vehicle, then fly its stored mission each time a ground station "
         "sends MAV_CMD_MISSION_START to the companion component (191), or zenoh's "
         "uav/<sysid>/command asks; report readiness by HEARTBEAT and STATUSTEXT.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     add_flight_arguments(p)
-    p.add_argument("--record-dir", metavar="DIR",
-                   help="write each flight's MCAP record here (flight-<n>-<UTC time>.mcap)")
-    p.add_argument("--resume", action="store_true",
-                   help="on start, take over a vehicle left hovering in GUIDED (the companion crashed "
-                   "or was restarted mid-flight): fly on from its current item, threats from --state-dir")
-    p.add_argument("--flights", type=positive_int, metavar="N",
-                   help="exit after N flights (default: serve until stopped)")
+    p.add_argument(
+        "--record-dir", metavar="DIR", help="write each flight's MCAP record here (flight-<n>-<UTC time>.mcap)"
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="on start, take over a vehicle left hovering in GUIDED (the companion crashed "
+        "or was restarted mid-flight): fly on from its current item, threats from --state-dir",
+    )
+    p.add_argument(
+        "--flights", type=positive_int, metavar="N", help="exit after N flights (default: serve until stopped)"
+    )
     p.set_defaults(func=serve)
 
 
@@ -62,15 +70,16 @@ def serve(args: argparse.Namespace) -> int:
     settings = flight_settings(args)
     if settings is None:
         return 0
-    service = CompanionService(settings, world_path=args.world, record_dir=args.record_dir,
-                               max_flights=args.flights, resume=args.resume)
+    service = CompanionService(
+        settings, world_path=args.world, record_dir=args.record_dir, max_flights=args.flights, resume=args.resume
+    )
 
     async def main() -> int:
         cancel_on_signals()
         try:
             await service.run()
         except asyncio.CancelledError:
-            pass                                  # stopped: a clean exit for systemd
+            pass  # stopped: a clean exit for systemd
         return 0
 
     return asyncio.run(main())

@@ -65,19 +65,41 @@ def _vector(text: str, option: str) -> tuple:
 def _add_bus_options(p) -> None:
     """The options of every action: which bus, which identity, how long to wait (``p.add_argument``)."""
     p.add_argument("--sysid", type=int, default=1, help="vehicle system id: key prefix uav/<sysid> (default 1)")
-    p.add_argument("--zenoh-connect", dest="zenoh_connect", nargs="+", metavar="ENDPOINT",
-                   help="zenoh endpoints to connect to (default tcp/127.0.0.1:<7447 + --sysid>, the "
-                   "companion's own default)")
-    p.add_argument("--zenoh-listen", dest="zenoh_listen", nargs="+", metavar="ENDPOINT", default=[],
-                   help="zenoh endpoints to listen on as well (default none)")
-    p.add_argument("--zenoh-config", dest="zenoh_config", metavar="FILE",
-                   help="zenoh configuration file (JSON5, e.g. a source's from `companion keys init`): "
-                   "TLS certificate and endpoints; --zenoh-connect/--zenoh-listen replace its endpoints")
-    p.add_argument("--source", metavar="NAME",
-                   help="put and delete on uav/<sysid>/threats/NAME/<id> (default: the common name of "
-                   "the --zenoh-config certificate, else the plain uav/<sysid>/threats/<id>)")
-    p.add_argument("--wait", type=float, default=3.0, metavar="S",
-                   help="how long to wait for the companion's subscriber or reply (default 3 s)")
+    p.add_argument(
+        "--zenoh-connect",
+        dest="zenoh_connect",
+        nargs="+",
+        metavar="ENDPOINT",
+        help="zenoh endpoints to connect to (default tcp/127.0.0.1:<7447 + --sysid>, the companion's own default)",
+    )
+    p.add_argument(
+        "--zenoh-listen",
+        dest="zenoh_listen",
+        nargs="+",
+        metavar="ENDPOINT",
+        default=[],
+        help="zenoh endpoints to listen on as well (default none)",
+    )
+    p.add_argument(
+        "--zenoh-config",
+        dest="zenoh_config",
+        metavar="FILE",
+        help="zenoh configuration file (JSON5, e.g. a source's from `companion keys init`): "
+        "TLS certificate and endpoints; --zenoh-connect/--zenoh-listen replace its endpoints",
+    )
+    p.add_argument(
+        "--source",
+        metavar="NAME",
+        help="put and delete on uav/<sysid>/threats/NAME/<id> (default: the common name of "
+        "the --zenoh-config certificate, else the plain uav/<sysid>/threats/<id>)",
+    )
+    p.add_argument(
+        "--wait",
+        type=float,
+        default=3.0,
+        metavar="S",
+        help="how long to wait for the companion's subscriber or reply (default 3 s)",
+    )
 
 
 def _add_threat_options(p, required: bool) -> None:
@@ -89,23 +111,32 @@ def _add_threat_options(p, required: bool) -> None:
     p.add_argument("--vel", help="velocity VN,VE,VD in m/s (default 0,0,0)")
     p.add_argument("--radius", type=float, required=required, help="radius in m")
     p.add_argument("--ttl", type=float, help="lifetime in s (default: until removed)")
-    p.add_argument("--kind", choices=("popup", "moving"),
-                   help="popup (static) or moving (default: moving when --vel is non-zero)")
+    p.add_argument(
+        "--kind", choices=("popup", "moving"), help="popup (static) or moving (default: moving when --vel is non-zero)"
+    )
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "threat", help="inject pop-up and moving threats over zenoh",
+        "threat",
+        help="inject pop-up and moving threats over zenoh",
         description="Inject threats into a running companion over zenoh (keys uav/<sysid>/threats/<id>, "
         "JSON version 1): add, move, remove, list, or play a scripted scenario.",
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     sub = p.add_subparsers(dest="threat_command", metavar="ACTION")
     sub.required = True
     actions = []
     for name in ("add", "move", "remove", "list", "play"):
         # NED vectors start with a minus sign (-1,1,0): heli_common.cli_args takes them as values
-        sp = sub.add_parser(name, help=SUBCOMMAND_HELP[name], description=SUBCOMMAND_HELP[name],
-                            epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+        sp = sub.add_parser(
+            name,
+            help=SUBCOMMAND_HELP[name],
+            description=SUBCOMMAND_HELP[name],
+            epilog=EPILOG,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
         actions.append(sp)
         if name in ("add", "move"):
             _add_threat_options(sp, required=name == "add")
@@ -116,8 +147,13 @@ def register(subparsers) -> None:
             sp.add_argument("--json", action="store_true", help="print the threats as JSON lines")
         else:
             sp.add_argument("scenario", help="scenario TOML file (see mission_files/threats/)")
-            sp.add_argument("--time-scale", dest="time_scale", type=float, default=1.0,
-                            help="scenario seconds per wall-clock second (set to sim-vehicle --speedup)")
+            sp.add_argument(
+                "--time-scale",
+                dest="time_scale",
+                type=float,
+                default=1.0,
+                help="scenario seconds per wall-clock second (set to sim-vehicle --speedup)",
+            )
         sp.set_defaults(func=run)
     add_shared_options(p, actions, _add_bus_options)
 
@@ -140,8 +176,8 @@ def threat_from_args(args, previous=None):
     """The threat described by ``add`` / ``move`` options (``previous``: what ``move`` changes)."""
     from dataclasses import replace
 
-    from companion.threats.transport import codec
     from companion.threats.model import Threat
+    from companion.threats.transport import codec
 
     codec.check_id(args.id, "--id")
     position = _position(args)
@@ -167,8 +203,13 @@ def threat_from_args(args, previous=None):
     try:
         codec.encode(threat)
     except ThreatPayloadError as exc:
-        option = {"radius_m": "--radius", "ttl_s": "--ttl", "velocity_ned_m_s": "--vel",
-                  "position": "--pos", "kind": "--kind"}.get(exc.field.split("[")[0].split(".")[0], exc.field)
+        option = {
+            "radius_m": "--radius",
+            "ttl_s": "--ttl",
+            "velocity_ned_m_s": "--vel",
+            "position": "--pos",
+            "kind": "--kind",
+        }.get(exc.field.split("[")[0].split(".")[0], exc.field)
         raise ThreatPayloadError(f"{option}: {exc}") from None
     return threat
 
@@ -190,21 +231,30 @@ def _open_bus(args):
     from companion.threats.transport.bus import ThreatBus
 
     if getattr(args, "zenoh_config", None):
-        return ThreatBus(args.sysid, listen=args.zenoh_listen or None, connect=args.zenoh_connect or None,
-                         zenoh_config=args.zenoh_config, source=args.source).open()
+        return ThreatBus(
+            args.sysid,
+            listen=args.zenoh_listen or None,
+            connect=args.zenoh_connect or None,
+            zenoh_config=args.zenoh_config,
+            source=args.source,
+        ).open()
     from companion.threats.settings import default_listen
 
-    connect = args.zenoh_connect if args.zenoh_connect else ([] if args.zenoh_listen else
-                                                             list(default_listen(args.sysid)))
+    connect = (
+        args.zenoh_connect if args.zenoh_connect else ([] if args.zenoh_listen else list(default_listen(args.sysid)))
+    )
     return ThreatBus(args.sysid, listen=args.zenoh_listen, connect=connect, source=args.source).open()
 
 
 def _wait_subscriber(bus, args, threat_id: str) -> bool:
     if bus.client.wait_for_subscriber(args.wait, threat_id):
         return True
-    hint = (" or does its access control refuse this identity?" if bus.security is not None else "")
-    print(f"companion threat: warning: no subscriber of {bus.key(bus.client.threat_leaf(threat_id))} within "
-          f"{args.wait:g} s (is `companion run` listening{hint}); sending anyway", file=sys.stderr)
+    hint = " or does its access control refuse this identity?" if bus.security is not None else ""
+    print(
+        f"companion threat: warning: no subscriber of {bus.key(bus.client.threat_leaf(threat_id))} within "
+        f"{args.wait:g} s (is `companion run` listening{hint}); sending anyway",
+        file=sys.stderr,
+    )
     return False
 
 
@@ -237,8 +287,9 @@ def run(args) -> int:
                 uid = args.id if bus.client.source is None else f"{bus.client.source}/{args.id}"
                 previous = held.get(uid)
                 if previous is None:
-                    raise ThreatPayloadError(f"--id: the companion holds no threat {args.id!r} "
-                                             f"(add it first, or give --pos and --radius)")
+                    raise ThreatPayloadError(
+                        f"--id: the companion holds no threat {args.id!r} (add it first, or give --pos and --radius)"
+                    )
             threat = threat_from_args(args, previous) if previous is not None else _full_move(args)
             ok = _wait_subscriber(bus, args, threat.id)
             bus.client.put_threat(threat)

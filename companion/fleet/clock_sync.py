@@ -37,11 +37,11 @@ class ClockOffset:
 
     def __init__(self, window_s: float = 60.0) -> None:
         self.window_s = window_s
-        self._samples: deque[tuple[float, float, float]] = deque()    # (t4, offset, round trip)
+        self._samples: deque[tuple[float, float, float]] = deque()  # (t4, offset, round trip)
 
     def observe(self, t1: float, t2: float, t3: float, t4: float) -> None:
         offset, rtt = exchange(t1, t2, t3, t4)
-        if rtt < -1e-9:                    # stamps that contradict each other: ignored
+        if rtt < -1e-9:  # stamps that contradict each other: ignored
             return
         self._samples.append((t4, offset, max(rtt, 0.0)))
         while self._samples and self._samples[0][0] < t4 - self.window_s:

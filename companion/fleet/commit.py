@@ -23,8 +23,9 @@ __all__ = ["fleet_check", "refuses", "WORSE_BY_M"]
 WORSE_BY_M = 0.5
 
 
-def fleet_check(trajectory, start_t_s: float, now_t_s: float, threats, *, horizon_s: float, step_s: float,
-                inflation_m: float) -> BatchCheck:
+def fleet_check(
+    trajectory, start_t_s: float, now_t_s: float, threats, *, horizon_s: float, step_s: float, inflation_m: float
+) -> BatchCheck:
     """Check ``trajectory`` (t = 0 at ``start_t_s``) from ``now_t_s`` over ``horizon_s`` against
     the tubes of the other vehicles ``threats`` (``VehicleThreat``) only."""
     t = sample_times(now_t_s, horizon_s, step_s)

@@ -76,15 +76,16 @@ PROCESS_STOP_S = 10.0
 #: How long a companion's planning workers may take to exit after it (wall s).
 LEFTOVER_GRACE_S = 5.0
 #: Interrupted companions: SIGINT, then SIGTERM and SIGKILL if one does not stop in time.
-COMPANION_ESCALATION = Escalation(((signal.SIGINT, COMPANION_STOP_S), (signal.SIGTERM, 5.0)),
-                                  leftover_grace_s=LEFTOVER_GRACE_S)
+COMPANION_ESCALATION = Escalation(
+    ((signal.SIGINT, COMPANION_STOP_S), (signal.SIGTERM, 5.0)), leftover_grace_s=LEFTOVER_GRACE_S
+)
 #: The simulators and the router: SIGTERM, then SIGKILL.
 PROCESS_ESCALATION = Escalation(((signal.SIGTERM, PROCESS_STOP_S),), leftover_grace_s=LEFTOVER_GRACE_S)
 
 
 def default_logs_dir() -> Path:
     """``out/fleet-<UTC timestamp>``."""
-    return Path("out") / f"fleet-{datetime.datetime.now(datetime.timezone.utc).strftime('%Y%m%d-%H%M%S')}"
+    return Path("out") / f"fleet-{datetime.datetime.now(datetime.UTC).strftime('%Y%m%d-%H%M%S')}"
 
 
 @dataclass
@@ -110,14 +111,26 @@ class FleetVehicle:
         return self.instance + 1
 
     def describe(self) -> dict:
-        return {"instance": self.instance, "sysid": self.sysid, "mission": str(self.mission),
-                "home_lla": list(self.home_lla), "heading_deg": self.heading_deg, "sim_port": self.sim_port,
-                "companion_port": self.companion_port, "zenoh_listen": self.zenoh_listen,
-                "pids": {"sim": self.sim.pid if self.sim else None,
-                         "companion": self.companion.pid if self.companion else None},
-                "files": {"sim_log": str(self.sim_log), "companion_log": str(self.companion_log),
-                          "tlog": str(self.tlog), "record": str(self.record)}}
-
+        return {
+            "instance": self.instance,
+            "sysid": self.sysid,
+            "mission": str(self.mission),
+            "home_lla": list(self.home_lla),
+            "heading_deg": self.heading_deg,
+            "sim_port": self.sim_port,
+            "companion_port": self.companion_port,
+            "zenoh_listen": self.zenoh_listen,
+            "pids": {
+                "sim": self.sim.pid if self.sim else None,
+                "companion": self.companion.pid if self.companion else None,
+            },
+            "files": {
+                "sim_log": str(self.sim_log),
+                "companion_log": str(self.companion_log),
+                "tlog": str(self.tlog),
+                "record": str(self.record),
+            },
+        }
 
 
 class Fleet:
@@ -152,10 +165,22 @@ class Fleet:
         its direction of travel at its yaw rate); else every vehicle faces north.
     """
 
-    def __init__(self, missions, logs_dir, *, speedup: float = 1.0, share: bool = True,
-                 trajectory_delay_ms: float | None = None, seed: int | None = None,
-                 gcs_out: str | None = DEFAULT_GCS_OUT, env: dict | None = None,
-                 companion_args=(), sim_args=(), sync_start: bool = True, face_first_leg: bool = True) -> None:
+    def __init__(
+        self,
+        missions,
+        logs_dir,
+        *,
+        speedup: float = 1.0,
+        share: bool = True,
+        trajectory_delay_ms: float | None = None,
+        seed: int | None = None,
+        gcs_out: str | None = DEFAULT_GCS_OUT,
+        env: dict | None = None,
+        companion_args=(),
+        sim_args=(),
+        sync_start: bool = True,
+        face_first_leg: bool = True,
+    ) -> None:
         if not (isinstance(speedup, (int, float)) and math.isfinite(speedup) and speedup > 0):
             raise ConfigError(f"--speedup: expected a number > 0, got {speedup!r}")
         if trajectory_delay_ms is not None and not (math.isfinite(trajectory_delay_ms) and trajectory_delay_ms >= 0):
@@ -178,7 +203,7 @@ class Fleet:
         self.router: ManagedProcess | None = None
         self.router_endpoint = ""
         self.companions = ProcessGroup(COMPANION_ESCALATION)
-        self.others = ProcessGroup(PROCESS_ESCALATION)       # the simulators and the router
+        self.others = ProcessGroup(PROCESS_ESCALATION)  # the simulators and the router
         self.vehicles = [self._vehicle(i, m) for i, m in enumerate(missions)]
         self._started_s: float | None = None
         self._result: FleetResult | None = None
@@ -187,29 +212,49 @@ class Fleet:
     def _vehicle(self, i: int, mission: Path) -> FleetVehicle:
         d = self.logs_dir
         heading = first_leg_heading_deg(mission) if self.face_first_leg else 0.0
-        return FleetVehicle(instance=i, mission=mission.resolve(), home_lla=mission_home(mission),
-                            heading_deg=round(heading, 1),
-                            sim_port=0, companion_port=0, zenoh_listen="",
-                            sim_log=d / f"sim{i}.log", companion_log=d / f"uav{i + 1}.log",
-                            tlog=d / f"sim{i}.tlog", record=d / f"uav{i + 1}.jsonl")
+        return FleetVehicle(
+            instance=i,
+            mission=mission.resolve(),
+            home_lla=mission_home(mission),
+            heading_deg=round(heading, 1),
+            sim_port=0,
+            companion_port=0,
+            zenoh_listen="",
+            sim_log=d / f"sim{i}.log",
+            companion_log=d / f"uav{i + 1}.log",
+            tlog=d / f"sim{i}.tlog",
+            record=d / f"uav{i + 1}.jsonl",
+        )
 
     # -------------------------------------------------------------------------- paths
     @property
     def paths(self) -> dict:
         """Where things are: ``logs``, ``fleet_json``, ``router_log`` and per vehicle (by
         sysid) its ``tlog``, ``record``, ``sim_log``, ``companion_log``."""
-        return {"logs": self.logs_dir, "fleet_json": self.logs_dir / "fleet.json",
-                "router_log": self.logs_dir / "router.log",
-                "vehicles": {v.sysid: {"tlog": v.tlog, "record": v.record, "sim_log": v.sim_log,
-                                       "companion_log": v.companion_log} for v in self.vehicles}}
+        return {
+            "logs": self.logs_dir,
+            "fleet_json": self.logs_dir / "fleet.json",
+            "router_log": self.logs_dir / "router.log",
+            "vehicles": {
+                v.sysid: {"tlog": v.tlog, "record": v.record, "sim_log": v.sim_log, "companion_log": v.companion_log}
+                for v in self.vehicles
+            },
+        }
 
     def describe(self) -> dict:
         """What ``fleet.json`` holds."""
-        return {"router": self.router_endpoint, "router_pid": self.router.pid if self.router else None,
-                "speedup": self.speedup, "share": self.share, "trajectory_delay_ms": self.trajectory_delay_ms,
-                "seed": self.seed, "launcher_pid": os.getpid(), "sync_start": self.sync_start,
-                "start_gate": self.gate.describe() if self.gate is not None else None,
-                "vehicles": [v.describe() for v in self.vehicles]}
+        return {
+            "router": self.router_endpoint,
+            "router_pid": self.router.pid if self.router else None,
+            "speedup": self.speedup,
+            "share": self.share,
+            "trajectory_delay_ms": self.trajectory_delay_ms,
+            "seed": self.seed,
+            "launcher_pid": os.getpid(),
+            "sync_start": self.sync_start,
+            "start_gate": self.gate.describe() if self.gate is not None else None,
+            "vehicles": [v.describe() for v in self.vehicles],
+        }
 
     # -------------------------------------------------------------------------- start
     def _spawn(self, module_args: list[str], log_path: Path, env=None) -> ManagedProcess:
@@ -225,10 +270,17 @@ class Fleet:
 
     def sim_command(self, v: FleetVehicle) -> list[str]:
         outs = [f"127.0.0.1:{v.companion_port}"] + ([self.gcs_out] if self.gcs_out else [])
-        return sim_vehicle_args(v.sim_port, outs=outs, speedup=self.speedup, instance=v.instance,
-                                home=home_arg(v.home_lla, v.heading_deg), tlog=v.tlog,
-                                seed=None if self.seed is None else self.seed + v.instance,
-                                config=self.hold_config if self.sync_start else None, extra=self.sim_args)
+        return sim_vehicle_args(
+            v.sim_port,
+            outs=outs,
+            speedup=self.speedup,
+            instance=v.instance,
+            home=home_arg(v.home_lla, v.heading_deg),
+            tlog=v.tlog,
+            seed=None if self.seed is None else self.seed + v.instance,
+            config=self.hold_config if self.sync_start else None,
+            extra=self.sim_args,
+        )
 
     @property
     def hold_config(self) -> Path:
@@ -237,12 +289,19 @@ class Fleet:
 
     def companion_command(self, v: FleetVehicle) -> list[str]:
         fleet_args = [] if self.share else ["--no-fleet"]
-        return companion_run_args(f"udpin://127.0.0.1:{v.companion_port}", instance=v.instance, mission=v.mission,
-                                  zenoh_connect=self.router_endpoint, zenoh_listen=v.zenoh_listen, record=v.record,
-                                  time_scale=self.speedup, seed=None if self.seed is None else self.seed + v.instance,
-                                  extra=[*fleet_args, *self.companion_args])
+        return companion_run_args(
+            f"udpin://127.0.0.1:{v.companion_port}",
+            instance=v.instance,
+            mission=v.mission,
+            zenoh_connect=self.router_endpoint,
+            zenoh_listen=v.zenoh_listen,
+            record=v.record,
+            time_scale=self.speedup,
+            seed=None if self.seed is None else self.seed + v.instance,
+            extra=[*fleet_args, *self.companion_args],
+        )
 
-    def start(self) -> "Fleet":
+    def start(self) -> Fleet:
         """Start the router (and wait until it listens), then every simulator and companion;
         write ``fleet.json``. On a failure everything started is stopped."""
         if self._started_s is not None:
@@ -257,13 +316,18 @@ class Fleet:
                 v.sim_port, v.companion_port = free_port(), free_port()
                 v.zenoh_listen = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
                 v.sim = self.others.add(self._spawn(self.sim_command(v), v.sim_log))
-                v.companion = self.companions.add(self._spawn(self.companion_command(v), v.companion_log,
-                                                              env=self.companion_env()))
-                log.info("vehicle %d: sim-vehicle pid %d, companion pid %d, mission %s", v.sysid, v.sim.pid,
-                         v.companion.pid, v.mission.name)
+                v.companion = self.companions.add(
+                    self._spawn(self.companion_command(v), v.companion_log, env=self.companion_env())
+                )
+                log.info(
+                    "vehicle %d: sim-vehicle pid %d, companion pid %d, mission %s",
+                    v.sysid,
+                    v.sim.pid,
+                    v.companion.pid,
+                    v.mission.name,
+                )
             if self.sync_start:
-                self.gate = StartGate([(v.sysid, v.sim_port, _running(v)) for v in self.vehicles],
-                                      self.speedup).start()
+                self.gate = StartGate([(v.sysid, v.sim_port, _running(v)) for v in self.vehicles], self.speedup).start()
             self.write_description()
         except BaseException:
             self.stop()
@@ -273,11 +337,13 @@ class Fleet:
     def _start_router(self) -> None:
         self.router_endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
         router_log = self.logs_dir / "router.log"
-        self.router = self.others.add(self._spawn(["companion.cli", "router", "--listen", self.router_endpoint],
-                                                  router_log))
+        self.router = self.others.add(
+            self._spawn(["companion.cli", "router", "--listen", self.router_endpoint], router_log)
+        )
         self.router.name = f"the zenoh router on {self.router_endpoint}"
-        self.router.wait_ready(self.router.log_contains("zenoh router listening"), ROUTER_START_S,
-                               "'zenoh router listening'")
+        self.router.wait_ready(
+            self.router.log_contains("zenoh router listening"), ROUTER_START_S, "'zenoh router listening'"
+        )
         log.info("zenoh router pid %d listening on %s", self.router.pid, self.router_endpoint)
 
     def write_description(self) -> Path:
@@ -323,12 +389,24 @@ class Fleet:
         for v in self.vehicles:
             code = v.companion.poll() if v.companion is not None else None
             summary = last_json_line(v.companion_log) if code is not None else None
-            outcome = (summary or {}).get("outcome") or ("running" if code is None and v.companion else
-                                                         "not started" if v.companion is None else
-                                                         f"exited {code} without a summary")
-            out.append(VehicleResult(v.sysid, v.mission.name, code, str(outcome),
-                                     (summary or {}).get("legs_reached"), (summary or {}).get("legs_planned"),
-                                     summary))
+            outcome = (summary or {}).get("outcome") or (
+                "running"
+                if code is None and v.companion
+                else "not started"
+                if v.companion is None
+                else f"exited {code} without a summary"
+            )
+            out.append(
+                VehicleResult(
+                    v.sysid,
+                    v.mission.name,
+                    code,
+                    str(outcome),
+                    (summary or {}).get("legs_reached"),
+                    (summary or {}).get("legs_planned"),
+                    summary,
+                )
+            )
         wall = 0.0 if self._started_s is None else time.monotonic() - self._started_s
         return FleetResult(tuple(out), wall)
 
@@ -350,10 +428,10 @@ class Fleet:
         self.others.stop()
         self._stopped = True
         if self._started_s is not None and self.logs_dir.is_dir():
-            self.write_description()            # with the start gate's account
+            self.write_description()  # with the start gate's account
         return self._result
 
-    def __enter__(self) -> "Fleet":
+    def __enter__(self) -> Fleet:
         return self.start()
 
     def __exit__(self, *exc) -> None:

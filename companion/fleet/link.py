@@ -19,7 +19,7 @@ import dataclasses
 import logging
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -46,7 +46,7 @@ class ReferenceGrid:
 
     def __init__(self, step_s: float) -> None:
         self.step_s = float(step_s)
-        self._of: tuple | None = None          # (trajectory, t0_s) the positions are of
+        self._of: tuple | None = None  # (trajectory, t0_s) the positions are of
         self._ned_m = np.zeros((0, 3))
 
     def positions(self, ref) -> np.ndarray:
@@ -59,8 +59,9 @@ class ReferenceGrid:
         return self._ned_m
 
 
-def sample_reference(ref, now_t_s: float, settings: FleetSettings, hover_ned_m=None,
-                     grid: ReferenceGrid | None = None) -> SampledPath:
+def sample_reference(
+    ref, now_t_s: float, settings: FleetSettings, hover_ned_m=None, grid: ReferenceGrid | None = None
+) -> SampledPath:
     """``ref`` (an active reference, or None: a hover at ``hover_ned_m``) over the published
     horizon, on its own grid (``grid``, kept by the caller between publications): from the last
     grid time at or before ``now_t_s``; before its start, its start point; after its end, its end
@@ -70,7 +71,7 @@ def sample_reference(ref, now_t_s: float, settings: FleetSettings, hover_ned_m=N
         return SampledPath("hover", now_t_s, step_s, np.atleast_2d(np.asarray(hover_ned_m, float)))
     ned_m = (grid or ReferenceGrid(step_s)).positions(ref)
     first = math.floor((now_t_s - ref.t0_s) / step_s)
-    first -= ref.t0_s + first * step_s > now_t_s           # rounding: the first is never after now
+    first -= ref.t0_s + first * step_s > now_t_s  # rounding: the first is never after now
     last = max(min(first + int(settings.horizon_s / step_s), len(ned_m) - 1), first)
     rows = np.clip(np.arange(first, last + 1), 0, len(ned_m) - 1)
     return SampledPath(ref.path_id, ref.t0_s + first * step_s, step_s, ned_m[rows])
@@ -92,8 +93,17 @@ class FleetLink:
         The active reference (or None) and the vehicle's position (or None).
     """
 
-    def __init__(self, settings, session, sysid: int, home_lla, *, clock_now_s: Callable[[], float],
-                 reference: Callable, position_ned_m: Callable) -> None:
+    def __init__(
+        self,
+        settings,
+        session,
+        sysid: int,
+        home_lla,
+        *,
+        clock_now_s: Callable[[], float],
+        reference: Callable,
+        position_ned_m: Callable,
+    ) -> None:
         self.settings = settings
         self.fleet: FleetSettings = settings.fleet
         self.session = session
@@ -119,16 +129,19 @@ class FleetLink:
         self._loop = loop
         self._publisher = self.session.declare_publisher(self._own_key)
         self._subscriber = self.session.declare_subscriber("uav/*/trajectory", self._on_sample)
-        log.info("fleet: sharing uav/%d/trajectory, avoiding uav/*/trajectory (every %.1f s%s)", self.sysid,
-                 self.fleet.publish_period_s,
-                 f", {self.fleet.inject_delay_s * 1000:.0f} ms injected delay" if self.fleet.inject_delay_s else "")
+        log.info(
+            "fleet: sharing uav/%d/trajectory, avoiding uav/*/trajectory (every %.1f s%s)",
+            self.sysid,
+            self.fleet.publish_period_s,
+            f", {self.fleet.inject_delay_s * 1000:.0f} ms injected delay" if self.fleet.inject_delay_s else "",
+        )
 
     async def stop(self) -> None:
         for ent in (self._subscriber, self._publisher):
             try:
                 if ent is not None:
                     ent.undeclare()
-            except Exception as exc:   # noqa: BLE001 - the session is closing
+            except Exception as exc:  # noqa: BLE001 - the session is closing
                 log.debug("undeclare: %s", exc)
         self._subscriber = self._publisher = None
 
@@ -162,9 +175,18 @@ class FleetLink:
         if ref is None and pos is None:
             return
         self._seq += 1
-        msg = TrajectoryMessage(self.sysid, self._seq, self.fleet.rotor_radius_m, self.home_lla, now, time.time(),
-                                float(self.settings.link.time_scale or 1.0), 0.0,
-                                sample_reference(ref, now, self.fleet, pos, self._grid), self.pending)
+        msg = TrajectoryMessage(
+            self.sysid,
+            self._seq,
+            self.fleet.rotor_radius_m,
+            self.home_lla,
+            now,
+            time.time(),
+            float(self.settings.link.time_scale or 1.0),
+            0.0,
+            sample_reference(ref, now, self.fleet, pos, self._grid),
+            self.pending,
+        )
         if self.fleet.inject_delay_s > 0:
             self._loop.call_later(self.fleet.inject_delay_s, self._put, msg)
         else:
@@ -191,8 +213,15 @@ class FleetLink:
 
         def check():
             now = self.clock_now_s()
-            return commit.fleet_check(trajectory, start_t_s, now, self.threats(now), horizon_s=th.horizon_s,
-                                      step_s=th.check_step_s, inflation_m=th.inflation_m)
+            return commit.fleet_check(
+                trajectory,
+                start_t_s,
+                now,
+                self.threats(now),
+                horizon_s=th.horizon_s,
+                step_s=th.check_step_s,
+                inflation_m=th.inflation_m,
+            )
 
         before = check()
         now = self.clock_now_s()
@@ -210,18 +239,25 @@ class FleetLink:
         self.delay_checks_ms.append((time.monotonic() - t0) * 1000.0)
         if refused:
             conflict = after.conflicts[0]
-            log.warning("fleet: delay check refused %s: %s within %.1f s (waited %.0f ms)", path_id,
-                        conflict.threat_id if conflict else "?", conflict.time_to_conflict_s if conflict else -1,
-                        wait_s * 1000)
-            self.publish()                 # the pending one is withdrawn
+            log.warning(
+                "fleet: delay check refused %s: %s within %.1f s (waited %.0f ms)",
+                path_id,
+                conflict.threat_id if conflict else "?",
+                conflict.time_to_conflict_s if conflict else -1,
+                wait_s * 1000,
+            )
+            self.publish()  # the pending one is withdrawn
         return not refused
 
     def summary(self) -> dict:
         """Counts, the delay checks' durations and what is known of each other vehicle."""
         d = self.delay_checks_ms
-        return {**self.counts, "peers": self.peers.summary(time.time()),
-                "delay_check_ms_max": round(max(d), 1) if d else None,
-                "delay_check_ms_median": round(float(np.median(d)), 1) if d else None}
+        return {
+            **self.counts,
+            "peers": self.peers.summary(time.time()),
+            "delay_check_ms_max": round(max(d), 1) if d else None,
+            "delay_check_ms_median": round(float(np.median(d)), 1) if d else None,
+        }
 
 
 class FleetCommitGate:

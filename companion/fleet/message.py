@@ -25,16 +25,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.threats.transport.codec import finite_number, parse_json
 from companion.threats.model import payload_error
+from companion.threats.transport.codec import finite_number, parse_json
 
 __all__ = ["TrajectoryMessage", "SampledPath", "encode", "decode", "VERSION", "MAX_PAYLOAD_BYTES"]
 
 VERSION = 1
 MAX_PAYLOAD_BYTES = 65536
 MAX_SAMPLES = 600
-FIELDS = ("v", "sysid", "seq", "rotor_radius_m", "origin_lla", "clock", "sent_unix_s", "committed",
-          "pending", "echo")
+FIELDS = ("v", "sysid", "seq", "rotor_radius_m", "origin_lla", "clock", "sent_unix_s", "committed", "pending", "echo")
 
 
 @dataclass(frozen=True)
@@ -83,20 +82,31 @@ class TrajectoryMessage:
 def _path_dict(path: SampledPath | None):
     if path is None:
         return None
-    return {"path_id": path.path_id, "t0_s": round(float(path.t0_s), 4), "dt_s": float(path.dt_s),
-            "ned_m": np.round(np.asarray(path.ned_m, dtype=float), 2).tolist()}
+    return {
+        "path_id": path.path_id,
+        "t0_s": round(float(path.t0_s), 4),
+        "dt_s": float(path.dt_s),
+        "ned_m": np.round(np.asarray(path.ned_m, dtype=float), 2).tolist(),
+    }
 
 
 def encode(msg: TrajectoryMessage) -> bytes:
     """The message as compact JSON bytes."""
-    return json.dumps({
-        "v": VERSION, "sysid": msg.sysid, "seq": msg.seq, "rotor_radius_m": msg.rotor_radius_m,
-        "origin_lla": list(msg.origin_lla),
-        "clock": {"mission_s": round(msg.mission_s, 4), "unix_s": msg.unix_s, "scale": msg.scale},
-        "sent_unix_s": msg.sent_unix_s, "committed": _path_dict(msg.committed),
-        "pending": _path_dict(msg.pending),
-        "echo": {str(k): [float(a), float(b)] for k, (a, b) in (msg.echo or {}).items()},
-    }, separators=(",", ":")).encode()
+    return json.dumps(
+        {
+            "v": VERSION,
+            "sysid": msg.sysid,
+            "seq": msg.seq,
+            "rotor_radius_m": msg.rotor_radius_m,
+            "origin_lla": list(msg.origin_lla),
+            "clock": {"mission_s": round(msg.mission_s, 4), "unix_s": msg.unix_s, "scale": msg.scale},
+            "sent_unix_s": msg.sent_unix_s,
+            "committed": _path_dict(msg.committed),
+            "pending": _path_dict(msg.pending),
+            "echo": {str(k): [float(a), float(b)] for k, (a, b) in (msg.echo or {}).items()},
+        },
+        separators=(",", ":"),
+    ).encode()
 
 
 def _number(value, field: str, *, lo: float = -math.inf, hi: float = math.inf) -> float:
@@ -138,8 +148,12 @@ def _path(value, field: str) -> SampledPath | None:
         if not isinstance(p, list) or len(p) != 3:
             raise payload_error(f"{field}.ned_m[{i}]", "expected [north, east, down] in metres")
         rows.append([_number(v, f"{field}.ned_m[{i}]", lo=-1e6, hi=1e6) for v in p])
-    return SampledPath(d["path_id"], _number(d["t0_s"], f"{field}.t0_s"),
-                       _number(d["dt_s"], f"{field}.dt_s", lo=1e-3, hi=60.0), np.asarray(rows))
+    return SampledPath(
+        d["path_id"],
+        _number(d["t0_s"], f"{field}.t0_s"),
+        _number(d["dt_s"], f"{field}.dt_s", lo=1e-3, hi=60.0),
+        np.asarray(rows),
+    )
 
 
 def decode(payload: bytes) -> TrajectoryMessage:
@@ -150,8 +164,11 @@ def decode(payload: bytes) -> TrajectoryMessage:
     lla = d["origin_lla"]
     if not isinstance(lla, list) or len(lla) != 3:
         raise payload_error("origin_lla", "expected [lat_deg, lon_deg, alt_m]")
-    origin = (_number(lla[0], "origin_lla[0]", lo=-90, hi=90), _number(lla[1], "origin_lla[1]", lo=-180, hi=180),
-              _number(lla[2], "origin_lla[2]", lo=-1e4, hi=1e5))
+    origin = (
+        _number(lla[0], "origin_lla[0]", lo=-90, hi=90),
+        _number(lla[1], "origin_lla[1]", lo=-180, hi=180),
+        _number(lla[2], "origin_lla[2]", lo=-1e4, hi=1e5),
+    )
     clock = _object(d["clock"], "clock", ("mission_s", "unix_s", "scale"))
     echo = d["echo"]
     if not isinstance(echo, dict):
@@ -165,9 +182,15 @@ def decode(payload: bytes) -> TrajectoryMessage:
     if committed is None:
         raise payload_error("committed", "missing: every message carries the trajectory flown")
     return TrajectoryMessage(
-        sysid=_integer(d["sysid"], "sysid", 1, 255), seq=_integer(d["seq"], "seq", 0, 2**53),
-        rotor_radius_m=_number(d["rotor_radius_m"], "rotor_radius_m", lo=0.01, hi=50.0), origin_lla=origin,
-        mission_s=_number(clock["mission_s"], "clock.mission_s"), unix_s=_number(clock["unix_s"], "clock.unix_s"),
+        sysid=_integer(d["sysid"], "sysid", 1, 255),
+        seq=_integer(d["seq"], "seq", 0, 2**53),
+        rotor_radius_m=_number(d["rotor_radius_m"], "rotor_radius_m", lo=0.01, hi=50.0),
+        origin_lla=origin,
+        mission_s=_number(clock["mission_s"], "clock.mission_s"),
+        unix_s=_number(clock["unix_s"], "clock.unix_s"),
         scale=_number(clock["scale"], "clock.scale", lo=1e-3, hi=1e3),
-        sent_unix_s=_number(d["sent_unix_s"], "sent_unix_s"), committed=committed,
-        pending=_path(d["pending"], "pending"), echo=echoes)
+        sent_unix_s=_number(d["sent_unix_s"], "sent_unix_s"),
+        committed=committed,
+        pending=_path(d["pending"], "pending"),
+        echo=echoes,
+    )

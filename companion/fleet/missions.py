@@ -11,8 +11,16 @@ import numpy as np
 
 from companion.errors import ConfigError, MissionError
 
-__all__ = ["MISSION_SUFFIXES", "select_missions", "mission_home", "first_leg_heading_deg", "crossing_missions",
-           "head_on_missions", "write_missions", "planned_length_m"]
+__all__ = [
+    "MISSION_SUFFIXES",
+    "select_missions",
+    "mission_home",
+    "first_leg_heading_deg",
+    "crossing_missions",
+    "head_on_missions",
+    "write_missions",
+    "planned_length_m",
+]
 
 #: Mission files the fleet takes from a directory (sorted by name).
 MISSION_SUFFIXES = (".plan", ".waypoints")
@@ -34,8 +42,10 @@ def select_missions(mission_dir: str | Path, count: int) -> list[Path]:
         raise ConfigError(f"--mission-dir: {directory} is not a directory")
     files = sorted(p for p in directory.iterdir() if p.is_file() and p.suffix.lower() in MISSION_SUFFIXES)
     if len(files) < count:
-        raise ConfigError(f"--mission-dir: {directory} has {len(files)} mission file(s) (*.plan, *.waypoints), "
-                          f"fewer than --vehicles {count}")
+        raise ConfigError(
+            f"--mission-dir: {directory} has {len(files)} mission file(s) (*.plan, *.waypoints), "
+            f"fewer than --vehicles {count}"
+        )
     return files[:count]
 
 
@@ -52,8 +62,10 @@ def mission_home(path: str | Path) -> tuple[float, float, float]:
 
     plan = load_mission_file(path)
     if plan.planned_home is None:
-        raise MissionError(f"{path}: the mission gives no home (plannedHomePosition, or item 0 of a "
-                           f"QGC WPL file): the fleet starts each vehicle at its mission's home")
+        raise MissionError(
+            f"{path}: the mission gives no home (plannedHomePosition, or item 0 of a "
+            f"QGC WPL file): the fleet starts each vehicle at its mission's home"
+        )
     return plan.planned_home
 
 
@@ -75,26 +87,51 @@ def _mission_plan(home_lla, waypoints_ned_m, *, alt_m: float, speed_m_s: float):
     """A ``MissionPlan``: takeoff to ``alt_m`` above home, the speed, the waypoints (NED about
     home, flown at ``alt_m`` above home), RTL."""
     from companion.geo import LocalFrame
-    from companion.mission.model import (MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_RETURN_TO_LAUNCH,
-                                         MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT, MAV_FRAME_MISSION,
-                                         MissionItem, MissionPlan)
+    from companion.mission.model import (
+        MAV_CMD_DO_CHANGE_SPEED,
+        MAV_CMD_NAV_RETURN_TO_LAUNCH,
+        MAV_CMD_NAV_TAKEOFF,
+        MAV_CMD_NAV_WAYPOINT,
+        MAV_FRAME_MISSION,
+        MissionItem,
+        MissionPlan,
+    )
 
     frame = LocalFrame(*home_lla)
-    items = [MissionItem(MAV_CMD_NAV_TAKEOFF, alt_m=float(alt_m)),
-             MissionItem(MAV_CMD_DO_CHANGE_SPEED, frame=MAV_FRAME_MISSION, param1=1.0, param2=float(speed_m_s),
-                         param3=-1.0)]
+    items = [
+        MissionItem(MAV_CMD_NAV_TAKEOFF, alt_m=float(alt_m)),
+        MissionItem(MAV_CMD_DO_CHANGE_SPEED, frame=MAV_FRAME_MISSION, param1=1.0, param2=float(speed_m_s), param3=-1.0),
+    ]
     for n, e in waypoints_ned_m:
         lat, lon, _ = frame.to_lla(n, e, 0.0)
-        items.append(MissionItem(MAV_CMD_NAV_WAYPOINT, param2=2.0, lat_deg=round(float(lat), 8),
-                                 lon_deg=round(float(lon), 8), alt_m=float(alt_m)))
+        items.append(
+            MissionItem(
+                MAV_CMD_NAV_WAYPOINT,
+                param2=2.0,
+                lat_deg=round(float(lat), 8),
+                lon_deg=round(float(lon), 8),
+                alt_m=float(alt_m),
+            )
+        )
     items.append(MissionItem(MAV_CMD_NAV_RETURN_TO_LAUNCH, frame=MAV_FRAME_MISSION))
-    return MissionPlan(items=tuple(items), planned_home=tuple(float(v) for v in home_lla),
-                       cruise_speed_m_s=float(speed_m_s), hover_speed_m_s=5.0)
+    return MissionPlan(
+        items=tuple(items),
+        planned_home=tuple(float(v) for v in home_lla),
+        cruise_speed_m_s=float(speed_m_s),
+        hover_speed_m_s=5.0,
+    )
 
 
-def crossing_missions(count: int, *, centre_lla=(47.397742, 8.545594, 488.0), radius_m: float = 70.0,
-                      beyond_m: float = 30.0, alt_m: float = 15.0, speed_m_s: float = 7.0,
-                      first_bearing_deg: float = 0.0) -> list:
+def crossing_missions(
+    count: int,
+    *,
+    centre_lla=(47.397742, 8.545594, 488.0),
+    radius_m: float = 70.0,
+    beyond_m: float = 30.0,
+    alt_m: float = 15.0,
+    speed_m_s: float = 7.0,
+    first_bearing_deg: float = 0.0,
+) -> list:
     """``count`` missions whose legs cross at one point at about the same time.
 
     Vehicle ``i``'s home is ``radius_m`` from ``centre_lla`` at bearing ``first_bearing_deg +
@@ -118,17 +155,30 @@ def crossing_missions(count: int, *, centre_lla=(47.397742, 8.545594, 488.0), ra
         home_ne = radius_m * u
         lat, lon, _ = centre.to_lla(home_ne[0], home_ne[1], 0.0)
         home = (round(float(lat), 8), round(float(lon), 8), float(centre_lla[2]))
-        far_ne = -beyond_m * u - home_ne                     # about the vehicle's home
+        far_ne = -beyond_m * u - home_ne  # about the vehicle's home
         plans.append(_mission_plan(home, [far_ne], alt_m=alt_m, speed_m_s=speed_m_s))
     return plans
 
 
-def head_on_missions(*, centre_lla=(47.397742, 8.545594, 488.0), half_length_m: float = 60.0,
-                     alt_m: float = 15.0, speed_m_s: float = 7.0, bearing_deg: float = 90.0) -> list:
+def head_on_missions(
+    *,
+    centre_lla=(47.397742, 8.545594, 488.0),
+    half_length_m: float = 60.0,
+    alt_m: float = 15.0,
+    speed_m_s: float = 7.0,
+    bearing_deg: float = 90.0,
+) -> list:
     """Two missions along one corridor, head-on: each flies from its home to the other's and back
     (RTL), at one altitude. Returns two ``MissionPlan``."""
-    return crossing_missions(2, centre_lla=centre_lla, radius_m=half_length_m, beyond_m=half_length_m,
-                             alt_m=alt_m, speed_m_s=speed_m_s, first_bearing_deg=bearing_deg)
+    return crossing_missions(
+        2,
+        centre_lla=centre_lla,
+        radius_m=half_length_m,
+        beyond_m=half_length_m,
+        alt_m=alt_m,
+        speed_m_s=speed_m_s,
+        first_bearing_deg=bearing_deg,
+    )
 
 
 def write_missions(plans, out_dir: str | Path, stem: str = "uav") -> list[Path]:

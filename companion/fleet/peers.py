@@ -75,9 +75,17 @@ class VehicleThreat:
     def tube(self, inflation_m: float) -> TrajectoryTube:
         """Its tube, ``inflation_m`` wider, plus ``bend_m``: the check treats the centre as linear
         between its own times, which may straddle a sample (a corner of the polyline)."""
-        return TrajectoryTube(self.uid, self.times_s, self.ned_m, self.radius_m + inflation_m + self.bend_m,
-                              self.radius_m, self.received_t_s, self.growth_m_s, self.growth_max_m,
-                              self.expires_t_s)
+        return TrajectoryTube(
+            self.uid,
+            self.times_s,
+            self.ned_m,
+            self.radius_m + inflation_m + self.bend_m,
+            self.radius_m,
+            self.received_t_s,
+            self.growth_m_s,
+            self.growth_max_m,
+            self.expires_t_s,
+        )
 
     @property
     def bend_m(self) -> float:
@@ -95,7 +103,7 @@ class _Peer:
     msg: TrajectoryMessage
     received_unix_s: float
     clock: ClockOffset = field(default_factory=ClockOffset)
-    delays: deque = field(default_factory=deque)          # (received_unix_s, delay_s)
+    delays: deque = field(default_factory=deque)  # (received_unix_s, delay_s)
 
 
 class PeerTable:
@@ -154,11 +162,17 @@ class PeerTable:
     def summary(self, now_unix_s: float) -> list[dict]:
         """Per vehicle: its age, clock offset and bound, largest delay (for the record)."""
         with self._lock:
-            return [{"sysid": s, "seq": p.msg.seq, "age_s": round(now_unix_s - p.received_unix_s, 3),
-                     "offset_s": round(p.clock.offset_s, 6),
-                     "offset_bound_s": None if math.isinf(p.clock.bound_s) else round(p.clock.bound_s, 6),
-                     "max_delay_s": round(max((d for _, d in p.delays), default=0.0), 4)}
-                    for s, p in sorted(self._peers.items())]
+            return [
+                {
+                    "sysid": s,
+                    "seq": p.msg.seq,
+                    "age_s": round(now_unix_s - p.received_unix_s, 3),
+                    "offset_s": round(p.clock.offset_s, 6),
+                    "offset_bound_s": None if math.isinf(p.clock.bound_s) else round(p.clock.bound_s, 6),
+                    "max_delay_s": round(max((d for _, d in p.delays), default=0.0), 4),
+                }
+                for s, p in sorted(self._peers.items())
+            ]
 
     def threats(self, now_t_s: float, now_unix_s: float, scale: float) -> list[VehicleThreat]:
         """Every vehicle still remembered as threats (committed, and a lower id's pending)."""
@@ -169,6 +183,7 @@ class PeerTable:
             peers = [(sysid, p.msg, p.received_unix_s, p.clock.offset_s) for sysid, p in self._peers.items()]
         out = []
         for sysid, msg, received, offset in peers:
+
             def to_ours(tau, msg=msg, offset=offset):
                 their_unix = msg.unix_s + (np.asarray(tau) - msg.mission_s) / msg.scale
                 return now_t_s + scale * (their_unix - offset - now_unix_s)
@@ -180,8 +195,19 @@ class PeerTable:
             radius = msg.rotor_radius_m + s.tracking_m + s.margin_m
             paths = [("", msg.committed)] + ([("-pending", msg.pending)] if msg.pending and sysid < self.sysid else [])
             for suffix, path in paths:
-                out.append(_threat(f"uav{sysid}{suffix}", sysid, path, to_ours, shift, radius,
-                                   float(to_ours(msg.mission_s)), growth, expires))
+                out.append(
+                    _threat(
+                        f"uav{sysid}{suffix}",
+                        sysid,
+                        path,
+                        to_ours,
+                        shift,
+                        radius,
+                        float(to_ours(msg.mission_s)),
+                        growth,
+                        expires,
+                    )
+                )
         return out
 
     def _origin_shift(self, origin_lla) -> np.ndarray:
@@ -196,8 +222,25 @@ class PeerTable:
             return len(self._peers)
 
 
-def _threat(name: str, sysid: int, path: SampledPath, to_ours, shift: np.ndarray, radius_m: float,
-            message_t_s: float, growth: tuple, expires_t_s: float) -> VehicleThreat:
-    return VehicleThreat(name, sysid, np.asarray(to_ours(path.times_s), dtype=float),
-                         np.asarray(path.ned_m, dtype=float) + shift[None, :], radius_m, message_t_s,
-                         growth[0], growth[1], expires_t_s)
+def _threat(
+    name: str,
+    sysid: int,
+    path: SampledPath,
+    to_ours,
+    shift: np.ndarray,
+    radius_m: float,
+    message_t_s: float,
+    growth: tuple,
+    expires_t_s: float,
+) -> VehicleThreat:
+    return VehicleThreat(
+        name,
+        sysid,
+        np.asarray(to_ours(path.times_s), dtype=float),
+        np.asarray(path.ned_m, dtype=float) + shift[None, :],
+        radius_m,
+        message_t_s,
+        growth[0],
+        growth[1],
+        expires_t_s,
+    )

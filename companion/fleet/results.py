@@ -26,8 +26,15 @@ class VehicleResult:
         return self.exit_code == 0 and self.outcome == "completed"
 
     def as_dict(self) -> dict:
-        return {"sysid": self.sysid, "mission": self.mission, "exit_code": self.exit_code, "outcome": self.outcome,
-                "legs_reached": self.legs_reached, "legs_planned": self.legs_planned, "completed": self.completed}
+        return {
+            "sysid": self.sysid,
+            "mission": self.mission,
+            "exit_code": self.exit_code,
+            "outcome": self.outcome,
+            "legs_reached": self.legs_reached,
+            "legs_planned": self.legs_planned,
+            "completed": self.completed,
+        }
 
 
 @dataclass(frozen=True)
@@ -42,8 +49,11 @@ class FleetResult:
         return bool(self.vehicles) and all(v.completed for v in self.vehicles)
 
     def as_dict(self) -> dict:
-        return {"completed": self.completed, "wall_s": round(self.wall_s, 1),
-                "vehicles": [v.as_dict() for v in self.vehicles]}
+        return {
+            "completed": self.completed,
+            "wall_s": round(self.wall_s, 1),
+            "vehicles": [v.as_dict() for v in self.vehicles],
+        }
 
     def table(self) -> str:
         """One line per vehicle, for people."""
@@ -52,8 +62,9 @@ class FleetResult:
             legs = "-" if v.legs_planned is None else f"{v.legs_reached}/{v.legs_planned}"
             code = "-" if v.exit_code is None else str(v.exit_code)
             lines.append(f"{v.sysid:>5}  {code:>4}  {legs:>5}  {v.outcome}")
-        lines.append(f"{'all missions completed' if self.completed else 'NOT all missions completed'} "
-                     f"({self.wall_s:.0f} s)")
+        lines.append(
+            f"{'all missions completed' if self.completed else 'NOT all missions completed'} ({self.wall_s:.0f} s)"
+        )
         return "\n".join(lines)
 
 

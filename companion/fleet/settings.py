@@ -87,14 +87,34 @@ class FleetSettings:
     inject_delay_s: float = 0.0
 
     def __post_init__(self) -> None:
-        require_numbers(ConfigError, "fleet", self, positive=(
-            "publish_period_s", "horizon_s", "sample_step_s", "rotor_radius_m", "stale_after_s",
-            "forget_after_s"), non_negative=(
-            "tracking_m", "margin_m", "growth_m_s", "growth_max_m", "stale_growth_m_s", "stale_max_m",
-            "delay_check_s", "yield_s", "inject_delay_s"))
+        require_numbers(
+            ConfigError,
+            "fleet",
+            self,
+            positive=(
+                "publish_period_s",
+                "horizon_s",
+                "sample_step_s",
+                "rotor_radius_m",
+                "stale_after_s",
+                "forget_after_s",
+            ),
+            non_negative=(
+                "tracking_m",
+                "margin_m",
+                "growth_m_s",
+                "growth_max_m",
+                "stale_growth_m_s",
+                "stale_max_m",
+                "delay_check_s",
+                "yield_s",
+                "inject_delay_s",
+            ),
+        )
         if self.forget_after_s <= self.stale_after_s:
-            raise ConfigError(f"fleet.forget_after_s: must exceed stale_after_s ({self.stale_after_s}), "
-                              f"got {self.forget_after_s}")
+            raise ConfigError(
+                f"fleet.forget_after_s: must exceed stale_after_s ({self.stale_after_s}), got {self.forget_after_s}"
+            )
 
     @property
     def separation_m(self) -> float:

@@ -20,8 +20,9 @@ log = logging.getLogger(__name__)
 #: (``StartupSettings.prearm_timeout_s``, vehicle s) even if not every companion waits yet.
 HOLD_FRACTION = 0.5
 #: The simulators' settings while the start is held: pre-arm checks failing.
-HOLD_CONFIG = ("# written by companion fleet up: pre-arm checks fail until the start gate opens\n"
-               "[flight]\nprearm_fail = 1\n")
+HOLD_CONFIG = (
+    "# written by companion fleet up: pre-arm checks fail until the start gate opens\n[flight]\nprearm_fail = 1\n"
+)
 #: The gate speaks MAVLink as a ground station: system 255 (a GCS's usual id), Mission Planner's component.
 GCS_SYSTEM_ID = 255
 GCS_COMPONENT_ID = mavlink.MAV_COMP_ID_MISSIONPLANNER
@@ -75,8 +76,8 @@ class StartGate:
         #: ... and while its arming is refused by one that does not report them (0.3 s after
         #: each refusal, then the retry interval in vehicle s)
         self.retry_hold_s = HOLD_FRACTION * (startup.arm_attempts - 1) * (0.3 + startup.retry_interval_s / speedup)
-        self.reports_prearm: dict[int, bool] = {}             # sysid -> SYS_STATUS has the pre-arm bit
-        self.state: dict[int, tuple[int, bool]] = {}          # sysid -> (custom mode, armed)
+        self.reports_prearm: dict[int, bool] = {}  # sysid -> SYS_STATUS has the pre-arm bit
+        self.state: dict[int, tuple[int, bool]] = {}  # sysid -> (custom mode, armed)
         self.confirmed: set[int] = set()
         self.released_wall_s: float | None = None
         self.first_waiting_s: float | None = None
@@ -85,7 +86,7 @@ class StartGate:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="fleet-start-gate", daemon=True)
 
-    def start(self) -> "StartGate":
+    def start(self) -> StartGate:
         self._thread.start()
         return self
 
@@ -106,9 +107,14 @@ class StartGate:
         return self.prearm_hold_s if known and all(known) else self.retry_hold_s
 
     def describe(self) -> dict:
-        return {"released": self.released_wall_s is not None, "held_s": self.held_s,
-                "waiting_at_release": self.waiting_at_release, "confirmed": sorted(self.confirmed),
-                "max_hold_s": round(self.max_hold_s, 1), "vehicles_report_prearm": self.reports_prearm}
+        return {
+            "released": self.released_wall_s is not None,
+            "held_s": self.held_s,
+            "waiting_at_release": self.waiting_at_release,
+            "confirmed": sorted(self.confirmed),
+            "max_hold_s": round(self.max_hold_s, 1),
+            "vehicles_report_prearm": self.reports_prearm,
+        }
 
     def _run(self) -> None:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -121,14 +127,24 @@ class StartGate:
         try:
             while not self._stop.is_set():
                 now = time.monotonic()
-                if now - last_beat >= 1.0:           # a peer the simulators answer (heard in 10 s)
+                if now - last_beat >= 1.0:  # a peer the simulators answer (heard in 10 s)
                     beat = mav.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
                     for sysid, port in ports.items():
                         _send(sock, beat.pack(mav), port)
-                        if sysid not in self.reports_prearm:      # SYS_STATUS on this link, 2 Hz
-                            ask = mav.command_long_encode(sysid, AUTOPILOT_COMPONENT_ID,
-                                                          mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-                                                          mavlink.MAVLINK_MSG_ID_SYS_STATUS, 500000, 0, 0, 0, 0, 0)
+                        if sysid not in self.reports_prearm:  # SYS_STATUS on this link, 2 Hz
+                            ask = mav.command_long_encode(
+                                sysid,
+                                AUTOPILOT_COMPONENT_ID,
+                                mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                                0,
+                                mavlink.MAVLINK_MSG_ID_SYS_STATUS,
+                                500000,
+                                0,
+                                0,
+                                0,
+                                0,
+                                0,
+                            )
                             _send(sock, ask.pack(mav), port)
                     last_beat = now
                 self._read(sock, mav)
@@ -143,8 +159,12 @@ class StartGate:
                         self.released_wall_s = now
                         self.held_s = round(now - self.first_waiting_s, 2)
                         self.waiting_at_release = sorted(waiting)
-                        log.info("start gate: releasing %s after %.1f s (waiting: %s)", sorted(ports),
-                                 self.held_s, sorted(waiting))
+                        log.info(
+                            "start gate: releasing %s after %.1f s (waiting: %s)",
+                            sorted(ports),
+                            self.held_s,
+                            sorted(waiting),
+                        )
                 if self.released_wall_s is not None:
                     pending = [s for s in ports if s not in self.confirmed]
                     if not pending or now - self.released_wall_s > 10.0:
@@ -153,8 +173,9 @@ class StartGate:
                         return
                     if now - last_set >= 0.3:
                         for sysid in pending:
-                            msg = mav.param_set_encode(sysid, AUTOPILOT_COMPONENT_ID, b"SIM_PREARM_FAIL", 0.0,
-                                                       mavlink.MAV_PARAM_TYPE_INT8)
+                            msg = mav.param_set_encode(
+                                sysid, AUTOPILOT_COMPONENT_ID, b"SIM_PREARM_FAIL", 0.0, mavlink.MAV_PARAM_TYPE_INT8
+                            )
                             _send(sock, msg.pack(mav), ports[sysid])
                         last_set = now
                 if not live:
@@ -165,7 +186,7 @@ class StartGate:
     def _read(self, sock, mav) -> None:
         try:
             data, _ = sock.recvfrom(65535)
-        except (socket.timeout, OSError):
+        except (TimeoutError, OSError):
             return
         for msg in mav.parse_buffer(data) or []:
             kind = msg.get_type()
@@ -174,8 +195,9 @@ class StartGate:
             if kind == "HEARTBEAT":
                 self.state[msg.get_srcSystem()] = (msg.custom_mode, bool(msg.base_mode & self.ARMED_FLAG))
             elif kind == "SYS_STATUS":
-                self.reports_prearm[msg.get_srcSystem()] = bool(msg.onboard_control_sensors_present
-                                                                & mavlink.MAV_SYS_STATUS_PREARM_CHECK)
+                self.reports_prearm[msg.get_srcSystem()] = bool(
+                    msg.onboard_control_sensors_present & mavlink.MAV_SYS_STATUS_PREARM_CHECK
+                )
             elif kind == "PARAM_VALUE" and self.released_wall_s is not None:
                 name = msg.param_id.decode() if isinstance(msg.param_id, bytes) else msg.param_id
                 if name.rstrip("\x00") == "SIM_PREARM_FAIL" and msg.param_value == 0.0:

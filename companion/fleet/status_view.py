@@ -23,9 +23,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["FleetView", "VehicleRow", "sysid_of_key", "record_decisions", "positions_lla", "nearest_separation",
-           "vehicle_rows",
-           "format_table", "rows_json"]
+__all__ = [
+    "FleetView",
+    "VehicleRow",
+    "sysid_of_key",
+    "record_decisions",
+    "positions_lla",
+    "nearest_separation",
+    "vehicle_rows",
+    "format_table",
+    "rows_json",
+]
 
 #: Events on ``uav/<sysid>/events`` that are not decisions (``companion serve``'s commands).
 NOT_DECISIONS = frozenset({"command"})
@@ -52,8 +60,8 @@ def event_kind(event: dict) -> str | None:
 class FleetView:
     """The latest status and the decisions of each vehicle heard (thread-safe ``on_*``)."""
 
-    status: dict = field(default_factory=dict)         # sysid -> latest status message
-    decisions: dict = field(default_factory=dict)      # sysid -> [decision events]
+    status: dict = field(default_factory=dict)  # sysid -> latest status message
+    decisions: dict = field(default_factory=dict)  # sysid -> [decision events]
     samples: int = 0
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
@@ -180,7 +188,7 @@ class VehicleRow:
     leg: int | None
     legs: int | None
     outcome: str | None
-    pos_ned_m: tuple | None            # in the common frame (the lowest sysid's home)
+    pos_ned_m: tuple | None  # in the common frame (the lowest sysid's home)
     nearest_m: float
     nearest_sysid: int | None
     decisions: int
@@ -188,11 +196,20 @@ class VehicleRow:
     t_s: float | None
 
     def as_dict(self) -> dict:
-        return {"sysid": self.sysid, "mode": self.mode, "armed": self.armed, "leg": self.leg, "legs": self.legs,
-                "outcome": self.outcome, "pos_ned_m": None if self.pos_ned_m is None else list(self.pos_ned_m),
-                "nearest_m": None if not math.isfinite(self.nearest_m) else self.nearest_m,
-                "nearest_sysid": self.nearest_sysid, "decisions": self.decisions,
-                "last_decision": self.last_decision, "t_s": self.t_s}
+        return {
+            "sysid": self.sysid,
+            "mode": self.mode,
+            "armed": self.armed,
+            "leg": self.leg,
+            "legs": self.legs,
+            "outcome": self.outcome,
+            "pos_ned_m": None if self.pos_ned_m is None else list(self.pos_ned_m),
+            "nearest_m": None if not math.isfinite(self.nearest_m) else self.nearest_m,
+            "nearest_sysid": self.nearest_sysid,
+            "decisions": self.decisions,
+            "last_decision": self.last_decision,
+            "t_s": self.t_s,
+        }
 
 
 def describe_decision(event: dict) -> str:
@@ -221,15 +238,22 @@ def vehicle_rows(statuses: dict, decisions: dict | None = None) -> list[VehicleR
         pos = positions.get(sysid)
         dist, other = nearest.get(sysid, (math.inf, None))
         leg = st.get("leg")
-        rows.append(VehicleRow(
-            sysid=sysid, mode=st.get("mode"), armed=st.get("armed"),
-            leg=leg if isinstance(leg, int) else None,
-            legs=st.get("legs") if isinstance(st.get("legs"), int) else None,
-            outcome=st.get("outcome"),
-            pos_ned_m=None if pos is None else tuple(round(float(v), 1) for v in pos),
-            nearest_m=dist, nearest_sysid=other, decisions=len(evs),
-            last_decision=describe_decision(evs[-1]) if evs else None,
-            t_s=st.get("t_s") if isinstance(st.get("t_s"), (int, float)) else None))
+        rows.append(
+            VehicleRow(
+                sysid=sysid,
+                mode=st.get("mode"),
+                armed=st.get("armed"),
+                leg=leg if isinstance(leg, int) else None,
+                legs=st.get("legs") if isinstance(st.get("legs"), int) else None,
+                outcome=st.get("outcome"),
+                pos_ned_m=None if pos is None else tuple(round(float(v), 1) for v in pos),
+                nearest_m=dist,
+                nearest_sysid=other,
+                decisions=len(evs),
+                last_decision=describe_decision(evs[-1]) if evs else None,
+                t_s=st.get("t_s") if isinstance(st.get("t_s"), (int, float)) else None,
+            )
+        )
     return rows
 
 
@@ -246,12 +270,12 @@ def format_table(rows, *, width: int = 60) -> str:
     head = ["sysid", "mode", "leg", "outcome", "position N,E,D (m)", "nearest (m)", "decisions", "last decision"]
     body = []
     for r in rows:
-        leg = "-" if r.leg is None else f"{r.leg}/{_cell(r.legs)}"      # the companion's leg index
+        leg = "-" if r.leg is None else f"{r.leg}/{_cell(r.legs)}"  # the companion's leg index
         pos = "-" if r.pos_ned_m is None else ",".join(f"{v:.1f}" for v in r.pos_ned_m)
         near = "-" if not math.isfinite(r.nearest_m) else f"{r.nearest_m:.1f} (#{r.nearest_sysid})"
         last = r.last_decision or "-"
         if len(last) > width:
-            last = last[:width - 3] + "..."
+            last = last[: width - 3] + "..."
         body.append([str(r.sysid), _cell(r.mode), leg, _cell(r.outcome), pos, near, str(r.decisions), last])
     widths = [max(len(line[k]) for line in [head] + body) for k in range(len(head))]
     fmt = lambda line: "  ".join(c.ljust(w) for c, w in zip(line, widths)).rstrip()  # noqa: E731

@@ -28,8 +28,18 @@ import numpy as np
 
 from companion.errors import ConfigError
 
-__all__ = ["Track", "Separation", "read_tlog_track", "tracks_in_frame", "common_grid", "resample", "separation",
-           "path_length_m", "achieved_speedup", "fleet_separation"]
+__all__ = [
+    "Track",
+    "Separation",
+    "read_tlog_track",
+    "tracks_in_frame",
+    "common_grid",
+    "resample",
+    "separation",
+    "path_length_m",
+    "achieved_speedup",
+    "fleet_separation",
+]
 
 #: Spacing of the common grid (wall s) added to the samples' own times.
 GRID_STEP_S = 0.05
@@ -115,8 +125,9 @@ def read_tlog_track(path: str | Path, sysid: int | None = None, *, component: in
                 sysid = msg.get_srcSystem()
             if msg.get_srcSystem() != sysid:
                 continue
-            rows.append((float(msg._timestamp), msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3,
-                         msg.time_boot_ms * 1e-3))
+            rows.append(
+                (float(msg._timestamp), msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3, msg.time_boot_ms * 1e-3)
+            )
     finally:
         conn.close()
     if not rows:
@@ -124,7 +135,7 @@ def read_tlog_track(path: str | Path, sysid: int | None = None, *, component: in
     arr = np.asarray(rows, dtype=np.float64)
     order = np.argsort(arr[:, 0], kind="stable")
     arr = arr[order]
-    keep = np.concatenate([[True], np.diff(arr[:, 0]) > 0.0])      # one sample per stamp
+    keep = np.concatenate([[True], np.diff(arr[:, 0]) > 0.0])  # one sample per stamp
     arr = arr[keep]
     return Track(int(sysid), arr[:, 0], arr[:, 1:4], arr[:, 4])
 
@@ -172,8 +183,9 @@ def resample(t_s, pos, grid) -> np.ndarray:
     t = np.asarray(t_s, dtype=np.float64)
     p = np.asarray(pos, dtype=np.float64).reshape(len(t), -1)
     g = np.asarray(grid, dtype=np.float64)
-    return np.column_stack([np.interp(g, t, p[:, k]) for k in range(p.shape[1])]) if len(g) else \
-        np.empty((0, p.shape[1]))
+    return (
+        np.column_stack([np.interp(g, t, p[:, k]) for k in range(p.shape[1])]) if len(g) else np.empty((0, p.shape[1]))
+    )
 
 
 def separation(times, positions, step_s: float = GRID_STEP_S) -> Separation:
@@ -254,11 +266,15 @@ def fleet_separation(tlogs, sysids=None, step_s: float = GRID_STEP_S) -> dict:
     ids = [t.sysid for t in tracks]
     lengths = {tr.sysid: path_length_m(p) for tr, p in zip(tracks, ned)}
     speed = {tr.sysid: achieved_speedup(tr) for tr in tracks}
-    return {"min_separation_m": sep.min_m,
-            "closest_pair": None if sep.pair is None else [ids[sep.pair[0]], ids[sep.pair[1]]],
-            "closest_t_s": sep.t_s, "common_s": sep.common_s,
-            "pair_min_m": {f"{ids[i]}-{ids[j]}": d for (i, j), d in sep.pair_min_m.items()},
-            "path_length_m": lengths, "samples": {t.sysid: len(t) for t in tracks},
-            "speedup": {k: v["speedup"] for k, v in speed.items()},
-            "max_lag_s": {k: v["max_lag_s"] for k, v in speed.items()},
-            "separation": sep}
+    return {
+        "min_separation_m": sep.min_m,
+        "closest_pair": None if sep.pair is None else [ids[sep.pair[0]], ids[sep.pair[1]]],
+        "closest_t_s": sep.t_s,
+        "common_s": sep.common_s,
+        "pair_min_m": {f"{ids[i]}-{ids[j]}": d for (i, j), d in sep.pair_min_m.items()},
+        "path_length_m": lengths,
+        "samples": {t.sysid: len(t) for t in tracks},
+        "speedup": {k: v["speedup"] for k, v in speed.items()},
+        "max_lag_s": {k: v["max_lag_s"] for k, v in speed.items()},
+        "separation": sep,
+    }

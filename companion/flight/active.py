@@ -15,7 +15,8 @@ instant).
 from __future__ import annotations
 
 import logging
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
@@ -47,8 +48,7 @@ class ReferenceOwner:
         The vehicle's heading now (where a turn starts from, and a hover's heading).
     """
 
-    def __init__(self, clock: MissionClock, *, turn_rate_rad_s: float,
-                 yaw_now_rad: Callable[[], float]) -> None:
+    def __init__(self, clock: MissionClock, *, turn_rate_rad_s: float, yaw_now_rad: Callable[[], float]) -> None:
         self.clock = clock
         self.turn_rate_rad_s = float(turn_rate_rad_s)
         self.yaw_now_rad = yaw_now_rad
@@ -61,8 +61,9 @@ class ReferenceOwner:
         self._listeners.append(listener)
         return lambda: self._listeners.remove(listener) if listener in self._listeners else None
 
-    def engage(self, trajectory, path_id: str, t0_s: float | None = None, *, turn: bool = False,
-               resume: bool = False) -> ActiveReference:
+    def engage(
+        self, trajectory, path_id: str, t0_s: float | None = None, *, turn: bool = False, resume: bool = False
+    ) -> ActiveReference:
         """Make ``trajectory`` the active reference from mission time ``t0_s`` (default now).
 
         A later ``t0_s`` keeps the current reference until then; ``turn``: first turn on the
@@ -71,10 +72,16 @@ class ReferenceOwner:
         """
         now = self.clock.now_s()
         later = t0_s is not None and t0_s > now
-        ref = ActiveReference(trajectory, now if t0_s is None else t0_s, self.clock, path_id,
-                              turn_from_yaw_rad=self.yaw_now_rad() if turn else None,
-                              turn_rate_rad_s=self.turn_rate_rad_s, resume=resume,
-                              previous=self.current if later else None)
+        ref = ActiveReference(
+            trajectory,
+            now if t0_s is None else t0_s,
+            self.clock,
+            path_id,
+            turn_from_yaw_rad=self.yaw_now_rad() if turn else None,
+            turn_rate_rad_s=self.turn_rate_rad_s,
+            resume=resume,
+            previous=self.current if later else None,
+        )
         self.current, self._hover = ref, None
         self._tell(ref)
         return ref

@@ -23,13 +23,23 @@ No asyncio and no I/O.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
 from companion.flight.ports import FlightSink
-from companion.threats.alerts import (LEVEL_NAMES, LOW, NONE, REPORT, AlertSettings, Approach, alert_statustext,
-                                      closest_approach, collision_action, collision_fields)
+from companion.threats.alerts import (
+    LEVEL_NAMES,
+    LOW,
+    NONE,
+    REPORT,
+    AlertSettings,
+    Approach,
+    alert_statustext,
+    closest_approach,
+    collision_action,
+    collision_fields,
+)
 from companion.threats.decision.spacetime import STATIC_ID
 
 __all__ = ["TrafficAlert", "TrafficAlerts"]
@@ -68,12 +78,18 @@ class TrafficAlert:
     def as_record(self) -> dict:
         """The flight record's ``alert`` line (and the zenoh event)."""
         a = self.approach
-        return {"t_s": self.t_s, "threat_id": self.threat_id, "traffic": self.traffic,
-                "level": LEVEL_NAMES.get(a.level, str(a.level)), "action": int(self.action),
-                "time_to_cpa_s": round(a.time_to_cpa_s, 3), "horizontal_m": round(a.horizontal_m, 3),
-                "vertical_m": round(a.vertical_m, 3),
-                "time_to_lowc_s": None if a.time_to_lowc_s is None else round(a.time_to_lowc_s, 3),
-                "text": None if self.statustext is None else self.statustext[0]}
+        return {
+            "t_s": self.t_s,
+            "threat_id": self.threat_id,
+            "traffic": self.traffic,
+            "level": LEVEL_NAMES.get(a.level, str(a.level)),
+            "action": int(self.action),
+            "time_to_cpa_s": round(a.time_to_cpa_s, 3),
+            "horizontal_m": round(a.horizontal_m, 3),
+            "vertical_m": round(a.vertical_m, 3),
+            "time_to_lowc_s": None if a.time_to_lowc_s is None else round(a.time_to_lowc_s, 3),
+            "text": None if self.statustext is None else self.statustext[0],
+        }
 
 
 @dataclasses.dataclass
@@ -105,8 +121,16 @@ class TrafficAlerts:
     sink : FlightSink
     """
 
-    def __init__(self, settings: AlertSettings, *, threats: Callable, reference: Callable,
-                 own_down_m: Callable[[], float | None], now_s: Callable[[], float], sink: FlightSink) -> None:
+    def __init__(
+        self,
+        settings: AlertSettings,
+        *,
+        threats: Callable,
+        reference: Callable,
+        own_down_m: Callable[[], float | None],
+        now_s: Callable[[], float],
+        sink: FlightSink,
+    ) -> None:
         self.settings = settings
         self.threats = threats
         self.reference = reference
@@ -133,8 +157,9 @@ class TrafficAlerts:
 
     def _approach(self, own: np.ndarray, threat, t_s: float) -> Approach:
         centre = np.atleast_2d(threat.position_at(t_s + self._tau_s))
-        return closest_approach(own, centre, float(threat.radius_m), _traffic(threat) == "manned",
-                                self.settings, self.settings.step_s)
+        return closest_approach(
+            own, centre, float(threat.radius_m), _traffic(threat) == "manned", self.settings, self.settings.step_s
+        )
 
     # ------------------------------------------------------------------ the task
     def check(self, now_mono_s: float | None = None) -> None:
@@ -181,7 +206,7 @@ class TrafficAlerts:
     def decided(self, decision) -> None:
         """Tell the decision that followed an alert: ``COLLISION`` with its action, at once."""
         conflict = getattr(decision, "conflict", None)
-        if conflict is None or conflict.threat_id == STATIC_ID:     # the static world is not traffic
+        if conflict is None or conflict.threat_id == STATIC_ID:  # the static world is not traffic
             return
         uid = conflict.threat_id
         action = collision_action(decision.kind, decision.label or "")
@@ -209,8 +234,11 @@ class TrafficAlerts:
 
     def _tell(self, uid: str, traffic: str, approach: Approach, action: int, t_s: float, text) -> None:
         self.alerts += 1
-        self.sink.alert(TrafficAlert(t_s, uid, traffic, approach, action,
-                                     collision_fields(uid.rsplit("/", 1)[-1], approach, action), text))
+        self.sink.alert(
+            TrafficAlert(
+                t_s, uid, traffic, approach, action, collision_fields(uid.rsplit("/", 1)[-1], approach, action), text
+            )
+        )
 
 
 def _uid(threat) -> str:

@@ -40,7 +40,8 @@ import dataclasses
 import functools
 import logging
 import math
-from typing import TYPE_CHECKING, Callable, Protocol
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
 
 from companion.flight.active import ReferenceOwner
 from companion.flight.alerting import TrafficAlerts
@@ -49,8 +50,16 @@ from companion.flight.reference import ActiveReference
 from companion.threats.decision.kinds import Trigger
 from companion.threats.decision.prediction import is_manned
 from companion.threats.decision.screen import MonitorScreen, same_reports
-from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
-                                             Observation, active_conflict, decide, plan_alternatives_for)
+from companion.threats.decision.step import (
+    ActiveTrajectory,
+    DecisionPolicy,
+    DecisionState,
+    LegContext,
+    Observation,
+    active_conflict,
+    decide,
+    plan_alternatives_for,
+)
 
 if TYPE_CHECKING:
     from companion.threats.decision.choice import Decision
@@ -126,11 +135,15 @@ class _Timing:
         ``transport`` (to the job and back, beyond its compute), ``gate`` (the delay check) and
         ``start`` (engaged to its first setpoint: the new reference takes effect at its start
         time, the decision's expected duration after the trigger), in ms."""
-        ms = lambda a, b: round((b - a) * 1000.0, 2)     # noqa: E731
+        ms = lambda a, b: round((b - a) * 1000.0, 2)  # noqa: E731
         job = ms(self.submitted_s, self.returned_s)
-        return {"queued": ms(self.trigger_s, self.submitted_s), "compute": round(decide_ms, 2),
-                "transport": round(job - decide_ms, 2), "gate": ms(self.returned_s, self.engaged_s),
-                "start": ms(self.engaged_s, first_sent_s)}
+        return {
+            "queued": ms(self.trigger_s, self.submitted_s),
+            "compute": round(decide_ms, 2),
+            "transport": round(job - decide_ms, 2),
+            "gate": ms(self.returned_s, self.engaged_s),
+            "start": ms(self.engaged_s, first_sent_s),
+        }
 
 
 @dataclasses.dataclass
@@ -175,12 +188,25 @@ class Avoidance:
         none.
     """
 
-    def __init__(self, *, policy: DecisionPolicy, state: DecisionState, owner: ReferenceOwner,
-                 threats: ThreatSource, jobs: Jobs, sink: FlightSink, now_s: Callable[[], float],
-                 monotonic_s: Callable[[], float], send_now: Callable[[], None],
-                 position_ned_m: Callable, alternatives: AlternativesPlan,
-                 commit_gate: CommitGate | None = None, steps: DecisionSteps = DecisionSteps(),
-                 alerts=None, send_at: Callable[[float], None] | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        policy: DecisionPolicy,
+        state: DecisionState,
+        owner: ReferenceOwner,
+        threats: ThreatSource,
+        jobs: Jobs,
+        sink: FlightSink,
+        now_s: Callable[[], float],
+        monotonic_s: Callable[[], float],
+        send_now: Callable[[], None],
+        position_ned_m: Callable,
+        alternatives: AlternativesPlan,
+        commit_gate: CommitGate | None = None,
+        steps: DecisionSteps = DecisionSteps(),
+        alerts=None,
+        send_at: Callable[[float], None] | None = None,
+    ) -> None:
         self.policy = policy
         self.steps = steps
         self.state = state
@@ -201,16 +227,25 @@ class Avoidance:
         self.alternatives_skipped = 0
         self._busy = False
         self._queued: tuple[Trigger, float] | None = None
-        self._unanswered: tuple | None = None     # (reference, threat reports, until s): a manned stand-off
+        self._unanswered: tuple | None = None  # (reference, threat reports, until s): a manned stand-off
         self._resume_wanted: Callable | None = None
         self._told: list[_Pending] = []
         self._alt_busy = False
         self._alt_dirty = False
         self._alt_last_key: tuple | None = None
         self.screen = MonitorScreen(policy.settings, policy.accel_bound_m_s2)
-        self.alerts = None if alerts is None or not alerts.enabled else TrafficAlerts(
-            alerts, threats=threats.threats_at, reference=lambda: owner.current, own_down_m=self._own_down_m,
-            now_s=now_s, sink=sink)
+        self.alerts = (
+            None
+            if alerts is None or not alerts.enabled
+            else TrafficAlerts(
+                alerts,
+                threats=threats.threats_at,
+                reference=lambda: owner.current,
+                own_down_m=self._own_down_m,
+                now_s=now_s,
+                sink=sink,
+            )
+        )
 
     def _own_down_m(self) -> float | None:
         pos = self.position_ned_m()
@@ -251,8 +286,11 @@ class Avoidance:
         if self._unanswered is None:
             return False
         ref, reports, until_s = self._unanswered
-        same = ref is self.owner.current and now_mono_s < until_s and same_reports(
-            reports, tuple(self.threats.threats_at(self.now_s())))
+        same = (
+            ref is self.owner.current
+            and now_mono_s < until_s
+            and same_reports(reports, tuple(self.threats.threats_at(self.now_s())))
+        )
         if not same:
             self._unanswered = None
         return same
@@ -284,16 +322,20 @@ class Avoidance:
     def _start(self, trigger: Trigger, trigger_mono_s: float, answered: Callable | None) -> None:
         obs = self._observation(trigger)
         if trigger is not Trigger.RESUME and self._stays_clear(obs):
-            self._next()                        # the usual tick or report: nothing for a worker to do
+            self._next()  # the usual tick or report: nothing for a worker to do
             return
         self._busy = True
         asked = (self.leg, self.owner.current, self.state, obs.threats)
         timing = _Timing(trigger_mono_s, self.monotonic_s())
-        self.jobs.submit("decision", self.steps.decide, (self.state, obs, self.leg, self.policy),
-                         done=functools.partial(self._decided, asked, trigger, timing, answered),
-                         failed=functools.partial(self._failed, answered))
+        self.jobs.submit(
+            "decision",
+            self.steps.decide,
+            (self.state, obs, self.leg, self.policy),
+            done=functools.partial(self._decided, asked, trigger, timing, answered),
+            failed=functools.partial(self._failed, answered),
+        )
         if trigger is not Trigger.RESUME and self.alerts is not None:
-            self.alerts.check()                 # a conflict: told while the decision is made
+            self.alerts.check()  # a conflict: told while the decision is made
 
     def _stays_clear(self, obs: Observation) -> bool:
         """The active reference stays clear of the observed threats: proven by the screen
@@ -318,8 +360,9 @@ class Avoidance:
         try:
             decision, state = result
             self._adopt(state, sent)
-            self._unanswered = ((ref, reports, timing.returned_s + MANNED_REDECIDE_S)
-                                if _manned_unanswered(decision, reports) else None)
+            self._unanswered = (
+                (ref, reports, timing.returned_s + MANNED_REDECIDE_S) if _manned_unanswered(decision, reports) else None
+            )
             if leg is self.leg and ref is self.owner.current:
                 self._apply(decision, trigger, timing)
             elif self.owner.current is not None:
@@ -343,8 +386,9 @@ class Avoidance:
         if self.state is sent:
             self.state = returned
         else:
-            self.state = dataclasses.replace(returned, alternatives=self.state.alternatives,
-                                             counter=max(returned.counter, self.state.counter))
+            self.state = dataclasses.replace(
+                returned, alternatives=self.state.alternatives, counter=max(returned.counter, self.state.counter)
+            )
 
     def _next(self) -> None:
         """Start what waits: a resume first, then the folded triggers."""
@@ -366,8 +410,13 @@ class Avoidance:
         """Engage the decision's trajectory (after the delay check), then tell it; a decision
         without a new reference (``none``) is logged only."""
         if decision.trajectory is None:
-            log.debug("threat check (%s): %s %s (%.1f ms)", trigger.value, decision.kind.value,
-                      decision.reason, decision.decide_ms)
+            log.debug(
+                "threat check (%s): %s %s (%.1f ms)",
+                trigger.value,
+                decision.kind.value,
+                decision.reason,
+                decision.decide_ms,
+            )
             return
         current = self.owner.current
         proceed = functools.partial(self._commit, decision, trigger, timing, current)
@@ -381,8 +430,9 @@ class Avoidance:
             log.info("decision %s dropped: the reference changed during the delay check", decision.kind.value)
             return
         timing.engaged_s = self.monotonic_s()
-        ref = self.owner.engage(decision.trajectory, decision.path_id, t0_s=decision.start_t_s,
-                                resume=bool(decision.resume))
+        ref = self.owner.engage(
+            decision.trajectory, decision.path_id, t0_s=decision.start_t_s, resume=bool(decision.resume)
+        )
         self.send_now()
         if self.send_at is not None and ref.turn_start_s > self.now_s():
             self.send_at(ref.turn_start_s)
@@ -410,16 +460,28 @@ class Avoidance:
         self._told = waiting
 
     def _event(self, decision, trigger: Trigger) -> dict:
-        return {**decision.as_event(), "label": decision.label or decision.kind.value,
-                "trigger": trigger.value, "latency_ms": None, "t_s": self.now_s(),
-                "pos_ned_m": self.position_ned_m(), "leg": None if self.leg is None else self.leg.index}
+        return {
+            **decision.as_event(),
+            "label": decision.label or decision.kind.value,
+            "trigger": trigger.value,
+            "latency_ms": None,
+            "t_s": self.now_s(),
+            "pos_ned_m": self.position_ned_m(),
+            "leg": None if self.leg is None else self.leg.index,
+        }
 
     def _publish(self, decision, event: dict) -> None:
         self.decisions += 1
-        log.warning("decision %s (%s, %s): %s (latency %s ms, decide %.1f ms, plan %.1f ms)",
-                    event["event"], event["label"], event["trigger"], decision.reason,
-                    "n/a" if event["latency_ms"] is None else f"{event['latency_ms']:.1f}",
-                    decision.decide_ms, decision.plan_ms)
+        log.warning(
+            "decision %s (%s, %s): %s (latency %s ms, decide %.1f ms, plan %.1f ms)",
+            event["event"],
+            event["label"],
+            event["trigger"],
+            decision.reason,
+            "n/a" if event["latency_ms"] is None else f"{event['latency_ms']:.1f}",
+            decision.decide_ms,
+            decision.plan_ms,
+        )
         self.sink.decision(decision, event)
         if self.alerts is not None:
             self.alerts.decided(decision)
@@ -456,17 +518,22 @@ class Avoidance:
         start = None if ref is None else ref.state(obs.t_s + plan.lead_s)[0]
         self._alt_busy, self._alt_dirty = True, False
         fn = functools.partial(self.steps.plan_alternatives, max_time_s=plan.budget_s, start_ned_m=start)
-        self.jobs.submit("alternatives", fn, (self.state, obs, self.leg, self.policy, plan.k),
-                         done=functools.partial(self._alternatives_done, self.leg, self.state, key, obs.t_s),
-                         failed=self._alternatives_failed)
+        self.jobs.submit(
+            "alternatives",
+            fn,
+            (self.state, obs, self.leg, self.policy, plan.k),
+            done=functools.partial(self._alternatives_done, self.leg, self.state, key, obs.t_s),
+            failed=self._alternatives_failed,
+        )
 
     def _alternatives_done(self, leg: LegContext, sent, key, t_s: float, result) -> None:
         alternatives, state = result
         self._alt_busy = False
-        if leg is self.leg and alternatives:           # none found: keep the previous ones
+        if leg is self.leg and alternatives:  # none found: keep the previous ones
             base = state if self.state is sent else self.state
-            self.state = dataclasses.replace(base.with_alternatives(alternatives),
-                                             counter=max(state.counter, self.state.counter))
+            self.state = dataclasses.replace(
+                base.with_alternatives(alternatives), counter=max(state.counter, self.state.counter)
+            )
             self._alt_last_key = key
             self.sink_path()
             self.sink.record("alternatives", leg=leg.index, t_s=t_s, paths=[a.path_ned_m for a in alternatives])

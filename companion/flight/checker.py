@@ -111,10 +111,12 @@ class TrajectoryChecker:
         report = self.closed_loop.check_and_stretch(trajectory) if stretch else self.closed_loop.check(trajectory)
         flown = report.trajectory
         if report.stretch > 1.0:
-            flown.notes.append(f"feasibility: timing stretched x{report.stretch:.3g} ({trajectory.duration_s:.1f} s "
-                               f"-> {flown.duration_s:.1f} s; first timing: max |delta| "
-                               f"{report.initial_max_abs_delta:.2f}, tracking error "
-                               f"{report.initial_max_tracking_error_m:.2f} m)")
+            flown.notes.append(
+                f"feasibility: timing stretched x{report.stretch:.3g} ({trajectory.duration_s:.1f} s "
+                f"-> {flown.duration_s:.1f} s; first timing: max |delta| "
+                f"{report.initial_max_abs_delta:.2f}, tracking error "
+                f"{report.initial_max_tracking_error_m:.2f} m)"
+            )
         if not report.feasible:
             flown.notes.append(f"feasibility: still infeasible: {report.reason}")
             return Checked(TrajectoryStatus.INFEASIBLE, flown, report, report.reason)

@@ -36,7 +36,7 @@ ports differ (``companion.flight.ports``). No asyncio and no I/O here.
 from __future__ import annotations
 
 import logging
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 from companion.flight.active import ReferenceOwner
 from companion.flight.avoidance import Avoidance
@@ -89,32 +89,63 @@ class FlightExecutor:
         See ``Scheduler``.
     """
 
-    def __init__(self, legs: Sequence, *, owner: ReferenceOwner, vehicle: VehiclePort, jobs: Jobs,
-                 sink: FlightSink, stream: Callable[[float, bool], None], now_s: Callable[[], float],
-                 clock_s: Callable[[], float], setpoint_rate_hz: float, timeout_margin_s: float, replanner: LegReplanner,
-                 avoidance: Avoidance | None = None, monitor_rate_hz: float = MONITOR_RATE_HZ,
-                 alternatives_rate_hz: float = 0.2, alerts_rate_hz: float = 1.0, leg_started: Callable | None = None,
-                 seed: int = 0, slack_s: float = 0.0) -> None:
+    def __init__(
+        self,
+        legs: Sequence,
+        *,
+        owner: ReferenceOwner,
+        vehicle: VehiclePort,
+        jobs: Jobs,
+        sink: FlightSink,
+        stream: Callable[[float, bool], None],
+        now_s: Callable[[], float],
+        clock_s: Callable[[], float],
+        setpoint_rate_hz: float,
+        timeout_margin_s: float,
+        replanner: LegReplanner,
+        avoidance: Avoidance | None = None,
+        monitor_rate_hz: float = MONITOR_RATE_HZ,
+        alternatives_rate_hz: float = 0.2,
+        alerts_rate_hz: float = 1.0,
+        leg_started: Callable | None = None,
+        seed: int = 0,
+        slack_s: float = 0.0,
+    ) -> None:
         self.owner = owner
         self.avoidance = avoidance
         self.stream = stream
         self.clock_s = clock_s
-        self.legs = LegRunner(legs, owner=owner, vehicle=vehicle, jobs=jobs, sink=sink, now_s=now_s,
-                              replanner=replanner, timeout_margin_s=timeout_margin_s,
-                              avoidance=avoidance, leg_started=leg_started, seed=seed)
-        self.schedule = Scheduler(self._table(setpoint_rate_hz, monitor_rate_hz, alternatives_rate_hz,
-                                              alerts_rate_hz), slack_s=slack_s)
+        self.legs = LegRunner(
+            legs,
+            owner=owner,
+            vehicle=vehicle,
+            jobs=jobs,
+            sink=sink,
+            now_s=now_s,
+            replanner=replanner,
+            timeout_margin_s=timeout_margin_s,
+            avoidance=avoidance,
+            leg_started=leg_started,
+            seed=seed,
+        )
+        self.schedule = Scheduler(
+            self._table(setpoint_rate_hz, monitor_rate_hz, alternatives_rate_hz, alerts_rate_hz), slack_s=slack_s
+        )
 
-    def _table(self, setpoint_rate_hz: float, monitor_rate_hz: float, alternatives_rate_hz: float,
-               alerts_rate_hz: float) -> list[Task]:
-        rows = [Task("setpoints", setpoint_rate_hz, lambda now: self.stream(now, True), budget_ms=2.0),
-                Task("prepare", PREPARE_RATE_HZ, lambda now: self.owner.prepare(), budget_ms=4.0),
-                Task("phase", PHASE_RATE_HZ, self.legs.step, budget_ms=2.0)]
+    def _table(
+        self, setpoint_rate_hz: float, monitor_rate_hz: float, alternatives_rate_hz: float, alerts_rate_hz: float
+    ) -> list[Task]:
+        rows = [
+            Task("setpoints", setpoint_rate_hz, lambda now: self.stream(now, True), budget_ms=2.0),
+            Task("prepare", PREPARE_RATE_HZ, lambda now: self.owner.prepare(), budget_ms=4.0),
+            Task("phase", PHASE_RATE_HZ, self.legs.step, budget_ms=2.0),
+        ]
         if self.avoidance is not None:
-            rows += [Task("tell", setpoint_rate_hz, self.avoidance.tell_engaged, budget_ms=1.0),
-                     Task("monitor", monitor_rate_hz, self.avoidance.monitor, budget_ms=8.0),
-                     Task("alternatives", alternatives_rate_hz, self.avoidance.refresh_alternatives,
-                          budget_ms=2.0)]
+            rows += [
+                Task("tell", setpoint_rate_hz, self.avoidance.tell_engaged, budget_ms=1.0),
+                Task("monitor", monitor_rate_hz, self.avoidance.monitor, budget_ms=8.0),
+                Task("alternatives", alternatives_rate_hz, self.avoidance.refresh_alternatives, budget_ms=2.0),
+            ]
             if self.avoidance.alerts is not None:
                 rows.append(Task("alerts", alerts_rate_hz, self.avoidance.alerts.check, budget_ms=4.0))
         return rows

@@ -28,14 +28,9 @@ import itertools
 import logging
 import math
 import time
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
-
-from heli_model import dynamics
-from heli_model.control import Setpoint as ModelSetpoint
-from heli_model.model import HeliModel
-from heli_model.vehicle_update import VehicleCommand, VehicleUpdate
 
 from companion.flight.active import ReferenceOwner
 from companion.flight.avoidance import AlternativesPlan, Avoidance
@@ -46,9 +41,21 @@ from companion.flight.ports import VehicleView
 from companion.threats.decision.kinds import DecisionKind, Strategy, Trigger
 from companion.threats.decision.step import DecisionPolicy, DecisionState
 from companion.threats.model import Threat, ThreatTable
+from heli_model import dynamics
+from heli_model.control import Setpoint as ModelSetpoint
+from heli_model.model import HeliModel
+from heli_model.vehicle_update import VehicleCommand, VehicleUpdate
 
-__all__ = ["VirtualClock", "ModelVehicle", "JobLatency", "InlineJobs", "ThreatFeed", "FlightLog",
-           "FastTimeResult", "FastTimeFlight"]
+__all__ = [
+    "VirtualClock",
+    "ModelVehicle",
+    "JobLatency",
+    "InlineJobs",
+    "ThreatFeed",
+    "FlightLog",
+    "FastTimeResult",
+    "FastTimeFlight",
+]
 
 log = logging.getLogger(__name__)
 
@@ -103,10 +110,13 @@ class ModelVehicle:
 
     def command(self, setpoint) -> None:
         """The setpoint streamed (``companion.flight.setpoint.Setpoint``)."""
-        self.setpoint = ModelSetpoint(np.asarray(setpoint.pos_ned_m, dtype=float),
-                                      None if setpoint.vel_ned_m_s is None else np.asarray(setpoint.vel_ned_m_s, dtype=float),
-                                      None if setpoint.acc_ned_m_s2 is None else np.asarray(setpoint.acc_ned_m_s2, dtype=float),
-                                      setpoint.yaw_rad, setpoint.yaw_rate_rad_s)
+        self.setpoint = ModelSetpoint(
+            np.asarray(setpoint.pos_ned_m, dtype=float),
+            None if setpoint.vel_ned_m_s is None else np.asarray(setpoint.vel_ned_m_s, dtype=float),
+            None if setpoint.acc_ned_m_s2 is None else np.asarray(setpoint.acc_ned_m_s2, dtype=float),
+            setpoint.yaw_rad,
+            setpoint.yaw_rate_rad_s,
+        )
 
     def advance(self, dt_s: float) -> None:
         """Fly ``dt_s`` on the last setpoint: the controller at its own period, RK4 within."""
@@ -179,9 +189,9 @@ class InlineJobs:
         result = None
         try:
             result = fn(*args)
-            outcome = lambda: done(result)          # noqa: E731 - delivered later
+            outcome = lambda: done(result)  # noqa: E731 - delivered later
         except Exception as exc:  # noqa: BLE001 - a job's failure is the caller's to handle
-            outcome = functools.partial(failed, exc)     # ``exc`` itself is unbound after the block
+            outcome = functools.partial(failed, exc)  # ``exc`` itself is unbound after the block
         spent = time.perf_counter() - t0
         self.wall_s.setdefault(name, []).append(spent)
         took = spent * self.job_time_scale if self.latency is None else self.latency.of(name, args, result)
@@ -332,12 +342,24 @@ class FastTimeFlight:
         The local frame's origin, for ``global`` threats (ADS-B reports).
     """
 
-    def __init__(self, legs, settings, *, threats=None, strategy: Strategy = Strategy.HYBRID,
-                 policy: DecisionPolicy | None = None, seed: int = 0,
-                 start_yaw_rad: float = 0.0, model: HeliModel | None = None, job_time_scale: float = 1.0,
-                 world=None, replanner: LegReplanner | None = None,
-                 update: VehicleUpdate | None = None, job_latency: JobLatency | None = None,
-                 home=None) -> None:
+    def __init__(
+        self,
+        legs,
+        settings,
+        *,
+        threats=None,
+        strategy: Strategy = Strategy.HYBRID,
+        policy: DecisionPolicy | None = None,
+        seed: int = 0,
+        start_yaw_rad: float = 0.0,
+        model: HeliModel | None = None,
+        job_time_scale: float = 1.0,
+        world=None,
+        replanner: LegReplanner | None = None,
+        update: VehicleUpdate | None = None,
+        job_latency: JobLatency | None = None,
+        home=None,
+    ) -> None:
         self.settings = settings
         self.clock = VirtualClock()
         start = np.asarray(legs[0].trajectory.sample(np.array([0.0]))[0][0], dtype=float)
@@ -345,29 +367,54 @@ class FastTimeFlight:
         self.vehicle = ModelVehicle(update, start, start_yaw_rad)
         self.jobs = InlineJobs(self.clock, job_time_scale, job_latency)
         self.log = FlightLog(self.clock.now_s)
-        self.owner = ReferenceOwner(self.clock, turn_rate_rad_s=settings.flight.turn_rate_rad_s,
-                                    yaw_now_rad=lambda: self.vehicle.yaw_rad)
+        self.owner = ReferenceOwner(
+            self.clock, turn_rate_rad_s=settings.flight.turn_rate_rad_s, yaw_now_rad=lambda: self.vehicle.yaw_rad
+        )
         self.feed = ThreatFeed(threats, home) if threats is not None else None
-        self.avoidance = None if self.feed is None else \
-            self._avoidance(self.feed, policy or DecisionPolicy.from_settings(settings, strategy), seed)
+        self.avoidance = (
+            None
+            if self.feed is None
+            else self._avoidance(self.feed, policy or DecisionPolicy.from_settings(settings, strategy), seed)
+        )
         s = settings
         self.executor = FlightExecutor(
-            legs, owner=self.owner, vehicle=self.vehicle, jobs=self.jobs, sink=self.log, stream=self._stream,
-            now_s=self.clock.now_s, clock_s=self.clock.now_s, setpoint_rate_hz=s.link.setpoint_rate_hz,
-            timeout_margin_s=s.link.leg_timeout_margin_s, replanner=replanner or LegReplanner.in_world(
-                world or legs[0].world, TrajectoryPipeline.from_settings(s.smoothing, s.planning), s.flight),
+            legs,
+            owner=self.owner,
+            vehicle=self.vehicle,
+            jobs=self.jobs,
+            sink=self.log,
+            stream=self._stream,
+            now_s=self.clock.now_s,
+            clock_s=self.clock.now_s,
+            setpoint_rate_hz=s.link.setpoint_rate_hz,
+            timeout_margin_s=s.link.leg_timeout_margin_s,
+            replanner=replanner
+            or LegReplanner.in_world(
+                world or legs[0].world, TrajectoryPipeline.from_settings(s.smoothing, s.planning), s.flight
+            ),
             avoidance=self.avoidance,
-            alternatives_rate_hz=1.0 / s.flight.alternatives_period_s, alerts_rate_hz=s.alerts.rate_hz, seed=seed)
+            alternatives_rate_hz=1.0 / s.flight.alternatives_period_s,
+            alerts_rate_hz=s.alerts.rate_hz,
+            seed=seed,
+        )
         self._refs: list[np.ndarray] = []
 
     def _avoidance(self, feed: ThreatFeed, policy: DecisionPolicy, seed: int) -> Avoidance:
         f = self.settings.flight
-        return Avoidance(policy=policy, state=DecisionState.initial(policy, seed), owner=self.owner,
-                         threats=feed, jobs=self.jobs, sink=self.log, now_s=self.clock.now_s,
-                         monotonic_s=self.clock.now_s, send_now=lambda: self.executor.send_now(),
-                         position_ned_m=lambda: self.vehicle.pos_ned_m,
-                         alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s,
-                                                       f.alternatives_lead_s), alerts=self.settings.alerts)
+        return Avoidance(
+            policy=policy,
+            state=DecisionState.initial(policy, seed),
+            owner=self.owner,
+            threats=feed,
+            jobs=self.jobs,
+            sink=self.log,
+            now_s=self.clock.now_s,
+            monotonic_s=self.clock.now_s,
+            send_now=lambda: self.executor.send_now(),
+            position_ned_m=lambda: self.vehicle.pos_ned_m,
+            alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s, f.alternatives_lead_s),
+            alerts=self.settings.alerts,
+        )
 
     def _stream(self, now_s: float, scheduled: bool) -> None:
         setpoint = self.owner.setpoint_at(now_s)
@@ -413,6 +460,15 @@ class FastTimeFlight:
         outcome, reason = self.executor.outcome, self.executor.legs.reason
         if not self.executor.done:
             reason = f"not done after {max_s:g} s"
-        return FastTimeResult(np.asarray(times), np.asarray(positions), np.asarray(refs),
-                              self.log.decisions, self.log.events, outcome, reason,
-                              self.executor.schedule.report(), self.jobs.wall_s, states)
+        return FastTimeResult(
+            np.asarray(times),
+            np.asarray(positions),
+            np.asarray(refs),
+            self.log.decisions,
+            self.log.events,
+            outcome,
+            reason,
+            self.executor.schedule.report(),
+            self.jobs.wall_s,
+            states,
+        )

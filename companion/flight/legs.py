@@ -18,13 +18,13 @@ import enum
 import functools
 import logging
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from companion.flight.active import ReferenceOwner
-from companion.flight.plan import plan_leg
 from companion.flight.phases import ActionKind, LegObservation, LegState, leg_step
+from companion.flight.plan import plan_leg
 from companion.flight.ports import FlightSink, Jobs, VehiclePort
 from companion.threats.decision.step import LegContext
 
@@ -37,8 +37,8 @@ class FlightOutcome(enum.Enum):
     """Where the legs stand."""
 
     FLYING = "flying"
-    COMPLETED = "completed"     # every leg reached
-    ABORTED = "aborted"         # ``LegRunner.reason`` says why
+    COMPLETED = "completed"  # every leg reached
+    ABORTED = "aborted"  # ``LegRunner.reason`` says why
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,7 +50,7 @@ class LegReplanner:
     fn: Callable
 
     @classmethod
-    def in_world(cls, world, pipeline, flight) -> "LegReplanner":
+    def in_world(cls, world, pipeline, flight) -> LegReplanner:
         """Replans in ``world`` (the mission's) through ``pipeline`` (the legs' trajectory
         pipeline) with the ``flight`` planning settings."""
         return cls(functools.partial(replan_from, world=world, pipeline=pipeline, flight=flight))
@@ -59,8 +59,9 @@ class LegReplanner:
 def replan_from(leg, start_ned_m, seed: int, *, world, pipeline, flight):
     """``leg`` planned again from ``start_ned_m`` (``companion.flight.plan.plan_leg``), its
     randomness from ``seed``."""
-    return plan_leg(leg.index, leg.waypoint, start_ned_m, world, pipeline=pipeline, settings=flight,
-                    rng=np.random.default_rng(seed))
+    return plan_leg(
+        leg.index, leg.waypoint, start_ned_m, world, pipeline=pipeline, settings=flight, rng=np.random.default_rng(seed)
+    )
 
 
 class LegRunner:
@@ -86,10 +87,21 @@ class LegRunner:
         Seeds of the replans (each replan ``seed + its number``).
     """
 
-    def __init__(self, legs: Sequence, *, owner: ReferenceOwner, vehicle: VehiclePort, jobs: Jobs,
-                 sink: FlightSink, now_s: Callable[[], float], replanner: LegReplanner,
-                 timeout_margin_s: float, avoidance=None, leg_started: Callable | None = None,
-                 seed: int = 0) -> None:
+    def __init__(
+        self,
+        legs: Sequence,
+        *,
+        owner: ReferenceOwner,
+        vehicle: VehiclePort,
+        jobs: Jobs,
+        sink: FlightSink,
+        now_s: Callable[[], float],
+        replanner: LegReplanner,
+        timeout_margin_s: float,
+        avoidance=None,
+        leg_started: Callable | None = None,
+        seed: int = 0,
+    ) -> None:
         self.legs = list(legs)
         self.owner = owner
         self.vehicle = vehicle
@@ -107,7 +119,7 @@ class LegRunner:
         self.reason = ""
         self.reached = 0
         self.relink_pending = False
-        self._waiting = False              # a replan or a way back is being worked out
+        self._waiting = False  # a replan or a way back is being worked out
         self._hold_until_s: float | None = None
         self._replans = 0
 
@@ -150,13 +162,22 @@ class LegRunner:
         view, ref = self.vehicle.view(), self.owner.current
         radius = leg.waypoint.acceptance_radius_m
         return LegObservation(
-            t_s=t_s, seq=leg.waypoint.seq, connected=view.connected, armed=view.armed,
-            guided=view.guided, mode_name=view.mode_name, relink_pending=self.relink_pending,
-            dist_to_goal_m=math.inf if view.pos_ned_m is None else
-            math.dist(view.pos_ned_m.tolist(), leg.goal_ned_m.tolist()),
-            acceptance_radius_m=radius, ref_end_t_s=None if ref is None else ref.t_end_s,
+            t_s=t_s,
+            seq=leg.waypoint.seq,
+            connected=view.connected,
+            armed=view.armed,
+            guided=view.guided,
+            mode_name=view.mode_name,
+            relink_pending=self.relink_pending,
+            dist_to_goal_m=math.inf
+            if view.pos_ned_m is None
+            else math.dist(view.pos_ned_m.tolist(), leg.goal_ned_m.tolist()),
+            acceptance_radius_m=radius,
+            ref_end_t_s=None if ref is None else ref.t_end_s,
             ref_ends_short=ref is not None and ref.end_gap_m(leg.goal_ned_m) > radius,
-            ref_resume=ref is not None and ref.resume, timeout_margin_s=self.timeout_margin_s)
+            ref_resume=ref is not None and ref.resume,
+            timeout_margin_s=self.timeout_margin_s,
+        )
 
     def on_link_back(self, pos_ned_m) -> None:
         """The link came back after a loss: hold where the vehicle is, then replan the leg."""
@@ -182,8 +203,12 @@ class LegRunner:
             self.avoidance.end_leg()
         self.reached += 1
         pos = self.vehicle.view().pos_ned_m
-        self.sink.event("reached", leg=leg.index, seq=leg.waypoint.seq,
-                        error_m=None if pos is None else round(float(np.linalg.norm(pos - leg.goal_ned_m)), 3))
+        self.sink.event(
+            "reached",
+            leg=leg.index,
+            seq=leg.waypoint.seq,
+            error_m=None if pos is None else round(float(np.linalg.norm(pos - leg.goal_ned_m)), 3),
+        )
         self._hold_until_s = t_s + max(leg.waypoint.hold_s, 0.0)
         if leg.waypoint.hold_s <= 0:
             self._next_leg()
@@ -209,8 +234,13 @@ class LegRunner:
             return
         self._waiting = True
         self._replans += 1
-        self.jobs.submit("replan", self.replanner.fn, (leg, pos, self.seed + self._replans),
-                         done=functools.partial(self._replanned, leg, pos), failed=self._replan_failed)
+        self.jobs.submit(
+            "replan",
+            self.replanner.fn,
+            (leg, pos, self.seed + self._replans),
+            done=functools.partial(self._replanned, leg, pos),
+            failed=self._replan_failed,
+        )
 
     def _replanned(self, leg, pos, new) -> None:
         self._waiting = False
@@ -218,8 +248,11 @@ class LegRunner:
             return
         if new is not None:
             self.owner.engage(new.trajectory, f"leg{leg.index}-resume", turn=True)
-        checked = None if new is None or new.feasibility is None else \
-            {k: v for k, v in new.feasibility.items() if k != "pieces"}
+        checked = (
+            None
+            if new is None or new.feasibility is None
+            else {k: v for k, v in new.feasibility.items() if k != "pieces"}
+        )
         self.sink.event("resumed", leg=leg.index, from_ned_m=pos, feasibility=checked)
 
     def _replan_failed(self, error: BaseException) -> None:
@@ -238,8 +271,12 @@ class LegRunner:
     def _way_back(self, leg, reason: str, decision) -> None:
         self._waiting = False
         if decision is not None and decision.trajectory is not None:
-            self.sink.event("continue", leg=leg.index, reason=reason, decision=decision.kind.value,
-                            path_id=decision.path_id)
+            self.sink.event(
+                "continue", leg=leg.index, reason=reason, decision=decision.kind.value, path_id=decision.path_id
+            )
         else:
-            log.info("leg %d: no clear way back to the mission yet (%s)", leg.index,
-                     "no decision" if decision is None else decision.reason)
+            log.info(
+                "leg %d: no clear way back to the mission yet (%s)",
+                leg.index,
+                "no decision" if decision is None else decision.reason,
+            )

@@ -32,8 +32,16 @@ import enum
 import math
 from dataclasses import dataclass, replace
 
-__all__ = ["LegPhase", "ActionKind", "LegAction", "LegState", "LegObservation", "leg_step",
-           "RESUME_AFTER_S", "RESUME_RETRY_S"]
+__all__ = [
+    "LegPhase",
+    "ActionKind",
+    "LegAction",
+    "LegState",
+    "LegObservation",
+    "leg_step",
+    "RESUME_AFTER_S",
+    "RESUME_RETRY_S",
+]
 
 #: A reference that ended short of its goal without asking to resume is continued this long
 #: after its end (s of mission time).
@@ -45,12 +53,12 @@ RESUME_RETRY_S = 1.0
 class LegPhase(enum.Enum):
     """Where the flight of one leg is."""
 
-    FOLLOWING = "following"            # a reference is flown (or none yet, e.g. after link back)
-    ARRIVING = "arriving"              # the reference ended at the goal; the vehicle closes in
-    STOPPED_SHORT = "stopped_short"    # the reference ended short of the goal (evade / hold)
-    REACHED = "reached"                # done (terminal)
-    TIMED_OUT = "timed_out"            # the goal was not reached in time (terminal)
-    ABORTED = "aborted"                # disarmed or not in GUIDED any more (terminal)
+    FOLLOWING = "following"  # a reference is flown (or none yet, e.g. after link back)
+    ARRIVING = "arriving"  # the reference ended at the goal; the vehicle closes in
+    STOPPED_SHORT = "stopped_short"  # the reference ended short of the goal (evade / hold)
+    REACHED = "reached"  # done (terminal)
+    TIMED_OUT = "timed_out"  # the goal was not reached in time (terminal)
+    ABORTED = "aborted"  # disarmed or not in GUIDED any more (terminal)
 
     @property
     def terminal(self) -> bool:
@@ -60,11 +68,11 @@ class LegPhase(enum.Enum):
 class ActionKind(enum.Enum):
     """What the daemon does after a step."""
 
-    KEEP = "keep"          # keep streaming the active reference
-    RESUME = "resume"      # plan back from the stopped reference to the leg's goal
-    REPLAN = "replan"      # replan the rest of the leg from where the vehicle is (link back)
-    REACHED = "reached"    # the leg is done
-    ABORT = "abort"        # end the flight (``LegAction.reason`` says why)
+    KEEP = "keep"  # keep streaming the active reference
+    RESUME = "resume"  # plan back from the stopped reference to the leg's goal
+    REPLAN = "replan"  # replan the rest of the leg from where the vehicle is (link back)
+    REACHED = "reached"  # the leg is done
+    ABORT = "abort"  # end the flight (``LegAction.reason`` says why)
 
 
 @dataclass(frozen=True)
@@ -169,12 +177,17 @@ def leg_step(state: LegState, obs: LegObservation) -> tuple[LegState, LegAction]
         if obs.armed is False:
             return _end(state, LegPhase.ABORTED, "the vehicle disarmed in flight")
         if obs.guided is False:
-            return _end(state, LegPhase.ABORTED,
-                        f"the vehicle left GUIDED (now {obs.mode_name}): a pilot or the autopilot "
-                        f"took over; the companion stops commanding")
+            return _end(
+                state,
+                LegPhase.ABORTED,
+                f"the vehicle left GUIDED (now {obs.mode_name}): a pilot or the autopilot "
+                f"took over; the companion stops commanding",
+            )
         if obs.relink_pending:
-            return (replace(state, phase=LegPhase.FOLLOWING),
-                    LegAction(ActionKind.REPLAN, "link back: replan the leg from the vehicle"))
+            return (
+                replace(state, phase=LegPhase.FOLLOWING),
+                LegAction(ActionKind.REPLAN, "link back: replan the leg from the vehicle"),
+            )
     if obs.ref_end_t_s is None or obs.t_s < obs.ref_end_t_s:
         return replace(state, phase=LegPhase.FOLLOWING), KEEP
     if obs.dist_to_goal_m <= obs.acceptance_radius_m:
@@ -182,9 +195,12 @@ def leg_step(state: LegState, obs: LegObservation) -> tuple[LegState, LegAction]
     if obs.ref_ends_short:
         return _stopped_short(state, obs, obs.ref_end_t_s)
     if obs.t_s > obs.ref_end_t_s + obs.timeout_margin_s:
-        return _end(state, LegPhase.TIMED_OUT,
-                    f"item {obs.seq} not reached: {obs.dist_to_goal_m:.1f} m away "
-                    f"{obs.timeout_margin_s:.0f} s after the reference arrived")
+        return _end(
+            state,
+            LegPhase.TIMED_OUT,
+            f"item {obs.seq} not reached: {obs.dist_to_goal_m:.1f} m away "
+            f"{obs.timeout_margin_s:.0f} s after the reference arrived",
+        )
     return replace(state, phase=LegPhase.ARRIVING), KEEP
 
 
@@ -194,8 +210,10 @@ def _stopped_short(state: LegState, obs: LegObservation, ref_end_t_s: float) -> 
     due_t_s = ref_end_t_s + (0.0 if obs.ref_resume else obs.resume_after_s)
     if obs.t_s < due_t_s or obs.t_s < state.last_resume_t_s + obs.resume_retry_s:
         return stopped, KEEP
-    return (replace(stopped, last_resume_t_s=obs.t_s),
-            LegAction(ActionKind.RESUME, "the reference stopped short of the goal"))
+    return (
+        replace(stopped, last_resume_t_s=obs.t_s),
+        LegAction(ActionKind.RESUME, "the reference stopped short of the goal"),
+    )
 
 
 def _end(state: LegState, phase: LegPhase, reason: str) -> tuple[LegState, LegAction]:

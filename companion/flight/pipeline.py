@@ -22,8 +22,19 @@ from typing import TYPE_CHECKING, TypeVar, cast
 import numpy as np
 
 from companion.flight.checker import Checked, Checker, TrajectoryChecker, TrajectoryStatus
-from companion.flight.stages import (SMOOTHERS, AlternativesPlanner, GartPlanner, MgartPlanner, PipelineError,
-                                     PlanBudget, Planner, PlanningProblem, Smoother, SpeedProfileTimer, Timer)
+from companion.flight.stages import (
+    SMOOTHERS,
+    AlternativesPlanner,
+    GartPlanner,
+    MgartPlanner,
+    PipelineError,
+    PlanBudget,
+    Planner,
+    PlanningProblem,
+    Smoother,
+    SpeedProfileTimer,
+    Timer,
+)
 from companion.planning import GartSettings, MgartSettings, PlanResult
 from companion.smoothing import FeasibilitySettings, SmoothingSettings, TrajectoryLimits
 from companion.world import World
@@ -80,9 +91,15 @@ class TrajectoryPipeline:
     limits: TrajectoryLimits
 
     @classmethod
-    def from_settings(cls, smoothing: SmoothingSettings, planning: GartSettings | None = None,
-                      feasibility: FeasibilitySettings | None = None, *, closed_loop=None,
-                      iterations_per_s: float | None = None) -> "TrajectoryPipeline":
+    def from_settings(
+        cls,
+        smoothing: SmoothingSettings,
+        planning: GartSettings | None = None,
+        feasibility: FeasibilitySettings | None = None,
+        *,
+        closed_loop=None,
+        iterations_per_s: float | None = None,
+    ) -> TrajectoryPipeline:
         """The pipeline of the settings tree's ``smoothing``, ``planning`` and ``feasibility``.
 
         Parameters
@@ -112,26 +129,37 @@ class TrajectoryPipeline:
         use_closed_loop = closed_loop is not None and (feasibility is None or feasibility.enabled)
         gart_settings = planner_settings(smoothing, planning)
         method = SMOOTHERS[smoothing.method]
-        smoother = method() if smoothing.method == "none" else method(smoothing.kappa_max_1_m,
-                                                                       smoothing.repair_max_halvings)
-        return cls(GartPlanner(gart_settings, iterations_per_s),
-                   MgartPlanner(MgartSettings(gart=gart_settings), iterations_per_s), smoother,
-                   SpeedProfileTimer(smoothing.grid_step_m),
-                   TrajectoryChecker(closed_loop if use_closed_loop else None), smoothing.limits)
+        smoother = (
+            method() if smoothing.method == "none" else method(smoothing.kappa_max_1_m, smoothing.repair_max_halvings)
+        )
+        return cls(
+            GartPlanner(gart_settings, iterations_per_s),
+            MgartPlanner(MgartSettings(gart=gart_settings), iterations_per_s),
+            smoother,
+            SpeedProfileTimer(smoothing.grid_step_m),
+            TrajectoryChecker(closed_loop if use_closed_loop else None),
+            smoothing.limits,
+        )
 
     @classmethod
-    def for_limits(cls, limits: TrajectoryLimits | None = None, kappa_max_1_m: float = 0.1,
-                   gart_settings: GartSettings | None = None) -> "TrajectoryPipeline":
+    def for_limits(
+        cls,
+        limits: TrajectoryLimits | None = None,
+        kappa_max_1_m: float = 0.1,
+        gart_settings: GartSettings | None = None,
+    ) -> TrajectoryPipeline:
         """``from_settings`` of a G2 smoothing tree with these limits and K_max (tests, benchmarks,
         and the decision policy's default)."""
         smoothing = SmoothingSettings(kappa_max_1_m=kappa_max_1_m, limits=limits or TrajectoryLimits())
         return cls.from_settings(smoothing, gart_settings or GartSettings(kappa_max_1_m=kappa_max_1_m))
 
-    def with_iteration_budgets(self, iterations_per_s: float | None) -> "TrajectoryPipeline":
+    def with_iteration_budgets(self, iterations_per_s: float | None) -> TrajectoryPipeline:
         """This pipeline with its searches budgeted in iterations (see ``from_settings``)."""
         return dataclasses.replace(
-            self, planner=_with_budget(self.planner, iterations_per_s),
-            alternatives_planner=_with_budget(self.alternatives_planner, iterations_per_s))
+            self,
+            planner=_with_budget(self.planner, iterations_per_s),
+            alternatives_planner=_with_budget(self.alternatives_planner, iterations_per_s),
+        )
 
     @property
     def reproducible(self) -> bool:
@@ -150,8 +178,9 @@ class TrajectoryPipeline:
         """Stage 1: a path (``PlanResult.status`` says whether there is one)."""
         return self.planner.plan(problem, budget, rng=rng)
 
-    def alternatives(self, problem: PlanningProblem, budget: PlanBudget, k: int, *,
-                     rng: np.random.Generator) -> list[PlanResult]:
+    def alternatives(
+        self, problem: PlanningProblem, budget: PlanBudget, k: int, *, rng: np.random.Generator
+    ) -> list[PlanResult]:
         """Stage 1 for switching targets: up to ``k`` distinct paths (M-GART)."""
         return self.alternatives_planner.plan(problem, budget, k, rng=rng)
 
@@ -160,9 +189,16 @@ class TrajectoryPipeline:
         """Curvature that bounds the speed through a corner (inf: the smoother stops there)."""
         return self.smoother.turn_kappa_1_m
 
-    def trajectory(self, path, world: World | None, *, limits: TrajectoryLimits | None = None,
-                   start_speed_m_s: float = 0.0, yaw_mode: str = "tangent",
-                   yaw_hold_rad: float | None = None) -> Checked:
+    def trajectory(
+        self,
+        path,
+        world: World | None,
+        *,
+        limits: TrajectoryLimits | None = None,
+        start_speed_m_s: float = 0.0,
+        yaw_mode: str = "tangent",
+        yaw_hold_rad: float | None = None,
+    ) -> Checked:
         """Stages 2-4 on a collision-free polyline: smooth (repaired in ``world``), time, check.
 
         Parameters
@@ -185,6 +221,7 @@ class TrajectoryPipeline:
         if path.ndim != 2 or path.shape[0] < 2:
             raise PipelineError(f"path: expected an (M, d) polyline with M >= 2, got shape {path.shape}")
         curve = self.smoother.smooth(path, world)
-        timed = self.timer.time(curve, limits or self.limits, start_speed_m_s=start_speed_m_s, yaw_mode=yaw_mode,
-                                yaw_hold_rad=yaw_hold_rad)
+        timed = self.timer.time(
+            curve, limits or self.limits, start_speed_m_s=start_speed_m_s, yaw_mode=yaw_mode, yaw_hold_rad=yaw_hold_rad
+        )
         return self.checker.check(timed, world, stretch=start_speed_m_s == 0.0)

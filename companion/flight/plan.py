@@ -93,10 +93,23 @@ class FlightPlanSettings:
     def __post_init__(self) -> None:
         require_int(MissionError, "flight", "planning_attempts", self.planning_attempts, 1, 10)
         require_int(MissionError, "flight", "alternatives_k", self.alternatives_k, 0, 16)
-        require_numbers(MissionError, "flight", self, positive=(
-            "planning_budget_s", "slab_margin_m", "climb_speed_m_s", "descent_speed_m_s",
-            "vertical_accel_m_s2", "min_vertical_change_m", "alternatives_budget_s",
-            "alternatives_period_s", "alternatives_lead_s", "turn_rate_rad_s"))
+        require_numbers(
+            MissionError,
+            "flight",
+            self,
+            positive=(
+                "planning_budget_s",
+                "slab_margin_m",
+                "climb_speed_m_s",
+                "descent_speed_m_s",
+                "vertical_accel_m_s2",
+                "min_vertical_change_m",
+                "alternatives_budget_s",
+                "alternatives_period_s",
+                "alternatives_lead_s",
+                "turn_rate_rad_s",
+            ),
+        )
 
 
 class TrajectoryChain:
@@ -124,7 +137,7 @@ class TrajectoryChain:
         """
         t = clip_ufunc(np.atleast_1d(np.asarray(t_s, dtype=float)), 0.0, self.duration_s)
         if t.size == 0:
-            return t, np.zeros(0, dtype=int), 0, -1           # no piece is sampled
+            return t, np.zeros(0, dtype=int), 0, -1  # no piece is sampled
         if len(self.pieces) == 1:
             return t, None, 0, 0
         idx = clip_ufunc(np.searchsorted(self.t_start_s, t, side="right") - 1, 0, len(self.pieces) - 1)
@@ -137,7 +150,7 @@ class TrajectoryChain:
     def sample(self, t_s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position, velocity, acceleration (NED) at times ``t_s`` (K,) -> three (K, 3) arrays."""
         t, idx, first, last = self._split(t_s)
-        if idx is None:                                   # all in one piece: no gather, no scatter
+        if idx is None:  # all in one piece: no gather, no scatter
             return self.pieces[first].sample(t - self.t_start_s[first])
         pos = np.empty((t.size, 3))
         vel = np.empty((t.size, 3))
@@ -216,21 +229,20 @@ def leg_slab(world: World, down_values_m, margin_m: float) -> World:
     lo[2] = max(lo[2], min(down_values_m) - margin_m)
     hi[2] = min(hi[2], max(down_values_m) + margin_m)
     if hi[2] <= lo[2]:
-        raise MissionError(f"altitudes {[-d for d in down_values_m]} m are outside the world's "
-                           f"altitude bounds")
+        raise MissionError(f"altitudes {[-d for d in down_values_m]} m are outside the world's altitude bounds")
     return World(world.obstacles, lo, hi, world.margin_m)
 
 
-def vertical_trajectory(start_ned_m: np.ndarray, down_m: float, settings: FlightPlanSettings,
-                        yaw_rad: float, pipeline: TrajectoryPipeline) -> Checked:
+def vertical_trajectory(
+    start_ned_m: np.ndarray, down_m: float, settings: FlightPlanSettings, yaw_rad: float, pipeline: TrajectoryPipeline
+) -> Checked:
     """A straight climb or descent from ``start_ned_m`` to ``down_m`` at rest at both ends,
     timed and checked (closed loop) by ``pipeline``."""
     end = np.array([start_ned_m[0], start_ned_m[1], down_m])
     climbing = down_m < start_ned_m[2]
     speed = settings.climb_speed_m_s if climbing else settings.descent_speed_m_s
     accel = settings.vertical_accel_m_s2
-    limits = TrajectoryLimits(speed_m_s=speed, accel_m_s2=accel, lat_accel_m_s2=accel,
-                              jerk_m_s3=4.0 * accel)
+    limits = TrajectoryLimits(speed_m_s=speed, accel_m_s2=accel, lat_accel_m_s2=accel, jerk_m_s3=4.0 * accel)
     timed = pipeline.timer.time(np.vstack([start_ned_m, end]), limits, yaw_mode="hold", yaw_hold_rad=yaw_rad)
     return pipeline.checker.check(timed)
 
@@ -267,9 +279,17 @@ def leg_limits(waypoint, limits: TrajectoryLimits) -> TrajectoryLimits:
     return replace(limits, speed_m_s=min(float(speed), limits.speed_m_s))
 
 
-def plan_level(level_start: np.ndarray, goal: np.ndarray, slab: World, waypoint, *,
-               pipeline: TrajectoryPipeline, settings: FlightPlanSettings, rng: np.random.Generator,
-               where: str) -> tuple[PlanResult, np.ndarray, Checked]:
+def plan_level(
+    level_start: np.ndarray,
+    goal: np.ndarray,
+    slab: World,
+    waypoint,
+    *,
+    pipeline: TrajectoryPipeline,
+    settings: FlightPlanSettings,
+    rng: np.random.Generator,
+    where: str,
+) -> tuple[PlanResult, np.ndarray, Checked]:
     """The level part of a leg through the pipeline; returns (PlanResult, path, Checked)."""
     budget = PlanBudget(settings.planning_budget_s, settings.planning_attempts)
     plane = footprint(slab)
@@ -280,9 +300,11 @@ def plan_level(level_start: np.ndarray, goal: np.ndarray, slab: World, waypoint,
     else:
         result = pipeline.plan(PlanningProblem(slab, level_start, goal), budget, rng=rng)
     if result.status != "exact":
-        reason = {"invalid_start": "the leg starts inside an obstacle or outside the bounds",
-                  "invalid_goal": "the goal is inside an obstacle (with the safety margin)",
-                  "timeout": f"no path found in {budget.total_s:g} s of search"}[result.status]
+        reason = {
+            "invalid_start": "the leg starts inside an obstacle or outside the bounds",
+            "invalid_goal": "the goal is inside an obstacle (with the safety margin)",
+            "timeout": f"no path found in {budget.total_s:g} s of search",
+        }[result.status]
         raise MissionError(f"{where}: unreachable: {reason}")
     assert result.path is not None  # an 'exact' result has a path
     path = level(result.path, goal[2], slab)
@@ -322,8 +344,17 @@ def feasibility_summary(reports) -> dict:
     }
 
 
-def plan_leg(index: int, waypoint, start_ned_m, world: World, *, pipeline: TrajectoryPipeline,
-             settings: FlightPlanSettings, rng: np.random.Generator, yaw_rad: float = 0.0) -> LegPlan | None:
+def plan_leg(
+    index: int,
+    waypoint,
+    start_ned_m,
+    world: World,
+    *,
+    pipeline: TrajectoryPipeline,
+    settings: FlightPlanSettings,
+    rng: np.random.Generator,
+    yaw_rad: float = 0.0,
+) -> LegPlan | None:
     """Plan, smooth, time and check one leg from ``start_ned_m`` to ``waypoint`` (``pipeline``).
 
     The level part is planned first; a climb or descent before it holds the level part's
@@ -339,14 +370,15 @@ def plan_leg(index: int, waypoint, start_ned_m, world: World, *, pipeline: Traje
     start = np.asarray(start_ned_m, dtype=float).reshape(3)
     goal = np.array(waypoint.pos_ned_m, dtype=float)
     if waypoint.kind in ("land", "rtl"):
-        goal[2] = start[2]          # fly there level; the vehicle's LAND descends
+        goal[2] = start[2]  # fly there level; the vehicle's LAND descends
     where = f"item {waypoint.seq} ({waypoint.kind})"
     level_start = np.array([start[0], start[1], goal[2]])
     slab = leg_slab(world, [goal[2]], settings.slab_margin_m)
     result, path, level_part = None, level_start[None, :], None
     if np.hypot(*(goal[:2] - level_start[:2])) > 1e-3:
-        result, path, level_part = plan_level(level_start, goal, slab, waypoint, pipeline=pipeline,
-                                              settings=settings, rng=rng, where=where)
+        result, path, level_part = plan_level(
+            level_start, goal, slab, waypoint, pipeline=pipeline, settings=settings, rng=rng, where=where
+        )
         yaw_rad = float(level_part.trajectory.yaw_rad(np.array([0.0]))[0])
     checks = []
     if abs(goal[2] - start[2]) >= settings.min_vertical_change_m:
@@ -359,20 +391,44 @@ def plan_leg(index: int, waypoint, start_ned_m, world: World, *, pipeline: Traje
     reports = [c.report for c in checks if c.report is not None]
     checked = feasibility_summary(reports) if reports else None
     notes = [n for p in pieces for n in p.notes]
-    log.info("leg %d to %s: %s, %.1f m, %.1f s%s", index, where,
-             result.status if result else "vertical", sum(p.length_m for p in pieces),
-             sum(p.duration_s for p in pieces), f" ({'; '.join(notes)})" if notes else "")
+    log.info(
+        "leg %d to %s: %s, %.1f m, %.1f s%s",
+        index,
+        where,
+        result.status if result else "vertical",
+        sum(p.length_m for p in pieces),
+        sum(p.duration_s for p in pieces),
+        f" ({'; '.join(notes)})" if notes else "",
+    )
     if checked is not None:
-        log.info("leg %d: closed loop %s, stretch x%.3g, max |delta| %.2f, tracking error max %.2f m "
-                 "RMS %.2f m (check %.0f ms)", index, "feasible" if checked["feasible"] else "INFEASIBLE",
-                 checked["stretch"], checked["max_abs_delta"], checked["max_tracking_error_m"],
-                 checked["rms_tracking_error_m"], 1e3 * checked["check_s"])
-    return LegPlan(index, waypoint, start, goal, result, np.vstack([start[None, :], path]),
-                   TrajectoryChain(pieces), slab, notes, checked)
+        log.info(
+            "leg %d: closed loop %s, stretch x%.3g, max |delta| %.2f, tracking error max %.2f m "
+            "RMS %.2f m (check %.0f ms)",
+            index,
+            "feasible" if checked["feasible"] else "INFEASIBLE",
+            checked["stretch"],
+            checked["max_abs_delta"],
+            checked["max_tracking_error_m"],
+            checked["rms_tracking_error_m"],
+            1e3 * checked["check_s"],
+        )
+    return LegPlan(
+        index,
+        waypoint,
+        start,
+        goal,
+        result,
+        np.vstack([start[None, :], path]),
+        TrajectoryChain(pieces),
+        slab,
+        notes,
+        checked,
+    )
 
 
-def plan_mission(local_mission, start_ned_m, *, pipeline: TrajectoryPipeline, settings: FlightPlanSettings,
-                 rng: np.random.Generator) -> list[LegPlan]:
+def plan_mission(
+    local_mission, start_ned_m, *, pipeline: TrajectoryPipeline, settings: FlightPlanSettings, rng: np.random.Generator
+) -> list[LegPlan]:
     """Plan every leg after the takeoff, in flight order; the first leg starts at ``start_ned_m``.
 
     The takeoff itself is the vehicle's (MAV_CMD_NAV_TAKEOFF); legs start at its altitude.
@@ -385,8 +441,7 @@ def plan_mission(local_mission, start_ned_m, *, pipeline: TrajectoryPipeline, se
     for waypoint in local_mission.waypoints:
         if waypoint.kind == "takeoff":
             continue
-        leg = plan_leg(len(legs), waypoint, start, local_mission.world, pipeline=pipeline, settings=settings,
-                       rng=rng)
+        leg = plan_leg(len(legs), waypoint, start, local_mission.world, pipeline=pipeline, settings=settings, rng=rng)
         if leg is not None:
             legs.append(leg)
             start = leg.goal_ned_m

@@ -19,8 +19,9 @@ The setpoints leave through the ``ReferenceOwner``'s stream (``companion.flight.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -64,8 +65,14 @@ class Jobs(Protocol):
     ``failed(error)`` from the executor's own thread; the executor never waits for it.
     """
 
-    def submit(self, name: str, fn: Callable, args: tuple, done: Callable[[object], None],
-               failed: Callable[[BaseException], None]) -> None: ...
+    def submit(
+        self,
+        name: str,
+        fn: Callable,
+        args: tuple,
+        done: Callable[[object], None],
+        failed: Callable[[BaseException], None],
+    ) -> None: ...
 
 
 class FlightSink(Protocol):

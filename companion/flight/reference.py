@@ -73,7 +73,7 @@ class VehicleClock:
 
     def observe(self, boot_s: float, arrival_monotonic_s: float) -> None:
         if self._offset is None:
-            self._last = -math.inf       # switch from the free-running clock to vehicle time
+            self._last = -math.inf  # switch from the free-running clock to vehicle time
         self._offsets.append((arrival_monotonic_s, boot_s - self.scale * arrival_monotonic_s))
         while self._offsets and self._offsets[0][0] < arrival_monotonic_s - self.window_s:
             self._offsets.popleft()
@@ -107,8 +107,9 @@ class ReferenceTable:
         Knots per evaluated chunk; the two chunks used last are kept.
     """
 
-    def __init__(self, trajectory: FlyableReference, step_s: float = TABLE_STEP_S,
-                 chunk_knots: int = TABLE_CHUNK_KNOTS):
+    def __init__(
+        self, trajectory: FlyableReference, step_s: float = TABLE_STEP_S, chunk_knots: int = TABLE_CHUNK_KNOTS
+    ):
         self.trajectory = trajectory
         self.duration_s = float(trajectory.duration_s)
         self.step_s = float(step_s)
@@ -185,9 +186,18 @@ class ActiveReference:
     state its commit time will find, so the setpoint does not jump whatever the decision took).
     """
 
-    def __init__(self, trajectory: FlyableReference, t0_s: float, clock: MissionClock, path_id: str, *,
-                 turn_from_yaw_rad: float | None = None, turn_rate_rad_s: float = 0.6,
-                 resume: bool = False, previous: "ActiveReference | None" = None):
+    def __init__(
+        self,
+        trajectory: FlyableReference,
+        t0_s: float,
+        clock: MissionClock,
+        path_id: str,
+        *,
+        turn_from_yaw_rad: float | None = None,
+        turn_rate_rad_s: float = 0.6,
+        resume: bool = False,
+        previous: ActiveReference | None = None,
+    ):
         self.trajectory = trajectory
         self.previous = previous
         self.clock = clock
@@ -205,7 +215,7 @@ class ActiveReference:
         self.t0_s = t0_s + turn_s
         self.t_end_s = self.t0_s + trajectory.duration_s
         self.table = ReferenceTable(trajectory)
-        self._end_gap: tuple[tuple, float] | None = None     # (goal, end_gap_m)
+        self._end_gap: tuple[tuple, float] | None = None  # (goal, end_gap_m)
         self._last_sampled_s: float | None = None
 
     def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:

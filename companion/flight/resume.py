@@ -27,11 +27,12 @@ def resume_refusal(*, mission_items: int, airborne: bool) -> str | None:
         The vehicle is armed and in the air (``companion.service.startup.is_airborne``).
     """
     if mission_items == 0:
-        return ("cannot resume: the vehicle has no mission (upload one, or start a new flight "
-                "with --mission FILE without --resume)")
+        return (
+            "cannot resume: the vehicle has no mission (upload one, or start a new flight "
+            "with --mission FILE without --resume)"
+        )
     if not airborne:
-        return ("cannot resume: the vehicle is not flying (disarmed or on the ground); start the "
-                "flight without --resume")
+        return "cannot resume: the vehicle is not flying (disarmed or on the ground); start the flight without --resume"
     return None
 
 

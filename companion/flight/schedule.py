@@ -17,8 +17,8 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 from companion.errors import CompanionError
 
@@ -118,8 +118,9 @@ class Scheduler:
         A duplicate name, or a rate or budget that is not a finite number > 0.
     """
 
-    def __init__(self, tasks: Sequence[Task] = (), *, slack_s: float = 0.0,
-                 timer: Callable[[], float] = time.perf_counter) -> None:
+    def __init__(
+        self, tasks: Sequence[Task] = (), *, slack_s: float = 0.0, timer: Callable[[], float] = time.perf_counter
+    ) -> None:
         if not (math.isfinite(slack_s) and slack_s >= 0.0):
             raise ScheduleError(f"slack_s must be a finite number >= 0, got {slack_s!r}")
         self._slots: dict[str, _Slot] = {}
@@ -174,7 +175,16 @@ class Scheduler:
     def report(self) -> list[dict]:
         """The table with what each task cost: name, rate, budget, runs, overruns, failures,
         mean and max duration (ms)."""
-        return [{"task": s.task.name, "rate_hz": s.task.rate_hz, "budget_ms": s.task.budget_ms,
-                 "runs": s.stats.runs, "overruns": s.stats.overruns, "failures": s.stats.failures,
-                 "mean_ms": round(s.stats.total_ms / s.stats.runs, 4) if s.stats.runs else 0.0,
-                 "max_ms": round(s.stats.max_ms, 4)} for s in self._slots.values()]
+        return [
+            {
+                "task": s.task.name,
+                "rate_hz": s.task.rate_hz,
+                "budget_ms": s.task.budget_ms,
+                "runs": s.stats.runs,
+                "overruns": s.stats.overruns,
+                "failures": s.stats.failures,
+                "mean_ms": round(s.stats.total_ms / s.stats.runs, 4) if s.stats.runs else 0.0,
+                "max_ms": round(s.stats.max_ms, 4),
+            }
+            for s in self._slots.values()
+        ]

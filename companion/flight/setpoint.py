@@ -7,8 +7,8 @@ the helicopter model (``companion.flight.fast_time``); the active reference prod
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Callable, NamedTuple
+from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 

@@ -32,9 +32,22 @@ from companion.planning import GartSettings, MgartSettings, PlanResult, gart, mg
 from companion.smoothing import TrajectoryLimits, smooth_g1, smooth_g2, time_parameterize
 from companion.world import World
 
-__all__ = ["PipelineError", "PlanningProblem", "PlanBudget", "Planner", "AlternativesPlanner", "Smoother",
-           "Timer", "GartPlanner", "MgartPlanner", "G2Smoother", "G1Smoother", "PolylineSmoother",
-           "SpeedProfileTimer", "SMOOTHERS"]
+__all__ = [
+    "PipelineError",
+    "PlanningProblem",
+    "PlanBudget",
+    "Planner",
+    "AlternativesPlanner",
+    "Smoother",
+    "Timer",
+    "GartPlanner",
+    "MgartPlanner",
+    "G2Smoother",
+    "G1Smoother",
+    "PolylineSmoother",
+    "SpeedProfileTimer",
+    "SMOOTHERS",
+]
 
 log = logging.getLogger(__name__)
 
@@ -91,8 +104,7 @@ class PlanBudget:
             value = getattr(self, name)
             if value is None and name == "first_path_s":
                 continue
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or value <= 0:
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise PipelineError(f"{name}: must be a finite number of seconds > 0, got {value!r}")
         if isinstance(self.attempts, bool) or not isinstance(self.attempts, int) or self.attempts < 1:
             raise PipelineError(f"attempts: must be an integer >= 1, got {self.attempts!r}")
@@ -100,7 +112,7 @@ class PlanBudget:
     @property
     def total_s(self) -> float:
         """Longest time the budget allows (s)."""
-        return self.max_time_s * (2 ** self.attempts - 1) + (self.first_path_s or 0.0)
+        return self.max_time_s * (2**self.attempts - 1) + (self.first_path_s or 0.0)
 
 
 class Planner(Protocol):
@@ -108,8 +120,9 @@ class Planner(Protocol):
 
 
 class AlternativesPlanner(Protocol):
-    def plan(self, problem: PlanningProblem, budget: PlanBudget, k: int, *,
-             rng: np.random.Generator) -> list[PlanResult]: ...
+    def plan(
+        self, problem: PlanningProblem, budget: PlanBudget, k: int, *, rng: np.random.Generator
+    ) -> list[PlanResult]: ...
 
 
 class Smoother(Protocol):
@@ -120,8 +133,15 @@ class Smoother(Protocol):
 
 
 class Timer(Protocol):
-    def time(self, curve, limits: TrajectoryLimits, *, start_speed_m_s: float = 0.0, yaw_mode: str = "tangent",
-             yaw_hold_rad: float | None = None) -> Trajectory: ...
+    def time(
+        self,
+        curve,
+        limits: TrajectoryLimits,
+        *,
+        start_speed_m_s: float = 0.0,
+        yaw_mode: str = "tangent",
+        yaw_hold_rad: float | None = None,
+    ) -> Trajectory: ...
 
 
 # ---------------------------------------------------------------------------- planners
@@ -149,18 +169,32 @@ class GartPlanner:
         budget_s = budget.max_time_s
         iterations, elapsed_s = 0, 0.0
         for attempt in range(budget.attempts):
-            result = gart(problem.world, problem.start, problem.goal, rng=rng, settings=self.settings,
-                          **iteration_budget(budget_s, self.iterations_per_s))
+            result = gart(
+                problem.world,
+                problem.start,
+                problem.goal,
+                rng=rng,
+                settings=self.settings,
+                **iteration_budget(budget_s, self.iterations_per_s),
+            )
             iterations, elapsed_s = iterations + result.iterations, elapsed_s + result.elapsed_s
             if result.status != "timeout":
                 return dataclasses.replace(result, iterations=iterations, elapsed_s=elapsed_s)
             if attempt + 1 < budget.attempts:
-                log.info("no path in %.2f s (attempt %d); searching again for %.2f s", budget_s, attempt + 1,
-                         2 * budget_s)
+                log.info(
+                    "no path in %.2f s (attempt %d); searching again for %.2f s", budget_s, attempt + 1, 2 * budget_s
+                )
             budget_s *= 2
         if budget.first_path_s is not None:
-            result = gart(problem.world, problem.start, problem.goal, rng=rng, stop_at_first=True,
-                          settings=self.settings, **iteration_budget(budget.first_path_s, self.iterations_per_s))
+            result = gart(
+                problem.world,
+                problem.start,
+                problem.goal,
+                rng=rng,
+                stop_at_first=True,
+                settings=self.settings,
+                **iteration_budget(budget.first_path_s, self.iterations_per_s),
+            )
             iterations, elapsed_s = iterations + result.iterations, elapsed_s + result.elapsed_s
         return dataclasses.replace(result, iterations=iterations, elapsed_s=elapsed_s)
 
@@ -173,10 +207,18 @@ class MgartPlanner:
     settings: MgartSettings = MgartSettings()
     iterations_per_s: float | None = None
 
-    def plan(self, problem: PlanningProblem, budget: PlanBudget, k: int, *,
-             rng: np.random.Generator) -> list[PlanResult]:
-        return mgart(problem.world, problem.start, problem.goal, k, rng=rng, settings=self.settings,
-                     **iteration_budget(budget.max_time_s, self.iterations_per_s))
+    def plan(
+        self, problem: PlanningProblem, budget: PlanBudget, k: int, *, rng: np.random.Generator
+    ) -> list[PlanResult]:
+        return mgart(
+            problem.world,
+            problem.start,
+            problem.goal,
+            k,
+            rng=rng,
+            settings=self.settings,
+            **iteration_budget(budget.max_time_s, self.iterations_per_s),
+        )
 
 
 # ---------------------------------------------------------------------------- smoothers
@@ -232,9 +274,22 @@ class SpeedProfileTimer:
 
     grid_step_m: float = 1.0
 
-    def time(self, curve, limits: TrajectoryLimits, *, start_speed_m_s: float = 0.0, yaw_mode: str = "tangent",
-             yaw_hold_rad: float | None = None) -> Trajectory:
-        trajectory = time_parameterize(curve, limits, start_speed_m_s=start_speed_m_s, grid_step_m=self.grid_step_m,
-                                       yaw_mode=yaw_mode, yaw_hold_rad=yaw_hold_rad)
+    def time(
+        self,
+        curve,
+        limits: TrajectoryLimits,
+        *,
+        start_speed_m_s: float = 0.0,
+        yaw_mode: str = "tangent",
+        yaw_hold_rad: float | None = None,
+    ) -> Trajectory:
+        trajectory = time_parameterize(
+            curve,
+            limits,
+            start_speed_m_s=start_speed_m_s,
+            grid_step_m=self.grid_step_m,
+            yaw_mode=yaw_mode,
+            yaw_hold_rad=yaw_hold_rad,
+        )
         trajectory.notes[:0] = list(getattr(curve, "notes", []))
         return trajectory

@@ -41,12 +41,12 @@ from companion.errors import TrajectoryError
 # The ufunc that ``np.clip`` calls, without its Python wrappers: the same results (NaN and signed
 # zeros included) for a fraction of the cost. Not imported from ``companion.smoothing`` (which
 # imports this module).
-if TYPE_CHECKING:                           # numpy's stubs do not declare the private umath.clip
+if TYPE_CHECKING:  # numpy's stubs do not declare the private umath.clip
     clip_ufunc: np.ufunc
 else:
-    try:                                    # numpy >= 2
+    try:  # numpy >= 2
         from numpy._core.umath import clip as clip_ufunc
-    except ImportError:                     # numpy 1.26
+    except ImportError:  # numpy 1.26
         from numpy.core.umath import clip as clip_ufunc
 
 __all__ = ["Trajectory", "RawProfile", "FlyableReference"]
@@ -201,9 +201,20 @@ class Trajectory:
         Dimension of the samples (3 for a lifted 2D trajectory).
     """
 
-    def __init__(self, curve, profile: RawProfile, limits, tau_start_s: float, tau_end_s: float, *,
-                 yaw_mode: str = "tangent", yaw_hold_rad: float = 0.0, down_m: float | None = None,
-                 notes=(), grid_step_m: float = 1.0) -> None:
+    def __init__(
+        self,
+        curve,
+        profile: RawProfile,
+        limits,
+        tau_start_s: float,
+        tau_end_s: float,
+        *,
+        yaw_mode: str = "tangent",
+        yaw_hold_rad: float = 0.0,
+        down_m: float | None = None,
+        notes=(),
+        grid_step_m: float = 1.0,
+    ) -> None:
         if yaw_mode not in ("tangent", "hold"):
             raise TrajectoryError(f"yaw_mode: expected 'tangent' or 'hold', got {yaw_mode!r}")
         self.curve = curve
@@ -306,7 +317,7 @@ class Trajectory:
         tangent = self.curve._arc_derivatives(piece, u, 1, position=False)[1]
         yaw = np.arctan2(tangent[:, 1], tangent[:, 0])
         horizontal = tangent[:, :2]
-        flat = np.sqrt(np.add.reduce(horizontal * horizontal, axis=1)) <= 1e-6    # np.linalg.norm
+        flat = np.sqrt(np.add.reduce(horizontal * horizontal, axis=1)) <= 1e-6  # np.linalg.norm
         if flat.any():
             table_s, table_yaw = self._fallback_yaw_table
             k = clip_ufunc(np.searchsorted(table_s, s[flat], side="right") - 1, 0, table_yaw.size - 1)
@@ -341,18 +352,26 @@ class Trajectory:
         return hi
 
     # ------------------------------------------------------------------ derived trajectories
-    def to_ned(self, down_m: float) -> "Trajectory":
+    def to_ned(self, down_m: float) -> Trajectory:
         """A 2D (north-east) trajectory flown at fixed ``down_m`` (NED, m): samples become (K, 3)."""
         if self.curve.d != 2 or self.down_m is not None:
             raise TrajectoryError(f"to_ned: only a 2D trajectory can be lifted, this one is {self.d}D")
         if not math.isfinite(float(down_m)):
             raise TrajectoryError(f"down_m: must be finite, got {down_m!r}")
-        return Trajectory(self.curve, self.profile, self.limits, self._tau_start,
-                          self._tau_start + self.duration_s, yaw_mode=self.yaw_mode,
-                          yaw_hold_rad=self.yaw_hold_rad, down_m=float(down_m), notes=self.notes,
-                          grid_step_m=self.grid_step_m)
+        return Trajectory(
+            self.curve,
+            self.profile,
+            self.limits,
+            self._tau_start,
+            self._tau_start + self.duration_s,
+            yaw_mode=self.yaw_mode,
+            yaw_hold_rad=self.yaw_hold_rad,
+            down_m=float(down_m),
+            notes=self.notes,
+            grid_step_m=self.grid_step_m,
+        )
 
-    def time_scaled(self, factor: float) -> "Trajectory":
+    def time_scaled(self, factor: float) -> Trajectory:
         """The same trajectory flown ``factor`` times slower (every duration times ``factor``).
 
         Exact: speeds scale by 1/factor, accelerations by 1/factor^2, jerk by 1/factor^3, and
@@ -363,13 +382,27 @@ class Trajectory:
         if not math.isfinite(k) or k <= 0:
             raise TrajectoryError(f"factor: must be a finite number > 0, got {factor!r}")
         p = self.profile
-        profile = RawProfile(tau_s=p.tau_s * k, s_m=p.s_m, v_m_s=p.v_m_s / k, a_m_s2=p.a_m_s2 / k**2,
-                             window_s=p.window_s * k, start_speed_m_s=p.start_speed_m_s / k,
-                             end_speed_m_s=p.end_speed_m_s / k)
-        return Trajectory(self.curve, profile, self.limits.stretched(k), self._tau_start * k,
-                          (self._tau_start + self.duration_s) * k, yaw_mode=self.yaw_mode,
-                          yaw_hold_rad=self.yaw_hold_rad, down_m=self.down_m, notes=self.notes,
-                          grid_step_m=self.grid_step_m)
+        profile = RawProfile(
+            tau_s=p.tau_s * k,
+            s_m=p.s_m,
+            v_m_s=p.v_m_s / k,
+            a_m_s2=p.a_m_s2 / k**2,
+            window_s=p.window_s * k,
+            start_speed_m_s=p.start_speed_m_s / k,
+            end_speed_m_s=p.end_speed_m_s / k,
+        )
+        return Trajectory(
+            self.curve,
+            profile,
+            self.limits.stretched(k),
+            self._tau_start * k,
+            (self._tau_start + self.duration_s) * k,
+            yaw_mode=self.yaw_mode,
+            yaw_hold_rad=self.yaw_hold_rad,
+            down_m=self.down_m,
+            notes=self.notes,
+            grid_step_m=self.grid_step_m,
+        )
 
     @property
     def start_pos_ned_m(self) -> np.ndarray:
@@ -382,5 +415,7 @@ class Trajectory:
         return self.sample(self.duration_s)[0]
 
     def __repr__(self) -> str:
-        return (f"Trajectory(d={self.d}, length_m={self.length_m:.2f}, duration_s={self.duration_s:.2f}, "
-                f"limits={self.limits})")
+        return (
+            f"Trajectory(d={self.d}, length_m={self.length_m:.2f}, duration_s={self.duration_s:.2f}, "
+            f"limits={self.limits})"
+        )

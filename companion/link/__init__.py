@@ -12,16 +12,36 @@ stream), ``gate`` and ``transport`` (MAVLink signing in front of MAVSDK).
 MAVSDK is imported lazily (inside ``VehicleLink.connect``), so importing this package is cheap.
 """
 
-from companion.link.setpoints import (JitterStats, Setpoint, SetpointStreamer, hold_position,
-                                      jitter_stats, planning_worker_init, raise_stream_priority,
-                                      restore_normal_priority)
 from companion.link.direct_messages import setpoint_fields
 from companion.link.setpoint_frame import setpoint_type_mask
+from companion.link.setpoints import (
+    JitterStats,
+    Setpoint,
+    SetpointStreamer,
+    hold_position,
+    jitter_stats,
+    planning_worker_init,
+    raise_stream_priority,
+    restore_normal_priority,
+)
 from companion.link.telemetry import Telemetry
 from companion.link.vehicle import DEFAULT_URL, VehicleLink, check_url
 from companion.link.vehicle_commands import COPTER_MODES
 
-__all__ = ["COPTER_MODES", "DEFAULT_URL", "JitterStats", "Setpoint", "SetpointStreamer",
-           "Telemetry", "VehicleLink", "check_url", "hold_position", "jitter_stats",
-           "planning_worker_init", "raise_stream_priority", "restore_normal_priority",
-           "setpoint_fields", "setpoint_type_mask"]
+__all__ = [
+    "COPTER_MODES",
+    "DEFAULT_URL",
+    "JitterStats",
+    "Setpoint",
+    "SetpointStreamer",
+    "Telemetry",
+    "VehicleLink",
+    "check_url",
+    "hold_position",
+    "jitter_stats",
+    "planning_worker_init",
+    "raise_stream_priority",
+    "restore_normal_priority",
+    "setpoint_fields",
+    "setpoint_type_mask",
+]

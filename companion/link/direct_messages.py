@@ -13,14 +13,13 @@ from __future__ import annotations
 import json
 import logging
 import time
-from typing import Callable
-
-from heli_common.mavlink_ids import enum_names
+from collections.abc import Callable
 
 from companion.errors import LinkError
 from companion.link.frames import LinkFrames
 from companion.link.session import LinkSession
 from companion.link.setpoint_frame import SETPOINT_MESSAGE, SetpointFrame, setpoint_values
+from heli_common.mavlink_ids import enum_names
 
 log = logging.getLogger(__name__)
 
@@ -30,13 +29,32 @@ MAV_SEVERITY_NAMES = tuple(enum_names("MAV_SEVERITY").values())
 STATUSTEXT_MAX_CHARS = 50
 
 
-def setpoint_fields(time_boot_ms: int, target_system: int, target_component: int,
-                    pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
-                    yaw_rate_rad_s=None) -> dict:
+def setpoint_fields(
+    time_boot_ms: int,
+    target_system: int,
+    target_component: int,
+    pos_ned_m=None,
+    vel_ned_m_s=None,
+    acc_ned_m_s2=None,
+    yaw_rad=None,
+    yaw_rate_rad_s=None,
+) -> dict:
     """``setpoint_values`` by field name (MAVSDK's MavlinkDirect takes a JSON object)."""
-    return dict(zip(SETPOINT_MESSAGE.ordered_fieldnames,
-                    setpoint_values(time_boot_ms, target_system, target_component, pos_ned_m,
-                                    vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s)))
+    return dict(
+        zip(
+            SETPOINT_MESSAGE.ordered_fieldnames,
+            setpoint_values(
+                time_boot_ms,
+                target_system,
+                target_component,
+                pos_ned_m,
+                vel_ned_m_s,
+                acc_ned_m_s2,
+                yaw_rad,
+                yaw_rate_rad_s,
+            ),
+        )
+    )
 
 
 class DirectMessages:
@@ -60,11 +78,13 @@ class DirectMessages:
 
         session = self._session
         session.require_connected()
-        session.direct.send_message(MavlinkMessage(name, 0, 0, session.target_system,
-                                                   session.target_component, json.dumps(fields)))
+        session.direct.send_message(
+            MavlinkMessage(name, 0, 0, session.target_system, session.target_component, json.dumps(fields))
+        )
 
-    def send_setpoint(self, pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
-                      yaw_rate_rad_s=None) -> None:
+    def send_setpoint(
+        self, pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None, yaw_rate_rad_s=None
+    ) -> None:
         """Send one SET_POSITION_TARGET_LOCAL_NED now (non-blocking; call from the loop thread).
 
         ``None`` fields are masked out in ``type_mask``. Raises ``LinkError`` for non-finite
@@ -77,16 +97,26 @@ class DirectMessages:
         session.require_connected()
         if pos_ned_m is not None:
             pos_ned_m = self._frames().to_origin_floats(pos_ned_m)
-        values = setpoint_values(int((time.monotonic() - session.t0) * 1000.0), session.target_system,
-                                 session.target_component, pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad,
-                                 yaw_rate_rad_s)
+        values = setpoint_values(
+            int((time.monotonic() - session.t0) * 1000.0),
+            session.target_system,
+            session.target_component,
+            pos_ned_m,
+            vel_ned_m_s,
+            acc_ned_m_s2,
+            yaw_rad,
+            yaw_rate_rad_s,
+        )
         if session.gate is not None and session.gate.send_message(SetpointFrame(values)):
             return
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
 
         fields = dict(zip(SETPOINT_MESSAGE.ordered_fieldnames, values))
-        session.direct.send_message(MavlinkMessage(SETPOINT_MESSAGE.msgname, 0, 0, session.target_system,
-                                                   session.target_component, json.dumps(fields)))
+        session.direct.send_message(
+            MavlinkMessage(
+                SETPOINT_MESSAGE.msgname, 0, 0, session.target_system, session.target_component, json.dumps(fields)
+            )
+        )
 
     def send_statustext(self, text: str, severity: int | str = "NOTICE") -> None:
         """Send one STATUSTEXT to the ground stations (non-blocking; call from the loop thread).
@@ -113,8 +143,10 @@ class DirectMessages:
         name = severity.upper().removeprefix("MAV_SEVERITY_") if isinstance(severity, str) else None
         level = MAV_SEVERITY_NAMES.index(name) if name in MAV_SEVERITY_NAMES else severity
         if not (isinstance(level, int) and not isinstance(level, bool) and 0 <= level < len(MAV_SEVERITY_NAMES)):
-            raise LinkError(f"severity: expected a MAV_SEVERITY value 0..7 or one of "
-                            f"{', '.join(MAV_SEVERITY_NAMES)}, got {severity!r}")
+            raise LinkError(
+                f"severity: expected a MAV_SEVERITY value 0..7 or one of "
+                f"{', '.join(MAV_SEVERITY_NAMES)}, got {severity!r}"
+            )
         body = str(text).encode("ascii", "replace").decode("ascii")[:STATUSTEXT_MAX_CHARS]
         fields = {"severity": level, "text": body, "id": 0, "chunk_seq": 0}
         self._session.direct.send_message(MavlinkMessage("STATUSTEXT", 0, 0, 0, 0, json.dumps(fields)))

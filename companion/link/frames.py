@@ -65,7 +65,7 @@ class LinkFrames:
     home_in_origin_ned_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @classmethod
-    def build(cls, home_lla, origin_lla=None) -> "LinkFrames":
+    def build(cls, home_lla, origin_lla=None) -> LinkFrames:
         """The frames for ``home_lla`` and the vehicle's ``origin_lla`` (None: the same)."""
         home = tuple(float(v) for v in home_lla)
         if origin_lla is None:

@@ -26,8 +26,7 @@ import time
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import LinkError
-from mavlink_signing import (SignatureCheck, SigningKeyError, Verdict, load_key, signing_encoder,
-                             signing_timestamp_now)
+from mavlink_signing import SignatureCheck, SigningKeyError, Verdict, load_key, signing_encoder, signing_timestamp_now
 from mavlink_signing.keys import key_fingerprint
 
 log = logging.getLogger(__name__)
@@ -44,7 +43,7 @@ class SigningKey:
     path: str
 
     @classmethod
-    def from_file(cls, path) -> "SigningKey | None":
+    def from_file(cls, path) -> SigningKey | None:
         """Read a key file (``mavlink_signing.load_key``: 64 hex digits or a passphrase); None
         for an empty path; a bad file is a ``LinkError`` naming it."""
         if not path:
@@ -61,11 +60,12 @@ class SigningKey:
 def silence_reason(counts: dict[str, int], key: SigningKey | None) -> str:
     """Why no autopilot was heard, from what the inbound filter dropped (one line)."""
     if key is not None and counts.get(Verdict.BAD_SIGNATURE.value, 0):
-        return (f"{counts[Verdict.BAD_SIGNATURE.value]} frames came signed with another key than "
-                f"--signing-key {key}")
+        return f"{counts[Verdict.BAD_SIGNATURE.value]} frames came signed with another key than --signing-key {key}"
     if key is not None and counts.get(Verdict.UNSIGNED.value, 0):
-        return (f"{counts[Verdict.UNSIGNED.value]} frames came unsigned although --signing-key "
-                f"{key} is given: is the vehicle started with that key?")
+        return (
+            f"{counts[Verdict.UNSIGNED.value]} frames came unsigned although --signing-key "
+            f"{key} is given: is the vehicle started with that key?"
+        )
     if counts.get(MALFORMED, 0) and not counts.get(PASSED, 0):
         return f"{counts[MALFORMED]} frames arrived but none was MAVLink"
     return "is the vehicle running and sending to this address?"
@@ -103,8 +103,9 @@ def tapped_fields(msg, arrival_s: float | None = None) -> dict:
 #: Telemetry the link reads itself (``VehicleLink.inbound.messages``) and MAVSDK has no use for
 #: (the companion creates no MAVSDK Telemetry plugin): the gate does not forward it to MAVSDK (a
 #: wake-up of its threads for each of about 30 frames a second). The tlog still has every frame.
-LINK_ONLY_MESSAGES = frozenset({"LOCAL_POSITION_NED", "ATTITUDE", "GLOBAL_POSITION_INT",
-                                "SERVO_OUTPUT_RAW", "RPM", "ADSB_VEHICLE"})
+LINK_ONLY_MESSAGES = frozenset(
+    {"LOCAL_POSITION_NED", "ATTITUDE", "GLOBAL_POSITION_INT", "SERVO_OUTPUT_RAW", "RPM", "ADSB_VEHICLE"}
+)
 
 
 def new_parser() -> mavlink.MAVLink:
@@ -147,16 +148,17 @@ class InboundFilter:
         ``Verdict`` value (``unsigned``, ``bad_signature``, ``replayed``, ``stale``).
     """
 
-    def __init__(self, identity: Identity, check: SignatureCheck | None = None,
-                 stream: bool = False, onboard=None) -> None:
+    def __init__(
+        self, identity: Identity, check: SignatureCheck | None = None, stream: bool = False, onboard=None
+    ) -> None:
         self.identity = identity
         self.check = check
         self.stream = stream
-        self.onboard = onboard                  # companion.link.onboard.OnboardComponent or None
-        self.replies: list[bytes] = []          # its answers, for the gate to send
-        self.tapped: set[str] = set()           # message types the link reads (``taps``)
+        self.onboard = onboard  # companion.link.onboard.OnboardComponent or None
+        self.replies: list[bytes] = []  # its answers, for the gate to send
+        self.tapped: set[str] = set()  # message types the link reads (``taps``)
         self.taps: list[tuple[str, dict]] = []  # admitted messages of those types, as fields
-        self.listeners: dict[str, list] = {}    # message type -> callables on the gate's thread
+        self.listeners: dict[str, list] = {}  # message type -> callables on the gate's thread
         self.parser = new_parser()
         self.autopilot_heard = False
         self._arrival_s: float | None = None
@@ -184,7 +186,7 @@ class InboundFilter:
             self.kinds = []
             return []
         if not self.stream and self.parser.buf_len() > 0:
-            self._count(MALFORMED)                # a datagram that ends inside a frame
+            self._count(MALFORMED)  # a datagram that ends inside a frame
         admitted = [msg for msg in messages if self._admits(msg)]
         self.kinds = [msg.get_type() for msg in admitted]
         return [bytes(msg.get_msgbuf()) for msg in admitted]
@@ -193,8 +195,7 @@ class InboundFilter:
         if msg.get_type() == "BAD_DATA" or isinstance(msg, mavlink.MAVLink_unknown):
             return self._count(MALFORMED)
         if self.check is not None:
-            verdict = self.check.check(msg.get_msgbuf(), msg.get_msgId(), msg.get_srcSystem(),
-                                       msg.get_srcComponent())
+            verdict = self.check.check(msg.get_msgbuf(), msg.get_msgId(), msg.get_srcSystem(), msg.get_srcComponent())
             if verdict is not Verdict.ACCEPTED:
                 return self._count(verdict.value)
         if self.onboard is not None and self.onboard.addressed_to_us(msg):
@@ -216,7 +217,7 @@ class InboundFilter:
         for listener in self.listeners.get(kind, ()):
             try:
                 listener(fields)
-            except Exception:                    # a listener's bug never costs the link a frame
+            except Exception:  # a listener's bug never costs the link a frame
                 log.exception("listener of %s failed", kind)
 
     def _count(self, outcome: str) -> bool:
@@ -244,7 +245,7 @@ class OutboundSigner:
         self.identity = identity
         self.encoder = None if key is None else signing_encoder(key, link_id, 0, 0)
         self.unsignable = 0
-        self._own_encoder = mavlink.MAVLink(None)        # our own messages without a key
+        self._own_encoder = mavlink.MAVLink(None)  # our own messages without a key
         self._own_seq = 0
 
     def pack_own(self, msg) -> bytes | None:
@@ -285,15 +286,13 @@ class OutboundSigner:
         if self.identity.system is None and msg.get_type() == "HEARTBEAT":
             self.identity.component = msg.get_srcComponent()
             self.identity.system = msg.get_srcSystem()
-            log.debug("MAVSDK speaks as system %d component %d", self.identity.system,
-                      self.identity.component)
+            log.debug("MAVSDK speaks as system %d component %d", self.identity.system, self.identity.component)
 
     def _signed(self, msg) -> bytes | None:
         if isinstance(msg, mavlink.MAVLink_unknown):
             self.unsignable += 1
             if self.unsignable <= 10:
-                log.warning("cannot sign message id %d from MAVSDK (not in the dialect): dropped",
-                            msg.get_msgId())
+                log.warning("cannot sign message id %d from MAVSDK (not in the dialect): dropped", msg.get_msgId())
             return None
         enc = self.encoder
         enc.srcSystem, enc.srcComponent, enc.seq = msg.get_srcSystem(), msg.get_srcComponent(), msg.get_seq()

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
-from typing import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable
 
 from companion.link.ports import Ticking
 from companion.link.session import LinkSession
@@ -39,8 +39,8 @@ class MessageTap:
         self._session = session
         self._readers: dict[str, set[asyncio.Queue]] = {}  # message type -> the queues of messages()
         self._batches: collections.deque = collections.deque()  # what the gate read, for the loop
-        self._taker: Ticking | None = None            # the running schedule that takes them
-        self._listeners: dict[str, list[Callable[[dict], None]]] = {}   # shared with each gate's filter
+        self._taker: Ticking | None = None  # the running schedule that takes them
+        self._listeners: dict[str, list[Callable[[dict], None]]] = {}  # shared with each gate's filter
 
     def attach(self, gate, loop: asyncio.AbstractEventLoop) -> None:
         """A new connection's gate (``companion.link.transport.GateThread``): its hand-overs
@@ -53,7 +53,7 @@ class MessageTap:
         gate's thread, as soon as it is read (the fields ``messages`` yields); for every
         connection from now on. Returns the function that stops it. A listener must be quick
         and must not touch the event loop: it runs beside the setpoint stream."""
-        self._listeners[name] = [*self._listeners.get(name, ()), listener]   # copied: the gate may be iterating
+        self._listeners[name] = [*self._listeners.get(name, ()), listener]  # copied: the gate may be iterating
         self._read_period_changed()
 
         def stop() -> None:
@@ -63,6 +63,7 @@ class MessageTap:
             else:
                 self._listeners.pop(name, None)
             self._read_period_changed()
+
         return stop
 
     def _read_period(self) -> float:
@@ -119,12 +120,14 @@ class MessageTap:
     def gate_callback(self, loop: asyncio.AbstractEventLoop) -> Callable[[list], None]:
         """The gate's ``on_tap`` (called on the gate's thread): keep each batch for the loop,
         and wake the loop for it unless the running schedule takes it (``batch_reads``)."""
+
         def on_tap(batch: list) -> None:
             self._batches.append(batch)
             taker = self._taker
-            if taker is None or not taker.running:     # a schedule that stopped takes none
+            if taker is None or not taker.running:  # a schedule that stopped takes none
                 try:
                     loop.call_soon_threadsafe(self.take_batches)
-                except RuntimeError:           # the loop is closed: the link is closing
+                except RuntimeError:  # the loop is closed: the link is closing
                     pass
+
         return on_tap

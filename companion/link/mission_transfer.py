@@ -24,17 +24,40 @@ def to_mavsdk_item(raw: RawItem):
     """``RawItem`` -> ``mavsdk.plugins.mission_raw.MissionItem``."""
     from mavsdk.plugins.mission_raw import MissionItem
 
-    return MissionItem(raw.seq, raw.frame, raw.command, raw.current, raw.autocontinue,
-                       raw.param1, raw.param2, raw.param3, raw.param4, raw.x, raw.y, raw.z,
-                       raw.mission_type)
+    return MissionItem(
+        raw.seq,
+        raw.frame,
+        raw.command,
+        raw.current,
+        raw.autocontinue,
+        raw.param1,
+        raw.param2,
+        raw.param3,
+        raw.param4,
+        raw.x,
+        raw.y,
+        raw.z,
+        raw.mission_type,
+    )
 
 
 def from_mavsdk_item(item) -> RawItem:
     """``mavsdk.plugins.mission_raw.MissionItem`` -> ``RawItem``."""
-    return RawItem(int(item.seq), int(item.frame), int(item.command), int(item.current),
-                   int(item.autocontinue), float(item.param1), float(item.param2),
-                   float(item.param3), float(item.param4), int(item.x), int(item.y),
-                   float(item.z), int(item.mission_type))
+    return RawItem(
+        int(item.seq),
+        int(item.frame),
+        int(item.command),
+        int(item.current),
+        int(item.autocontinue),
+        float(item.param1),
+        float(item.param2),
+        float(item.param3),
+        float(item.param4),
+        int(item.x),
+        int(item.y),
+        float(item.z),
+        int(item.mission_type),
+    )
 
 
 class MissionTransfer:
@@ -60,9 +83,11 @@ class MissionTransfer:
         self._session.require_connected()
         plugin = self._session.mission
         lists = []
-        for name, fetch in (("mission", plugin.download_mission),
-                            ("fence", plugin.download_geofence),
-                            ("rally", plugin.download_rallypoints)):
+        for name, fetch in (
+            ("mission", plugin.download_mission),
+            ("fence", plugin.download_geofence),
+            ("rally", plugin.download_rallypoints),
+        ):
             try:
                 items = await fetch()
             except MissionRawError as exc:
@@ -97,8 +122,11 @@ class MissionTransfer:
             A transfer failed (the previous lists are restored when possible).
         """
         plan.validate()
-        lists = (("mission", mission_to_raw(plan, home_lla)), ("fence", fence_to_raw(plan)),
-                 ("rally", rally_to_raw(plan)))
+        lists = (
+            ("mission", mission_to_raw(plan, home_lla)),
+            ("fence", fence_to_raw(plan)),
+            ("rally", rally_to_raw(plan)),
+        )
         async with self._lock:
             backup = await self.download_raw()
             done: list[int] = []
@@ -107,20 +135,25 @@ class MissionTransfer:
                     await self._upload_list(name, raw)
                 except LinkError as exc:
                     await self._restore(backup, done)
-                    outcome = ("the lists already replaced were restored" if done
-                               else "nothing was changed")
+                    outcome = "the lists already replaced were restored" if done else "nothing was changed"
                     raise LinkError(f"{exc}; {outcome}") from None
                 done.append(k)
-        log.info("uploaded %d mission items, %d fence items, %d rally points",
-                 len(plan.items), len(lists[1][1]), len(plan.rally))
+        log.info(
+            "uploaded %d mission items, %d fence items, %d rally points",
+            len(plan.items),
+            len(lists[1][1]),
+            len(plan.rally),
+        )
 
     async def _upload_list(self, name: str, raw: list[RawItem]) -> None:
         from mavsdk.plugins.mission_raw import MissionRawError
 
         plugin = self._session.mission
-        upload = {"mission": plugin.upload_mission,
-                  "fence": plugin.upload_geofence,
-                  "rally": plugin.upload_rally_points}[name]
+        upload = {
+            "mission": plugin.upload_mission,
+            "fence": plugin.upload_geofence,
+            "rally": plugin.upload_rally_points,
+        }[name]
         try:
             if raw:
                 await upload([to_mavsdk_item(r) for r in raw])
@@ -145,25 +178,28 @@ class MissionTransfer:
 
         session = self._session
         mission_type = {"mission": 0, "fence": 1, "rally": 2}[name]
-        fields = {"target_system": session.target_system, "target_component": session.target_component,
-                  "mission_type": mission_type}
-        message = MavlinkMessage("MISSION_CLEAR_ALL", 0, 0, session.target_system,
-                                 session.target_component, json.dumps(fields))
+        fields = {
+            "target_system": session.target_system,
+            "target_component": session.target_component,
+            "mission_type": mission_type,
+        }
+        message = MavlinkMessage(
+            "MISSION_CLEAR_ALL", 0, 0, session.target_system, session.target_component, json.dumps(fields)
+        )
 
         async def wait_ack() -> int:
             async for ack in self._source.messages("MISSION_ACK"):
-                if session.from_vehicle(ack) and \
-                        int(ack.get("mission_type", 0)) == mission_type:
+                if session.from_vehicle(ack) and int(ack.get("mission_type", 0)) == mission_type:
                     return int(ack.get("type", -1))
             return -1
 
         for _ in range(attempts):
             waiter = asyncio.ensure_future(wait_ack())
-            await asyncio.sleep(0)               # subscribed before the request goes out
+            await asyncio.sleep(0)  # subscribed before the request goes out
             session.direct.send_message(message)
             try:
                 result = await asyncio.wait_for(waiter, timeout_s)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 continue
             if result != 0:
                 raise LinkError(f"{name} clear refused: MAV_MISSION_RESULT {result}")

@@ -48,7 +48,7 @@ class OnboardComponent:
 
     def __init__(self, system_id: int | None, on_command: Callable[[OnboardCommand], int]) -> None:
         self.on_command = on_command
-        self.active = False                            # MAV_STATE_ACTIVE while a flight runs
+        self.active = False  # MAV_STATE_ACTIVE while a flight runs
         self.system_id: int | None = None
         self.set_system(system_id)
 
@@ -59,8 +59,11 @@ class OnboardComponent:
 
     def addressed_to_us(self, msg) -> bool:
         """Is ``msg`` a command for this component (not a broadcast)?"""
-        return (msg.get_type() in COMMAND_TYPES and msg.target_system == self.system_id
-                and msg.target_component == COMPONENT_ID)
+        return (
+            msg.get_type() in COMMAND_TYPES
+            and msg.target_system == self.system_id
+            and msg.target_component == COMPONENT_ID
+        )
 
     def handle(self, msg) -> bytes:
         """Answer a command addressed to us (``addressed_to_us``): the COMMAND_ACK frame."""
@@ -71,10 +74,9 @@ class OnboardComponent:
         command = OnboardCommand(msg.command, params, msg.get_srcSystem(), msg.get_srcComponent())
         try:
             result = int(self.on_command(command))
-        except Exception:                              # never leave a ground station waiting
+        except Exception:  # never leave a ground station waiting
             result = mavlink.MAV_RESULT_FAILED
-        ack = self._mav.command_ack_encode(msg.command, result, 0, 0, command.sender_system,
-                                           command.sender_component)
+        ack = self._mav.command_ack_encode(msg.command, result, 0, 0, command.sender_system, command.sender_component)
         return bytes(ack.pack(self._mav))
 
     def heartbeat(self) -> bytes | None:
@@ -82,8 +84,7 @@ class OnboardComponent:
         if self.system_id is None:
             return None
         state = mavlink.MAV_STATE_ACTIVE if self.active else mavlink.MAV_STATE_STANDBY
-        hb = self._mav.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID,
-                                        0, 0, state)
+        hb = self._mav.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, state)
         return bytes(hb.pack(self._mav))
 
     def statustext(self, severity: int, text: str) -> bytes:

@@ -19,7 +19,7 @@ import asyncio
 import logging
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from companion.link.timerfd import PeriodicTimer
 
@@ -123,13 +123,13 @@ class PeriodicDriver:
         def on_expiry() -> None:
             periods = timer.expirations()
             if periods:
-                self.missed += periods - 1        # deadlines already passed are skipped, never bursts
+                self.missed += periods - 1  # deadlines already passed are skipped, never bursts
                 self._run_tick(time.monotonic())
 
         self._run_tick(t0)
         loop.add_reader(timer.fileno(), on_expiry)
         try:
-            await loop.create_future()            # until cancelled
+            await loop.create_future()  # until cancelled
         finally:
             loop.remove_reader(timer.fileno())
             timer.close()
@@ -141,7 +141,7 @@ class PeriodicDriver:
             self._run_tick(time.monotonic())
             k += 1
             behind = int((time.monotonic() - (t0 + k * self.period_s)) // self.period_s)
-            if behind > 0:                        # skip deadlines missed by more than a period
+            if behind > 0:  # skip deadlines missed by more than a period
                 self.missed += behind
                 k += behind
 

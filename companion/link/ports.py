@@ -5,7 +5,8 @@ and tested alone (with a double) and no part imports another.
 
 from __future__ import annotations
 
-from typing import AsyncIterator, Protocol
+from collections.abc import AsyncIterator
+from typing import Protocol
 
 
 class MessageSource(Protocol):
@@ -19,36 +20,31 @@ class MessageSource(Protocol):
 class MessageSender(Protocol):
     """Sends one MAVLink message now (``companion.link.direct_messages.DirectMessages``)."""
 
-    def send_message(self, name: str, fields: dict) -> None:
-        ...
+    def send_message(self, name: str, fields: dict) -> None: ...
 
 
 class CommandSender(Protocol):
     """COMMAND_LONG with its COMMAND_ACK (``companion.link.vehicle_commands.VehicleCommands``)."""
 
-    async def command_result(self, command: int, params=(), *, what: str | None = None,
-                             timeout_s: float = 10.0) -> int | None:
-        ...
+    async def command_result(
+        self, command: int, params=(), *, what: str | None = None, timeout_s: float = 10.0
+    ) -> int | None: ...
 
-    async def request_home(self) -> None:
-        ...
+    async def request_home(self) -> None: ...
 
 
 class StatusTextLog(Protocol):
     """The vehicle's recent STATUSTEXTs (``companion.link.watchers.TelemetryWatchers``)."""
 
-    def statustexts_since(self, t_monotonic_s: float) -> list[str]:
-        ...
+    def statustexts_since(self, t_monotonic_s: float) -> list[str]: ...
 
 
 class StreamNotes(Protocol):
     """What the telemetry stream keeper is told and asked (``companion.link.streams.StreamKeeper``)."""
 
-    def note(self, name: str, boot_s: float | None = None) -> None:
-        ...
+    def note(self, name: str, boot_s: float | None = None) -> None: ...
 
-    def unavailable(self, name: str) -> bool:
-        ...
+    def unavailable(self, name: str) -> bool: ...
 
 
 class VehicleTarget(Protocol):

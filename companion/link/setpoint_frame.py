@@ -17,10 +17,13 @@ from __future__ import annotations
 import hashlib
 import struct
 
-from heli_common.mavlink_ids import (TYPEMASK_IGNORE_ACCELERATION, TYPEMASK_IGNORE_POSITION,
-                                     TYPEMASK_IGNORE_VELOCITY, mavlink)
-
 from companion.errors import LinkError
+from heli_common.mavlink_ids import (
+    TYPEMASK_IGNORE_ACCELERATION,
+    TYPEMASK_IGNORE_POSITION,
+    TYPEMASK_IGNORE_VELOCITY,
+    mavlink,
+)
 
 __all__ = ["SETPOINT_MESSAGE", "SetpointFrame", "setpoint_type_mask", "setpoint_values"]
 
@@ -37,10 +40,13 @@ _GROUP_NAMES = ("pos_ned_m", "vel_ned_m_s", "acc_ned_m_s2", "yaw_rad", "yaw_rate
 def setpoint_type_mask(pos, vel, acc, yaw, yaw_rate=None) -> int:
     """SET_POSITION_TARGET type_mask: a field group is ignored when it is None."""
     mask = 0
-    for value, bits in ((pos, TYPEMASK_IGNORE_POSITION), (vel, TYPEMASK_IGNORE_VELOCITY),
-                        (acc, TYPEMASK_IGNORE_ACCELERATION),
-                        (yaw, mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE),
-                        (yaw_rate, mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE)):
+    for value, bits in (
+        (pos, TYPEMASK_IGNORE_POSITION),
+        (vel, TYPEMASK_IGNORE_VELOCITY),
+        (acc, TYPEMASK_IGNORE_ACCELERATION),
+        (yaw, mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE),
+        (yaw_rate, mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE),
+    ):
         if value is None:
             mask |= bits
     return mask
@@ -54,8 +60,9 @@ def _three(value, name: str) -> tuple | list:
         values = [float(v) for v in (value.tolist() if hasattr(value, "tolist") else value)]
     except (TypeError, ValueError):
         values = []
-    if len(values) != 3 or not (abs(values[0]) <= FLOAT32_MAX and abs(values[1]) <= FLOAT32_MAX
-                                and abs(values[2]) <= FLOAT32_MAX):          # NaN fails too
+    if len(values) != 3 or not (
+        abs(values[0]) <= FLOAT32_MAX and abs(values[1]) <= FLOAT32_MAX and abs(values[2]) <= FLOAT32_MAX
+    ):  # NaN fails too
         raise LinkError(f"setpoint {name} must be 3 finite numbers, got {value!r}")
     return values
 
@@ -69,9 +76,16 @@ def _scalar(value, name: str) -> float:
     return value
 
 
-def setpoint_values(time_boot_ms: int, target_system: int, target_component: int,
-                    pos_ned_m=None, vel_ned_m_s=None, acc_ned_m_s2=None, yaw_rad=None,
-                    yaw_rate_rad_s=None) -> tuple:
+def setpoint_values(
+    time_boot_ms: int,
+    target_system: int,
+    target_component: int,
+    pos_ned_m=None,
+    vel_ned_m_s=None,
+    acc_ned_m_s2=None,
+    yaw_rad=None,
+    yaw_rate_rad_s=None,
+) -> tuple:
     """SET_POSITION_TARGET_LOCAL_NED's field values in wire order
     (``SETPOINT_MESSAGE.ordered_fieldnames``), frame LOCAL_NED; a group given as None is 0
     and masked out in ``type_mask``.
@@ -87,10 +101,18 @@ def setpoint_values(time_boot_ms: int, target_system: int, target_component: int
         A given vector is not 3 finite numbers, or a given yaw is not finite (named).
     """
     pos, vel, acc = (_three(v, n) for v, n in zip((pos_ned_m, vel_ned_m_s, acc_ned_m_s2), _GROUP_NAMES))
-    return (int(time_boot_ms) & 0xFFFFFFFF, *pos, *vel, *acc, _scalar(yaw_rad, "yaw_rad"),
-            _scalar(yaw_rate_rad_s, "yaw_rate_rad_s"),
-            setpoint_type_mask(pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s),
-            target_system, target_component, mavlink.MAV_FRAME_LOCAL_NED)
+    return (
+        int(time_boot_ms) & 0xFFFFFFFF,
+        *pos,
+        *vel,
+        *acc,
+        _scalar(yaw_rad, "yaw_rad"),
+        _scalar(yaw_rate_rad_s, "yaw_rate_rad_s"),
+        setpoint_type_mask(pos_ned_m, vel_ned_m_s, acc_ned_m_s2, yaw_rad, yaw_rate_rad_s),
+        target_system,
+        target_component,
+        mavlink.MAV_FRAME_LOCAL_NED,
+    )
 
 
 class SetpointFrame:
@@ -110,12 +132,23 @@ class SetpointFrame:
     def pack(self, mav: mavlink.MAVLink) -> bytes:
         """The frame from ``mav``'s system, component and sequence, signed when ``mav`` signs."""
         payload = SETPOINT_MESSAGE.unpacker.pack(*self.values)
-        payload = payload.rstrip(b"\0") or payload[:1]           # MAVLink 2: trailing zeros cut
+        payload = payload.rstrip(b"\0") or payload[:1]  # MAVLink 2: trailing zeros cut
         signing = mav.signing
         signed = signing.sign_outgoing
-        frame = _HEADER.pack(253, len(payload), mavlink.MAVLINK_IFLAG_SIGNED if signed else 0, 0,
-                             mav.seq, mav.srcSystem, mav.srcComponent, SETPOINT_MESSAGE.id & 0xFFFF,
-                             SETPOINT_MESSAGE.id >> 16) + payload
+        frame = (
+            _HEADER.pack(
+                253,
+                len(payload),
+                mavlink.MAVLINK_IFLAG_SIGNED if signed else 0,
+                0,
+                mav.seq,
+                mav.srcSystem,
+                mav.srcComponent,
+                SETPOINT_MESSAGE.id & 0xFFFF,
+                SETPOINT_MESSAGE.id >> 16,
+            )
+            + payload
+        )
         crc = mavlink.x25crc(frame[1:])
         crc.accumulate(bytes((SETPOINT_MESSAGE.crc_extra,)))
         frame += _CRC.pack(crc.crc)

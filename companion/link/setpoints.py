@@ -31,12 +31,24 @@ import logging
 import math
 import time
 from array import array
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
 from companion.flight.setpoint import Setpoint, SetpointSource, hold_position
 from companion.link.periodic import PeriodicDriver
+
+__all__ = [
+    "JitterStats",
+    "Setpoint",
+    "SetpointStreamer",
+    "hold_position",
+    "jitter_stats",
+    "normal_priority",
+    "planning_worker_init",
+    "raise_stream_priority",
+    "restore_normal_priority",
+]
 
 log = logging.getLogger(__name__)
 
@@ -83,8 +95,7 @@ def raise_stream_priority(fifo_priority: int = 10, nice_increment: int = -5) -> 
         log.info("setpoint stream process niceness lowered by %d", -nice_increment)
         return "nice"
     except (AttributeError, OSError, PermissionError):
-        log.warning("cannot raise the setpoint stream's scheduling priority; jitter will "
-                    "follow the machine's load")
+        log.warning("cannot raise the setpoint stream's scheduling priority; jitter will follow the machine's load")
         return "normal"
 
 
@@ -176,9 +187,15 @@ def jitter_stats(send_times_s, nominal_period_s: float, missed: int = 0) -> Jitt
         return JitterStats(int(t.size), nominal_period_s * 1e3, nan, nan, nan, nan, missed)
     periods = np.diff(t)
     dev_ms = np.abs(periods - nominal_period_s) * 1e3
-    return JitterStats(int(t.size), nominal_period_s * 1e3, float(periods.mean() * 1e3),
-                       float(np.percentile(dev_ms, 50)), float(np.percentile(dev_ms, 99)),
-                       float(dev_ms.max()), missed)
+    return JitterStats(
+        int(t.size),
+        nominal_period_s * 1e3,
+        float(periods.mean() * 1e3),
+        float(np.percentile(dev_ms, 50)),
+        float(np.percentile(dev_ms, 99)),
+        float(dev_ms.max()),
+        missed,
+    )
 
 
 class SetpointStreamer:
@@ -213,10 +230,16 @@ class SetpointStreamer:
     >>> await streamer.stop(); streamer.stats().p99_ms
     """
 
-    def __init__(self, send: SetpointSender, source: SetpointSource | None = None, *,
-                 rate_hz: float = 50.0,
-                 on_sent: Callable[[float, Setpoint], None] | None = None,
-                 spin_s: float = 0.0, max_records: int = 180_000) -> None:
+    def __init__(
+        self,
+        send: SetpointSender,
+        source: SetpointSource | None = None,
+        *,
+        rate_hz: float = 50.0,
+        on_sent: Callable[[float, Setpoint], None] | None = None,
+        spin_s: float = 0.0,
+        max_records: int = 180_000,
+    ) -> None:
         if not (math.isfinite(rate_hz) and 0.0 < rate_hz <= 1000.0):
             raise ValueError(f"rate_hz must be in (0, 1000], got {rate_hz}")
         if not (0.0 <= spin_s < 1.0 / rate_hz):
@@ -233,7 +256,7 @@ class SetpointStreamer:
         self._driver: PeriodicDriver | None = None
         self.sent = 0
         self.send_errors = 0
-        self.missed = 0              # periods its driver skipped (``start``'s, or the caller's)
+        self.missed = 0  # periods its driver skipped (``start``'s, or the caller's)
 
     def set_source(self, source: SetpointSource | None) -> None:
         """Replace the setpoint source; effective at the next tick (None pauses sending)."""
@@ -277,9 +300,13 @@ class SetpointStreamer:
         if setpoint is None:
             return
         try:
-            self._send(pos_ned_m=setpoint.pos_ned_m, vel_ned_m_s=setpoint.vel_ned_m_s,
-                       acc_ned_m_s2=setpoint.acc_ned_m_s2, yaw_rad=setpoint.yaw_rad,
-                       yaw_rate_rad_s=setpoint.yaw_rate_rad_s)
+            self._send(
+                pos_ned_m=setpoint.pos_ned_m,
+                vel_ned_m_s=setpoint.vel_ned_m_s,
+                acc_ned_m_s2=setpoint.acc_ned_m_s2,
+                yaw_rad=setpoint.yaw_rad,
+                yaw_rate_rad_s=setpoint.yaw_rate_rad_s,
+            )
         except Exception:  # noqa: BLE001 - the stream must go on
             self.send_errors += 1
             if self.send_errors == 1 or self.send_errors % 500 == 0:

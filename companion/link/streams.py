@@ -34,8 +34,8 @@ import dataclasses
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -43,8 +43,15 @@ from companion.errors import ConfigError
 from companion.link.ports import CommandSender, MessageSender, VehicleTarget
 from heli_common.typed_config import require_numbers
 
-__all__ = ["StreamSettings", "StreamKeeper", "StreamRequest", "stream_requests", "DATA_STREAM_OF",
-           "CORE_STREAMS", "data_stream_rates"]
+__all__ = [
+    "StreamSettings",
+    "StreamKeeper",
+    "StreamRequest",
+    "stream_requests",
+    "DATA_STREAM_OF",
+    "CORE_STREAMS",
+    "data_stream_rates",
+]
 
 log = logging.getLogger(__name__)
 
@@ -107,8 +114,13 @@ class StreamSettings:
 
     def __post_init__(self) -> None:
         rates = [f.name for f in dataclasses.fields(self) if f.name.endswith("_hz")]
-        require_numbers(ConfigError, "link.streams", self, non_negative=tuple(rates),
-                        positive=("stale_after_s", "command_timeout_s"))
+        require_numbers(
+            ConfigError,
+            "link.streams",
+            self,
+            non_negative=tuple(rates),
+            positive=("stale_after_s", "command_timeout_s"),
+        )
         for name in rates:
             if getattr(self, name) > 100.0:
                 raise ConfigError(f"link.streams.{name}: at most 100 Hz, got {getattr(self, name)}")
@@ -134,8 +146,17 @@ class StreamRequest:
 
 def stream_requests(settings: StreamSettings, adsb: bool = False) -> list[StreamRequest]:
     """The messages to request, in order, with their pymavlink ids (rates of 0 left out)."""
-    names = ["LOCAL_POSITION_NED", "ATTITUDE", "GLOBAL_POSITION_INT", "EXTENDED_SYS_STATE",
-             "HOME_POSITION", "GPS_GLOBAL_ORIGIN", "SYS_STATUS", "SERVO_OUTPUT_RAW", "RPM"]
+    names = [
+        "LOCAL_POSITION_NED",
+        "ATTITUDE",
+        "GLOBAL_POSITION_INT",
+        "EXTENDED_SYS_STATE",
+        "HOME_POSITION",
+        "GPS_GLOBAL_ORIGIN",
+        "SYS_STATUS",
+        "SERVO_OUTPUT_RAW",
+        "RPM",
+    ]
     if adsb:
         names.append("ADSB_VEHICLE")
     out = []
@@ -184,8 +205,16 @@ class StreamKeeper:
         How many times every stream has been requested.
     """
 
-    def __init__(self, settings: StreamSettings, *, commands: CommandSender, sender: MessageSender,
-                 target: VehicleTarget, connected: Callable[[], bool], adsb: bool = False) -> None:
+    def __init__(
+        self,
+        settings: StreamSettings,
+        *,
+        commands: CommandSender,
+        sender: MessageSender,
+        target: VehicleTarget,
+        connected: Callable[[], bool],
+        adsb: bool = False,
+    ) -> None:
         self._commands = commands
         self._sender = sender
         self._target = target
@@ -210,8 +239,9 @@ class StreamKeeper:
         if boot_s is None:
             return
         if self._boot_s is not None and boot_s < self._boot_s - 1.0:
-            log.warning("the vehicle rebooted (boot time %.1f s -> %.1f s): requesting its "
-                        "streams again", self._boot_s, boot_s)
+            log.warning(
+                "the vehicle rebooted (boot time %.1f s -> %.1f s): requesting its streams again", self._boot_s, boot_s
+            )
             self.request_again("vehicle reboot")
         self._boot_s = boot_s
 
@@ -236,12 +266,12 @@ class StreamKeeper:
         while True:
             try:
                 await asyncio.wait_for(self._wanted.wait(), check_s)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 self._check_stale()
                 continue
             self._wanted.clear()
             if not self._connected():
-                continue                  # asked again when the link is back
+                continue  # asked again when the link is back
             try:
                 await self.request_all(self._reason)
             except asyncio.CancelledError:
@@ -268,16 +298,22 @@ class StreamKeeper:
         ``status``."""
         self._last_round_t = time.monotonic()
         self.rounds += 1
-        log.info("requesting telemetry streams (%s): %s", reason,
-                 ", ".join(f"{r.name} {r.rate_hz:g} Hz" for r in self.requests))
+        log.info(
+            "requesting telemetry streams (%s): %s",
+            reason,
+            ", ".join(f"{r.name} {r.rate_hz:g} Hz" for r in self.requests),
+        )
         fallback = []
         for req in self.requests:
             if self._interval_unsupported:
                 fallback.append(req)
                 continue
             result = await self._commands.command_result(
-                mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, (req.msg_id, req.interval_us),
-                what=f"SET_MESSAGE_INTERVAL {req.name}", timeout_s=self.settings.command_timeout_s)
+                mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                (req.msg_id, req.interval_us),
+                what=f"SET_MESSAGE_INTERVAL {req.name}",
+                timeout_s=self.settings.command_timeout_s,
+            )
             if result == MAV_RESULT_ACCEPTED:
                 self.status[req.name] = "interval"
             elif result is None:
@@ -297,9 +333,16 @@ class StreamKeeper:
     async def _fall_back(self, requests: list[StreamRequest]) -> None:
         groups = data_stream_rates(requests)
         for group, rate in sorted(groups.items()):
-            self._sender.send_message("REQUEST_DATA_STREAM", {
-                "target_system": self._target.target_system, "target_component": self._target.target_component,
-                "req_stream_id": group, "req_message_rate": rate, "start_stop": 1})
+            self._sender.send_message(
+                "REQUEST_DATA_STREAM",
+                {
+                    "target_system": self._target.target_system,
+                    "target_component": self._target.target_component,
+                    "req_stream_id": group,
+                    "req_message_rate": rate,
+                    "start_stop": 1,
+                },
+            )
         for req in requests:
             if req.name in DATA_STREAM_OF:
                 self.status[req.name] = "data_stream"
@@ -309,12 +352,14 @@ class StreamKeeper:
                 self.status[req.name] = "unavailable"
                 continue
             result = await self._commands.command_result(
-                mavlink.MAV_CMD_REQUEST_MESSAGE, (req.msg_id,), what=f"REQUEST_MESSAGE {req.name}",
-                timeout_s=self.settings.command_timeout_s)
+                mavlink.MAV_CMD_REQUEST_MESSAGE,
+                (req.msg_id,),
+                what=f"REQUEST_MESSAGE {req.name}",
+                timeout_s=self.settings.command_timeout_s,
+            )
             if result == MAV_RESULT_ACCEPTED:
                 self.status[req.name] = "requested"
             elif result is None:
                 self.status[req.name] = "pending"
             else:
                 self.status[req.name] = "unavailable"
-

@@ -10,9 +10,8 @@ import math
 
 import numpy as np
 
-from heli_common.mavlink_ids import COPTER_MODE_NAMES
-
 from companion.link.frames import LinkFrames
+from heli_common.mavlink_ids import COPTER_MODE_NAMES
 
 #: Seconds without a HEARTBEAT after which the link counts as lost.
 HEARTBEAT_TIMEOUT_S = 3.0
@@ -118,5 +117,9 @@ class TelemetryState:
         if self.pos_origin is not None:
             pos = self.pos_origin if frames is None else frames.to_home(self.pos_origin)
             values = {**values, "pos_ned_m": pos}
-        return Telemetry(**values, connected=hb_age < HEARTBEAT_TIMEOUT_S,
-                         heartbeat_age_s=hb_age, position_age_s=now - self.position_t)
+        return Telemetry(
+            **values,
+            connected=hb_age < HEARTBEAT_TIMEOUT_S,
+            heartbeat_age_s=hb_age,
+            position_age_s=now - self.position_t,
+        )

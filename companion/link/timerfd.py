@@ -65,19 +65,21 @@ class PeriodicTimer:
         self.period_s = period_s
 
     @classmethod
-    def open(cls, first_s: float, period_s: float) -> "PeriodicTimer | None":
+    def open(cls, first_s: float, period_s: float) -> PeriodicTimer | None:
         libc = _libc()
         if libc is None:
             return None
         fd = libc.timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC)
         if fd < 0:
-            log.info("timerfd_create failed (%s): the stream sleeps on the loop's timer",
-                     os.strerror(ctypes.get_errno()))
+            log.info(
+                "timerfd_create failed (%s): the stream sleeps on the loop's timer", os.strerror(ctypes.get_errno())
+            )
             return None
         spec = _Itimerspec(_timespec(period_s), _timespec(max(first_s, 1e-9)))
         if libc.timerfd_settime(fd, TFD_TIMER_ABSTIME, ctypes.byref(spec), None) != 0:
-            log.info("timerfd_settime failed (%s): the stream sleeps on the loop's timer",
-                     os.strerror(ctypes.get_errno()))
+            log.info(
+                "timerfd_settime failed (%s): the stream sleeps on the loop's timer", os.strerror(ctypes.get_errno())
+            )
             os.close(fd)
             return None
         return cls(fd, period_s)

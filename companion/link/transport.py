@@ -111,7 +111,7 @@ class UdpVehicleSide:
         if self.peer is not None:
             try:
                 self.sock.sendto(data, self.peer)
-            except OSError as exc:      # e.g. ICMP unreachable while the vehicle restarts
+            except OSError as exc:  # e.g. ICMP unreachable while the vehicle restarts
                 log.debug("send to the vehicle failed: %s", exc)
 
     def close(self) -> None:
@@ -124,11 +124,13 @@ class StreamVehicleSide:
     def __init__(self, scheme: str, host: str, port: int) -> None:
         from pymavlink import mavutil
 
-        device = {"tcpout": f"tcp:{host}:{port}", "tcp": f"tcp:{host}:{port}",
-                  "tcpin": f"tcpin:{host}:{port}"}.get(scheme, host)
+        device = {"tcpout": f"tcp:{host}:{port}", "tcp": f"tcp:{host}:{port}", "tcpin": f"tcpin:{host}:{port}"}.get(
+            scheme, host
+        )
         try:
-            self.conn = mavutil.mavlink_connection(device, baud=port if scheme == "serial" else 57600,
-                                                   autoreconnect=True)
+            self.conn = mavutil.mavlink_connection(
+                device, baud=port if scheme == "serial" else 57600, autoreconnect=True
+            )
         except Exception as exc:
             raise LinkError(f"cannot open {scheme}://{host}:{port}: {exc}") from None
 
@@ -177,13 +179,19 @@ class GateThread:
         With ``inbound.onboard`` (the companion's own component): its HEARTBEAT period.
     """
 
-    def __init__(self, url: str, inbound: InboundFilter, outbound: OutboundSigner,
-                 tlog: TlogWriter | None = None, onboard_period_s: float = 1.0) -> None:
+    def __init__(
+        self,
+        url: str,
+        inbound: InboundFilter,
+        outbound: OutboundSigner,
+        tlog: TlogWriter | None = None,
+        onboard_period_s: float = 1.0,
+    ) -> None:
         self.inbound, self.outbound, self.tlog = inbound, outbound, tlog
         self.onboard_period_s = onboard_period_s
         self._heartbeat_due_s = 0.0
-        self._own: collections.deque[bytes] = collections.deque()   # post_own's, sent by the gate's thread
-        self._send_lock = threading.Lock()       # the encoder and the vehicle side, shared with the loop
+        self._own: collections.deque[bytes] = collections.deque()  # post_own's, sent by the gate's thread
+        self._send_lock = threading.Lock()  # the encoder and the vehicle side, shared with the loop
         #: ``on_tap(batch)`` on the gate's thread with the ``inbound.taps`` read since the last
         #: hand-over, at most every ``TAP_HANDOVER_PERIOD_S`` (the link's)
         self.on_tap: Callable[[list], None] | None = None
@@ -203,7 +211,7 @@ class GateThread:
     def mavsdk_url(self) -> str:
         return f"udpout://127.0.0.1:{self.local.getsockname()[1]}"
 
-    def start(self) -> "GateThread":
+    def start(self) -> GateThread:
         self._thread.start()
         return self
 
@@ -272,7 +280,7 @@ class GateThread:
                 watched = [self.local, self.vehicle] if now >= self._vehicle_due_s else [self.local]
                 ready, _, _ = select.select(watched, [], [], self._select_timeout_s(now))
             except (OSError, ValueError):
-                return                              # closed under us
+                return  # closed under us
             for side in ready:
                 try:
                     self._read_vehicle() if side is self.vehicle else self._from_mavsdk()
@@ -280,7 +288,7 @@ class GateThread:
                     continue
                 except OSError as exc:
                     log.debug("gate: %s", exc)
-                except Exception:                    # never let the gate die silently
+                except Exception:  # never let the gate die silently
                     log.exception("gate: unexpected error (the link goes on)")
             self._hand_over_taps()
 
@@ -302,7 +310,7 @@ class GateThread:
             return
         self._vehicle_due_s = time.monotonic() + self.read_period_s
         for _ in range(MAX_BATCH_DATAGRAMS if isinstance(self.vehicle, UdpVehicleSide) else 1):
-            self._from_vehicle()                  # BlockingIOError when none is left
+            self._from_vehicle()  # BlockingIOError when none is left
 
     def _hand_over_taps(self) -> None:
         """Hand the messages read to ``on_tap`` in one batch, at most every ``TAP_HANDOVER_PERIOD_S``."""
@@ -332,7 +340,7 @@ class GateThread:
         with self._send_lock:
             for frame in self.outbound.convert(data):
                 if self.inbound.onboard is not None and is_heartbeat(frame):
-                    continue                        # the companion component's own HEARTBEAT speaks for us
+                    continue  # the companion component's own HEARTBEAT speaks for us
                 self._write(frame)
 
 
@@ -343,8 +351,9 @@ def is_heartbeat(frame: bytes) -> bool:
     return frame[:1] == b"\xfe" and frame[5:6] == b"\x00"
 
 
-def open_gate(url: str, key: SigningKey | None = None, link_id: int = 0,
-              tlog_path: str | None = None, onboard=None) -> GateThread:
+def open_gate(
+    url: str, key: SigningKey | None = None, link_id: int = 0, tlog_path: str | None = None, onboard=None
+) -> GateThread:
     """Open the vehicle side of ``url`` and start the gate (signing with ``key`` if given;
     recording the traffic to the ``.tlog`` file ``tlog_path`` if given; speaking as the
     companion component ``onboard``, a ``companion.link.onboard.OnboardComponent``, if given)."""

@@ -35,7 +35,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -68,9 +68,11 @@ LINK_CHECK_PERIOD_S = 0.2
 def check_url(url: str) -> str:
     """Raise ``LinkError`` naming ``url`` unless it is a MAVSDK connection URL."""
     if not isinstance(url, str) or not url.startswith(URL_SCHEMES):
-        raise LinkError(f"--connect {url!r}: not a MAVSDK URL; use e.g. udpin://0.0.0.0:14540, "
-                        f"udpout://127.0.0.1:14555, tcpout://127.0.0.1:5760 or "
-                        f"serial:///dev/ttyUSB0:57600")
+        raise LinkError(
+            f"--connect {url!r}: not a MAVSDK URL; use e.g. udpin://0.0.0.0:14540, "
+            f"udpout://127.0.0.1:14555, tcpout://127.0.0.1:5760 or "
+            f"serial:///dev/ttyUSB0:57600"
+        )
     return url
 
 
@@ -127,9 +129,16 @@ class VehicleLink:
     >>> link.direct.send_setpoint(pos_ned_m=[0, 0, -10], vel_ned_m_s=[0, 0, 0], yaw_rad=0.0)
     """
 
-    def __init__(self, role: str = "companion", *, streams: StreamSettings | None = None,
-                 adsb: bool = False, signing_key: SigningKey | None = None,
-                 tlog_path: str | None = None, onboard=None) -> None:
+    def __init__(
+        self,
+        role: str = "companion",
+        *,
+        streams: StreamSettings | None = None,
+        adsb: bool = False,
+        signing_key: SigningKey | None = None,
+        tlog_path: str | None = None,
+        onboard=None,
+    ) -> None:
         if role not in ("companion", "gcs"):
             raise LinkError(f"role must be 'companion' or 'gcs', got {role!r}")
         self.role = role
@@ -147,8 +156,7 @@ class VehicleLink:
         self.inbound = MessageTap(self.session)
         self.direct = DirectMessages(self.session, lambda: self.frames)
         self.watchers = TelemetryWatchers(self.session, self.inbound, lambda: self.streams)
-        self.commands = VehicleCommands(self.session, self.inbound, self.direct,
-                                        lambda: self.telemetry, self.watchers)
+        self.commands = VehicleCommands(self.session, self.inbound, self.direct, lambda: self.telemetry, self.watchers)
         self.waits = TelemetryWaits(lambda: self.telemetry, self.commands, lambda: self.streams)
         self.missions = MissionTransfer(self.session, self.inbound)
         self._tasks: list[asyncio.Task] = []
@@ -171,10 +179,8 @@ class VehicleLink:
 
         check_url(url)
         route_mavsdk_logs()
-        kind = (ComponentType.COMPANION_COMPUTER if self.role == "companion"
-                else ComponentType.GROUND_STATION)
-        gate = self.session.gate = open_gate(url, self.signing_key, tlog_path=self.tlog_path,
-                                             onboard=self.onboard)
+        kind = ComponentType.COMPANION_COMPUTER if self.role == "companion" else ComponentType.GROUND_STATION
+        gate = self.session.gate = open_gate(url, self.signing_key, tlog_path=self.tlog_path, onboard=self.onboard)
         self.inbound.attach(gate, asyncio.get_running_loop())
         mavsdk = self.session.mavsdk = Mavsdk(Configuration.create_with_component_type(kind))
         try:
@@ -188,16 +194,22 @@ class VehicleLink:
             self.close()
             raise LinkError(f"no autopilot heard on {url} within {timeout_s:g} s ({why})")
         self.url = url
-        self.session.attach(mavsdk, system, MavlinkDirect(system._system), MissionRawAsync(system),
-                            await system.get_system_id())
+        self.session.attach(
+            mavsdk, system, MavlinkDirect(system._system), MissionRawAsync(system), await system.get_system_id()
+        )
         if self.onboard is not None:
             self.onboard.set_system(self.target_system)
         self.watchers.heard_now()
         self._was_connected = True
         if self.stream_settings is not None:
-            self.streams = StreamKeeper(self.stream_settings, commands=self.commands,
-                                        sender=self.direct, target=self.session,
-                                        connected=lambda: self.connected, adsb=self.adsb)
+            self.streams = StreamKeeper(
+                self.stream_settings,
+                commands=self.commands,
+                sender=self.direct,
+                target=self.session,
+                connected=lambda: self.connected,
+                adsb=self.adsb,
+            )
         self._start_tasks()
         log.info("connected to system %d on %s", self.target_system, url)
 
@@ -220,15 +232,19 @@ class VehicleLink:
         tasks, self._tasks = self._tasks, []
         for task in tasks:
             task.cancel()
-        if tasks:                        # a subscription stuck in MAVSDK must not hold the close
+        if tasks:  # a subscription stuck in MAVSDK must not hold the close
             _, stuck = await asyncio.wait(tasks, timeout=CANCEL_WAIT_S)
             if stuck:
-                log.warning("closing the link: %d telemetry subscriptions did not end within %g s (%s)",
-                            len(stuck), CANCEL_WAIT_S, ", ".join(sorted(t.get_name() for t in stuck)))
+                log.warning(
+                    "closing the link: %d telemetry subscriptions did not end within %g s (%s)",
+                    len(stuck),
+                    CANCEL_WAIT_S,
+                    ", ".join(sorted(t.get_name() for t in stuck)),
+                )
         await self.commands.wait_in_flight(IN_FLIGHT_WAIT_S)
         self.close()
 
-    async def __aenter__(self) -> "VehicleLink":
+    async def __aenter__(self) -> VehicleLink:
         return self
 
     async def __aexit__(self, *exc) -> None:
@@ -279,8 +295,12 @@ class VehicleLink:
                 if self.streams is not None:
                     self.streams.request_again("link back")
             else:
-                log.warning("link to system %d lost: no heartbeat for %.1f s; still "
-                            "listening on %s", self.target_system, HEARTBEAT_TIMEOUT_S, self.url)
+                log.warning(
+                    "link to system %d lost: no heartbeat for %.1f s; still listening on %s",
+                    self.target_system,
+                    HEARTBEAT_TIMEOUT_S,
+                    self.url,
+                )
             for callback in list(self._link_listeners):
                 try:
                     callback(now_connected)
@@ -301,12 +321,14 @@ class VehicleLink:
         origin = self.telemetry.origin_lla
         self.frames = LinkFrames.build(home_lla, origin)
         if origin is None:
-            log.info("the vehicle reports no EKF origin (GPS_GLOBAL_ORIGIN): its local frame is "
-                     "taken to be home's")
+            log.info("the vehicle reports no EKF origin (GPS_GLOBAL_ORIGIN): its local frame is taken to be home's")
         else:
-            log.info("home %.7f, %.7f, %.2f m; EKF origin %.7f, %.7f, %.2f m; home in the "
-                     "vehicle's local frame: %s m", *self.frames.home_lla, *origin,
-                     np.round(self.frames.home_in_origin_ned_m, 3).tolist())
+            log.info(
+                "home %.7f, %.7f, %.2f m; EKF origin %.7f, %.7f, %.2f m; home in the vehicle's local frame: %s m",
+                *self.frames.home_lla,
+                *origin,
+                np.round(self.frames.home_in_origin_ned_m, 3).tolist(),
+            )
         return self.frames
 
 

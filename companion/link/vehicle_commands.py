@@ -16,16 +16,15 @@ import json
 import logging
 import math
 import time
-from typing import Callable
-
-from heli_common.ardupilot_ids import FORCE_DISARM_MAGIC
-from heli_common.mavlink_ids import COPTER_MODE_NAMES, COPTER_MODES, MAV_RESULT_NAMES, mavlink
+from collections.abc import Callable
 
 from companion.errors import LinkError, VehicleRefused
 from companion.link.ports import MessageSender, MessageSource, StatusTextLog
 from companion.link.session import LinkSession
 from companion.link.telemetry import Telemetry
 from companion.link.waits import wait_for
+from heli_common.ardupilot_ids import FORCE_DISARM_MAGIC
+from heli_common.mavlink_ids import COPTER_MODE_NAMES, COPTER_MODES, MAV_RESULT_NAMES, mavlink
 
 log = logging.getLogger(__name__)
 
@@ -48,8 +47,7 @@ def mode_number(mode) -> int:
         try:
             return COPTER_MODES[mode.upper()]
         except KeyError:
-            raise LinkError(f"unknown flight mode {mode!r}; known: "
-                            f"{', '.join(COPTER_MODES)}") from None
+            raise LinkError(f"unknown flight mode {mode!r}; known: {', '.join(COPTER_MODES)}") from None
     return int(mode)
 
 
@@ -70,15 +68,21 @@ class VehicleCommands:
         The vehicle's STATUSTEXTs, quoted in a refusal.
     """
 
-    def __init__(self, session: LinkSession, source: MessageSource, sender: MessageSender,
-                 telemetry: Callable[[], Telemetry], texts: StatusTextLog) -> None:
+    def __init__(
+        self,
+        session: LinkSession,
+        source: MessageSource,
+        sender: MessageSender,
+        telemetry: Callable[[], Telemetry],
+        texts: StatusTextLog,
+    ) -> None:
         self._session = session
         self._source = source
         self._sender = sender
         self._telemetry = telemetry
         self._texts = texts
-        self._lock = asyncio.Lock()                        # one MAVSDK command call at a time
-        self._in_flight: set[asyncio.Future] = set()      # MAVSDK command calls still running
+        self._lock = asyncio.Lock()  # one MAVSDK command call at a time
+        self._in_flight: set[asyncio.Future] = set()  # MAVSDK command calls still running
 
     def _command_message(self, command: int, params):
         from mavsdk.plugins.mavlink_direct import MavlinkMessage
@@ -87,14 +91,18 @@ class VehicleCommands:
         values = [float(p) if math.isfinite(float(p)) else 0.0 for p in params]
         values += [0.0] * (7 - len(values))
         target = self._session
-        fields = {"target_system": target.target_system, "target_component": target.target_component,
-                  "command": int(command), "confirmation": 0}
+        fields = {
+            "target_system": target.target_system,
+            "target_component": target.target_component,
+            "command": int(command),
+            "confirmation": 0,
+        }
         fields.update({f"param{k + 1}": v for k, v in enumerate(values)})
-        return MavlinkMessage("COMMAND_LONG", 0, 0, target.target_system, target.target_component,
-                              json.dumps(fields))
+        return MavlinkMessage("COMMAND_LONG", 0, 0, target.target_system, target.target_component, json.dumps(fields))
 
-    async def command_result(self, command: int, params=(), *, what: str | None = None,
-                             timeout_s: float = 10.0) -> int | None:
+    async def command_result(
+        self, command: int, params=(), *, what: str | None = None, timeout_s: float = 10.0
+    ) -> int | None:
         """Send COMMAND_LONG and return the MAV_RESULT of its COMMAND_ACK (None: no final ack
         within ``timeout_s``). Never raises for a refusal: see ``command_long``."""
         from mavsdk.plugins.mavlink_direct import MavlinkDirectError
@@ -110,7 +118,7 @@ class VehicleCommands:
             call.add_done_callback(self._command_call_done)
             try:
                 ack = await asyncio.wait_for(asyncio.shield(call), timeout_s)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 log.info("%s: no COMMAND_ACK within %g s", label, timeout_s)
                 return None
             except MavlinkDirectError as exc:
@@ -121,8 +129,7 @@ class VehicleCommands:
         except (json.JSONDecodeError, TypeError, ValueError, AttributeError):
             log.info("%s: unreadable COMMAND_ACK", label)
             return None
-        log.log(logging.INFO if result == 0 else logging.DEBUG, "%s: %s", label,
-                MAV_RESULT_NAMES.get(result, result))
+        log.log(logging.INFO if result == 0 else logging.DEBUG, "%s: %s", label, MAV_RESULT_NAMES.get(result, result))
         return result
 
     async def wait_in_flight(self, timeout_s: float) -> None:
@@ -134,10 +141,9 @@ class VehicleCommands:
     def _command_call_done(self, call: asyncio.Future) -> None:
         self._in_flight.discard(call)
         if not call.cancelled():
-            call.exception()             # retrieved: a late failure after our timeout is no error
+            call.exception()  # retrieved: a late failure after our timeout is no error
 
-    async def command_long(self, command: int, params=(), *, what: str | None = None,
-                           timeout_s: float = 10.0) -> None:
+    async def command_long(self, command: int, params=(), *, what: str | None = None, timeout_s: float = 10.0) -> None:
         """Send COMMAND_LONG and check its COMMAND_ACK.
 
         Parameters
@@ -176,9 +182,9 @@ class VehicleCommands:
         """Switch to an ArduCopter mode (name or number) with DO_SET_MODE and wait to see it."""
         number = mode_number(mode)
         name = COPTER_MODE_NAMES.get(number, str(number))
-        await self.command_long(MAV_CMD_DO_SET_MODE,
-                                (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number),
-                                what=f"set mode {name}")
+        await self.command_long(
+            MAV_CMD_DO_SET_MODE, (MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, number), what=f"set mode {name}"
+        )
         await wait_for(self._telemetry, lambda t: t.mode == number, 5.0, f"mode {name} in the heartbeat")
 
     async def arm(self) -> None:
@@ -188,15 +194,15 @@ class VehicleCommands:
 
     async def disarm(self, force: bool = False) -> None:
         """Disarm (``force``: even in the air, ArduPilot's 21196 magic)."""
-        await self.command_long(MAV_CMD_COMPONENT_ARM_DISARM,
-                                (0.0, FORCE_DISARM_MAGIC if force else 0.0), what="disarm")
+        await self.command_long(
+            MAV_CMD_COMPONENT_ARM_DISARM, (0.0, FORCE_DISARM_MAGIC if force else 0.0), what="disarm"
+        )
 
     async def takeoff(self, alt_m: float) -> None:
         """GUIDED takeoff to ``alt_m`` above home (NAV_TAKEOFF param7); vehicle must be armed."""
         if not (math.isfinite(alt_m) and alt_m > 0.0):
             raise LinkError(f"takeoff altitude alt_m must be > 0, got {alt_m}")
-        await self.command_long(MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, float(alt_m)),
-                                what=f"takeoff to {alt_m:g} m")
+        await self.command_long(MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, float(alt_m)), what=f"takeoff to {alt_m:g} m")
 
     async def land(self) -> None:
         """Land here (NAV_LAND)."""
@@ -209,9 +215,12 @@ class VehicleCommands:
     async def aux_function(self, function: int, switch: int, *, timeout_s: float = 3.0) -> int | None:
         """MAV_CMD_DO_AUX_FUNCTION (an RC switch function, e.g. 32 MOTOR_INTERLOCK) at switch
         position ``switch`` (0 low, 1 middle, 2 high); returns the MAV_RESULT (None: no ack)."""
-        return await self.command_result(MAV_CMD_DO_AUX_FUNCTION, (function, switch),
-                                         what=f"aux function {function} switch {switch}",
-                                         timeout_s=timeout_s)
+        return await self.command_result(
+            MAV_CMD_DO_AUX_FUNCTION,
+            (function, switch),
+            what=f"aux function {function} switch {switch}",
+            timeout_s=timeout_s,
+        )
 
     async def read_params(self, names, timeout_s: float = 2.0) -> dict[str, float]:
         """Read parameters with PARAM_REQUEST_READ (sent twice, all at once).
@@ -236,24 +245,34 @@ class VehicleCommands:
                         return
 
         waiter = asyncio.ensure_future(collect())
-        await asyncio.sleep(0)                    # subscribed before the requests go out
+        await asyncio.sleep(0)  # subscribed before the requests go out
         try:
-            for attempt in range(2):
+            for _attempt in range(2):
                 for name in sorted(wanted - set(got)):
-                    self._sender.send_message("PARAM_REQUEST_READ", {
-                        "target_system": session.target_system, "target_component": session.target_component,
-                        "param_id": name, "param_index": -1})
+                    self._sender.send_message(
+                        "PARAM_REQUEST_READ",
+                        {
+                            "target_system": session.target_system,
+                            "target_component": session.target_component,
+                            "param_id": name,
+                            "param_index": -1,
+                        },
+                    )
                 done, _ = await asyncio.wait({waiter}, timeout=timeout_s / 2.0)
                 if done:
                     break
         finally:
             waiter.cancel()
             await asyncio.gather(waiter, return_exceptions=True)
-        log.info("parameters read: %s%s", ", ".join(f"{k}={v:g}" for k, v in sorted(got.items())) or "none",
-                 "" if len(got) == len(wanted) else f"; not on the vehicle: {', '.join(sorted(wanted - set(got)))}")
+        log.info(
+            "parameters read: %s%s",
+            ", ".join(f"{k}={v:g}" for k, v in sorted(got.items())) or "none",
+            "" if len(got) == len(wanted) else f"; not on the vehicle: {', '.join(sorted(wanted - set(got)))}",
+        )
         return got
 
     async def request_home(self) -> None:
         """Ask for HOME_POSITION (REQUEST_MESSAGE 242); the answer updates the telemetry."""
-        await self.command_long(MAV_CMD_REQUEST_MESSAGE, (MAVLINK_MSG_ID_HOME_POSITION,),
-                                what="request HOME_POSITION", timeout_s=3.0)
+        await self.command_long(
+            MAV_CMD_REQUEST_MESSAGE, (MAVLINK_MSG_ID_HOME_POSITION,), what="request HOME_POSITION", timeout_s=3.0
+        )

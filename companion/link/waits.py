@@ -10,19 +10,22 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from typing import Callable
-
-from heli_common.mavlink_ids import mavlink
+from collections.abc import Callable
 
 from companion.errors import LinkError
 from companion.link.ports import CommandSender, StreamNotes
 from companion.link.telemetry import Telemetry
+from heli_common.mavlink_ids import mavlink
 
 log = logging.getLogger(__name__)
 
 
-async def wait_for(telemetry: Callable[[], Telemetry], predicate: Callable[[Telemetry], bool],
-                   timeout_s: float, what: str = "condition") -> Telemetry:
+async def wait_for(
+    telemetry: Callable[[], Telemetry],
+    predicate: Callable[[Telemetry], bool],
+    timeout_s: float,
+    what: str = "condition",
+) -> Telemetry:
     """Wait until ``predicate(telemetry())`` holds; ``LinkError`` naming ``what`` on timeout."""
     deadline = time.monotonic() + timeout_s
     while True:
@@ -47,8 +50,9 @@ class TelemetryWaits:
         The link's stream keeper: a message it knows the vehicle cannot send is not waited for.
     """
 
-    def __init__(self, telemetry: Callable[[], Telemetry], commands: CommandSender,
-                 streams: Callable[[], StreamNotes | None]) -> None:
+    def __init__(
+        self, telemetry: Callable[[], Telemetry], commands: CommandSender, streams: Callable[[], StreamNotes | None]
+    ) -> None:
         self._telemetry = telemetry
         self._commands = commands
         self._streams = streams
@@ -63,11 +67,14 @@ class TelemetryWaits:
             streams = self._streams()
             if waited > timeout_s or (streams is not None and streams.unavailable("GPS_GLOBAL_ORIGIN")):
                 return None
-            if not asked and waited > timeout_s / 2.0:       # the stream is slow: ask once
+            if not asked and waited > timeout_s / 2.0:  # the stream is slow: ask once
                 asked = True
-                await self._commands.command_result(mavlink.MAV_CMD_REQUEST_MESSAGE,
-                                                    (mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,),
-                                                    what="request GPS_GLOBAL_ORIGIN", timeout_s=1.0)
+                await self._commands.command_result(
+                    mavlink.MAV_CMD_REQUEST_MESSAGE,
+                    (mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,),
+                    what="request GPS_GLOBAL_ORIGIN",
+                    timeout_s=1.0,
+                )
             await asyncio.sleep(0.05)
         return origin
 
@@ -101,10 +108,12 @@ class TelemetryWaits:
 
     async def wait_ready(self, timeout_s: float = 10.0) -> Telemetry:
         """Wait until position, flight mode and armed state are known."""
-        return await self.wait_for(lambda t: t.pos_ned_m is not None and t.mode is not None
-                                   and t.armed is not None, timeout_s, "telemetry")
+        return await self.wait_for(
+            lambda t: t.pos_ned_m is not None and t.mode is not None and t.armed is not None, timeout_s, "telemetry"
+        )
 
-    async def wait_for(self, predicate: Callable[[Telemetry], bool], timeout_s: float,
-                       what: str = "condition") -> Telemetry:
+    async def wait_for(
+        self, predicate: Callable[[Telemetry], bool], timeout_s: float, what: str = "condition"
+    ) -> Telemetry:
         """Wait until ``predicate(telemetry)`` holds; ``LinkError`` naming ``what`` on timeout."""
         return await wait_for(self._telemetry, predicate, timeout_s, what)

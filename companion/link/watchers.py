@@ -15,23 +15,24 @@ import asyncio
 import collections
 import logging
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
-from heli_common.mavlink_ids import mavlink
-
 from companion.link.ports import MessageSource, StreamNotes, VehicleTarget
 from companion.link.telemetry import TelemetryState, finite_fields
+from heli_common.mavlink_ids import mavlink
 
 log = logging.getLogger(__name__)
 
 #: EXTENDED_SYS_STATE.landed_state values that mean "not on the ground" (MAV_LANDED_STATE).
-LANDED_STATES_IN_AIR = (mavlink.MAV_LANDED_STATE_IN_AIR, mavlink.MAV_LANDED_STATE_TAKEOFF,
-                        mavlink.MAV_LANDED_STATE_LANDING)
+LANDED_STATES_IN_AIR = (
+    mavlink.MAV_LANDED_STATE_IN_AIR,
+    mavlink.MAV_LANDED_STATE_TAKEOFF,
+    mavlink.MAV_LANDED_STATE_LANDING,
+)
 #: SYS_STATUS sensor bit of the pre-arm checks (MAV_SYS_STATUS_PREARM_CHECK).
 MAV_SYS_STATUS_PREARM_CHECK = mavlink.MAV_SYS_STATUS_PREARM_CHECK
-
 
 
 def degrees_lla(lla_int) -> tuple[float, float, float] | None:
@@ -41,6 +42,7 @@ def degrees_lla(lla_int) -> tuple[float, float, float] | None:
     if (lat, lon) == (0.0, 0.0) or abs(lat) > 90.0 or abs(lon) > 180.0:
         return None
     return lat, lon, lla_int[2] / 1e3
+
 
 #: How many recent STATUSTEXTs of the vehicle are kept (``TelemetryWatchers.statustexts``).
 STATUSTEXT_KEEP = 64
@@ -66,8 +68,7 @@ class TelemetryWatchers:
         The vehicle's last ``STATUSTEXT_KEEP`` STATUSTEXTs.
     """
 
-    def __init__(self, target: VehicleTarget, source: MessageSource,
-                 streams: Callable[[], StreamNotes | None]) -> None:
+    def __init__(self, target: VehicleTarget, source: MessageSource, streams: Callable[[], StreamNotes | None]) -> None:
         self._target = target
         self._source = source
         self._streams = streams
@@ -76,10 +77,18 @@ class TelemetryWatchers:
 
     def coroutines(self) -> list:
         """One subscription coroutine per message type (run each as a task until cancelled)."""
-        return [self._watch_heartbeat(), self._watch_local_position(), self._watch_attitude(),
-                self._watch_landed_state(), self._watch_home(), self._watch_origin(),
-                self._watch_global_position(), self._watch_statustext(), self._watch_rpm(),
-                self._watch_sys_status()]
+        return [
+            self._watch_heartbeat(),
+            self._watch_local_position(),
+            self._watch_attitude(),
+            self._watch_landed_state(),
+            self._watch_home(),
+            self._watch_origin(),
+            self._watch_global_position(),
+            self._watch_statustext(),
+            self._watch_rpm(),
+            self._watch_sys_status(),
+        ]
 
     def heard_now(self) -> None:
         """The autopilot was just heard (``connect`` found it): it counts as a heartbeat."""
@@ -111,8 +120,10 @@ class TelemetryWatchers:
 
     async def _watch_heartbeat(self) -> None:
         def apply(fields: dict) -> None:
-            if fields.get("_sysid") != self._target.target_system or fields.get("_compid") != \
-                    self._target.target_component:
+            if (
+                fields.get("_sysid") != self._target.target_system
+                or fields.get("_compid") != self._target.target_component
+            ):
                 return
             self.state.heartbeat_t = time.monotonic()
             values = finite_fields(fields, "base_mode", "custom_mode")
@@ -122,6 +133,7 @@ class TelemetryWatchers:
             if base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
                 self.state.values["mode"] = custom_mode
             self.state.values["armed"] = bool(base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+
         await self._guarded("HEARTBEAT", lambda: self._source.messages("HEARTBEAT"), apply)
 
     async def _watch_local_position(self) -> None:
@@ -135,6 +147,7 @@ class TelemetryWatchers:
             self.state.values["boot_s"] = boot_s
             self.state.position_t = time.monotonic()
             self._note("LOCAL_POSITION_NED", boot_s)
+
         await self._guarded("LOCAL_POSITION_NED", lambda: self._source.messages("LOCAL_POSITION_NED"), apply)
 
     async def _watch_attitude(self) -> None:
@@ -144,6 +157,7 @@ class TelemetryWatchers:
                 return
             self.state.values["attitude_rad"] = np.array(values)
             self._note("ATTITUDE")
+
         await self._guarded("ATTITUDE", lambda: self._source.messages("ATTITUDE"), apply)
 
     async def _watch_landed_state(self) -> None:
@@ -155,6 +169,7 @@ class TelemetryWatchers:
             self.state.values["landed_state"] = state
             self.state.values["in_air"] = None if state == 0 else state in LANDED_STATES_IN_AIR
             self._note("EXTENDED_SYS_STATE")
+
         await self._guarded("EXTENDED_SYS_STATE", lambda: self._source.messages("EXTENDED_SYS_STATE"), apply)
 
     async def _watch_origin(self) -> None:
@@ -169,6 +184,7 @@ class TelemetryWatchers:
                     log.warning("the vehicle's EKF origin moved from %s to %s", old, origin)
                 self.state.values["origin_lla"] = origin
             self._note("GPS_GLOBAL_ORIGIN")
+
         await self._guarded("GPS_GLOBAL_ORIGIN", lambda: self._source.messages("GPS_GLOBAL_ORIGIN"), apply)
 
     async def _watch_statustext(self) -> None:
@@ -179,19 +195,24 @@ class TelemetryWatchers:
             severity = int((finite_fields(fields, "severity") or [6])[0])
             self.statustexts.append((time.monotonic(), severity, text))
             log.log(logging.WARNING if severity <= 4 else logging.INFO, "vehicle: %s", text)
+
         await self._guarded("STATUSTEXT", lambda: self._source.messages("STATUSTEXT"), apply)
 
     async def _watch_sys_status(self) -> None:
         def apply(fields: dict) -> None:
-            sensors = finite_fields(fields, "onboard_control_sensors_present",
-                                    "onboard_control_sensors_health")
-            if not self._from_vehicle(fields) or fields.get("_compid") != self._target.target_component \
-                    or sensors is None:
+            sensors = finite_fields(fields, "onboard_control_sensors_present", "onboard_control_sensors_health")
+            if (
+                not self._from_vehicle(fields)
+                or fields.get("_compid") != self._target.target_component
+                or sensors is None
+            ):
                 return
             present, health = map(int, sensors)
-            self.state.values["prearm_ok"] = (bool(health & MAV_SYS_STATUS_PREARM_CHECK)
-                                               if present & MAV_SYS_STATUS_PREARM_CHECK else None)
+            self.state.values["prearm_ok"] = (
+                bool(health & MAV_SYS_STATUS_PREARM_CHECK) if present & MAV_SYS_STATUS_PREARM_CHECK else None
+            )
             self._note("SYS_STATUS")
+
         await self._guarded("SYS_STATUS", lambda: self._source.messages("SYS_STATUS"), apply)
 
     async def _watch_rpm(self) -> None:
@@ -200,6 +221,7 @@ class TelemetryWatchers:
             if self._from_vehicle(fields) and values is not None:
                 self.state.values["rotor_rpm"] = values[0]
                 self._note("RPM")
+
         await self._guarded("RPM", lambda: self._source.messages("RPM"), apply)
 
     async def _watch_home(self) -> None:
@@ -211,6 +233,7 @@ class TelemetryWatchers:
             if home is not None:
                 self.state.values["home_lla"] = home
             self._note("HOME_POSITION")
+
         await self._guarded("HOME_POSITION", lambda: self._source.messages("HOME_POSITION"), apply)
 
     async def _watch_global_position(self) -> None:
@@ -219,7 +242,9 @@ class TelemetryWatchers:
             if not self._from_vehicle(fields) or values is None:
                 return
             lat, lon, alt_mm, rel_mm = values
-            self.state.values.update(lat_deg=lat / 1e7, lon_deg=lon / 1e7, alt_amsl_m=alt_mm / 1e3,
-                                      rel_alt_m=rel_mm / 1e3)
+            self.state.values.update(
+                lat_deg=lat / 1e7, lon_deg=lon / 1e7, alt_amsl_m=alt_mm / 1e3, rel_alt_m=rel_mm / 1e3
+            )
             self._note("GLOBAL_POSITION_INT")
+
         await self._guarded("GLOBAL_POSITION_INT", lambda: self._source.messages("GLOBAL_POSITION_INT"), apply)

@@ -11,16 +11,39 @@ from pathlib import Path
 
 from companion.errors import MissionError
 from companion.mission.convert import ConversionSettings, mission_to_local
-from companion.mission.model import (FenceCircle, FencePolygon, LocalMission, LocalWaypoint,
-                                     MissionItem, MissionPlan, RallyPoint, SUPPORTED_COMMANDS)
+from companion.mission.model import (
+    SUPPORTED_COMMANDS,
+    FenceCircle,
+    FencePolygon,
+    LocalMission,
+    LocalWaypoint,
+    MissionItem,
+    MissionPlan,
+    RallyPoint,
+)
 from companion.mission.plan_file import read_plan_file, read_plan_text, write_plan_file
 from companion.mission.wpl_file import read_wpl_file, read_wpl_text, write_wpl_file
 
 __all__ = [
-    "ConversionSettings", "FenceCircle", "FencePolygon", "LocalMission", "LocalWaypoint",
-    "MissionItem", "MissionPlan", "RallyPoint", "SUPPORTED_COMMANDS", "load_mission_file",
-    "mission_file_kind", "mission_to_local", "read_plan_file", "read_plan_text",
-    "read_wpl_file", "read_wpl_text", "save_mission_file", "write_plan_file", "write_wpl_file",
+    "ConversionSettings",
+    "FenceCircle",
+    "FencePolygon",
+    "LocalMission",
+    "LocalWaypoint",
+    "MissionItem",
+    "MissionPlan",
+    "RallyPoint",
+    "SUPPORTED_COMMANDS",
+    "load_mission_file",
+    "mission_file_kind",
+    "mission_to_local",
+    "read_plan_file",
+    "read_plan_text",
+    "read_wpl_file",
+    "read_wpl_text",
+    "save_mission_file",
+    "write_plan_file",
+    "write_wpl_file",
 ]
 
 PLAN_SUFFIXES = (".plan",)
@@ -34,8 +57,9 @@ def mission_file_kind(path: str | Path) -> str:
         return "plan"
     if suffix in WPL_SUFFIXES:
         return "wpl"
-    raise MissionError(f"{path}: unknown mission file extension {suffix!r}; use .plan "
-                       f"(QGroundControl) or .waypoints (QGC WPL 110)")
+    raise MissionError(
+        f"{path}: unknown mission file extension {suffix!r}; use .plan (QGroundControl) or .waypoints (QGC WPL 110)"
+    )
 
 
 def load_mission_file(path: str | Path) -> MissionPlan:

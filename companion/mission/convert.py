@@ -25,15 +25,22 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from heli_common.geometry import point_in_polygon  # noqa: F401  (re-exported)
-
 from companion.errors import MissionError
 from companion.geo import LocalFrame
+from companion.mission.model import (
+    AMSL_FRAMES,
+    MAV_CMD_DO_CHANGE_SPEED,
+    MAV_CMD_NAV_LAND,
+    MAV_CMD_NAV_RETURN_TO_LAUNCH,
+    MAV_CMD_NAV_TAKEOFF,
+    MAV_CMD_NAV_WAYPOINT,
+    LocalMission,
+    LocalWaypoint,
+    MissionItem,
+    MissionPlan,
+)
+from heli_common.geometry import point_in_polygon  # noqa: F401  (re-exported)
 from heli_common.typed_config import require_numbers
-from companion.mission.model import (AMSL_FRAMES, MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LAND,
-                                     MAV_CMD_NAV_RETURN_TO_LAUNCH, MAV_CMD_NAV_TAKEOFF,
-                                     MAV_CMD_NAV_WAYPOINT, LocalMission, LocalWaypoint,
-                                     MissionItem, MissionPlan)
 
 if TYPE_CHECKING:
     from companion.world import Obstacle
@@ -66,9 +73,13 @@ class ConversionSettings:
     floor_m: float = 0.5
 
     def __post_init__(self) -> None:
-        require_numbers(MissionError, "mission", self,
-                        positive=("default_acceptance_radius_m", "ceiling_m"),
-                        non_negative=("margin_m", "padding_m", "floor_m"))
+        require_numbers(
+            MissionError,
+            "mission",
+            self,
+            positive=("default_acceptance_radius_m", "ceiling_m"),
+            non_negative=("margin_m", "padding_m", "floor_m"),
+        )
 
 
 @dataclass(frozen=True)
@@ -79,9 +90,14 @@ class Zone:
     name: str
 
 
-def mission_to_local(plan: MissionPlan, home_lla: tuple[float, float, float] | None = None, *,
-                     settings: ConversionSettings | None = None, world_file=None,
-                     dim: int = 3) -> LocalMission:
+def mission_to_local(
+    plan: MissionPlan,
+    home_lla: tuple[float, float, float] | None = None,
+    *,
+    settings: ConversionSettings | None = None,
+    world_file=None,
+    dim: int = 3,
+) -> LocalMission:
     """Convert a validated mission to local NED waypoints and a planning world.
 
     Parameters
@@ -114,8 +130,7 @@ def mission_to_local(plan: MissionPlan, home_lla: tuple[float, float, float] | N
     plan.validate()
     home = home_lla if home_lla is not None else plan.planned_home
     if home is None:
-        raise MissionError("no home position: the mission has no planned home and the vehicle "
-                           "reported none")
+        raise MissionError("no home position: the mission has no planned home and the vehicle reported none")
     frame = LocalFrame(*home)
     waypoints, end_action = items_to_waypoints(plan, frame, settings)
     zones = exclusion_zones(plan, frame)
@@ -125,13 +140,14 @@ def mission_to_local(plan: MissionPlan, home_lla: tuple[float, float, float] | N
     bounds_min, bounds_max = world_bounds(waypoints, zones, inclusion_ne_m, settings, dim)
     check_waypoints_reachable(waypoints, zones, inclusion_ne_m, settings, dim)
     world = build_world([z.obstacle for z in zones], bounds_min, bounds_max, settings.margin_m)
-    rally = np.array([frame.to_ned(r.lat_deg, r.lon_deg, home[2] + r.alt_m)
-                      for r in plan.rally], dtype=np.float64).reshape(-1, 3)
-    return LocalMission(frame=frame, waypoints=tuple(waypoints), world=world, rally_ned_m=rally,
-                        end_action=end_action)
+    rally = np.array(
+        [frame.to_ned(r.lat_deg, r.lon_deg, home[2] + r.alt_m) for r in plan.rally], dtype=np.float64
+    ).reshape(-1, 3)
+    return LocalMission(frame=frame, waypoints=tuple(waypoints), world=world, rally_ned_m=rally, end_action=end_action)
 
 
 # ----------------------------------------------------------------------------- waypoints
+
 
 def item_ned_m(item: MissionItem, frame: LocalFrame, last_ned_m: np.ndarray) -> np.ndarray:
     """NED position of a navigation item; lat/lon 0, 0 means "above the last position"."""
@@ -145,8 +161,9 @@ def item_ned_m(item: MissionItem, frame: LocalFrame, last_ned_m: np.ndarray) -> 
     return np.array([last_ned_m[0], last_ned_m[1], frame.alt0_m - alt_amsl])
 
 
-def items_to_waypoints(plan: MissionPlan, frame: LocalFrame, settings: ConversionSettings
-                       ) -> tuple[list[LocalWaypoint], str]:
+def items_to_waypoints(
+    plan: MissionPlan, frame: LocalFrame, settings: ConversionSettings
+) -> tuple[list[LocalWaypoint], str]:
     """Walk the items in order: speed changes apply to later legs; LAND/RTL end the mission."""
     waypoints: list[LocalWaypoint] = []
     last = np.zeros(3)
@@ -156,8 +173,7 @@ def items_to_waypoints(plan: MissionPlan, frame: LocalFrame, settings: Conversio
     for index, item in enumerate(plan.items):
         seq = index + 1
         if end_action != "hover":
-            log.warning("%s follows the mission's %s and is not flown", item.describe(seq),
-                        end_action.upper())
+            log.warning("%s follows the mission's %s and is not flown", item.describe(seq), end_action.upper())
             continue
         if item.command == MAV_CMD_DO_CHANGE_SPEED:
             if item.speed_m_s is not None:
@@ -200,18 +216,24 @@ def ground_down_m(item: MissionItem, frame: LocalFrame) -> float:
     return 0.0
 
 
-def check_altitude(pos_ned_m: np.ndarray, item: MissionItem, seq: int,
-                   settings: ConversionSettings, allow_ground: bool) -> None:
+def check_altitude(
+    pos_ned_m: np.ndarray, item: MissionItem, seq: int, settings: ConversionSettings, allow_ground: bool
+) -> None:
     altitude_m = -float(pos_ned_m[2])
     if altitude_m > settings.ceiling_m + 1e-9:
-        raise MissionError(f"{item.describe(seq)}: altitude {altitude_m:.1f} m above home is "
-                           f"above the ceiling of {settings.ceiling_m:.1f} m")
+        raise MissionError(
+            f"{item.describe(seq)}: altitude {altitude_m:.1f} m above home is "
+            f"above the ceiling of {settings.ceiling_m:.1f} m"
+        )
     if not allow_ground and altitude_m < settings.floor_m:
-        raise MissionError(f"{item.describe(seq)}: altitude {altitude_m:.1f} m above home is "
-                           f"below the minimum of {settings.floor_m:.1f} m")
+        raise MissionError(
+            f"{item.describe(seq)}: altitude {altitude_m:.1f} m above home is "
+            f"below the minimum of {settings.floor_m:.1f} m"
+        )
 
 
 # ----------------------------------------------------------------------------- world
+
 
 def exclusion_zones(plan: MissionPlan, frame: LocalFrame) -> list[Zone]:
     """Exclusion polygons -> Prism, exclusion circles -> Cylinder (full height)."""
@@ -233,8 +255,7 @@ def exclusion_zones(plan: MissionPlan, frame: LocalFrame) -> list[Zone]:
         if circle.inclusion:
             continue
         n, e, _ = frame.to_ned(circle.lat_deg, circle.lon_deg, frame.alt0_m)
-        zones.append(Zone(Cylinder((float(n), float(e)), circle.radius_m),
-                          f"{len(zones) + 1} (geofence circle {k})"))
+        zones.append(Zone(Cylinder((float(n), float(e)), circle.radius_m), f"{len(zones) + 1} (geofence circle {k})"))
     return zones
 
 
@@ -258,8 +279,7 @@ def inclusion_polygon_ne(plan: MissionPlan, frame: LocalFrame) -> np.ndarray | N
     polygons = plan.inclusion_polygons
     circles = plan.inclusion_circles
     if len(polygons) + len(circles) > 1:
-        log.warning("%d inclusion fences: only the first one bounds the world",
-                    len(polygons) + len(circles))
+        log.warning("%d inclusion fences: only the first one bounds the world", len(polygons) + len(circles))
     if polygons:
         lat = np.array([v[0] for v in polygons[0].vertices_deg])
         lon = np.array([v[1] for v in polygons[0].vertices_deg])
@@ -269,14 +289,17 @@ def inclusion_polygon_ne(plan: MissionPlan, frame: LocalFrame) -> np.ndarray | N
         c = circles[0]
         n, e, _ = frame.to_ned(c.lat_deg, c.lon_deg, frame.alt0_m)
         ang = np.linspace(0.0, 2.0 * np.pi, 32, endpoint=False)
-        return np.column_stack([float(n) + c.radius_m * np.cos(ang),
-                                float(e) + c.radius_m * np.sin(ang)])
+        return np.column_stack([float(n) + c.radius_m * np.cos(ang), float(e) + c.radius_m * np.sin(ang)])
     return None
 
 
-def world_bounds(waypoints: list[LocalWaypoint], zones: list[Zone],
-                 inclusion_ne_m: np.ndarray | None, settings: ConversionSettings, dim: int
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def world_bounds(
+    waypoints: list[LocalWaypoint],
+    zones: list[Zone],
+    inclusion_ne_m: np.ndarray | None,
+    settings: ConversionSettings,
+    dim: int,
+) -> tuple[np.ndarray, np.ndarray]:
     """Bounds: the inclusion fence's box, else the extent of home, goals and zones + padding."""
     if inclusion_ne_m is not None:
         lo_ne = inclusion_ne_m.min(axis=0)
@@ -293,13 +316,16 @@ def world_bounds(waypoints: list[LocalWaypoint], zones: list[Zone],
         hi_ne = pts.max(axis=0) + pad
     if dim == 2:
         return lo_ne.astype(np.float64), hi_ne.astype(np.float64)
-    return (np.array([lo_ne[0], lo_ne[1], -settings.ceiling_m]),
-            np.array([hi_ne[0], hi_ne[1], 0.0]))
+    return (np.array([lo_ne[0], lo_ne[1], -settings.ceiling_m]), np.array([hi_ne[0], hi_ne[1], 0.0]))
 
 
-def check_waypoints_reachable(waypoints: list[LocalWaypoint], zones: list[Zone],
-                              inclusion_ne_m: np.ndarray | None, settings: ConversionSettings,
-                              dim: int) -> None:
+def check_waypoints_reachable(
+    waypoints: list[LocalWaypoint],
+    zones: list[Zone],
+    inclusion_ne_m: np.ndarray | None,
+    settings: ConversionSettings,
+    dim: int,
+) -> None:
     """Every goal must be outside every inflated zone and inside the inclusion fence."""
     for w in waypoints:
         label = "the implied takeoff (seq 0)" if w.seq == 0 else f"item {w.seq} ({w.kind})"
@@ -309,15 +335,16 @@ def check_waypoints_reachable(waypoints: list[LocalWaypoint], zones: list[Zone],
             if clearance_m < 0.0:
                 raise MissionError(f"{label} is inside exclusion zone {zone.name}: unreachable")
             if clearance_m < settings.margin_m:
-                raise MissionError(f"{label} is {clearance_m:.1f} m from exclusion zone "
-                                   f"{zone.name}, closer than the {settings.margin_m:.1f} m "
-                                   f"margin: unreachable")
+                raise MissionError(
+                    f"{label} is {clearance_m:.1f} m from exclusion zone "
+                    f"{zone.name}, closer than the {settings.margin_m:.1f} m "
+                    f"margin: unreachable"
+                )
         if inclusion_ne_m is not None and not point_in_polygon(w.pos_ned_m[:2], inclusion_ne_m):
             raise MissionError(f"{label} is outside the inclusion geofence: unreachable")
 
 
-def build_world(obstacles: list, bounds_min: np.ndarray, bounds_max: np.ndarray,
-                margin_m: float):
+def build_world(obstacles: list, bounds_min: np.ndarray, bounds_max: np.ndarray, margin_m: float):
     """``companion.world.World`` with the zones inflated by ``margin_m``."""
     from companion.world import World
 

@@ -21,9 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from heli_common.mavlink_ids import mavlink
-
 from companion.errors import MissionError
+from heli_common.mavlink_ids import mavlink
 
 # MAV_CMD numbers (pymavlink's generated enums)
 MAV_CMD_NAV_WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
@@ -132,16 +131,14 @@ class MissionItem:
     @property
     def acceptance_radius_m(self) -> float | None:
         """NAV_WAYPOINT acceptance radius in metres (None when unset or 0: use the default)."""
-        if self.command != MAV_CMD_NAV_WAYPOINT or not math.isfinite(self.param2) \
-                or self.param2 <= 0.0:
+        if self.command != MAV_CMD_NAV_WAYPOINT or not math.isfinite(self.param2) or self.param2 <= 0.0:
             return None
         return float(self.param2)
 
     @property
     def speed_m_s(self) -> float | None:
         """DO_CHANGE_SPEED speed in m/s (None for "no change" or other commands)."""
-        if self.command != MAV_CMD_DO_CHANGE_SPEED or not math.isfinite(self.param2) \
-                or self.param2 <= 0.0:
+        if self.command != MAV_CMD_DO_CHANGE_SPEED or not math.isfinite(self.param2) or self.param2 <= 0.0:
             return None
         return float(self.param2)
 
@@ -168,8 +165,7 @@ class FencePolygon:
     def __post_init__(self) -> None:
         kind = "inclusion" if self.inclusion else "exclusion"
         if len(self.vertices_deg) < 3:
-            raise MissionError(f"fence {kind} polygon has {len(self.vertices_deg)} vertices, "
-                               f"needs at least 3")
+            raise MissionError(f"fence {kind} polygon has {len(self.vertices_deg)} vertices, needs at least 3")
         for k, (lat, lon) in enumerate(self.vertices_deg):
             check_lat_lon_deg(lat, lon, f"fence {kind} polygon vertex {k}")
 
@@ -250,8 +246,7 @@ class MissionPlan:
             raise MissionError("the mission is empty: it has no mission items")
         for index, item in enumerate(self.items):
             validate_item(item, index + 1)
-        if not any(item.has_position or item.command == MAV_CMD_NAV_TAKEOFF
-                   for item in self.items):
+        if not any(item.has_position or item.command == MAV_CMD_NAV_TAKEOFF for item in self.items):
             raise MissionError("the mission has no takeoff and no waypoint with a position")
 
     @property
@@ -275,11 +270,14 @@ def validate_item(item: MissionItem, index: int) -> None:
     """Raise ``MissionError`` naming item ``index`` (its vehicle seq) if it cannot be flown."""
     if item.command not in SUPPORTED_COMMANDS:
         supported = ", ".join(f"{name} ({num})" for num, name in SUPPORTED_COMMANDS.items())
-        raise MissionError(f"item {index}: unsupported command {command_name(item.command)} "
-                           f"({item.command}); supported: {supported}")
+        raise MissionError(
+            f"item {index}: unsupported command {command_name(item.command)} ({item.command}); supported: {supported}"
+        )
     if item.is_nav and item.frame not in AMSL_FRAMES | RELATIVE_FRAMES:
-        raise MissionError(f"{item.describe(index)}: unsupported frame {item.frame}; use "
-                           f"GLOBAL (0), GLOBAL_RELATIVE_ALT (3) or their _INT variants (5, 6)")
+        raise MissionError(
+            f"{item.describe(index)}: unsupported frame {item.frame}; use "
+            f"GLOBAL (0), GLOBAL_RELATIVE_ALT (3) or their _INT variants (5, 6)"
+        )
     if item.is_nav:
         check_lat_lon_deg(item.lat_deg, item.lon_deg, item.describe(index))
         if not math.isfinite(item.alt_m):
@@ -288,8 +286,7 @@ def validate_item(item: MissionItem, index: int) -> None:
         if math.isfinite(item.param1) and item.param1 < 0:
             raise MissionError(f"{item.describe(index)}: hold time param1 {item.param1} s < 0")
         if math.isfinite(item.param2) and item.param2 < 0:
-            raise MissionError(f"{item.describe(index)}: acceptance radius param2 "
-                               f"{item.param2} m < 0")
+            raise MissionError(f"{item.describe(index)}: acceptance radius param2 {item.param2} m < 0")
 
 
 # ----------------------------------------------------------------------------- local form

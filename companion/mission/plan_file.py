@@ -13,11 +13,17 @@ import json
 import math
 from pathlib import Path
 
-from heli_common.mavlink_ids import mavlink
-
 from companion.errors import MissionError
-from companion.mission.model import (AMSL_FRAMES, FenceCircle, FencePolygon, MissionItem,
-                                     MissionPlan, NAV_COMMANDS, RallyPoint)
+from companion.mission.model import (
+    AMSL_FRAMES,
+    NAV_COMMANDS,
+    FenceCircle,
+    FencePolygon,
+    MissionItem,
+    MissionPlan,
+    RallyPoint,
+)
+from heli_common.mavlink_ids import mavlink
 
 PLAN_FILE_TYPE = "Plan"
 MAV_AUTOPILOT_ARDUPILOTMEGA = mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
@@ -47,8 +53,7 @@ def read_plan_text(text: str, source: str = "<plan>") -> MissionPlan:
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise MissionError(f"{source}: broken JSON at line {exc.lineno} column {exc.colno}: "
-                           f"{exc.msg}") from None
+        raise MissionError(f"{source}: broken JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
     plan = parse_plan_document(doc, source)
     plan.validate()
     return plan
@@ -69,27 +74,38 @@ def parse_plan_document(doc, source: str) -> MissionPlan:
     require_type(doc, dict, "top level", source)
     file_type = doc.get("fileType")
     if file_type != PLAN_FILE_TYPE:
-        raise MissionError(f"{source}: fileType is {file_type!r}, expected {PLAN_FILE_TYPE!r} "
-                           f"(is this a QGroundControl .plan file?)")
+        raise MissionError(
+            f"{source}: fileType is {file_type!r}, expected {PLAN_FILE_TYPE!r} (is this a QGroundControl .plan file?)"
+        )
     mission = require_key(doc, "mission", dict, "", source)
     items_json = require_key(mission, "items", list, "mission", source)
     items = tuple(parse_item(entry, index, source) for index, entry in enumerate(items_json))
     home = parse_planned_home(mission.get("plannedHomePosition"), source)
     polygons, circles = parse_geofence(doc.get("geoFence"), source)
     rally = parse_rally(doc.get("rallyPoints"), source)
-    return MissionPlan(items=items, polygons=polygons, circles=circles, rally=rally,
-                       planned_home=home,
-                       cruise_speed_m_s=optional_number(mission, "cruiseSpeed", source),
-                       hover_speed_m_s=optional_number(mission, "hoverSpeed", source))
+    return MissionPlan(
+        items=items,
+        polygons=polygons,
+        circles=circles,
+        rally=rally,
+        planned_home=home,
+        cruise_speed_m_s=optional_number(mission, "cruiseSpeed", source),
+        hover_speed_m_s=optional_number(mission, "hoverSpeed", source),
+    )
 
 
 def require_type(value, kind, where: str, source: str):
     kinds = kind if isinstance(kind, tuple) else (kind,)
     if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
-        names = {dict: "an object", list: "an array", int: "an integer", float: "a number",
-                 (int, float): "a number", bool: "true or false"}
-        raise MissionError(f"{source}: {where} must be {names.get(kind, kind)}, "
-                           f"got {type(value).__name__}")
+        names = {
+            dict: "an object",
+            list: "an array",
+            int: "an integer",
+            float: "a number",
+            (int, float): "a number",
+            bool: "true or false",
+        }
+        raise MissionError(f"{source}: {where} must be {names.get(kind, kind)}, got {type(value).__name__}")
     return value
 
 
@@ -121,16 +137,19 @@ def parse_item(entry, index: int, source: str) -> MissionItem:
     item_type = entry.get("type", "SimpleItem")
     if item_type == "ComplexItem":
         kind = entry.get("complexItemType", "complex item")
-        raise MissionError(f"{source}: {where} is a ComplexItem ({kind}): unsupported; convert "
-                           f"it to waypoints in QGroundControl")
+        raise MissionError(
+            f"{source}: {where} is a ComplexItem ({kind}): unsupported; convert it to waypoints in QGroundControl"
+        )
     if item_type != "SimpleItem":
         raise MissionError(f"{source}: {where}: unknown item type {item_type!r}")
     command = require_key(entry, "command", int, where, source)
     frame = require_key(entry, "frame", int, where, source)
     params = require_key(entry, "params", list, where, source)
     if len(params) != 7:
-        raise MissionError(f"{source}: {where}.params has {len(params)} entries, expected 7 "
-                           f"(param1..param4, latitude, longitude, altitude)")
+        raise MissionError(
+            f"{source}: {where}.params has {len(params)} entries, expected 7 "
+            f"(param1..param4, latitude, longitude, altitude)"
+        )
     values = [param_value(v, f"{where}.params[{k}]", source) for k, v in enumerate(params)]
     if command in NAV_COMMANDS:
         for k, name in ((4, "latitude"), (5, "longitude"), (6, "altitude")):
@@ -138,9 +157,18 @@ def parse_item(entry, index: int, source: str) -> MissionItem:
                 raise MissionError(f"{source}: {where}: {name} params[{k}] is missing (null)")
     lat, lon, alt = (0.0 if not math.isfinite(v) else v for v in values[4:7])
     auto = entry.get("autoContinue", True)
-    return MissionItem(command=command, frame=frame, param1=values[0], param2=values[1],
-                       param3=values[2], param4=values[3], lat_deg=lat, lon_deg=lon, alt_m=alt,
-                       autocontinue=bool(auto))
+    return MissionItem(
+        command=command,
+        frame=frame,
+        param1=values[0],
+        param2=values[1],
+        param3=values[2],
+        param4=values[3],
+        lat_deg=lat,
+        lon_deg=lon,
+        alt_m=alt,
+        autocontinue=bool(auto),
+    )
 
 
 def parse_planned_home(value, source: str) -> tuple[float, float, float] | None:
@@ -148,10 +176,8 @@ def parse_planned_home(value, source: str) -> tuple[float, float, float] | None:
         return None
     require_type(value, list, "mission.plannedHomePosition", source)
     if len(value) != 3:
-        raise MissionError(f"{source}: mission.plannedHomePosition must be [lat, lon, alt], "
-                           f"got {len(value)} values")
-    lat, lon, alt = (float(require_type(v, (int, float), "mission.plannedHomePosition", source))
-                     for v in value)
+        raise MissionError(f"{source}: mission.plannedHomePosition must be [lat, lon, alt], got {len(value)} values")
+    lat, lon, alt = (float(require_type(v, (int, float), "mission.plannedHomePosition", source)) for v in value)
     return lat, lon, alt
 
 
@@ -160,8 +186,7 @@ def parse_geofence(fence, source: str) -> tuple[tuple[FencePolygon, ...], tuple[
         return (), ()
     require_type(fence, dict, "geoFence", source)
     polygons = []
-    for k, entry in enumerate(require_type(fence.get("polygons", []), list,
-                                           "geoFence.polygons", source)):
+    for k, entry in enumerate(require_type(fence.get("polygons", []), list, "geoFence.polygons", source)):
         where = f"geoFence.polygons[{k}]"
         require_type(entry, dict, where, source)
         vertices = require_key(entry, "polygon", list, where, source)
@@ -178,16 +203,14 @@ def parse_geofence(fence, source: str) -> tuple[tuple[FencePolygon, ...], tuple[
         except MissionError as exc:
             raise MissionError(f"{source}: {where}: {exc}") from None
     circles = []
-    for k, entry in enumerate(require_type(fence.get("circles", []), list,
-                                           "geoFence.circles", source)):
+    for k, entry in enumerate(require_type(fence.get("circles", []), list, "geoFence.circles", source)):
         where = f"geoFence.circles[{k}]"
         require_type(entry, dict, where, source)
         circle = require_key(entry, "circle", dict, where, source)
         center = require_key(circle, "center", list, f"{where}.circle", source)
         if len(center) != 2:
             raise MissionError(f"{source}: {where}.circle.center must be [lat, lon]")
-        lat, lon = (float(require_type(v, (int, float), f"{where}.circle.center", source))
-                    for v in center)
+        lat, lon = (float(require_type(v, (int, float), f"{where}.circle.center", source)) for v in center)
         radius = float(require_key(circle, "radius", (int, float), f"{where}.circle", source))
         inclusion = bool(entry.get("inclusion", True))
         try:
@@ -202,8 +225,7 @@ def parse_rally(rally, source: str) -> tuple[RallyPoint, ...]:
         return ()
     require_type(rally, dict, "rallyPoints", source)
     points = []
-    for k, entry in enumerate(require_type(rally.get("points", []), list,
-                                           "rallyPoints.points", source)):
+    for k, entry in enumerate(require_type(rally.get("points", []), list, "rallyPoints.points", source)):
         where = f"rallyPoints.points[{k}]"
         require_type(entry, list, where, source)
         if len(entry) != 3:
@@ -218,6 +240,7 @@ def parse_rally(rally, source: str) -> tuple[RallyPoint, ...]:
 
 # ----------------------------------------------------------------------------- writer
 
+
 def json_number(value: float):
     """NaN -> ``null`` (QGroundControl's convention), integral floats stay floats."""
     return None if value is None or not math.isfinite(value) else float(value)
@@ -229,9 +252,15 @@ def item_to_json(item: MissionItem, jump_id: int) -> dict:
         "command": int(item.command),
         "doJumpId": jump_id,
         "frame": int(item.frame),
-        "params": [json_number(item.param1), json_number(item.param2),
-                   json_number(item.param3), json_number(item.param4),
-                   float(item.lat_deg), float(item.lon_deg), float(item.alt_m)],
+        "params": [
+            json_number(item.param1),
+            json_number(item.param2),
+            json_number(item.param3),
+            json_number(item.param4),
+            float(item.lat_deg),
+            float(item.lon_deg),
+            float(item.alt_m),
+        ],
         "type": "SimpleItem",
     }
     if item.is_nav:
@@ -245,8 +274,7 @@ def plan_to_document(plan: MissionPlan) -> dict:
     """``MissionPlan`` -> ``.plan`` JSON document (QGroundControl reads it)."""
     home = plan.planned_home
     if home is None:
-        home = next(((i.lat_deg, i.lon_deg, 0.0) for i in plan.items if i.has_position),
-                    (0.0, 0.0, 0.0))
+        home = next(((i.lat_deg, i.lon_deg, 0.0) for i in plan.items if i.has_position), (0.0, 0.0, 0.0))
     mission = {
         "cruiseSpeed": plan.cruise_speed_m_s if plan.cruise_speed_m_s is not None else 15.0,
         "firmwareType": MAV_AUTOPILOT_ARDUPILOTMEGA,
@@ -258,15 +286,25 @@ def plan_to_document(plan: MissionPlan) -> dict:
         "version": 2,
     }
     geofence = {
-        "circles": [{"circle": {"center": [c.lat_deg, c.lon_deg], "radius": c.radius_m},
-                     "inclusion": c.inclusion, "version": 1} for c in plan.circles],
-        "polygons": [{"inclusion": p.inclusion, "polygon": [list(v) for v in p.vertices_deg],
-                      "version": 1} for p in plan.polygons],
+        "circles": [
+            {"circle": {"center": [c.lat_deg, c.lon_deg], "radius": c.radius_m}, "inclusion": c.inclusion, "version": 1}
+            for c in plan.circles
+        ],
+        "polygons": [
+            {"inclusion": p.inclusion, "polygon": [list(v) for v in p.vertices_deg], "version": 1}
+            for p in plan.polygons
+        ],
         "version": 2,
     }
     rally = {"points": [[r.lat_deg, r.lon_deg, r.alt_m] for r in plan.rally], "version": 2}
-    return {"fileType": PLAN_FILE_TYPE, "geoFence": geofence, "groundStation": "QGroundControl",
-            "mission": mission, "rallyPoints": rally, "version": 1}
+    return {
+        "fileType": PLAN_FILE_TYPE,
+        "geoFence": geofence,
+        "groundStation": "QGroundControl",
+        "mission": mission,
+        "rallyPoints": rally,
+        "version": 1,
+    }
 
 
 def write_plan_file(plan: MissionPlan, path: str | Path) -> None:

@@ -17,18 +17,25 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from companion.errors import MissionError
+from companion.mission.model import (
+    MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION,
+    MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
+    MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION,
+    MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+    MAV_CMD_NAV_FENCE_RETURN_POINT,
+    MAV_CMD_NAV_RALLY_POINT,
+    MAV_CMD_NAV_WAYPOINT,
+    MAV_FRAME_GLOBAL,
+    MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    FenceCircle,
+    FencePolygon,
+    MissionItem,
+    MissionPlan,
+    RallyPoint,
+)
 from heli_common.mavlink_ids import mavlink
 from heli_common.mission_item import MissionItemInt
-
-from companion.errors import MissionError
-from companion.mission.model import (MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION,
-                                     MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
-                                     MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION,
-                                     MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
-                                     MAV_CMD_NAV_FENCE_RETURN_POINT, MAV_CMD_NAV_RALLY_POINT,
-                                     MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL,
-                                     MAV_FRAME_GLOBAL_RELATIVE_ALT, FenceCircle, FencePolygon,
-                                     MissionItem, MissionPlan, RallyPoint)
 
 MAV_MISSION_TYPE_MISSION = mavlink.MAV_MISSION_TYPE_MISSION
 MAV_MISSION_TYPE_FENCE = mavlink.MAV_MISSION_TYPE_FENCE
@@ -49,8 +56,9 @@ def e7_to_deg(value_e7: int) -> float:
     return value_e7 / DEG_E7
 
 
-def mission_to_raw(plan: MissionPlan, home_lla: tuple[float, float, float] | None = None,
-                   *, with_home: bool = True) -> list[RawItem]:
+def mission_to_raw(
+    plan: MissionPlan, home_lla: tuple[float, float, float] | None = None, *, with_home: bool = True
+) -> list[RawItem]:
     """The mission list: home at seq 0 (if ``with_home``), then ``plan.items``.
 
     Parameters
@@ -61,15 +69,42 @@ def mission_to_raw(plan: MissionPlan, home_lla: tuple[float, float, float] | Non
     raw: list[RawItem] = []
     if with_home:
         home = home_lla or plan.planned_home or (0.0, 0.0, 0.0)
-        raw.append(RawItem(0, MAV_FRAME_GLOBAL, MAV_CMD_NAV_WAYPOINT, 1, 1, 0.0, 0.0, 0.0, 0.0,
-                           deg_to_e7(home[0]), deg_to_e7(home[1]), float(home[2]),
-                           MAV_MISSION_TYPE_MISSION))
+        raw.append(
+            RawItem(
+                0,
+                MAV_FRAME_GLOBAL,
+                MAV_CMD_NAV_WAYPOINT,
+                1,
+                1,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                deg_to_e7(home[0]),
+                deg_to_e7(home[1]),
+                float(home[2]),
+                MAV_MISSION_TYPE_MISSION,
+            )
+        )
     for item in plan.items:
         # MAVSDK requires exactly one item flagged current: the first one
-        raw.append(RawItem(len(raw), int(item.frame), int(item.command), int(not raw),
-                           int(item.autocontinue), float(item.param1), float(item.param2),
-                           float(item.param3), float(item.param4), deg_to_e7(item.lat_deg),
-                           deg_to_e7(item.lon_deg), float(item.alt_m), MAV_MISSION_TYPE_MISSION))
+        raw.append(
+            RawItem(
+                len(raw),
+                int(item.frame),
+                int(item.command),
+                int(not raw),
+                int(item.autocontinue),
+                float(item.param1),
+                float(item.param2),
+                float(item.param3),
+                float(item.param4),
+                deg_to_e7(item.lat_deg),
+                deg_to_e7(item.lon_deg),
+                float(item.alt_m),
+                MAV_MISSION_TYPE_MISSION,
+            )
+        )
     return raw
 
 
@@ -77,31 +112,77 @@ def fence_to_raw(plan: MissionPlan) -> list[RawItem]:
     """The fence list: every polygon's vertices, then every circle."""
     raw: list[RawItem] = []
     for polygon in plan.polygons:
-        command = (MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION if polygon.inclusion
-                   else MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION)
+        command = (
+            MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+            if polygon.inclusion
+            else MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+        )
         count = float(len(polygon.vertices_deg))
         for lat, lon in polygon.vertices_deg:
-            raw.append(RawItem(len(raw), MAV_FRAME_GLOBAL, command, 0, 1, count, 0.0, 0.0, 0.0,
-                               deg_to_e7(lat), deg_to_e7(lon), 0.0, MAV_MISSION_TYPE_FENCE))
+            raw.append(
+                RawItem(
+                    len(raw),
+                    MAV_FRAME_GLOBAL,
+                    command,
+                    0,
+                    1,
+                    count,
+                    0.0,
+                    0.0,
+                    0.0,
+                    deg_to_e7(lat),
+                    deg_to_e7(lon),
+                    0.0,
+                    MAV_MISSION_TYPE_FENCE,
+                )
+            )
     for circle in plan.circles:
-        command = (MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION if circle.inclusion
-                   else MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION)
-        raw.append(RawItem(len(raw), MAV_FRAME_GLOBAL, command, 0, 1, float(circle.radius_m),
-                           0.0, 0.0, 0.0, deg_to_e7(circle.lat_deg), deg_to_e7(circle.lon_deg),
-                           0.0, MAV_MISSION_TYPE_FENCE))
+        command = MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION if circle.inclusion else MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
+        raw.append(
+            RawItem(
+                len(raw),
+                MAV_FRAME_GLOBAL,
+                command,
+                0,
+                1,
+                float(circle.radius_m),
+                0.0,
+                0.0,
+                0.0,
+                deg_to_e7(circle.lat_deg),
+                deg_to_e7(circle.lon_deg),
+                0.0,
+                MAV_MISSION_TYPE_FENCE,
+            )
+        )
     return raw
 
 
 def rally_to_raw(plan: MissionPlan) -> list[RawItem]:
     """The rally list (altitudes above home)."""
-    return [RawItem(k, MAV_FRAME_GLOBAL_RELATIVE_ALT, MAV_CMD_NAV_RALLY_POINT, 0, 1, 0.0, 0.0,
-                    0.0, 0.0, deg_to_e7(r.lat_deg), deg_to_e7(r.lon_deg), float(r.alt_m),
-                    MAV_MISSION_TYPE_RALLY)
-            for k, r in enumerate(plan.rally)]
+    return [
+        RawItem(
+            k,
+            MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            MAV_CMD_NAV_RALLY_POINT,
+            0,
+            1,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            deg_to_e7(r.lat_deg),
+            deg_to_e7(r.lon_deg),
+            float(r.alt_m),
+            MAV_MISSION_TYPE_RALLY,
+        )
+        for k, r in enumerate(plan.rally)
+    ]
 
 
-def raw_to_mission_items(raw: list[RawItem], *, with_home: bool = True
-                         ) -> tuple[tuple[MissionItem, ...], tuple[float, float, float] | None]:
+def raw_to_mission_items(
+    raw: list[RawItem], *, with_home: bool = True
+) -> tuple[tuple[MissionItem, ...], tuple[float, float, float] | None]:
     """Mission list -> (items, home). With ``with_home`` seq 0 is taken as home."""
     ordered = sorted(raw, key=lambda r: r.seq)
     home = None
@@ -109,10 +190,21 @@ def raw_to_mission_items(raw: list[RawItem], *, with_home: bool = True
         first = ordered[0]
         home = (e7_to_deg(first.x), e7_to_deg(first.y), float(first.z))
         ordered = ordered[1:]
-    items = tuple(MissionItem(command=r.command, frame=r.frame, param1=r.param1,
-                              param2=r.param2, param3=r.param3, param4=r.param4,
-                              lat_deg=e7_to_deg(r.x), lon_deg=e7_to_deg(r.y), alt_m=float(r.z),
-                              autocontinue=bool(r.autocontinue)) for r in ordered)
+    items = tuple(
+        MissionItem(
+            command=r.command,
+            frame=r.frame,
+            param1=r.param1,
+            param2=r.param2,
+            param3=r.param3,
+            param4=r.param4,
+            lat_deg=e7_to_deg(r.x),
+            lon_deg=e7_to_deg(r.y),
+            alt_m=float(r.z),
+            autocontinue=bool(r.autocontinue),
+        )
+        for r in ordered
+    )
     if home is not None and home[0] == 0.0 and home[1] == 0.0:
         home = None
     return items, home
@@ -132,20 +224,27 @@ def raw_to_fence(raw: list[RawItem]) -> tuple[tuple[FencePolygon, ...], tuple[Fe
     k = 0
     while k < len(ordered):
         item = ordered[k]
-        if item.command in (MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
-                            MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION):
+        if item.command in (MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION):
             count = int(round(item.param1))
-            run = ordered[k:k + count]
+            run = ordered[k : k + count]
             if count < 3 or len(run) < count or any(r.command != item.command for r in run):
-                raise MissionError(f"fence item {item.seq}: polygon of {count} vertices is "
-                                   f"incomplete")
-            polygons.append(FencePolygon(tuple((e7_to_deg(r.x), e7_to_deg(r.y)) for r in run),
-                                         item.command == MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION))
+                raise MissionError(f"fence item {item.seq}: polygon of {count} vertices is incomplete")
+            polygons.append(
+                FencePolygon(
+                    tuple((e7_to_deg(r.x), e7_to_deg(r.y)) for r in run),
+                    item.command == MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                )
+            )
             k += count
-        elif item.command in (MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
-                              MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION):
-            circles.append(FenceCircle(e7_to_deg(item.x), e7_to_deg(item.y), float(item.param1),
-                                       item.command == MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION))
+        elif item.command in (MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION):
+            circles.append(
+                FenceCircle(
+                    e7_to_deg(item.x),
+                    e7_to_deg(item.y),
+                    float(item.param1),
+                    item.command == MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
+                )
+            )
             k += 1
         elif item.command == MAV_CMD_NAV_FENCE_RETURN_POINT:
             k += 1  # the companion does not use ArduPilot's fence return point
@@ -164,10 +263,12 @@ def raw_to_rally(raw: list[RawItem]) -> tuple[RallyPoint, ...]:
     return tuple(points)
 
 
-def raw_to_plan(mission: Sequence[RawItem], fence: Sequence[RawItem] = (), rally: Sequence[RawItem] = (),
-                *, with_home: bool = True) -> MissionPlan:
+def raw_to_plan(
+    mission: Sequence[RawItem], fence: Sequence[RawItem] = (), rally: Sequence[RawItem] = (), *, with_home: bool = True
+) -> MissionPlan:
     """The three downloaded lists -> ``MissionPlan`` (not validated: a download keeps any item)."""
     items, home = raw_to_mission_items(list(mission), with_home=with_home)
     polygons, circles = raw_to_fence(list(fence))
-    return MissionPlan(items=items, polygons=polygons, circles=circles,
-                       rally=raw_to_rally(list(rally)), planned_home=home)
+    return MissionPlan(
+        items=items, polygons=polygons, circles=circles, rally=raw_to_rally(list(rally)), planned_home=home
+    )

@@ -52,8 +52,7 @@ def read_wpl_text(text: str, source: str = "<waypoints>") -> MissionPlan:
         if expected_index is None:
             expected_index = index
         if index != expected_index:
-            raise MissionError(f"{source}: line {line_no}: item index {index}, expected "
-                               f"{expected_index}")
+            raise MissionError(f"{source}: line {line_no}: item index {index}, expected {expected_index}")
         expected_index += 1
         if index == 0:
             home = (item.lat_deg, item.lon_deg, item.alt_m)
@@ -76,9 +75,11 @@ def parse_wpl_line(line: str, line_no: int, source: str) -> tuple[int, MissionIt
     fields = line.split("\t") if "\t" in line else line.split()
     fields = [f.strip() for f in fields if f.strip() != ""]
     if len(fields) != WPL_COLUMNS:
-        raise MissionError(f"{source}: line {line_no}: {len(fields)} columns, expected "
-                           f"{WPL_COLUMNS} (index current frame command p1 p2 p3 p4 lat lon "
-                           f"alt autocontinue)")
+        raise MissionError(
+            f"{source}: line {line_no}: {len(fields)} columns, expected "
+            f"{WPL_COLUMNS} (index current frame command p1 p2 p3 p4 lat lon "
+            f"alt autocontinue)"
+        )
     try:
         index, current, frame, command = (int(fields[k]) for k in range(4))
         p1, p2, p3, p4, lat, lon, alt = (float(fields[k]) for k in range(4, 11))
@@ -86,18 +87,24 @@ def parse_wpl_line(line: str, line_no: int, source: str) -> tuple[int, MissionIt
     except ValueError as exc:
         raise MissionError(f"{source}: line {line_no}: not a number: {exc}") from None
     if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(alt)):
-        raise MissionError(f"{source}: line {line_no}: latitude/longitude/altitude must be "
-                           f"numbers")
+        raise MissionError(f"{source}: line {line_no}: latitude/longitude/altitude must be numbers")
     if abs(lat) > 90.0:
-        raise MissionError(f"{source}: line {line_no}: latitude {lat} deg is out of range "
-                           f"[-90, 90]")
+        raise MissionError(f"{source}: line {line_no}: latitude {lat} deg is out of range [-90, 90]")
     if abs(lon) > 180.0:
-        raise MissionError(f"{source}: line {line_no}: longitude {lon} deg is out of range "
-                           f"[-180, 180]")
+        raise MissionError(f"{source}: line {line_no}: longitude {lon} deg is out of range [-180, 180]")
     del current
-    item = MissionItem(command=command, frame=frame, param1=p1, param2=p2, param3=p3,
-                       param4=p4, lat_deg=lat, lon_deg=lon, alt_m=alt,
-                       autocontinue=bool(autocontinue))
+    item = MissionItem(
+        command=command,
+        frame=frame,
+        param1=p1,
+        param2=p2,
+        param3=p3,
+        param4=p4,
+        lat_deg=lat,
+        lon_deg=lon,
+        alt_m=alt,
+        autocontinue=bool(autocontinue),
+    )
     return index, item
 
 
@@ -131,9 +138,13 @@ def wpl_line(index: int, item: MissionItem, current: int = 0) -> str:
 def plan_to_wpl_text(plan: MissionPlan) -> str:
     """``MissionPlan`` -> ``QGC WPL 110`` text (home as index 0, then the items)."""
     if plan.polygons or plan.circles or plan.rally:
-        log.warning("QGC WPL 110 holds no geofence or rally points: %d polygons, %d circles and "
-                    "%d rally points are not written (use a .plan file)",
-                    len(plan.polygons), len(plan.circles), len(plan.rally))
+        log.warning(
+            "QGC WPL 110 holds no geofence or rally points: %d polygons, %d circles and "
+            "%d rally points are not written (use a .plan file)",
+            len(plan.polygons),
+            len(plan.circles),
+            len(plan.rally),
+        )
     home = plan.planned_home or (0.0, 0.0, 0.0)
     home_item = MissionItem(command=16, frame=0, lat_deg=home[0], lon_deg=home[1], alt_m=home[2])
     lines = [WPL_HEADER, wpl_line(0, home_item, current=1)]

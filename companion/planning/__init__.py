@@ -11,5 +11,17 @@ from companion.planning.result import PlanResult, Tree
 from companion.planning.settings import CostWeights, GartSettings, MgartSettings, SimplifySettings
 from companion.planning.simplify import shortcut_path
 
-__all__ = ["gart", "mgart", "PlanResult", "Tree", "GartSettings", "MgartSettings", "CostWeights",
-           "SimplifySettings", "path_cost", "path_length_m", "shortcut_path", "hausdorff_m"]
+__all__ = [
+    "gart",
+    "mgart",
+    "PlanResult",
+    "Tree",
+    "GartSettings",
+    "MgartSettings",
+    "CostWeights",
+    "SimplifySettings",
+    "path_cost",
+    "path_length_m",
+    "shortcut_path",
+    "hausdorff_m",
+]

@@ -77,8 +77,7 @@ class _Nodes(_Points):
 
     def within(self, p: tuple, radius_m: float) -> list[tuple[int, float]]:
         s = self.s
-        ids, dist = within_kernel(s.coords, s.keys, s.active, s.n_nodes, np.array(p, dtype=float),
-                                  radius_m * radius_m)
+        ids, dist = within_kernel(s.coords, s.keys, s.active, s.n_nodes, np.array(p, dtype=float), radius_m * radius_m)
         return list(zip(ids.tolist(), dist.tolist()))
 
     def remove(self, node: int) -> None:
@@ -98,8 +97,8 @@ class _GoalLinks(_Points):
         link_of, gl_node, gl_e, gl_u, gl_len = s.links
         k, m = int(link_of[node]), int(s.counters[kernel.N_LINKS])
         for a in (gl_node, gl_e, gl_u, gl_len):
-            a[k:m - 1] = a[k + 1:m]
-        link_of[gl_node[k:m - 1]] -= 1
+            a[k : m - 1] = a[k + 1 : m]
+        link_of[gl_node[k : m - 1]] -= 1
         link_of[node] = -1
         s.counters[kernel.N_LINKS] = m - 1
         return None

@@ -36,7 +36,7 @@ from companion.world.segments import compiled_for
 __all__ = ["CompiledGart", "compiled_case", "grow_compiled"]
 
 _FIRST_CAPACITY = 256
-_FIRST_BATCH = 32            # iterations per call; adapted so that a call lasts about _SLICE_S
+_FIRST_BATCH = 32  # iterations per call; adapted so that a call lasts about _SLICE_S
 _MAX_BATCH = 4096
 _SLICE_S = 1e-3
 
@@ -66,8 +66,14 @@ def _world_arrays(world: World, r_max: float, influence_m: float | None) -> tupl
         inv_cell = 1.0 / max(r_max, 1e-3)
         shape = grid_shape(lo, hi, inv_cell)
         guide = Guidance.ball_rows_of(world, influence_m) if influence_m is not None else np.zeros((0, d + 2))
-        arrays = (np.array(lo), np.array(hi), np.array([h - l for l, h in zip(lo, hi)]), space_of(world), guide,
-                  np.array(shape, dtype=np.int64))
+        arrays = (
+            np.array(lo),
+            np.array(hi),
+            np.array([h - l for l, h in zip(lo, hi)]),
+            space_of(world),
+            guide,
+            np.array(shape, dtype=np.int64),
+        )
         found = (lo, hi, inv_cell, shape, arrays)
         world._memo[key] = found
     return found
@@ -114,19 +120,41 @@ class CompiledGart:
         ellipse = ellipse_frame(start, goal)
         c_min, basis, centre = ellipse if ellipse is not None else (0.0, np.zeros((0, d)), start)
         goal_arr, self.start_arr = np.array(goal), np.array(start)
-        self.problem = (goal_arr,) + world_arrays[:5] + (np.array(basis, dtype=float).reshape(-1, d), np.array(centre),
-                                                         inv_cell, world_arrays[5], rule_of(settings))
+        self.problem = (
+            (goal_arr,)
+            + world_arrays[:5]
+            + (
+                np.array(basis, dtype=float).reshape(-1, d),
+                np.array(centre),
+                inv_cell,
+                world_arrays[5],
+                rule_of(settings),
+            )
+        )
         self.energy = settings.cost.energy
         self.climb = climb_penalty_of(settings, d)
-        self.params = (float(settings.goal_bias), float(step), float(settings.goal_radius_m or step), float(r_max),
-                       rrt_star_gamma(lo, hi, settings.rewire_factor), float(self.energy), self.climb, float(c_min),
-                       float(settings.obstacle_gain_m2), float(settings.repel_offset_m), float(settings.goal_gain_m),
-                       float(settings.max_guidance_m), float(settings.influence_m), bool(settings.guidance),
-                       bool(settings.informed), ellipse is not None)
+        self.params = (
+            float(settings.goal_bias),
+            float(step),
+            float(settings.goal_radius_m or step),
+            float(r_max),
+            rrt_star_gamma(lo, hi, settings.rewire_factor),
+            float(self.energy),
+            self.climb,
+            float(c_min),
+            float(settings.obstacle_gain_m2),
+            float(settings.repel_offset_m),
+            float(settings.goal_gain_m),
+            float(settings.max_guidance_m),
+            float(settings.influence_m),
+            bool(settings.guidance),
+            bool(settings.informed),
+            ellipse is not None,
+        )
         self.counters = np.array([0, 0, -1, 0, 0], dtype=np.int64)
         self.best = np.array([math.inf])
         self._allocate(_FIRST_CAPACITY)
-        self.coords[0] = start   # the root, bucket key as NodeGrid's
+        self.coords[0] = start  # the root, bucket key as NodeGrid's
         self.keys[0], self.active[0] = bucket_key(start, lo, inv_cell, shape), True
         self.parent[0], self.cost[0], self.first_child[0], self.link_of[0] = -1, 0.0, -1, -1
         self.counters[kernel.N_NODES] = 1
@@ -135,8 +163,20 @@ class CompiledGart:
         """(Re)allocate every array with room for ``cap`` nodes, keeping the rows written."""
         d, n = self.dim, self.n_nodes
         f, i, b = np.float64, np.int64, np.bool_
-        shapes = ((cap, d), f), ((cap,), i), ((cap,), b), ((cap,), i), ((cap,), f), ((cap, d), f), ((cap,), b), \
-            ((cap,), f), ((cap,), f), ((cap,), i), ((cap,), i), ((cap,), i)
+        shapes = (
+            ((cap, d), f),
+            ((cap,), i),
+            ((cap,), b),
+            ((cap,), i),
+            ((cap,), f),
+            ((cap, d), f),
+            ((cap,), b),
+            ((cap,), f),
+            ((cap,), f),
+            ((cap,), i),
+            ((cap,), i),
+            ((cap,), i),
+        )
         link_shapes = ((cap,), i), ((cap,), i), ((cap,), f), ((cap, d), f), ((cap,), f)
         old = getattr(self, "tree_arrays", None)
         tree = tuple(np.zeros(shape, dtype) if dtype is b else np.empty(shape, dtype) for shape, dtype in shapes)
@@ -145,8 +185,20 @@ class CompiledGart:
             for new, before in zip(tree + links, old + self.links):
                 new[:n] = before[:n]
         self.tree_arrays, self.links = tree, links
-        (self.coords, self.keys, self.active, self.parent, self.cost, self.u, self.has_u, self.length, self.edge,
-         self.first_child, self.next_sib, self.prev_sib) = tree
+        (
+            self.coords,
+            self.keys,
+            self.active,
+            self.parent,
+            self.cost,
+            self.u,
+            self.has_u,
+            self.length,
+            self.edge,
+            self.first_child,
+            self.next_sib,
+            self.prev_sib,
+        ) = tree
         self.link_of = links[0]
 
     # ------------------------------------------------------------------ state read by gart()
@@ -187,11 +239,20 @@ class CompiledGart:
         while True:
             if self.counters[kernel.RANDOM_POS] >= self.rand.shape[0]:
                 self.more_random()
-            status = kernel.grow_batch(self.tree_arrays, self.links, self.counters, self.best, self.rand, self.problem,
-                                       self.params, int(stop - self.counters[kernel.ITERATIONS]), mode)
+            status = kernel.grow_batch(
+                self.tree_arrays,
+                self.links,
+                self.counters,
+                self.best,
+                self.rand,
+                self.problem,
+                self.params,
+                int(stop - self.counters[kernel.ITERATIONS]),
+                mode,
+            )
             if status != kernel.NEED_RANDOM:
                 return status
-            self.more_random()   # (at least one iteration is left: a sample needed more numbers)
+            self.more_random()  # (at least one iteration is left: a sample needed more numbers)
 
     def more_random(self) -> None:
         """Append the stream's next batch to the unread uniform numbers."""
@@ -222,8 +283,9 @@ class CompiledGart:
         return Tree(nodes=self.coords[:n].copy(), parents=self.parent[:n].copy(), forbidden=np.zeros(n, dtype=bool))
 
 
-def grow_compiled(search: CompiledGart, t0: float, deadline: float, iter_limit: float,
-                  stop_at_first: bool) -> tuple[list[tuple[float, float]], float | None]:
+def grow_compiled(
+    search: CompiledGart, t0: float, deadline: float, iter_limit: float, stop_at_first: bool
+) -> tuple[list[tuple[float, float]], float | None]:
     """:func:`companion.planning.gart.grow` for a :class:`CompiledGart`: same budgets, same history."""
     history: list[tuple[float, float]] = []
     first_s = None

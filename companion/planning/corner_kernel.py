@@ -29,8 +29,12 @@ __all__ = ["rule_of", "climb_penalty_of", "corner_fits", "corner_clear", "edge_c
 def rule_of(settings: GartSettings) -> tuple:
     """``(cos_max, kappa_1_m or 0.0, corner_fraction, G2_CORNER_COEFF)`` of ``settings``."""
     kappa = settings.kappa_max_1_m
-    return (math.cos(settings.max_heading_change_rad), 0.0 if kappa is None else float(kappa),
-            float(settings.corner_fraction), float(G2_CORNER_COEFF))
+    return (
+        math.cos(settings.max_heading_change_rad),
+        0.0 if kappa is None else float(kappa),
+        float(settings.corner_fraction),
+        float(G2_CORNER_COEFF),
+    )
 
 
 def climb_penalty_of(settings: GartSettings, dim: int) -> float:

@@ -29,9 +29,9 @@ def _scaled_norm(diffs: np.ndarray, largest: float) -> float:
     """Norm of ``diffs`` (d,) (non-negative, finite, largest ``largest`` > 0), CPython's way."""
     _, exponent = math.frexp(largest)
     scale = math.ldexp(1.0, -exponent)
-    total = 1.0      # compensated sum started at 1 (subtracted at the end)
-    frac_sq = 0.0    # low parts of the squares
-    frac_sum = 0.0   # rounding errors of the sum
+    total = 1.0  # compensated sum started at 1 (subtracted at the end)
+    frac_sq = 0.0  # low parts of the squares
+    frac_sum = 0.0  # rounding errors of the sum
     for k in range(diffs.shape[0]):
         x = diffs[k] * scale
         sq, sq_lo = exact_product(x, x)
@@ -64,7 +64,7 @@ def python_dist(p, q) -> float:
     if largest == 0.0:
         return largest
     _, exponent = math.frexp(largest)
-    if exponent < -1023:     # subnormal differences: lift them to normal numbers first
+    if exponent < -1023:  # subnormal differences: lift them to normal numbers first
         for k in range(d):
             diffs[k] /= _DBL_MIN
         return _DBL_MIN * _scaled_norm(diffs, largest / _DBL_MIN)

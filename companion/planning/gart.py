@@ -50,15 +50,19 @@ def _tiny_worlds() -> tuple[World, ...]:
     compiled iteration, a prism (the polyhedral queries), a box (the Python iteration's kernels)."""
     lo2, hi2, lo3, hi3 = np.zeros(2), np.full(2, 10.0), np.zeros(3), np.full(3, 10.0)
     square = ((4.0, 4.0), (6.0, 4.0), (6.0, 6.0), (4.0, 6.0))
-    return (World([Disc((5.0, 5.0), 1.5)], lo2, hi2), World([Sphere((5.0, 5.0, 5.0), 1.5)], lo3, hi3),
-            World([Prism(square)], lo2, hi2), World([Box((4.0, 4.0), (6.0, 6.0))], lo2, hi2))
+    return (
+        World([Disc((5.0, 5.0), 1.5)], lo2, hi2),
+        World([Sphere((5.0, 5.0, 5.0), 1.5)], lo3, hi3),
+        World([Prism(square)], lo2, hi2),
+        World([Box((4.0, 4.0), (6.0, 6.0))], lo2, hi2),
+    )
 
 
 def _first_calls() -> None:
     """Call every planning kernel once per argument type: tiny GART searches by iterations (no
     clock) on the compiled and the Python iteration (a threat cost, a box), their shortcut and
     cost, M-GART's compiled search and radius query, and its distinctness test."""
-    plain, threat_cost = GartSettings(), GartSettings(cost=CostWeights(threat=1.0))   # compiled, Python
+    plain, threat_cost = GartSettings(), GartSettings(cost=CostWeights(threat=1.0))  # compiled, Python
     for world in _tiny_worlds():
         start, goal = np.full(world.dim, 1.0), np.full(world.dim, 9.0)
         _plan(world, start, goal, rng=np.random.default_rng(0), max_iterations=300, settings=threat_cost)
@@ -68,8 +72,9 @@ def _first_calls() -> None:
             search.iterate(True, 50)
             search.nn.within(tuple(start), 1.0)
         if result.path is not None:
-            points = hausdorff_kernel.resample_points(np.ascontiguousarray(result.path, dtype=float),
-                                                      np.ones(result.path.shape[0] - 1, dtype=np.int64))
+            points = hausdorff_kernel.resample_points(
+                np.ascontiguousarray(result.path, dtype=float), np.ones(result.path.shape[0] - 1, dtype=np.int64)
+            )
             hausdorff_kernel.separated_kernel(points, points[::-1].copy(), 1.0)
 
 
@@ -89,7 +94,7 @@ def warm() -> float:
 
 def finish_path(world: World, path: np.ndarray, settings: GartSettings) -> tuple[np.ndarray, float, float]:
     """Shortcut (if enabled) and cost a found path: (path, cost, length_m)."""
-    if shortcut_case(world, settings):   # compiled, the same answer
+    if shortcut_case(world, settings):  # compiled, the same answer
         path, cost = shortcut_and_cost(world, path, settings)
         return path, cost, path_length_m(path)
     if settings.simplify.enabled and path.shape[0] > 2:
@@ -97,9 +102,17 @@ def finish_path(world: World, path: np.ndarray, settings: GartSettings) -> tuple
     return path, path_cost(world, path, settings.cost), path_length_m(path)
 
 
-def gart(world: World, start, goal, *, rng: np.random.Generator, max_time_s: float | None = None,
-         max_iterations: int | None = None, stop_at_first: bool = False,
-         settings: GartSettings | None = None) -> PlanResult:
+def gart(
+    world: World,
+    start,
+    goal,
+    *,
+    rng: np.random.Generator,
+    max_time_s: float | None = None,
+    max_iterations: int | None = None,
+    stop_at_first: bool = False,
+    settings: GartSettings | None = None,
+) -> PlanResult:
     """Plan from ``start`` to ``goal`` with GART (paper section 3.1).
 
     Parameters
@@ -133,13 +146,29 @@ def gart(world: World, start, goal, *, rng: np.random.Generator, max_time_s: flo
     :func:`warm`) before the budget's clock starts, so no budget pays for it.
     """
     warm()
-    return _plan(world, start, goal, rng=rng, max_time_s=max_time_s, max_iterations=max_iterations,
-                 stop_at_first=stop_at_first, settings=settings)
+    return _plan(
+        world,
+        start,
+        goal,
+        rng=rng,
+        max_time_s=max_time_s,
+        max_iterations=max_iterations,
+        stop_at_first=stop_at_first,
+        settings=settings,
+    )
 
 
-def _plan(world: World, start, goal, *, rng: np.random.Generator, max_time_s: float | None = None,
-          max_iterations: int | None = None, stop_at_first: bool = False,
-          settings: GartSettings | None = None) -> PlanResult:
+def _plan(
+    world: World,
+    start,
+    goal,
+    *,
+    rng: np.random.Generator,
+    max_time_s: float | None = None,
+    max_iterations: int | None = None,
+    stop_at_first: bool = False,
+    settings: GartSettings | None = None,
+) -> PlanResult:
     """:func:`gart` without the warm-up (the warm-up's own searches)."""
     t0 = time.perf_counter()
     settings = settings or GartSettings()
@@ -155,7 +184,7 @@ def _plan(world: World, start, goal, *, rng: np.random.Generator, max_time_s: fl
     deadline = t0 + max_time_s if max_time_s is not None else math.inf
     iter_limit = max_iterations if max_iterations is not None else math.inf
     search: CompiledGart | GartSearch
-    if compiled_case(world, settings):   # the whole iteration compiled (numba), the tree in arrays
+    if compiled_case(world, settings):  # the whole iteration compiled (numba), the tree in arrays
         search = CompiledGart(world, start_t, goal_t, settings, rng)
         history, first_s = grow_compiled(search, t0, deadline, iter_limit, stop_at_first)
         tree = search.tree_snapshot()
@@ -166,13 +195,22 @@ def _plan(world: World, start, goal, *, rng: np.random.Generator, max_time_s: fl
     if search.best_node < 0:
         return failed_result("timeout", t0, search.iterations, tree)
     path, cost, length = finish_path(world, search.path_to_goal(search.best_node), settings)
-    return PlanResult(status="exact", path=path, cost=cost, length_m=length, iterations=search.iterations,
-                      elapsed_s=time.perf_counter() - t0, time_to_first_s=first_s, tree=tree,
-                      cost_history=tuple(history))
+    return PlanResult(
+        status="exact",
+        path=path,
+        cost=cost,
+        length_m=length,
+        iterations=search.iterations,
+        elapsed_s=time.perf_counter() - t0,
+        time_to_first_s=first_s,
+        tree=tree,
+        cost_history=tuple(history),
+    )
 
 
-def grow(search: GartSearch, t0: float, deadline: float, iter_limit: float,
-         stop_at_first: bool) -> tuple[list[tuple[float, float]], float | None]:
+def grow(
+    search: GartSearch, t0: float, deadline: float, iter_limit: float, stop_at_first: bool
+) -> tuple[list[tuple[float, float]], float | None]:
     """Iterate until a budget is spent (or the first path, with ``stop_at_first``).
 
     Returns the cost history ``[(t_s, best cost)]`` and the time of the first path (or None).
@@ -182,8 +220,11 @@ def grow(search: GartSearch, t0: float, deadline: float, iter_limit: float,
     clock = time.perf_counter
     start_t, goal_t = search.start, search.goal
     if search.world.segment_free(start_t, goal_t):  # trivial problem: the straight line
-        search.goal_links[0] = (search.ec.edge(start_t, goal_t, math.dist(start_t, goal_t)),
-                                None, math.dist(start_t, goal_t))
+        search.goal_links[0] = (
+            search.ec.edge(start_t, goal_t, math.dist(start_t, goal_t)),
+            None,
+            math.dist(start_t, goal_t),
+        )
         search.update_best()
         first_s = clock() - t0
         history.append((first_s, search.best_cost))
@@ -197,7 +238,11 @@ def grow(search: GartSearch, t0: float, deadline: float, iter_limit: float,
             now = clock() - t0
             if first_s is None:
                 first_s = now
-                log.debug("gart: first path after %d iterations, %.1f ms, cost %.2f",
-                          search.iterations, 1e3 * now, search.best_cost)
+                log.debug(
+                    "gart: first path after %d iterations, %.1f ms, cost %.2f",
+                    search.iterations,
+                    1e3 * now,
+                    search.best_cost,
+                )
             history.append((now, search.best_cost))
     return history, first_s

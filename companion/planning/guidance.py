@@ -66,7 +66,7 @@ class Guidance:
         rows = world._memo.get(key)
         if rows is None:
             d = world.dim
-            rows = ball_table(world).copy()   # (centre..., r^2, r)
+            rows = ball_table(world).copy()  # (centre..., r^2, r)
             reach = rows[:, d + 1] + influence_m
             rows[:, d] = reach * reach
             world._memo[key] = rows
@@ -76,13 +76,23 @@ class Guidance:
         """Sample ``p`` moved by the potential, clamped to the bounds."""
         s = self.s
         if self.compiled:
-            out = attract_to_balls(np.array(p), self.goal, self.lo, self.hi, self.ball_rows, self.space,
-                                   s.influence_m, s.obstacle_gain_m2, s.repel_offset_m, s.goal_gain_m,
-                                   s.max_guidance_m)
+            out = attract_to_balls(
+                np.array(p),
+                self.goal,
+                self.lo,
+                self.hi,
+                self.ball_rows,
+                self.space,
+                s.influence_m,
+                s.obstacle_gain_m2,
+                s.repel_offset_m,
+                s.goal_gain_m,
+                s.max_guidance_m,
+            )
             return tuple(out.tolist())
         force = [0.0] * self.dim
         if self.scan_all:
-            balls, others = self.balls, self.others   # few obstacles: a plain scan is cheapest
+            balls, others = self.balls, self.others  # few obstacles: a plain scan is cheapest
         else:
             balls = ()
             others = self.world.obstacles_acting_on_cell(self.world.cell_of(p), s.influence_m + self.margin)
@@ -161,7 +171,7 @@ def _others_force(p, space, influence: float, gain: float, repel: float, force) 
     """:meth:`Guidance._others` over the world's cylinders and prisms (``space``, in their order)."""
     d = p.shape[0]
     margin = space[8]
-    reach = influence + margin + space[10]     # beyond: c > influence surely (obstacle_kernels)
+    reach = influence + margin + space[10]  # beyond: c > influence surely (obstacle_kernels)
     h = 1e-3
     up = np.empty(d)
     down = np.empty(d)
@@ -172,7 +182,7 @@ def _others_force(p, space, influence: float, gain: float, repel: float, force) 
         c = okern.other_sdf(j, p, space) - margin
         if c >= influence:
             continue
-        for i in range(d):   # Obstacle.gradient: central differences, 1 mm
+        for i in range(d):  # Obstacle.gradient: central differences, 1 mm
             up[:] = p
             down[:] = p
             up[i] = p[i] + h
@@ -194,8 +204,19 @@ def _others_force(p, space, influence: float, gain: float, repel: float, force) 
 
 
 @njit(cache=True)
-def attract_to_balls(p, goal, lo, hi, balls: np.ndarray, space, influence: float, gain: float, repel: float,
-                     goal_gain: float, max_guidance: float) -> np.ndarray:
+def attract_to_balls(
+    p,
+    goal,
+    lo,
+    hi,
+    balls: np.ndarray,
+    space,
+    influence: float,
+    gain: float,
+    repel: float,
+    goal_gain: float,
+    max_guidance: float,
+) -> np.ndarray:
     """:meth:`Guidance.attract` for a world of the compiled case: the moved sample, shape (d,).
 
     ``p`` (d,) array; ``balls`` (N, d + 2) rows ``(centre..., (r + influence)^2, r)``; ``space``

@@ -35,19 +35,30 @@ from companion.planning.node_arrays import append_kernel, nearest_kernel
 from companion.planning.parent_choice import extend
 from companion.world import obstacle_kernels as okern
 
-__all__ = ["grow_batch", "BATCH_DONE", "IMPROVED", "NEED_RANDOM", "NEW_NODE", "GART", "MGART_LINKS", "MGART_NODES",
-           "N_NODES", "ITERATIONS", "BEST_NODE",
-           "N_LINKS", "RANDOM_POS"]
+__all__ = [
+    "grow_batch",
+    "BATCH_DONE",
+    "IMPROVED",
+    "NEED_RANDOM",
+    "NEW_NODE",
+    "GART",
+    "MGART_LINKS",
+    "MGART_NODES",
+    "N_NODES",
+    "ITERATIONS",
+    "BEST_NODE",
+    "N_LINKS",
+    "RANDOM_POS",
+]
 
-BATCH_DONE, IMPROVED, NEED_RANDOM, NEW_NODE = 0, 1, 2, 3          # why grow_batch returned
-GART, MGART_LINKS, MGART_NODES = 0, 1, 2      # modes: stop at a lower best cost, at a goal link, at every node
-N_NODES, ITERATIONS, BEST_NODE, N_LINKS, RANDOM_POS = 0, 1, 2, 3, 4   # counters
+BATCH_DONE, IMPROVED, NEED_RANDOM, NEW_NODE = 0, 1, 2, 3  # why grow_batch returned
+GART, MGART_LINKS, MGART_NODES = 0, 1, 2  # modes: stop at a lower best cost, at a goal link, at every node
+N_NODES, ITERATIONS, BEST_NODE, N_LINKS, RANDOM_POS = 0, 1, 2, 3, 4  # counters
 _INFORMED_TRIES = 20
 
 
 @njit(cache=True)
-def draw_sample(rand, pos, x, goal, lo, hi, span, goal_bias, c_best_m, informed, has_ellipse, c_min, basis,
-                centre):
+def draw_sample(rand, pos, x, goal, lo, hi, span, goal_bias, c_best_m, informed, has_ellipse, c_min, basis, centre):
     """Step 1 (:meth:`~companion.planning.sampling.Sampler.sample`) into ``x`` (d,).
 
     Uniform numbers are read from ``rand`` at ``pos``. Returns ``(pos after, is_goal)``; pos -1
@@ -66,7 +77,7 @@ def draw_sample(rand, pos, x, goal, lo, hi, span, goal_bias, c_best_m, informed,
         r_minor = 0.5 * math.sqrt(c_best_m * c_best_m - c_min * c_min)
         ball = np.empty(d)
         for _ in range(_INFORMED_TRIES):
-            while True:   # a uniform point of the unit ball, by rejection
+            while True:  # a uniform point of the unit ball, by rejection
                 if pos + d > m:
                     return -1, False
                 s2 = 0.0
@@ -164,8 +175,9 @@ def _rewire_allowed(tree, link_of, gl_u, gl_len, node: int, i: int, uu, dist: fl
     """The tests of :meth:`GartSearch.rewire` after the cost test: corners, edge, K_max's corners."""
     coords, u, length = tree[0], tree[5], tree[7]
     link = link_of[i]
-    if not corner_fits(u[node], length[node], uu, dist, rule) or not _children_fit(tree, i, uu, dist, rule, None,
-                                                                                    space):
+    if not corner_fits(u[node], length[node], uu, dist, rule) or not _children_fit(
+        tree, i, uu, dist, rule, None, space
+    ):
         return False
     if link >= 0 and not corner_fits(uu, dist, gl_u[link], gl_len[link], rule):
         return False
@@ -173,9 +185,11 @@ def _rewire_allowed(tree, link_of, gl_u, gl_len, node: int, i: int, uu, dist: fl
         return False
     if rule[1] == 0.0:
         return True
-    return (corner_clear(u[node], length[node], uu, dist, coords[node], rule, space)
-            and _children_fit(tree, i, uu, dist, rule, coords[i], space)
-            and (link < 0 or corner_clear(uu, dist, gl_u[link], gl_len[link], coords[i], rule, space)))
+    return (
+        corner_clear(u[node], length[node], uu, dist, coords[node], rule, space)
+        and _children_fit(tree, i, uu, dist, rule, coords[i], space)
+        and (link < 0 or corner_clear(uu, dist, gl_u[link], gl_len[link], coords[i], rule, space))
+    )
 
 
 @njit(cache=True)
@@ -206,7 +220,7 @@ def rewire(tree, links, node: int, ids, dists, energy: float, climb_penalty: flo
         _link_child(first_child, next_sib, prev_sib, node, i)
         edge[i], length[i], cost[i] = e, dist, c
         u[i, :] = uu
-        top = 0          # propagate the new cost to the descendants
+        top = 0  # propagate the new cost to the descendants
         stack[top] = i
         top += 1
         while top > 0:
@@ -221,8 +235,9 @@ def rewire(tree, links, node: int, ids, dists, energy: float, climb_penalty: flo
 
 
 @njit(cache=True)
-def connect_goal(tree, links, counters, node: int, goal, goal_radius: float, energy: float, climb_penalty: float,
-                 rule, space) -> None:
+def connect_goal(
+    tree, links, counters, node: int, goal, goal_radius: float, energy: float, climb_penalty: float, rule, space
+) -> None:
     """Step 6 (:meth:`GartSearch.connect_goal`): a straight edge from ``node`` to the goal, recorded."""
     coords, u, length = tree[0], tree[5], tree[7]
     link_of, gl_node, gl_e, gl_u, gl_len = links
@@ -302,33 +317,80 @@ def grow_batch(tree, links, counters, best, rand, problem, params, max_iteration
     """
     coords, keys, active, parent, cost, u, has_u, length, edge, first_child, next_sib, prev_sib = tree
     goal, lo, hi, span, space, ball_rows, basis, centre, inv_cell, shape, rule = problem
-    (goal_bias, step, goal_radius, r_max, gamma, energy, climb, c_min, gain, repel, goal_gain, max_guidance,
-     influence, guided, informed, has_ellipse) = params
+    (
+        goal_bias,
+        step,
+        goal_radius,
+        r_max,
+        gamma,
+        energy,
+        climb,
+        c_min,
+        gain,
+        repel,
+        goal_gain,
+        max_guidance,
+        influence,
+        guided,
+        informed,
+        has_ellipse,
+    ) = params
     d = coords.shape[1]
     x = np.empty(d)
     x_new = np.empty(d)
     stack = np.empty(coords.shape[0], dtype=np.int64)
     for _ in range(max_iterations):
-        pos, is_goal = draw_sample(rand, counters[RANDOM_POS], x, goal, lo, hi, span, goal_bias, best[0] / energy,
-                                   informed, has_ellipse, c_min, basis, centre)
+        pos, is_goal = draw_sample(
+            rand,
+            counters[RANDOM_POS],
+            x,
+            goal,
+            lo,
+            hi,
+            span,
+            goal_bias,
+            best[0] / energy,
+            informed,
+            has_ellipse,
+            c_min,
+            basis,
+            centre,
+        )
         if pos < 0:
             return NEED_RANDOM
         counters[RANDOM_POS] = pos
         counters[ITERATIONS] += 1
         x_rand = x
         if guided and not is_goal:
-            x_rand = attract_to_balls(x, goal, lo, hi, ball_rows, space, influence, gain, repel, goal_gain,
-                                      max_guidance)
+            x_rand = attract_to_balls(
+                x, goal, lo, hi, ball_rows, space, influence, gain, repel, goal_gain, max_guidance
+            )
         n = counters[N_NODES]
         near = nearest_kernel(coords, active, n, x_rand)
         if near < 0 or not steer(coords[near], x_rand, step, x_new):
             continue
         near_dist = python_dist(coords[near], x_new)
-        _, chosen, ids, dists = extend(x_new, near, near_dist, rewire_radius(n, gamma, r_max, d), coords, keys,
-                                       active, n, cost, u, has_u, length, energy, climb, rule, space)
+        _, chosen, ids, dists = extend(
+            x_new,
+            near,
+            near_dist,
+            rewire_radius(n, gamma, r_max, d),
+            coords,
+            keys,
+            active,
+            n,
+            cost,
+            u,
+            has_u,
+            length,
+            energy,
+            climb,
+            rule,
+            space,
+        )
         if chosen < 0:
             continue
-        p, dist = ids[chosen], dists[chosen]       # step 4 chose the parent: insert the node
+        p, dist = ids[chosen], dists[chosen]  # step 4 chose the parent: insert the node
         append_kernel(coords, keys, active, n, x_new, lo, inv_cell, shape)
         for k in range(d):
             u[n, k] = (x_new[k] - coords[p, k]) / dist

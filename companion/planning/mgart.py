@@ -37,8 +37,8 @@ from companion.planning.gart import finish_path, warm
 from companion.planning.hausdorff_kernel import UNSURE, resample_points, separated_kernel
 from companion.planning.portals import GoalPortals
 from companion.planning.problem import validate_problem
-from companion.planning.search import GartSearch
 from companion.planning.result import PlanResult, Status
+from companion.planning.search import GartSearch
 from companion.planning.settings import MgartSettings
 
 __all__ = ["mgart", "hausdorff_m", "hausdorff_of_points", "resample_path", "separated"]
@@ -131,7 +131,8 @@ def forbid_branch(search: BranchSearch, node: int, keep_near_root_m: float, tube
             if i == 0 or search.forbidden[i]:
                 continue
             if math.dist(pts[i], start) <= keep_near_root_m or (
-                    i != node and math.dist(pts[i], goal) <= keep_near_root_m):
+                i != node and math.dist(pts[i], goal) <= keep_near_root_m
+            ):
                 continue
             search.forbidden[i] = True
             search.nn.remove(i)
@@ -139,8 +140,17 @@ def forbid_branch(search: BranchSearch, node: int, keep_near_root_m: float, tube
     return count
 
 
-def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: float | None = None,
-          settings: MgartSettings | None = None, max_iterations: int | None = None) -> list[PlanResult]:
+def mgart(
+    world,
+    start,
+    goal,
+    k: int,
+    *,
+    rng: np.random.Generator,
+    max_time_s: float | None = None,
+    settings: MgartSettings | None = None,
+    max_iterations: int | None = None,
+) -> list[PlanResult]:
     """Up to ``k`` distinct collision-free paths from ``start`` to ``goal``, cheapest first.
 
     Parameters
@@ -179,19 +189,29 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
     gs = settings.gart
     if not world.point_free(start_t) or not world.point_free(goal_t):
         status: Status = "invalid_start" if not world.point_free(start_t) else "invalid_goal"
-        return [PlanResult(status=status, path=None, cost=math.inf, length_m=math.inf, iterations=0,
-                           elapsed_s=time.perf_counter() - t0, time_to_first_s=None, tree=None)]
+        return [
+            PlanResult(
+                status=status,
+                path=None,
+                cost=math.inf,
+                length_m=math.inf,
+                iterations=0,
+                elapsed_s=time.perf_counter() - t0,
+                time_to_first_s=None,
+                tree=None,
+            )
+        ]
     if max_time_s is None and max_iterations is None:
         max_time_s = settings.time_budget_s
     deadline = t0 + max_time_s if max_time_s is not None else math.inf
     iter_limit = max_iterations if max_iterations is not None else math.inf
-    compiled = compiled_case(world, gs)   # the whole iteration compiled (numba), the tree in arrays
+    compiled = compiled_case(world, gs)  # the whole iteration compiled (numba), the tree in arrays
     search = (CompiledMgartSearch if compiled else GartSearch)(world, start_t, goal_t, gs, rng)
     portals = GoalPortals(search, settings.portal_zone_m)
     found: list[tuple[np.ndarray, float, float, float]] = []  # path, cost, length, t_found
     clock = time.perf_counter
 
-    kept_points: list[np.ndarray] = []   # the paths found, resampled for the distinctness test
+    kept_points: list[np.ndarray] = []  # the paths found, resampled for the distinctness test
 
     def consider(raw: np.ndarray) -> None:
         # the shortcut path if it is distinct; else the branch as grown (shortcutting can pull
@@ -210,8 +230,11 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
     if world.segment_free(start_t, goal_t):
         consider(np.array([start_t, goal_t]))
     while len(found) < k and clock() < deadline and search.iterations < iter_limit:
-        node = (search.iterate(bool(portals.items), iter_limit - search.iterations)
-                if isinstance(search, CompiledMgartSearch) else search.iterate())  # i.e. if compiled
+        node = (
+            search.iterate(bool(portals.items), iter_limit - search.iterations)
+            if isinstance(search, CompiledMgartSearch)
+            else search.iterate()
+        )  # i.e. if compiled
         if node < 0:
             continue
         raw = search.path_to_goal(node) if node in search.goal_links else portals.join(node)
@@ -226,8 +249,29 @@ def mgart(world, start, goal, k: int, *, rng: np.random.Generator, max_time_s: f
     tree = search.tree()
     elapsed = clock() - t0
     if not found:
-        return [PlanResult(status="timeout", path=None, cost=math.inf, length_m=math.inf,
-                           iterations=search.iterations, elapsed_s=elapsed, time_to_first_s=None, tree=tree)]
+        return [
+            PlanResult(
+                status="timeout",
+                path=None,
+                cost=math.inf,
+                length_m=math.inf,
+                iterations=search.iterations,
+                elapsed_s=elapsed,
+                time_to_first_s=None,
+                tree=tree,
+            )
+        ]
     found.sort(key=lambda f: f[1])
-    return [PlanResult(status="exact", path=p, cost=c, length_m=L, iterations=search.iterations,
-                       elapsed_s=elapsed, time_to_first_s=t, tree=tree) for p, c, L, t in found]
+    return [
+        PlanResult(
+            status="exact",
+            path=p,
+            cost=c,
+            length_m=L,
+            iterations=search.iterations,
+            elapsed_s=elapsed,
+            time_to_first_s=t,
+            tree=tree,
+        )
+        for p, c, L, t in found
+    ]

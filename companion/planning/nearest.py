@@ -93,7 +93,7 @@ class NodeGrid:
     # ------------------------------------------------------------------ updates
     def add(self, node: int) -> None:
         """Insert node ``node`` (its position is ``points[node]``)."""
-        key = self.arrays.append(node, self.points[node])   # = self._flat(self._index(p))
+        key = self.arrays.append(node, self.points[node])  # = self._flat(self._index(p))
         bucket = self.buckets.get(key)
         if bucket is None:
             self.buckets[key] = [node]

@@ -77,8 +77,9 @@ def within_kernel(coords: np.ndarray, keys: np.ndarray, active: np.ndarray, n: i
 
 
 @njit(cache=True)
-def append_kernel(coords: np.ndarray, keys: np.ndarray, active: np.ndarray, node: int, p, lo, inv_cell: float,
-                  shape) -> int:
+def append_kernel(
+    coords: np.ndarray, keys: np.ndarray, active: np.ndarray, node: int, p, lo, inv_cell: float, shape
+) -> int:
     """Write row ``node`` (position ``p``), mark it active; returns its bucket key.
 
     The key is that of :class:`~companion.planning.nearest.NodeGrid`: per axis the truncation

@@ -62,9 +62,20 @@ class ParentArrays:
 
 
 @njit(cache=True)
-def first_valid_parent(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, u_in: np.ndarray,
-                       has_u: np.ndarray, len_in: np.ndarray, coords: np.ndarray, x_new, energy: float,
-                       climb_penalty: float, rule, space) -> int:
+def first_valid_parent(
+    ids: np.ndarray,
+    dists: np.ndarray,
+    cost: np.ndarray,
+    u_in: np.ndarray,
+    has_u: np.ndarray,
+    len_in: np.ndarray,
+    coords: np.ndarray,
+    x_new,
+    energy: float,
+    climb_penalty: float,
+    rule,
+    space,
+) -> int:
     """Position in ``ids`` of the chosen parent of ``x_new``, or -1.
 
     Parameters
@@ -119,8 +130,9 @@ def first_valid_parent(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, u_i
 
 
 @njit(cache=True)
-def rewire_candidates(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, c_new: float, energy: float,
-                      skip: int) -> np.ndarray:
+def rewire_candidates(
+    ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, c_new: float, energy: float, skip: int
+) -> np.ndarray:
     """Positions in ``ids`` of the neighbours that the new node (cost ``c_new``) may shorten.
 
     Those with ``c_new + dist * energy < cost`` that are neither the root, nor ``skip`` (the new
@@ -139,9 +151,24 @@ def rewire_candidates(ids: np.ndarray, dists: np.ndarray, cost: np.ndarray, c_ne
 
 
 @njit(cache=True)
-def extend(x_new, near: int, near_dist: float, radius_m: float, coords: np.ndarray, keys: np.ndarray,
-           active: np.ndarray, n: int, cost: np.ndarray, u_in: np.ndarray, has_u: np.ndarray, len_in: np.ndarray,
-           energy: float, climb_penalty: float, rule, space):
+def extend(
+    x_new,
+    near: int,
+    near_dist: float,
+    radius_m: float,
+    coords: np.ndarray,
+    keys: np.ndarray,
+    active: np.ndarray,
+    n: int,
+    cost: np.ndarray,
+    u_in: np.ndarray,
+    has_u: np.ndarray,
+    len_in: np.ndarray,
+    energy: float,
+    climb_penalty: float,
+    rule,
+    space,
+):
     """Point test, neighbours and parent of the steered point ``x_new`` in one call.
 
     Returns ``(free, pos, ids, dists)``: whether ``x_new`` is free, the position in ``ids`` of
@@ -158,9 +185,8 @@ def extend(x_new, near: int, near_dist: float, radius_m: float, coords: np.ndarr
     for k in range(1, coords.shape[1]):
         dk = coords[near, k] - x_new[k]
         d2 += dk * dk
-    if not d2 <= rr:   # listed_within(pts[near], x_new, radius_m)
+    if not d2 <= rr:  # listed_within(pts[near], x_new, radius_m)
         ids = np.append(ids, near)
         dists = np.append(dists, near_dist)
-    pos = first_valid_parent(ids, dists, cost, u_in, has_u, len_in, coords, x_new, energy, climb_penalty, rule,
-                             space)
+    pos = first_valid_parent(ids, dists, cost, u_in, has_u, len_in, coords, x_new, energy, climb_penalty, rule, space)
     return True, pos, ids, dists

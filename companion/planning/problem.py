@@ -42,12 +42,18 @@ def validate_problem(world, start, goal, rng, max_time_s, max_iterations) -> tup
             raise PlanningError(f"{name}: coordinates must be finite, got {arr.tolist()}")
         p = tuple(float(x) for x in arr)
         if not world.in_bounds(p):
-            raise PlanningError(f"{name}: {list(p)} is outside the world bounds "
-                                f"{world.bounds_min.tolist()}..{world.bounds_max.tolist()}")
+            raise PlanningError(
+                f"{name}: {list(p)} is outside the world bounds "
+                f"{world.bounds_min.tolist()}..{world.bounds_max.tolist()}"
+            )
         points.append(p)
     if max_time_s is not None:
-        if isinstance(max_time_s, bool) or not isinstance(max_time_s, (int, float)) \
-                or not math.isfinite(max_time_s) or max_time_s <= 0:
+        if (
+            isinstance(max_time_s, bool)
+            or not isinstance(max_time_s, (int, float))
+            or not math.isfinite(max_time_s)
+            or max_time_s <= 0
+        ):
             raise PlanningError(f"max_time_s: must be a positive number of seconds, got {max_time_s!r}")
     if max_iterations is not None:
         if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) or max_iterations <= 0:
@@ -57,5 +63,13 @@ def validate_problem(world, start, goal, rng, max_time_s, max_iterations) -> tup
 
 def failed_result(status: Status, t0: float, iterations: int = 0, tree=None) -> PlanResult:
     """A result without a path: ``status`` ('timeout', 'invalid_start', 'invalid_goal')."""
-    return PlanResult(status=status, path=None, cost=math.inf, length_m=math.inf, iterations=iterations,
-                      elapsed_s=time.perf_counter() - t0, time_to_first_s=None, tree=tree)
+    return PlanResult(
+        status=status,
+        path=None,
+        cost=math.inf,
+        length_m=math.inf,
+        iterations=iterations,
+        elapsed_s=time.perf_counter() - t0,
+        time_to_first_s=None,
+        tree=tree,
+    )

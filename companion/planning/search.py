@@ -32,6 +32,7 @@ from typing import cast
 
 import numpy as np
 
+from companion.planning.corner_kernel import rule_of
 from companion.planning.cost import EdgeCost
 from companion.planning.guidance import Guidance
 from companion.planning.nearest import NodeGrid, listed_within
@@ -41,7 +42,6 @@ from companion.planning.sampling import RandomStream, Sampler
 from companion.planning.settings import GartSettings
 from companion.planning.simplify import CornerRule
 from companion.world import World
-from companion.planning.corner_kernel import rule_of
 from companion.world.obstacle_kernels import space_of
 from companion.world.segments import compiled_for, segment_test
 
@@ -79,8 +79,7 @@ class GartSearch:
         The only source of randomness.
     """
 
-    def __init__(self, world: World, start: tuple, goal: tuple, settings: GartSettings,
-                 rng: np.random.Generator):
+    def __init__(self, world: World, start: tuple, goal: tuple, settings: GartSettings, rng: np.random.Generator):
         self.world = world
         self.start = start
         self.goal = goal
@@ -179,8 +178,9 @@ class GartSearch:
                 return i, c, e, u, dist
         return None
 
-    def add_node(self, x_new: tuple, parent: int, cost: float, edge: float, u: tuple, length: float,
-                 dens_new: float) -> int:
+    def add_node(
+        self, x_new: tuple, parent: int, cost: float, edge: float, u: tuple, length: float, dens_new: float
+    ) -> int:
         """Append a node and link it to ``parent``."""
         node = len(self.pts)
         self.pts.append(x_new)
@@ -234,9 +234,10 @@ class GartSearch:
             if not free(x_new, p):
                 continue
             if self.rule.world is not None and not (
-                    ok(u_node, len_node, u, dist, x_new)
-                    and all(ok(u, dist, u_in[ch], len_in[ch], p) for ch in self.children[i])
-                    and (link is None or ok(u, dist, link[1], link[2], p))):
+                ok(u_node, len_node, u, dist, x_new)
+                and all(ok(u, dist, u_in[ch], len_in[ch], p) for ch in self.children[i])
+                and (link is None or ok(u, dist, link[1], link[2], p))
+            ):
                 continue
             self.children[self.parent[i]].remove(i)
             self.parent[i] = node
@@ -338,9 +339,23 @@ class GartSearch:
         """Steps 4 to 6 from the steered ``x_new`` (plain length cost, no K_max, compiled obstacles)."""
         fast, arrays, energy = self.fast, self.nn.arrays, self.s.cost.energy
         assert fast is not None  # iterate calls this only with the compiled arrays
-        free, pos, ids, dists = extend(np.array(x_new), near, math.dist(self.pts[near], x_new), self.radius(),
-                                       arrays.coords, arrays.keys, arrays.active, arrays.count, fast.cost, fast.u,
-                                       fast.has_u, fast.length, energy, 0.0, *self.fast_world)
+        free, pos, ids, dists = extend(
+            np.array(x_new),
+            near,
+            math.dist(self.pts[near], x_new),
+            self.radius(),
+            arrays.coords,
+            arrays.keys,
+            arrays.active,
+            arrays.count,
+            fast.cost,
+            fast.u,
+            fast.has_u,
+            fast.length,
+            energy,
+            0.0,
+            *self.fast_world,
+        )
         if pos < 0:
             return -1
         parent, dist = int(ids[pos]), float(dists[pos])
@@ -370,6 +385,8 @@ class GartSearch:
 
     def tree(self) -> Tree:
         """Snapshot of the tree as arrays."""
-        return Tree(nodes=np.array(self.pts, dtype=float).reshape(-1, self.dim),
-                    parents=np.array(self.parent, dtype=np.int64),
-                    forbidden=np.array(self.forbidden, dtype=bool))
+        return Tree(
+            nodes=np.array(self.pts, dtype=float).reshape(-1, self.dim),
+            parents=np.array(self.parent, dtype=np.int64),
+            forbidden=np.array(self.forbidden, dtype=bool),
+        )

@@ -65,7 +65,7 @@ class CostWeights:
             raise PlanningError(f"cost.threat_range_m: must be > 0, got {self.threat_range_m!r}")
 
     @classmethod
-    def length_only(cls) -> "CostWeights":
+    def length_only(cls) -> CostWeights:
         """Cost = path length in metres (what OMPL's planners minimise; used by benchmarks)."""
         return cls(energy=1.0, climb_penalty=0.0, threat=0.0, tracking_m_per_rad=0.0)
 
@@ -158,8 +158,17 @@ class GartSettings:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise PlanningError(f"settings.{name}: must be a positive finite number, got {v!r}")
 
-        for name in ("step_m", "rewire_factor", "max_rewire_radius_m", "goal_radius_m", "influence_m",
-                     "max_guidance_m", "kappa_max_1_m", "time_budget_s", "corner_fraction"):
+        for name in (
+            "step_m",
+            "rewire_factor",
+            "max_rewire_radius_m",
+            "goal_radius_m",
+            "influence_m",
+            "max_guidance_m",
+            "kappa_max_1_m",
+            "time_budget_s",
+            "corner_fraction",
+        ):
             positive(name)
         for name in ("goal_gain_m", "obstacle_gain_m2", "repel_offset_m"):
             v = getattr(self, name)
@@ -168,7 +177,9 @@ class GartSettings:
         if not 0.0 <= self.goal_bias <= 1.0:
             raise PlanningError(f"settings.goal_bias: must be in [0, 1], got {self.goal_bias!r}")
         if not 0.0 < self.max_heading_change_rad <= math.pi:
-            raise PlanningError(f"settings.max_heading_change_rad: must be in (0, pi], got {self.max_heading_change_rad!r}")
+            raise PlanningError(
+                f"settings.max_heading_change_rad: must be in (0, pi], got {self.max_heading_change_rad!r}"
+            )
 
     def max_heading_change_for(self, edge_length_m: float) -> float:
         """Largest corner deflection (rad) allowed between two edges of ``edge_length_m``."""

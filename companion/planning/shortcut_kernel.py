@@ -36,8 +36,13 @@ def shortcut_case(world, settings: GartSettings) -> bool:
 def shortcut_and_cost(world, path: np.ndarray, settings: GartSettings) -> tuple[np.ndarray, float]:
     """``(path (M', d), cost)``: the path shortcut when ``settings.simplify`` says so, then costed."""
     rounds = settings.simplify.max_rounds if settings.simplify.enabled and path.shape[0] > 2 else -1
-    out, cost = shortcut_polyline(np.ascontiguousarray(path, dtype=float), float(settings.cost.energy),
-                                  math.cos(settings.max_heading_change_rad), rounds, space_of(world))
+    out, cost = shortcut_polyline(
+        np.ascontiguousarray(path, dtype=float),
+        float(settings.cost.energy),
+        math.cos(settings.max_heading_change_rad),
+        rounds,
+        space_of(world),
+    )
     return out, cost
 
 
@@ -130,7 +135,7 @@ def shortcut_polyline(path, energy, cos_max, rounds, space):
     out = np.empty((m, d))
     for k in range(m):
         out[k] = path[idx[k]]
-    total = 0.0     # path_cost: the edges' lengths x energy, left to right
+    total = 0.0  # path_cost: the edges' lengths x energy, left to right
     for k in range(m - 1):
         dist = python_dist(out[k], out[k + 1])
         if dist > 0.0:

@@ -37,8 +37,7 @@ class CornerRule:
         self.world = world if settings.kappa_max_1_m is not None else None
         self.segment_free = segment_test(world) if self.world is not None else None
 
-    def ok(self, u_in: tuple | None, len_in: float, u_out: tuple, len_out: float,
-           corner: tuple | None = None) -> bool:
+    def ok(self, u_in: tuple | None, len_in: float, u_out: tuple, len_out: float, corner: tuple | None = None) -> bool:
         """True when the corner from unit direction ``u_in`` to ``u_out`` (at ``corner``) is allowed."""
         if u_in is None:
             return True
@@ -124,7 +123,7 @@ def shortcut_path(world: World, path, settings: GartSettings | None = None) -> n
         while i < len(pts) - 2:
             j = _farthest_shortcut(world, rule, ec, pts, edges, i)
             if j > 0:
-                pts = pts[:i + 1] + pts[j:]
+                pts = pts[: i + 1] + pts[j:]
                 edges = _Edges(pts, ec)
                 changed = True
             i += 1
@@ -154,7 +153,7 @@ def _farthest_shortcut(world: World, rule: CornerRule, ec: EdgeCost, pts: list, 
         if not new < old - 1e-9:
             continue
         if free is None:  # the edges from i to every later waypoint, tested at once
-            free = segments_free_from(world, pts[i], pts[i + 2:j + 1])
+            free = segments_free_from(world, pts[i], pts[i + 2 : j + 1])
         if free[j - i - 2]:
             return j
     return -1

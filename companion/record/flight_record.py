@@ -38,6 +38,7 @@ writes (``companion.daemon``, ``companion.threats.reactor``). Times ``t_s`` are 
               maximum tracking error, decisions, minimum threat separation, latencies, threat
               updates, joined, resumed_at_seq, threats_restored, outcome)
 """
+
 from __future__ import annotations
 
 import json
@@ -46,7 +47,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, IO
+from typing import IO, Any
 
 import numpy as np
 
@@ -58,7 +59,7 @@ log = logging.getLogger(__name__)
 def jsonable(value: Any) -> Any:
     """``value`` as plain JSON data: arrays as lists, floats rounded to 6 decimals, non-finite
     numbers as None."""
-    kind = type(value)                     # the common types first: a sample line is ~40 numbers
+    kind = type(value)  # the common types first: a sample line is ~40 numbers
     if kind is float:
         return round(value, 6) if math.isfinite(value) else None
     if kind is list or kind is tuple:
@@ -108,7 +109,7 @@ class FlightRecorder:
             self._fh.close()
             self._fh = None
 
-    def __enter__(self) -> "FlightRecorder":
+    def __enter__(self) -> FlightRecorder:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -135,8 +136,7 @@ class FlightRecord:
         return "t_s" in self.samples and len(self.samples["t_s"]) > 0
 
 
-SAMPLE_KEYS = ("t_s", "ref_pos_ned_m", "ref_vel_ned_m_s", "pos_ned_m", "vel_ned_m_s",
-               "servo_us", "tracking_error_m")
+SAMPLE_KEYS = ("t_s", "ref_pos_ned_m", "ref_vel_ned_m_s", "pos_ned_m", "vel_ned_m_s", "servo_us", "tracking_error_m")
 
 
 def load_record(path: str | Path) -> FlightRecord:

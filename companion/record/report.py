@@ -33,8 +33,7 @@ from companion.smoothing.feasibility import describe
 log = logging.getLogger(__name__)
 
 INPUT_NAMES = ("lateral cyclic", "longitudinal cyclic", "pedal", "collective")
-DECISION_COLOURS = {"replan": "tab:green", "switch": "tab:orange", "hold": "tab:red",
-                    "rejected": "tab:gray"}
+DECISION_COLOURS = {"replan": "tab:green", "switch": "tab:orange", "hold": "tab:red", "rejected": "tab:gray"}
 
 
 def servo_us_to_delta(servo_us: np.ndarray) -> np.ndarray:
@@ -48,9 +47,12 @@ def tracking_statistics(record: FlightRecord) -> dict:
         return {}
     err = record.samples["tracking_error_m"]
     err = err[np.isfinite(err)]
-    return {"samples": int(err.size), "rms_tracking_error_m": float(np.sqrt(np.mean(err**2))),
-            "max_tracking_error_m": float(np.max(err)),
-            "duration_s": float(record.samples["t_s"][-1] - record.samples["t_s"][0])}
+    return {
+        "samples": int(err.size),
+        "rms_tracking_error_m": float(np.sqrt(np.mean(err**2))),
+        "max_tracking_error_m": float(np.max(err)),
+        "duration_s": float(record.samples["t_s"][-1] - record.samples["t_s"][0]),
+    }
 
 
 def leg_feasibility(record: FlightRecord) -> list[dict]:
@@ -59,18 +61,28 @@ def leg_feasibility(record: FlightRecord) -> list[dict]:
     out = []
     for plan in record.plans:
         f = plan.get("feasibility")
-        out.append({"leg": plan.get("leg"), "seq": plan.get("seq"), "duration_s": plan.get("duration_s"),
-                    "feasibility": None if f is None else {k: v for k, v in f.items() if k != "pieces"}})
+        out.append(
+            {
+                "leg": plan.get("leg"),
+                "seq": plan.get("seq"),
+                "duration_s": plan.get("duration_s"),
+                "feasibility": None if f is None else {k: v for k, v in f.items() if k != "pieces"},
+            }
+        )
     return out
 
 
 def summary_text(summary: dict, legs: list[dict]) -> str:
     """A few lines of the flight: legs, tracking, and each leg's closed-loop check."""
-    lines = [f"outcome: {summary.get('outcome')}  legs planned {summary.get('legs_planned')}  "
-             f"reached {summary.get('legs_reached')}"]
+    lines = [
+        f"outcome: {summary.get('outcome')}  legs planned {summary.get('legs_planned')}  "
+        f"reached {summary.get('legs_reached')}"
+    ]
     if summary.get("rms_tracking_error_m") is not None:
-        lines.append(f"tracking error (flown): RMS {summary['rms_tracking_error_m']:.2f} m, "
-                     f"max {summary.get('max_tracking_error_m', float('nan')):.2f} m")
+        lines.append(
+            f"tracking error (flown): RMS {summary['rms_tracking_error_m']:.2f} m, "
+            f"max {summary.get('max_tracking_error_m', float('nan')):.2f} m"
+        )
     for leg in legs:
         f = leg["feasibility"]
         head = f"leg {leg['leg']} (item {leg['seq']})"
@@ -93,8 +105,9 @@ def _draw_obstacles(ax, world: dict | None) -> None:
             n, e = ob["center"][:2]
             ax.add_patch(Circle((e, n), ob["radius"], **style))
             if margin > 0:
-                ax.add_patch(Circle((e, n), ob["radius"] + margin, fill=False, linestyle=":",
-                                    edgecolor="0.4", zorder=1))
+                ax.add_patch(
+                    Circle((e, n), ob["radius"] + margin, fill=False, linestyle=":", edgecolor="0.4", zorder=1)
+                )
         elif kind == "prism":
             ax.add_patch(Polygon([(e, n) for n, e in ob["vertices"]], closed=True, **style))
         elif kind == "box":
@@ -115,8 +128,14 @@ def _draw_plans(ax, plans: list[dict]) -> None:
             ax.add_collection(LineCollection(segs, colors="0.8", linewidths=0.4, zorder=0))
         if plan.get("reference_ne") is not None:
             ref = np.asarray(plan["reference_ne"], dtype=float)
-            ax.plot(ref[:, 1], ref[:, 0], color="tab:blue", lw=1.2, zorder=3,
-                    label="reference" if plan is plans[0] else None)
+            ax.plot(
+                ref[:, 1],
+                ref[:, 0],
+                color="tab:blue",
+                lw=1.2,
+                zorder=3,
+                label="reference" if plan is plans[0] else None,
+            )
 
 
 def _draw_alternatives(ax, record: FlightRecord) -> None:
@@ -131,8 +150,7 @@ def _draw_alternatives(ax, record: FlightRecord) -> None:
     for d in record.decisions:
         if d.get("path_ned_m") is not None:
             p = np.asarray(d["path_ned_m"], dtype=float)
-            ax.plot(p[:, 1], p[:, 0], "-.", color=DECISION_COLOURS.get(d.get("kind"), "k"), lw=1.0,
-                    zorder=3)
+            ax.plot(p[:, 1], p[:, 0], "-.", color=DECISION_COLOURS.get(d.get("kind"), "k"), lw=1.0, zorder=3)
 
 
 def _draw_threats(ax, threats: list[dict]) -> None:
@@ -143,8 +161,7 @@ def _draw_threats(ax, threats: list[dict]) -> None:
         if threat.get("removed") or threat.get("position_ned_m") is None:
             continue
         n, e = threat["position_ned_m"][:2]
-        ax.add_patch(Circle((e, n), threat["radius_m"], facecolor="tab:red", alpha=0.15,
-                            edgecolor="tab:red", zorder=2))
+        ax.add_patch(Circle((e, n), threat["radius_m"], facecolor="tab:red", alpha=0.15, edgecolor="tab:red", zorder=2))
         vel = threat.get("velocity_ned_m_s") or [0.0, 0.0, 0.0]
         if np.hypot(vel[0], vel[1]) > 1e-6:
             ax.arrow(e, n, 5 * vel[1], 5 * vel[0], width=0.3, color="tab:red", zorder=4)
@@ -167,7 +184,7 @@ def _plot_flight_path(plt, record: FlightRecord, path: Path) -> None:
             n, e = d["pos_ned_m"][:2]
             ax.plot(e, n, "o", color=DECISION_COLOURS.get(d.get("kind"), "k"), ms=7, zorder=6)
             ax.annotate(d.get("kind"), (e, n), textcoords="offset points", xytext=(5, 5), fontsize=8)
-    for wp in (record.header.get("waypoints_ned_m") or []):
+    for wp in record.header.get("waypoints_ned_m") or []:
         ax.plot(wp[1], wp[0], "k^", ms=6, zorder=6)
     ax.set_aspect("equal", adjustable="datalim")
     ax.autoscale_view()
@@ -220,8 +237,13 @@ def _plot_actuators(plt, record: FlightRecord, path: Path) -> None:
         if checked:
             peak = max(list(f["peak_abs_delta"].values())[i] for f in checked)
             for sign in (1.0, -1.0):
-                ax.axhline(sign * peak, color="tab:green", ls="--", lw=0.8,
-                           label="predicted peak" if sign > 0 and i == 0 else None)
+                ax.axhline(
+                    sign * peak,
+                    color="tab:green",
+                    ls="--",
+                    lw=0.8,
+                    label="predicted peak" if sign > 0 and i == 0 else None,
+                )
             if i == 0:
                 ax.legend(loc="upper right", fontsize=7)
         ax.set_ylabel(INPUT_NAMES[i], fontsize=8)
@@ -264,8 +286,7 @@ def render_report(record: FlightRecord, out_dir: str | Path) -> list[Path]:
         plot_scene(plt, record, written[-1], instant)
     summary = dict(record.summary or {})
     summary.update(tracking_statistics(record))
-    summary["decisions"] = [{k: d.get(k) for k in ("kind", "reason", "latency_ms", "t_s")}
-                            for d in record.decisions]
+    summary["decisions"] = [{k: d.get(k) for k in ("kind", "reason", "latency_ms", "t_s")} for d in record.decisions]
     summary["legs"] = leg_feasibility(record)
     written.append(out / "summary.json")
     written[-1].write_text(json.dumps(summary, indent=2))

@@ -65,11 +65,13 @@ def _draw_obstacles(ax, world: dict | None, ceiling_m: float) -> None:
             ring = ob["vertices"]
         elif ob["type"] in ("cylinder", "disc"):
             a = np.linspace(0, 2 * np.pi, 33)[:-1]
-            ring = np.column_stack([ob["center"][0] + ob["radius"] * np.cos(a), ob["center"][1] + ob["radius"] * np.sin(a)])
+            ring = np.column_stack(
+                [ob["center"][0] + ob["radius"] * np.cos(a), ob["center"][1] + ob["radius"] * np.sin(a)]
+            )
         elif ob["type"] == "box":
             (n0, e0, d0), (n1, e1, d1) = ob["min"], ob["max"]
             ring, bottom, top = [(n0, e0), (n1, e0), (n1, e1), (n0, e1)], -d1, min(-d0, ceiling_m)
-        else:                                                # a sphere: drawn as its wireframe
+        else:  # a sphere: drawn as its wireframe
             _sphere(ax, np.asarray(ob["center"], float), ob["radius"], "0.45", 0.3)
             continue
         walls = prism_side_triangles(ring, bottom, top).reshape(-1, 3, 3)
@@ -89,8 +91,14 @@ def _ceiling_m(record: FlightRecord, above_m: float = 10.0) -> float:
 def _sphere(ax, centre_ned: np.ndarray, radius_m: float, colour, alpha: float) -> None:
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 16), np.linspace(0, np.pi, 9))
     e, n, up = enu_from_ned(centre_ned)
-    ax.plot_wireframe(e + radius_m * np.cos(u) * np.sin(v), n + radius_m * np.sin(u) * np.sin(v),
-                      up + radius_m * np.cos(v), color=colour, alpha=alpha, linewidth=0.6)
+    ax.plot_wireframe(
+        e + radius_m * np.cos(u) * np.sin(v),
+        n + radius_m * np.sin(u) * np.sin(v),
+        up + radius_m * np.cos(v),
+        color=colour,
+        alpha=alpha,
+        linewidth=0.6,
+    )
 
 
 def _line(ax, path_ned: np.ndarray, **style) -> None:
@@ -98,8 +106,9 @@ def _line(ax, path_ned: np.ndarray, **style) -> None:
     ax.plot(enu[:, 0], enu[:, 1], enu[:, 2], **style)
 
 
-def plot_scene(plt, record: FlightRecord, path: Path, t_s: float, horizon_s: float = 10.0,
-               uncertainty_m_s: float = 0.3) -> None:
+def plot_scene(
+    plt, record: FlightRecord, path: Path, t_s: float, horizon_s: float = 10.0, uncertainty_m_s: float = 0.3
+) -> None:
     """Draw the flight at mission time ``t_s`` into the PNG ``path``."""
     fig = plt.figure(figsize=(9, 8))
     ax = fig.add_subplot(projection="3d")
@@ -118,9 +127,15 @@ def plot_scene(plt, record: FlightRecord, path: Path, t_s: float, horizon_s: flo
             e, n, up = enu_from_ned(pos[now - 1])
             ax.scatter([e], [n], [up], color="navy", s=60, marker="^", label="helicopter")
     for tid, th in threats_known_at(record, t_s).items():
-        centres, radii = threat_tube(np.asarray(th["position_ned_m"], float),
-                                     np.asarray(th.get("velocity_ned_m_s") or (0, 0, 0), float), th["radius_m"],
-                                     max(0.0, t_s - th["t_s"]), horizon_s, 2.5, uncertainty_m_s)
+        centres, radii = threat_tube(
+            np.asarray(th["position_ned_m"], float),
+            np.asarray(th.get("velocity_ned_m_s") or (0, 0, 0), float),
+            th["radius_m"],
+            max(0.0, t_s - th["t_s"]),
+            horizon_s,
+            2.5,
+            uncertainty_m_s,
+        )
         _sphere(ax, centres[0], radii[0], "tab:red", 0.8)
         if len(centres) > 1:
             _line(ax, centres, color="tab:red", lw=1.5)
@@ -132,7 +147,7 @@ def plot_scene(plt, record: FlightRecord, path: Path, t_s: float, horizon_s: flo
     ax.set_title(f"The scene at t = {t_s:.1f} s (threats on their predicted tubes, {horizon_s:g} s ahead)")
     ax.view_init(elev=35, azim=-60)
     lo, hi = np.array([ax.get_xlim(), ax.get_ylim(), ax.get_zlim()]).T
-    ax.set_box_aspect(np.maximum(hi - lo, 1.0))                    # metres the same on every axis
+    ax.set_box_aspect(np.maximum(hi - lo, 1.0))  # metres the same on every axis
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

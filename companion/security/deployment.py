@@ -25,9 +25,11 @@ from pathlib import Path
 from companion.security import keys
 from companion.security.paths import default_keys_dir
 from companion.threats.transport import access
+
 __all__ = ["Deployment", "default_keys_dir", "deployment_files", "init_deployment"]
 
 log = logging.getLogger(__name__)
+
 
 def deployment_files(directory, names, mavlink_key: bool = True) -> list:
     """Every file ``init_deployment`` writes in ``directory`` for the identities ``names``.
@@ -56,9 +58,11 @@ def _check_overwrite(d: Path, names, mavlink_key: bool, force: bool) -> None:
     """Refuse, naming them, the deployment's files that exist already (unless ``force``)."""
     existing = [p.name for p in deployment_files(d, names, mavlink_key) if p.exists()]
     if existing and not force:
-        raise keys.KeyMaterialError(f"{d}: {', '.join(existing)} exist already (a deployment's keys?); "
-                                    f"use --force to overwrite them (a new CA: every identity must then be "
-                                    f"redeployed), or choose another directory")
+        raise keys.KeyMaterialError(
+            f"{d}: {', '.join(existing)} exist already (a deployment's keys?); "
+            f"use --force to overwrite them (a new CA: every identity must then be "
+            f"redeployed), or choose another directory"
+        )
 
 
 def _make_directory(d: Path) -> None:
@@ -110,10 +114,20 @@ def _write_mavlink_key(path: Path) -> Path:
         raise keys.KeyMaterialError(str(exc)) from None
 
 
-def init_deployment(directory, *, sysid: int = 1, companion: str = "companion", sources=("source1",),
-                    observers=(), listen=("tls/0.0.0.0:7447",), connect=("tls/localhost:7447",),
-                    hosts=(), days: int = keys.DEFAULT_DAYS, mavlink_key: bool = True,
-                    force: bool = False) -> Deployment:
+def init_deployment(
+    directory,
+    *,
+    sysid: int = 1,
+    companion: str = "companion",
+    sources=("source1",),
+    observers=(),
+    listen=("tls/0.0.0.0:7447",),
+    connect=("tls/localhost:7447",),
+    hosts=(),
+    days: int = keys.DEFAULT_DAYS,
+    mavlink_key: bool = True,
+    force: bool = False,
+) -> Deployment:
     """Create the CA, the identities and their zenoh configurations in ``directory``.
 
     Parameters
@@ -174,19 +188,31 @@ def init_deployment(directory, *, sysid: int = 1, companion: str = "companion", 
     _make_directory(d)
     d = d.resolve()
     # the names sources may reach the companion by: loopback, the --connect hosts, specific --listen hosts
-    companion_hosts = list(dict.fromkeys(["localhost", "127.0.0.1", *_hosts_of(connect), *_hosts_of(listen),
-                                          *hosts]))
+    companion_hosts = list(dict.fromkeys(["localhost", "127.0.0.1", *_hosts_of(connect), *_hosts_of(listen), *hosts]))
     try:
         ca = keys.create_ca(f"{companion}-ca")
-        out = Deployment(d, keys.write_certificate(ca, d / "ca.pem"), keys.write_private_key(ca, d / "ca.key"),
-                         companion, sources, observers)
+        out = Deployment(
+            d,
+            keys.write_certificate(ca, d / "ca.pem"),
+            keys.write_private_key(ca, d / "ca.key"),
+            companion,
+            sources,
+            observers,
+        )
         for name in names:
             ident = keys.issue_identity(ca, name, hosts=companion_hosts if name == companion else (), days=days)
             out.keys[name] = keys.write_private_key(ident, d / f"{name}.key")
             out.certs[name] = keys.write_certificate(ident, d / f"{name}.pem")
         common = {"ca_cert": out.ca_cert}
-        cfg = access.companion_config(**common, key=out.keys[companion], cert=out.certs[companion],
-                                      listen=listen, sysid=sysid, sources=sources, observers=observers)
+        cfg = access.companion_config(
+            **common,
+            key=out.keys[companion],
+            cert=out.certs[companion],
+            listen=listen,
+            sysid=sysid,
+            sources=sources,
+            observers=observers,
+        )
         out.configs[companion] = access.write_config(cfg, d / f"{companion}.json5")
         for name in [*sources, *observers]:
             cfg = access.peer_config(**common, key=out.keys[name], cert=out.certs[name], connect=connect)
@@ -194,7 +220,8 @@ def init_deployment(directory, *, sysid: int = 1, companion: str = "companion", 
         if mavlink_key:
             out.mavlink_key = _write_mavlink_key(d / MAVLINK_KEY)
     except OSError as exc:
-        raise keys.KeyMaterialError(f"{getattr(exc, 'filename', None) or d}: cannot write: "
-                                    f"{exc.strerror or exc}") from None
+        raise keys.KeyMaterialError(
+            f"{getattr(exc, 'filename', None) or d}: cannot write: {exc.strerror or exc}"
+        ) from None
     log.info("deployment in %s: companion %s, sources %s, observers %s", d, companion, sources, observers)
     return out

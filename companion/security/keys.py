@@ -27,8 +27,20 @@ from pathlib import Path
 from companion.errors import ConfigError
 from companion.extras import require
 
-__all__ = ["Identity", "KeyMaterialError", "NAME_PATTERN", "check_name", "create_ca", "issue_identity",
-           "load_certificate", "load_identity", "common_name", "verify_signed_by", "write_private_key", "write_certificate"]
+__all__ = [
+    "Identity",
+    "KeyMaterialError",
+    "NAME_PATTERN",
+    "check_name",
+    "create_ca",
+    "issue_identity",
+    "load_certificate",
+    "load_identity",
+    "common_name",
+    "verify_signed_by",
+    "write_private_key",
+    "write_certificate",
+]
 
 log = logging.getLogger(__name__)
 
@@ -46,8 +58,10 @@ class KeyMaterialError(ConfigError):
 def check_name(name: str, what: str = "name") -> str:
     """Return ``name`` if it is a valid identity name, else raise ``KeyMaterialError`` naming ``what``."""
     if not isinstance(name, str) or not NAME_PATTERN.match(name):
-        raise KeyMaterialError(f"{what}: must be 1-63 characters of A-Z a-z 0-9 _ - starting with a letter "
-                        f"or digit (it becomes a zenoh key chunk and a certificate CN), got {name!r}")
+        raise KeyMaterialError(
+            f"{what}: must be 1-63 characters of A-Z a-z 0-9 _ - starting with a letter "
+            f"or digit (it becomes a zenoh key chunk and a certificate CN), got {name!r}"
+        )
     if name.lower() in RESERVED_NAMES:
         raise KeyMaterialError(f"{what}: {name!r} is reserved ({', '.join(RESERVED_NAMES)})")
     return name
@@ -71,7 +85,7 @@ class Identity:
 
 
 def _now() -> _dt.datetime:
-    return _dt.datetime.now(_dt.timezone.utc)
+    return _dt.datetime.now(_dt.UTC)
 
 
 def _name(cn: str):
@@ -79,8 +93,9 @@ def _name(cn: str):
     from cryptography import x509
     from cryptography.x509.oid import NameOID
 
-    return x509.Name([x509.NameAttribute(NameOID.ORGANIZATION_NAME, "heli-companion"),
-                      x509.NameAttribute(NameOID.COMMON_NAME, cn)])
+    return x509.Name(
+        [x509.NameAttribute(NameOID.ORGANIZATION_NAME, "heli-companion"), x509.NameAttribute(NameOID.COMMON_NAME, cn)]
+    )
 
 
 def create_ca(name: str = "companion-ca", days: int = 3650) -> Identity:
@@ -93,19 +108,32 @@ def create_ca(name: str = "companion-ca", days: int = 3650) -> Identity:
     key = ec.generate_private_key(ec.SECP256R1())
     subject = _name(name)
     now = _now()
-    cert = (x509.CertificateBuilder()
-            .subject_name(subject).issuer_name(subject)
-            .public_key(key.public_key())
-            .serial_number(x509.random_serial_number())
-            .not_valid_before(now - _dt.timedelta(minutes=5))
-            .not_valid_after(now + _dt.timedelta(days=days))
-            .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-            .add_extension(x509.KeyUsage(digital_signature=True, content_commitment=False,
-                                         key_encipherment=False, data_encipherment=False,
-                                         key_agreement=False, key_cert_sign=True, crl_sign=True,
-                                         encipher_only=False, decipher_only=False), critical=True)
-            .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
-            .sign(key, hashes.SHA256()))
+    cert = (
+        x509.CertificateBuilder()
+        .subject_name(subject)
+        .issuer_name(subject)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - _dt.timedelta(minutes=5))
+        .not_valid_after(now + _dt.timedelta(days=days))
+        .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+        .add_extension(
+            x509.KeyUsage(
+                digital_signature=True,
+                content_commitment=False,
+                key_encipherment=False,
+                data_encipherment=False,
+                key_agreement=False,
+                key_cert_sign=True,
+                crl_sign=True,
+                encipher_only=False,
+                decipher_only=False,
+            ),
+            critical=True,
+        )
+        .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
+        .sign(key, hashes.SHA256())
+    )
     return Identity(name, key, cert)
 
 
@@ -140,24 +168,37 @@ def issue_identity(ca: Identity, name: str, *, hosts=(), days: int = DEFAULT_DAY
             sans.append(x509.DNSName(host))
     key = ec.generate_private_key(ec.SECP256R1())
     now = _now()
-    cert = (x509.CertificateBuilder()
-            .subject_name(_name(name)).issuer_name(ca.cert.subject)
-            .public_key(key.public_key())
-            .serial_number(x509.random_serial_number())
-            .not_valid_before(now - _dt.timedelta(minutes=5))
-            .not_valid_after(now + _dt.timedelta(days=days))
-            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-            .add_extension(x509.KeyUsage(digital_signature=True, content_commitment=False,
-                                         key_encipherment=False, data_encipherment=False,
-                                         key_agreement=False, key_cert_sign=False, crl_sign=False,
-                                         encipher_only=False, decipher_only=False), critical=True)
-            .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH,
-                                                  ExtendedKeyUsageOID.CLIENT_AUTH]), critical=False)
-            .add_extension(x509.SubjectAlternativeName(list(dict.fromkeys(sans))), critical=False)
-            .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
-            .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca.key.public_key()),
-                           critical=False)
-            .sign(ca.key, hashes.SHA256()))
+    cert = (
+        x509.CertificateBuilder()
+        .subject_name(_name(name))
+        .issuer_name(ca.cert.subject)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - _dt.timedelta(minutes=5))
+        .not_valid_after(now + _dt.timedelta(days=days))
+        .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+        .add_extension(
+            x509.KeyUsage(
+                digital_signature=True,
+                content_commitment=False,
+                key_encipherment=False,
+                data_encipherment=False,
+                key_agreement=False,
+                key_cert_sign=False,
+                crl_sign=False,
+                encipher_only=False,
+                decipher_only=False,
+            ),
+            critical=True,
+        )
+        .add_extension(
+            x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]), critical=False
+        )
+        .add_extension(x509.SubjectAlternativeName(list(dict.fromkeys(sans))), critical=False)
+        .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
+        .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca.key.public_key()), critical=False)
+        .sign(ca.key, hashes.SHA256())
+    )
     return Identity(name, key, cert)
 
 
@@ -167,12 +208,13 @@ def write_private_key(identity: Identity, path: str | Path) -> Path:
     from cryptography.hazmat.primitives import serialization
 
     path = Path(path)
-    data = identity.key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
-                                      serialization.NoEncryption())
+    data = identity.key.private_bytes(
+        serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+    )
     flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC
     fd = os.open(path, flags, 0o600)
     try:
-        os.fchmod(fd, 0o600)           # an existing file keeps its mode through O_CREAT
+        os.fchmod(fd, 0o600)  # an existing file keeps its mode through O_CREAT
         os.write(fd, data)
     finally:
         os.close(fd)
@@ -239,14 +281,19 @@ def verify_signed_by(cert, ca_cert) -> None:
     from cryptography.exceptions import InvalidSignature
 
     if cert.issuer != ca_cert.subject:
-        raise KeyMaterialError(f"certificate {common_name(cert)!r}: issued by {cert.issuer.rfc4514_string()}, "
-                        f"not by the CA {ca_cert.subject.rfc4514_string()}")
+        raise KeyMaterialError(
+            f"certificate {common_name(cert)!r}: issued by {cert.issuer.rfc4514_string()}, "
+            f"not by the CA {ca_cert.subject.rfc4514_string()}"
+        )
     try:
         cert.verify_directly_issued_by(ca_cert)
     except (InvalidSignature, ValueError, TypeError) as exc:
-        raise KeyMaterialError(f"certificate {common_name(cert)!r}: signature does not verify against the CA "
-                        f"({exc or type(exc).__name__})") from None
+        raise KeyMaterialError(
+            f"certificate {common_name(cert)!r}: signature does not verify against the CA ({exc or type(exc).__name__})"
+        ) from None
     now = _now()
     if not cert.not_valid_before_utc <= now <= cert.not_valid_after_utc:
-        raise KeyMaterialError(f"certificate {common_name(cert)!r}: not valid now (valid "
-                        f"{cert.not_valid_before_utc:%Y-%m-%d} to {cert.not_valid_after_utc:%Y-%m-%d})")
+        raise KeyMaterialError(
+            f"certificate {common_name(cert)!r}: not valid now (valid "
+            f"{cert.not_valid_before_utc:%Y-%m-%d} to {cert.not_valid_after_utc:%Y-%m-%d})"
+        )

@@ -14,7 +14,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-from typing import Callable
+from collections.abc import Callable
 
 from companion.errors import CompanionError
 from companion.flight.schedule import Task
@@ -50,8 +50,9 @@ class TelemetryWatchers:
         Mission time.
     """
 
-    def __init__(self, link, clock, owner, *, reactor=None, adsb_settings=None, home_lla=None,
-                 now_s: Callable[[], float]) -> None:
+    def __init__(
+        self, link, clock, owner, *, reactor=None, adsb_settings=None, home_lla=None, now_s: Callable[[], float]
+    ) -> None:
         self.link = link
         self.clock = clock
         self.owner = owner
@@ -90,7 +91,7 @@ class TelemetryWatchers:
             ref = self.owner.current
             if ref is not None:
                 pos = self.link.frames.to_home_floats((fields["x"], fields["y"], fields["z"]))
-                self.errors_m.append(math.dist(pos, ref.state_lists(boot_s)[0]))   # mission time is vehicle time
+                self.errors_m.append(math.dist(pos, ref.state_lists(boot_s)[0]))  # mission time is vehicle time
 
     async def _watch_servos(self) -> None:
         async for fields in self.link.inbound.messages("SERVO_OUTPUT_RAW"):
@@ -131,9 +132,20 @@ class DaemonTasks:
     leg_index : callable () -> int
     """
 
-    def __init__(self, settings, *, link, owner, watchers: TelemetryWatchers, summary, sink,
-                 status: Callable[[], dict], reactor=None, recorder=None,
-                 leg_index: Callable[[], int] = lambda: -1) -> None:
+    def __init__(
+        self,
+        settings,
+        *,
+        link,
+        owner,
+        watchers: TelemetryWatchers,
+        summary,
+        sink,
+        status: Callable[[], dict],
+        reactor=None,
+        recorder=None,
+        leg_index: Callable[[], int] = lambda: -1,
+    ) -> None:
         self.settings = settings
         self.link = link
         self.owner = owner
@@ -149,17 +161,26 @@ class DaemonTasks:
     def rows(self) -> list[Task]:
         """The rows, at their declared rates."""
         link = self.settings.link
-        rows = [Task("telemetry", link.setpoint_rate_hz, lambda now: self.link.inbound.take_batches(), budget_ms=1.0),
-                Task("record", link.record_rate_hz, self.record_sample, budget_ms=2.0)]
+        rows = [
+            Task("telemetry", link.setpoint_rate_hz, lambda now: self.link.inbound.take_batches(), budget_ms=1.0),
+            Task("record", link.record_rate_hz, self.record_sample, budget_ms=2.0),
+        ]
         if self.recorder is not None:
-            rows.append(Task("record_write", RECORD_WRITE_RATE_HZ, lambda now: self.recorder.flush(),
-                             budget_ms=3.0))
+            rows.append(Task("record_write", RECORD_WRITE_RATE_HZ, lambda now: self.recorder.flush(), budget_ms=3.0))
         if self.reactor is not None:
-            rows += [Task("status", link.status_rate_hz, self.publish_status, budget_ms=2.0),
-                     Task("zenoh_watch", 1.0 / ZENOH_WATCH_PERIOD_S, self.watch_zenoh, budget_ms=1.0)]
+            rows += [
+                Task("status", link.status_rate_hz, self.publish_status, budget_ms=2.0),
+                Task("zenoh_watch", 1.0 / ZENOH_WATCH_PERIOD_S, self.watch_zenoh, budget_ms=1.0),
+            ]
             if self.settings.fleet.enabled:
-                rows.append(Task("fleet_publish", 1.0 / self.settings.fleet.publish_period_s,
-                                 self.reactor.fleet_publish, budget_ms=3.0))
+                rows.append(
+                    Task(
+                        "fleet_publish",
+                        1.0 / self.settings.fleet.publish_period_s,
+                        self.reactor.fleet_publish,
+                        budget_ms=3.0,
+                    )
+                )
         return rows
 
     def record_sample(self, now_s: float) -> None:
@@ -171,12 +192,22 @@ class DaemonTasks:
         ref_pos, ref_vel = ref.state(t)[:2]
         if self.reactor is not None:
             self.summary.min_threat_separation_m = min(
-                self.summary.min_threat_separation_m, self.reactor.min_separation_m(tele.pos_ned_m, t))
+                self.summary.min_threat_separation_m, self.reactor.min_separation_m(tele.pos_ned_m, t)
+            )
         errors = self.watchers.errors_m
-        self.sink.record("sample", t_s=t, ref_pos_ned_m=ref_pos, ref_vel_ned_m_s=ref_vel,
-                         pos_ned_m=tele.pos_ned_m, vel_ned_m_s=tele.vel_ned_m_s,
-                         servo_us=self.watchers.servo_us, tracking_error_m=errors[-1] if errors else None,
-                         leg=self.leg_index(), path_id=ref.path_id, euler_rad=tele.attitude_rad)
+        self.sink.record(
+            "sample",
+            t_s=t,
+            ref_pos_ned_m=ref_pos,
+            ref_vel_ned_m_s=ref_vel,
+            pos_ned_m=tele.pos_ned_m,
+            vel_ned_m_s=tele.vel_ned_m_s,
+            servo_us=self.watchers.servo_us,
+            tracking_error_m=errors[-1] if errors else None,
+            leg=self.leg_index(),
+            path_id=ref.path_id,
+            euler_rad=tele.attitude_rad,
+        )
 
     def publish_status(self, now_s: float) -> None:
         self.reactor.publish_status(self.status())

@@ -13,8 +13,8 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from collections.abc import Callable
 from concurrent.futures import Future
-from typing import Callable
 
 from companion.workers import PlanningWorkers
 
@@ -39,8 +39,14 @@ class WorkerJobs:
         self.wall_s: dict[str, list[float]] = {}
         self.outstanding = 0
 
-    def submit(self, name: str, fn: Callable, args: tuple, done: Callable[[object], None],
-               failed: Callable[[BaseException], None]) -> None:
+    def submit(
+        self,
+        name: str,
+        fn: Callable,
+        args: tuple,
+        done: Callable[[object], None],
+        failed: Callable[[BaseException], None],
+    ) -> None:
         t0 = time.perf_counter()
         self.outstanding += 1
         try:

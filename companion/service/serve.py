@@ -49,9 +49,9 @@ from companion.daemon import CompanionDaemon, companion_link
 from companion.errors import CompanionError, FlightAborted, LinkError, MissionError, VehicleRefused
 from companion.link.onboard import OnboardCommand, OnboardComponent
 from companion.link.setpoints import raise_stream_priority
-from companion.service.startup import is_airborne
 from companion.link.vehicle import check_url
 from companion.service.mission import GUIDED
+from companion.service.startup import is_airborne
 from companion.threats.settings import DEFAULT_SYSID
 
 log = logging.getLogger(__name__)
@@ -60,8 +60,12 @@ __all__ = ["CompanionService", "FlightRequest", "READY_TEXT"]
 
 READY_TEXT = "companion ready: MISSION_START to comp 191"
 #: The STATUSTEXT word for how a flight ended, by the error that ended it.
-OUTCOME_WORDS = {FlightAborted: "aborted", VehicleRefused: "refused by the vehicle",
-                 MissionError: "not flown (mission)", LinkError: "ended: link"}
+OUTCOME_WORDS = {
+    FlightAborted: "aborted",
+    VehicleRefused: "refused by the vehicle",
+    MissionError: "not flown (mission)",
+    LinkError: "ended: link",
+}
 #: How often (wall clock, s) the presence status is published between flights.
 PRESENCE_PERIOD_S = 1.0
 
@@ -95,8 +99,16 @@ class CompanionService:
         ``CompanionDaemon``'s ``workers``.
     """
 
-    def __init__(self, settings: Settings, *, world_path=None, record_dir=None,
-                 max_flights: int | None = None, workers: str = "process", resume: bool = False) -> None:
+    def __init__(
+        self,
+        settings: Settings,
+        *,
+        world_path=None,
+        record_dir=None,
+        max_flights: int | None = None,
+        workers: str = "process",
+        resume: bool = False,
+    ) -> None:
         # the session opens before any vehicle answers: its prefix cannot wait for the vehicle's id
         self.settings = dataclasses.replace(settings, zenoh=settings.zenoh.for_vehicle(DEFAULT_SYSID))
         self.world_path = world_path
@@ -111,7 +123,7 @@ class CompanionService:
         self.flights = 0
         self.last_outcome: str | None = None
         self.daemon: CompanionDaemon | None = None
-        self.live = None                      # companion.view.live.LiveView, with view.foxglove
+        self.live = None  # companion.view.live.LiveView, with view.foxglove
         self._busy = False
         self._lock = threading.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -126,11 +138,11 @@ class CompanionService:
         check_url(self.settings.link.connect)
         presence = None
         try:
-            if self.settings.zenoh.enabled:     # before the priority: zenoh's threads stay normal
+            if self.settings.zenoh.enabled:  # before the priority: zenoh's threads stay normal
                 self._open_presence()
                 presence = self._loop.create_task(self._publish_presence(), name="presence")
-            self._open_live_view()              # before the priority too: the server's threads
-            raise_stream_priority()              # before connect: MAVSDK's threads inherit it
+            self._open_live_view()  # before the priority too: the server's threads
+            raise_stream_priority()  # before connect: MAVSDK's threads inherit it
             await self._wait_for_vehicle()
             self.link.on_link_change(self._on_link_change)
             if self.resume and await self._left_hovering():
@@ -165,8 +177,12 @@ class CompanionService:
             return False
         tele = self.link.telemetry
         hovering = tele.mode == GUIDED and is_airborne(tele, self.settings.startup.join_min_height_m)
-        log.info("--resume: the vehicle is %s", "hovering in GUIDED: taking it over" if hovering
-                 else f"not hovering in GUIDED ({tele.mode_name}): nothing to resume")
+        log.info(
+            "--resume: the vehicle is %s",
+            "hovering in GUIDED: taking it over"
+            if hovering
+            else f"not hovering in GUIDED ({tele.mode_name}): nothing to resume",
+        )
         return hovering
 
     async def _fly(self, request: FlightRequest) -> None:
@@ -175,16 +191,23 @@ class CompanionService:
         self._set_state("flying")
         self.onboard.active = True
         self._say(mavlink.MAV_SEVERITY_INFO, f"companion: flight {self.flights} ({request.source})")
-        self.daemon = CompanionDaemon(self.settings, world_path=self.world_path, record_path=self._record_path(),
-                                      resume=request.resume, workers=self.workers, link=self.link, bus=self.bus,
-                                      live=self.live)
+        self.daemon = CompanionDaemon(
+            self.settings,
+            world_path=self.world_path,
+            record_path=self._record_path(),
+            resume=request.resume,
+            workers=self.workers,
+            link=self.link,
+            bus=self.bus,
+            live=self.live,
+        )
         verdict, reason = "completed", ""
         try:
             await self.daemon.run()
-        except CompanionError as exc:            # refused, aborted (a pilot took over), no mission ...
+        except CompanionError as exc:  # refused, aborted (a pilot took over), no mission ...
             verdict, reason = OUTCOME_WORDS.get(type(exc), "not flown"), str(exc)
             log.error("flight %d %s: %s", self.flights, verdict, reason)
-        except Exception as exc:                 # a bug: the service stays up for the next flight
+        except Exception as exc:  # a bug: the service stays up for the next flight
             verdict, reason = "failed", f"{type(exc).__name__}: {exc}"
             log.exception("flight %d failed", self.flights)
         finally:
@@ -200,7 +223,7 @@ class CompanionService:
         if self.record_dir is None:
             return None
         self.record_dir.mkdir(parents=True, exist_ok=True)
-        stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        stamp = datetime.datetime.now(datetime.UTC).strftime("%Y%m%dT%H%M%SZ")
         return self.record_dir / f"flight-{self.flights}-{stamp}.mcap"
 
     def _open_live_view(self) -> None:
@@ -210,7 +233,7 @@ class CompanionService:
         from companion.extras import require
 
         require("view", "foxglove")
-        from companion.view.live import LiveView                  # foxglove-sdk only when used
+        from companion.view.live import LiveView  # foxglove-sdk only when used
         from companion.view.sinks import parse_foxglove_address
 
         self.live = LiveView(self.link, *parse_foxglove_address(self.settings.view.foxglove, "view.foxglove"))
@@ -245,7 +268,7 @@ class CompanionService:
 
     def _on_link_change(self, connected: bool) -> None:
         if connected and self.state == "ready":  # the vehicle is back (a reboot): tell its ground stations
-            self._announce_ready()               # (a start already queued stays queued)
+            self._announce_ready()  # (a start already queued stays queued)
 
     def _open_presence(self) -> None:
         from companion.threats.transport.bus import ThreatBus
@@ -256,12 +279,17 @@ class CompanionService:
 
     def presence(self) -> dict:
         """The status published between flights."""
-        return {"service": self.state, "flights": self.flights, "last_outcome": self.last_outcome,
-                "link": self.link.connected, "mode": self.link.telemetry.mode_name}
+        return {
+            "service": self.state,
+            "flights": self.flights,
+            "last_outcome": self.last_outcome,
+            "link": self.link.connected,
+            "mode": self.link.telemetry.mode_name,
+        }
 
     async def _publish_presence(self) -> None:
         while True:
-            if self.state != "flying":          # while flying, the flight publishes its status
+            if self.state != "flying":  # while flying, the flight publishes its status
                 self.bus.outbound.publish_status(self.presence())
             await asyncio.sleep(PRESENCE_PERIOD_S)
 
@@ -271,8 +299,9 @@ class CompanionService:
         if command.command != mavlink.MAV_CMD_MISSION_START:
             return mavlink.MAV_RESULT_UNSUPPORTED
         if any(command.params[:2]):
-            log.warning("MISSION_START items %g..%g refused: the service flies whole missions (0, 0)",
-                        *command.params[:2])
+            log.warning(
+                "MISSION_START items %g..%g refused: the service flies whole missions (0, 0)", *command.params[:2]
+            )
             return mavlink.MAV_RESULT_DENIED
         source = f"MAVLink {command.sender_system}/{command.sender_component}"
         return mavlink.MAV_RESULT_ACCEPTED if self._request(source) else mavlink.MAV_RESULT_TEMPORARILY_REJECTED
@@ -281,7 +310,7 @@ class CompanionService:
         """``uav/<sysid>/command`` (a zenoh thread): answered on ``uav/<sysid>/events``."""
         command = message.get("command") if isinstance(message, dict) else None
         if command != "mission_start":
-            result = f"unsupported: expected {{\"command\": \"mission_start\"}}, got {message!r}"[:200]
+            result = f'unsupported: expected {{"command": "mission_start"}}, got {message!r}'[:200]
         else:
             result = "accepted" if self._request("zenoh") else f"busy: {self.state}"
         log.info("zenoh command %r: %s", command, result)

@@ -45,8 +45,9 @@ import asyncio
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Literal
+from typing import Literal
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -56,10 +57,25 @@ from heli_common.ardupilot_ids import SWITCH_HIGH, SWITCH_LOW
 from heli_common.mavlink_ids import COPTER_MODES
 from heli_common.typed_config import require_int, require_numbers
 
-__all__ = ["StartupSettings", "RotorPlan", "rotor_plan", "is_airborne", "start_vehicle",
-           "read_rotor_parameters", "interlock_low", "wait_prearm", "arm", "wait_arming_delay",
-           "engage_interlock", "wait_runup", "take_off", "abandon_start", "rpm_settled",
-           "AUX_MOTOR_INTERLOCK", "RSC_PARAMETERS"]
+__all__ = [
+    "StartupSettings",
+    "RotorPlan",
+    "rotor_plan",
+    "is_airborne",
+    "start_vehicle",
+    "read_rotor_parameters",
+    "interlock_low",
+    "wait_prearm",
+    "arm",
+    "wait_arming_delay",
+    "engage_interlock",
+    "wait_runup",
+    "take_off",
+    "abandon_start",
+    "rpm_settled",
+    "AUX_MOTOR_INTERLOCK",
+    "RSC_PARAMETERS",
+]
 
 log = logging.getLogger(__name__)
 
@@ -121,9 +137,13 @@ class StartupSettings:
     join_min_height_m: float = 1.0
 
     def __post_init__(self) -> None:
-        require_numbers(ConfigError, "startup", self, positive=(
-            "pilot_timeout_s", "prearm_timeout_s", "retry_interval_s", "param_timeout_s"),
-            non_negative=("arming_delay_s", "runup_time_s", "runup_margin_s", "join_min_height_m"))
+        require_numbers(
+            ConfigError,
+            "startup",
+            self,
+            positive=("pilot_timeout_s", "prearm_timeout_s", "retry_interval_s", "param_timeout_s"),
+            non_negative=("arming_delay_s", "runup_time_s", "runup_margin_s", "join_min_height_m"),
+        )
         require_int(ConfigError, "startup", "arm_attempts", self.arm_attempts, 1, 20)
         require_int(ConfigError, "startup", "takeoff_attempts", self.takeoff_attempts, 1, 50)
 
@@ -162,8 +182,12 @@ def rotor_plan(settings: StartupSettings, params: dict) -> RotorPlan:
         return RotorPlan("none", delay, 0.0, "no H_RSC_MODE parameter: no rotor speed controller")
     mode = int(params["H_RSC_MODE"])
     if mode == RSC_MODE_PASSTHROUGH and settings.interlock == "command":
-        return RotorPlan("pilot", delay, runup, "H_RSC_MODE 1 (RC passthrough): the rotor follows "
-                         "the pilot's RC8, DO_AUX_FUNCTION cannot engage it")
+        return RotorPlan(
+            "pilot",
+            delay,
+            runup,
+            "H_RSC_MODE 1 (RC passthrough): the rotor follows the pilot's RC8, DO_AUX_FUNCTION cannot engage it",
+        )
     return RotorPlan(settings.interlock, delay, runup, f"H_RSC_MODE {mode}")
 
 
@@ -229,8 +253,9 @@ async def interlock_low(link) -> bool:
     if result == UNSUPPORTED:
         return False
     if result != ACCEPTED:
-        raise VehicleRefused(link.commands.refusal_text("motor interlock low (DO_AUX_FUNCTION 32)", result, sent),
-                             result)
+        raise VehicleRefused(
+            link.commands.refusal_text("motor interlock low (DO_AUX_FUNCTION 32)", result, sent), result
+        )
     return True
 
 
@@ -249,8 +274,9 @@ async def wait_prearm(link, settings: StartupSettings, now_s) -> bool:
         if ok is None and (elapsed > 2.0 or (streams is not None and streams.seen("SYS_STATUS"))):
             return False
         if elapsed > settings.prearm_timeout_s:
-            log.warning("the vehicle's pre-arm checks still fail after %.0f s: arming anyway",
-                        settings.prearm_timeout_s)
+            log.warning(
+                "the vehicle's pre-arm checks still fail after %.0f s: arming anyway", settings.prearm_timeout_s
+            )
             return False
         await asyncio.sleep(0.05)
 
@@ -267,13 +293,14 @@ async def arm(link, settings: StartupSettings, now_s) -> float:
     message, result = "arm: no attempt", None
     for attempt in range(1, settings.arm_attempts + 1):
         sent = time.monotonic()
-        result = await link.commands.command_result(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), what="arm",
-                                           timeout_s=5.0)
+        result = await link.commands.command_result(
+            mavlink.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), what="arm", timeout_s=5.0
+        )
         if result == ACCEPTED:
             armed_at = now_s()
             await link.waits.wait_for(lambda t: bool(t.armed), 5.0, "the armed state")
             return armed_at
-        await asyncio.sleep(0.3)             # the vehicle's reason (STATUSTEXT) may follow the ack
+        await asyncio.sleep(0.3)  # the vehicle's reason (STATUSTEXT) may follow the ack
         message = link.commands.refusal_text("arm", result, sent)
         log.warning("%s (attempt %d of %d)", message, attempt, settings.arm_attempts)
         if attempt < settings.arm_attempts:
@@ -308,8 +335,9 @@ async def engage_interlock(link, plan: RotorPlan, settings: StartupSettings, now
         if result == UNSUPPORTED:
             return False
         if now_s() > deadline or not link.telemetry.armed:
-            raise VehicleRefused(link.commands.refusal_text("motor interlock (DO_AUX_FUNCTION 32 high)", result,
-                                                   sent), result)
+            raise VehicleRefused(
+                link.commands.refusal_text("motor interlock (DO_AUX_FUNCTION 32 high)", result, sent), result
+            )
         await wait_vehicle_s(now_s, min(0.5, settings.retry_interval_s))
 
 
@@ -337,14 +365,16 @@ async def wait_runup(link, plan: RotorPlan, settings: StartupSettings, now_s) ->
             samples = [s for s in samples if s[0] >= t - 2.0]
         if t >= ready_at and (tele.rotor_rpm is None or rpm_settled(samples) or t >= give_up):
             rpm = math.nan if tele.rotor_rpm is None else float(tele.rotor_rpm)
-            log.info("rotor run-up done after %.1f s (vehicle time)%s", t - start,
-                     "" if math.isnan(rpm) else f", rotor at {rpm:.0f} rpm")
+            log.info(
+                "rotor run-up done after %.1f s (vehicle time)%s",
+                t - start,
+                "" if math.isnan(rpm) else f", rotor at {rpm:.0f} rpm",
+            )
             return rpm
         await asyncio.sleep(0.05)
 
 
-async def take_off(link, alt_m: float, attempts: int, retry_s: float, now_s,
-                   deadline_s: float | None = None) -> int:
+async def take_off(link, alt_m: float, attempts: int, retry_s: float, now_s, deadline_s: float | None = None) -> int:
     """NAV_TAKEOFF to ``alt_m`` above home, retried until accepted; returns the attempts used.
 
     ``deadline_s`` (vehicle time) replaces the attempt count when given (waiting for the
@@ -359,8 +389,9 @@ async def take_off(link, alt_m: float, attempts: int, retry_s: float, now_s,
     while True:
         attempt += 1
         sent = time.monotonic()
-        result = await link.commands.command_result(mavlink.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, float(alt_m)),
-                                           what=f"takeoff to {alt_m:g} m", timeout_s=5.0)
+        result = await link.commands.command_result(
+            mavlink.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, float(alt_m)), what=f"takeoff to {alt_m:g} m", timeout_s=5.0
+        )
         if result == ACCEPTED:
             return attempt
         out_of_time = now_s() >= deadline_s if deadline_s is not None else attempt >= attempts
@@ -371,8 +402,7 @@ async def take_off(link, alt_m: float, attempts: int, retry_s: float, now_s,
         await wait_vehicle_s(now_s, retry_s)
 
 
-async def abandon_start(link, interlock_commanded: bool, reason: str,
-                        min_height_m: float = 1.0) -> str:
+async def abandon_start(link, interlock_commanded: bool, reason: str, min_height_m: float = 1.0) -> str:
     """Undo a start that failed: disarm a vehicle on the ground (interlock low again), hold one
     that left the ground (LOITER). Returns what was done; never raises."""
     try:
@@ -400,8 +430,16 @@ async def abandon_start(link, interlock_commanded: bool, reason: str,
 
 
 # ---------------------------------------------------------------------------- the whole start
-async def start_vehicle(link, settings: StartupSettings, alt_m: float, now_s: Callable[[], float], *,
-                        time_scale: float = 1.0, climb_speed_m_s: float = 1.0, event=None) -> RotorPlan:
+async def start_vehicle(
+    link,
+    settings: StartupSettings,
+    alt_m: float,
+    now_s: Callable[[], float],
+    *,
+    time_scale: float = 1.0,
+    climb_speed_m_s: float = 1.0,
+    event=None,
+) -> RotorPlan:
     """GUIDED, interlock low, arm, interlock, run-up, takeoff to ``alt_m``, climb (module docstring).
 
     Parameters
@@ -430,16 +468,22 @@ async def start_vehicle(link, settings: StartupSettings, alt_m: float, now_s: Ca
     tell = event or (lambda name, **fields: None)
     params = await read_rotor_parameters(link, settings)
     plan = rotor_plan(settings, params)
-    log.info("start-up: interlock %s (%s); arming delay %.1f s, run-up %.1f s", plan.interlock,
-             plan.reason, plan.arming_delay_s, plan.runup_time_s)
+    log.info(
+        "start-up: interlock %s (%s); arming delay %.1f s, run-up %.1f s",
+        plan.interlock,
+        plan.reason,
+        plan.arming_delay_s,
+        plan.runup_time_s,
+    )
     await link.commands.set_mode("GUIDED")
     commanded = False
-    already_armed = bool(link.telemetry.armed)         # e.g. on the ground with the rotor running
+    already_armed = bool(link.telemetry.armed)  # e.g. on the ground with the rotor running
     if plan.interlock == "command" and not already_armed:
         commanded = await interlock_low(link)
         if not commanded:
-            plan = RotorPlan("none", plan.arming_delay_s, 0.0,
-                             "DO_AUX_FUNCTION unsupported by the vehicle: no interlock")
+            plan = RotorPlan(
+                "none", plan.arming_delay_s, 0.0, "DO_AUX_FUNCTION unsupported by the vehicle: no interlock"
+            )
             log.info("start-up: %s", plan.reason)
     try:
         if already_armed:
@@ -461,29 +505,35 @@ async def start_vehicle(link, settings: StartupSettings, alt_m: float, now_s: Ca
             else:
                 log.info("start-up: DO_AUX_FUNCTION unsupported after arming: no interlock")
         elif plan.interlock == "pilot":
-            log.warning("waiting up to %.0f s for the pilot to engage the motor interlock (the "
-                        "vehicle disarms itself after DISARM_DELAY with the interlock off)",
-                        settings.pilot_timeout_s)
+            log.warning(
+                "waiting up to %.0f s for the pilot to engage the motor interlock (the "
+                "vehicle disarms itself after DISARM_DELAY with the interlock off)",
+                settings.pilot_timeout_s,
+            )
             deadline = now_s() + settings.pilot_timeout_s
-        attempts = await take_off(link, alt_m, settings.takeoff_attempts, settings.retry_interval_s,
-                                  now_s, deadline)
+        attempts = await take_off(link, alt_m, settings.takeoff_attempts, settings.retry_interval_s, now_s, deadline)
         tell("takeoff", alt_m=alt_m, attempts=attempts)
     except (VehicleRefused, LinkError, asyncio.CancelledError) as exc:
-        await asyncio.shield(abandon_start(link, commanded, str(exc) or type(exc).__name__,
-                                           settings.join_min_height_m))
+        await asyncio.shield(abandon_start(link, commanded, str(exc) or type(exc).__name__, settings.join_min_height_m))
         raise
     wait_vehicle = 30.0 + 3.0 * alt_m / max(climb_speed_m_s, 0.1)
     if plan.interlock == "pilot":
         wait_vehicle += plan.runup_time_s + settings.runup_margin_s
     try:
-        await link.waits.wait_for(lambda t: left_guided(t) or (t.height_m is not None and t.pos_ned_m is not None
-                                                          and -t.pos_ned_m[2] >= alt_m - 0.5),
-                            10.0 + wait_vehicle / time_scale, f"the takeoff to {alt_m:.1f} m")
+        await link.waits.wait_for(
+            lambda t: (
+                left_guided(t)
+                or (t.height_m is not None and t.pos_ned_m is not None and -t.pos_ned_m[2] >= alt_m - 0.5)
+            ),
+            10.0 + wait_vehicle / time_scale,
+            f"the takeoff to {alt_m:.1f} m",
+        )
         if left_guided(link.telemetry):
             raise LinkError(f"the vehicle left GUIDED during the takeoff (now {link.telemetry.mode_name})")
     except (LinkError, asyncio.CancelledError) as exc:
-        outcome = await asyncio.shield(abandon_start(link, commanded, str(exc) or "interrupted",
-                                                     settings.join_min_height_m))
+        outcome = await asyncio.shield(
+            abandon_start(link, commanded, str(exc) or "interrupted", settings.join_min_height_m)
+        )
         if isinstance(exc, asyncio.CancelledError):
             raise
         raise FlightAborted(f"{exc}; vehicle {outcome}") from None

@@ -8,8 +8,14 @@ from dataclasses import dataclass, field
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CheckerHandle", "FlightSummary", "feasibility_totals", "make_checker", "process_checker",
-           "warm_process_checker"]
+__all__ = [
+    "CheckerHandle",
+    "FlightSummary",
+    "feasibility_totals",
+    "make_checker",
+    "process_checker",
+    "warm_process_checker",
+]
 
 
 @dataclass

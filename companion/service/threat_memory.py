@@ -38,5 +38,9 @@ def restore_threats(daemon) -> None:
     threats = load_live_threats(path, now(), sysid=s.zenoh.sysid, home_lla=daemon.home_lla)
     ids = reactor.restore(threats)
     daemon.summary.threats_restored = len(ids)
-    daemon.sink.event("threats_restored", ids=ids, snapshot=str(path),
-                      remaining_ttl_s={t.id: round(t.expires_t_s - now(), 2) for t in threats if t.ttl_s is not None})
+    daemon.sink.event(
+        "threats_restored",
+        ids=ids,
+        snapshot=str(path),
+        remaining_ttl_s={t.id: round(t.expires_t_s - now(), 2) for t in threats if t.ttl_s is not None},
+    )

@@ -33,15 +33,22 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Mapping, Sequence
 
 from companion.errors import ConfigError, ProcessError
 from companion.sitl.procfs import GONE_STATES, descendants, process_state, start_time
 
-__all__ = ["Escalation", "ManagedProcess", "ProcessGroup", "python_command", "spawn", "stop_together",
-           "DEFAULT_ESCALATION"]
+__all__ = [
+    "Escalation",
+    "ManagedProcess",
+    "ProcessGroup",
+    "python_command",
+    "spawn",
+    "stop_together",
+    "DEFAULT_ESCALATION",
+]
 
 log = logging.getLogger(__name__)
 
@@ -105,7 +112,7 @@ def _check_seconds(name: str, value: float) -> None:
 DEFAULT_ESCALATION = Escalation()
 
 
-def stop_together(processes: Iterable["ManagedProcess"], escalation: Escalation = DEFAULT_ESCALATION) -> None:
+def stop_together(processes: Iterable[ManagedProcess], escalation: Escalation = DEFAULT_ESCALATION) -> None:
     """Stop ``processes`` at once: each step's signal to every one still running, one deadline
     for all; SIGKILL to those still running after the last step; then their leftovers
     (``ManagedProcess.end_leftovers``)."""
@@ -127,12 +134,11 @@ def stop_together(processes: Iterable["ManagedProcess"], escalation: Escalation 
     _wait_all(live, escalation.kill_wait_s)
     for proc in live:
         if proc.poll() is None:
-            log.error("%s (pid %d) is still there %.0f s after SIGKILL", proc.name, proc.pid,
-                      escalation.kill_wait_s)
+            log.error("%s (pid %d) is still there %.0f s after SIGKILL", proc.name, proc.pid, escalation.kill_wait_s)
     _end_leftovers(started, escalation.leftover_grace_s)
 
 
-def _wait_all(processes: Sequence["ManagedProcess"], timeout_s: float) -> None:
+def _wait_all(processes: Sequence[ManagedProcess], timeout_s: float) -> None:
     deadline = time.monotonic() + timeout_s
     for proc in processes:
         try:
@@ -141,7 +147,7 @@ def _wait_all(processes: Sequence["ManagedProcess"], timeout_s: float) -> None:
             pass
 
 
-def _end_leftovers(processes: Sequence["ManagedProcess"], grace_s: float) -> None:
+def _end_leftovers(processes: Sequence[ManagedProcess], grace_s: float) -> None:
     deadline = time.monotonic() + grace_s
     while any(p.leftovers() for p in processes) and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -171,9 +177,17 @@ class ManagedProcess:
         How ``stop()`` stops it unless told otherwise.
     """
 
-    def __init__(self, argv: Sequence[str], log_path, *, name: str | None = None,
-                 env: Mapping[str, str] | None = None, cwd=None, exit_with_parent: bool = True,
-                 escalation: Escalation = DEFAULT_ESCALATION) -> None:
+    def __init__(
+        self,
+        argv: Sequence[str],
+        log_path,
+        *,
+        name: str | None = None,
+        env: Mapping[str, str] | None = None,
+        cwd=None,
+        exit_with_parent: bool = True,
+        escalation: Escalation = DEFAULT_ESCALATION,
+    ) -> None:
         self.argv = [str(a) for a in argv]
         if not self.argv:
             raise ConfigError("ManagedProcess: expected a command line, got an empty one")
@@ -184,10 +198,10 @@ class ManagedProcess:
         self.exit_with_parent = bool(exit_with_parent)
         self.escalation = escalation
         self._popen: subprocess.Popen | None = None
-        self._seen: dict[int, int] = {}          # descendant pid -> its start time
+        self._seen: dict[int, int] = {}  # descendant pid -> its start time
 
     # -------------------------------------------------------------------------- start
-    def start(self) -> "ManagedProcess":
+    def start(self) -> ManagedProcess:
         """Start the child (once); returns self.
 
         Raises
@@ -200,9 +214,16 @@ class ManagedProcess:
         preexec = _exit_with_parent_hook(os.getpid()) if self.exit_with_parent and _PRCTL else None
         try:
             with open(self.log_path, "wb") as fh:
-                self._popen = subprocess.Popen(self.argv, stdout=fh, stderr=subprocess.STDOUT,
-                                               stdin=subprocess.DEVNULL, env=self.env, cwd=self.cwd,
-                                               process_group=0, preexec_fn=preexec)
+                self._popen = subprocess.Popen(
+                    self.argv,
+                    stdout=fh,
+                    stderr=subprocess.STDOUT,
+                    stdin=subprocess.DEVNULL,
+                    env=self.env,
+                    cwd=self.cwd,
+                    process_group=0,
+                    preexec_fn=preexec,
+                )
         except OSError as exc:
             raise ProcessError(f"cannot start {self.name} ({self.argv[0]}): {exc.strerror or exc}") from None
         log.debug("%s started: pid %d, log %s", self.name, self._popen.pid, self.log_path)
@@ -275,8 +296,9 @@ class ManagedProcess:
             if code is not None:
                 raise ProcessError(f"{self.name} exited with status {code} before {what}; see {self.log_path}")
             if time.monotonic() > deadline:
-                raise ProcessError(f"{self.name} (pid {self.pid}): no {what} within {timeout_s:g} s; "
-                                   f"see {self.log_path}")
+                raise ProcessError(
+                    f"{self.name} (pid {self.pid}): no {what} within {timeout_s:g} s; see {self.log_path}"
+                )
             time.sleep(poll_s)
 
     def log_contains(self, text: str) -> Callable[[], bool]:
@@ -309,8 +331,11 @@ class ManagedProcess:
 
     def leftovers(self) -> list[int]:
         """The descendants seen (``note_descendants``) that still run."""
-        return [pid for pid, started in self._seen.items()
-                if start_time(pid) == started and process_state(pid) not in GONE_STATES]
+        return [
+            pid
+            for pid, started in self._seen.items()
+            if start_time(pid) == started and process_state(pid) not in GONE_STATES
+        ]
 
     def end_leftovers(self) -> list[int]:
         """Once it has exited: SIGKILL to the descendants seen that still run, and to its
@@ -336,7 +361,7 @@ class ManagedProcess:
         stop_together([self], escalation or self.escalation)
         return self._popen.returncode
 
-    def __enter__(self) -> "ManagedProcess":
+    def __enter__(self) -> ManagedProcess:
         if self._popen is None:
             self.start()
         return self
@@ -345,9 +370,12 @@ class ManagedProcess:
         self.stop()
 
     def __repr__(self) -> str:
-        state = ("not started" if self._popen is None else
-                 f"pid {self._popen.pid}, " + ("running" if self._popen.returncode is None
-                                               else f"exit {self._popen.returncode}"))
+        state = (
+            "not started"
+            if self._popen is None
+            else f"pid {self._popen.pid}, "
+            + ("running" if self._popen.returncode is None else f"exit {self._popen.returncode}")
+        )
         return f"ManagedProcess({self.name}: {state})"
 
 
@@ -360,10 +388,12 @@ def _kill(pid: int) -> None:
 
 def _exit_with_parent_hook(parent_pid: int):
     """A ``preexec_fn``: SIGTERM when the parent's thread ends, and at once if it already has."""
+
     def hook() -> None:
         _PRCTL(PR_SET_PDEATHSIG, signal.SIGTERM)
-        if os.getppid() != parent_pid:          # the parent died before the prctl
+        if os.getppid() != parent_pid:  # the parent died before the prctl
             os.kill(os.getpid(), signal.SIGTERM)
+
     return hook
 
 
@@ -411,7 +441,7 @@ class ProcessGroup:
         """Stop them all at once, and what they left behind. Idempotent."""
         stop_together(self.processes, escalation or self.escalation)
 
-    def __enter__(self) -> "ProcessGroup":
+    def __enter__(self) -> ProcessGroup:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -10,15 +10,22 @@ from __future__ import annotations
 
 import contextlib
 import socket
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Mapping, Sequence
 
 from companion.sitl.processes import ManagedProcess, python_command
 from heli_common.ports import free_port
 
-__all__ = ["FlightProcesses", "SIM_VEHICLE_MODULE", "COMPANION_MODULE", "companion_run_args", "flight_processes",
-           "home_arg", "sim_vehicle_args"]
+__all__ = [
+    "FlightProcesses",
+    "SIM_VEHICLE_MODULE",
+    "COMPANION_MODULE",
+    "companion_run_args",
+    "flight_processes",
+    "home_arg",
+    "sim_vehicle_args",
+]
 
 SIM_VEHICLE_MODULE = "sim_vehicle.cli"
 COMPANION_MODULE = "companion.cli"
@@ -30,9 +37,19 @@ def home_arg(home_lla: Sequence[float], heading_deg: float) -> str:
     return f"{lat_lon},{home_lla[2]:g},{heading_deg:g}"
 
 
-def sim_vehicle_args(port: int, *, outs: Sequence[str] = (), speedup: float = 1.0, instance: int | None = None,
-                     home: str | None = None, tlog=None, seed: int | None = None, config=None,
-                     default_outs: bool = True, extra: Sequence[str] = ()) -> list[str]:
+def sim_vehicle_args(
+    port: int,
+    *,
+    outs: Sequence[str] = (),
+    speedup: float = 1.0,
+    instance: int | None = None,
+    home: str | None = None,
+    tlog=None,
+    seed: int | None = None,
+    config=None,
+    default_outs: bool = True,
+    extra: Sequence[str] = (),
+) -> list[str]:
     """``sim_vehicle.cli`` and its arguments.
 
     Parameters
@@ -67,9 +84,18 @@ def sim_vehicle_args(port: int, *, outs: Sequence[str] = (), speedup: float = 1.
     return args + list(extra)
 
 
-def companion_run_args(connect: str, *, mission=None, instance: int | None = None, zenoh_connect: str | None = None,
-                       zenoh_listen: str | None = None, record=None, time_scale: float | None = None,
-                       seed: int | None = None, extra: Sequence[str] = ()) -> list[str]:
+def companion_run_args(
+    connect: str,
+    *,
+    mission=None,
+    instance: int | None = None,
+    zenoh_connect: str | None = None,
+    zenoh_listen: str | None = None,
+    record=None,
+    time_scale: float | None = None,
+    seed: int | None = None,
+    extra: Sequence[str] = (),
+) -> list[str]:
     """``companion.cli run`` and its arguments: ``--connect`` (e.g. ``udpin://127.0.0.1:PORT``),
     then ``--instance``, ``--mission``, ``--zenoh-connect``, ``--zenoh-listen``, ``--record``,
     ``--time-scale``, ``--seed`` when given, then ``extra``."""
@@ -77,8 +103,12 @@ def companion_run_args(connect: str, *, mission=None, instance: int | None = Non
     if instance is not None:
         args += ["--instance", str(instance)]
     args += ["--connect", connect]
-    for option, value in (("--mission", mission), ("--zenoh-connect", zenoh_connect),
-                          ("--zenoh-listen", zenoh_listen), ("--record", record)):
+    for option, value in (
+        ("--mission", mission),
+        ("--zenoh-connect", zenoh_connect),
+        ("--zenoh-listen", zenoh_listen),
+        ("--record", record),
+    ):
         if value is not None:
             args += [option, str(value)]
     if time_scale is not None:
@@ -94,17 +124,25 @@ class FlightProcesses:
 
     sim: ManagedProcess
     companion: ManagedProcess
-    vehicle_port: int      # the vehicle's UDP port (another ground station can talk to it)
-    endpoint: str          # the companion's zenoh listen endpoint
-    record: Path           # its flight record
-    log: Path              # its log (stdout and stderr; the last line is the JSON summary)
+    vehicle_port: int  # the vehicle's UDP port (another ground station can talk to it)
+    endpoint: str  # the companion's zenoh listen endpoint
+    record: Path  # its flight record
+    log: Path  # its log (stdout and stderr; the last line is the JSON summary)
 
 
 @contextlib.contextmanager
-def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0, gcs_out: str | None = None,
-                     extra_args: Sequence[str] = (), sim_args: Sequence[str] = (),
-                     env: Mapping[str, str] | None = None, record_name: str = "flight.jsonl",
-                     companion_prefix: Sequence[str] = ()) -> Iterator[FlightProcesses]:
+def flight_processes(
+    out_dir: Path,
+    mission: Path,
+    *,
+    speedup: float = 4.0,
+    gcs_out: str | None = None,
+    extra_args: Sequence[str] = (),
+    sim_args: Sequence[str] = (),
+    env: Mapping[str, str] | None = None,
+    record_name: str = "flight.jsonl",
+    companion_prefix: Sequence[str] = (),
+) -> Iterator[FlightProcesses]:
     """Start ``sim-vehicle`` and ``companion run --mission`` on free loopback ports.
 
     Parameters
@@ -134,11 +172,29 @@ def flight_processes(out_dir: Path, mission: Path, *, speedup: float = 4.0, gcs_
     mav_port, vehicle_port, zenoh_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
     outs = [f"127.0.0.1:{mav_port}"] + ([gcs_out] if gcs_out else [])
-    sim = ManagedProcess(python_command(sim_vehicle_args(vehicle_port, outs=outs, speedup=speedup, extra=sim_args)),
-                         out_dir / "sim_vehicle.log", name="sim-vehicle", env=env)
+    sim = ManagedProcess(
+        python_command(sim_vehicle_args(vehicle_port, outs=outs, speedup=speedup, extra=sim_args)),
+        out_dir / "sim_vehicle.log",
+        name="sim-vehicle",
+        env=env,
+    )
     record, log_path = out_dir / record_name, out_dir / "companion.log"
-    companion = ManagedProcess(python_command([*companion_prefix, *companion_run_args(
-        f"udpin://127.0.0.1:{mav_port}", mission=mission, zenoh_listen=endpoint, record=record,
-        extra=extra_args)]), log_path, name="companion", env=env)
-    with sim, companion:            # leaves in reverse: the companion stops first
+    companion = ManagedProcess(
+        python_command(
+            [
+                *companion_prefix,
+                *companion_run_args(
+                    f"udpin://127.0.0.1:{mav_port}",
+                    mission=mission,
+                    zenoh_listen=endpoint,
+                    record=record,
+                    extra=extra_args,
+                ),
+            ]
+        ),
+        log_path,
+        name="companion",
+        env=env,
+    )
+    with sim, companion:  # leaves in reverse: the companion stops first
         yield FlightProcesses(sim, companion, vehicle_port, endpoint, record, log_path)

@@ -13,5 +13,12 @@ from companion.smoothing.g2 import smooth_g2
 from companion.smoothing.settings import FeasibilitySettings, SmoothingSettings, TrajectoryLimits
 from companion.smoothing.timing import time_parameterize
 
-__all__ = ["BezierPath", "smooth_g1", "smooth_g2", "time_parameterize", "TrajectoryLimits",
-           "SmoothingSettings", "FeasibilitySettings"]
+__all__ = [
+    "BezierPath",
+    "smooth_g1",
+    "smooth_g2",
+    "time_parameterize",
+    "TrajectoryLimits",
+    "SmoothingSettings",
+    "FeasibilitySettings",
+]

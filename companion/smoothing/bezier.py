@@ -14,8 +14,18 @@ The corner curves themselves are built in ``g1`` (quartic midpoint interpolation
 module.
 """
 
-from companion.smoothing.bezier_maths import arc_length, bernstein, curvature, curvature_from_derivatives, \
-    derivative, derivative_control_points, elevate, elevate_lines, evaluate, split
+from companion.smoothing.bezier_maths import (
+    arc_length,
+    bernstein,
+    curvature,
+    curvature_from_derivatives,
+    derivative,
+    derivative_control_points,
+    elevate,
+    elevate_lines,
+    evaluate,
+    split,
+)
 from companion.smoothing.bezier_path import BezierPath
 
 __all__ = [

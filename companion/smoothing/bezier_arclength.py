@@ -23,11 +23,24 @@ from typing import TypeVar, cast
 
 import numpy as np
 
-from companion.smoothing.bezier_maths import GAUSS_ORDER, bernstein, clip_ufunc, curvature_from_derivatives, \
-    gauss_legendre, norm_rows
+from companion.smoothing.bezier_maths import (
+    GAUSS_ORDER,
+    bernstein,
+    clip_ufunc,
+    curvature_from_derivatives,
+    gauss_legendre,
+    norm_rows,
+)
 
-__all__ = ["TABLE_INTERVALS", "ArcLengthTable", "build_table", "knot_curvature", "locate", "arc_length_at",
-           "arc_derivatives"]
+__all__ = [
+    "TABLE_INTERVALS",
+    "ArcLengthTable",
+    "build_table",
+    "knot_curvature",
+    "locate",
+    "arc_length_at",
+    "arc_derivatives",
+]
 
 TABLE_INTERVALS = 16
 
@@ -85,9 +98,13 @@ def _bases(degree: int) -> tuple[np.ndarray, ...]:
     nodes = (knots[:-1, None] + (1.0 / g) * x[None, :]).ravel()
     at_nodes = bernstein(degree - 1, nodes)
     first, second = bernstein(degree - 1, knots), bernstein(degree - 2, knots)
-    out = ((at_nodes[:, :, None] * at_nodes[:, None, :]).reshape(nodes.size, -1),
-           (first[:, :, None] * first[:, None, :]).reshape(g + 1, -1),
-           (first[:, :, None] * second[:, None, :]).reshape(g + 1, -1), first, second)
+    out = (
+        (at_nodes[:, :, None] * at_nodes[:, None, :]).reshape(nodes.size, -1),
+        (first[:, :, None] * first[:, None, :]).reshape(g + 1, -1),
+        (first[:, :, None] * second[:, None, :]).reshape(g + 1, -1),
+        first,
+        second,
+    )
     for a in out:
         a.setflags(write=False)
     return out
@@ -115,12 +132,12 @@ def _curved_knots(hod1: np.ndarray, hod2: np.ndarray) -> tuple[np.ndarray, ...]:
     _, w = gauss_legendre(GAUSS_ORDER)
     squared_at_nodes, squared_at_knots, mixed_at_knots = _bases(hod1.shape[1])[:3]
     n_pieces = hod1.shape[0]
-    gram = (hod1 @ hod1.transpose(0, 2, 1)).reshape(n_pieces, -1)                   # (P', n^2)
-    speed_nodes = squared_at_nodes @ gram.T                                        # (G Q, P')
+    gram = (hod1 @ hod1.transpose(0, 2, 1)).reshape(n_pieces, -1)  # (P', n^2)
+    speed_nodes = squared_at_nodes @ gram.T  # (G Q, P')
     np.sqrt(np.maximum(speed_nodes, 0.0, out=speed_nodes), out=speed_nodes)
     seg_len = np.einsum("gqp,q->pg", speed_nodes.reshape(g, w.size, -1), w) / g
     del speed_nodes
-    speed = squared_at_knots @ gram.T                                              # (G+1, P')
+    speed = squared_at_knots @ gram.T  # (G+1, P')
     np.sqrt(np.maximum(speed, 0.0, out=speed), out=speed)
     dot = mixed_at_knots @ (hod1 @ hod2.transpose(0, 2, 1)).reshape(n_pieces, -1).T
     safe = np.maximum(speed, 1e-300)
@@ -137,7 +154,7 @@ def knot_curvature(hod1: np.ndarray, hod2: np.ndarray) -> np.ndarray:
         First and second hodographs.
     """
     first_at_knots, second_at_knots = _bases(hod1.shape[1])[3:]
-    d1 = _components(first_at_knots, hod1).transpose(2, 0, 1)                      # (P', G+1, d)
+    d1 = _components(first_at_knots, hod1).transpose(2, 0, 1)  # (P', G+1, d)
     return curvature_from_derivatives(d1, _components(second_at_knots, hod2).transpose(2, 0, 1))
 
 
@@ -173,12 +190,13 @@ def build_table(ctrl: np.ndarray, degrees: np.ndarray, hod1: np.ndarray, hod2: n
     np.cumsum(seg_len[:, :-1], axis=1, out=s_lo[:, 1:])
     s_lo += piece_start_s[:-1, None]
     u_s = np.maximum(speed_knots, 1e-9 * max(float(piece_start_s[-1]), 1.0), out=speed_knots)
-    np.divide(g, u_s, out=u_s)                                                        # G du/ds
-    return ArcLengthTable(piece_start_s=piece_start_s, s_lo=s_lo.ravel(), h=seg_len.ravel(), u_s=u_s.ravel(),
-                          u_ss=u_ss_knots.ravel())
+    np.divide(g, u_s, out=u_s)  # G du/ds
+    return ArcLengthTable(
+        piece_start_s=piece_start_s, s_lo=s_lo.ravel(), h=seg_len.ravel(), u_s=u_s.ravel(), u_ss=u_ss_knots.ravel()
+    )
 
 
-_Num = TypeVar("_Num", float, np.ndarray)   # all floats (one setpoint) or all arrays
+_Num = TypeVar("_Num", float, np.ndarray)  # all floats (one setpoint) or all arrays
 
 
 def _hermite_quintic(x: _Num, m0: _Num, m1: _Num, c0: _Num, c1: _Num) -> _Num:
@@ -187,24 +205,27 @@ def _hermite_quintic(x: _Num, m0: _Num, m1: _Num, c0: _Num, c1: _Num) -> _Num:
     x3 = x2 * x
     x4 = x3 * x
     x5 = x4 * x
-    return ((x - 6 * x3 + 8 * x4 - 3 * x5) * m0
-            + (0.5 * x2 - 1.5 * x3 + 1.5 * x4 - 0.5 * x5) * c0
-            + (0.5 * x3 - x4 + 0.5 * x5) * c1
-            + (-4 * x3 + 7 * x4 - 3 * x5) * m1
-            + (10 * x3 - 15 * x4 + 6 * x5))
+    return (
+        (x - 6 * x3 + 8 * x4 - 3 * x5) * m0
+        + (0.5 * x2 - 1.5 * x3 + 1.5 * x4 - 0.5 * x5) * c0
+        + (0.5 * x3 - x4 + 0.5 * x5) * c1
+        + (-4 * x3 + 7 * x4 - 3 * x5) * m1
+        + (10 * x3 - 15 * x4 + 6 * x5)
+    )
 
 
-def _hermite_quintic_dx(x: np.ndarray, m0: np.ndarray, m1: np.ndarray, c0: np.ndarray,
-                        c1: np.ndarray) -> np.ndarray:
+def _hermite_quintic_dx(x: np.ndarray, m0: np.ndarray, m1: np.ndarray, c0: np.ndarray, c1: np.ndarray) -> np.ndarray:
     """Derivative with respect to x of ``_hermite_quintic``."""
     x2 = x * x
     x3 = x2 * x
     x4 = x3 * x
-    return ((1 - 18 * x2 + 32 * x3 - 15 * x4) * m0
-            + (x - 4.5 * x2 + 6 * x3 - 2.5 * x4) * c0
-            + (1.5 * x2 - 4 * x3 + 2.5 * x4) * c1
-            + (-12 * x2 + 28 * x3 - 15 * x4) * m1
-            + (30 * x2 - 60 * x3 + 30 * x4))
+    return (
+        (1 - 18 * x2 + 32 * x3 - 15 * x4) * m0
+        + (x - 4.5 * x2 + 6 * x3 - 2.5 * x4) * c0
+        + (1.5 * x2 - 4 * x3 + 2.5 * x4) * c1
+        + (-12 * x2 + 28 * x3 - 15 * x4) * m1
+        + (30 * x2 - 60 * x3 + 30 * x4)
+    )
 
 
 def locate(table: ArcLengthTable, s_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -226,10 +247,10 @@ def locate(table: ArcLengthTable, s_m: np.ndarray) -> tuple[np.ndarray, np.ndarr
     h = table.h[j]
     x = clip_ufunc((s - table.s_lo[j]) / np.maximum(h, 1e-300), 0.0, 1.0)
     piece, k = np.divmod(j, TABLE_INTERVALS)
-    knot = j + piece                                     # the values of ``hermite_args(j)``
+    knot = j + piece  # the values of ``hermite_args(j)``
     hh = h * (TABLE_INTERVALS * h)
     args = (h * table.u_s[knot], h * table.u_s[knot + 1], hh * table.u_ss[knot], hh * table.u_ss[knot + 1])
-    if x.shape == (1,):         # one point (a setpoint): the same arithmetic on Python floats
+    if x.shape == (1,):  # one point (a setpoint): the same arithmetic on Python floats
         frac = np.array([_hermite_quintic(float(x[0]), *(float(a[0]) for a in args))])
     else:
         frac = _hermite_quintic(x, *args)
@@ -248,7 +269,7 @@ def arc_length_at(table: ArcLengthTable, piece: np.ndarray, u: np.ndarray) -> np
     target = (u - (j % g) / g) * g
     args = table.hermite_args(j)
     x = target.copy()
-    for _ in range(8):                                   # Newton, then bisection where needed
+    for _ in range(8):  # Newton, then bisection where needed
         step = (_hermite_quintic(x, *args) - target) / np.maximum(_hermite_quintic_dx(x, *args), 1e-12)
         x = np.clip(x - step, 0.0, 1.0)
     bad = np.abs(_hermite_quintic(x, *args) - target) > 1e-12
@@ -284,7 +305,7 @@ def arc_derivatives(du: Sequence[np.ndarray | None]) -> list[np.ndarray | None]:
     if len(du) == 1:
         return out
     du = cast("Sequence[np.ndarray]", du)  # only the position du[0] may be None, and it is only passed through
-    add = np.add.reduce                                  # np.sum without its Python wrappers
+    add = np.add.reduce  # np.sum without its Python wrappers
     a = du[1]
     sig2 = np.maximum(add(a * a, axis=1, keepdims=True), 1e-300)
     sig = np.sqrt(sig2)

@@ -62,7 +62,7 @@ def tangent_jumps(ctrl: np.ndarray, abs_max: np.ndarray | None = None) -> np.nda
         return np.zeros(0, dtype=bool)
     if abs_max is None:
         abs_max = np.abs(ctrl).max(axis=(1, 2))
-    tol = 1e-12 * np.maximum(1.0, abs_max)                                             # (P,)
+    tol = 1e-12 * np.maximum(1.0, abs_max)  # (P,)
     t_out = -_tangents(ctrl[:-1, ::-1], tol[:-1])
     t_in = _tangents(ctrl[1:], tol[1:])
     cosang = np.clip(np.einsum("ij,ij->i", t_out, t_in), -1.0, 1.0)

@@ -24,18 +24,34 @@ from companion.errors import SmoothingError
 # ``clip_ufunc(a, lo, hi)``: the ufunc that ``np.clip`` calls, without its Python wrappers (a few
 # microseconds a call); the same results, NaN and signed zeros included (``np.minimum(np.maximum(
 # a, lo), hi)`` would turn -0.0 into 0.0).
-if TYPE_CHECKING:                           # numpy's stubs do not declare the private umath.clip
+if TYPE_CHECKING:  # numpy's stubs do not declare the private umath.clip
     clip_ufunc: np.ufunc
 else:
-    try:                                    # numpy >= 2
+    try:  # numpy >= 2
         from numpy._core.umath import clip as clip_ufunc
-    except ImportError:                     # numpy 1.26
+    except ImportError:  # numpy 1.26
         from numpy.core.umath import clip as clip_ufunc
 
-__all__ = ["bernstein", "bernstein_family", "clip_ufunc", "evaluate", "derivative_control_points", "derivative",
-           "norm_rows", "curvature_from_derivatives", "curvature", "gauss_legendre", "arc_length", "split",
-           "elevate", "lower_degree", "evaluate_many", "elevate_lines",
-           "as_control_points", "GAUSS_ORDER"]
+__all__ = [
+    "bernstein",
+    "bernstein_family",
+    "clip_ufunc",
+    "evaluate",
+    "derivative_control_points",
+    "derivative",
+    "norm_rows",
+    "curvature_from_derivatives",
+    "curvature",
+    "gauss_legendre",
+    "arc_length",
+    "split",
+    "elevate",
+    "lower_degree",
+    "evaluate_many",
+    "elevate_lines",
+    "as_control_points",
+    "GAUSS_ORDER",
+]
 
 GAUSS_ORDER = 4
 
@@ -108,7 +124,7 @@ def bernstein_family(degrees, u: np.ndarray) -> list[np.ndarray]:
         One basis per degree, in the order of ``degrees``.
     """
     up, vp = _powers(max(degrees), np.asarray(u, dtype=float).reshape(-1))
-    return [_binomial_row(n) * up[:, :n + 1] * vp[:, n::-1] for n in degrees]
+    return [_binomial_row(n) * up[:, : n + 1] * vp[:, n::-1] for n in degrees]
 
 
 def evaluate(ctrl: np.ndarray, u: np.ndarray) -> np.ndarray:

@@ -15,11 +15,24 @@ from functools import cached_property
 import numpy as np
 
 from companion.errors import SmoothingError
-from companion.smoothing.bezier_arclength import TABLE_INTERVALS, arc_derivatives, arc_length_at, build_table, \
-    knot_curvature, locate
+from companion.smoothing.bezier_arclength import (
+    TABLE_INTERVALS,
+    arc_derivatives,
+    arc_length_at,
+    build_table,
+    knot_curvature,
+    locate,
+)
 from companion.smoothing.bezier_joints import tangent_jumps
-from companion.smoothing.bezier_maths import as_control_points, bernstein, bernstein_family, \
-    curvature_from_derivatives, elevate, lower_degree, norm_rows
+from companion.smoothing.bezier_maths import (
+    as_control_points,
+    bernstein,
+    bernstein_family,
+    curvature_from_derivatives,
+    elevate,
+    lower_degree,
+    norm_rows,
+)
 from companion.smoothing.bezier_peaks import interior_peaks, sampled_curvature
 
 __all__ = ["BezierPath"]
@@ -58,8 +71,16 @@ class BezierPath:
         corners); a trajectory must come to rest there.
     """
 
-    def __init__(self, pieces, *, kappa_ok: bool = True, notes=(), tight_corners=(),
-                 kappa_max_1_m: float | None = None, peaks_at_joints: bool = False) -> None:
+    def __init__(
+        self,
+        pieces,
+        *,
+        kappa_ok: bool = True,
+        notes=(),
+        tight_corners=(),
+        kappa_max_1_m: float | None = None,
+        peaks_at_joints: bool = False,
+    ) -> None:
         arrays = [as_control_points(p, f"pieces[{i}]") for i, p in enumerate(pieces)]
         if not arrays:
             raise SmoothingError("pieces: a BezierPath needs at least one piece")
@@ -72,9 +93,17 @@ class BezierPath:
         self._init_arrays(ctrl, degrees, kappa_ok, notes, tight_corners, kappa_max_1_m, peaks_at_joints)
 
     @classmethod
-    def from_stacked(cls, ctrl: np.ndarray, degrees: np.ndarray, *, kappa_ok: bool = True, notes=(),
-                     tight_corners=(), kappa_max_1_m: float | None = None,
-                     peaks_at_joints: bool = False) -> "BezierPath":
+    def from_stacked(
+        cls,
+        ctrl: np.ndarray,
+        degrees: np.ndarray,
+        *,
+        kappa_ok: bool = True,
+        notes=(),
+        tight_corners=(),
+        kappa_max_1_m: float | None = None,
+        peaks_at_joints: bool = False,
+    ) -> BezierPath:
         """Fast constructor from pieces already elevated to one degree (no per-piece checks).
 
         Parameters
@@ -88,19 +117,25 @@ class BezierPath:
             ``curvature_peaks_s`` need not search inside the pieces.
         """
         obj = cls.__new__(cls)
-        obj._init_arrays(np.asarray(ctrl, dtype=float), np.asarray(degrees), kappa_ok, notes, tight_corners,
-                         kappa_max_1_m, peaks_at_joints)
+        obj._init_arrays(
+            np.asarray(ctrl, dtype=float),
+            np.asarray(degrees),
+            kappa_ok,
+            notes,
+            tight_corners,
+            kappa_max_1_m,
+            peaks_at_joints,
+        )
         return obj
 
-    def _init_arrays(self, ctrl, degrees, kappa_ok, notes, tight_corners, kappa_max_1_m,
-                     peaks_at_joints) -> None:
-        abs_max = np.abs(ctrl).max(axis=(1, 2))                              # (P,)
+    def _init_arrays(self, ctrl, degrees, kappa_ok, notes, tight_corners, kappa_max_1_m, peaks_at_joints) -> None:
+        abs_max = np.abs(ctrl).max(axis=(1, 2))  # (P,)
         keep = np.max(norm_rows(ctrl - ctrl[:, :1]), axis=1) > 1e-10 * max(1.0, float(abs_max.max()))
         if not np.any(keep):
             raise SmoothingError("pieces: every piece has zero length")
         if not np.all(keep):
             ctrl, degrees, abs_max = ctrl[keep], degrees[keep], abs_max[keep]
-        self._ctrl = ctrl                                                    # (P, N+1, d)
+        self._ctrl = ctrl  # (P, N+1, d)
         self._degrees = degrees
         self.degree: int = ctrl.shape[1] - 1
         self.d: int = ctrl.shape[2]
@@ -134,16 +169,21 @@ class BezierPath:
     @cached_property
     def pieces(self) -> list[np.ndarray]:
         """Control points of every piece in its own degree, list of (n_i+1, d) arrays."""
-        return [c[[0, -1]].copy() if n == 1 else c.copy() if n == self.degree else lower_degree(c, int(n))
-                for c, n in zip(self._ctrl, self._degrees)]
+        return [
+            c[[0, -1]].copy() if n == 1 else c.copy() if n == self.degree else lower_degree(c, int(n))
+            for c, n in zip(self._ctrl, self._degrees)
+        ]
 
     def _hodograph(self, order: int) -> np.ndarray:
         """Derivative control points of every piece, shape (P, N+1-order, d) (computed once)."""
         hods = self._hodographs
         while len(hods) <= order:
-            k = len(hods) - 1                                 # order of the last one computed
-            hods.append((self.degree - k) * np.diff(hods[-1], axis=1) if k < self.degree
-                        else np.zeros((self._ctrl.shape[0], 1, self.d)))
+            k = len(hods) - 1  # order of the last one computed
+            hods.append(
+                (self.degree - k) * np.diff(hods[-1], axis=1)
+                if k < self.degree
+                else np.zeros((self._ctrl.shape[0], 1, self.d))
+            )
         return hods[order]
 
     def _piece_derivative(self, piece: np.ndarray, u: np.ndarray, order: int) -> np.ndarray:
@@ -253,8 +293,9 @@ class BezierPath:
         assert out is not None  # only the position can be None, and it is evaluated for order 0
         return out[0] if scalar else out
 
-    def _arc_derivatives(self, piece: np.ndarray, u: np.ndarray, order: int, *,
-                         position: bool = True) -> list[np.ndarray | None]:
+    def _arc_derivatives(
+        self, piece: np.ndarray, u: np.ndarray, order: int, *, position: bool = True
+    ) -> list[np.ndarray | None]:
         """[r, r_s, r_ss, r_sss] up to ``order`` (>= 1 without the position) at (piece, u) by the
         chain rule; ``position=False`` does not evaluate r (its entry is None)."""
         if position:
@@ -301,12 +342,13 @@ class BezierPath:
             best = max(best, float(np.max(self.curvature(peaks))))
         return best
 
-
     def polyline(self, step_m: float = 0.5) -> np.ndarray:
         """Points every ``step_m`` metres of arc (plus both ends), shape (K, d), for plots."""
         n = max(2, int(math.ceil(self.length_m / step_m)) + 1)
         return self.evaluate(np.linspace(0.0, self.length_m, n))
 
     def __repr__(self) -> str:
-        return (f"BezierPath(d={self.d}, pieces={len(self.pieces)}, length_m={self.length_m:.3f}, "
-                f"kappa_ok={self.kappa_ok}, stops={self.stop_s.size})")
+        return (
+            f"BezierPath(d={self.d}, pieces={len(self.pieces)}, length_m={self.length_m:.3f}, "
+            f"kappa_ok={self.kappa_ok}, stops={self.stop_s.size})"
+        )

@@ -101,8 +101,8 @@ def interior_peaks(hod1: np.ndarray, hod2: np.ndarray) -> tuple[np.ndarray, np.n
     c2 = power_basis_matrix(h2.shape[1] - 1)[None] @ h2
     rows = np.arange(index.size)
     grid = np.linspace(0.0, 1.0, REFINE_SAMPLES)
-    for _ in range(REFINE_ROUNDS):              # each round narrows the bracket 8 times
-        x = lo[:, None] + (hi - lo)[:, None] * grid[None, :]                       # (I, 17)
+    for _ in range(REFINE_ROUNDS):  # each round narrows the bracket 8 times
+        x = lo[:, None] + (hi - lo)[:, None] * grid[None, :]  # (I, 17)
         k = curvature_from_derivatives(horner_grid(c1, x), horner_grid(c2, x))
         top = np.clip(np.argmax(k, axis=1), 1, grid.size - 2)
         lo, hi = x[rows, top - 1], x[rows, top + 1]

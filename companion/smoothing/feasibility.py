@@ -25,9 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.errors import SmoothingError
+from companion.flight.trajectory import Trajectory
 from companion.numba_cache import compile_once
 from companion.smoothing.settings import FeasibilitySettings
-from companion.flight.trajectory import Trajectory
 
 __all__ = ["CHANNELS", "FeasibilityReport", "FeasibilityChecker", "check", "check_and_stretch"]
 
@@ -94,7 +94,8 @@ class FeasibilityReport:
         """The figures as plain data (flight record, ``companion plan --json``), without the
         trajectory."""
         return {
-            "feasible": bool(self.feasible), "stretch": float(self.stretch),
+            "feasible": bool(self.feasible),
+            "stretch": float(self.stretch),
             "max_abs_delta": float(self.max_abs_delta),
             "peak_abs_delta": {name: float(v) for name, v in zip(CHANNELS, self.peak_abs_delta)},
             "saturated": bool(self.saturated),
@@ -103,7 +104,8 @@ class FeasibilityReport:
             "initial_max_abs_delta": float(self.initial_max_abs_delta),
             "initial_max_tracking_error_m": float(self.initial_max_tracking_error_m),
             "initial_saturated": bool(self.initial_saturated),
-            "attempts": int(self.attempts), "reason": self.reason,
+            "attempts": int(self.attempts),
+            "reason": self.reason,
             "duration_s": float(self.trajectory.duration_s),
             "check_s": float(self.elapsed_s),
         }
@@ -118,13 +120,17 @@ def describe(summary: dict) -> str:
     leg's), as ``companion plan`` and ``companion report`` print them."""
     f = summary
     peaks = " ".join(f"{name.split('_')[0][:3]} {v:.2f}" for name, v in f["peak_abs_delta"].items())
-    text = (f"{'feasible' if f['feasible'] else 'INFEASIBLE'}, stretch x{f['stretch']:.3g} "
-            f"({f['duration_s']:.1f} s); predicted max |delta| {f['max_abs_delta']:.2f} ({peaks}), "
-            f"tracking error max {f['max_tracking_error_m']:.2f} m RMS {f['rms_tracking_error_m']:.2f} m; "
-            f"check {1e3 * f['check_s']:.0f} ms")
+    text = (
+        f"{'feasible' if f['feasible'] else 'INFEASIBLE'}, stretch x{f['stretch']:.3g} "
+        f"({f['duration_s']:.1f} s); predicted max |delta| {f['max_abs_delta']:.2f} ({peaks}), "
+        f"tracking error max {f['max_tracking_error_m']:.2f} m RMS {f['rms_tracking_error_m']:.2f} m; "
+        f"check {1e3 * f['check_s']:.0f} ms"
+    )
     if f["stretch"] > 1.0:
-        text += (f"; first timing max |delta| {f['initial_max_abs_delta']:.2f}"
-                 f"{' (saturates)' if f['initial_saturated'] else ''}")
+        text += (
+            f"; first timing max |delta| {f['initial_max_abs_delta']:.2f}"
+            f"{' (saturates)' if f['initial_saturated'] else ''}"
+        )
     if f.get("reason"):
         text += f"; {f['reason']}"
     return text
@@ -205,8 +211,16 @@ class FeasibilityChecker:
         start = time.perf_counter()
         t = np.array([0.0, 1.0 / self.settings.sample_rate_hz])
         zero = np.zeros((2, 3))
-        simulate_closed_loop(self.model, t, zero, zero, zero, np.zeros(2), self.controller_settings,
-                             yaw_rate_rad_s=np.zeros(2) if self.settings.yaw_rate_feedforward else None)
+        simulate_closed_loop(
+            self.model,
+            t,
+            zero,
+            zero,
+            zero,
+            np.zeros(2),
+            self.controller_settings,
+            yaw_rate_rad_s=np.zeros(2) if self.settings.yaw_rate_feedforward else None,
+        )
         return time.perf_counter() - start
 
     def reference(self, trajectory: Trajectory) -> tuple[np.ndarray, ...]:
@@ -246,14 +260,27 @@ class FeasibilityChecker:
         from heli_model.control import simulate_closed_loop
 
         t, pos, vel, acc, yaw, rate = self.reference(trajectory)
-        return simulate_closed_loop(self.model, t, pos, vel, acc, yaw, self.controller_settings,
-                                    yaw_rate_rad_s=rate if self.settings.yaw_rate_feedforward else None)
+        return simulate_closed_loop(
+            self.model,
+            t,
+            pos,
+            vel,
+            acc,
+            yaw,
+            self.controller_settings,
+            yaw_rate_rad_s=rate if self.settings.yaw_rate_feedforward else None,
+        )
 
     def _outcome(self, trajectory: Trajectory) -> _Outcome:
         result = self.simulate(trajectory)
         peak = tuple(float(v) for v in np.max(np.abs(np.asarray(result.delta, dtype=float)), axis=0))
-        return _Outcome(float(result.max_abs_delta), float(np.max(result.tracking_error_m)), bool(result.saturated),
-                        peak, float(result.rms_tracking_error_m))
+        return _Outcome(
+            float(result.max_abs_delta),
+            float(np.max(result.tracking_error_m)),
+            bool(result.saturated),
+            peak,
+            float(result.rms_tracking_error_m),
+        )
 
     def _failure(self, out: _Outcome) -> str:
         s = self.settings
@@ -277,7 +304,7 @@ class FeasibilityChecker:
     def _run(self, trajectory: Trajectory, stretch_allowed: bool) -> FeasibilityReport:
         if not isinstance(trajectory, Trajectory):
             raise SmoothingError(f"trajectory: expected a Trajectory, got {type(trajectory).__name__}")
-        warm_model()                     # numba's compile before the clock (once per process)
+        warm_model()  # numba's compile before the clock (once per process)
         start = time.perf_counter()
         s = self.settings
         first = self._outcome(trajectory)
@@ -291,17 +318,30 @@ class FeasibilityChecker:
         if reason and stretch_allowed:
             logger.warning("feasibility: still infeasible after stretching x%.3g: %s", factor, reason)
         elif factor > 1.0:
-            logger.info("feasibility: stretched durations x%.3g (%.1f s -> %.1f s)", factor,
-                        trajectory.duration_s, candidate.duration_s)
+            logger.info(
+                "feasibility: stretched durations x%.3g (%.1f s -> %.1f s)",
+                factor,
+                trajectory.duration_s,
+                candidate.duration_s,
+            )
         return FeasibilityReport(
-            feasible=not reason, trajectory=candidate, stretch=factor, max_abs_delta=out.max_abs_delta,
-            max_tracking_error_m=out.max_tracking_error_m, saturated=out.saturated,
+            feasible=not reason,
+            trajectory=candidate,
+            stretch=factor,
+            max_abs_delta=out.max_abs_delta,
+            max_tracking_error_m=out.max_tracking_error_m,
+            saturated=out.saturated,
             delta_margin=s.max_abs_delta - out.max_abs_delta,
-            error_margin_m=s.max_tracking_error_m - out.max_tracking_error_m, attempts=attempts,
+            error_margin_m=s.max_tracking_error_m - out.max_tracking_error_m,
+            attempts=attempts,
             initial_max_abs_delta=first.max_abs_delta,
-            initial_max_tracking_error_m=first.max_tracking_error_m, reason=reason,
-            elapsed_s=time.perf_counter() - start, peak_abs_delta=out.peak_abs_delta,
-            rms_tracking_error_m=out.rms_tracking_error_m, initial_saturated=first.saturated)
+            initial_max_tracking_error_m=first.max_tracking_error_m,
+            reason=reason,
+            elapsed_s=time.perf_counter() - start,
+            peak_abs_delta=out.peak_abs_delta,
+            rms_tracking_error_m=out.rms_tracking_error_m,
+            initial_saturated=first.saturated,
+        )
 
 
 def check(trajectory: Trajectory, model=None, settings: FeasibilitySettings | None = None) -> FeasibilityReport:
@@ -309,8 +349,9 @@ def check(trajectory: Trajectory, model=None, settings: FeasibilitySettings | No
     return FeasibilityChecker(model, settings).check(trajectory)
 
 
-def check_and_stretch(trajectory: Trajectory, model=None,
-                      settings: FeasibilitySettings | None = None) -> FeasibilityReport:
+def check_and_stretch(
+    trajectory: Trajectory, model=None, settings: FeasibilitySettings | None = None
+) -> FeasibilityReport:
     """Closed-loop check of ``trajectory``, stretching its durations until it is feasible.
 
     Parameters

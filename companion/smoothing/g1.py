@@ -106,14 +106,18 @@ def smooth_g1(path, *, world=None, kappa_max_1_m: float | None = None, max_halvi
         for i in turn_ids[sharp]:
             kind[i] = 1
             tight.append(int(index[i + 1]))
-            notes.append(f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: every smooth "
-                         f"corner clips an obstacle; kept the polyline corner (the vehicle stops there)")
+            notes.append(
+                f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: every smooth "
+                f"corner clips an obstacle; kept the polyline corner (the vehicle stops there)"
+            )
     elif turn_ids.size:
         curves[turn_ids] = build(turn_ids, np.ones(turn_ids.size))
     for i in np.nonzero(corners.kind == "reversal")[0]:
         tight.append(int(index[i + 1]))
-        notes.append(f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: the path reverses "
-                     f"(heading change {math.degrees(corners.turn_rad[i]):.2f} deg); the vehicle stops there")
+        notes.append(
+            f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: the path reverses "
+            f"(heading change {math.degrees(corners.turn_rad[i]):.2f} deg); the vehicle stops there"
+        )
     if kappa is not None:
         smooth_ids = turn_ids[kind[turn_ids] == 2]
         u = np.linspace(0.0, 1.0, 129)
@@ -124,12 +128,14 @@ def smooth_g1(path, *, world=None, kappa_max_1_m: float | None = None, max_halvi
         for i, k in zip(smooth_ids, peak):
             if k > kappa * (1.0 + 1e-9):
                 tight.append(int(index[i + 1]))
-                notes.append(f"corner {index[i + 1]}: G1 curvature {k:.4g} 1/m > K_max {kappa:.4g} 1/m "
-                             f"(use G2 to bound it)")
+                notes.append(
+                    f"corner {index[i + 1]}: G1 curvature {k:.4g} 1/m > K_max {kappa:.4g} 1/m (use G2 to bound it)"
+                )
     tight = sorted(set(tight))
     if logger.isEnabledFor(logging.INFO):
         for note in notes:
             logger.info("smooth_g1: %s", note)
     ctrl, degrees = assemble_stacked(nodes, kind, curves)
-    return BezierPath.from_stacked(ctrl, degrees, kappa_ok=not tight, notes=notes, tight_corners=tight,
-                                   kappa_max_1_m=kappa)
+    return BezierPath.from_stacked(
+        ctrl, degrees, kappa_ok=not tight, notes=notes, tight_corners=tight, kappa_max_1_m=kappa
+    )

@@ -38,8 +38,18 @@ from companion.smoothing.bezier_path import BezierPath
 from companion.smoothing.polyline import assemble_stacked, prepare_path
 from companion.smoothing.repair import repair_corners
 
-__all__ = ["smooth_g2", "C1", "C2", "C3", "C4", "spiral_pair", "spiral_pairs", "spiral_distance_m",
-           "spiral_curvature_1_m", "allocate_segments"]
+__all__ = [
+    "smooth_g2",
+    "C1",
+    "C2",
+    "C3",
+    "C4",
+    "spiral_pair",
+    "spiral_pairs",
+    "spiral_distance_m",
+    "spiral_curvature_1_m",
+    "allocate_segments",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -55,8 +65,16 @@ def _fmt_point(p: np.ndarray) -> str:
     return "[" + ", ".join(f"{float(x):.3f}" for x in p) + "]"
 
 
-def _tight_notes(ids: np.ndarray, index: np.ndarray, corners, d_need: np.ndarray, d_fit: np.ndarray,
-                 sizes: np.ndarray, kappa_1_m: np.ndarray, kappa_max_1_m: float) -> list[str]:
+def _tight_notes(
+    ids: np.ndarray,
+    index: np.ndarray,
+    corners,
+    d_need: np.ndarray,
+    d_fit: np.ndarray,
+    sizes: np.ndarray,
+    kappa_1_m: np.ndarray,
+    kappa_max_1_m: float,
+) -> list[str]:
     """One note per corner ``ids`` (C',) whose spirals are smaller than K_max needs.
 
     ``index`` maps cleaned nodes to the input polyline, ``corners`` is the ``Corners`` of the
@@ -65,11 +83,20 @@ def _tight_notes(ids: np.ndarray, index: np.ndarray, corners, d_need: np.ndarray
     Python values once, and the notes formatted in one comprehension.
     """
     reasons = np.where(sizes[ids] == d_fit[ids], "the adjacent segments are too short", "obstacles")
-    rows = zip(index[ids + 1].tolist(), corners.point[ids].tolist(), np.degrees(corners.turn_rad[ids]).tolist(),
-               d_need[ids].tolist(), sizes[ids].tolist(), reasons.tolist(), kappa_1_m.tolist())
-    return [f"corner {node} at {_fmt_point(p)}: heading change {turn:.1f} deg needs d = {need:.3f} m, got "
-            f"{got:.3f} m ({why}); curvature {k:.4g} 1/m > K_max {kappa_max_1_m:.4g} 1/m"
-            for node, p, turn, need, got, why, k in rows]
+    rows = zip(
+        index[ids + 1].tolist(),
+        corners.point[ids].tolist(),
+        np.degrees(corners.turn_rad[ids]).tolist(),
+        d_need[ids].tolist(),
+        sizes[ids].tolist(),
+        reasons.tolist(),
+        kappa_1_m.tolist(),
+    )
+    return [
+        f"corner {node} at {_fmt_point(p)}: heading change {turn:.1f} deg needs d = {need:.3f} m, got "
+        f"{got:.3f} m ({why}); curvature {k:.4g} 1/m > K_max {kappa_max_1_m:.4g} 1/m"
+        for node, p, turn, need, got, why, k in rows
+    ]
 
 
 def check_kappa(kappa_max_1_m) -> float:
@@ -153,15 +180,13 @@ def allocate_segments(d_need: np.ndarray, len_in: np.ndarray, len_out: np.ndarra
     n = d_need.size
     if n == 0:
         return d_need.copy()
-    seg_len = np.concatenate([len_in[:1], len_out])                 # (C + 1,)
-    left = np.concatenate([[0.0], d_need])                           # corner at the segment start
-    right = np.concatenate([d_need, [0.0]])                          # corner at the segment end
+    seg_len = np.concatenate([len_in[:1], len_out])  # (C + 1,)
+    left = np.concatenate([[0.0], d_need])  # corner at the segment start
+    right = np.concatenate([d_need, [0.0]])  # corner at the segment end
     fits = left + right <= seg_len
     half = 0.5 * seg_len
-    left_allowed = np.where(fits, left, np.where(right <= half, seg_len - right,
-                                                 np.where(left <= half, left, half)))
-    right_allowed = np.where(fits, right, np.where(left <= half, seg_len - left,
-                                                   np.where(right <= half, right, half)))
+    left_allowed = np.where(fits, left, np.where(right <= half, seg_len - right, np.where(left <= half, left, half)))
+    right_allowed = np.where(fits, right, np.where(left <= half, seg_len - left, np.where(right <= half, right, half)))
     return np.minimum(d_need, np.minimum(right_allowed[:-1], left_allowed[1:]))
 
 
@@ -222,13 +247,17 @@ def smooth_g2(path, kappa_max_1_m: float, *, world=None, max_halvings: int = 12)
     tight: list[int] = []
     for i in sharp_ids:
         tight.append(int(index[i + 1]))
-        notes.append(f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: every smooth "
-                     f"corner clips an obstacle; kept the polyline corner (the vehicle stops there)")
+        notes.append(
+            f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: every smooth "
+            f"corner clips an obstacle; kept the polyline corner (the vehicle stops there)"
+        )
     for i in np.nonzero(corners.kind == "reversal")[0]:
         tight.append(int(index[i + 1]))
-        notes.append(f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: the path "
-                     f"reverses (heading change {math.degrees(corners.turn_rad[i]):.2f} deg); the "
-                     f"vehicle stops and turns there")
+        notes.append(
+            f"corner {index[i + 1]} at {_fmt_point(corners.point[i])}: the path "
+            f"reverses (heading change {math.degrees(corners.turn_rad[i]):.2f} deg); the "
+            f"vehicle stops and turns there"
+        )
     smooth_ids = turn_ids[kind[turn_ids] == 2]
     true_kappa = spiral_curvature_1_m(corners.turn_rad[smooth_ids], sizes[smooth_ids])
     over = true_kappa > kappa * (1.0 + 1e-9)
@@ -240,8 +269,15 @@ def smooth_g2(path, kappa_max_1_m: float, *, world=None, max_halvings: int = 12)
         return notes + _tight_notes(tight_ids, index, corners, d_need, d_fit, sizes, true_kappa[over], kappa)
 
     ctrl, degrees = assemble_stacked(nodes, kind, curves)
-    curve = BezierPath.from_stacked(ctrl, degrees, kappa_ok=not tight, notes=all_notes, tight_corners=tight,
-                                   kappa_max_1_m=kappa, peaks_at_joints=True)
+    curve = BezierPath.from_stacked(
+        ctrl,
+        degrees,
+        kappa_ok=not tight,
+        notes=all_notes,
+        tight_corners=tight,
+        kappa_max_1_m=kappa,
+        peaks_at_joints=True,
+    )
     if logger.isEnabledFor(logging.INFO):
         for note in curve.notes:
             logger.info("smooth_g2: %s", note)

@@ -11,14 +11,12 @@ stop) or ``turn``.
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
 
 import numpy as np
 
-from companion.smoothing.bezier_maths import elevate_lines
-
 from companion.errors import SmoothingError
+from companion.smoothing.bezier_maths import elevate_lines
 
 __all__ = ["Corners", "clean_path", "prepare_path", "corner_geometry", "assemble_stacked"]
 
@@ -75,7 +73,7 @@ def clean_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray]:
     return arr[index], index
 
 
-def prepare_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray, "Corners"]:
+def prepare_path(path, name: str = "path") -> tuple[np.ndarray, np.ndarray, Corners]:
     """``clean_path`` and ``corner_geometry`` in one pass (what the G1 and G2 smoothers need).
 
     The corner geometry of the distinct nodes also tells whether any node runs straight on
@@ -125,7 +123,7 @@ def drop_straight_nodes(arr: np.ndarray, index: np.ndarray) -> np.ndarray:
     a, b = seg[:-1], seg[1:]
     cos = np.einsum("ij,ij->i", a, b)
     sin = _cross_norm(a, b)
-    check = np.nonzero(np.arctan2(sin, cos) < 2.0 * STRAIGHT_RAD)[0] + 1   # positions in index
+    check = np.nonzero(np.arctan2(sin, cos) < 2.0 * STRAIGHT_RAD)[0] + 1  # positions in index
     if check.size == 0:
         return index
     kept = np.ones(index.size, dtype=bool)
@@ -205,8 +203,9 @@ def corner_geometry(nodes: np.ndarray) -> Corners:
     # atan2(|a x b|, a.b) is accurate at both ends of [0, pi], unlike arccos
     turn = np.arctan2(_cross_norm(t_in, t_out), cos_turn)
     kind = np.where(turn < STRAIGHT_RAD, "straight", np.where(turn > np.pi - REVERSAL_RAD, "reversal", "turn"))
-    return Corners(point=nodes[1:-1], u_in=-t_in, u_out=t_out, len_in=seg_len[:-1],
-                   len_out=seg_len[1:], turn_rad=turn, kind=kind)
+    return Corners(
+        point=nodes[1:-1], u_in=-t_in, u_out=t_out, len_in=seg_len[:-1], len_out=seg_len[1:], turn_rad=turn, kind=kind
+    )
 
 
 def assemble_stacked(nodes: np.ndarray, corner_kind: np.ndarray, curves: np.ndarray):
@@ -233,13 +232,13 @@ def assemble_stacked(nodes: np.ndarray, corner_kind: np.ndarray, curves: np.ndar
     m = curves.shape[1]
     used = np.nonzero(corner_kind > 0)[0]
     curved = corner_kind[used] == 2
-    entry = np.where(curved[:, None], curves[used, 0, 0], nodes[used + 1])      # (K, d)
+    entry = np.where(curved[:, None], curves[used, 0, 0], nodes[used + 1])  # (K, d)
     exit_ = np.where(curved[:, None], curves[used, -1, -1], nodes[used + 1])
     line_a = np.vstack([nodes[:1], exit_])
     line_b = np.vstack([entry, nodes[-1:]])
-    lines = elevate_lines(line_a, line_b, degree)                              # (K+1, N+1, d)
-    count = 1 + m * curved.astype(int)                                         # pieces per corner + line
-    first = np.concatenate([[0], np.cumsum(count)])                            # line index of each block
+    lines = elevate_lines(line_a, line_b, degree)  # (K+1, N+1, d)
+    count = 1 + m * curved.astype(int)  # pieces per corner + line
+    first = np.concatenate([[0], np.cumsum(count)])  # line index of each block
     total = int(first[-1]) + 1
     ctrl = np.empty((total, degree + 1, nodes.shape[1]))
     degrees = np.full(total, degree)

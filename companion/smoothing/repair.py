@@ -19,7 +19,7 @@ stops there. So the smoothed path is never less safe than the polyline.
 from __future__ import annotations
 
 import logging
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -57,10 +57,10 @@ def corners_clear(world, curves: np.ndarray) -> np.ndarray:
     if n_groups == 0:
         return ok
     degree = curves.shape[2] - 1
-    ctrl = curves.reshape(n_groups * m, degree + 1, curves.shape[3])            # (P, N+1, d)
+    ctrl = curves.reshape(n_groups * m, degree + 1, curves.shape[3])  # (P, N+1, d)
     group_of = np.repeat(np.arange(n_groups), m)
     hod = degree * np.diff(ctrl, axis=1)
-    speed_bound = np.max(np.linalg.norm(hod, axis=2), axis=1)                  # (P,)
+    speed_bound = np.max(np.linalg.norm(hod, axis=2), axis=1)  # (P,)
 
     def points(piece: np.ndarray, u: np.ndarray) -> np.ndarray:
         return np.einsum("kn,knd->kd", bernstein(degree, u), ctrl[piece])
@@ -100,13 +100,14 @@ def corners_clear(world, curves: np.ndarray) -> np.ndarray:
         piece = np.concatenate([piece, piece])
         u_lo, u_hi = np.concatenate([u_lo, u_mid]), np.concatenate([u_mid, u_hi])
         c_lo, c_hi = np.concatenate([c_lo, c_mid]), np.concatenate([c_mid, c_hi])
-    remaining = (c_lo + c_hi <= (u_hi - u_lo) * speed_bound[piece])
+    remaining = c_lo + c_hi <= (u_hi - u_lo) * speed_bound[piece]
     ok[np.unique(group_of[piece[remaining]])] = False
     return ok
 
 
-def repair_corners(world, build: Callable[[np.ndarray, np.ndarray], np.ndarray], corner_ids: np.ndarray,
-                   max_halvings: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def repair_corners(
+    world, build: Callable[[np.ndarray, np.ndarray], np.ndarray], corner_ids: np.ndarray, max_halvings: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shrink clipping corners (halving their size) until they are certified free.
 
     Parameters
@@ -146,6 +147,5 @@ def repair_corners(world, build: Callable[[np.ndarray, np.ndarray], np.ndarray],
             curves[failing] = build(ids[failing], scales[failing])
         pending = failing
     if np.any(sharp):
-        logger.info("corners %s still clip at 1/%d of their size: kept sharp", ids[sharp].tolist(),
-                    2 ** max_halvings)
+        logger.info("corners %s still clip at 1/%d of their size: kept sharp", ids[sharp].tolist(), 2**max_halvings)
     return curves, scales, sharp

@@ -55,10 +55,11 @@ class TrajectoryLimits:
     jerk_m_s3: float = 3.0
 
     def __post_init__(self) -> None:
-        require_numbers(SmoothingError, "limits", self,
-                        positive=("speed_m_s", "accel_m_s2", "lat_accel_m_s2", "jerk_m_s3"))
+        require_numbers(
+            SmoothingError, "limits", self, positive=("speed_m_s", "accel_m_s2", "lat_accel_m_s2", "jerk_m_s3")
+        )
 
-    def stretched(self, factor: float) -> "TrajectoryLimits":
+    def stretched(self, factor: float) -> TrajectoryLimits:
         """Limits of the same trajectory flown ``factor`` times slower (time scaled by factor).
 
         Speed scales by ``1/factor``, accelerations by ``1/factor**2``, jerk by
@@ -105,10 +106,14 @@ class SmoothingSettings:
         if self.method not in ("g1", "g2", "none"):
             raise SmoothingError(f"smoothing.method: expected 'g1', 'g2' or 'none', got {self.method!r}")
         require_numbers(SmoothingError, "smoothing", self, positive=("kappa_max_1_m", "grid_step_m"))
-        if isinstance(self.repair_max_halvings, bool) or not isinstance(self.repair_max_halvings, int) \
-                or self.repair_max_halvings < 0:
+        if (
+            isinstance(self.repair_max_halvings, bool)
+            or not isinstance(self.repair_max_halvings, int)
+            or self.repair_max_halvings < 0
+        ):
             raise SmoothingError(
-                f"smoothing.repair_max_halvings: expected an integer >= 0, got {self.repair_max_halvings!r}")
+                f"smoothing.repair_max_halvings: expected an integer >= 0, got {self.repair_max_halvings!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -158,8 +163,13 @@ class FeasibilitySettings:
     hold_after_s: float = 2.0
 
     def __post_init__(self) -> None:
-        require_numbers(SmoothingError, "feasibility", self, non_negative=("hold_after_s",), positive=(
-            "max_abs_delta", "max_tracking_error_m", "sample_rate_hz", "max_stretch", "stretch_step"))
+        require_numbers(
+            SmoothingError,
+            "feasibility",
+            self,
+            non_negative=("hold_after_s",),
+            positive=("max_abs_delta", "max_tracking_error_m", "sample_rate_hz", "max_stretch", "stretch_step"),
+        )
         if self.stretch_step <= 1.0:
             raise SmoothingError(f"feasibility.stretch_step: must be > 1, got {self.stretch_step!r}")
         if not isinstance(self.enabled, bool):

@@ -30,9 +30,9 @@ import math
 import numpy as np
 
 from companion.errors import SmoothingError
+from companion.flight.trajectory import RawProfile, Trajectory
 from companion.smoothing.bezier import BezierPath
 from companion.smoothing.settings import TrajectoryLimits
-from companion.flight.trajectory import RawProfile, Trajectory
 
 __all__ = ["time_parameterize", "retime", "arc_grid", "speed_limit_sq", "erode", "forward_backward"]
 
@@ -45,7 +45,7 @@ def _as_curve(curve) -> BezierPath:
     from companion.smoothing.polyline import clean_path
 
     nodes, _ = clean_path(curve, "curve")
-    return BezierPath([nodes[i:i + 2] for i in range(nodes.shape[0] - 1)])
+    return BezierPath([nodes[i : i + 2] for i in range(nodes.shape[0] - 1)])
 
 
 def _check_speed(name: str, value: float, limit: float, notes: list[str] | None = None) -> float:
@@ -58,8 +58,7 @@ def _check_speed(name: str, value: float, limit: float, notes: list[str] | None 
     if v > limit * (1.0 + 1e-6):
         if notes is None:
             raise SmoothingError(f"{name}: {v} m/s exceeds the speed limit {limit} m/s")
-        notes.append(f"{name} {v:.3f} m/s is above the speed limit {limit} m/s; the profile starts at "
-                     f"the limit")
+        notes.append(f"{name} {v:.3f} m/s is above the speed limit {limit} m/s; the profile starts at the limit")
     return min(v, limit)
 
 
@@ -146,8 +145,9 @@ def forward_backward(w_max: np.ndarray, s_m: np.ndarray, accel_m_s2: float) -> n
     return np.maximum(np.minimum(forward, backward), 0.0)
 
 
-def raw_profile(s_m: np.ndarray, w: np.ndarray, stop_idx: np.ndarray, window_s: float,
-                start_speed_m_s: float, end_speed_m_s: float) -> RawProfile:
+def raw_profile(
+    s_m: np.ndarray, w: np.ndarray, stop_idx: np.ndarray, window_s: float, start_speed_m_s: float, end_speed_m_s: float
+) -> RawProfile:
     """Times of the knots (constant acceleration between them) with a dwell at every stop."""
     v = np.sqrt(w)
     ds = np.diff(s_m)
@@ -156,7 +156,7 @@ def raw_profile(s_m: np.ndarray, w: np.ndarray, stop_idx: np.ndarray, window_s: 
     accel = np.where(dt > 0, (v[1:] - v[:-1]) / np.maximum(dt, 1e-300), 0.0)
     if stop_idx.size:
         # insert a knot with the same (s, v = 0) after every stop knot, reached after the dwell
-        insert_at = stop_idx                               # knot index of the stop
+        insert_at = stop_idx  # knot index of the stop
         s_out = np.insert(s_m, insert_at + 1, s_m[insert_at])
         v_out = np.insert(v, insert_at + 1, 0.0)
         dt_out = np.insert(dt, insert_at, window_s)
@@ -164,13 +164,27 @@ def raw_profile(s_m: np.ndarray, w: np.ndarray, stop_idx: np.ndarray, window_s: 
     else:
         s_out, v_out, dt_out, a_out = s_m, v, dt, accel
     tau = np.concatenate([[0.0], np.cumsum(dt_out)])
-    return RawProfile(tau_s=tau, s_m=s_out, v_m_s=v_out, a_m_s2=a_out, window_s=window_s,
-                      start_speed_m_s=start_speed_m_s, end_speed_m_s=end_speed_m_s)
+    return RawProfile(
+        tau_s=tau,
+        s_m=s_out,
+        v_m_s=v_out,
+        a_m_s2=a_out,
+        window_s=window_s,
+        start_speed_m_s=start_speed_m_s,
+        end_speed_m_s=end_speed_m_s,
+    )
 
 
-def time_parameterize(curve, limits: TrajectoryLimits | None = None, *, start_speed_m_s: float = 0.0,
-                      end_speed_m_s: float = 0.0, grid_step_m: float = 1.0, yaw_mode: str = "tangent",
-                      yaw_hold_rad: float | None = None) -> Trajectory:
+def time_parameterize(
+    curve,
+    limits: TrajectoryLimits | None = None,
+    *,
+    start_speed_m_s: float = 0.0,
+    end_speed_m_s: float = 0.0,
+    grid_step_m: float = 1.0,
+    yaw_mode: str = "tangent",
+    yaw_hold_rad: float | None = None,
+) -> Trajectory:
     """Time-parameterise a curve under speed, acceleration, lateral-acceleration and jerk limits.
 
     Parameters
@@ -207,8 +221,12 @@ def time_parameterize(curve, limits: TrajectoryLimits | None = None, *, start_sp
     limits = TrajectoryLimits() if limits is None else limits
     if not isinstance(limits, TrajectoryLimits):
         raise SmoothingError(f"limits: expected a TrajectoryLimits, got {type(limits).__name__}")
-    if isinstance(grid_step_m, bool) or not isinstance(grid_step_m, (int, float)) \
-            or not math.isfinite(grid_step_m) or grid_step_m <= 0:
+    if (
+        isinstance(grid_step_m, bool)
+        or not isinstance(grid_step_m, (int, float))
+        or not math.isfinite(grid_step_m)
+        or grid_step_m <= 0
+    ):
         raise SmoothingError(f"grid_step_m: must be a finite number > 0, got {grid_step_m!r}")
     notes: list[str] = []
     v0 = _check_speed("start_speed_m_s", start_speed_m_s, limits.speed_m_s, notes)
@@ -233,11 +251,12 @@ def time_parameterize(curve, limits: TrajectoryLimits | None = None, *, start_sp
         w_max[hold_end] = np.minimum(w_max[hold_end], v1**2)
     w = forward_backward(w_max, s, limits.accel_m_s2)
     if v0 > 0 and w[0] < v0**2 * (1 - 1e-9):
-        notes.append(f"start speed {v0:.3f} m/s is above the {math.sqrt(w[0]):.3f} m/s the limits allow "
-                     f"at the start; the profile starts slower")
+        notes.append(
+            f"start speed {v0:.3f} m/s is above the {math.sqrt(w[0]):.3f} m/s the limits allow "
+            f"at the start; the profile starts slower"
+        )
     if v1 > 0 and w[-1] < v1**2 * (1 - 1e-9):
-        notes.append(f"end speed {v1:.3f} m/s is above the {math.sqrt(w[-1]):.3f} m/s the limits allow "
-                     f"at the end")
+        notes.append(f"end speed {v1:.3f} m/s is above the {math.sqrt(w[-1]):.3f} m/s the limits allow at the end")
     for note in notes:
         logger.warning("time_parameterize: %s", note)
     v0 = min(v0, math.sqrt(w[0]))
@@ -248,15 +267,30 @@ def time_parameterize(curve, limits: TrajectoryLimits | None = None, *, start_sp
     if yaw_hold_rad is None:
         t0 = path.derivative(0.0, 1)
         yaw_hold_rad = float(math.atan2(t0[1], t0[0])) if np.hypot(t0[0], t0[1]) > 1e-6 else 0.0
-    return Trajectory(path, profile, limits, tau_start, tau_end, yaw_mode=yaw_mode,
-                      yaw_hold_rad=yaw_hold_rad, notes=notes, grid_step_m=float(grid_step_m))
+    return Trajectory(
+        path,
+        profile,
+        limits,
+        tau_start,
+        tau_end,
+        yaw_mode=yaw_mode,
+        yaw_hold_rad=yaw_hold_rad,
+        notes=notes,
+        grid_step_m=float(grid_step_m),
+    )
 
 
 def retime(trajectory: Trajectory, limits: TrajectoryLimits) -> Trajectory:
     """The same curve and boundary speeds as ``trajectory``, re-timed for other ``limits`` (e.g.
     ``limits.stretched(k)``); lifted to the same altitude when ``trajectory`` is."""
     p = trajectory.profile
-    out = time_parameterize(trajectory.curve, limits, start_speed_m_s=p.start_speed_m_s,
-                            end_speed_m_s=p.end_speed_m_s, grid_step_m=trajectory.grid_step_m,
-                            yaw_mode=trajectory.yaw_mode, yaw_hold_rad=trajectory.yaw_hold_rad)
+    out = time_parameterize(
+        trajectory.curve,
+        limits,
+        start_speed_m_s=p.start_speed_m_s,
+        end_speed_m_s=p.end_speed_m_s,
+        grid_step_m=trajectory.grid_step_m,
+        yaw_mode=trajectory.yaw_mode,
+        yaw_hold_rad=trajectory.yaw_hold_rad,
+    )
     return out.to_ned(trajectory.down_m) if trajectory.down_m is not None else out

@@ -14,7 +14,7 @@
 This package's ``__init__`` imports neither zenoh nor the planners.
 """
 
-from companion.threats.transport.codec import decode, encode
 from companion.threats.model import Threat, ThreatTable
+from companion.threats.transport.codec import decode, encode
 
 __all__ = ["Threat", "ThreatTable", "decode", "encode"]

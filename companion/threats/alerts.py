@@ -37,19 +37,38 @@ from companion.errors import ConfigError
 from companion.threats.statustext import STATUSTEXT_MAX_CHARS
 from heli_common.typed_config import require_numbers
 
-__all__ = ["AlertSettings", "Approach", "closest_approach", "alert_level", "collision_action", "collision_fields",
-           "alert_statustext", "collision_id", "LEVEL_NAMES", "NONE", "LOW", "HIGH", "REPORT"]
+__all__ = [
+    "AlertSettings",
+    "Approach",
+    "closest_approach",
+    "alert_level",
+    "collision_action",
+    "collision_fields",
+    "alert_statustext",
+    "collision_id",
+    "LEVEL_NAMES",
+    "NONE",
+    "LOW",
+    "HIGH",
+    "REPORT",
+]
 
 FT_M = 0.3048
 #: Another vehicle of the fleet as a threat (``companion.fleet.peers``).
 _FLEET_ID = re.compile(r"uav(\d+)(?:-pending)?")
 #: The threat levels and the action before any decision (pymavlink's values, for the callers).
-NONE, LOW, HIGH = (mavlink.MAV_COLLISION_THREAT_LEVEL_NONE, mavlink.MAV_COLLISION_THREAT_LEVEL_LOW,
-                   mavlink.MAV_COLLISION_THREAT_LEVEL_HIGH)
+NONE, LOW, HIGH = (
+    mavlink.MAV_COLLISION_THREAT_LEVEL_NONE,
+    mavlink.MAV_COLLISION_THREAT_LEVEL_LOW,
+    mavlink.MAV_COLLISION_THREAT_LEVEL_HIGH,
+)
 REPORT = mavlink.MAV_COLLISION_ACTION_REPORT
 #: MAV_COLLISION_THREAT_LEVEL by value, as words for the STATUSTEXT and the record.
-LEVEL_NAMES = {mavlink.MAV_COLLISION_THREAT_LEVEL_NONE: "none", mavlink.MAV_COLLISION_THREAT_LEVEL_LOW: "low",
-               mavlink.MAV_COLLISION_THREAT_LEVEL_HIGH: "high"}
+LEVEL_NAMES = {
+    mavlink.MAV_COLLISION_THREAT_LEVEL_NONE: "none",
+    mavlink.MAV_COLLISION_THREAT_LEVEL_LOW: "low",
+    mavlink.MAV_COLLISION_THREAT_LEVEL_HIGH: "high",
+}
 
 
 @dataclass(frozen=True)
@@ -89,10 +108,21 @@ class AlertSettings:
     manned_nmac_v_m: float = 100.0 * FT_M
 
     def __post_init__(self) -> None:
-        require_numbers(ConfigError, "alerts", self,
-                        positive=("horizon_s", "step_s", "rate_hz", "manned_wc_h_m", "manned_wc_v_m",
-                                  "manned_nmac_h_m", "manned_nmac_v_m"),
-                        non_negative=("cleared_report_s", "drone_lowc_extra_m", "drone_nmac_extra_m"))
+        require_numbers(
+            ConfigError,
+            "alerts",
+            self,
+            positive=(
+                "horizon_s",
+                "step_s",
+                "rate_hz",
+                "manned_wc_h_m",
+                "manned_wc_v_m",
+                "manned_nmac_h_m",
+                "manned_nmac_v_m",
+            ),
+            non_negative=("cleared_report_s", "drone_lowc_extra_m", "drone_nmac_extra_m"),
+        )
         if self.drone_nmac_extra_m > self.drone_lowc_extra_m:
             raise ConfigError("alerts: expected drone_nmac_extra_m <= drone_lowc_extra_m")
         if self.manned_nmac_h_m > self.manned_wc_h_m or self.manned_nmac_v_m > self.manned_wc_v_m:
@@ -124,15 +154,22 @@ class Approach:
     level: int
 
 
-def _inside(dh: np.ndarray, dv: np.ndarray, radius_m: float, manned: bool, extra_m: float, h_m: float,
-            v_m: float) -> np.ndarray:
+def _inside(
+    dh: np.ndarray, dv: np.ndarray, radius_m: float, manned: bool, extra_m: float, h_m: float, v_m: float
+) -> np.ndarray:
     if manned:
         return (dh < h_m) & (dv < v_m)
     return np.hypot(dh, dv) < radius_m + extra_m
 
 
-def closest_approach(own_ned_m: np.ndarray, threat_ned_m: np.ndarray, radius_m: float, manned: bool,
-                     settings: AlertSettings, step_s: float) -> Approach:
+def closest_approach(
+    own_ned_m: np.ndarray,
+    threat_ned_m: np.ndarray,
+    radius_m: float,
+    manned: bool,
+    settings: AlertSettings,
+    step_s: float,
+) -> Approach:
     """The closest approach of two predicted tracks sampled at the same times.
 
     Parameters
@@ -160,8 +197,13 @@ def closest_approach(own_ned_m: np.ndarray, threat_ned_m: np.ndarray, radius_m: 
     lowc = _inside(dh, dv, radius_m, manned, s.drone_lowc_extra_m, s.manned_wc_h_m, s.manned_wc_v_m)
     nmac = _inside(dh, dv, radius_m, manned, s.drone_nmac_extra_m, s.manned_nmac_h_m, s.manned_nmac_v_m)
     first = int(np.argmax(lowc)) if lowc.any() else None
-    return Approach(k * step_s, float(dh[k]), float(dv[k]), None if first is None else first * step_s,
-                    alert_level(bool(lowc.any()), bool(nmac.any())))
+    return Approach(
+        k * step_s,
+        float(dh[k]),
+        float(dv[k]),
+        None if first is None else first * step_s,
+        alert_level(bool(lowc.any()), bool(nmac.any())),
+    )
 
 
 def alert_level(lowc: bool, nmac: bool) -> int:
@@ -221,10 +263,15 @@ def collision_fields(threat_id: str, approach: Approach, action: int) -> dict:
     """The fields of one ``COLLISION`` message (MAVLink common, id 247), as
     ``AP_Avoidance::send_collision_all`` fills them."""
     src, ident = collision_id(threat_id)
-    return {"src": int(src), "id": int(ident), "action": int(action), "threat_level": int(approach.level),
-            "time_to_minimum_delta": float(approach.time_to_cpa_s),
-            "altitude_minimum_delta": float(approach.vertical_m),
-            "horizontal_minimum_delta": float(approach.horizontal_m)}
+    return {
+        "src": int(src),
+        "id": int(ident),
+        "action": int(action),
+        "threat_level": int(approach.level),
+        "time_to_minimum_delta": float(approach.time_to_cpa_s),
+        "altitude_minimum_delta": float(approach.vertical_m),
+        "horizontal_minimum_delta": float(approach.horizontal_m),
+    }
 
 
 def alert_statustext(threat_id: str, approach: Approach) -> tuple[str, str]:
@@ -249,4 +296,4 @@ def alert_statustext(threat_id: str, approach: Approach) -> tuple[str, str]:
 
 def _fit(head: str, tail: str) -> str:
     """``head + tail`` in one STATUSTEXT (50 characters), the head cut first."""
-    return head[:max(STATUSTEXT_MAX_CHARS - len(tail), 0)] + tail
+    return head[: max(STATUSTEXT_MAX_CHARS - len(tail), 0)] + tail

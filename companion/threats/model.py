@@ -94,8 +94,11 @@ class Threat:
     def pos_ned_m(self) -> np.ndarray:
         """Position (3,) NED metres at ``received_t_s`` (local-frame threats only)."""
         if self.frame != "local_ned":
-            raise payload_error("frame", "a global threat has no local position until converted "
-                                "with the home position (ThreatTable(home=...) or to_local)")
+            raise payload_error(
+                "frame",
+                "a global threat has no local position until converted "
+                "with the home position (ThreatTable(home=...) or to_local)",
+            )
         return np.asarray(self.position, dtype=float)
 
     @property
@@ -122,7 +125,7 @@ class Threat:
             return p0 + v * (float(t) - self.received_t_s)
         return p0[None, :] + (t.reshape(-1, 1) - self.received_t_s) * v[None, :]
 
-    def to_local(self, home) -> "Threat":
+    def to_local(self, home) -> Threat:
         """This threat in the local NED frame.
 
         Parameters
@@ -134,10 +137,9 @@ class Threat:
             return self
         lat, lon, alt = self.position
         north, east, down = home.to_ned(lat, lon, alt)
-        return replace(self, frame="local_ned",
-                       position=(float(north), float(east), float(down)))
+        return replace(self, frame="local_ned", position=(float(north), float(east), float(down)))
 
-    def with_time(self, received_t_s: float) -> "Threat":
+    def with_time(self, received_t_s: float) -> Threat:
         """The same threat stamped with another receive time."""
         return replace(self, received_t_s=float(received_t_s))
 

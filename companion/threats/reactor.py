@@ -28,7 +28,7 @@ import asyncio
 import logging
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -78,9 +78,17 @@ class ThreatReactor:
         Told after every PUT or DELETE (the executor's ``Avoidance.on_threats_changed``).
     """
 
-    def __init__(self, settings, *, clock_now_s: Callable[[], float], record: Callable,
-                 statustext: Callable | None = None, bus: ThreatBus | None = None,
-                 keep_bus_open: bool = False, on_table_change: Callable | None = None):
+    def __init__(
+        self,
+        settings,
+        *,
+        clock_now_s: Callable[[], float],
+        record: Callable,
+        statustext: Callable | None = None,
+        bus: ThreatBus | None = None,
+        keep_bus_open: bool = False,
+        on_table_change: Callable | None = None,
+    ):
         self.settings = settings
         self.clock_now_s = clock_now_s
         self.record = record
@@ -108,9 +116,15 @@ class ThreatReactor:
         if self.settings.fleet.enabled:
             from companion.fleet.link import FleetLink
 
-            self.fleet = FleetLink(self.settings, self.bus.session, self.bus.sysid, home_lla,
-                                   clock_now_s=self.clock_now_s, reference=reference,
-                                   position_ned_m=position_ned_m)
+            self.fleet = FleetLink(
+                self.settings,
+                self.bus.session,
+                self.bus.sysid,
+                home_lla,
+                clock_now_s=self.clock_now_s,
+                reference=reference,
+                position_ned_m=position_ned_m,
+            )
             self.fleet.start(loop)
 
     async def stop(self) -> None:
@@ -168,19 +182,35 @@ class ThreatReactor:
             return
         if update.action == "delete":
             known = self.table.delete(update.uid)
-            self.record("threat", id=update.uid, source=update.source, removed=True, known=known,
-                        t_s=update.received_t_s)
+            self.record(
+                "threat", id=update.uid, source=update.source, removed=True, known=known, t_s=update.received_t_s
+            )
             log.info("threat %s removed by %s%s", update.uid, update.source, "" if known else " (was not known)")
         else:
             try:
                 self.table.put(update.threat)
-            except (CompanionError, GeoError) as exc:   # e.g. a global threat before home
-                self.reject({"event": "rejected", "threat_id": update.uid, "source": update.source,
-                             "field": getattr(exc, "field", "payload"), "reason": str(exc)})
+            except (CompanionError, GeoError) as exc:  # e.g. a global threat before home
+                self.reject(
+                    {
+                        "event": "rejected",
+                        "threat_id": update.uid,
+                        "source": update.source,
+                        "field": getattr(exc, "field", "payload"),
+                        "reason": str(exc),
+                    }
+                )
                 return
             th = self.table.get(update.uid)
-            self.record("threat", id=th.uid, source=th.source, kind=th.kind, position_ned_m=th.pos_ned_m,
-                        velocity_ned_m_s=th.velocity_ned_m_s, radius_m=th.radius_m, t_s=update.received_t_s)
+            self.record(
+                "threat",
+                id=th.uid,
+                source=th.source,
+                kind=th.kind,
+                position_ned_m=th.pos_ned_m,
+                velocity_ned_m_s=th.velocity_ned_m_s,
+                radius_m=th.radius_m,
+                t_s=update.received_t_s,
+            )
         self.table_changed()
         if self.on_change is not None:
             self.on_change(update.received_mono_s)
@@ -203,9 +233,17 @@ class ThreatReactor:
         for th in threats:
             self.table.put(th)
             ids.append(th.id)
-            self.record("threat", id=th.id, kind=th.kind, position_ned_m=th.pos_ned_m,
-                        velocity_ned_m_s=th.velocity_ned_m_s, radius_m=th.radius_m,
-                        t_s=th.received_t_s, expires_t_s=th.expires_t_s, restored=True)
+            self.record(
+                "threat",
+                id=th.id,
+                kind=th.kind,
+                position_ned_m=th.pos_ned_m,
+                velocity_ned_m_s=th.velocity_ned_m_s,
+                radius_m=th.radius_m,
+                t_s=th.received_t_s,
+                expires_t_s=th.expires_t_s,
+                restored=True,
+            )
         self.table_changed()
         return ids
 
@@ -213,10 +251,16 @@ class ThreatReactor:
         """A threat this process learnt itself (e.g. ADS-B; on the loop): stored and decided
         exactly as a zenoh PUT (:meth:`on_update`), then republished for other consumers."""
         self._local_seq += 1
-        update = ThreatUpdate("put", threat.id, threat, None, self.bus.key(f"threats/{threat.id}"),
-                              threat.received_t_s,
-                              time.monotonic() if received_mono_s is None else received_mono_s,
-                              self._local_seq)
+        update = ThreatUpdate(
+            "put",
+            threat.id,
+            threat,
+            None,
+            self.bus.key(f"threats/{threat.id}"),
+            threat.received_t_s,
+            time.monotonic() if received_mono_s is None else received_mono_s,
+            self._local_seq,
+        )
         self.on_update(update)
         try:
             self.bus.outbound.republish_threat(threat)
@@ -235,10 +279,17 @@ class ThreatReactor:
         log.warning("threat rejected: %s", event.get("reason"))
         self.rejected += 1
         self.bus.outbound.publish_event(event)
-        self.record("decision", kind="rejected", reason=event.get("reason"), t_s=event["t_s"],
-                    field=event.get("field"), threat_id=event.get("threat_id"), source=event.get("source"))
+        self.record(
+            "decision",
+            kind="rejected",
+            reason=event.get("reason"),
+            t_s=event["t_s"],
+            field=event.get("field"),
+            threat_id=event.get("threat_id"),
+            source=event.get("source"),
+        )
         if time.monotonic() - self._rejected_told_s >= REJECTED_TEXT_PERIOD_S:
-            self._rejected_told_s = time.monotonic()     # a flood of junk: one line per period
+            self._rejected_told_s = time.monotonic()  # a flood of junk: one line per period
             self.tell(*statustext_for("rejected", str(event.get("field") or ""), event.get("threat_id"), None))
 
     # ------------------------------------------------------------------ decisions out
@@ -256,11 +307,17 @@ class ThreatReactor:
         if reference is None:
             return
         t = np.linspace(0.0, reference.trajectory.duration_s, max(2, int(reference.trajectory.duration_s * 2)))
-        self.bus.outbound.publish_path({
-            "t_s": self.clock_now_s(), "leg": leg_index, "path_id": reference.path_id,
-            "t0_s": reference.t0_s, "duration_s": reference.trajectory.duration_s,
-            "reference_ned_m": reference.trajectory.sample(t)[0],
-            "alternatives": [{"path_id": a.path_id, "path_ned_m": a.path_ned_m} for a in alternatives]})
+        self.bus.outbound.publish_path(
+            {
+                "t_s": self.clock_now_s(),
+                "leg": leg_index,
+                "path_id": reference.path_id,
+                "t0_s": reference.t0_s,
+                "duration_s": reference.trajectory.duration_s,
+                "reference_ned_m": reference.trajectory.sample(t)[0],
+                "alternatives": [{"path_id": a.path_id, "path_ned_m": a.path_ned_m} for a in alternatives],
+            }
+        )
 
     def tell(self, text: str, severity: str) -> None:
         """A STATUSTEXT to the ground stations (logged if it cannot be sent)."""
@@ -268,5 +325,5 @@ class ThreatReactor:
             return
         try:
             self.statustext(text, severity)
-        except CompanionError as exc:            # e.g. the link is down: the event is published
+        except CompanionError as exc:  # e.g. the link is down: the event is published
             log.info("STATUSTEXT %r not sent: %s", text, exc)

@@ -37,8 +37,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from companion.errors import ThreatPayloadError
-from companion.threats.transport import codec
 from companion.threats.model import Threat
+from companion.threats.transport import codec
 
 __all__ = ["ScenarioEvent", "Scenario", "load_scenario", "scenario_from_dict", "ScenarioError"]
 
@@ -149,8 +149,9 @@ def _event(raw, index: int, known: dict[str, tuple[Threat, float]], name: str) -
         vel = vel or (0.0, 0.0, 0.0)
         kind = raw.get("kind", "moving" if any(vel) else "popup")
         ttl = _number(raw["ttl_s"], f"{where}.ttl_s") if "ttl_s" in raw else None
-        threat = Threat(threat_id, kind, position[0], position[1], vel,
-                        _number(raw["radius_m"], f"{where}.radius_m"), ttl, 0.0)
+        threat = Threat(
+            threat_id, kind, position[0], position[1], vel, _number(raw["radius_m"], f"{where}.radius_m"), ttl, 0.0
+        )
     else:
         threat = previous
         if position is not None:
@@ -170,7 +171,7 @@ def _event(raw, index: int, known: dict[str, tuple[Threat, float]], name: str) -
         if threat.kind == "popup" and any(threat.velocity_ned_m_s):
             threat = replace(threat, kind="moving")
     try:
-        codec.encode(threat)                 # the same validation as the receiver's
+        codec.encode(threat)  # the same validation as the receiver's
     except ThreatPayloadError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
     known[threat_id] = (threat, at_s)
@@ -187,9 +188,15 @@ def scenario_from_dict(data: dict, name: str = "scenario") -> Scenario:
     raw_events = data.get("event", [])
     if not isinstance(raw_events, list) or not raw_events:
         raise ScenarioError(f"{name}: event: expected at least one [[event]] table")
-    order = sorted(range(len(raw_events)), key=lambda i: (_number(raw_events[i].get("at_s", 0.0)
-                                                                 if isinstance(raw_events[i], dict) else 0.0,
-                                                                 f"{name}: event[{i}].at_s"), i))
+    order = sorted(
+        range(len(raw_events)),
+        key=lambda i: (
+            _number(
+                raw_events[i].get("at_s", 0.0) if isinstance(raw_events[i], dict) else 0.0, f"{name}: event[{i}].at_s"
+            ),
+            i,
+        ),
+    )
     known: dict[str, tuple[Threat, float]] = {}
     events = tuple(_event(raw_events[i], i, known, name) for i in order)
     description = data.get("description", "")

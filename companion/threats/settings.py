@@ -135,7 +135,7 @@ class ZenohSettings:
         """The system id of the prefix: ``sysid``, or ``DEFAULT_SYSID`` while it is unresolved."""
         return DEFAULT_SYSID if self.sysid is None else self.sysid
 
-    def for_vehicle(self, vehicle_sysid: int) -> "ZenohSettings":
+    def for_vehicle(self, vehicle_sysid: int) -> ZenohSettings:
         """These settings with ``sysid`` resolved to ``vehicle_sysid`` when it was not set."""
         return self if self.sysid is not None else dataclasses.replace(self, sysid=int(vehicle_sysid))
 
@@ -291,19 +291,55 @@ class ThreatSettings:
             raise ConfigError(f"threats.retime_rates: every rate must be in [0, 1), got {self.retime_rates!r}")
         if not self.evade_coasts_s:
             raise ConfigError("threats.evade_coasts_s: give at least one coast duration")
-        require_numbers(ConfigError, "threats", self, positive=(
-            "horizon_s", "check_step_s", "evade_step_s", "replan_budget_s", "switch_range_m",
-            "sensor_range_m", "switch_budget_s", "gart_budget_s", "entry_spacing_m",
-            "gart_first_budget_s", "hold_decel_m_s2", "estimate_gain", "evade_speed_m_s",
-            "evade_accel_m_s2", "evade_vertical_accel_m_s2", "evade_climb_m_s", "evade_descent_m_s",
-            "manned_h_m", "manned_v_m", "manned_horizon_s", "manned_range_m", "manned_step_s"),
-            non_negative=("inflation_m", "urgency_margin_s", "static_slack_m", "replan_turn_rad", "uncertainty_m_s",
-                          "uncertainty_max_m", "restart_s", "vertical_room_m", "manned_vertical_room_m", "min_altitude_m", "clearance_weight_s_m", "clearance_cap_m"))
+        require_numbers(
+            ConfigError,
+            "threats",
+            self,
+            positive=(
+                "horizon_s",
+                "check_step_s",
+                "evade_step_s",
+                "replan_budget_s",
+                "switch_range_m",
+                "sensor_range_m",
+                "switch_budget_s",
+                "gart_budget_s",
+                "entry_spacing_m",
+                "gart_first_budget_s",
+                "hold_decel_m_s2",
+                "estimate_gain",
+                "evade_speed_m_s",
+                "evade_accel_m_s2",
+                "evade_vertical_accel_m_s2",
+                "evade_climb_m_s",
+                "evade_descent_m_s",
+                "manned_h_m",
+                "manned_v_m",
+                "manned_horizon_s",
+                "manned_range_m",
+                "manned_step_s",
+            ),
+            non_negative=(
+                "inflation_m",
+                "urgency_margin_s",
+                "static_slack_m",
+                "replan_turn_rad",
+                "uncertainty_m_s",
+                "uncertainty_max_m",
+                "restart_s",
+                "vertical_room_m",
+                "manned_vertical_room_m",
+                "min_altitude_m",
+                "clearance_weight_s_m",
+                "clearance_cap_m",
+            ),
+        )
         if self.horizon_s < 10.0:
             raise ConfigError(f"threats.horizon_s: must be >= 10 s (DESIGN 7.2), got {self.horizon_s!r}")
         if self.manned_horizon_s < self.horizon_s:
-            raise ConfigError(f"threats.manned_horizon_s: must be >= horizon_s ({self.horizon_s!r}), "
-                              f"got {self.manned_horizon_s!r}")
+            raise ConfigError(
+                f"threats.manned_horizon_s: must be >= horizon_s ({self.horizon_s!r}), got {self.manned_horizon_s!r}"
+            )
         if self.replan_turn_rad >= math.pi:
             raise ConfigError(f"threats.replan_turn_rad: must be < pi, got {self.replan_turn_rad!r}")
         if self.estimate_gain > 1:

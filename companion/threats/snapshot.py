@@ -39,9 +39,19 @@ from companion.errors import CompanionError
 from companion.geo import LocalFrame
 from companion.threats.model import TRAFFIC, Threat
 
-__all__ = ["SNAPSHOT_VERSION", "SnapshotError", "ThreatSnapshot", "snapshot_path", "snapshot_to_dict",
-           "snapshot_from_dict", "write_snapshot", "read_snapshot", "live_threats",
-           "load_live_threats", "SnapshotWriter"]
+__all__ = [
+    "SNAPSHOT_VERSION",
+    "SnapshotError",
+    "ThreatSnapshot",
+    "snapshot_path",
+    "snapshot_to_dict",
+    "snapshot_from_dict",
+    "write_snapshot",
+    "read_snapshot",
+    "live_threats",
+    "load_live_threats",
+    "SnapshotWriter",
+]
 
 log = logging.getLogger(__name__)
 
@@ -89,19 +99,29 @@ def snapshot_path(state_dir, sysid: int) -> Path:
 
 def _threat_to_dict(threat: Threat) -> dict:
     expires = threat.expires_t_s
-    return {"id": threat.id, "kind": threat.kind, "frame": threat.frame,
-            "position": [float(v) for v in threat.position],
-            "velocity_ned_m_s": [float(v) for v in threat.velocity_ned_m_s],
-            "radius_m": float(threat.radius_m), "received_t_s": float(threat.received_t_s),
-            "expires_t_s": float(expires) if math.isfinite(expires) else None, "traffic": threat.traffic}
+    return {
+        "id": threat.id,
+        "kind": threat.kind,
+        "frame": threat.frame,
+        "position": [float(v) for v in threat.position],
+        "velocity_ned_m_s": [float(v) for v in threat.velocity_ned_m_s],
+        "radius_m": float(threat.radius_m),
+        "received_t_s": float(threat.received_t_s),
+        "expires_t_s": float(expires) if math.isfinite(expires) else None,
+        "traffic": threat.traffic,
+    }
 
 
 def snapshot_to_dict(snapshot: ThreatSnapshot) -> dict:
     """The JSON document of ``snapshot`` (version, times, home, threats)."""
-    return {"version": SNAPSHOT_VERSION, "sysid": snapshot.sysid,
-            "written_t_s": float(snapshot.written_t_s), "written_unix_s": float(snapshot.written_unix_s),
-            "home_lla": None if snapshot.home_lla is None else [float(v) for v in snapshot.home_lla],
-            "threats": [_threat_to_dict(t) for t in snapshot.threats]}
+    return {
+        "version": SNAPSHOT_VERSION,
+        "sysid": snapshot.sysid,
+        "written_t_s": float(snapshot.written_t_s),
+        "written_unix_s": float(snapshot.written_unix_s),
+        "home_lla": None if snapshot.home_lla is None else [float(v) for v in snapshot.home_lla],
+        "threats": [_threat_to_dict(t) for t in snapshot.threats],
+    }
 
 
 def _number(data: dict, key: str, where: str, optional: bool = False) -> float | None:
@@ -115,8 +135,11 @@ def _number(data: dict, key: str, where: str, optional: bool = False) -> float |
 
 def _vector(data: dict, key: str, where: str) -> tuple:
     value = data.get(key)
-    if not isinstance(value, list) or len(value) != 3 or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+    if (
+        not isinstance(value, list)
+        or len(value) != 3
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    ):
         raise SnapshotError(f"{where}{key}: expected 3 finite numbers, got {value!r}")
     return tuple(float(v) for v in value)
 
@@ -134,9 +157,17 @@ def _threat_from_dict(data, index: int) -> Threat:
     if traffic not in TRAFFIC:
         raise SnapshotError(f"{where}traffic: expected one of {', '.join(TRAFFIC)}, got {traffic!r}")
     try:
-        return Threat(str(data["id"]), str(data["kind"]), "local_ned", _vector(data, "position", where),
-                      _vector(data, "velocity_ned_m_s", where), radius,
-                      None if expires is None else expires - received, received, traffic=traffic)
+        return Threat(
+            str(data["id"]),
+            str(data["kind"]),
+            "local_ned",
+            _vector(data, "position", where),
+            _vector(data, "velocity_ned_m_s", where),
+            radius,
+            None if expires is None else expires - received,
+            received,
+            traffic=traffic,
+        )
     except KeyError as exc:
         raise SnapshotError(f"{where}{exc.args[0]}: missing") from None
 
@@ -161,8 +192,13 @@ def snapshot_from_dict(data) -> ThreatSnapshot:
     threats = data.get("threats")
     if not isinstance(threats, list):
         raise SnapshotError(f"threats: expected a list, got {type(threats).__name__}")
-    return ThreatSnapshot(sysid, _number(data, "written_t_s", ""), _number(data, "written_unix_s", ""),
-                          home_lla, tuple(_threat_from_dict(t, i) for i, t in enumerate(threats)))
+    return ThreatSnapshot(
+        sysid,
+        _number(data, "written_t_s", ""),
+        _number(data, "written_unix_s", ""),
+        home_lla,
+        tuple(_threat_from_dict(t, i) for i, t in enumerate(threats)),
+    )
 
 
 def write_snapshot(path, snapshot: ThreatSnapshot) -> None:
@@ -211,9 +247,15 @@ def read_snapshot(path) -> ThreatSnapshot | None:
         raise SnapshotError(f"threat snapshot {path}: {exc}") from None
 
 
-def live_threats(snapshot: ThreatSnapshot, now_t_s: float, *, sysid: int, home_lla=None,
-                 clock_tolerance_s: float = CLOCK_TOLERANCE_S,
-                 home_tolerance_m: float = HOME_TOLERANCE_M) -> tuple[list[Threat], str]:
+def live_threats(
+    snapshot: ThreatSnapshot,
+    now_t_s: float,
+    *,
+    sysid: int,
+    home_lla=None,
+    clock_tolerance_s: float = CLOCK_TOLERANCE_S,
+    home_tolerance_m: float = HOME_TOLERANCE_M,
+) -> tuple[list[Threat], str]:
     """The threats of ``snapshot`` still alive at mission time ``now_t_s``.
 
     Parameters
@@ -236,8 +278,10 @@ def live_threats(snapshot: ThreatSnapshot, now_t_s: float, *, sysid: int, home_l
     if snapshot.sysid != sysid:
         return [], f"written for system {snapshot.sysid}, not {sysid}"
     if now_t_s < snapshot.written_t_s - clock_tolerance_s:
-        return [], (f"the vehicle's clock ({now_t_s:.1f} s) is before the snapshot's "
-                    f"({snapshot.written_t_s:.1f} s): the vehicle rebooted")
+        return [], (
+            f"the vehicle's clock ({now_t_s:.1f} s) is before the snapshot's "
+            f"({snapshot.written_t_s:.1f} s): the vehicle rebooted"
+        )
     if home_lla is not None and snapshot.home_lla is not None:
         moved = float(np.linalg.norm(LocalFrame(*home_lla).to_ned(*snapshot.home_lla)))
         if moved > home_tolerance_m:
@@ -264,8 +308,7 @@ def load_live_threats(path, now_t_s: float, *, sysid: int, home_lla=None) -> lis
     threats, note = live_threats(snapshot, now_t_s, sysid=sysid, home_lla=home_lla)
     if note:
         log.warning("threat snapshot %s: %s", path, note)
-    log.info("threat snapshot %s: %d live threats (%s)", path, len(threats),
-             ", ".join(t.id for t in threats) or "none")
+    log.info("threat snapshot %s: %d live threats (%s)", path, len(threats), ", ".join(t.id for t in threats) or "none")
     return threats
 
 
@@ -298,7 +341,7 @@ class SnapshotWriter:
         try:
             write_snapshot(self.path, snap)
             self.writes += 1
-        except (OSError, ValueError) as exc:      # a full disk must not stop the flight
+        except (OSError, ValueError) as exc:  # a full disk must not stop the flight
             self.failures += 1
             log.error("threat snapshot %s not written: %s", self.path, exc)
 

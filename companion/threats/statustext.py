@@ -10,8 +10,7 @@ STATUSTEXT_MAX_CHARS = 50
 WARNING_KINDS = frozenset({"evade", "hold", "rejected"})
 
 
-def statustext_for(kind: str, label: str, threat_id: str | None,
-                   latency_ms: float | None) -> tuple[str, str]:
+def statustext_for(kind: str, label: str, threat_id: str | None, latency_ms: float | None) -> tuple[str, str]:
     """The STATUSTEXT of one published decision and its severity.
 
     Parameters
@@ -43,5 +42,5 @@ def statustext_for(kind: str, label: str, threat_id: str | None,
         head = f"AVOID {threat_id}" if threat_id else "RESUME"
     tail = "" if latency_ms is None else f", {latency_ms:.0f} ms"
     text = f"{head}: {label}" if label else head
-    text = text[:STATUSTEXT_MAX_CHARS - len(tail)] + tail
+    text = text[: STATUSTEXT_MAX_CHARS - len(tail)] + tail
     return text, "WARNING" if kind in WARNING_KINDS else "NOTICE"

@@ -11,8 +11,20 @@ time stamp.
 
 from __future__ import annotations
 
-__all__ = ["RECORD_TOPICS", "SAMPLE_TOPICS", "TELEMETRY", "TELEMETRY_PROPERTIES", "SCENE_WORLD", "SCENE_PATHS", "SCENE_THREATS",
-           "SCENE_VEHICLE", "TRANSFORMS", "LOCATION", "LOG", "json_schema"]
+__all__ = [
+    "RECORD_TOPICS",
+    "SAMPLE_TOPICS",
+    "TELEMETRY",
+    "TELEMETRY_PROPERTIES",
+    "SCENE_WORLD",
+    "SCENE_PATHS",
+    "SCENE_THREATS",
+    "SCENE_VEHICLE",
+    "TRANSFORMS",
+    "LOCATION",
+    "LOG",
+    "json_schema",
+]
 
 _NUM = {"type": "number"}
 _VEC3 = {"type": "array", "items": _NUM, "minItems": 3, "maxItems": 3}
@@ -23,41 +35,101 @@ _ANY: dict = {}
 
 #: record line type -> (topic, properties of its JSON messages). Lines may carry more fields.
 RECORD_TOPICS: dict[str, tuple[str, dict]] = {
-    "header": ("/flight/header", {"settings": {"type": "object"}, "seed": _INT, "home_lla": _VEC3,
-                                  "mission": _STR, "waypoints_ned_m": _PATH}),
+    "header": (
+        "/flight/header",
+        {"settings": {"type": "object"}, "seed": _INT, "home_lla": _VEC3, "mission": _STR, "waypoints_ned_m": _PATH},
+    ),
     "world": ("/flight/world", {"world": {"type": "object"}, "obstacles": {"type": "array"}}),
-    "plan": ("/flight/plan", {"leg": _INT, "seq": _INT, "path_id": _STR, "path_ned_m": _PATH,
-                              "reference_ne": {"type": "array"}, "tree": _ANY, "summary": _ANY,
-                              "feasibility": _ANY}),
+    "plan": (
+        "/flight/plan",
+        {
+            "leg": _INT,
+            "seq": _INT,
+            "path_id": _STR,
+            "path_ned_m": _PATH,
+            "reference_ne": {"type": "array"},
+            "tree": _ANY,
+            "summary": _ANY,
+            "feasibility": _ANY,
+        },
+    ),
     "alternatives": ("/flight/alternatives", {"leg": _INT, "t_s": _NUM, "paths": {"type": "array", "items": _PATH}}),
-    "threat": ("/flight/threat", {"id": _STR, "source": _STR, "kind": _STR, "position_ned_m": _VEC3,
-                                  "velocity_ned_m_s": _VEC3, "radius_m": _NUM, "t_s": _NUM,
-                                  "removed": {"type": "boolean"}}),
-    "decision": ("/flight/decision", {"kind": _STR, "reason": _STR, "label": _STR, "path_id": _STR,
-                                      "path_ned_m": _PATH, "trigger": _STR, "latency_ms": _NUM,
-                                      "decide_ms": _NUM, "min_clearance_m": _NUM, "threat_id": _STR,
-                                      "t_s": _NUM, "leg": _INT}),
-    "alert": ("/flight/alert", {"t_s": _NUM, "threat_id": _STR, "traffic": _STR, "level": _STR, "action": _INT,
-                                "time_to_cpa_s": _NUM, "horizontal_m": _NUM, "vertical_m": _NUM,
-                                "time_to_lowc_s": _NUM, "text": _STR}),
+    "threat": (
+        "/flight/threat",
+        {
+            "id": _STR,
+            "source": _STR,
+            "kind": _STR,
+            "position_ned_m": _VEC3,
+            "velocity_ned_m_s": _VEC3,
+            "radius_m": _NUM,
+            "t_s": _NUM,
+            "removed": {"type": "boolean"},
+        },
+    ),
+    "decision": (
+        "/flight/decision",
+        {
+            "kind": _STR,
+            "reason": _STR,
+            "label": _STR,
+            "path_id": _STR,
+            "path_ned_m": _PATH,
+            "trigger": _STR,
+            "latency_ms": _NUM,
+            "decide_ms": _NUM,
+            "min_clearance_m": _NUM,
+            "threat_id": _STR,
+            "t_s": _NUM,
+            "leg": _INT,
+        },
+    ),
+    "alert": (
+        "/flight/alert",
+        {
+            "t_s": _NUM,
+            "threat_id": _STR,
+            "traffic": _STR,
+            "level": _STR,
+            "action": _INT,
+            "time_to_cpa_s": _NUM,
+            "horizontal_m": _NUM,
+            "vertical_m": _NUM,
+            "time_to_lowc_s": _NUM,
+            "text": _STR,
+        },
+    ),
     "event": ("/flight/event", {"name": _STR, "t_s": _NUM}),
-    "summary": ("/flight/summary", {"legs_planned": _INT, "legs_reached": _INT, "landed": {"type": "boolean"},
-                                    "rms_tracking_error_m": _NUM, "max_tracking_error_m": _NUM,
-                                    "outcome": _STR}),
+    "summary": (
+        "/flight/summary",
+        {
+            "legs_planned": _INT,
+            "legs_reached": _INT,
+            "landed": {"type": "boolean"},
+            "rms_tracking_error_m": _NUM,
+            "max_tracking_error_m": _NUM,
+            "outcome": _STR,
+        },
+    ),
 }
 #: The ``sample`` line, split: topic -> the sample keys it carries (``t_s`` on each).
 SAMPLE_TOPICS: dict[str, dict] = {
     "/vehicle/state": {"t_s": _NUM, "pos_ned_m": _VEC3, "vel_ned_m_s": _VEC3, "euler_rad": _VEC3},
-    "/vehicle/reference": {"t_s": _NUM, "ref_pos_ned_m": _VEC3, "ref_vel_ned_m_s": _VEC3, "leg": _INT,
-                           "path_id": _STR},
+    "/vehicle/reference": {"t_s": _NUM, "ref_pos_ned_m": _VEC3, "ref_vel_ned_m_s": _VEC3, "leg": _INT, "path_id": _STR},
     "/vehicle/tracking_error": {"t_s": _NUM, "tracking_error_m": _NUM},
     "/vehicle/actuators": {"t_s": _NUM, "servo_us": {"type": ["array", "null"], "items": _INT}},
 }
 #: The vehicle's state as its telemetry reports it, one message per LOCAL_POSITION_NED.
 TELEMETRY = "/vehicle/telemetry"
-TELEMETRY_PROPERTIES: dict = {"time_boot_ms": _INT, "t_s": _NUM, "seq": _INT, "pos_ned_m": _VEC3,
-                              "vel_ned_m_s": _VEC3, "euler_rad": {"type": ["array", "null"], "items": _NUM},
-                              "frame": {"type": "string", "enum": ["home", "vehicle_local"]}}
+TELEMETRY_PROPERTIES: dict = {
+    "time_boot_ms": _INT,
+    "t_s": _NUM,
+    "seq": _INT,
+    "pos_ned_m": _VEC3,
+    "vel_ned_m_s": _VEC3,
+    "euler_rad": {"type": ["array", "null"], "items": _NUM},
+    "frame": {"type": "string", "enum": ["home", "vehicle_local"]},
+}
 SCENE_WORLD = "/scene/world"
 SCENE_PATHS = "/scene/paths"
 SCENE_THREATS = "/scene/threats"

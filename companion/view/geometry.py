@@ -26,7 +26,7 @@ def enu_from_ned(points_ned_m: Sequence) -> np.ndarray:
 def prism_side_triangles(vertices_ne_m: Sequence, bottom_m: float, top_m: float) -> np.ndarray:
     """The side walls of a polygon (north-east, shape (n, 2)) extruded from ``bottom_m`` to
     ``top_m`` (up), two triangles per edge, ENU: shape (6 n, 3). Right for any simple polygon."""
-    ring = np.asarray(vertices_ne_m, dtype=float)[:, ::-1]             # (east, north)
+    ring = np.asarray(vertices_ne_m, dtype=float)[:, ::-1]  # (east, north)
     nxt = np.roll(ring, -1, axis=0)
     lo, hi = np.full((len(ring), 1), bottom_m), np.full((len(ring), 1), top_m)
     a, b = np.hstack([ring, lo]), np.hstack([nxt, lo])
@@ -34,8 +34,15 @@ def prism_side_triangles(vertices_ne_m: Sequence, bottom_m: float, top_m: float)
     return np.stack([a, b, c, a, c, d], axis=1).reshape(-1, 3)
 
 
-def threat_tube(position_ned_m: np.ndarray, velocity_ned_m_s: np.ndarray, radius_m: float, age_s: float,
-                horizon_s: float, step_s: float, uncertainty_m_s: float) -> tuple[np.ndarray, np.ndarray]:
+def threat_tube(
+    position_ned_m: np.ndarray,
+    velocity_ned_m_s: np.ndarray,
+    radius_m: float,
+    age_s: float,
+    horizon_s: float,
+    step_s: float,
+    uncertainty_m_s: float,
+) -> tuple[np.ndarray, np.ndarray]:
     """Centres (NED, shape (k, 3)) and radii (shape (k,)) of a threat's predicted tube.
 
     Constant velocity from the report, ``age_s`` ago, every ``step_s`` up to ``horizon_s`` ahead
@@ -53,8 +60,12 @@ def _multiply(a: tuple, b: tuple) -> tuple[float, float, float, float]:
     """Hamilton product of quaternions (x, y, z, w)."""
     ax, ay, az, aw = a
     bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
 
 
 #: NED -> ENU is half a turn about (1, 1, 0); FLU -> FRD half a turn about x.
@@ -66,7 +77,18 @@ def flu_quaternion_enu(euler_rad: Sequence[float]) -> tuple[float, float, float,
     """The attitude (roll, pitch, yaw of FRD in NED, rad; ZYX order) as the quaternion
     (x, y, z, w) of the body's forward-left-up axes in east-north-up."""
     roll, pitch, yaw = (0.5 * float(a) for a in euler_rad)
-    cr, sr, cp, sp, cy, sy = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw), math.sin(yaw)
-    q_ned_frd = (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-                 cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
+    cr, sr, cp, sp, cy, sy = (
+        math.cos(roll),
+        math.sin(roll),
+        math.cos(pitch),
+        math.sin(pitch),
+        math.cos(yaw),
+        math.sin(yaw),
+    )
+    q_ned_frd = (
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    )
     return _multiply(_multiply(_Q_ENU_FROM_NED, q_ned_frd), _Q_FRD_FROM_FLU)

@@ -89,11 +89,17 @@ class VehicleFeed:
         Wall clock in nanoseconds (log times).
     """
 
-    def __init__(self, context: foxglove.Context, frames: Callable, sysid: Callable[[], int | None],
-                 clock_ns: Callable[[], int] = time.time_ns) -> None:
+    def __init__(
+        self,
+        context: foxglove.Context,
+        frames: Callable,
+        sysid: Callable[[], int | None],
+        clock_ns: Callable[[], int] = time.time_ns,
+    ) -> None:
         self._frames, self._sysid, self._clock_ns = frames, sysid, clock_ns
-        self._state = foxglove.Channel(ch.TELEMETRY, schema=ch.json_schema(ch.TELEMETRY, ch.TELEMETRY_PROPERTIES),
-                                       context=context)
+        self._state = foxglove.Channel(
+            ch.TELEMETRY, schema=ch.json_schema(ch.TELEMETRY, ch.TELEMETRY_PROPERTIES), context=context
+        )
         self._tf = FrameTransformChannel(ch.TRANSFORMS, context=context)
         self._fix = LocationFixChannel(ch.LOCATION, context=context)
         self._shape = SceneUpdateChannel(ch.SCENE_VEHICLE, context=context)
@@ -139,9 +145,18 @@ class VehicleFeed:
         now_ns = self._clock_ns()
         pos = frames.to_home_floats(values[:3])
         self._seq += 1
-        self._state.log({"time_boot_ms": boot_ms, "t_s": boot_ms * 1e-3, "seq": self._seq, "pos_ned_m": pos,
-                         "vel_ned_m_s": values[3:6], "euler_rad": self._euler,
-                         "frame": "home" if frames.home_lla is not None else "vehicle_local"}, log_time=now_ns)
+        self._state.log(
+            {
+                "time_boot_ms": boot_ms,
+                "t_s": boot_ms * 1e-3,
+                "seq": self._seq,
+                "pos_ned_m": pos,
+                "vel_ned_m_s": values[3:6],
+                "euler_rad": self._euler,
+                "frame": "home" if frames.home_lla is not None else "vehicle_local",
+            },
+            log_time=now_ns,
+        )
         self._tf.log(scene.vehicle_transform(pos, self._euler, boot_ms * 1e-3), log_time=now_ns)
         if now_ns >= self._shape_due_ns:
             self._shape_due_ns = now_ns + int(REPUBLISH_PERIOD_S * 1e9)
@@ -153,12 +168,19 @@ class VehicleFeed:
         if values is None or not self._own(fields):
             return
         period_ms = FIX_PERIOD_S * 1e3
-        if self._fix_due_ms - period_ms <= values[3] < self._fix_due_ms:   # earlier: the vehicle rebooted
+        if self._fix_due_ms - period_ms <= values[3] < self._fix_due_ms:  # earlier: the vehicle rebooted
             return
         self._fix_due_ms = values[3] + period_ms
-        self._fix.log(LocationFix(timestamp=scene.timestamp(values[3] * 1e-3), frame_id=scene.MAP_FRAME,
-                                  latitude=values[0] * 1e-7, longitude=values[1] * 1e-7, altitude=values[2] * 1e-3),
-                      log_time=self._clock_ns())
+        self._fix.log(
+            LocationFix(
+                timestamp=scene.timestamp(values[3] * 1e-3),
+                frame_id=scene.MAP_FRAME,
+                latitude=values[0] * 1e-7,
+                longitude=values[1] * 1e-7,
+                altitude=values[2] * 1e-3,
+            ),
+            log_time=self._clock_ns(),
+        )
 
 
 class LiveView:

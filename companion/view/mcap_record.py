@@ -22,8 +22,14 @@ __all__ = ["load_mcap_record", "load_flight"]
 log = logging.getLogger(__name__)
 
 _LINE_TYPES = {topic: line_type for line_type, (topic, _) in ch.RECORD_TOPICS.items()}
-_LISTS = {"plan": "plans", "decision": "decisions", "alternatives": "alternatives", "threat": "threats",
-          "event": "events", "alert": "alerts"}
+_LISTS = {
+    "plan": "plans",
+    "decision": "decisions",
+    "alternatives": "alternatives",
+    "threat": "threats",
+    "event": "events",
+    "alert": "alerts",
+}
 
 
 def load_flight(path: str | Path) -> FlightRecord:

@@ -24,11 +24,9 @@ from pathlib import Path
 
 import foxglove
 import numpy as np
-from foxglove.channels import (FrameTransformChannel, LocationFixChannel, LogChannel,
-                               SceneUpdateChannel)
+from foxglove.channels import FrameTransformChannel, LocationFixChannel, LogChannel, SceneUpdateChannel
 from foxglove.mcap import MCAPWriteOptions
-from foxglove.messages import (LocationFix, Log, LogLevel, SceneEntityDeletion,
-                               SceneEntityDeletionType, SceneUpdate)
+from foxglove.messages import LocationFix, Log, LogLevel, SceneEntityDeletion, SceneEntityDeletionType, SceneUpdate
 
 from companion.record.flight_record import jsonable
 from companion.view import channels as ch
@@ -67,31 +65,48 @@ class FlightView:
         Wall clock in nanoseconds (log times; kept increasing).
     """
 
-    def __init__(self, mcap_path: str | Path | None = None, server: tuple[str, int] | None = None,
-                 horizon_s: float = 10.0, uncertainty_m_s: float = 0.3,
-                 clock_ns: Callable[[], int] = time.time_ns, live: LiveServer | None = None) -> None:
-        self._server = LiveServer(*server) if server and live is None else None      # owned
+    def __init__(
+        self,
+        mcap_path: str | Path | None = None,
+        server: tuple[str, int] | None = None,
+        horizon_s: float = 10.0,
+        uncertainty_m_s: float = 0.3,
+        clock_ns: Callable[[], int] = time.time_ns,
+        live: LiveServer | None = None,
+    ) -> None:
+        self._server = LiveServer(*server) if server and live is None else None  # owned
         self._draws_vehicle = live is None
         live = live or self._server
         self.context = live.context if live is not None else foxglove.Context()
-        self._mcap = (foxglove.open_mcap(Path(mcap_path), allow_overwrite=True, context=self.context,
-                                         writer_options=MCAPWriteOptions(chunk_size=CHUNK_BYTES))
-                      if mcap_path else None)
+        self._mcap = (
+            foxglove.open_mcap(
+                Path(mcap_path),
+                allow_overwrite=True,
+                context=self.context,
+                writer_options=MCAPWriteOptions(chunk_size=CHUNK_BYTES),
+            )
+            if mcap_path
+            else None
+        )
         self.port = live.port if live is not None else None
         self._clock_ns, self._last_ns = clock_ns, 0
         self._lock = threading.Lock()
-        self._json = {topic: foxglove.Channel(topic, schema=ch.json_schema(topic, props), context=self.context)
-                      for topic, props in [*ch.RECORD_TOPICS.values(), *ch.SAMPLE_TOPICS.items()]}
-        self._scene = {t: SceneUpdateChannel(t, context=self.context)
-                       for t in (ch.SCENE_WORLD, ch.SCENE_PATHS, ch.SCENE_THREATS, ch.SCENE_VEHICLE)}
+        self._json = {
+            topic: foxglove.Channel(topic, schema=ch.json_schema(topic, props), context=self.context)
+            for topic, props in [*ch.RECORD_TOPICS.values(), *ch.SAMPLE_TOPICS.items()]
+        }
+        self._scene = {
+            t: SceneUpdateChannel(t, context=self.context)
+            for t in (ch.SCENE_WORLD, ch.SCENE_PATHS, ch.SCENE_THREATS, ch.SCENE_VEHICLE)
+        }
         self._tf = FrameTransformChannel(ch.TRANSFORMS, context=self.context)
         self._fix = LocationFixChannel(ch.LOCATION, context=self.context)
         self._log = LogChannel(ch.LOG, context=self.context)
         self._tube = (horizon_s, uncertainty_m_s)
         self._home: LocalFrame | None = None
         self._world: dict | None = None
-        self._paths: dict[str, list] = {}             # path_id -> NED polyline (plans, decisions)
-        self._planned: list[str] = []                 # the mission's legs, in order
+        self._paths: dict[str, list] = {}  # path_id -> NED polyline (plans, decisions)
+        self._planned: list[str] = []  # the mission's legs, in order
         self._alternatives: list = []
         self._active: str | None = None
         self._threats: dict[str, dict] = {}
@@ -175,12 +190,11 @@ class FlightView:
         if self._threats:
             self._publish_threats(t_s, now_ns)
         wall_s = now_ns * 1e-9
-        republish = wall_s - self._republished_s >= REPUBLISH_PERIOD_S     # for clients that join late
+        republish = wall_s - self._republished_s >= REPUBLISH_PERIOD_S  # for clients that join late
         if republish:
             self._republished_s = wall_s
             if self._draws_vehicle:
-                self._scene[ch.SCENE_VEHICLE].log(SceneUpdate(entities=[scene.vehicle_entity(t_s)]),
-                                                  log_time=now_ns)
+                self._scene[ch.SCENE_VEHICLE].log(SceneUpdate(entities=[scene.vehicle_entity(t_s)]), log_time=now_ns)
             self._publish_world(now_ns)
         if republish or path_changed:
             self._publish_paths(now_ns)
@@ -191,8 +205,12 @@ class FlightView:
         if self._home is not None and t_s - self._fix_t_s >= FIX_PERIOD_S:
             self._fix_t_s = t_s
             lat, lon, alt = (float(np.asarray(v).ravel()[0]) for v in self._home.to_lla(*pos))
-            self._fix.log(LocationFix(timestamp=scene.timestamp(t_s), frame_id=scene.MAP_FRAME,
-                                      latitude=lat, longitude=lon, altitude=alt), log_time=now_ns)
+            self._fix.log(
+                LocationFix(
+                    timestamp=scene.timestamp(t_s), frame_id=scene.MAP_FRAME, latitude=lat, longitude=lon, altitude=alt
+                ),
+                log_time=now_ns,
+            )
 
     # -- scene ----------------------------------------------------------------------------
     def _publish_world(self, now_ns: int) -> None:
@@ -202,25 +220,40 @@ class FlightView:
 
     def _publish_paths(self, now_ns: int) -> None:
         t = now_ns * 1e-9
-        entities = [scene.path_entity(f"planned/{pid}", self._paths[pid], t, PLANNED_RGBA, 1.5)
-                    for pid in self._planned if pid != self._active]
-        entities += [scene.path_entity(f"alternative/{i}", p, t, ALTERNATIVE_RGBA, 1.5)
-                     for i, p in enumerate(self._alternatives)]
+        entities = [
+            scene.path_entity(f"planned/{pid}", self._paths[pid], t, PLANNED_RGBA, 1.5)
+            for pid in self._planned
+            if pid != self._active
+        ]
+        entities += [
+            scene.path_entity(f"alternative/{i}", p, t, ALTERNATIVE_RGBA, 1.5) for i, p in enumerate(self._alternatives)
+        ]
         if self._active in self._paths:
             entities.append(scene.path_entity("active", self._paths[self._active], t, ACTIVE_PATH_RGBA, 4.0))
         self._scene[ch.SCENE_PATHS].log(_replace_all(entities), log_time=now_ns)
 
     def _publish_threats(self, t_s: float, now_ns: int) -> None:
         horizon_s, uncertainty_m_s = self._tube
-        entities = [scene.threat_entity(tid, th["position_ned_m"], th.get("velocity_ned_m_s") or (0, 0, 0),
-                                        th.get("radius_m", 1.0), max(0.0, t_s - th.get("t_s", t_s)), t_s,
-                                        horizon_s=horizon_s, uncertainty_m_s=uncertainty_m_s)
-                    for tid, th in self._threats.items()]
+        entities = [
+            scene.threat_entity(
+                tid,
+                th["position_ned_m"],
+                th.get("velocity_ned_m_s") or (0, 0, 0),
+                th.get("radius_m", 1.0),
+                max(0.0, t_s - th.get("t_s", t_s)),
+                t_s,
+                horizon_s=horizon_s,
+                uncertainty_m_s=uncertainty_m_s,
+            )
+            for tid, th in self._threats.items()
+        ]
         self._scene[ch.SCENE_THREATS].log(_replace_all(entities), log_time=now_ns)
 
     def _text(self, level: LogLevel, message: str, now_ns: int) -> None:
-        self._log.log(Log(timestamp=scene.timestamp(now_ns * 1e-9), level=level, message=message,
-                          name="companion"), log_time=now_ns)
+        self._log.log(
+            Log(timestamp=scene.timestamp(now_ns * 1e-9), level=level, message=message, name="companion"),
+            log_time=now_ns,
+        )
 
     def _now_ns(self) -> int:
         self._last_ns = max(self._last_ns + 1, self._clock_ns())

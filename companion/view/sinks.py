@@ -61,7 +61,7 @@ class RecordSinks:
         for sink in self.sinks:
             try:
                 sink.close()
-            except Exception:                        # pragma: no cover - best effort at exit
+            except Exception:  # pragma: no cover - best effort at exit
                 log.exception("closing %s", type(sink).__name__)
 
 
@@ -79,8 +79,13 @@ def parse_foxglove_address(text: str, name: str = "--foxglove") -> tuple[str, in
     return host or DEFAULT_FOXGLOVE_HOST, int(port)
 
 
-def open_record_sinks(record_path: str | Path | None, foxglove: tuple[str, int] | None = None,
-                      horizon_s: float = 10.0, uncertainty_m_s: float = 0.3, live=None) -> RecordSinks:
+def open_record_sinks(
+    record_path: str | Path | None,
+    foxglove: tuple[str, int] | None = None,
+    horizon_s: float = 10.0,
+    uncertainty_m_s: float = 0.3,
+    live=None,
+) -> RecordSinks:
     """The sinks for ``--record`` (MCAP when it ends in ``.mcap``) and ``--foxglove``.
 
     Parameters
@@ -103,11 +108,18 @@ def open_record_sinks(record_path: str | Path | None, foxglove: tuple[str, int] 
     if record_path is not None and not mcap:
         sinks.append(FlightRecorder(record_path))
     if mcap or foxglove is not None or live is not None:
-        require("view", "foxglove")                                  # foxglove-sdk only when used
+        require("view", "foxglove")  # foxglove-sdk only when used
         from companion.view.publisher import FlightView
 
         if mcap:
             Path(record_path).parent.mkdir(parents=True, exist_ok=True)
-        sinks.append(FlightView(record_path if mcap else None, None if live is not None else foxglove,
-                                horizon_s, uncertainty_m_s, live=live))
+        sinks.append(
+            FlightView(
+                record_path if mcap else None,
+                None if live is not None else foxglove,
+                horizon_s,
+                uncertainty_m_s,
+                live=live,
+            )
+        )
     return RecordSinks(sinks)

@@ -44,8 +44,7 @@ __all__ = ["parse_geojson", "parse_geojson_text", "METRES_PER_LEVEL"]
 
 METRES_PER_LEVEL = 3.0
 _GEOMETRIES = ("Polygon", "MultiPolygon", "Point", "MultiPoint", "LineString", "MultiLineString")
-_HEADER_KEYS = {"name", "home", "bounds", "margin_m", "ceiling_m", "padding_m", "default_height_m",
-                "start", "goal"}
+_HEADER_KEYS = {"name", "home", "bounds", "margin_m", "ceiling_m", "padding_m", "default_height_m", "start", "goal"}
 _NUMBER_RE = re.compile(r"^\s*([-+]?(\d+(\.\d*)?|\.\d+)([eE][-+]?\d+)?)\s*(m)?\s*$")
 _WGS84_CRS = ("CRS84", "EPSG::4326", "EPSG:4326")
 
@@ -74,17 +73,25 @@ def _metres(value, where: str, *, positive: bool) -> float:
 
 # ----------------------------------------------------------------------------- coordinates
 
+
 def _lon_lat(position, where: str) -> tuple[float, float]:
     """A GeoJSON position ``[lon, lat(, alt)]`` -> ``(lon_deg, lat_deg)``."""
-    if (not isinstance(position, list) or len(position) not in (2, 3)
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in position)
-            or not all(math.isfinite(v) for v in position)):
-        raise WorldError(f"{where}: expected a position [longitude, latitude] or [longitude, "
-                         f"latitude, altitude] of finite numbers, got {_shown(position)}")
+    if (
+        not isinstance(position, list)
+        or len(position) not in (2, 3)
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in position)
+        or not all(math.isfinite(v) for v in position)
+    ):
+        raise WorldError(
+            f"{where}: expected a position [longitude, latitude] or [longitude, "
+            f"latitude, altitude] of finite numbers, got {_shown(position)}"
+        )
     lon, lat = float(position[0]), float(position[1])
     if not -180.0 <= lon <= 180.0 or not -90.0 <= lat <= 90.0:
-        raise WorldError(f"{where}: longitude must be -180..180 and latitude -90..90 degrees "
-                         f"(RFC 7946, WGS-84), got {_shown(position)}")
+        raise WorldError(
+            f"{where}: longitude must be -180..180 and latitude -90..90 degrees "
+            f"(RFC 7946, WGS-84), got {_shown(position)}"
+        )
     return lon, lat
 
 
@@ -98,8 +105,9 @@ def _ring(coords, where: str) -> list[tuple[float, float]]:
     """A linear ring: >= 4 positions, the last equal to the first (RFC 7946 3.1.6)."""
     ring = _positions(coords, where, 4)
     if ring[0] != ring[-1]:
-        raise WorldError(f"{where}: a linear ring must be closed (its last position equal to its "
-                         "first, RFC 7946 3.1.6)")
+        raise WorldError(
+            f"{where}: a linear ring must be closed (its last position equal to its first, RFC 7946 3.1.6)"
+        )
     return ring
 
 
@@ -110,8 +118,10 @@ def _polygon(coords, where: str) -> Polygon:
     rings = [_ring(r, f"{where}[{i}]") for i, r in enumerate(coords)]
     polygon = Polygon(rings[0], rings[1:])
     if not polygon.is_valid:
-        raise WorldError(f"{where}: not a valid polygon: {explain_validity(polygon)} "
-                         "(self-intersecting or degenerate ring, or a hole outside its polygon)")
+        raise WorldError(
+            f"{where}: not a valid polygon: {explain_validity(polygon)} "
+            "(self-intersecting or degenerate ring, or a hole outside its polygon)"
+        )
     if polygon.area <= 0.0:
         raise WorldError(f"{where}: the polygon has zero area")
     return polygon
@@ -132,8 +142,9 @@ def _geometry(raw, where: str):
         raise WorldError(f"{where}: expected a geometry object, got {_shown(raw)}")
     kind = raw.get("type")
     if kind not in _GEOMETRIES:
-        raise WorldError(f"{where}.type: unsupported geometry {_shown(kind)} (expected one of "
-                         f"{', '.join(_GEOMETRIES)})")
+        raise WorldError(
+            f"{where}.type: unsupported geometry {_shown(kind)} (expected one of {', '.join(_GEOMETRIES)})"
+        )
     if "coordinates" not in raw:
         raise WorldError(f"{where}.coordinates: missing")
     coords, at = raw["coordinates"], f"{where}.coordinates"
@@ -159,6 +170,7 @@ def _non_empty(coords, where: str) -> None:
 
 # ----------------------------------------------------------------------------- properties
 
+
 def _height_m(props: dict, where: str, default_height_m: float | None) -> float:
     """``height``, else ``building:levels`` x 3 m, else the file's ``default_height_m``."""
     if "height" in props:
@@ -167,8 +179,10 @@ def _height_m(props: dict, where: str, default_height_m: float | None) -> float:
         return METRES_PER_LEVEL * _metres(props["building:levels"], f"{where}.building:levels", positive=True)
     if default_height_m is not None:
         return default_height_m
-    raise WorldError(f"{where}.height: missing (give height in m or building:levels, or "
-                     "companion.default_height_m for the whole file)")
+    raise WorldError(
+        f"{where}.height: missing (give height in m or building:levels, or "
+        "companion.default_height_m for the whole file)"
+    )
 
 
 def _min_height_m(props: dict, where: str, height_m: float) -> float:
@@ -190,7 +204,7 @@ def _feature(raw, where: str, default_height_m: float | None) -> MapFeature:
     if not isinstance(raw, dict):
         raise WorldError(f"{where}: expected a Feature object, got {_shown(raw)}")
     if raw.get("type") != "Feature":
-        raise WorldError(f"{where}.type: expected \"Feature\", got {_shown(raw.get('type'))}")
+        raise WorldError(f'{where}.type: expected "Feature", got {_shown(raw.get("type"))}')
     geometry = _geometry(raw.get("geometry"), f"{where}.geometry")
     props = raw.get("properties")
     if props is None:
@@ -208,11 +222,18 @@ def _feature(raw, where: str, default_height_m: float | None) -> MapFeature:
         if "width" not in props:
             raise WorldError(f"{at}.width: missing (a {raw['geometry']['type']} needs a width in m)")
         extra["width_m"] = _metres(props["width"], f"{at}.width", positive=True)
-    return MapFeature(where=where, geometry_deg=geometry, height_m=height_m, min_height_m=extra["min_height_m"],
-                      radius_m=extra.get("radius_m"), width_m=extra.get("width_m"))
+    return MapFeature(
+        where=where,
+        geometry_deg=geometry,
+        height_m=height_m,
+        min_height_m=extra["min_height_m"],
+        radius_m=extra.get("radius_m"),
+        width_m=extra.get("width_m"),
+    )
 
 
 # ----------------------------------------------------------------------------- the collection
+
 
 def _geo_position(value, where: str) -> tuple[float, float, float]:
     """``[lon, lat, number]`` of the header (home altitude AMSL, start/goal height)."""
@@ -225,8 +246,11 @@ def _geo_position(value, where: str) -> tuple[float, float, float]:
 
 
 def _bounds_deg(value, where: str) -> tuple[float, float, float, float]:
-    if (not isinstance(value, list) or len(value) != 4
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+    if (
+        not isinstance(value, list)
+        or len(value) != 4
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    ):
         raise WorldError(f"{where}: expected [west, south, east, north] in degrees, got {_shown(value)}")
     west, south = _lon_lat(value[:2], where)
     east, north = _lon_lat(value[2:], where)
@@ -265,12 +289,15 @@ def _check_collection(data) -> None:
     if not isinstance(data, dict):
         raise WorldError(f"expected a GeoJSON FeatureCollection object, got {_shown(data)}")
     if data.get("type") != "FeatureCollection":
-        raise WorldError(f"type: expected \"FeatureCollection\", got {_shown(data.get('type'))} "
-                         "(wrap a single Feature or geometry in a FeatureCollection)")
+        raise WorldError(
+            f'type: expected "FeatureCollection", got {_shown(data.get("type"))} '
+            "(wrap a single Feature or geometry in a FeatureCollection)"
+        )
     crs = data.get("crs")
     if crs is not None and not any(tag in json.dumps(crs) for tag in _WGS84_CRS):
-        raise WorldError(f"crs: {_shown(crs)}: only WGS-84 longitude/latitude is supported (RFC "
-                         "7946); export the file in EPSG:4326")
+        raise WorldError(
+            f"crs: {_shown(crs)}: only WGS-84 longitude/latitude is supported (RFC 7946); export the file in EPSG:4326"
+        )
     if not isinstance(data.get("features"), list):
         raise WorldError(f"features: expected a list of Feature objects, got {_shown(data.get('features'))}")
 
@@ -309,4 +336,3 @@ def parse_geojson_text(text: str, source: str = "map", default_name: str | None 
     except json.JSONDecodeError as exc:
         raise WorldError(f"{source}: line {exc.lineno}, column {exc.colno}: {exc.msg}") from None
     return parse_geojson(data, source, default_name)
-

@@ -77,6 +77,7 @@ def segment_segment_dist2(p1: tuple, q1: tuple, p2: tuple, q2: tuple) -> float:
 
 def segments_cross_2d(a: tuple, b: tuple, c: tuple, d: tuple) -> bool:
     """True when 2D segments ``ab`` and ``cd`` share at least one point (touching counts)."""
+
     def orient(p, q, r):
         return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
 

@@ -48,8 +48,7 @@ class UniformGrid:
             # in both cells, so a segment traversal that visits either cell finds it
             blo = tuple(x - pad for x in blo)
             bhi = tuple(x + pad for x in bhi)
-            if any(bh < l or bl > l + s * self.cell_m
-                   for bl, bh, l, s in zip(blo, bhi, self.lo, self.shape)):
+            if any(bh < l or bl > l + s * self.cell_m for bl, bh, l, s in zip(blo, bhi, self.lo, self.shape)):
                 continue  # entirely outside the grid
             for flat in self.cells_overlapping(blo, bhi):
                 cells[flat].append(item)

@@ -80,7 +80,8 @@ def _require(table: dict, key: str, where: str):
 
 def _vector(value, where: str, dim: int | None = None) -> tuple:
     if not isinstance(value, (list, tuple)) or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in value
+    ):
         raise WorldError(f"{where}: expected a list of numbers, got {value!r}")
     if dim is not None and len(value) != dim:
         raise WorldError(f"{where}: expected {dim} numbers, got {len(value)}")
@@ -124,18 +125,28 @@ def _obstacle_from_dict(table, where: str, dim: int) -> Obstacle:
         raise WorldError(f"{where}.{sorted(unknown)[0]}: unknown key for a {kind}")
     try:
         if kind == "disc":
-            return Disc(_vector(_require(table, "center", where), f"{where}.center", 2),
-                        _number(_require(table, "radius", where), f"{where}.radius"))
+            return Disc(
+                _vector(_require(table, "center", where), f"{where}.center", 2),
+                _number(_require(table, "radius", where), f"{where}.radius"),
+            )
         if kind == "sphere":
-            return Sphere(_vector(_require(table, "center", where), f"{where}.center", 3),
-                          _number(_require(table, "radius", where), f"{where}.radius"))
+            return Sphere(
+                _vector(_require(table, "center", where), f"{where}.center", 3),
+                _number(_require(table, "radius", where), f"{where}.radius"),
+            )
         if kind == "cylinder":
             lo, hi = _vertical_limits(table, where)
-            return Cylinder(_vector(_require(table, "center", where), f"{where}.center", 2),
-                            _number(_require(table, "radius", where), f"{where}.radius"), lo, hi)
+            return Cylinder(
+                _vector(_require(table, "center", where), f"{where}.center", 2),
+                _number(_require(table, "radius", where), f"{where}.radius"),
+                lo,
+                hi,
+            )
         if kind == "box":
-            return Box(_vector(_require(table, "min", where), f"{where}.min", dim),
-                       _vector(_require(table, "max", where), f"{where}.max", dim))
+            return Box(
+                _vector(_require(table, "min", where), f"{where}.min", dim),
+                _vector(_require(table, "max", where), f"{where}.max", dim),
+            )
         verts = _require(table, "vertices", where)
         if not isinstance(verts, list):
             raise WorldError(f"{where}.vertices: expected a list of [north, east] pairs")
@@ -209,8 +220,9 @@ def _map_world_file(doc, home_lla, ground_alt_m) -> WorldFile:
     from companion.world.mapdata import map_world
 
     world, frame, start, goal = map_world(doc, home_lla, ground_alt_m)
-    return WorldFile(world=world, name=doc.name, start=start, goal=goal,
-                     home_lla=(frame.lat0_deg, frame.lon0_deg, frame.alt0_m))
+    return WorldFile(
+        world=world, name=doc.name, start=start, goal=goal, home_lla=(frame.lat0_deg, frame.lon0_deg, frame.alt0_m)
+    )
 
 
 def _read_map_document(p: Path, text: str, data=None):

@@ -40,8 +40,7 @@ from companion.world.mapdata import MapDocument, MapFeature
 __all__ = ["parse_kml"]
 
 _MODES = ("relativeToGround", "absolute")
-_GEOMETRY_TAGS = ("Point", "LineString", "LinearRing", "Polygon", "MultiGeometry", "Model", "Track",
-                  "MultiTrack")
+_GEOMETRY_TAGS = ("Point", "LineString", "LinearRing", "Polygon", "MultiGeometry", "Model", "Track", "MultiTrack")
 
 
 def _local(tag: str) -> str:
@@ -74,12 +73,15 @@ def _coordinates(ring: ET.Element, where: str) -> list[tuple[float, float, float
             raise WorldError(f"{where}.coordinates: tuple {k}: expected lon,lat[,alt], got {word!r}")
         lon, lat, alt = values[0], values[1], values[2] if len(values) == 3 else 0.0
         if not -180.0 <= lon <= 180.0 or not -90.0 <= lat <= 90.0:
-            raise WorldError(f"{where}.coordinates: tuple {k}: longitude must be -180..180 and "
-                             f"latitude -90..90 degrees, got {word!r}")
+            raise WorldError(
+                f"{where}.coordinates: tuple {k}: longitude must be -180..180 and "
+                f"latitude -90..90 degrees, got {word!r}"
+            )
         out.append((lon, lat, alt))
     if len(out) < 4 or out[0][:2] != out[-1][:2]:
-        raise WorldError(f"{where}.coordinates: a LinearRing needs at least 4 tuples, the last "
-                         f"equal to the first, got {len(out)}")
+        raise WorldError(
+            f"{where}.coordinates: a LinearRing needs at least 4 tuples, the last equal to the first, got {len(out)}"
+        )
     return out
 
 
@@ -94,12 +96,15 @@ def _extruded_mode(polygon: ET.Element, where: str) -> str:
     """The polygon's altitude mode, after checking that it is extruded."""
     extrude = _child_text(polygon, "extrude")
     if extrude not in ("1", "true"):
-        raise WorldError(f"{where}.extrude: expected 1 (walls down to the ground), got "
-                         f"{extrude!r}: a flat polygon is no obstacle")
+        raise WorldError(
+            f"{where}.extrude: expected 1 (walls down to the ground), got {extrude!r}: a flat polygon is no obstacle"
+        )
     mode = _child_text(polygon, "altitudeMode") or "clampToGround"
     if mode not in _MODES:
-        raise WorldError(f"{where}.altitudeMode: expected relativeToGround or absolute, got "
-                         f"{mode!r} (a clamped polygon has no height)")
+        raise WorldError(
+            f"{where}.altitudeMode: expected relativeToGround or absolute, got "
+            f"{mode!r} (a clamped polygon has no height)"
+        )
     return mode
 
 
@@ -117,8 +122,10 @@ def _polygon_feature(polygon: ET.Element, where: str) -> MapFeature:
         raise WorldError(f"{where}: not a valid polygon: {reason}")
     top_m = max(p[2] for p in shell)
     if mode == "relativeToGround" and not top_m > 0.0:
-        raise WorldError(f"{where}.outerBoundaryIs.LinearRing.coordinates: the altitudes give "
-                         f"the height above ground; expected a number > 0, got {top_m:g}")
+        raise WorldError(
+            f"{where}.outerBoundaryIs.LinearRing.coordinates: the altitudes give "
+            f"the height above ground; expected a number > 0, got {top_m:g}"
+        )
     return MapFeature(where=where, geometry_deg=shape, height_m=top_m, top_is_amsl=(mode == "absolute"))
 
 
@@ -130,13 +137,16 @@ def _placemark_polygons(placemark: ET.Element, where: str) -> list[tuple[ET.Elem
         found += [(p, f"{where}: MultiGeometry[{m}].Polygon[{k}]") for k, p in enumerate(polygons)]
         others = sorted({_local(c.tag) for c in multi} & set(_GEOMETRY_TAGS) - {"Polygon"})
         if others:
-            raise WorldError(f"{where}: MultiGeometry[{m}].{others[0]}: unsupported geometry "
-                             "(only extruded Polygons are obstacles)")
+            raise WorldError(
+                f"{where}: MultiGeometry[{m}].{others[0]}: unsupported geometry (only extruded Polygons are obstacles)"
+            )
     if not found:
         kinds = sorted({_local(c.tag) for c in placemark} & set(_GEOMETRY_TAGS))
         what = kinds[0] if kinds else "none"
-        raise WorldError(f"{where}: geometry {what}: unsupported (only extruded Polygons are "
-                         "obstacles; remove the placemark or draw it as a polygon)")
+        raise WorldError(
+            f"{where}: geometry {what}: unsupported (only extruded Polygons are "
+            "obstacles; remove the placemark or draw it as a polygon)"
+        )
     return found
 
 
@@ -168,8 +178,9 @@ def parse_kml(content: bytes | str, source: str = "map", default_name: str | Non
         root = ET.fromstring(content)
     except ET.ParseError as exc:
         line, column = exc.position
-        raise WorldError(f"{source}: line {line}, column {column}: not well-formed XML "
-                         f"({str(exc).split(':')[0]})") from None
+        raise WorldError(
+            f"{source}: line {line}, column {column}: not well-formed XML ({str(exc).split(':')[0]})"
+        ) from None
     try:
         if _local(root.tag) != "kml":
             raise WorldError(f"root element: expected kml, got {_local(root.tag)}")

@@ -44,18 +44,29 @@ from companion.world.round_obstacles import Cylinder
 from companion.world.world import World
 from heli_common.frames import GeoError, LocalFrame
 
-__all__ = ["MapFeature", "MapDocument", "GroundAltitude", "DEFAULT_CEILING_M", "DEFAULT_PADDING_M",
-           "flat_ground", "footprint_ne_m", "footprint_deg", "simple_pieces_ne_m", "feature_obstacles", "map_world"]
+__all__ = [
+    "MapFeature",
+    "MapDocument",
+    "GroundAltitude",
+    "DEFAULT_CEILING_M",
+    "DEFAULT_PADDING_M",
+    "flat_ground",
+    "footprint_ne_m",
+    "footprint_deg",
+    "simple_pieces_ne_m",
+    "feature_obstacles",
+    "map_world",
+]
 
 log = logging.getLogger(__name__)
 
 #: ``ground_alt_m(lat_deg (K,), lon_deg (K,)) -> alt_m (K,)``, metres AMSL.
 GroundAltitude = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
-DEFAULT_CEILING_M = 120.0      # as the mission conversion's mission.ceiling_m
-DEFAULT_PADDING_M = 30.0       # as the mission conversion's mission.padding_m
-_AREA_TOL_M2 = 1e-6            # a piece smaller than this is a cut's sliver, dropped
-_FAR_FROM_HOME_M = 5000.0      # a feature this far from home is logged (a huge world)
+DEFAULT_CEILING_M = 120.0  # as the mission conversion's mission.ceiling_m
+DEFAULT_PADDING_M = 30.0  # as the mission conversion's mission.padding_m
+_AREA_TOL_M2 = 1e-6  # a piece smaller than this is a cut's sliver, dropped
+_FAR_FROM_HOME_M = 5000.0  # a feature this far from home is logged (a huge world)
 
 
 @dataclass(frozen=True)
@@ -135,6 +146,7 @@ def flat_ground(frame: LocalFrame) -> GroundAltitude:
 
 # ----------------------------------------------------------------------------- footprints
 
+
 def footprint_ne_m(geometry_deg: BaseGeometry, frame: LocalFrame, ground_alt_m: GroundAltitude) -> BaseGeometry:
     """The geometry projected to local north-east metres at its ground altitude.
 
@@ -148,7 +160,8 @@ def footprint_ne_m(geometry_deg: BaseGeometry, frame: LocalFrame, ground_alt_m: 
     -------
     shapely geometry of the same type, x = north (m), y = east (m)
     """
-    def to_ne(lon_lat_deg: np.ndarray) -> np.ndarray:          # (K, 2) -> (K, 2)
+
+    def to_ne(lon_lat_deg: np.ndarray) -> np.ndarray:  # (K, 2) -> (K, 2)
         lon, lat = lon_lat_deg[:, 0], lon_lat_deg[:, 1]
         north_m, east_m, _ = frame.to_ned(lat, lon, ground_alt_m(lat, lon))
         return np.column_stack([north_m, east_m])
@@ -156,8 +169,13 @@ def footprint_ne_m(geometry_deg: BaseGeometry, frame: LocalFrame, ground_alt_m: 
     return shapely.transform(geometry_deg, to_ne)
 
 
-def footprint_deg(geometry_ne_m: BaseGeometry, frame: LocalFrame, ground_alt_m: GroundAltitude,
-                  tolerance_m: float = 1e-6, max_iterations: int = 10) -> BaseGeometry:
+def footprint_deg(
+    geometry_ne_m: BaseGeometry,
+    frame: LocalFrame,
+    ground_alt_m: GroundAltitude,
+    tolerance_m: float = 1e-6,
+    max_iterations: int = 10,
+) -> BaseGeometry:
     """Inverse of :func:`footprint_ne_m`: local north-east metres on the ground -> degrees.
 
     The point of the ground above or below ``(north, east)`` is found by fixed-point iteration
@@ -177,7 +195,8 @@ def footprint_deg(geometry_ne_m: BaseGeometry, frame: LocalFrame, ground_alt_m: 
     -------
     shapely geometry of the same type, x = longitude, y = latitude (degrees)
     """
-    def to_deg(ne_m: np.ndarray) -> np.ndarray:                # (K, 2) -> (K, 2)
+
+    def to_deg(ne_m: np.ndarray) -> np.ndarray:  # (K, 2) -> (K, 2)
         north_m, east_m = ne_m[:, 0], ne_m[:, 1]
         down_m = np.zeros(len(ne_m))
         for _ in range(max_iterations):
@@ -229,7 +248,7 @@ def simple_pieces_ne_m(polygon_ne: Polygon) -> list[Polygon]:
 def _polygons_ne_m(feature: MapFeature, footprint: BaseGeometry) -> list[Polygon]:
     """The feature's footprint as valid polygons (a line buffered to its width)."""
     if isinstance(footprint, (LineString, MultiLineString)):
-        assert feature.width_m is not None        # the reader requires a width of every line
+        assert feature.width_m is not None  # the reader requires a width of every line
         footprint = footprint.buffer(0.5 * feature.width_m, cap_style="flat", join_style="mitre")
     parts = list(footprint.geoms) if isinstance(footprint, MultiPolygon) else [footprint]
     out = []
@@ -245,9 +264,10 @@ def _polygons_ne_m(feature: MapFeature, footprint: BaseGeometry) -> list[Polygon
 
 # ----------------------------------------------------------------------------- heights
 
+
 def _lowest_ground_alt_m(feature: MapFeature, ground_alt_m: GroundAltitude) -> float:
     """The ground under the footprint: the lowest of its vertices and centroid (m AMSL)."""
-    coords = shapely.get_coordinates(feature.geometry_deg)                  # (K, 2) lon, lat
+    coords = shapely.get_coordinates(feature.geometry_deg)  # (K, 2) lon, lat
     centre = feature.geometry_deg.centroid
     lon = np.append(coords[:, 0], centre.x)
     lat = np.append(coords[:, 1], centre.y)
@@ -260,17 +280,19 @@ def _down_limits_m(feature: MapFeature, frame: LocalFrame, ground_alt_m: GroundA
     top_alt_m = feature.height_m if feature.top_is_amsl else ground_m + feature.height_m
     bottom_alt_m = ground_m + feature.min_height_m
     if not top_alt_m > bottom_alt_m:
-        raise WorldError(f"{feature.where}: the top ({top_alt_m:.2f} m AMSL) is not above the "
-                         f"bottom ({bottom_alt_m:.2f} m AMSL: ground {ground_m:.2f} m + min_height "
-                         f"{feature.min_height_m:g} m)")
+        raise WorldError(
+            f"{feature.where}: the top ({top_alt_m:.2f} m AMSL) is not above the "
+            f"bottom ({bottom_alt_m:.2f} m AMSL: ground {ground_m:.2f} m + min_height "
+            f"{feature.min_height_m:g} m)"
+        )
     centre = feature.geometry_deg.centroid
-    _, _, down_m = frame.to_ned(np.array([centre.y] * 2), np.array([centre.x] * 2),
-                                np.array([top_alt_m, bottom_alt_m]))
+    _, _, down_m = frame.to_ned(np.array([centre.y] * 2), np.array([centre.x] * 2), np.array([top_alt_m, bottom_alt_m]))
     down_max_m = float(down_m[1]) if feature.min_height_m > 0.0 else math.inf
     return float(down_m[0]), down_max_m
 
 
 # ----------------------------------------------------------------------------- obstacles
+
 
 def feature_obstacles(feature: MapFeature, frame: LocalFrame, ground_alt_m: GroundAltitude) -> list[Obstacle]:
     """The World obstacles of one map feature (local NED about ``frame``'s origin).
@@ -300,7 +322,7 @@ def feature_obstacles(feature: MapFeature, frame: LocalFrame, ground_alt_m: Grou
     _log_if_far(feature, footprint)
     if isinstance(footprint, (Point, MultiPoint)):
         points = list(footprint.geoms) if isinstance(footprint, MultiPoint) else [footprint]
-        assert feature.radius_m is not None       # the reader requires a radius of every point
+        assert feature.radius_m is not None  # the reader requires a radius of every point
         return [Cylinder((p.x, p.y), feature.radius_m, down_min_m, down_max_m) for p in points]
     prisms: list[Obstacle] = []
     for polygon in _polygons_ne_m(feature, footprint):
@@ -312,8 +334,7 @@ def feature_obstacles(feature: MapFeature, frame: LocalFrame, ground_alt_m: Grou
 def _log_if_far(feature: MapFeature, footprint_ne: BaseGeometry) -> None:
     distance_m = footprint_ne.distance(Point(0.0, 0.0))
     if distance_m > _FAR_FROM_HOME_M:
-        log.warning("%s is %.1f km from home: the world grows to include it", feature.where,
-                    distance_m / 1000.0)
+        log.warning("%s is %.1f km from home: the world grows to include it", feature.where, distance_m / 1000.0)
 
 
 def _geo_point_ned_m(position_deg: tuple, frame: LocalFrame, ground_alt_m: GroundAltitude) -> tuple:
@@ -321,11 +342,12 @@ def _geo_point_ned_m(position_deg: tuple, frame: LocalFrame, ground_alt_m: Groun
     lon, lat, height_m = position_deg
     ground_m = float(ground_alt_m(np.array([lat]), np.array([lon]))[0])
     n, e, d = frame.to_ned(lat, lon, ground_m + height_m)
-    return tuple(round(float(v), 6) for v in (n, e, d))        # to the micrometre
+    return tuple(round(float(v), 6) for v in (n, e, d))  # to the micrometre
 
 
-def _bounds_ne_m(doc: MapDocument, obstacles: list[Obstacle], frame: LocalFrame,
-                 extra_ne_m: list[tuple]) -> tuple[np.ndarray, np.ndarray]:
+def _bounds_ne_m(
+    doc: MapDocument, obstacles: list[Obstacle], frame: LocalFrame, extra_ne_m: list[tuple]
+) -> tuple[np.ndarray, np.ndarray]:
     """Horizontal bounds: the file's ``bounds_deg`` box, else the extent of home, the obstacles
     and ``extra_ne_m`` plus ``padding_m + margin_m``."""
     if doc.bounds_deg is not None:
@@ -343,8 +365,9 @@ def _bounds_ne_m(doc: MapDocument, obstacles: list[Obstacle], frame: LocalFrame,
     return pts.min(axis=0) - pad_m, pts.max(axis=0) + pad_m
 
 
-def map_world(doc: MapDocument, home_lla: tuple | None = None,
-              ground_alt_m: GroundAltitude | None = None) -> tuple[World, LocalFrame, tuple | None, tuple | None]:
+def map_world(
+    doc: MapDocument, home_lla: tuple | None = None, ground_alt_m: GroundAltitude | None = None
+) -> tuple[World, LocalFrame, tuple | None, tuple | None]:
     """The 3D planning world of a map document, in local NED about the home.
 
     Parameters
@@ -372,8 +395,10 @@ def map_world(doc: MapDocument, home_lla: tuple | None = None,
     try:
         home = home_lla if home_lla is not None else doc.home_lla
         if home is None:
-            raise WorldError("a map world needs a home (the origin of local NED): give --home "
-                             "LAT,LON,ALT (a GeoJSON file may carry it as companion.home)")
+            raise WorldError(
+                "a map world needs a home (the origin of local NED): give --home "
+                "LAT,LON,ALT (a GeoJSON file may carry it as companion.home)"
+            )
         try:
             frame = LocalFrame(*home)
         except GeoError as exc:
@@ -388,6 +413,13 @@ def map_world(doc: MapDocument, home_lla: tuple | None = None,
         world = World(obstacles, [lo_ne[0], lo_ne[1], -doc.ceiling_m], [hi_ne[0], hi_ne[1], 0.0], doc.margin_m)
     except (WorldError, GeoError) as exc:
         raise WorldError(f"{doc.source}: {exc}") from None
-    log.debug("%s: %d features -> %d obstacles about home %.7f, %.7f, %.1f m", doc.source,
-             len(doc.features), len(obstacles), frame.lat0_deg, frame.lon0_deg, frame.alt0_m)
+    log.debug(
+        "%s: %d features -> %d obstacles about home %.7f, %.7f, %.1f m",
+        doc.source,
+        len(doc.features),
+        len(obstacles),
+        frame.lat0_deg,
+        frame.lon0_deg,
+        frame.alt0_m,
+    )
     return world, frame, start, goal

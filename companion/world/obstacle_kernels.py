@@ -38,16 +38,35 @@ import math
 import numpy as np
 from numba import njit
 
-from companion.world.polyhedral_kernels import (_point_segment_dist2_2d, _py_max, _py_min, _python_hypot,
-                                                _slab_interval, polygon_sdf, prism_sdf_3d, prism_segment_distance,
-                                                segment_polygon_dist_2d)
+from companion.world.polyhedral_kernels import (
+    _point_segment_dist2_2d,
+    _py_max,
+    _py_min,
+    _python_hypot,
+    _slab_interval,
+    polygon_sdf,
+    prism_sdf_3d,
+    prism_segment_distance,
+    segment_polygon_dist_2d,
+)
 from companion.world.polyhedral_obstacles import Prism
 from companion.world.round_obstacles import Cylinder
 
-__all__ = ["ball_arrays", "ball_table", "space_of", "supported", "segment_clear", "point_clear", "other_sdf", "box_gap", "CYLINDER", "PRISM"]
+__all__ = [
+    "ball_arrays",
+    "ball_table",
+    "space_of",
+    "supported",
+    "segment_clear",
+    "point_clear",
+    "other_sdf",
+    "box_gap",
+    "CYLINDER",
+    "PRISM",
+]
 
 CYLINDER, PRISM = 0, 1
-_GOLDEN_ITERATIONS = 90          # geometry.golden_min's default
+_GOLDEN_ITERATIONS = 90  # geometry.golden_min's default
 _MEMO_KEY = ("obstacle_kernels", "space")
 
 
@@ -113,16 +132,28 @@ def space_of(world) -> tuple:
         boxes = np.array([ob.aabb(2)[0] + ob.aabb(2)[1] for ob in others], dtype=float).reshape(-1, 4)
         lo, hi = world.bounds_min, world.bounds_max
         largest = max(float(np.abs(lo).max()), float(np.abs(hi).max()), float(np.abs(boxes).max(initial=0.0)))
-        found = (lo, hi, centres, r2, kinds, params, vstart, verts, float(world.margin_m), boxes,
-                 1e-9 * (1.0 + largest))
+        found = (
+            lo,
+            hi,
+            centres,
+            r2,
+            kinds,
+            params,
+            vstart,
+            verts,
+            float(world.margin_m),
+            boxes,
+            1e-9 * (1.0 + largest),
+        )
         world._memo[_MEMO_KEY] = found
     return found
 
 
 # ---------------------------------------------------------------------------- cylinders
 @njit(cache=True)
-def _cylinder_sdf_3d(x: float, y: float, z: float, cx: float, cy: float, r: float, down_min: float,
-                     down_max: float) -> float:
+def _cylinder_sdf_3d(
+    x: float, y: float, z: float, cx: float, cy: float, r: float, down_min: float, down_max: float
+) -> float:
     """``Cylinder.sdf`` of a 3D point."""
     dr = _python_hypot(x - cx, y - cy) - r
     dz = _py_max(down_min - z, z - down_max)
@@ -141,15 +172,16 @@ def _cylinder_dist_at(t: float, a, b, cx: float, cy: float, r: float, down_min: 
 
 
 @njit(cache=True)
-def _cylinder_golden_min(a, b, cx: float, cy: float, r: float, down_min: float, down_max: float, lo: float,
-                         hi: float) -> float:
+def _cylinder_golden_min(
+    a, b, cx: float, cy: float, r: float, down_min: float, down_max: float, lo: float, hi: float
+) -> float:
     """``geometry.golden_min(dist_at, lo, hi)`` of ``Cylinder.segment_distance``."""
     inv_phi = (math.sqrt(5.0) - 1.0) / 2.0
     x1 = hi - inv_phi * (hi - lo)
     x2 = lo + inv_phi * (hi - lo)
     f1 = _cylinder_dist_at(x1, a, b, cx, cy, r, down_min, down_max)
     f2 = _cylinder_dist_at(x2, a, b, cx, cy, r, down_min, down_max)
-    best = _cylinder_dist_at(lo, a, b, cx, cy, r, down_min, down_max)      # min(f(lo), f(hi), f1, f2)
+    best = _cylinder_dist_at(lo, a, b, cx, cy, r, down_min, down_max)  # min(f(lo), f(hi), f1, f2)
     best = _py_min(best, _cylinder_dist_at(hi, a, b, cx, cy, r, down_min, down_max))
     best = _py_min(_py_min(best, f1), f2)
     for _ in range(_GOLDEN_ITERATIONS):
@@ -208,9 +240,8 @@ def other_sdf(j: int, p, space) -> float:
     if kinds[j] == CYLINDER:
         if len(p) == 2:
             return _python_hypot(p[0] - params[j, 0], p[1] - params[j, 1]) - params[j, 2]
-        return _cylinder_sdf_3d(p[0], p[1], p[2], params[j, 0], params[j, 1], params[j, 2], params[j, 3],
-                                params[j, 4])
-    poly = verts[vstart[j]:vstart[j + 1]]
+        return _cylinder_sdf_3d(p[0], p[1], p[2], params[j, 0], params[j, 1], params[j, 2], params[j, 3], params[j, 4])
+    poly = verts[vstart[j] : vstart[j + 1]]
     if len(p) == 2:
         return polygon_sdf(p[0], p[1], poly)
     return prism_sdf_3d(p[0], p[1], p[2], poly, params[j, 3], params[j, 4])
@@ -222,7 +253,7 @@ def _other_segment_distance(j: int, a, b, space) -> float:
     kinds, params, vstart, verts = space[4], space[5], space[6], space[7]
     if kinds[j] == CYLINDER:
         return cylinder_segment_distance(a, b, params[j, 0], params[j, 1], params[j, 2], params[j, 3], params[j, 4])
-    poly = verts[vstart[j]:vstart[j + 1]]
+    poly = verts[vstart[j] : vstart[j + 1]]
     if len(a) == 2:
         return segment_polygon_dist_2d(a[0], a[1], b[0], b[1], poly)
     return prism_segment_distance(a[0], a[1], a[2], b[0], b[1], b[2], poly, params[j, 3], params[j, 4])

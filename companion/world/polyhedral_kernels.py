@@ -31,8 +31,8 @@ from heli_common.pyfloat import py_square as _py_square
 
 __all__ = ["segment_polygon_dist_2d", "polygon_sdf", "prism_sdf_3d", "prism_segment_distance", "warm_up"]
 
-_EPS = 1e-12                     # geometry._EPS
-_SLAB_EPS = 1e-15                # obstacles.slab_interval's threshold on the segment's dz
+_EPS = 1e-12  # geometry._EPS
+_SLAB_EPS = 1e-15  # obstacles.slab_interval's threshold on the segment's dz
 
 
 @njit(cache=True)
@@ -57,8 +57,9 @@ def _seg_seg_params(a: float, e: float, f: float, c: float, b: float) -> tuple[f
 
 
 @njit(cache=True)
-def _seg_seg_dist2_2d(p1x: float, p1y: float, q1x: float, q1y: float,
-                      p2x: float, p2y: float, q2x: float, q2y: float) -> float:
+def _seg_seg_dist2_2d(
+    p1x: float, p1y: float, q1x: float, q1y: float, p2x: float, p2y: float, q2x: float, q2y: float
+) -> float:
     """``geometry.segment_segment_dist2`` for 2D points given coordinate by coordinate."""
     d1x, d1y = q1x - p1x, q1y - p1y
     d2x, d2y = q2x - p2x, q2y - p2y
@@ -84,8 +85,20 @@ def _seg_seg_dist2_2d(p1x: float, p1y: float, q1x: float, q1y: float,
 
 
 @njit(cache=True)
-def _seg_seg_dist2_3d(p1x: float, p1y: float, p1z: float, q1x: float, q1y: float, q1z: float,
-                      p2x: float, p2y: float, p2z: float, q2x: float, q2y: float, q2z: float) -> float:
+def _seg_seg_dist2_3d(
+    p1x: float,
+    p1y: float,
+    p1z: float,
+    q1x: float,
+    q1y: float,
+    q1z: float,
+    p2x: float,
+    p2y: float,
+    p2z: float,
+    q2x: float,
+    q2y: float,
+    q2z: float,
+) -> float:
     """``geometry.segment_segment_dist2`` for 3D points given coordinate by coordinate."""
     d1x, d1y, d1z = q1x - p1x, q1y - p1y, q1z - p1z
     d2x, d2y, d2z = q2x - p2x, q2y - p2y, q2z - p2z
@@ -203,7 +216,7 @@ def segment_polygon_dist_2d(ax: float, ay: float, bx: float, by: float, verts: n
         if _cross_properly(ax, ay, bx, by, cx, cy, dx, dy):
             return 0.0
         d2 = _seg_seg_dist2_2d(ax, ay, bx, by, cx, cy, dx, dy)
-        if d2 <= _EPS:                  # segments_cross_2d's touching case
+        if d2 <= _EPS:  # segments_cross_2d's touching case
             return 0.0
         if d2 < best:
             best = d2
@@ -246,8 +259,18 @@ def _slab_interval(a_z: float, b_z: float, lo: float, hi: float) -> tuple[bool, 
 
 
 @njit(cache=True)
-def _edges_dist2(ax: float, ay: float, az: float, bx: float, by: float, bz: float, verts: np.ndarray,
-                 z_lo: float, z_hi: float, best2: float) -> float:
+def _edges_dist2(
+    ax: float,
+    ay: float,
+    az: float,
+    bx: float,
+    by: float,
+    bz: float,
+    verts: np.ndarray,
+    z_lo: float,
+    z_hi: float,
+    best2: float,
+) -> float:
     """Smaller of ``best2`` and the squared distances from ``ab`` to the prism's cap and wall edges."""
     n = verts.shape[0]
     for i in range(n):
@@ -266,8 +289,17 @@ def _edges_dist2(ax: float, ay: float, az: float, bx: float, by: float, bz: floa
 
 
 @njit(cache=True)
-def prism_segment_distance(ax: float, ay: float, az: float, bx: float, by: float, bz: float,
-                           verts: np.ndarray, down_min_m: float, down_max_m: float) -> float:
+def prism_segment_distance(
+    ax: float,
+    ay: float,
+    az: float,
+    bx: float,
+    by: float,
+    bz: float,
+    verts: np.ndarray,
+    down_min_m: float,
+    down_max_m: float,
+) -> float:
     """``Prism.segment_distance`` of a 3D segment: exact distance (m), 0 when they meet.
 
     Parameters

@@ -17,7 +17,7 @@ from companion.world.obstacles import Obstacle, down_limits, finite_vector
 
 __all__ = ["Box", "Prism"]
 
-_KERNELS = None     # companion.world.polyhedral_kernels, imported at the first Prism query
+_KERNELS = None  # companion.world.polyhedral_kernels, imported at the first Prism query
 
 
 def _load_kernels():
@@ -176,8 +176,9 @@ class Prism(Obstacle):
         kern = _KERNELS or _load_kernels()
         if len(p) == 2:
             return kern.polygon_sdf(float(p[0]), float(p[1]), self._vertices_array)
-        return kern.prism_sdf_3d(float(p[0]), float(p[1]), float(p[2]), self._vertices_array,
-                                 self.down_min_m, self.down_max_m)
+        return kern.prism_sdf_3d(
+            float(p[0]), float(p[1]), float(p[2]), self._vertices_array, self.down_min_m, self.down_max_m
+        )
 
     def segment_distance(self, a: tuple, b: tuple) -> float:
         """Exact: intersection test, else endpoint-to-prism and segment-to-edge distances.
@@ -187,11 +188,20 @@ class Prism(Obstacle):
         """
         kern = _KERNELS or _load_kernels()
         if len(a) == 2:
-            return kern.segment_polygon_dist_2d(float(a[0]), float(a[1]), float(b[0]), float(b[1]),
-                                                self._vertices_array)
-        return kern.prism_segment_distance(float(a[0]), float(a[1]), float(a[2]),
-                                           float(b[0]), float(b[1]), float(b[2]),
-                                           self._vertices_array, self.down_min_m, self.down_max_m)
+            return kern.segment_polygon_dist_2d(
+                float(a[0]), float(a[1]), float(b[0]), float(b[1]), self._vertices_array
+            )
+        return kern.prism_segment_distance(
+            float(a[0]),
+            float(a[1]),
+            float(a[2]),
+            float(b[0]),
+            float(b[1]),
+            float(b[2]),
+            self._vertices_array,
+            self.down_min_m,
+            self.down_max_m,
+        )
 
     def _polygon_sdf_batch(self, points: np.ndarray) -> np.ndarray:
         x, y = points[:, 0], points[:, 1]

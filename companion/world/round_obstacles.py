@@ -14,8 +14,7 @@ import numpy as np
 
 from companion.errors import WorldError
 from companion.world import geometry as geo
-from companion.world.obstacles import (Obstacle, down_limits, finite_vector, lerp, positive_length,
-                                       slab_interval)
+from companion.world.obstacles import Obstacle, down_limits, finite_vector, lerp, positive_length, slab_interval
 
 __all__ = ["Disc", "Sphere", "Cylinder"]
 

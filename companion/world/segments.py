@@ -18,7 +18,7 @@ same order (no fused multiply-add), so its answers are the same booleans.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 from numba import njit
@@ -50,16 +50,17 @@ def segments_free_from(world, a: tuple, ends: list) -> list[bool]:
     """
     if not ends:
         return []
-    if compiled_for(world):   # balls, cylinders and prisms: compiled
-        free = segments_clear(np.array(a, dtype=float), np.array(ends, dtype=float).reshape(-1, world.dim),
-                              okern.space_of(world))
+    if compiled_for(world):  # balls, cylinders and prisms: compiled
+        free = segments_clear(
+            np.array(a, dtype=float), np.array(ends, dtype=float).reshape(-1, world.dim), okern.space_of(world)
+        )
         return free.tolist()
     if not world.in_bounds(a):
         return [False] * len(ends)
     d = world.dim
     centres, r2 = ball_arrays(world)
     b = np.array(ends, dtype=float).reshape(-1, d)
-    delta = [(b[:, k] - a[k])[:, None] for k in range(d)]          # (K, 1) per axis
+    delta = [(b[:, k] - a[k])[:, None] for k in range(d)]  # (K, 1) per axis
     l2 = delta[0] * delta[0]
     num = (centres[:, 0] - a[0]) * delta[0]
     for k in range(1, d):
@@ -117,5 +118,8 @@ def compiled_for(world) -> bool:
     """True when the compiled tests apply: discs/spheres (at most 256), vertical cylinders and
     prisms (at most 64 together), no box."""
     others = world.non_ball_obstacles
-    return (len(world.inflated_balls) <= _COMPILED_UP_TO_BALLS and len(others) <= _COMPILED_UP_TO_OTHERS
-            and okern.supported(world))
+    return (
+        len(world.inflated_balls) <= _COMPILED_UP_TO_BALLS
+        and len(others) <= _COMPILED_UP_TO_OTHERS
+        and okern.supported(world)
+    )

@@ -75,8 +75,21 @@ class World:
     the caches never change the answers, and the obstacles, bounds and margin cannot change.
     """
 
-    __slots__ = ("_dim", "_lo", "_hi", "_margin", "_obstacles", "_grid", "_balls",
-                 "_other_ids", "_cell_balls", "_cell_others", "_frozen", "point_free", "_memo")
+    __slots__ = (
+        "_dim",
+        "_lo",
+        "_hi",
+        "_margin",
+        "_obstacles",
+        "_grid",
+        "_balls",
+        "_other_ids",
+        "_cell_balls",
+        "_cell_others",
+        "_frozen",
+        "point_free",
+        "_memo",
+    )
 
     def __init__(self, obstacles: Iterable[Obstacle], bounds_min, bounds_max, margin_m: float = 0.0):
         lo = _bounds_vector(bounds_min, "bounds_min")
@@ -117,7 +130,7 @@ class World:
 
     # ------------------------------------------------------------------ construction helpers
     @classmethod
-    def from_spheres(cls, centers, radii, bounds_min, bounds_max, margin_m: float = 0.0) -> "World":
+    def from_spheres(cls, centers, radii, bounds_min, bounds_max, margin_m: float = 0.0) -> World:
         """World of discs (d = 2) or spheres (d = 3).
 
         Parameters
@@ -143,7 +156,7 @@ class World:
                 raise WorldError(f"centers/radii[{i}]: {exc}") from None
         return cls(obs, bounds_min, bounds_max, margin_m)
 
-    def with_threats(self, threats: Iterable[Obstacle]) -> "World":
+    def with_threats(self, threats: Iterable[Obstacle]) -> World:
         """New world with the extra obstacles ``threats`` (this world is unchanged).
 
         A ``Sphere`` given to a 2D world becomes the ``Disc`` of its north-east footprint.
@@ -186,10 +199,12 @@ class World:
         self._grid = grid
         self._balls = tuple(balls)
         self._other_ids = other_ids
-        self._cell_balls = tuple(tuple(balls[ball_ids[i]] for i in cell_items if i in ball_ids)
-                                 for cell_items in grid.cells)
-        self._cell_others = tuple(tuple(other_ids[i] for i in cell_items if i in other_ids)
-                                  for cell_items in grid.cells)
+        self._cell_balls = tuple(
+            tuple(balls[ball_ids[i]] for i in cell_items if i in ball_ids) for cell_items in grid.cells
+        )
+        self._cell_others = tuple(
+            tuple(other_ids[i] for i in cell_items if i in other_ids) for cell_items in grid.cells
+        )
 
     # ------------------------------------------------------------------ properties
     @property
@@ -228,8 +243,10 @@ class World:
         return self._margin
 
     def __repr__(self) -> str:
-        return (f"World(dim={self._dim}, obstacles={len(self._obstacles)}, bounds_min={list(self._lo)}, "
-                f"bounds_max={list(self._hi)}, margin_m={self._margin})")
+        return (
+            f"World(dim={self._dim}, obstacles={len(self._obstacles)}, bounds_min={list(self._lo)}, "
+            f"bounds_max={list(self._hi)}, margin_m={self._margin})"
+        )
 
     # ------------------------------------------------------------------ fast scalar queries
     def in_bounds(self, p: Sequence[float]) -> bool:
@@ -464,7 +481,7 @@ class World:
         centers, radii = balls[:, : self._dim], balls[:, -1]
         others = list(self._other_ids.values())
         for start in range(0, arr.shape[0], _BATCH_ROWS):
-            chunk = arr[start:start + _BATCH_ROWS]
+            chunk = arr[start : start + _BATCH_ROWS]
             best = np.full(chunk.shape[0], np.inf)
             if len(radii) > _KDTREE_FROM:
                 best = ball_clearance_kdtree(chunk, centers, radii, self._memo)
@@ -473,5 +490,5 @@ class World:
                 best = np.minimum(best, dist.min(axis=1))
             for ob in others:
                 best = np.minimum(best, ob.sdf_batch(chunk) - self._margin)
-            out[start:start + _BATCH_ROWS] = best
+            out[start : start + _BATCH_ROWS] = best
         return out

@@ -23,19 +23,56 @@ about 1.6 s).
 from heli_model.control.closed_loop import ClosedLoopResult, simulate_closed_loop
 from heli_model.control.flight_controller import FlightController
 from heli_model.control.law import ControlLaw, ControllerState, initial_controller_state
-from heli_model.control.outer_loop import wrap_pi
 from heli_model.control.lqi import (
-    LqiGains, control_law_matrix, design_lqi, feedforward_map, model_14, tracked_output_matrix, zoh,
+    LqiGains,
+    control_law_matrix,
+    design_lqi,
+    feedforward_map,
+    model_14,
+    tracked_output_matrix,
+    zoh,
 )
+from heli_model.control.outer_loop import wrap_pi
 from heli_model.control.settings import (
-    BRYSON_INPUT_MAX, BRYSON_INTEGRATOR_MAX, BRYSON_STATE_MAX, DEFAULT_Q_WEIGHTS, DEFAULT_R_WEIGHTS, N_LQI_STATES,
-    N_TRACKED, TRACKED_INDICES, ControlError, ControllerSettings, Setpoint, bryson_weights,
+    BRYSON_INPUT_MAX,
+    BRYSON_INTEGRATOR_MAX,
+    BRYSON_STATE_MAX,
+    DEFAULT_Q_WEIGHTS,
+    DEFAULT_R_WEIGHTS,
+    N_LQI_STATES,
+    N_TRACKED,
+    TRACKED_INDICES,
+    ControlError,
+    ControllerSettings,
+    Setpoint,
+    bryson_weights,
 )
 
 __all__ = [
-    "BRYSON_INPUT_MAX", "BRYSON_INTEGRATOR_MAX", "BRYSON_STATE_MAX", "DEFAULT_Q_WEIGHTS", "DEFAULT_R_WEIGHTS",
-    "N_LQI_STATES", "N_TRACKED", "TRACKED_INDICES", "ClosedLoopResult", "ControlError", "ControlLaw",
-    "ControllerSettings", "ControllerState", "FlightController", "LqiGains", "Setpoint", "bryson_weights",
-    "control_law_matrix", "design_lqi", "feedforward_map", "initial_controller_state", "model_14",
-    "simulate_closed_loop", "tracked_output_matrix", "wrap_pi", "zoh",
+    "BRYSON_INPUT_MAX",
+    "BRYSON_INTEGRATOR_MAX",
+    "BRYSON_STATE_MAX",
+    "DEFAULT_Q_WEIGHTS",
+    "DEFAULT_R_WEIGHTS",
+    "N_LQI_STATES",
+    "N_TRACKED",
+    "TRACKED_INDICES",
+    "ClosedLoopResult",
+    "ControlError",
+    "ControlLaw",
+    "ControllerSettings",
+    "ControllerState",
+    "FlightController",
+    "LqiGains",
+    "Setpoint",
+    "bryson_weights",
+    "control_law_matrix",
+    "design_lqi",
+    "feedforward_map",
+    "initial_controller_state",
+    "model_14",
+    "simulate_closed_loop",
+    "tracked_output_matrix",
+    "wrap_pi",
+    "zoh",
 ]

@@ -27,8 +27,8 @@ import math
 import numpy as np
 
 from heli_model.control.closed_loop_model import N_S, N_W, S_E, S_X, ClosedLoopModel, build_closed_loop
-from heli_model.control.outer_loop import wrap_pi
 from heli_model.control.modal import run_modal, run_recursion, tall_matmul
+from heli_model.control.outer_loop import wrap_pi
 from heli_model.control.settings import N_LQI_STATES, ControlError, ControllerSettings
 from heli_model.dynamics import IDX_PSI
 from heli_model.model import N_STATES, HeliModel
@@ -66,7 +66,7 @@ class ClosedLoopResult:
     @property
     def rms_tracking_error_m(self) -> float:
         """Root mean square of :attr:`tracking_error_m`."""
-        return float(np.sqrt(np.mean(self.tracking_error_m ** 2)))
+        return float(np.sqrt(np.mean(self.tracking_error_m**2)))
 
     @property
     def max_tracking_error_m(self) -> float:
@@ -80,8 +80,12 @@ def _check_reference(t_s, pos, vel, acc, yaw) -> tuple[np.ndarray, ...]:
         raise ControlError(f"t_s: expected shape (K,) with K >= 2, got {t.shape}")
     k = t.size
     out = [t]
-    for name, arr, shape in (("pos_ned_m", pos, (k, 3)), ("vel_ned_m_s", vel, (k, 3)),
-                             ("acc_ned_m_s2", acc, (k, 3)), ("yaw_rad", yaw, (k,))):
+    for name, arr, shape in (
+        ("pos_ned_m", pos, (k, 3)),
+        ("vel_ned_m_s", vel, (k, 3)),
+        ("acc_ned_m_s2", acc, (k, 3)),
+        ("yaw_rad", yaw, (k,)),
+    ):
         a = np.asarray(arr, dtype=float)
         if a.shape != shape:
             raise ControlError(f"{name}: expected shape {shape}, got {a.shape}")
@@ -177,15 +181,14 @@ def simulate_closed_loop(
     dpsi = np.zeros(n)
     dpsi[:-1] = np.diff(g_yaw)
     w[:, 10] = dpsi
-    G = tall_matmul(w, np.ascontiguousarray(cl.Mw.T))             # (n, n_s + 3)
+    G = tall_matmul(w, np.ascontiguousarray(cl.Mw.T))  # (n, n_s + 3)
 
     s0 = _initial_closed_loop_state(cl, x0, w[0], g_pos[0], g_yaw[0])
     states = run_modal(cl, G, dpsi, s0)
     if states is None:
         states = run_recursion(cl.Ms, G, dpsi, s0)
 
-    delta = (tall_matmul(states, np.ascontiguousarray(cl.Ks.T))
-             + tall_matmul(w, np.ascontiguousarray(cl.Kw.T)))
+    delta = tall_matmul(states, np.ascontiguousarray(cl.Ks.T)) + tall_matmul(w, np.ascontiguousarray(cl.Kw.T))
     e_b = states[:, S_E]
     err = np.sqrt(np.sum(e_b * e_b, axis=1))
     p = np.empty((n, 3))
@@ -207,7 +210,7 @@ def _initial_closed_loop_state(cl: ClosedLoopModel, x0, w0: np.ndarray, pos0: np
     """Closed-loop state at the first control period: trimmed on the reference, or from ``x0``."""
     s0 = np.zeros(cl.n_s)
     ref8 = np.array([w0[0], w0[1], w0[2], w0[3], w0[4], w0[5], w0[6], 0.0])
-    trim = cl.Nx @ ref8                                  # [x_ff (14), delta_ff (4)]
+    trim = cl.Nx @ ref8  # [x_ff (14), delta_ff (4)]
     if x0 is None:
         s0[S_X] = trim[:N_LQI_STATES]
         s0[IDX_PSI] = 0.0
@@ -227,4 +230,3 @@ def _initial_closed_loop_state(cl: ClosedLoopModel, x0, w0: np.ndarray, pos0: np
     if cl.n_s > N_S:
         s0[N_S:] = x0[17:21] if x0.size == 21 else 0.0
     return s0
-

@@ -20,13 +20,12 @@ from heli_model.control.settings import N_LQI_STATES, ControllerSettings
 from heli_model.dynamics import IDX_PSI
 from heli_model.model import N_INPUTS, HeliModel
 
-
 # closed-loop state layout of the fast prediction
-S_X = slice(0, 14)        # x14 with psi replaced by psi - psi_ref
-S_E = slice(14, 17)       # position error p_ref - p in reference-heading axes
-S_Z = slice(17, 21)       # LQI integrators
-S_I = slice(21, 24)       # PID integrators in reference-heading axes
-N_S = 24                  # then, with servo lag, the 4 actuator positions (24:28)
+S_X = slice(0, 14)  # x14 with psi replaced by psi - psi_ref
+S_E = slice(14, 17)  # position error p_ref - p in reference-heading axes
+S_Z = slice(17, 21)  # LQI integrators
+S_I = slice(21, 24)  # PID integrators in reference-heading axes
+N_S = 24  # then, with servo lag, the 4 actuator positions (24:28)
 # exogenous input per control period: [acc_b (3), r_ref, vff_b (3), dp_ref_b (3), dpsi_ref]
 N_W = 11
 
@@ -34,15 +33,15 @@ N_W = 11
 class ClosedLoopModel(NamedTuple):
     """The closed loop ``s+ = Ms s + Mw w`` of one design, with its modal form (cached per model and settings)."""
 
-    Ms: np.ndarray      # (n_s + 3, n_s) rows: x14+, e + dp - I, z+, zeta+, act+, I (position increment)
-    Mw: np.ndarray      # (n_s + 3, 11)
-    Ks: np.ndarray      # (4, n_s) delta = Ks s + Kw w
-    Kw: np.ndarray      # (4, 11)
-    Nx: np.ndarray      # (18, 8) trim map (for the initial state)
+    Ms: np.ndarray  # (n_s + 3, n_s) rows: x14+, e + dp - I, z+, zeta+, act+, I (position increment)
+    Mw: np.ndarray  # (n_s + 3, 11)
+    Ks: np.ndarray  # (4, n_s) delta = Ks s + Kw w
+    Kw: np.ndarray  # (4, 11)
+    Nx: np.ndarray  # (18, 8) trim map (for the initial state)
     dt_s: float
-    n_s: int                      # closed-loop state size: 24, or 28 with servo lag
-    modal: tuple | None           # modal form of Ms[:n_s, :n_s] (None: ill-conditioned)
-    pid_integral: bool            # PID integrators active (Ki > 0)
+    n_s: int  # closed-loop state size: 24, or 28 with servo lag
+    modal: tuple | None  # modal form of Ms[:n_s, :n_s] (None: ill-conditioned)
+    pid_integral: bool  # PID integrators active (Ki > 0)
 
 
 def _integral_zoh(A: np.ndarray, B: np.ndarray, C: np.ndarray, dt_s: float):
@@ -51,10 +50,10 @@ def _integral_zoh(A: np.ndarray, B: np.ndarray, C: np.ndarray, dt_s: float):
     p = C.shape[0]
     blk = np.zeros((n + m + p, n + m + p))
     blk[:n, :n] = A
-    blk[:n, n:n + m] = B
-    blk[n + m:, :n] = C
+    blk[:n, n : n + m] = B
+    blk[n + m :, :n] = C
     E = scipy.linalg.expm(blk * dt_s)
-    return E[:n, :n], E[:n, n:n + m], E[n + m:, :n], E[n + m:, n:n + m]
+    return E[:n, :n], E[:n, n : n + m], E[n + m :, :n], E[n + m :, n : n + m]
 
 
 def _plant_with_servos(model: HeliModel) -> tuple[np.ndarray, np.ndarray, int]:
@@ -80,7 +79,7 @@ def build_closed_loop(model: HeliModel, settings: ControllerSettings) -> ClosedL
     dt = settings.control_dt_s
     A_p, B_p, n_act = _plant_with_servos(model)
     n_s = N_S + n_act
-    plant = list(range(N_LQI_STATES)) + list(range(N_S, n_s))     # plant states inside s
+    plant = list(range(N_LQI_STATES)) + list(range(N_S, n_s))  # plant states inside s
     C3 = np.zeros((3, A_p.shape[0]))
     C3[0, 0] = C3[1, 1] = C3[2, 2] = 1.0
     Ad, Bd, Jx, Jd = _integral_zoh(A_p, B_p, C3, dt)
@@ -96,8 +95,8 @@ def build_closed_loop(model: HeliModel, settings: ControllerSettings) -> ClosedL
     cmd_w = np.zeros((3, N_W))
     cmd_w[:, 4:7] = np.eye(3) + kd
     Ks = Lcmd @ cmd_s
-    Ks[:, S_X] += L[:, 8:8 + N_LQI_STATES]
-    Ks[:, S_Z] += L[:, 8 + N_LQI_STATES:]
+    Ks[:, S_X] += L[:, 8 : 8 + N_LQI_STATES]
+    Ks[:, S_Z] += L[:, 8 + N_LQI_STATES :]
     Kw = Lcmd @ cmd_w
     Kw[:, 0:4] += L[:, 0:4]
     # open-loop rows as maps of [s, delta, w]; rows n_s:n_s+3 are the position increment I
@@ -108,27 +107,35 @@ def build_closed_loop(model: HeliModel, settings: ControllerSettings) -> ClosedL
     Pw = np.zeros((nrow, N_W))
     Ps[np.ix_(plant, plant)] = Ad
     Pd[plant] = Bd
-    Pw[IDX_PSI, 10] = -1.0                       # psi error loses the reference's turn
+    Pw[IDX_PSI, 10] = -1.0  # psi error loses the reference's turn
     Ps[14:17, S_E] = np.eye(3)
-    Pw[14:17, 7:10] = np.eye(3)                  # e + dp_ref (the increment I is removed below)
+    Pw[14:17, 7:10] = np.eye(3)  # e + dp_ref (the increment I is removed below)
     Ps[inc, plant] = Jx
-    Pd[inc] = Jd                                 # I = integral of body velocity over the step
+    Pd[inc] = Jd  # I = integral of body velocity over the step
     Ps[17:21, S_Z] = np.eye(4)
-    Ps[17:20, 0:3] += dt * np.eye(3)             # z += dt (x[0:3] - cmd_b)
+    Ps[17:20, 0:3] += dt * np.eye(3)  # z += dt (x[0:3] - cmd_b)
     Ps[17:20] -= dt * cmd_s
     Pw[17:20] -= dt * cmd_w
-    Ps[20, IDX_PSI] += dt                        # z_psi += dt psi_err
+    Ps[20, IDX_PSI] += dt  # z_psi += dt psi_err
     Ps[21:24, S_I] = np.eye(3)
-    Ps[21:24, S_E] += dt * np.eye(3)            # zeta += dt e
+    Ps[21:24, S_E] += dt * np.eye(3)  # zeta += dt e
     Ms = Ps + Pd @ Ks
     Mw = Pw + Pd @ Kw
     Ms[14:17] -= Ms[inc]
     Mw[14:17] -= Mw[inc]
     for arr in (Ms, Mw, Ks, Kw):
         arr.setflags(write=False)
-    return ClosedLoopModel(Ms=Ms, Mw=Mw, Ks=Ks, Kw=Kw, Nx=gains.ff_map, dt_s=dt, n_s=n_s,
-                       modal=modal_form(Ms[:n_s, :n_s]),
-                       pid_integral=settings.ki_xy_1_s2 > 0.0 or settings.ki_z_1_s2 > 0.0)
+    return ClosedLoopModel(
+        Ms=Ms,
+        Mw=Mw,
+        Ks=Ks,
+        Kw=Kw,
+        Nx=gains.ff_map,
+        dt_s=dt,
+        n_s=n_s,
+        modal=modal_form(Ms[:n_s, :n_s]),
+        pid_integral=settings.ki_xy_1_s2 > 0.0 or settings.ki_z_1_s2 > 0.0,
+    )
 
 
 def modal_form(Phi: np.ndarray) -> tuple | None:
@@ -149,6 +156,4 @@ def modal_form(Phi: np.ndarray) -> tuple | None:
     if int(np.count_nonzero(upper)) * 2 + int(np.count_nonzero(real)) != lam.size:
         return None
     real_idx = np.nonzero(real)[0]
-    return (real_idx, lam[real].real, Vinv[real].real, V[:, real].real,
-            lam[upper], Vinv[upper], V[:, upper])
-
+    return (real_idx, lam[real].real, Vinv[real].real, V[:, real].real, lam[upper], Vinv[upper], V[:, upper])

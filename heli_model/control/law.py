@@ -45,8 +45,7 @@ import numpy as np
 
 from heli_model.control.lqi import control_law_matrix, design_lqi
 from heli_model.control.outer_loop import heading_reference, limit_command, velocity_command, wrap_pi
-from heli_model.control.settings import N_LQI_STATES, ControlError, ControllerSettings, Setpoint
-from heli_model.control.settings import setpoint_axes
+from heli_model.control.settings import N_LQI_STATES, ControlError, ControllerSettings, Setpoint, setpoint_axes
 from heli_model.dynamics import IDX_PSI, STATE_SIZE, compiled_kernels, hover_state
 from heli_model.model import N_INPUTS, N_STATES, HeliModel
 
@@ -66,6 +65,7 @@ def _control_kernel():
     """:mod:`heli_model.control_kernel`, imported on the first call (it imports numba)."""
     if not _KERNEL:
         from heli_model import control_kernel
+
         _KERNEL.append(control_kernel)
     return _KERNEL[0]
 
@@ -105,9 +105,16 @@ class ControllerState(NamedTuple):
 
 def initial_controller_state() -> ControllerState:
     """All integrators, commands and outputs zero, heading reference 0."""
-    return ControllerState(z=(0.0, 0.0, 0.0, 0.0), pos_integral_m=(0.0, 0.0, 0.0), yaw_ref_rad=0.0,
-                           cmd_prev_ned_m_s=(0.0, 0.0, 0.0), delta=np.zeros(N_INPUTS),
-                           delta_unclipped=np.zeros(N_INPUTS), saturated=False, vel_cmd_ned_m_s=np.zeros(3))
+    return ControllerState(
+        z=(0.0, 0.0, 0.0, 0.0),
+        pos_integral_m=(0.0, 0.0, 0.0),
+        yaw_ref_rad=0.0,
+        cmd_prev_ned_m_s=(0.0, 0.0, 0.0),
+        delta=np.zeros(N_INPUTS),
+        delta_unclipped=np.zeros(N_INPUTS),
+        saturated=False,
+        vel_cmd_ned_m_s=np.zeros(3),
+    )
 
 
 class ControlLaw:
@@ -136,8 +143,9 @@ class ControlLaw:
         self.settings = settings if settings is not None else ControllerSettings()
         s = self.settings
         self.gains = design_lqi(model, s.control_dt_s, s.q_weights, s.r_weights)
-        self.matrix = model.cached(("law", s.control_dt_s, self.gains.q_weights, self.gains.r_weights),
-                                   lambda: control_law_matrix(self.gains))
+        self.matrix = model.cached(
+            ("law", s.control_dt_s, self.gains.q_weights, self.gains.r_weights), lambda: control_law_matrix(self.gains)
+        )
         self._matrix_shape = self.matrix.shape
         self._params_of: ControllerSettings | None = None  # the settings self._params packs
         self._params: np.ndarray | None = None
@@ -150,10 +158,16 @@ class ControlLaw:
         c, s = math.cos(yaw), math.sin(yaw)
         u, v, w = float(x[0]), float(x[1]), float(x[2])
         cmd_prev = (c * u - s * v, s * u + c * v, w)
-        return ControllerState(z=(0.0, 0.0, 0.0, 0.0), pos_integral_m=(0.0, 0.0, 0.0), yaw_ref_rad=yaw,
-                               cmd_prev_ned_m_s=cmd_prev, delta=np.zeros(N_INPUTS),
-                               delta_unclipped=np.zeros(N_INPUTS), saturated=False,
-                               vel_cmd_ned_m_s=np.array(cmd_prev))
+        return ControllerState(
+            z=(0.0, 0.0, 0.0, 0.0),
+            pos_integral_m=(0.0, 0.0, 0.0),
+            yaw_ref_rad=yaw,
+            cmd_prev_ned_m_s=cmd_prev,
+            delta=np.zeros(N_INPUTS),
+            delta_unclipped=np.zeros(N_INPUTS),
+            saturated=False,
+            vel_cmd_ned_m_s=np.array(cmd_prev),
+        )
 
     def step(self, state: ControllerState, x: np.ndarray, setpoint: Setpoint, dt_s: float) -> ControllerState:
         """One control period: controller state, vehicle state and setpoint in, next controller state out.
@@ -211,20 +225,33 @@ class ControlLaw:
             None where :meth:`step` would not run its kernel (no compiled kernels, settings the
             kernel cannot read, a state or setpoint of another kind): the caller steps instead.
         """
-        if compiled_kernels(self._matrix_shape) is None or type(x) is not np.ndarray or x.dtype is not _FLOAT64 \
-                or x.ndim != 1 or x.shape[0] < STATE_SIZE:
+        if (
+            compiled_kernels(self._matrix_shape) is None
+            or type(x) is not np.ndarray
+            or x.dtype is not _FLOAT64
+            or x.ndim != 1
+            or x.shape[0] < STATE_SIZE
+        ):
             return None
         params = self._params if self._params_of is self.settings else self._pack_settings()
         if params is None:
             return None
         try:
-            sp = np.array([*_kernel_axes(setpoint.pos_ned_m, "pos_ned_m"), *_kernel_axes(setpoint.vel_ned_m_s, "vel_ned_m_s"),
-                           *_kernel_axes(setpoint.acc_ned_m_s2, "acc_ned_m_s2"),
-                           setpoint.yaw_rad is not None, 0.0 if setpoint.yaw_rad is None else float(setpoint.yaw_rad),
-                           setpoint.yaw_rate_rad_s is not None,
-                           0.0 if setpoint.yaw_rate_rad_s is None else float(setpoint.yaw_rate_rad_s)], dtype=float)
-            controller = np.array([*state.z, *state.pos_integral_m, state.yaw_ref_rad, *state.cmd_prev_ned_m_s],
-                                  dtype=float)
+            sp = np.array(
+                [
+                    *_kernel_axes(setpoint.pos_ned_m, "pos_ned_m"),
+                    *_kernel_axes(setpoint.vel_ned_m_s, "vel_ned_m_s"),
+                    *_kernel_axes(setpoint.acc_ned_m_s2, "acc_ned_m_s2"),
+                    setpoint.yaw_rad is not None,
+                    0.0 if setpoint.yaw_rad is None else float(setpoint.yaw_rad),
+                    setpoint.yaw_rate_rad_s is not None,
+                    0.0 if setpoint.yaw_rate_rad_s is None else float(setpoint.yaw_rate_rad_s),
+                ],
+                dtype=float,
+            )
+            controller = np.array(
+                [*state.z, *state.pos_integral_m, state.yaw_ref_rad, *state.cmd_prev_ned_m_s], dtype=float
+            )
         except Exception:  # noqa: BLE001 - an argument of another kind: step's own checks say what is wrong
             return None
         if controller.shape != (11,):
@@ -257,9 +284,30 @@ class ControlLaw:
         delta, raw = np.empty(N_INPUTS), np.empty(N_INPUTS)
         kernel = None if compiled_kernels(self._matrix_shape) is None else _control_kernel()
         saturated, z = (law_output if kernel is None else kernel.law_output)(
-            self.matrix, x, c, s, cmd0, cmd1, cmd2, vel_ff[0], vel_ff[1], acc_ff[0], acc_ff[1], acc_ff[2], rate_ref,
-            psi_err, z0, z1, z2, z3, float(dt_s), not (limited[0] or limited[1] or limited[2]), not yaw_limited,
-            delta, raw)
+            self.matrix,
+            x,
+            c,
+            s,
+            cmd0,
+            cmd1,
+            cmd2,
+            vel_ff[0],
+            vel_ff[1],
+            acc_ff[0],
+            acc_ff[1],
+            acc_ff[2],
+            rate_ref,
+            psi_err,
+            z0,
+            z1,
+            z2,
+            z3,
+            float(dt_s),
+            not (limited[0] or limited[1] or limited[2]),
+            not yaw_limited,
+            delta,
+            raw,
+        )
         if saturated:
             z = state.z
         else:  # the PID position integrators of the position-controlled axes whose command was not limited
@@ -277,8 +325,9 @@ class ControlLaw:
         return ControllerState(z, tuple(pos_integral), yaw_ref, cmd, delta, raw, saturated, np.array(cmd))
 
 
-def _step_compiled(kernel, params: np.ndarray, L: np.ndarray, state: ControllerState, x: np.ndarray,
-                   sp: Setpoint, dt_s: float) -> ControllerState | None:
+def _step_compiled(
+    kernel, params: np.ndarray, L: np.ndarray, state: ControllerState, x: np.ndarray, sp: Setpoint, dt_s: float
+) -> ControllerState | None:
     """:meth:`ControlLaw.step` in one call of :func:`heli_model.control_kernel.law_step`; None where the Python code must run.
 
     The setpoint and the controller state go in as floats (NaN: an axis not commanded), the
@@ -289,12 +338,21 @@ def _step_compiled(kernel, params: np.ndarray, L: np.ndarray, state: ControllerS
     try:
         pos, vel, acc, yaw, rate = sp.pos_ned_m, sp.vel_ned_m_s, sp.acc_ned_m_s2, sp.yaw_rad, sp.yaw_rate_rad_s
         # float arrays of 3 (the fast-time flights' setpoints) inline, anything else through _kernel_axes
-        p0, p1, p2 = (pos.tolist() if type(pos) is _NDARRAY and pos.dtype is _FLOAT64 and pos.shape == _SHAPE3
-                      else _kernel_axes(pos, "pos_ned_m"))
-        v0, v1, v2 = (vel.tolist() if type(vel) is _NDARRAY and vel.dtype is _FLOAT64 and vel.shape == _SHAPE3
-                      else _kernel_axes(vel, "vel_ned_m_s"))
-        a0, a1, a2 = (acc.tolist() if type(acc) is _NDARRAY and acc.dtype is _FLOAT64 and acc.shape == _SHAPE3
-                      else _kernel_axes(acc, "acc_ned_m_s2"))
+        p0, p1, p2 = (
+            pos.tolist()
+            if type(pos) is _NDARRAY and pos.dtype is _FLOAT64 and pos.shape == _SHAPE3
+            else _kernel_axes(pos, "pos_ned_m")
+        )
+        v0, v1, v2 = (
+            vel.tolist()
+            if type(vel) is _NDARRAY and vel.dtype is _FLOAT64 and vel.shape == _SHAPE3
+            else _kernel_axes(vel, "vel_ned_m_s")
+        )
+        a0, a1, a2 = (
+            acc.tolist()
+            if type(acc) is _NDARRAY and acc.dtype is _FLOAT64 and acc.shape == _SHAPE3
+            else _kernel_axes(acc, "acc_ned_m_s2")
+        )
         has_yaw, has_rate = yaw is not None, rate is not None
         yaw = float(yaw) if yaw is not None else 0.0
         rate = float(rate) if rate is not None else 0.0
@@ -303,8 +361,38 @@ def _step_compiled(kernel, params: np.ndarray, L: np.ndarray, state: ControllerS
         prev0, prev1, prev2 = state.cmd_prev_ned_m_s
         delta, raw, vel_cmd = _empty(N_INPUTS), _empty(N_INPUTS), _empty(3)
         status, saturated, z, integral, yaw_ref, cmd = kernel.law_step(
-            params, L, x, p0, p1, p2, v0, v1, v2, a0, a1, a2, has_yaw, yaw, has_rate, rate, z0, z1, z2, z3,
-            i0, i1, i2, state.yaw_ref_rad, prev0, prev1, prev2, dt_s, delta, raw, vel_cmd)
+            params,
+            L,
+            x,
+            p0,
+            p1,
+            p2,
+            v0,
+            v1,
+            v2,
+            a0,
+            a1,
+            a2,
+            has_yaw,
+            yaw,
+            has_rate,
+            rate,
+            z0,
+            z1,
+            z2,
+            z3,
+            i0,
+            i1,
+            i2,
+            state.yaw_ref_rad,
+            prev0,
+            prev1,
+            prev2,
+            dt_s,
+            delta,
+            raw,
+            vel_cmd,
+        )
     except Exception:  # noqa: BLE001 - an argument of another kind: the Python code says what is wrong
         return None
     if status != kernel.OK:
@@ -324,10 +412,31 @@ def _kernel_axes(v, name: str) -> tuple[float, float, float]:
     return _NOT_COMMANDED if axes is None else axes
 
 
-def law_output(L: np.ndarray, x: np.ndarray, c: float, s: float, cmd0: float, cmd1: float, cmd2: float,
-               vf0: float, vf1: float, a0: float, a1: float, a2: float, rate_ref: float, psi_err: float,
-               z0: float, z1: float, z2: float, z3: float, dt_s: float, integrate_vel: bool, integrate_yaw: bool,
-               delta: np.ndarray, raw: np.ndarray) -> tuple[bool, tuple]:
+def law_output(
+    L: np.ndarray,
+    x: np.ndarray,
+    c: float,
+    s: float,
+    cmd0: float,
+    cmd1: float,
+    cmd2: float,
+    vf0: float,
+    vf1: float,
+    a0: float,
+    a1: float,
+    a2: float,
+    rate_ref: float,
+    psi_err: float,
+    z0: float,
+    z1: float,
+    z2: float,
+    z3: float,
+    dt_s: float,
+    integrate_vel: bool,
+    integrate_yaw: bool,
+    delta: np.ndarray,
+    raw: np.ndarray,
+) -> tuple[bool, tuple]:
     """The linear part of a control period in numpy: references in body axes, ``L @ vec``, clip, integrators.
 
     The reference implementation of :func:`heli_model.control_kernel.law_output` (same arguments,
@@ -344,9 +453,9 @@ def law_output(L: np.ndarray, x: np.ndarray, c: float, s: float, cmd0: float, cm
     ayb = -s * a0 + c * a1 - rate_ref * vfx
     vec = np.empty(L.shape[1])
     vec[0:8] = (axb, ayb, a2, rate_ref, ub, vb, wb, 0.0)
-    vec[8:8 + N_STATES] = x[:N_STATES]
+    vec[8 : 8 + N_STATES] = x[:N_STATES]
     vec[8 + N_STATES] = psi_err
-    vec[8 + N_LQI_STATES:] = (z0, z1, z2, z3)
+    vec[8 + N_LQI_STATES :] = (z0, z1, z2, z3)
     raw[:] = L @ vec
     unclipped = raw.tolist()
     delta[:] = [(-1.0 if d < -1.0 else (1.0 if d > 1.0 else d)) for d in unclipped]

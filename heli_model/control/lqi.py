@@ -150,8 +150,9 @@ def design_lqi(model: HeliModel, dt_s: float, q_weights, r_weights) -> LqiGains:
     return model.cached(("lqi", dt_s, q, r), lambda: _design(model, dt_s, q, r))
 
 
-def dlqr_integral(Ad: np.ndarray, Bd: np.ndarray, integral_action: np.ndarray, Q: np.ndarray,
-                  R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def dlqr_integral(
+    Ad: np.ndarray, Bd: np.ndarray, integral_action: np.ndarray, Q: np.ndarray, R: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The discrete LQR of ``(Ad, Bd)`` augmented with integrators ``z+ = z + integral_action x``.
 
     The operations of python-control's ``dlqr(sys, Q, R, integral_action=...)`` (0.10, its
@@ -175,8 +176,7 @@ def dlqr_integral(Ad: np.ndarray, Bd: np.ndarray, integral_action: np.ndarray, Q
         The closed-loop eigenvalues.
     """
     n, m, p = Ad.shape[0], Bd.shape[1], integral_action.shape[0]
-    A = np.block([[np.array(Ad, ndmin=2, dtype=float), np.zeros((n, p))],
-                  [integral_action, np.eye(p)]])
+    A = np.block([[np.array(Ad, ndmin=2, dtype=float), np.zeros((n, p))], [integral_action, np.eye(p)]])
     B = np.vstack([np.array(Bd, ndmin=2, dtype=float), np.zeros((p, m))])
     S = np.zeros((n + p, m))
     X = scipy.linalg.solve_discrete_are(A, B, Q, R, e=None, s=S)
@@ -188,19 +188,30 @@ def _design(model: HeliModel, dt_s: float, q: tuple, r: tuple) -> LqiGains:
     A14, B14 = model_14(model)
     Ad, Bd = zoh(A14, B14, dt_s)
     C = tracked_output_matrix()
-    K, E = dlqr_integral(Ad, Bd, C * dt_s, np.array(np.diag(q), ndmin=2, dtype=float),
-                         np.array(np.diag(r), ndmin=2, dtype=float))
+    K, E = dlqr_integral(
+        Ad, Bd, C * dt_s, np.array(np.diag(q), ndmin=2, dtype=float), np.array(np.diag(r), ndmin=2, dtype=float)
+    )
     K = np.asarray(K, dtype=float)
     E = np.asarray(E)
     if np.max(np.abs(E)) >= 1.0:
-        raise ControlError("q_weights: the LQI design is not stabilising "
-                           "(closed-loop eigenvalue outside the unit circle)")
+        raise ControlError(
+            "q_weights: the LQI design is not stabilising (closed-loop eigenvalue outside the unit circle)"
+        )
     for arr in (K, Ad, Bd, C):
         arr.setflags(write=False)
     log.debug("LQI designed: dt %.4f s, max |eig| %.4f", dt_s, float(np.max(np.abs(E))))
     return LqiGains(
-        K=K, Kx=K[:, :N_LQI_STATES], Kz=K[:, N_LQI_STATES:], Ad=Ad, Bd=Bd, C=C, dt_s=dt_s,
-        closed_loop_eigenvalues=E, ff_map=feedforward_map(model), q_weights=q, r_weights=r,
+        K=K,
+        Kx=K[:, :N_LQI_STATES],
+        Kz=K[:, N_LQI_STATES:],
+        Ad=Ad,
+        Bd=Bd,
+        C=C,
+        dt_s=dt_s,
+        closed_loop_eigenvalues=E,
+        ff_map=feedforward_map(model),
+        q_weights=q,
+        r_weights=r,
     )
 
 
@@ -212,4 +223,3 @@ def control_law_matrix(gains: LqiGains) -> np.ndarray:
     L = np.hstack([G, -gains.Kx, -gains.Kz])
     L.setflags(write=False)
     return L
-

@@ -32,7 +32,7 @@ def tall_matmul(a: np.ndarray, b: np.ndarray, rows: int = 256) -> np.ndarray:
         return a @ b
     out = np.empty((n, b.shape[1]))
     for i in range(0, n, rows):
-        np.matmul(a[i:i + rows], b, out=out[i:i + rows])
+        np.matmul(a[i : i + rows], b, out=out[i : i + rows])
     return out
 
 
@@ -46,8 +46,9 @@ def _filter_modes(h_r: np.ndarray, h_c: np.ndarray, real_lam, cplx_lam) -> None:
         h_c[j] = lfilter([1.0], [1.0, -lam], h_c[j])
 
 
-def run_modal(cl: ClosedLoopModel, G: np.ndarray, dpsi: np.ndarray, s0: np.ndarray,
-               max_iterations: int = 12, tol_m: float = 1e-7) -> np.ndarray | None:
+def run_modal(
+    cl: ClosedLoopModel, G: np.ndarray, dpsi: np.ndarray, s0: np.ndarray, max_iterations: int = 12, tol_m: float = 1e-7
+) -> np.ndarray | None:
     """The recursion solved in modal form, each mode by a C-level IIR filter (``lfilter``).
 
     The non-rotating part is linear time-invariant, ``s+ = Phi s + g``; with
@@ -72,18 +73,20 @@ def run_modal(cl: ClosedLoopModel, G: np.ndarray, dpsi: np.ndarray, s0: np.ndarr
     drive[0] = s0
     drive[1:] = G[:-1, :n_s]
     # only real matrix products (a real-by-complex product is many times slower in numpy)
-    h_r = np.ascontiguousarray(tall_matmul(drive, np.ascontiguousarray(W_r.T)).T)       # (n_real, n)
-    h_c = np.ascontiguousarray(tall_matmul(drive, np.ascontiguousarray(W_c.real.T)).T
-                               + 1j * tall_matmul(drive, np.ascontiguousarray(W_c.imag.T)).T)
+    h_r = np.ascontiguousarray(tall_matmul(drive, np.ascontiguousarray(W_r.T)).T)  # (n_real, n)
+    h_c = np.ascontiguousarray(
+        tall_matmul(drive, np.ascontiguousarray(W_c.real.T)).T
+        + 1j * tall_matmul(drive, np.ascontiguousarray(W_c.imag.T)).T
+    )
     _filter_modes(h_r, h_c, real_lam, cplx_lam)
     q_r, q_c = h_r, h_c
     if turning:
         # outputs the correction needs: e_x, e_y (rows 14, 15) and I_x, I_y (rows n_s, n_s + 1)
         cols = [14, 15, n_s, n_s + 1]
-        Phi4 = cl.Ms[cols].T                                                 # (n_s, 4)
-        out_r = V_r.T @ Phi4                                                 # (n_real, 4)
-        out_re, out_im = 2.0 * V_c.real.T @ Phi4, -2.0 * V_c.imag.T @ Phi4   # (n_pairs, 4)
-        in_r = np.ascontiguousarray(W_r[:, 14:16])                           # response to e_x, e_y
+        Phi4 = cl.Ms[cols].T  # (n_s, 4)
+        out_r = V_r.T @ Phi4  # (n_real, 4)
+        out_re, out_im = 2.0 * V_c.real.T @ Phi4, -2.0 * V_c.imag.T @ Phi4  # (n_pairs, 4)
+        in_r = np.ascontiguousarray(W_r[:, 14:16])  # response to e_x, e_y
         in_c_re, in_c_im = np.ascontiguousarray(W_c[:, 14:16].real), np.ascontiguousarray(W_c[:, 14:16].imag)
         G4 = G[:, cols]
         trig = (np.cos(dpsi) - 1.0, np.sin(dpsi), np.cos(0.5 * dpsi) - 1.0, np.sin(0.5 * dpsi))
@@ -109,9 +112,11 @@ def run_modal(cl: ClosedLoopModel, G: np.ndarray, dpsi: np.ndarray, s0: np.ndarr
         if not converged:
             log.debug("modal prediction did not converge (last change %.3g m); stepping the recursion", change)
             return None
-    return (tall_matmul(np.ascontiguousarray(q_r.T), np.ascontiguousarray(V_r.T))
-            + tall_matmul(np.ascontiguousarray(q_c.real.T), np.ascontiguousarray(2.0 * V_c.real.T))
-            + tall_matmul(np.ascontiguousarray(q_c.imag.T), np.ascontiguousarray(-2.0 * V_c.imag.T)))
+    return (
+        tall_matmul(np.ascontiguousarray(q_r.T), np.ascontiguousarray(V_r.T))
+        + tall_matmul(np.ascontiguousarray(q_c.real.T), np.ascontiguousarray(2.0 * V_c.real.T))
+        + tall_matmul(np.ascontiguousarray(q_c.imag.T), np.ascontiguousarray(-2.0 * V_c.imag.T))
+    )
 
 
 def _rotation_correction_xy(out4: np.ndarray, trig: tuple) -> np.ndarray:

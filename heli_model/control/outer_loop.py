@@ -10,7 +10,6 @@ import math
 
 from heli_model.control.settings import ControlError, ControllerSettings, Setpoint, setpoint_axes
 
-
 __all__ = ["heading_reference", "limit_command", "proportional_term", "velocity_command", "wrap_pi"]
 
 _TWO_PI = 2.0 * math.pi
@@ -135,7 +134,9 @@ def limit_command(st: ControllerSettings, prev, cmd: list, acc_ff: list, dt_s: f
     return cmd, acc_ff, limited
 
 
-def heading_reference(st: ControllerSettings, yaw_ref_rad: float, sp: Setpoint, dt_s: float) -> tuple[float, float, bool]:
+def heading_reference(
+    st: ControllerSettings, yaw_ref_rad: float, sp: Setpoint, dt_s: float
+) -> tuple[float, float, bool]:
     """Next heading reference (rad), yaw-rate feed-forward (rad/s), and whether it was slewed.
 
     A commanded heading is approached at most at ``max_yaw_rate_rad_s`` (a heading step

@@ -30,15 +30,26 @@ from typing import Any
 
 import numpy as np
 
-from heli_model.dynamics import IDX_PSI
-from heli_model.model import N_INPUTS, N_STATES
 from heli_common.typed_config import from_dict as _typed_from_dict
 from heli_common.typed_config import require_numbers
+from heli_model.dynamics import IDX_PSI
+from heli_model.model import N_INPUTS, N_STATES
 
 __all__ = [
-    "BRYSON_INPUT_MAX", "BRYSON_INTEGRATOR_MAX", "BRYSON_STATE_MAX", "DEFAULT_Q_WEIGHTS", "DEFAULT_R_WEIGHTS",
-    "N_LQI_STATES", "N_TRACKED", "TRACKED_INDICES", "ControlError", "ControllerSettings", "Setpoint",
-    "bryson_weights", "check_weights", "setpoint_axes",
+    "BRYSON_INPUT_MAX",
+    "BRYSON_INTEGRATOR_MAX",
+    "BRYSON_STATE_MAX",
+    "DEFAULT_Q_WEIGHTS",
+    "DEFAULT_R_WEIGHTS",
+    "N_LQI_STATES",
+    "N_TRACKED",
+    "TRACKED_INDICES",
+    "ControlError",
+    "ControllerSettings",
+    "Setpoint",
+    "bryson_weights",
+    "check_weights",
+    "setpoint_axes",
 ]
 
 _FLOAT64 = np.dtype(np.float64)
@@ -50,12 +61,20 @@ N_TRACKED = 4
 TRACKED_INDICES = (0, 1, 2, IDX_PSI)
 
 BRYSON_STATE_MAX: tuple[float, ...] = (
-    0.5, 0.5, 0.5,        # u v w   (m/s)
-    1.0, 1.0, 1.0,        # p q r   (rad/s)
-    0.35, 0.35,           # phi theta (rad)
-    0.1, 0.1,             # a b (rad)
-    1.0, 1.0, 1.0,        # r_fb c d
-    0.2,                  # psi (rad)
+    0.5,
+    0.5,
+    0.5,  # u v w   (m/s)
+    1.0,
+    1.0,
+    1.0,  # p q r   (rad/s)
+    0.35,
+    0.35,  # phi theta (rad)
+    0.1,
+    0.1,  # a b (rad)
+    1.0,
+    1.0,
+    1.0,  # r_fb c d
+    0.2,  # psi (rad)
 )
 BRYSON_INTEGRATOR_MAX: tuple[float, ...] = (0.3, 0.3, 0.3, 0.2)
 BRYSON_INPUT_MAX: tuple[float, ...] = (0.4, 0.4, 0.4, 0.4)
@@ -130,16 +149,23 @@ class ControllerSettings:
     max_yaw_rate_rad_s: float = 1.5
 
     def __post_init__(self) -> None:
-        positive = ("control_dt_s", "max_speed_xy_m_s", "max_climb_m_s", "max_descent_m_s",
-                    "max_accel_m_s2", "max_yaw_rate_rad_s", "cmd_accel_xy_m_s2", "cmd_accel_z_m_s2")
-        non_negative = ("kp_xy_1_s", "ki_xy_1_s2", "kd_xy", "kp_z_1_s", "ki_z_1_s2", "kd_z",
-                        "pos_integral_max_m_s")
+        positive = (
+            "control_dt_s",
+            "max_speed_xy_m_s",
+            "max_climb_m_s",
+            "max_descent_m_s",
+            "max_accel_m_s2",
+            "max_yaw_rate_rad_s",
+            "cmd_accel_xy_m_s2",
+            "cmd_accel_z_m_s2",
+        )
+        non_negative = ("kp_xy_1_s", "ki_xy_1_s2", "kd_xy", "kp_z_1_s", "ki_z_1_s2", "kd_z", "pos_integral_max_m_s")
         require_numbers(ControlError, "controller", self, positive=positive, non_negative=non_negative)
         check_weights(self.q_weights, N_LQI_STATES + N_TRACKED, "q_weights", allow_zero=True)
         check_weights(self.r_weights, N_INPUTS, "r_weights", allow_zero=False)
 
     @classmethod
-    def from_dict(cls, data: Any, prefix: str = "") -> "ControllerSettings":
+    def from_dict(cls, data: Any, prefix: str = "") -> ControllerSettings:
         """Build from a (TOML) table; wrong keys or values raise :class:`ControlError` naming them."""
         return _typed_from_dict(cls, data, prefix, ControlError)
 

@@ -14,11 +14,11 @@ import math
 import numpy as np
 
 from heli_model import dynamics
-from sim_vehicle.config import VehicleSettings
 from heli_model.control import ControlLaw, Setpoint, initial_controller_state
 from heli_model.model import HeliModel
 from heli_model.vehicle_update import VehicleCommand, VehicleState, VehicleUpdate
 from heli_model.wind import WindModel, WindSettings
+from sim_vehicle.config import VehicleSettings
 
 
 class Airframe:
@@ -53,8 +53,11 @@ class Airframe:
     def __init__(self, model: HeliModel, settings: VehicleSettings, yaw_deg: float, rng: np.random.Generator) -> None:
         self.model = model
         self._rng = rng
-        self.state = VehicleState(x=dynamics.hover_state(model, (0.0, 0.0, 0.0), math.radians(yaw_deg)),
-                                  delta=np.zeros(4), controller=initial_controller_state())
+        self.state = VehicleState(
+            x=dynamics.hover_state(model, (0.0, 0.0, 0.0), math.radians(yaw_deg)),
+            delta=np.zeros(4),
+            controller=initial_controller_state(),
+        )
         self._build(settings, None)
 
     def apply_settings(self, settings: VehicleSettings, old: VehicleSettings) -> None:

@@ -12,10 +12,10 @@ vehicle (the mode's mission start, the controller reset) is the
 from __future__ import annotations
 
 import logging
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 from heli_common.mavlink_ids import mavlink
-
 from sim_vehicle import rsc
 from sim_vehicle.config import VehicleSettings
 

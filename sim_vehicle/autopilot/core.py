@@ -29,11 +29,13 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
 from heli_model import dynamics
+from heli_model.control import Setpoint
+from heli_model.model import HeliModel
 from sim_vehicle.autopilot.airframe import Airframe
 from sim_vehicle.autopilot.arming import Arming
 from sim_vehicle.autopilot.fence import Geofence
@@ -49,15 +51,24 @@ from sim_vehicle.autopilot.mode_rtl import ModeRTL
 from sim_vehicle.autopilot.mode_stabilize import ModeAltHold, ModeStabilize
 from sim_vehicle.autopilot.navigation import Navigation
 from sim_vehicle.config import VehicleSettings
-from heli_model.control import Setpoint
 from sim_vehicle.frames import Frames
-from heli_model.model import HeliModel
 
 log = logging.getLogger(__name__)
 
 #: The modes this vehicle flies, number -> mode object.
-MODES: dict[int, Mode] = {m.number: m for m in (ModeStabilize(), ModeAltHold(), ModeAuto(), ModeGuided(), ModeLoiter(),
-                                                ModeRTL(), ModeLand(), ModeBrake())}
+MODES: dict[int, Mode] = {
+    m.number: m
+    for m in (
+        ModeStabilize(),
+        ModeAltHold(),
+        ModeAuto(),
+        ModeGuided(),
+        ModeLoiter(),
+        ModeRTL(),
+        ModeLand(),
+        ModeBrake(),
+    )
+}
 if set(MODES) != set(MODE_NAMES):
     raise RuntimeError("every mode of MODE_NAMES needs its mode object")
 
@@ -100,8 +111,14 @@ class Autopilot:
         ``landed``, ``taking_off``.
     """
 
-    def __init__(self, model: HeliModel, settings: VehicleSettings, home_lla: Sequence[float],
-                 rng: np.random.Generator, origin_lla: Sequence[float] | None = None) -> None:
+    def __init__(
+        self,
+        model: HeliModel,
+        settings: VehicleSettings,
+        home_lla: Sequence[float],
+        rng: np.random.Generator,
+        origin_lla: Sequence[float] | None = None,
+    ) -> None:
         lat, lon, alt, yaw_deg = (float(v) for v in home_lla)
         self.frames = Frames((lat, lon, alt), origin_lla)
         self.frame = self.frames.ground
@@ -117,8 +134,9 @@ class Autopilot:
         self.navigation = Navigation(self.airframe, self.frames, current_settings, emit, math.radians(yaw_deg))
         self.mission = Mission(self, self.navigation, self.frames, current_settings, emit)
         self.fence = Geofence(self, self.frames, self.mission.item_target_ned_m, current_settings, emit)
-        self.ground = GroundContact(self.airframe, self.navigation, self.arming, self, current_settings,
-                                    self.mission.item_flown)
+        self.ground = GroundContact(
+            self.airframe, self.navigation, self.arming, self, current_settings, self.mission.item_flown
+        )
 
     def apply_settings(self, settings: VehicleSettings) -> None:
         """Use a new settings tree (after PARAM_SET): controller redesigned if its weights changed."""
@@ -294,8 +312,13 @@ class Autopilot:
             return False, f"home {lat_deg!r}, {lon_deg!r} is not a valid position"
         self.frames.set_home(lat_deg, lon_deg, alt_m)
         home = self.frames.home_local_ned_m
-        log.info("home set to %.7f, %.7f, %.2f m AMSL (N %.1f E %.1f D %.1f m from the EKF origin)", lat_deg, lon_deg,
-                 alt_m, *home)
+        log.info(
+            "home set to %.7f, %.7f, %.2f m AMSL (N %.1f E %.1f D %.1f m from the EKF origin)",
+            lat_deg,
+            lon_deg,
+            alt_m,
+            *home,
+        )
         return True, ""
 
     # ------------------------------------------------------------------ simulation

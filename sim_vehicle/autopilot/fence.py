@@ -11,13 +11,13 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from typing import Callable, Protocol, Sequence
+from collections.abc import Callable, Sequence
+from typing import Protocol
 
 import numpy as np
 
 from heli_common.geometry import point_in_polygon
 from heli_common.mavlink_ids import mavlink
-
 from sim_vehicle.autopilot.mode import BRAKE, LAND, RTL
 from sim_vehicle.config import VehicleSettings
 from sim_vehicle.frames import Frames
@@ -53,8 +53,9 @@ class Fence:
     @property
     def empty(self) -> bool:
         """True when no polygon or circle is defined."""
-        return not (self.inclusion_polygons or self.exclusion_polygons or self.inclusion_circles
-                    or self.exclusion_circles)
+        return not (
+            self.inclusion_polygons or self.exclusion_polygons or self.inclusion_circles or self.exclusion_circles
+        )
 
 
 def fence_breach(fence: Fence, pos_ned_m: np.ndarray, alt_max_m: float) -> str | None:
@@ -100,7 +101,9 @@ def fence_from_items(items: Sequence[MissionItem], target_ned_m: Callable[[Missi
     return Fence(
         tuple(np.array(p) for p in polygons[CMD_FENCE_POLYGON_INCLUSION] if len(p) >= 3),
         tuple(np.array(p) for p in polygons[CMD_FENCE_POLYGON_EXCLUSION] if len(p) >= 3),
-        tuple(circles[CMD_FENCE_CIRCLE_INCLUSION]), tuple(circles[CMD_FENCE_CIRCLE_EXCLUSION]))
+        tuple(circles[CMD_FENCE_CIRCLE_INCLUSION]),
+        tuple(circles[CMD_FENCE_CIRCLE_EXCLUSION]),
+    )
 
 
 class Host(Protocol):
@@ -146,8 +149,14 @@ class Geofence:
         Why the fence is breached now (None inside).
     """
 
-    def __init__(self, host: Host, frames: Frames, item_target_ned_m: Callable[[MissionItem], np.ndarray],
-                 settings: Callable[[], VehicleSettings], emit: Callable[[tuple], None]) -> None:
+    def __init__(
+        self,
+        host: Host,
+        frames: Frames,
+        item_target_ned_m: Callable[[MissionItem], np.ndarray],
+        settings: Callable[[], VehicleSettings],
+        emit: Callable[[tuple], None],
+    ) -> None:
         self._host = host
         self._frames = frames
         self._item_target_ned_m = item_target_ned_m
@@ -160,9 +169,13 @@ class Geofence:
         """New fence list (polygon vertices grouped by their vertex count, circles)."""
         self.area = fence_from_items(items, self._item_target_ned_m)
         self.breached = None
-        log.info("fence: %d inclusion / %d exclusion polygons, %d / %d circles", len(self.area.inclusion_polygons),
-                 len(self.area.exclusion_polygons), len(self.area.inclusion_circles),
-                 len(self.area.exclusion_circles))
+        log.info(
+            "fence: %d inclusion / %d exclusion polygons, %d / %d circles",
+            len(self.area.inclusion_polygons),
+            len(self.area.exclusion_polygons),
+            len(self.area.inclusion_circles),
+            len(self.area.exclusion_circles),
+        )
 
     def check(self) -> None:
         """Every control tick while armed: a new breach switches to the FENCE_ACTION mode (not from RTL or LAND)."""

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
@@ -109,8 +110,15 @@ class GroundContact:
         True while on the ground.
     """
 
-    def __init__(self, body: Body, stages: Stages, rotor: Rotor, host: Host, settings: Callable[[], VehicleSettings],
-                 on_land_stage_done: Callable[[], None]) -> None:
+    def __init__(
+        self,
+        body: Body,
+        stages: Stages,
+        rotor: Rotor,
+        host: Host,
+        settings: Callable[[], VehicleSettings],
+        on_land_stage_done: Callable[[], None],
+    ) -> None:
         self._body = body
         self._stages = stages
         self._rotor = rotor

@@ -32,8 +32,16 @@ class Leg:
         Simulated time at which the leg starts.
     """
 
-    def __init__(self, start_ned_m: Any, end_ned_m: Any, speed_xy_m_s: float, speed_up_m_s: float,
-                 speed_down_m_s: float, accel_m_s2: float, t0_s: float) -> None:
+    def __init__(
+        self,
+        start_ned_m: Any,
+        end_ned_m: Any,
+        speed_xy_m_s: float,
+        speed_up_m_s: float,
+        speed_down_m_s: float,
+        accel_m_s2: float,
+        t0_s: float,
+    ) -> None:
         self.start = np.asarray(start_ned_m, dtype=float).copy()
         self.end = np.asarray(end_ned_m, dtype=float).copy()
         delta = self.end - self.start

@@ -14,20 +14,18 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Callable, Protocol, Sequence
+from collections.abc import Callable, Sequence
+from typing import Protocol
 
 import numpy as np
 
 from heli_common.mavlink_ids import mavlink
-
 from sim_vehicle.autopilot.legs import Stage
 from sim_vehicle.autopilot.mode import AUTO
 from sim_vehicle.autopilot.mode_rtl import rtl_stages
 from sim_vehicle.config import VehicleSettings
 from sim_vehicle.frames import Frames
-from sim_vehicle.mission_store import (
-    FRAME_GLOBAL, FRAME_GLOBAL_INT, FRAME_LOCAL_NED, FRAME_MISSION, MissionItem,
-)
+from sim_vehicle.mission_store import FRAME_GLOBAL, FRAME_GLOBAL_INT, FRAME_LOCAL_NED, FRAME_MISSION, MissionItem
 
 log = logging.getLogger(__name__)
 
@@ -40,8 +38,16 @@ CMD_NAV_LAND = mavlink.MAV_CMD_NAV_LAND
 CMD_NAV_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
 CMD_DO_CHANGE_SPEED = mavlink.MAV_CMD_DO_CHANGE_SPEED
 CMD_NAV_RALLY_POINT = mavlink.MAV_CMD_NAV_RALLY_POINT
-NAV_COMMANDS = frozenset({CMD_NAV_WAYPOINT, CMD_NAV_LOITER_UNLIM, CMD_NAV_LOITER_TIME, CMD_NAV_RETURN_TO_LAUNCH,
-                          CMD_NAV_LAND, CMD_NAV_TAKEOFF})
+NAV_COMMANDS = frozenset(
+    {
+        CMD_NAV_WAYPOINT,
+        CMD_NAV_LOITER_UNLIM,
+        CMD_NAV_LOITER_TIME,
+        CMD_NAV_RETURN_TO_LAUNCH,
+        CMD_NAV_LAND,
+        CMD_NAV_TAKEOFF,
+    }
+)
 
 
 class Host(Protocol):
@@ -119,8 +125,14 @@ class Mission:
         Rally points, m NED in the ground frame.
     """
 
-    def __init__(self, host: Host, navigation: Navigator, frames: Frames, settings: Callable[[], VehicleSettings],
-                 emit: Callable[[tuple], None]) -> None:
+    def __init__(
+        self,
+        host: Host,
+        navigation: Navigator,
+        frames: Frames,
+        settings: Callable[[], VehicleSettings],
+        emit: Callable[[tuple], None],
+    ) -> None:
         self._host = host
         self._nav = navigation
         self._frames = frames

@@ -11,7 +11,6 @@ position like LOITER.
 from __future__ import annotations
 
 from heli_common.mavlink_ids import COPTER_MODES, copter_mode_name
-
 from sim_vehicle.autopilot.legs import Stage
 from sim_vehicle.autopilot.mode_context import ModeContext
 
@@ -25,8 +24,9 @@ RTL = COPTER_MODES["RTL"]
 LAND = COPTER_MODES["LAND"]
 BRAKE = COPTER_MODES["BRAKE"]
 #: the modes this vehicle flies, number -> name
-MODE_NAMES = {number: copter_mode_name(number) for number in
-              (STABILIZE, ALT_HOLD, AUTO, GUIDED, LOITER, RTL, LAND, BRAKE)}
+MODE_NAMES = {
+    number: copter_mode_name(number) for number in (STABILIZE, ALT_HOLD, AUTO, GUIDED, LOITER, RTL, LAND, BRAKE)
+}
 MODE_NUMBERS = {name: number for number, name in MODE_NAMES.items()}
 
 

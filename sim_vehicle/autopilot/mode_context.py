@@ -13,10 +13,10 @@ from typing import Protocol
 
 import numpy as np
 
+from heli_model.control import Setpoint
 from sim_vehicle import rsc
 from sim_vehicle.autopilot.legs import GuidedCommand, Stage
 from sim_vehicle.config import VehicleSettings
-from heli_model.control import Setpoint
 from sim_vehicle.frames import Frames
 
 

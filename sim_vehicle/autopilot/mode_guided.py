@@ -12,12 +12,13 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+
 import numpy as np
 
+from heli_model.control import Setpoint
 from sim_vehicle.autopilot.legs import GuidedCommand, Stage
 from sim_vehicle.autopilot.mode import GUIDED, Mode, QuietRefusal, mode_name
 from sim_vehicle.autopilot.mode_context import ModeContext
-from heli_model.control import Setpoint
 
 log = logging.getLogger(__name__)
 
@@ -53,8 +54,11 @@ class ModeGuided(Mode):
             return False, f"takeoff altitude {alt_m:g} m is not above the vehicle"
         rotor = ap.arming.rotor
         if not rotor.interlock:
-            return False, ("motor interlock not in effect yet (ARMING_DELAY_SEC after arming)"
-                           if rotor.switch_engaged else "motor interlock not engaged (RC8 or DO_AUX_FUNCTION 32)")
+            return False, (
+                "motor interlock not in effect yet (ARMING_DELAY_SEC after arming)"
+                if rotor.switch_engaged
+                else "motor interlock not engaged (RC8 or DO_AUX_FUNCTION 32)"
+            )
         return True, ""
 
     def set_target(self, ap: ModeContext, setpoint: Setpoint) -> tuple[bool, str]:
@@ -89,8 +93,12 @@ class ModeGuided(Mode):
         if checked.yaw_rad is not None or checked.yaw_rate_rad_s is not None:
             nav.yaw_hold_rad = nav.yaw_target(checked)
         current = nav.current_stage
-        same = (current is not None and current.kind in ("leg", "hold") and current.target is not None
-                and float(np.linalg.norm(current.target - target)) < 0.05)
+        same = (
+            current is not None
+            and current.kind in ("leg", "hold")
+            and current.target is not None
+            and float(np.linalg.norm(current.target - target)) < 0.05
+        )
         if not same:
             nav.set_stages([Stage("leg", target=target), Stage("hold", target=target)])
         nav.guided = None
@@ -149,5 +157,10 @@ def check_setpoint(sp: Setpoint, max_speed_m_s: float) -> Setpoint | str:
         value = getattr(sp, name)
         if value is not None and not math.isfinite(float(value)):
             return f"{name}: expected a finite number, got {value!r}"
-    return Setpoint(pos_ned_m=out["pos_ned_m"], vel_ned_m_s=out["vel_ned_m_s"], acc_ned_m_s2=out["acc_ned_m_s2"],
-                    yaw_rad=sp.yaw_rad, yaw_rate_rad_s=sp.yaw_rate_rad_s)
+    return Setpoint(
+        pos_ned_m=out["pos_ned_m"],
+        vel_ned_m_s=out["vel_ned_m_s"],
+        acc_ned_m_s2=out["acc_ned_m_s2"],
+        yaw_rad=sp.yaw_rad,
+        yaw_rate_rad_s=sp.yaw_rate_rad_s,
+    )

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
+from heli_model.control import Setpoint
 from sim_vehicle.autopilot.legs import Stage
 from sim_vehicle.autopilot.mode import LAND, Mode
 from sim_vehicle.autopilot.mode_context import ModeContext
 from sim_vehicle.config import FlightSettings
-from heli_model.control import Setpoint
 
 
 class ModeLand(Mode):

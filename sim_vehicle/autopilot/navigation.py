@@ -12,15 +12,16 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
+from heli_model.control import Setpoint
 from sim_vehicle.autopilot.legs import GuidedCommand, Leg, Stage
 from sim_vehicle.autopilot.mode_guided import integrate_target
 from sim_vehicle.autopilot.mode_land import land_setpoint
 from sim_vehicle.config import VehicleSettings
-from heli_model.control import Setpoint
 from sim_vehicle.frames import Frames
 
 log = logging.getLogger(__name__)
@@ -66,8 +67,14 @@ class Navigation:
         Heading held by legs, holds and landings (and direct setpoints without a yaw).
     """
 
-    def __init__(self, body: Body, frames: Frames, settings: Callable[[], VehicleSettings],
-                 emit: Callable[[tuple], None], yaw_rad: float) -> None:
+    def __init__(
+        self,
+        body: Body,
+        frames: Frames,
+        settings: Callable[[], VehicleSettings],
+        emit: Callable[[tuple], None],
+        yaw_rad: float,
+    ) -> None:
         self._body = body
         self._frames = frames
         self._settings = settings
@@ -162,8 +169,9 @@ class Navigation:
         if stage.kind == "leg":
             f = self._settings().flight
             up = f.takeoff_speed_m_s if stage.vertical_only else f.wp_speed_up_m_s
-            stage.leg = Leg(self._leg_start(), stage.target, self._speed_xy(stage), up, f.wp_speed_down_m_s,
-                            f.wp_accel_m_s2, t)
+            stage.leg = Leg(
+                self._leg_start(), stage.target, self._speed_xy(stage), up, f.wp_speed_down_m_s, f.wp_accel_m_s2, t
+            )
         elif stage.kind == "hold" and stage.target is None:
             stage.target = self.hold_target()
         elif stage.kind == "land":

@@ -14,19 +14,24 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from heli_common.ardupilot_ids import FORCE_DISARM_MAGIC
+from heli_model.control import Setpoint
 from sim_vehicle import autopilot as ap
 from sim_vehicle import rsc
 from sim_vehicle.autopilot import Autopilot, QuietRefusal
-from heli_model.control import Setpoint
 from sim_vehicle.mavlink.endpoint import Address, Endpoint
 from sim_vehicle.mavlink.stream_sender import StreamSender
 from sim_vehicle.mission_store import (
-    FRAME_GLOBAL, FRAME_GLOBAL_INT, FRAME_GLOBAL_RELATIVE_ALT, FRAME_GLOBAL_RELATIVE_ALT_INT, GLOBAL_FRAMES,
+    FRAME_GLOBAL,
+    FRAME_GLOBAL_INT,
+    FRAME_GLOBAL_RELATIVE_ALT,
+    FRAME_GLOBAL_RELATIVE_ALT_INT,
+    GLOBAL_FRAMES,
 )
 from sim_vehicle.streams import MESSAGE_IDS, NAMES_BY_ID
 from sim_vehicle.telemetry import Telemetry
@@ -98,21 +103,35 @@ class CommandProtocol:
             log.exception("command %d failed", call.command)
             result, reason = mavlink.MAV_RESULT_FAILED, "internal error"
         if result != mavlink.MAV_RESULT_ACCEPTED:
-            log.warning("command %s refused (%s): %s", _name(call.command, call.command),
-                        mavlink.enums["MAV_RESULT"][result].name, reason)
+            log.warning(
+                "command %s refused (%s): %s",
+                _name(call.command, call.command),
+                mavlink.enums["MAV_RESULT"][result].name,
+                reason,
+            )
         self.ack(call.msg, call.address, call.command, result)
         replies, self.after_ack = self.after_ack, []
         for reply, to in replies:
             self.endpoint.send(reply, to)
-        if (result != mavlink.MAV_RESULT_ACCEPTED and reason and result == mavlink.MAV_RESULT_FAILED
-                and not isinstance(reason, QuietRefusal)):
-            self.endpoint.statustext(mavlink.MAV_SEVERITY_CRITICAL if reason.startswith(("Arm:", "PreArm:"))
-                                     else mavlink.MAV_SEVERITY_WARNING, reason)
+        if (
+            result != mavlink.MAV_RESULT_ACCEPTED
+            and reason
+            and result == mavlink.MAV_RESULT_FAILED
+            and not isinstance(reason, QuietRefusal)
+        ):
+            self.endpoint.statustext(
+                mavlink.MAV_SEVERITY_CRITICAL
+                if reason.startswith(("Arm:", "PreArm:"))
+                else mavlink.MAV_SEVERITY_WARNING,
+                reason,
+            )
 
     def ack(self, msg: Any, address: Address, command: int, result: int) -> None:
         """COMMAND_ACK of ``command`` to the sender of ``msg``."""
-        self.endpoint.send(self.endpoint.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(),
-                                                                msg.get_srcComponent()), address)
+        self.endpoint.send(
+            self.endpoint.mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()),
+            address,
+        )
 
     def on_set_mode(self, msg: Any, address: Address) -> None:
         """SET_MODE (the message): acknowledged with the message id as the command, as ArduPilot does."""
@@ -158,8 +177,10 @@ def _takeoff(room: CommandProtocol, call: CommandCall) -> Outcome:
     if call.frame in (FRAME_GLOBAL, FRAME_GLOBAL_INT):
         alt = alt - room.autopilot.home_lla[2]
     if not math.isfinite(alt) or not 0.5 <= alt <= ap.MAX_TAKEOFF_ALT_M:
-        return (mavlink.MAV_RESULT_DENIED,
-                f"takeoff altitude (param7) {call.p[6]!r} outside 0.5..{ap.MAX_TAKEOFF_ALT_M:g} m")
+        return (
+            mavlink.MAV_RESULT_DENIED,
+            f"takeoff altitude (param7) {call.p[6]!r} outside 0.5..{ap.MAX_TAKEOFF_ALT_M:g} m",
+        )
     return _outcome(room.autopilot.takeoff(alt))
 
 
@@ -186,8 +207,10 @@ def _mission_start(room: CommandProtocol, call: CommandCall) -> Outcome:
     first = 0.0 if math.isnan(call.p[0]) else call.p[0]
     count = len(room.autopilot.mission.items)
     if not _finite_int(first) or first < 0 or (count and first >= count):
-        return (mavlink.MAV_RESULT_DENIED,
-                f"first item (param1) {call.p[0]!r} is not an item of the mission (0..{count - 1})")
+        return (
+            mavlink.MAV_RESULT_DENIED,
+            f"first item (param1) {call.p[0]!r} is not an item of the mission (0..{count - 1})",
+        )
     return _outcome(room.autopilot.mission_start(int(first)))
 
 

@@ -17,13 +17,14 @@ import dataclasses
 import logging
 import socket
 import time
-from typing import Any, Callable, Iterable
+from collections.abc import Callable, Iterable
+from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from heli_common.tlog import TlogWriter
 from sim_vehicle.config import parse_host_port
-from sim_vehicle.signing import Verdict, VehicleSigning
+from sim_vehicle.signing import VehicleSigning, Verdict
 
 log = logging.getLogger(__name__)
 
@@ -106,10 +107,19 @@ class Endpoint:
         Take SETUP_SIGNING while there is no signing key.
     """
 
-    def __init__(self, sysid: int, bind_host: str, port: int, outs: Iterable[str], peer_timeout_s: float,
-                 deliver: Callable[[Any, Address], None], tlog_path: str | None = None,
-                 wall_s: Callable[[], float] = time.monotonic, signing_key: bytes | None = None,
-                 accept_signing_setup: bool = False) -> None:
+    def __init__(
+        self,
+        sysid: int,
+        bind_host: str,
+        port: int,
+        outs: Iterable[str],
+        peer_timeout_s: float,
+        deliver: Callable[[Any, Address], None],
+        tlog_path: str | None = None,
+        wall_s: Callable[[], float] = time.monotonic,
+        signing_key: bytes | None = None,
+        accept_signing_setup: bool = False,
+    ) -> None:
         self.sysid = int(sysid)
         self.peer_timeout_s = peer_timeout_s
         self.wall_s = wall_s
@@ -184,8 +194,11 @@ class Endpoint:
         if target_system:
             if target_system == self.sysid and target_component in (0, COMPONENT_ID):
                 return
-            targets = {address for (sysid, compid), address in self.routes.items()
-                       if sysid == target_system and target_component in (0, compid)}
+            targets = {
+                address
+                for (sysid, compid), address in self.routes.items()
+                if sysid == target_system and target_component in (0, compid)
+            }
         elif msg.get_type() in ROUTED:
             targets = set(self.destinations())
         else:
@@ -214,7 +227,7 @@ class Endpoint:
             self.send(self.mav.statustext_encode(severity, data))
             return
         self._statustext_id = self._statustext_id % 0xFFFF + 1
-        chunks = [data[i:i + STATUSTEXT_CHUNK] for i in range(0, len(data), STATUSTEXT_CHUNK)]
+        chunks = [data[i : i + STATUSTEXT_CHUNK] for i in range(0, len(data), STATUSTEXT_CHUNK)]
         for seq, chunk in enumerate(chunks[:255]):
             self.send(self.mav.statustext_encode(severity, chunk, self._statustext_id, seq))
 
@@ -294,5 +307,6 @@ class Endpoint:
             return
         n = self.throttle.count("setup_signing")
         if n <= 10 or n % 100 == 0:
-            log.warning("SETUP_SIGNING from %s:%d (system %d) refused: %s; %d so far", *address,
-                        msg.get_srcSystem(), what, n)
+            log.warning(
+                "SETUP_SIGNING from %s:%d (system %d) refused: %s; %d so far", *address, msg.get_srcSystem(), what, n
+            )

@@ -14,17 +14,26 @@ import math
 from typing import Any
 
 from heli_common.mavlink_ids import (
-    TYPEMASK_IGNORE_ACCELERATION, TYPEMASK_IGNORE_POSITION, TYPEMASK_IGNORE_VELOCITY, mavlink,
+    TYPEMASK_IGNORE_ACCELERATION,
+    TYPEMASK_IGNORE_POSITION,
+    TYPEMASK_IGNORE_VELOCITY,
+    mavlink,
 )
-from sim_vehicle.autopilot import Autopilot
 from heli_model.control import Setpoint
+from sim_vehicle.autopilot import Autopilot
 from sim_vehicle.mavlink.endpoint import Address, LogThrottle
 from sim_vehicle.mission_store import FRAME_GLOBAL, FRAME_GLOBAL_INT, GLOBAL_FRAMES
 
 log = logging.getLogger(__name__)
 
-LOCAL_FRAMES = frozenset({mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_OFFSET_NED,
-                          mavlink.MAV_FRAME_BODY_NED, mavlink.MAV_FRAME_BODY_OFFSET_NED})
+LOCAL_FRAMES = frozenset(
+    {
+        mavlink.MAV_FRAME_LOCAL_NED,
+        mavlink.MAV_FRAME_LOCAL_OFFSET_NED,
+        mavlink.MAV_FRAME_BODY_NED,
+        mavlink.MAV_FRAME_BODY_OFFSET_NED,
+    }
+)
 BODY_FRAMES = frozenset({mavlink.MAV_FRAME_BODY_NED, mavlink.MAV_FRAME_BODY_OFFSET_NED})
 
 
@@ -79,8 +88,12 @@ class GuidedSetpoints:
         if not msg.type_mask & TYPEMASK_IGNORE_POSITION:
             lat, lon = msg.lat_int * 1e-7, msg.lon_int * 1e-7
             if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0) or not math.isfinite(msg.alt):
-                log.warning("SET_POSITION_TARGET_GLOBAL_INT: position %r, %r, %r invalid; ignored",
-                            msg.lat_int, msg.lon_int, msg.alt)
+                log.warning(
+                    "SET_POSITION_TARGET_GLOBAL_INT: position %r, %r, %r invalid; ignored",
+                    msg.lat_int,
+                    msg.lon_int,
+                    msg.alt,
+                )
                 return
             home_alt = self.autopilot.home_lla[2]
             alt_amsl = msg.alt if frame in (FRAME_GLOBAL, FRAME_GLOBAL_INT) else home_alt + msg.alt
@@ -97,8 +110,13 @@ class GuidedSetpoints:
             yaw_rad=None if mask & mavlink.POSITION_TARGET_TYPEMASK_YAW_IGNORE else float(msg.yaw),
             yaw_rate_rad_s=None if mask & mavlink.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE else float(msg.yaw_rate),
         )
-        if setpoint.pos_ned_m is None and setpoint.vel_ned_m_s is None and setpoint.acc_ned_m_s2 is None \
-                and setpoint.yaw_rad is None and setpoint.yaw_rate_rad_s is None:
+        if (
+            setpoint.pos_ned_m is None
+            and setpoint.vel_ned_m_s is None
+            and setpoint.acc_ned_m_s2 is None
+            and setpoint.yaw_rad is None
+            and setpoint.yaw_rate_rad_s is None
+        ):
             log.warning("%s: type_mask %#x ignores everything; ignored", msg.get_type(), mask)
             return
         ok, reason = self.autopilot.set_guided_setpoint(setpoint)

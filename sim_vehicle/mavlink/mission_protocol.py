@@ -20,8 +20,14 @@ from sim_vehicle.autopilot import Autopilot
 from sim_vehicle.mavlink.endpoint import Address, Endpoint
 from sim_vehicle.mavlink.mission_wire import encode_item
 from sim_vehicle.mission_store import (
-    MISSION_TYPE_FENCE, MISSION_TYPE_MISSION, MISSION_TYPE_NAMES, MISSION_TYPE_RALLY,
-    MissionItem, MissionResult, MissionStore, Upload,
+    MISSION_TYPE_FENCE,
+    MISSION_TYPE_MISSION,
+    MISSION_TYPE_NAMES,
+    MISSION_TYPE_RALLY,
+    MissionItem,
+    MissionResult,
+    MissionStore,
+    Upload,
 )
 from sim_vehicle.telemetry import Telemetry
 
@@ -52,8 +58,9 @@ def mission_type_of(msg: Any) -> int:
 
 def send_ack(endpoint: Endpoint, msg: Any, address: Address, result: int, mission_type: int) -> None:
     """MISSION_ACK with ``result`` to the sender of ``msg``."""
-    endpoint.send(endpoint.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), int(result),
-                                                  mission_type), address)
+    endpoint.send(
+        endpoint.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), int(result), mission_type), address
+    )
 
 
 def refuse_count(endpoint: Endpoint, msg: Any, address: Address, result: MissionResult, mission_type: int) -> None:
@@ -62,8 +69,9 @@ def refuse_count(endpoint: Endpoint, msg: Any, address: Address, result: Mission
 
 
 def refuse_item(endpoint: Endpoint, msg: Any, address: Address, item: MissionItem) -> None:
-    log.warning("mission item %d (type %d) from %s:%d outside any upload: refused", item.seq, item.mission_type,
-                *address)
+    log.warning(
+        "mission item %d (type %d) from %s:%d outside any upload: refused", item.seq, item.mission_type, *address
+    )
     send_ack(endpoint, msg, address, MissionResult.DENIED, item.mission_type)
 
 
@@ -165,9 +173,12 @@ class MissionItemProtocol(abc.ABC):
     # ---------------------------------------------------------------- download
     def on_request_list(self, msg: Any, address: Address) -> None:
         """MISSION_REQUEST_LIST: MISSION_COUNT of the stored list."""
-        self.endpoint.send(self.endpoint.mav.mission_count_encode(
-            msg.get_srcSystem(), msg.get_srcComponent(), len(self.store.items(self.mission_type)),
-            self.mission_type), address)
+        self.endpoint.send(
+            self.endpoint.mav.mission_count_encode(
+                msg.get_srcSystem(), msg.get_srcComponent(), len(self.store.items(self.mission_type)), self.mission_type
+            ),
+            address,
+        )
 
     def on_request(self, msg: Any, address: Address, legacy: bool) -> None:
         """MISSION_REQUEST_INT (or legacy MISSION_REQUEST): the stored item, exactly as it was uploaded."""
@@ -175,8 +186,17 @@ class MissionItemProtocol(abc.ABC):
         if not 0 <= msg.seq < len(items):
             refuse_request(self.endpoint, msg, address, len(items), self.mission_type)
             return
-        self.endpoint.send(encode_item(self.endpoint.mav, items[msg.seq], msg.get_srcSystem(),
-                                                    msg.get_srcComponent(), self.mission_type, legacy), address)
+        self.endpoint.send(
+            encode_item(
+                self.endpoint.mav,
+                items[msg.seq],
+                msg.get_srcSystem(),
+                msg.get_srcComponent(),
+                self.mission_type,
+                legacy,
+            ),
+            address,
+        )
 
     # ---------------------------------------------------------------- clearing, cancelling, time-outs
     def cleared(self, accepted: bool) -> None:
@@ -196,8 +216,12 @@ class MissionItemProtocol(abc.ABC):
         """The store gave up the upload: tell the uploader (OPERATION_CANCELLED)."""
         peer, self._peer = self._peer, None
         if peer is not None:
-            self.endpoint.send(self.endpoint.mav.mission_ack_encode(
-                peer.sysid, peer.compid, MissionResult.OPERATION_CANCELLED, upload.mission_type), peer.address)
+            self.endpoint.send(
+                self.endpoint.mav.mission_ack_encode(
+                    peer.sysid, peer.compid, MissionResult.OPERATION_CANCELLED, upload.mission_type
+                ),
+                peer.address,
+            )
 
     def retry(self, now_s: float) -> None:
         """Request the awaited item again when the uploader has been silent for :data:`REQUEST_RETRY_S`."""

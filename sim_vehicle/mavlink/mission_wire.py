@@ -18,9 +18,21 @@ INVALID_DEG_E7 = 2_000_000_000
 
 def from_mission_item_int(msg: Any, mission_type: int) -> MissionItem:
     """The record of a received MISSION_ITEM_INT."""
-    return MissionItem(seq=msg.seq, frame=msg.frame, command=msg.command, current=msg.current,
-                       autocontinue=msg.autocontinue, param1=msg.param1, param2=msg.param2, param3=msg.param3,
-                       param4=msg.param4, x=int(msg.x), y=int(msg.y), z=float(msg.z), mission_type=mission_type)
+    return MissionItem(
+        seq=msg.seq,
+        frame=msg.frame,
+        command=msg.command,
+        current=msg.current,
+        autocontinue=msg.autocontinue,
+        param1=msg.param1,
+        param2=msg.param2,
+        param3=msg.param3,
+        param4=msg.param4,
+        x=int(msg.x),
+        y=int(msg.y),
+        z=float(msg.z),
+        mission_type=mission_type,
+    )
 
 
 def from_mission_item(msg: Any, mission_type: int) -> MissionItem:
@@ -35,22 +47,63 @@ def from_mission_item(msg: Any, mission_type: int) -> MissionItem:
         x, y = int(round(msg.x * 1e4)), int(round(msg.y * 1e4))
     else:
         x, y = (int(msg.x), int(msg.y)) if math.isfinite(msg.x) and math.isfinite(msg.y) else (0, 0)
-    return MissionItem(seq=msg.seq, frame=frame, command=msg.command, current=msg.current,
-                       autocontinue=msg.autocontinue, param1=msg.param1, param2=msg.param2, param3=msg.param3,
-                       param4=msg.param4, x=x, y=y, z=float(msg.z), mission_type=mission_type)
+    return MissionItem(
+        seq=msg.seq,
+        frame=frame,
+        command=msg.command,
+        current=msg.current,
+        autocontinue=msg.autocontinue,
+        param1=msg.param1,
+        param2=msg.param2,
+        param3=msg.param3,
+        param4=msg.param4,
+        x=x,
+        y=y,
+        z=float(msg.z),
+        mission_type=mission_type,
+    )
 
 
 def encode_item(mav: Any, it: MissionItem, sysid: int, compid: int, mission_type: int, legacy: bool) -> Any:
     """The stored item as MISSION_ITEM_INT, or as MISSION_ITEM for a legacy request, to ``sysid``/``compid``."""
     if not legacy:
-        return mav.mission_item_int_encode(sysid, compid, it.seq, it.frame, it.command, it.current,
-                                           it.autocontinue, it.param1, it.param2, it.param3, it.param4,
-                                           it.x, it.y, it.z, mission_type)
+        return mav.mission_item_int_encode(
+            sysid,
+            compid,
+            it.seq,
+            it.frame,
+            it.command,
+            it.current,
+            it.autocontinue,
+            it.param1,
+            it.param2,
+            it.param3,
+            it.param4,
+            it.x,
+            it.y,
+            it.z,
+            mission_type,
+        )
     if it.frame in GLOBAL_FRAMES:
         x, y = it.x * 1e-7, it.y * 1e-7
     elif it.frame == FRAME_LOCAL_NED:
         x, y = it.x * 1e-4, it.y * 1e-4
     else:
         x, y = float(it.x), float(it.y)
-    return mav.mission_item_encode(sysid, compid, it.seq, it.frame, it.command, it.current, it.autocontinue,
-                                   it.param1, it.param2, it.param3, it.param4, x, y, it.z, mission_type)
+    return mav.mission_item_encode(
+        sysid,
+        compid,
+        it.seq,
+        it.frame,
+        it.command,
+        it.current,
+        it.autocontinue,
+        it.param1,
+        it.param2,
+        it.param3,
+        it.param4,
+        x,
+        y,
+        it.z,
+        mission_type,
+    )

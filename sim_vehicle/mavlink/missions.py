@@ -16,8 +16,15 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from sim_vehicle.autopilot import Autopilot
 from sim_vehicle.mavlink.endpoint import Address, Endpoint
 from sim_vehicle.mavlink.mission_protocol import (
-    MissionItemProtocol, MissionItemProtocolFence, MissionItemProtocolRally, MissionItemProtocolWaypoints,
-    mission_type_of, refuse_count, refuse_item, refuse_request, send_ack,
+    MissionItemProtocol,
+    MissionItemProtocolFence,
+    MissionItemProtocolRally,
+    MissionItemProtocolWaypoints,
+    mission_type_of,
+    refuse_count,
+    refuse_item,
+    refuse_request,
+    send_ack,
 )
 from sim_vehicle.mavlink.mission_wire import from_mission_item, from_mission_item_int
 from sim_vehicle.mission_store import MISSION_TYPE_ALL, MissionItem, MissionResult, MissionStore
@@ -61,7 +68,8 @@ class MissionProtocols:
         self.telemetry = telemetry
         self.lists: dict[int, MissionItemProtocol] = {
             cls.mission_type: cls(endpoint, store, autopilot, telemetry)
-            for cls in (MissionItemProtocolWaypoints, MissionItemProtocolFence, MissionItemProtocolRally)}
+            for cls in (MissionItemProtocolWaypoints, MissionItemProtocolFence, MissionItemProtocolRally)
+        }
         self._unsupported = UnsupportedList(endpoint)
 
     def protocol(self, mission_type: int) -> MissionItemProtocol | UnsupportedList:
@@ -95,8 +103,13 @@ class MissionProtocols:
         """MISSION_CLEAR_ALL of one list, or of all three (MAV_MISSION_TYPE_ALL)."""
         mission_type = mission_type_of(msg)
         result = self.store.clear(mission_type)
-        cleared = self.lists.values() if mission_type == MISSION_TYPE_ALL else \
-            [self.lists[mission_type]] if mission_type in self.lists else []
+        cleared = (
+            self.lists.values()
+            if mission_type == MISSION_TYPE_ALL
+            else [self.lists[mission_type]]
+            if mission_type in self.lists
+            else []
+        )
         for protocol in cleared:
             protocol.cleared(result == MissionResult.ACCEPTED)
         send_ack(self.endpoint, msg, address, result, mission_type)

@@ -9,7 +9,8 @@ resulting PARAM_VALUE goes to every link either way.
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -40,8 +41,9 @@ class ParamProtocol:
         ``on_change(old, new)`` after a PARAM_SET replaced the settings tree.
     """
 
-    def __init__(self, params: ParameterTable, endpoint: Endpoint,
-                 on_change: Callable[[VehicleSettings, VehicleSettings], None]) -> None:
+    def __init__(
+        self, params: ParameterTable, endpoint: Endpoint, on_change: Callable[[VehicleSettings, VehicleSettings], None]
+    ) -> None:
         self.params = params
         self.endpoint = endpoint
         self._on_change = on_change
@@ -49,8 +51,12 @@ class ParamProtocol:
     def send_value(self, index: int, address: Address | None = None) -> None:
         """PARAM_VALUE of parameter ``index`` to ``address`` (None: every link)."""
         spec = self.params.specs[index]
-        self.endpoint.send(self.endpoint.mav.param_value_encode(spec.name.encode(), self.params.value(spec),
-                                                                spec.param_type, len(self.params), index), address)
+        self.endpoint.send(
+            self.endpoint.mav.param_value_encode(
+                spec.name.encode(), self.params.value(spec), spec.param_type, len(self.params), index
+            ),
+            address,
+        )
 
     def on_param_request_list(self, msg: Any, address: Address) -> None:
         for index in range(len(self.params)):

@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -69,10 +70,18 @@ class MavlinkServer:
         Take SETUP_SIGNING while there is no signing key.
     """
 
-    def __init__(self, autopilot: Autopilot, settings: VehicleSettings, sysid: int, port: int,
-                 tlog_path: str | None = None, wall_s: Callable[[], float] = time.monotonic,
-                 traffic: TrafficModel | None = None, signing_key: bytes | None = None,
-                 accept_signing_setup: bool = False) -> None:
+    def __init__(
+        self,
+        autopilot: Autopilot,
+        settings: VehicleSettings,
+        sysid: int,
+        port: int,
+        tlog_path: str | None = None,
+        wall_s: Callable[[], float] = time.monotonic,
+        traffic: TrafficModel | None = None,
+        signing_key: bytes | None = None,
+        accept_signing_setup: bool = False,
+    ) -> None:
         self.autopilot = autopilot
         self.sysid = int(sysid)
         self.wall_s = wall_s
@@ -80,17 +89,33 @@ class MavlinkServer:
         self.store = MissionStore(settings.link.mission_upload_timeout_s)
         self.clock = SimClock(settings.timing.physics_dt_s, settings.timing.speedup, settings.timing.max_lag_s, wall_s)
         link = settings.link
-        self.endpoint = Endpoint(self.sysid, link.bind_host, port, link.out, link.peer_timeout_s, self._dispatch,
-                                 tlog_path, wall_s, signing_key, accept_signing_setup)
+        self.endpoint = Endpoint(
+            self.sysid,
+            link.bind_host,
+            port,
+            link.out,
+            link.peer_timeout_s,
+            self._dispatch,
+            tlog_path,
+            wall_s,
+            signing_key,
+            accept_signing_setup,
+        )
         if traffic is None:
             import numpy as np
 
             traffic = TrafficModel(settings.adsb, np.random.default_rng([settings.seed, 0xAD5B]))
         self.traffic = traffic
-        self.telemetry = Telemetry(self.endpoint.mav, autopilot, self.clock, self.store, traffic, self.sysid,
-                                   lambda: self.endpoint.stats.dropped)
-        streams = StreamTable(self.endpoint.outs, [link.mav1.as_groups(), link.mav2.as_groups(),
-                                                   link.mav3.as_groups()])
+        self.telemetry = Telemetry(
+            self.endpoint.mav,
+            autopilot,
+            self.clock,
+            self.store,
+            traffic,
+            self.sysid,
+            lambda: self.endpoint.stats.dropped,
+        )
+        streams = StreamTable(self.endpoint.outs, [link.mav1.as_groups(), link.mav2.as_groups(), link.mav3.as_groups()])
         self.sender = StreamSender(self.endpoint, self.telemetry, streams, self.clock, self.params)
         self.commands = CommandProtocol(self.endpoint, autopilot, self.telemetry, self.sender)
         self.missions = MissionProtocols(self.endpoint, self.store, autopilot, self.telemetry)
@@ -216,8 +241,9 @@ class MavlinkServer:
         gcs_sysid = self.settings.link.gcs_sysid
         if msg.get_srcSystem() != gcs_sysid:
             if self.endpoint.throttle.count(f"rc_override:{msg.get_srcSystem()}") <= 3:
-                log.info("RC_CHANNELS_OVERRIDE from system %d ignored (MAV_GCS_SYSID is %d)", msg.get_srcSystem(),
-                         gcs_sysid)
+                log.info(
+                    "RC_CHANNELS_OVERRIDE from system %d ignored (MAV_GCS_SYSID is %d)", msg.get_srcSystem(), gcs_sysid
+                )
             return
         if msg.chan8_raw != 0xFFFF:  # UINT16_MAX: leave the channel as it is
             self.autopilot.arming.rc_override(int(msg.chan8_raw))
@@ -236,7 +262,10 @@ class MavlinkServer:
         if settings.adsb != old.adsb:
             self.traffic.apply_settings(settings.adsb)
             log.info("ADS-B traffic: %d aircraft within %g m", settings.adsb.count, settings.adsb.radius_m)
-        if settings.link != old.link and any(getattr(settings.link, f"mav{n}") != getattr(old.link, f"mav{n}")
-                                             for n in (1, 2, 3)):
-            log.info("MAVn_* stream rates stored; as in ArduPilot they apply at the next start "
-                     "(use SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM now)")
+        if settings.link != old.link and any(
+            getattr(settings.link, f"mav{n}") != getattr(old.link, f"mav{n}") for n in (1, 2, 3)
+        ):
+            log.info(
+                "MAVn_* stream rates stored; as in ArduPilot they apply at the next start "
+                "(use SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM now)"
+            )

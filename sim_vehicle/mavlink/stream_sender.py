@@ -41,8 +41,9 @@ class StreamSender:
         Takes the ``MAVn_*`` rates that REQUEST_DATA_STREAM sets on a numbered link.
     """
 
-    def __init__(self, endpoint: Endpoint, telemetry: Telemetry, streams: StreamTable, clock: SimClock,
-                 params: ParameterTable) -> None:
+    def __init__(
+        self, endpoint: Endpoint, telemetry: Telemetry, streams: StreamTable, clock: SimClock, params: ParameterTable
+    ) -> None:
         self.endpoint = endpoint
         self.telemetry = telemetry
         self.streams = streams
@@ -83,8 +84,9 @@ class StreamSender:
 
     def on_request_data_stream(self, msg: Any, address: Address) -> None:
         """REQUEST_DATA_STREAM for the requesting link; a numbered link's MAVn_ parameter follows."""
-        changed = self.streams.request_data_stream(address, msg.req_stream_id, msg.req_message_rate, msg.start_stop,
-                                                   self.clock.time_s)
+        changed = self.streams.request_data_stream(
+            address, msg.req_stream_id, msg.req_message_rate, msg.start_stop, self.clock.time_s
+        )
         n = self.streams.number(address)
         if n is None or n > 3 or not changed:
             return

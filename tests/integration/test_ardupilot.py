@@ -29,8 +29,9 @@ import time
 
 import numpy as np
 import pytest
-
 from ardupilot_support import ardupilot_unavailable, start_ardupilot
+from support import REPO_ROOT
+
 from companion.geo import LocalFrame
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
@@ -38,11 +39,12 @@ from companion.record.flight_record import load_record
 from companion.threats.transport.bus import ThreatBus
 from companion.world import World
 from heli_common.ports import free_port
-from support import REPO_ROOT
 
 UNAVAILABLE = ardupilot_unavailable()
-pytestmark = [pytest.mark.integration,
-              pytest.mark.skipif(UNAVAILABLE is not None, reason=f"ArduPilot SITL: {UNAVAILABLE}")]
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.skipif(UNAVAILABLE is not None, reason=f"ArduPilot SITL: {UNAVAILABLE}"),
+]
 
 SPEEDUP = 8.0
 MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
@@ -58,28 +60,40 @@ NO_ALTERNATIVES = "[flight]\nalternatives_k = 0\n"
 
 
 def companion_command(sitl, record, *extra: str) -> list[str]:
-    return [sys.executable, "-m", "companion.cli", "run", "--connect", f"udpin://127.0.0.1:{sitl.companion_port}",
-            "--mission", str(MISSION), "--time-scale", f"{SPEEDUP:g}", "--record", str(record), *extra]
+    return [
+        sys.executable,
+        "-m",
+        "companion.cli",
+        "run",
+        "--connect",
+        f"udpin://127.0.0.1:{sitl.companion_port}",
+        "--mission",
+        str(MISSION),
+        "--time-scale",
+        f"{SPEEDUP:g}",
+        "--record",
+        str(record),
+        *extra,
+    ]
 
 
 def run_companion_process(cmd, log_path, timeout_s: float = 240.0) -> subprocess.CompletedProcess:
     env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
     with open(log_path, "w") as err:
-        return subprocess.run(cmd, cwd=str(REPO_ROOT), stdout=subprocess.PIPE, stderr=err, text=True,
-                              timeout=timeout_s, env=env)
+        return subprocess.run(
+            cmd, cwd=str(REPO_ROOT), stdout=subprocess.PIPE, stderr=err, text=True, timeout=timeout_s, env=env
+        )
 
 
 def summary_of(result, log_path) -> dict:
-    assert result.returncode == 0, f"companion run exited {result.returncode}:\n" \
-                                   f"{log_path.read_text()[-4000:]}"
+    assert result.returncode == 0, f"companion run exited {result.returncode}:\n{log_path.read_text()[-4000:]}"
     return json.loads(result.stdout.strip().splitlines()[-1])
 
 
 @pytest.fixture(scope="module")
 def sitl(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("ardupilot")
-    with start_ardupilot(tmp / "sitl", speedup=SPEEDUP, adsb_count=2, adsb_radius_m=400.0,
-                         adsb_alt_m=900.0) as sitl:
+    with start_ardupilot(tmp / "sitl", speedup=SPEEDUP, adsb_count=2, adsb_radius_m=400.0, adsb_alt_m=900.0) as sitl:
         sitl.observer.wait_ready_to_arm(150.0)
         yield sitl
 
@@ -100,15 +114,25 @@ def flight(sitl, tmp_path_factory):
         bus.inbound.subscribe(lambda u: adsb_puts.append(u) if (u.threat_id or "").startswith("adsb-") else None)
         start_boot, t0 = obs.boot_s, time.monotonic()
         result = run_companion_process(
-            companion_command(sitl, tmp / "flight.jsonl", "--zenoh-listen", endpoint, "--adsb",
-                              "--config", str(config)),
-            tmp / "companion.log")
+            companion_command(
+                sitl, tmp / "flight.jsonl", "--zenoh-listen", endpoint, "--adsb", "--config", str(config)
+            ),
+            tmp / "companion.log",
+        )
         wall_s = time.monotonic() - t0
         print(f"\nachieved speed-up during the flight (2 s windows): {obs.speedup_profile(t0, t0 + wall_s)}")
     obs.wait_until(lambda: obs.armed is False, 30.0, "a disarmed heartbeat")
-    yield {"result": result, "log": tmp / "companion.log", "record": tmp / "flight.jsonl", "home": obs.home,
-           "origin": obs.origin, "start_boot_s": start_boot, "end_boot_s": obs.boot_s, "wall_s": wall_s,
-           "adsb_puts": adsb_puts}
+    yield {
+        "result": result,
+        "log": tmp / "companion.log",
+        "record": tmp / "flight.jsonl",
+        "home": obs.home,
+        "origin": obs.origin,
+        "start_boot_s": start_boot,
+        "end_boot_s": obs.boot_s,
+        "wall_s": wall_s,
+        "adsb_puts": adsb_puts,
+    }
 
 
 def flown(sitl, run) -> np.ndarray:
@@ -129,9 +153,11 @@ def test_the_real_firmware_is_flown_through_the_mission_and_lands(sitl, flight):
     assert obs.armed is False and obs.landed_state == 1, "the vehicle must be disarmed on the ground"
     log = flight["log"].read_text()
     assert "rotor run-up done" in log and "interlock command (H_RSC_MODE 2)" in log
-    print(f"\nArduPilot flight: {summary['legs_reached']} legs, RMS {summary['rms_tracking_error_m']:.2f} m, "
-          f"max {summary['max_tracking_error_m']:.2f} m, {flight['wall_s']:.0f} s wall clock, "
-          f"{flight['end_boot_s'] - flight['start_boot_s']:.0f} s of vehicle time")
+    print(
+        f"\nArduPilot flight: {summary['legs_reached']} legs, RMS {summary['rms_tracking_error_m']:.2f} m, "
+        f"max {summary['max_tracking_error_m']:.2f} m, {flight['wall_s']:.0f} s wall clock, "
+        f"{flight['end_boot_s'] - flight['start_boot_s']:.0f} s of vehicle time"
+    )
     # ArduPilot's own position controller tracks the reference (0.2-0.6 m RMS measured here); the
     # bound only catches a reference that runs away from the vehicle (clock or frame errors give
     # metres). What the flight is judged on is below: waypoints, zones, landing.
@@ -140,7 +166,7 @@ def test_the_real_firmware_is_flown_through_the_mission_and_lands(sitl, flight):
 
 def test_home_differed_from_the_ekf_origin_and_the_companion_used_both(flight):
     home, origin = LocalFrame(*flight["home"]), flight["origin"]
-    shift = -np.array(home.to_ned(*origin), dtype=float)          # home in the origin frame
+    shift = -np.array(home.to_ned(*origin), dtype=float)  # home in the origin frame
     assert np.linalg.norm(shift[:2]) > 10.0
     header = load_record(flight["record"]).header
     assert np.allclose(header["home_in_origin_ned_m"], shift, atol=0.05)
@@ -171,7 +197,7 @@ def test_adsb_traffic_became_threats_republished_on_zenoh(flight):
     puts = [u for u in flight["adsb_puts"] if u.action == "put"]
     assert puts, "no ADS-B threat was republished on uav/1/threats/adsb-*"
     ids = {u.threat_id for u in puts}
-    assert all(len(i) >= 11 for i in ids)                      # adsb- + at least 6 hex digits
+    assert all(len(i) >= 11 for i in ids)  # adsb- + at least 6 hex digits
     moving = [u.threat for u in puts if np.linalg.norm(u.threat.velocity_ned_m_s) > 1.0]
     assert moving and all(t.frame == "global" and t.kind == "moving" and t.ttl_s == 5.0 for t in moving)
     held = {th.get("id") for th in load_record(flight["record"]).threats}
@@ -187,11 +213,17 @@ def joined(sitl, flight, tmp_path_factory):
     obs.take_off_and_hover(JOIN_ALT_M)
     armed_texts = len([t for t in obs.texts_since(pilot_t) if "Arming motors" in t])
     start_boot = obs.boot_s
-    result = run_companion_process(companion_command(sitl, tmp / "join.jsonl", "--no-zenoh"),
-                                   tmp / "companion.log")
+    result = run_companion_process(companion_command(sitl, tmp / "join.jsonl", "--no-zenoh"), tmp / "companion.log")
     obs.wait_until(lambda: obs.armed is False, 30.0, "a disarmed heartbeat")
-    yield {"result": result, "log": tmp / "companion.log", "record": tmp / "join.jsonl", "home": obs.home,
-           "start_boot_s": start_boot, "pilot_t": pilot_t, "armed_texts_before": armed_texts}
+    yield {
+        "result": result,
+        "log": tmp / "companion.log",
+        "record": tmp / "join.jsonl",
+        "home": obs.home,
+        "start_boot_s": start_boot,
+        "pilot_t": pilot_t,
+        "armed_texts_before": armed_texts,
+    }
 
 
 def test_a_hovering_helicopter_is_joined_without_arming_or_takeoff(sitl, joined):
@@ -205,8 +237,9 @@ def test_a_hovering_helicopter_is_joined_without_arming_or_takeoff(sitl, joined)
     pos = flown(sitl, joined)
     first_wp = next(w for w in local_mission(joined).waypoints if w.kind == "waypoint")
     reach = int(np.argmax(np.linalg.norm(pos - first_wp.pos_ned_m, axis=1) <= first_wp.acceptance_radius_m))
-    assert reach > 0 and pos[:reach, 2].max() < -(JOIN_ALT_M - 3.0), \
+    assert reach > 0 and pos[:reach, 2].max() < -(JOIN_ALT_M - 3.0), (
         "the vehicle must stay in the air from the join to the first waypoint"
+    )
 
 
 def test_after_a_reboot_the_link_asks_for_its_streams_again(sitl, joined):
@@ -228,8 +261,11 @@ def test_after_a_reboot_the_link_asks_for_its_streams_again(sitl, joined):
             assert boot_s is not None and boot_s > 60.0
             result = await asyncio.to_thread(obs.command, obs.mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, 1)
             assert result == obs.mavlink.MAV_RESULT_ACCEPTED
-            await link.waits.wait_for(lambda t: t.boot_s is not None and t.boot_s < boot_s and t.position_age_s < 1.0,
-                                90.0, "positions from the rebooted vehicle")
+            await link.waits.wait_for(
+                lambda t: t.boot_s is not None and t.boot_s < boot_s and t.position_age_s < 1.0,
+                90.0,
+                "positions from the rebooted vehicle",
+            )
             assert link.streams.rounds > rounds
             assert link.streams.status["LOCAL_POSITION_NED"] == "interval"
         finally:

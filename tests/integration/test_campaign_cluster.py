@@ -17,12 +17,12 @@ import time
 
 import pyarrow.parquet as pq
 import pytest
+from support import REPO_ROOT
 
 from companion.campaign.flying import MEASURED_COLUMNS
 from companion.campaign.store import CampaignStore
 from companion.sitl.processes import ManagedProcess
 from heli_common.ports import free_port
-from support import REPO_ROOT
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(900)]
 
@@ -37,8 +37,13 @@ strata = ["crossing/open", "popup_far/open", "head_on/open", "manned/rotorcraft"
 
 
 def _companion(*args, timeout_s: float = 900.0) -> dict:
-    out = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", *args, "--no-progress"],
-                         cwd=REPO_ROOT, capture_output=True, text=True, timeout=timeout_s)
+    out = subprocess.run(
+        [sys.executable, "-m", "companion.cli", "campaign", *args, "--no-progress"],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+    )
     assert out.returncode == 0, out.stderr[-3000:]
     return json.loads(out.stdout)
 
@@ -54,11 +59,30 @@ def cluster(tmp_path):
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     dask = os.path.join(os.path.dirname(sys.executable), "dask")
-    scheduler = ManagedProcess([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
-                               tmp_path / "scheduler.log").start()
-    workers = [ManagedProcess([dask, "worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard",
-                               "--name", f"w{i}", "--local-directory", str(tmp_path / f"w{i}")],
-                              tmp_path / f"worker{i}.log", cwd=REPO_ROOT).start() for i in range(2)]
+    scheduler = ManagedProcess(
+        [dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], tmp_path / "scheduler.log"
+    ).start()
+    workers = [
+        ManagedProcess(
+            [
+                dask,
+                "worker",
+                address,
+                "--nworkers",
+                "1",
+                "--nthreads",
+                "1",
+                "--no-dashboard",
+                "--name",
+                f"w{i}",
+                "--local-directory",
+                str(tmp_path / f"w{i}"),
+            ],
+            tmp_path / f"worker{i}.log",
+            cwd=REPO_ROOT,
+        ).start()
+        for i in range(2)
+    ]
     try:
         scheduler.wait_ready(scheduler.log_contains("Scheduler at"), 60.0, "dask scheduler")
         for w in workers:
@@ -81,12 +105,21 @@ def test_cluster_rows_equal_local_rows(tmp_path, cluster):
     local_rows = [json.loads(r) for r in local_rows]
     assert [r["id"] for r in local_rows] == list(range(200))
     # the rows hold every stratum, flown both ways, with ADS-B traffic among them
-    assert {r["stratum"] for r in local_rows} == {"crossing/open", "popup_far/open", "head_on/open",
-                                                  "manned/rotorcraft"}
+    assert {r["stratum"] for r in local_rows} == {
+        "crossing/open",
+        "popup_far/open",
+        "head_on/open",
+        "manned/rotorcraft",
+    }
     assert any(r["u_nmac"] for r in local_rows) and any(r["m_manoeuvred"] for r in local_rows)
     assert all(r["weight"] > 0 for r in local_rows)
-    status = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", "status", str(tmp_path / "local"),
-                             "--json"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
+    status = subprocess.run(
+        [sys.executable, "-m", "companion.cli", "campaign", "status", str(tmp_path / "local"), "--json"],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert status.returncode == 0, status.stderr[-2000:]
     assert json.loads(status.stdout)["pairs"] == 200
 
@@ -95,9 +128,25 @@ def test_killed_campaign_resumes_to_the_same_rows(tmp_path):
     spec = tmp_path / "spec.toml"
     spec.write_text(SPEC.replace("max_pairs = 200", "max_pairs = 60").replace("min_pairs = 200", "min_pairs = 60"))
     out = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "companion.cli", "campaign", "run", str(spec), "--out", str(out),
-                             "--workers", "2", "--no-progress"], cwd=REPO_ROOT, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "companion.cli",
+            "campaign",
+            "run",
+            str(spec),
+            "--out",
+            str(out),
+            "--workers",
+            "2",
+            "--no-progress",
+        ],
+        cwd=REPO_ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline and len(list((out / "rows").glob("part-*.parquet"))) < 2:
         time.sleep(0.5)
@@ -106,8 +155,9 @@ def test_killed_campaign_resumes_to_the_same_rows(tmp_path):
     parts = sorted((out / "rows").glob("part-*.parquet"))
     assert 2 <= len(parts) < 6, "the campaign should have been killed part way"
     for path in parts:
-        assert pq.read_table(path).num_rows == 10          # only whole parts are left
+        assert pq.read_table(path).num_rows == 10  # only whole parts are left
     resumed = _companion("run", str(spec), "--out", str(out), "--workers", "2")
     assert resumed["flown"] == 60 - 10 * len(parts)
     fresh = _companion("run", str(spec), "--out", str(tmp_path / "fresh"), "--workers", "2")
+    assert fresh["flown"] == 60
     assert _rows(out) == _rows(tmp_path / "fresh")

@@ -12,10 +12,10 @@ import subprocess
 import sys
 
 import pytest
+from support import REPO_ROOT
 
 from companion.campaign.store import CampaignStore
 from companion.record.flight_record import load_record
-from support import REPO_ROOT
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]
 
@@ -33,18 +33,40 @@ def flown_campaign(tmp_path, spec_text: str):
     spec = tmp_path / "spec.toml"
     spec.write_text(spec_text)
     out = tmp_path / "campaign"
-    run = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", "run", str(spec), "--out", str(out),
-                          "--workers", "1", "--no-progress"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "companion.cli",
+            "campaign",
+            "run",
+            str(spec),
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+            "--no-progress",
+        ],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert run.returncode == 0, run.stderr[-3000:]
     return out
 
 
 def replayed(out, encounter_id: int) -> dict:
     """``companion campaign replay`` of one encounter at speed-up 4 (real processes); its outcome."""
-    replay = subprocess.run([sys.executable, "-m", "companion.cli", "campaign", "replay", str(out), str(encounter_id),
-                             "--speedup", "4"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=500)
+    replay = subprocess.run(
+        [sys.executable, "-m", "companion.cli", "campaign", "replay", str(out), str(encounter_id), "--speedup", "4"],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=500,
+    )
     assert replay.returncode == 0, replay.stderr[-3000:]
-    return json.loads(replay.stdout[replay.stdout.index("{"):])
+    return json.loads(replay.stdout[replay.stdout.index("{") :])
 
 
 def test_replay_flies_the_encounter_in_sitl(tmp_path):
@@ -57,7 +79,7 @@ def test_replay_flies_the_encounter_in_sitl(tmp_path):
     record = load_record(outcome["record"])
     assert record.decisions, "the companion made no decision in SITL"
     t = record.samples["t_s"] - outcome["leg_t0_s"]
-    assert t.min() < 1.0 and t.max() > 20.0          # the telemetry covers the leg and the encounter
+    assert t.min() < 1.0 and t.max() > 20.0  # the telemetry covers the leg and the encounter
     assert len(outcome["hmd_m"]) == 1 and outcome["min_sep_m"] < 100.0
 
 
@@ -79,7 +101,7 @@ def test_manned_traffic_reaches_the_companion_as_adsb_vehicle_through_the_vehicl
     assert outcome["puts"] > 20
     record = load_record(outcome["record"])
     heard = [t for t in record.threats if str(t["id"]).startswith("adsb-")]
-    assert 20 <= len(heard) <= outcome["puts"]     # reports sent after the landing reach no one
+    assert 20 <= len(heard) <= outcome["puts"]  # reports sent after the landing reach no one
     gaps = [b["t_s"] - a["t_s"] for a, b in zip(heard, heard[1:])]
     # 1 Hz: the gaps alternate about 0.8 and 1.2 s (the vehicle forwards at its own ticks), so
     # their median is either; their mean is the rate, and no report is lost on the way

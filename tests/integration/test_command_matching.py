@@ -15,13 +15,13 @@ import threading
 import time
 
 import pytest
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
-from companion.sitl.processes import spawn
 from flight_support import run_companion
-from heli_common.ports import free_port
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from support import REPO_ROOT, start_sim_vehicle
 from test_sitl_mavproxy import mavproxy_executable
+
+from companion.sitl.processes import spawn
+from heli_common.ports import free_port
 
 pytestmark = pytest.mark.integration
 
@@ -66,7 +66,7 @@ class CommandingStation(threading.Thread):
     def _receive(self) -> None:
         try:
             data, self.router = self.sock.recvfrom(65535)
-        except (socket.timeout, OSError):
+        except (TimeoutError, OSError):
             return
         for msg in self.mav.parse_buffer(data) or []:
             if msg.get_type() == "COMMAND_ACK":
@@ -93,15 +93,33 @@ def flight(tmp_path_factory):
     companion_port, gcs_port = free_port(), free_port()
     with start_sim_vehicle(speedup=SPEEDUP) as sim:
         router = spawn(
-            [mavproxy_executable(), f"--master=udpout:127.0.0.1:{sim.port}", f"--out=udp:127.0.0.1:{companion_port}",
-             f"--out=udp:127.0.0.1:{gcs_port}", "--non-interactive", "--nowait", "--default-modules=",
-             f"--state-basedir={tmp}"], tmp / "mavproxy.log", cwd=tmp)
+            [
+                mavproxy_executable(),
+                f"--master=udpout:127.0.0.1:{sim.port}",
+                f"--out=udp:127.0.0.1:{companion_port}",
+                f"--out=udp:127.0.0.1:{gcs_port}",
+                "--non-interactive",
+                "--nowait",
+                "--default-modules=",
+                f"--state-basedir={tmp}",
+            ],
+            tmp / "mavproxy.log",
+            cwd=tmp,
+        )
         station = CommandingStation(gcs_port)
         station.start()
         try:
-            result = run_companion("run", "--connect", f"udpin://127.0.0.1:{companion_port}", "--mission",
-                                   str(MISSION), "--time-scale", str(SPEEDUP), "--no-zenoh")
-            time.sleep(0.5)                           # the last answers come in
+            result = run_companion(
+                "run",
+                "--connect",
+                f"udpin://127.0.0.1:{companion_port}",
+                "--mission",
+                str(MISSION),
+                "--time-scale",
+                str(SPEEDUP),
+                "--no-zenoh",
+            )
+            time.sleep(0.5)  # the last answers come in
         finally:
             station.stop()
             router.stop()

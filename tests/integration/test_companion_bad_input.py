@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 
 import pytest
-
 from flight_support import TrackListener, run_companion
 from support import REPO_ROOT, start_sim_vehicle
 
@@ -38,8 +37,7 @@ def stored_items(url: str, tmp_path) -> list:
 
 
 def run_bad(url: str, *args: str):
-    return run_companion("run", "--connect", url, "--no-zenoh", "--time-scale", "2", *args,
-                         timeout_s=120)
+    return run_companion("run", "--connect", url, "--no-zenoh", "--time-scale", "2", *args, timeout_s=120)
 
 
 def assert_one_line_error(result, *needles: str, status: int = 2) -> None:
@@ -69,7 +67,7 @@ def test_broken_json_mission_is_refused_before_anything_is_sent(vehicle, tmp_pat
 def test_unknown_command_is_refused_naming_the_item(vehicle, tmp_path):
     before = stored_items(vehicle[2], tmp_path)
     plan = json.loads(MISSION.read_text())
-    plan["mission"]["items"][1]["command"] = 31000          # not a supported MAV_CMD
+    plan["mission"]["items"][1]["command"] = 31000  # not a supported MAV_CMD
     bad = tmp_path / "unknown.plan"
     bad.write_text(json.dumps(plan))
     assert_one_line_error(run_bad(vehicle[2], "--mission", str(bad)), "31000")
@@ -81,7 +79,7 @@ def test_waypoint_inside_an_exclusion_zone_is_unreachable(vehicle, tmp_path):
     plan = json.loads(MISSION.read_text())
     circle = plan["geoFence"]["circles"][0]["circle"]
     lat, lon = circle["center"]
-    plan["mission"]["items"][1]["params"][4:6] = [lat, lon]   # item 2 at the circle's centre
+    plan["mission"]["items"][1]["params"][4:6] = [lat, lon]  # item 2 at the circle's centre
     bad = tmp_path / "inside.plan"
     bad.write_text(json.dumps(plan))
     assert_one_line_error(run_bad(vehicle[2], "--mission", str(bad)), "item 2")

@@ -14,20 +14,20 @@ import time
 
 import numpy as np
 import pytest
+from flight_support import TrackListener, run_companion, wait_until
+from support import REPO_ROOT, MavlinkPeer, start_sim_vehicle
 
 from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
 from companion.world import World
 from heli_common.mavlink_ids import COPTER_MODES
-from flight_support import TrackListener, run_companion, wait_until
 from heli_common.ports import free_port
-from support import REPO_ROOT, MavlinkPeer, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
 SPEEDUP = 4.0
 MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
-HOME = (47.397742, 8.545594, 488.0)      # sim-vehicle's default home
+HOME = (47.397742, 8.545594, 488.0)  # sim-vehicle's default home
 #: The world's safety margin (3 m) is the rotor radius plus a tracking buffer; the flown track
 #: must stay clear of every zone inflated by the rotor radius (R-50 class: about 1.5 m).
 ROTOR_RADIUS_M = 1.5
@@ -38,14 +38,21 @@ AUTO, GUIDED = COPTER_MODES["AUTO"], COPTER_MODES["GUIDED"]
 def flight(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("companion_flight")
     port = free_port()
-    with TrackListener() as track, \
-            start_sim_vehicle(out=[f"127.0.0.1:{port}", track.address], speedup=SPEEDUP) as sim:
-        result = run_companion("run", "--connect", f"udpin://127.0.0.1:{port}", "--mission",
-                               str(MISSION), "--time-scale", str(SPEEDUP), "--no-zenoh",
-                               "--record", str(tmp / "flight.jsonl"))
+    with TrackListener() as track, start_sim_vehicle(out=[f"127.0.0.1:{port}", track.address], speedup=SPEEDUP) as sim:
+        result = run_companion(
+            "run",
+            "--connect",
+            f"udpin://127.0.0.1:{port}",
+            "--mission",
+            str(MISSION),
+            "--time-scale",
+            str(SPEEDUP),
+            "--no-zenoh",
+            "--record",
+            str(tmp / "flight.jsonl"),
+        )
         wait_until(lambda: track.armed is False, 10.0, "a disarmed heartbeat")
-        yield {"result": result, "track": track, "sim": sim, "tmp": tmp,
-               "n_companion": len(track.track)}
+        yield {"result": result, "track": track, "sim": sim, "tmp": tmp, "n_companion": len(track.track)}
 
 
 @pytest.fixture(scope="module")
@@ -109,8 +116,8 @@ def test_the_same_mission_in_auto_crosses_an_exclusion_zone(flight, local_missio
     start = len(track.track)
     with MavlinkPeer(sim.port, sim.sysid) as gcs:
         assert gcs.set_mode(AUTO).result == 0
-        gcs.arm_heli()                           # interlock low, arm, interlock high
-        time.sleep(2.5 / SPEEDUP + 0.5)          # the interlock takes effect after the arming delay
+        gcs.arm_heli()  # interlock low, arm, interlock high
+        time.sleep(2.5 / SPEEDUP + 0.5)  # the interlock takes effect after the arming delay
         assert gcs.command(gcs.mavlink.MAV_CMD_MISSION_START, 0, 0).result == 0
         deadline = time.monotonic() + 240.0 / SPEEDUP + 60.0
         while time.monotonic() < deadline:

@@ -6,11 +6,11 @@ import signal
 import time
 
 import pytest
+from flight_support import FlightWatcher, flight_processes, last_json_line, wait_until
+from support import REPO_ROOT, MavlinkPeer
 
 from companion.record.flight_record import load_record
 from companion.threats.transport.bus import ThreatBus
-from flight_support import FlightWatcher, flight_processes, last_json_line, wait_until
-from support import REPO_ROOT, MavlinkPeer
 
 pytestmark = pytest.mark.integration
 
@@ -34,7 +34,7 @@ def test_sigint_in_flight_leaves_the_vehicle_hovering_in_loiter(tmp_path):
             hb = gcs.wait("HEARTBEAT", 5.0, lambda m: m.get_srcComponent() == 1)
             assert hb.custom_mode == LOITER
             assert hb.base_mode & 128, "the vehicle must still be armed (hovering, not dropped)"
-            gcs.request("LOCAL_POSITION_NED")          # as ArduPilot: only what is asked for
+            gcs.request("LOCAL_POSITION_NED")  # as ArduPilot: only what is asked for
             first = gcs.wait("LOCAL_POSITION_NED", 5.0)
             time.sleep(1.0)
             later = gcs.wait("LOCAL_POSITION_NED", 5.0)
@@ -47,7 +47,7 @@ def test_a_dropped_link_is_survived_and_the_mission_completed(tmp_path):
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             watcher = FlightWatcher(bus)
             wait_until(lambda: flying_leg_1(watcher), 120, "leg 1")
-            flight.sim.send_signal(signal.SIGSTOP)       # no heartbeat, no telemetry for 4 s
+            flight.sim.send_signal(signal.SIGSTOP)  # no heartbeat, no telemetry for 4 s
             time.sleep(4.0)
             flight.sim.send_signal(signal.SIGCONT)
             assert flight.companion.wait(240) == 0, flight.log.read_text()[-3000:]

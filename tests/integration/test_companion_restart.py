@@ -13,35 +13,59 @@ import time
 
 import numpy as np
 import pytest
+from flight_support import FlightWatcher, Injection, TrackListener, inject, last_json_line, spawn, wait_until
+from support import REPO_ROOT
 
 from companion.record.flight_record import load_record
+from companion.threats.model import Threat
 from companion.threats.snapshot import read_snapshot, snapshot_path
 from companion.threats.transport.bus import ThreatBus
-from companion.threats.model import Threat
-from flight_support import FlightWatcher, Injection, TrackListener, inject, last_json_line, spawn, wait_until
 from heli_common.mavlink_ids import COPTER_MODES
 from heli_common.ports import free_port
-from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration
 
 MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
 SPEEDUP = 4.0
 GUIDED = COPTER_MODES["GUIDED"]
-GUIDED_TIMEOUT_S = 3.0          # sim-vehicle's default GUID_TIMEOUT (simulated s)
-BRAKE_S = 6.0                   # simulated s allowed for braking to a hover after it
-THREAT_TTL_S = 2000.0           # simulated s: alive through the crash and the rest of the flight
+GUIDED_TIMEOUT_S = 3.0  # sim-vehicle's default GUID_TIMEOUT (simulated s)
+BRAKE_S = 6.0  # simulated s allowed for braking to a hover after it
+THREAT_TTL_S = 2000.0  # simulated s: alive through the crash and the rest of the flight
 THREAT_RADIUS_M = 3.0
 
 
 def companion_args(mav_port: int, zenoh_listen: str, record, *extra: str) -> list[str]:
-    return ["companion.cli", "-v", "run", "--connect", f"udpin://127.0.0.1:{mav_port}",
-            "--time-scale", str(SPEEDUP), "--zenoh-listen", zenoh_listen, "--record", str(record), *extra]
+    return [
+        "companion.cli",
+        "-v",
+        "run",
+        "--connect",
+        f"udpin://127.0.0.1:{mav_port}",
+        "--time-scale",
+        str(SPEEDUP),
+        "--zenoh-listen",
+        zenoh_listen,
+        "--record",
+        str(record),
+        *extra,
+    ]
 
 
 def vehicle(tmp_path, mav_port: int, track: TrackListener):
-    return spawn(["sim_vehicle.cli", "--port", str(free_port()), "--out", f"127.0.0.1:{mav_port}",
-                  "--out", track.address, "--speedup", str(SPEEDUP)], tmp_path / "sim_vehicle.log")
+    return spawn(
+        [
+            "sim_vehicle.cli",
+            "--port",
+            str(free_port()),
+            "--out",
+            f"127.0.0.1:{mav_port}",
+            "--out",
+            track.address,
+            "--speedup",
+            str(SPEEDUP),
+        ],
+        tmp_path / "sim_vehicle.log",
+    )
 
 
 def midpoint_of(path_ned_m) -> np.ndarray:
@@ -71,22 +95,36 @@ def test_a_killed_companion_leaves_a_hover_and_resume_finishes_the_mission_with_
     first_zenoh = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     with TrackListener() as track:
         sim = vehicle(tmp_path, mav_port, track)
-        first = spawn(companion_args(mav_port, first_zenoh, tmp_path / "first.jsonl", "--mission", str(MISSION),
-                                     "--state-dir", str(state)), tmp_path / "first.log")
+        first = spawn(
+            companion_args(
+                mav_port, first_zenoh, tmp_path / "first.jsonl", "--mission", str(MISSION), "--state-dir", str(state)
+            ),
+            tmp_path / "first.log",
+        )
         second = None
         try:
             # -------- first companion: a threat on a later leg, then SIGKILL mid-leg
             with ThreatBus(1, listen=(), connect=(first_zenoh,)) as bus:
                 watcher = FlightWatcher(bus)
-                wait_until(lambda: watcher.status and watcher.status["leg"] >= 0 and watcher.status["path_id"],
-                           180, "leg 0 flown")
+                wait_until(
+                    lambda: watcher.status and watcher.status["leg"] >= 0 and watcher.status["path_id"],
+                    180,
+                    "leg 0 flown",
+                )
                 wait_until(lambda: 7 in _plans(tmp_path / "first.jsonl"), 30, "the plans in the record")
                 plans = _plans(tmp_path / "first.jsonl")
                 # on the return leg (item 6 to home): a straight line whichever way GART took around
                 # the exclusion zones, so the resumed companion's own plan meets it too
                 centre = midpoint_of(plans[7]["path_ned_m"])
-                threat = Threat("keep1", "popup", "local_ned", tuple(map(float, centre)), (0.0, 0.0, 0.0),
-                                THREAT_RADIUS_M, THREAT_TTL_S)
+                threat = Threat(
+                    "keep1",
+                    "popup",
+                    "local_ned",
+                    tuple(map(float, centre)),
+                    (0.0, 0.0, 0.0),
+                    THREAT_RADIUS_M,
+                    THREAT_TTL_S,
+                )
                 assert bus.client.wait_for_subscriber(10.0, threat.id)
                 bus.client.put_threat(threat)
                 wait_until(lambda: _snapshot_ids(state) == ["keep1"], 30, "the threat in the snapshot")
@@ -97,12 +135,16 @@ def test_a_killed_companion_leaves_a_hover_and_resume_finishes_the_mission_with_
             first.send_signal(signal.SIGKILL)
             first.wait(10)
             # -------- the vehicle on its own: brakes to a hover after its guided timeout
-            wait_until(lambda: track.samples()[0][-1] > kill_track_t + GUIDED_TIMEOUT_S + BRAKE_S + 2.0,
-                       60, "the vehicle's track after the kill")
+            wait_until(
+                lambda: track.samples()[0][-1] > kill_track_t + GUIDED_TIMEOUT_S + BRAKE_S + 2.0,
+                60,
+                "the vehicle's track after the kill",
+            )
             t, pos = track.samples()
             before = window(t, pos, kill_track_t - 1.0, kill_track_t)
-            hover = window(t, pos, kill_track_t + GUIDED_TIMEOUT_S + BRAKE_S,
-                           kill_track_t + GUIDED_TIMEOUT_S + BRAKE_S + 2.0)
+            hover = window(
+                t, pos, kill_track_t + GUIDED_TIMEOUT_S + BRAKE_S, kill_track_t + GUIDED_TIMEOUT_S + BRAKE_S + 2.0
+            )
             assert np.linalg.norm(before[-1, :2] - before[0, :2]) > 1.0, "it was flying when killed"
             assert len(hover) >= 5
             assert np.ptp(hover[:, 0]) < 0.5 and np.ptp(hover[:, 1]) < 0.5, "it hovers (under 0.25 m/s)"
@@ -111,8 +153,12 @@ def test_a_killed_companion_leaves_a_hover_and_resume_finishes_the_mission_with_
             resume_track_t = t[-1]
             # -------- the resumed companion
             second_zenoh = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
-            second = spawn(companion_args(mav_port, second_zenoh, tmp_path / "second.jsonl", "--resume",
-                                          "--state-dir", str(state)), tmp_path / "second.log")
+            second = spawn(
+                companion_args(
+                    mav_port, second_zenoh, tmp_path / "second.jsonl", "--resume", "--state-dir", str(state)
+                ),
+                tmp_path / "second.log",
+            )
             assert second.wait(300) == 0, (tmp_path / "second.log").read_text()[-3000:]
             wait_until(lambda: track.armed is False, 30, "the vehicle's disarm after landing")
             t, pos = track.samples()
@@ -123,7 +169,7 @@ def test_a_killed_companion_leaves_a_hover_and_resume_finishes_the_mission_with_
     summary = last_json_line(tmp_path / "second.log")
     record = load_record(tmp_path / "second.jsonl")
     seq_of_leg = {p["leg"]: p["seq"] for p in load_record(tmp_path / "first.jsonl").plans}
-    current = seq_of_leg[leg_at_kill]          # 4 unless the machine is very slow
+    current = seq_of_leg[leg_at_kill]  # 4 unless the machine is very slow
     remaining = [q for q in (2, 4, 5, 6, 7) if q >= current]
     events = {e["name"]: e for e in record.events}
     # it took over at the leg flown when the first one died, and flew the rest
@@ -160,8 +206,12 @@ def test_resume_refuses_a_vehicle_on_the_ground(tmp_path):
     mav_port = free_port()
     with TrackListener() as track:
         sim = vehicle(tmp_path, mav_port, track)
-        companion = spawn(companion_args(mav_port, f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}",
-                                         tmp_path / "r.jsonl", "--resume"), tmp_path / "companion.log")
+        companion = spawn(
+            companion_args(
+                mav_port, f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}", tmp_path / "r.jsonl", "--resume"
+            ),
+            tmp_path / "companion.log",
+        )
         try:
             assert companion.wait(120) == 2
         finally:
@@ -178,8 +228,11 @@ AFTER_RESTART = Injection("after1", "popup", leg=3, after_s=3.0, ahead_s=5.0, ra
 def router(port: int, log_path):
     """``companion router`` on ``port``, once it says it listens."""
     proc = spawn(["companion.cli", "router", "--listen", f"tcp/127.0.0.1:{port}"], log_path)
-    wait_until(lambda: "zenoh router listening" in log_path.read_text(errors="replace") or proc.poll() is not None,
-               60, "the router")
+    wait_until(
+        lambda: "zenoh router listening" in log_path.read_text(errors="replace") or proc.poll() is not None,
+        60,
+        "the router",
+    )
     assert proc.poll() is None, log_path.read_text()
     return proc
 
@@ -190,9 +243,18 @@ def test_a_router_that_stops_and_returns_loses_neither_the_flight_nor_later_thre
     with TrackListener() as track:
         sim = vehicle(tmp_path, mav_port, track)
         rtr = router(router_port, tmp_path / "router1.log")
-        companion = spawn(companion_args(mav_port, f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}",
-                                         tmp_path / "flight.jsonl", "--mission", str(MISSION),
-                                         "--zenoh-connect", router_ep), tmp_path / "companion.log")
+        companion = spawn(
+            companion_args(
+                mav_port,
+                f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}",
+                tmp_path / "flight.jsonl",
+                "--mission",
+                str(MISSION),
+                "--zenoh-connect",
+                router_ep,
+            ),
+            tmp_path / "companion.log",
+        )
         try:
             with ThreatBus(1, listen=(), connect=(router_ep,), mode="client") as bus:
                 watcher = FlightWatcher(bus)
@@ -207,8 +269,11 @@ def test_a_router_that_stops_and_returns_loses_neither_the_flight_nor_later_thre
                 wait_until(lambda: watcher.status is not None, 60, "status through the restarted router")
                 sent = inject(watcher, [AFTER_RESTART], 240, done=lambda: companion.poll() is not None)
                 assert [t.id for t in sent] == ["after1"]
-                wait_until(lambda: any(e.get("threat_id") == "after1" for e in watcher.events), 30,
-                           "a decision about the threat put after the restart")
+                wait_until(
+                    lambda: any(e.get("threat_id") == "after1" for e in watcher.events),
+                    30,
+                    "a decision about the threat put after the restart",
+                )
                 assert companion.wait(300) == 0, (tmp_path / "companion.log").read_text()[-3000:]
             t, pos = track.samples()
         finally:

@@ -16,21 +16,21 @@ import time
 
 import numpy as np
 import pytest
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
-from companion.threats.transport.bus import ThreatBus
-from companion.geo import LocalFrame
 from flight_support import DEMO_HOME, TrackListener, last_json_line, run_companion, spawn, wait_until
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from support import MavlinkPeer
+
+from companion.geo import LocalFrame
+from companion.threats.transport.bus import ThreatBus
 from heli_common.mavlink_ids import COPTER_MODES
 from heli_common.ports import free_port
-from support import MavlinkPeer
 
 pytestmark = pytest.mark.integration
 
 SPEEDUP = 4.0
 COMPANION = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
 HOME = DEMO_HOME
-NORTH_M = 30.0                  # out 30 m north and back home
+NORTH_M = 30.0  # out 30 m north and back home
 NORTH_LAT = float(np.ravel(LocalFrame(*HOME).to_lla(NORTH_M, 0.0, 0.0)[0])[0])
 MISSION = f"""QGC WPL 110
 0\t1\t0\t16\t0\t0\t0\t0\t{HOME[0]}\t{HOME[1]}\t{HOME[2]}\t1
@@ -62,8 +62,9 @@ class GroundStation(MavlinkPeer):
         deadline = time.monotonic() + timeout_s
         while not any(text.startswith(prefix) for text in self.texts[since:]):
             if time.monotonic() > deadline:
-                raise AssertionError(f"no STATUSTEXT {prefix!r} from the companion within {timeout_s} s; "
-                                     f"got {self.texts[since:]}")
+                raise AssertionError(
+                    f"no STATUSTEXT {prefix!r} from the companion within {timeout_s} s; got {self.texts[since:]}"
+                )
             self.receive(0.1)
         return self.texts[since:]
 
@@ -83,8 +84,9 @@ def mission_start(gcs: GroundStation):
 
 def sim_vehicle(tmp_path, vehicle_port: int, mav_port: int, name: str, track: TrackListener | None = None):
     outs = ["--out", f"127.0.0.1:{mav_port}"] + (["--out", track.address] if track else [])
-    return spawn(["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(SPEEDUP)],
-                 tmp_path / f"{name}.log")
+    return spawn(
+        ["sim_vehicle.cli", "--port", str(vehicle_port), *outs, "--speedup", str(SPEEDUP)], tmp_path / f"{name}.log"
+    )
 
 
 def test_serve_waits_for_the_vehicle_flies_each_start_and_yields_to_the_pilot(tmp_path):
@@ -92,27 +94,48 @@ def test_serve_waits_for_the_vehicle_flies_each_start_and_yields_to_the_pilot(tm
     mission.write_text(MISSION)
     mav_port, vehicle_port, zenoh_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
     endpoint = f"tcp/127.0.0.1:{zenoh_port}"
-    service = spawn(["companion.cli", "-v", "serve", "--connect", f"udpin://127.0.0.1:{mav_port}",
-                     "--zenoh-listen", endpoint, "--flights", "2", "--record-dir", str(tmp_path / "flights"),
-                     "--tlog", str(tmp_path / "serve.tlog")], tmp_path / "serve.log")
-    log_text = lambda: (tmp_path / "serve.log").read_text(errors="replace")   # noqa: E731
+    service = spawn(
+        [
+            "companion.cli",
+            "-v",
+            "serve",
+            "--connect",
+            f"udpin://127.0.0.1:{mav_port}",
+            "--zenoh-listen",
+            endpoint,
+            "--flights",
+            "2",
+            "--record-dir",
+            str(tmp_path / "flights"),
+            "--tlog",
+            str(tmp_path / "serve.tlog"),
+        ],
+        tmp_path / "serve.log",
+    )
+    log_text = lambda: (tmp_path / "serve.log").read_text(errors="replace")  # noqa: E731
     try:
-        time.sleep(3.0)                                       # the service waits: no vehicle yet
+        time.sleep(3.0)  # the service waits: no vehicle yet
         first = sim_vehicle(tmp_path, vehicle_port, mav_port, "sim_vehicle_1")
         try:
             with GroundStation(vehicle_port) as gcs:
                 hb = gcs.wait("HEARTBEAT", 40.0, from_companion)
                 assert hb is not None, f"no HEARTBEAT from component 191; log:\n{log_text()[-3000:]}"
                 assert (hb.type, hb.autopilot, hb.system_status) == (
-                    mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, mavlink.MAV_STATE_STANDBY)
+                    mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+                    mavlink.MAV_AUTOPILOT_INVALID,
+                    mavlink.MAV_STATE_STANDBY,
+                )
         finally:
             first.stop()
-        time.sleep(5.0)                                       # a vehicle reboot: its heartbeats stop
+        time.sleep(5.0)  # a vehicle reboot: its heartbeats stop
         with TrackListener() as track:
             vehicle = sim_vehicle(tmp_path, vehicle_port, mav_port, "sim_vehicle_2", track)
             try:
-                wait_until(lambda: log_text().count("companion serve: ready") >= 2, 40.0,
-                           "the service to be ready again after the vehicle came back")
+                wait_until(
+                    lambda: log_text().count("companion serve: ready") >= 2,
+                    40.0,
+                    "the service to be ready again after the vehicle came back",
+                )
                 upload = run_companion("upload", str(mission), "--connect", f"udpout://127.0.0.1:{vehicle_port}")
                 assert upload.returncode == 0, upload.stderr
                 with GroundStation(vehicle_port) as gcs:
@@ -156,8 +179,9 @@ def hand_the_next_flight_to_the_pilot(gcs: GroundStation, track: TrackListener, 
     companion stops commanding (the mode stays LOITER) and is ready again."""
     answers: list[dict] = []
     with ThreatBus(1, listen=(), connect=(endpoint,)) as bus:
-        bus.subscribe_json("events", lambda key, msg: answers.append(msg) if msg and msg.get("event") == "command"
-                           else None)
+        bus.subscribe_json(
+            "events", lambda key, msg: answers.append(msg) if msg and msg.get("event") == "command" else None
+        )
         time.sleep(1.0)
         bus.session.put(bus.key("command"), json.dumps({"command": "mission_start"}))
         wait_until(lambda: answers, 10.0, "the answer to the zenoh command")
@@ -168,7 +192,7 @@ def hand_the_next_flight_to_the_pilot(gcs: GroundStation, track: TrackListener, 
     since = len(gcs.texts)
     ack = gcs.set_mode(loiter)
     assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED, ack
-    texts = gcs.wait_for_text("companion: service stopped", 30.0, since)   # after --flights 2
+    texts = gcs.wait_for_text("companion: service stopped", 30.0, since)  # after --flights 2
     assert "companion: flight 2 aborted" in texts, texts
     assert any("left GUIDED" in text for text in texts), texts
     time.sleep(2.0)
@@ -182,22 +206,42 @@ def test_serve_resume_takes_over_the_hovering_vehicle_after_a_crash(tmp_path):
     mission = tmp_path / "north.waypoints"
     mission.write_text(MISSION)
     mav_port, vehicle_port = free_port(), free_port()
-    args = ["companion.cli", "-v", "serve", "--connect", f"udpin://127.0.0.1:{mav_port}", "--no-zenoh",
-            "--state-dir", str(tmp_path / "state"), "--resume", "--flights", "1"]
+    args = [
+        "companion.cli",
+        "-v",
+        "serve",
+        "--connect",
+        f"udpin://127.0.0.1:{mav_port}",
+        "--no-zenoh",
+        "--state-dir",
+        str(tmp_path / "state"),
+        "--resume",
+        "--flights",
+        "1",
+    ]
     with TrackListener() as track:
         vehicle = sim_vehicle(tmp_path, vehicle_port, mav_port, "sim_vehicle", track)
         first = second = None
         try:
-            wait_until(lambda: run_companion("upload", str(mission), "--connect",
-                                             f"udpout://127.0.0.1:{vehicle_port}").returncode == 0, 60.0, "the upload")
+            wait_until(
+                lambda: (
+                    run_companion("upload", str(mission), "--connect", f"udpout://127.0.0.1:{vehicle_port}").returncode
+                    == 0
+                ),
+                60.0,
+                "the upload",
+            )
             first = spawn(args, tmp_path / "serve_1.log")
             with GroundStation(vehicle_port) as gcs:
                 gcs.wait_for_text("companion ready", 60.0)
                 ack = mission_start(gcs)
                 assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED, ack
-                gcs.wait_while(lambda: len(track.track) > 20 and track.positions()[-1, 0] > 8.0, 120.0,
-                               "the vehicle on its way north")
-                first.kill()                                          # a crash: no goodbye
+                gcs.wait_while(
+                    lambda: len(track.track) > 20 and track.positions()[-1, 0] > 8.0,
+                    120.0,
+                    "the vehicle on its way north",
+                )
+                first.kill()  # a crash: no goodbye
                 first.wait(10.0)
                 assert "companion: service stopped" not in gcs.texts
                 second = spawn(args, tmp_path / "serve_2.log")

@@ -10,12 +10,12 @@ import sys
 import time
 
 import pytest
+from docs_blocks import NEEDS_VEHICLE, NEEDS_ZENOH, ROOT, python_snippets
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from support import MavlinkPeer, checkout_env, start_sim_vehicle
 
 from companion.threats.transport.bus import ThreatBus
-from docs_blocks import NEEDS_VEHICLE, NEEDS_ZENOH, ROOT, python_snippets
 from heli_common.ports import free_port
-from support import MavlinkPeer, checkout_env, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -29,8 +29,9 @@ def _snippet(marker: str) -> str:
 def _run(code: str, tmp_path, timeout_s: float = 120.0) -> subprocess.CompletedProcess:
     script = tmp_path / "snippet.py"
     script.write_text(code)
-    return subprocess.run([sys.executable, str(script)], cwd=ROOT, env=checkout_env(), capture_output=True,
-                          text=True, timeout=timeout_s)
+    return subprocess.run(
+        [sys.executable, str(script)], cwd=ROOT, env=checkout_env(), capture_output=True, text=True, timeout=timeout_s
+    )
 
 
 def test_the_mavsdk_snippet_arms_and_takes_off_a_real_vehicle(tmp_path):

@@ -19,6 +19,8 @@ import logging
 
 import numpy as np
 import pytest
+from flight_support import TrackListener, fly
+from support import REPO_ROOT
 
 from companion.config import load_settings
 from companion.demo import DEMO_HOME, Injection
@@ -29,8 +31,6 @@ from companion.mission import load_mission_file
 from companion.mission.convert import mission_to_local
 from companion.record.flight_record import load_record
 from companion.threats.model import Threat
-from flight_support import TrackListener, fly
-from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration
 
@@ -58,10 +58,13 @@ def planned_legs(settings):
     local = mission_to_local(plan, DEMO_HOME, settings=settings.mission, dim=3)
     alt_m = -float(local.waypoints[0].pos_ned_m[2])
     rng = np.random.default_rng(settings.seed)
-    legs = plan_mission(local, np.array([0.0, 0.0, -alt_m]),
-                        pipeline=TrajectoryPipeline.from_settings(settings.smoothing, settings.planning,
-                                                                  settings.feasibility),
-                        settings=settings.flight, rng=np.random.default_rng(rng.integers(2**63)))
+    legs = plan_mission(
+        local,
+        np.array([0.0, 0.0, -alt_m]),
+        pipeline=TrajectoryPipeline.from_settings(settings.smoothing, settings.planning, settings.feasibility),
+        settings=settings.flight,
+        rng=np.random.default_rng(rng.integers(2**63)),
+    )
     return legs, local.world, int(rng.integers(2**31))
 
 
@@ -76,8 +79,15 @@ def real(tmp_path_factory):
     config = tmp / "companion.toml"
     config.write_text(CONFIG)
     with TrackListener(rate_hz=50.0) as track:
-        summary = fly(tmp, MISSION, speedup=SPEEDUP, injections=[POPUP], gcs_out=track.address,
-                      extra_args=["--config", str(config)], timeout_s=400.0)
+        summary = fly(
+            tmp,
+            MISSION,
+            speedup=SPEEDUP,
+            injections=[POPUP],
+            gcs_out=track.address,
+            extra_args=["--config", str(config)],
+            timeout_s=400.0,
+        )
         t_s, pos = track.samples()
     return summary, load_record(summary["record"]), t_s, pos, config
 
@@ -93,11 +103,24 @@ def test_real_and_fast_time_flights_take_the_same_decisions_and_pass_as_close(re
     assert kinds_real, "the pop-up asked for no decision in the real flight"
 
     legs, world, seed = planned_legs(settings)
-    threat = Threat(POPUP.threat_id, "popup", "local_ned", tuple(centre), (0.0, 0.0, 0.0), radius_m,
-                    received_t_s=received_s - start_s)
-    flight = FastTimeFlight(legs[:1], settings, threats=[(received_s - start_s, threat, threat.id)], seed=seed,
-                            start_yaw_rad=float(legs[0].trajectory.yaw_rad(np.array([0.0]))[0]), world=world,
-                            job_time_scale=SPEEDUP)      # a job takes SPEEDUP x its wall time of mission time
+    threat = Threat(
+        POPUP.threat_id,
+        "popup",
+        "local_ned",
+        tuple(centre),
+        (0.0, 0.0, 0.0),
+        radius_m,
+        received_t_s=received_s - start_s,
+    )
+    flight = FastTimeFlight(
+        legs[:1],
+        settings,
+        threats=[(received_s - start_s, threat, threat.id)],
+        seed=seed,
+        start_yaw_rad=float(legs[0].trajectory.yaw_rad(np.array([0.0]))[0]),
+        world=world,
+        job_time_scale=SPEEDUP,
+    )  # a job takes SPEEDUP x its wall time of mission time
     fast = flight.run(max_s=200.0)
     kinds_fast = [d["event"] for d in fast.decisions]
     assert fast.outcome.value == "completed", fast.reason

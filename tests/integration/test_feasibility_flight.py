@@ -13,12 +13,12 @@ import json
 
 import numpy as np
 import pytest
+from flight_support import TrackListener, run_companion, wait_until
+from support import start_sim_vehicle
 
 from companion.record.flight_record import load_record
 from companion.record.report import servo_us_to_delta
-from flight_support import TrackListener, run_companion, wait_until
 from heli_common.ports import free_port
-from support import start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -45,12 +45,21 @@ def flight(tmp_path_factory):
     (tmp / "leg.waypoints").write_text(MISSION)
     (tmp / "aggressive.toml").write_text(CONFIG)
     port = free_port()
-    with TrackListener() as track, \
-            start_sim_vehicle(out=[f"127.0.0.1:{port}", track.address], speedup=SPEEDUP):
-        result = run_companion("run", "--connect", f"udpin://127.0.0.1:{port}", "--mission",
-                               str(tmp / "leg.waypoints"), "--config", str(tmp / "aggressive.toml"),
-                               "--time-scale", str(SPEEDUP), "--no-zenoh",
-                               "--record", str(tmp / "flight.jsonl"))
+    with TrackListener() as track, start_sim_vehicle(out=[f"127.0.0.1:{port}", track.address], speedup=SPEEDUP):
+        result = run_companion(
+            "run",
+            "--connect",
+            f"udpin://127.0.0.1:{port}",
+            "--mission",
+            str(tmp / "leg.waypoints"),
+            "--config",
+            str(tmp / "aggressive.toml"),
+            "--time-scale",
+            str(SPEEDUP),
+            "--no-zenoh",
+            "--record",
+            str(tmp / "flight.jsonl"),
+        )
         wait_until(lambda: track.armed is False, 10.0, "a disarmed heartbeat")
     assert result.returncode == 0, f"companion run failed:\n{result.stderr[-3000:]}"
     return {"result": result, "tmp": tmp, "record": load_record(tmp / "flight.jsonl")}
@@ -73,7 +82,7 @@ def test_the_stretched_leg_is_flown_without_saturation(flight):
     samples = record.samples
     servo = np.asarray(samples["servo_us"], dtype=float)
     servo = servo[np.all(np.isfinite(servo), axis=1)]
-    assert len(servo) > 30          # the record's rate is in wall-clock time (speed-up 4)
+    assert len(servo) > 30  # the record's rate is in wall-clock time (speed-up 4)
     delta = np.abs(servo_us_to_delta(servo))
     assert np.max(delta) < 0.95, f"max |delta| flown {np.max(delta):.3f}"
     # the longitudinal cyclic, the channel the timing loads, peaks where the check predicted

@@ -31,13 +31,13 @@ import time
 from pathlib import Path
 
 import pytest
+from flight_support import wait_until
+from support import REPO_ROOT, checkout_env
 
 from companion.fleet.launcher import Fleet
 from companion.fleet.missions import select_missions
 from companion.fleet.settings import FleetSettings
 from companion.fleet.tracks import fleet_separation
-from flight_support import wait_until
-from support import REPO_ROOT, checkout_env
 
 pytestmark = pytest.mark.integration
 
@@ -49,34 +49,41 @@ FLEET_TIMEOUT_S = 200.0
 
 def fly(logs: Path, mission_dir: Path = CROSSING3, vehicles: int = 3, **kwargs) -> tuple:
     """Fly the missions of ``mission_dir``; (result, numbers, one-line description)."""
-    fleet = Fleet(select_missions(mission_dir, vehicles), logs, speedup=SPEEDUP, gcs_out=None, env=checkout_env(),
-                  **kwargs)
+    fleet = Fleet(
+        select_missions(mission_dir, vehicles), logs, speedup=SPEEDUP, gcs_out=None, env=checkout_env(), **kwargs
+    )
     before, t0 = os.times(), time.monotonic()
     try:
         fleet.start()
         try:
             fleet.wait(FLEET_TIMEOUT_S)
         except TimeoutError:
-            pass                                     # judged below: not completed
+            pass  # judged below: not completed
     finally:
         result = fleet.stop()
     after, wall = os.times(), time.monotonic() - t0
     cpu_s = (after.children_user + after.children_system) - (before.children_user + before.children_system)
     numbers = fleet_separation([v.tlog for v in fleet.vehicles], [v.sysid for v in fleet.vehicles])
     numbers.pop("separation")
-    numbers.update(cpu_s=round(cpu_s, 1), wall_s=round(wall, 1), cores=round(cpu_s / wall, 2),
-                   vehicles=[v.as_dict() for v in result.vehicles])
+    numbers.update(
+        cpu_s=round(cpu_s, 1),
+        wall_s=round(wall, 1),
+        cores=round(cpu_s / wall, 2),
+        vehicles=[v.as_dict() for v in result.vehicles],
+    )
     (logs / "numbers.json").write_text(json.dumps(numbers, indent=1, default=str))
-    text = (f"min separation {numbers['min_separation_m']:.2f} m (pair {numbers['closest_pair']}; every pair "
-            f"{ {k: round(v, 2) for k, v in numbers['pair_min_m'].items()} }), required "
-            f"{FleetSettings().separation_m:.2f} m; completed {[v.completed for v in result.vehicles]} "
-            f"(outcomes {[v.outcome for v in result.vehicles]}, exit {[v.exit_code for v in result.vehicles]}); "
-            f"decisions {[(v.summary or {}).get('decisions') for v in result.vehicles]}; "
-            f"flown { {k: round(v, 1) for k, v in numbers['path_length_m'].items()} } m; simulators' speed-up "
-            f"{ {k: round(v, 3) for k, v in numbers['speedup'].items()} }; fleet CPU {numbers['cpu_s']} s over "
-            f"{numbers['wall_s']} s wall ({numbers['cores']} cores); "
-            f"start gate {fleet.gate and fleet.gate.describe()}; "
-            f"logs {logs}")
+    text = (
+        f"min separation {numbers['min_separation_m']:.2f} m (pair {numbers['closest_pair']}; every pair "
+        f"{ {k: round(v, 2) for k, v in numbers['pair_min_m'].items()} }), required "
+        f"{FleetSettings().separation_m:.2f} m; completed {[v.completed for v in result.vehicles]} "
+        f"(outcomes {[v.outcome for v in result.vehicles]}, exit {[v.exit_code for v in result.vehicles]}); "
+        f"decisions {[(v.summary or {}).get('decisions') for v in result.vehicles]}; "
+        f"flown { {k: round(v, 1) for k, v in numbers['path_length_m'].items()} } m; simulators' speed-up "
+        f"{ {k: round(v, 3) for k, v in numbers['speedup'].items()} }; fleet CPU {numbers['cpu_s']} s over "
+        f"{numbers['wall_s']} s wall ({numbers['cores']} cores); "
+        f"start gate {fleet.gate and fleet.gate.describe()}; "
+        f"logs {logs}"
+    )
     print(text)
     return result, numbers, text
 
@@ -122,14 +129,43 @@ def processes_mentioning(text: str) -> list[int]:
 
 def test_fleet_up_interrupted_in_flight_stops_the_companions_first_and_leaves_no_process(tmp_path):
     logs = tmp_path / "fleet"
-    launcher = subprocess.Popen([sys.executable, "-m", "companion.cli", "fleet", "up", "--vehicles", "2",
-                                 "--mission-dir", str(HEADON2), "--speedup", str(SPEEDUP), "--logs", str(logs),
-                                 "--gcs", "none"], env=checkout_env(), cwd=str(REPO_ROOT),
-                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    launcher = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "companion.cli",
+            "fleet",
+            "up",
+            "--vehicles",
+            "2",
+            "--mission-dir",
+            str(HEADON2),
+            "--speedup",
+            str(SPEEDUP),
+            "--logs",
+            str(logs),
+            "--gcs",
+            "none",
+        ],
+        env=checkout_env(),
+        cwd=str(REPO_ROOT),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     try:
-        wait_until(lambda: all("takeoff_complete" in p.read_text(errors="replace")
-                               for p in (logs / "uav1.log", logs / "uav2.log") if p.exists())
-                   and (logs / "uav2.log").exists(), 150.0, "both vehicles in the air")
+        wait_until(
+            lambda: (
+                all(
+                    "takeoff_complete" in p.read_text(errors="replace")
+                    for p in (logs / "uav1.log", logs / "uav2.log")
+                    if p.exists()
+                )
+                and (logs / "uav2.log").exists()
+            ),
+            150.0,
+            "both vehicles in the air",
+        )
         desc = json.loads((logs / "fleet.json").read_text())
         pids = [desc["router_pid"]] + [pid for v in desc["vehicles"] for pid in v["pids"].values()]
         launcher.send_signal(signal.SIGINT)
@@ -142,7 +178,10 @@ def test_fleet_up_interrupted_in_flight_stops_the_companions_first_and_leaves_no
     summary = json.loads((logs / "summary.json").read_text())
     assert [v["outcome"] for v in summary["vehicles"]] == ["interrupted", "interrupted"], out
     assert [v["exit_code"] for v in summary["vehicles"]] == [130, 130], out
-    for sysid in (1, 2):                    # the companion stopped its vehicle, then exited
+    for sysid in (1, 2):  # the companion stopped its vehicle, then exited
         assert "interrupted" in (logs / f"uav{sysid}.log").read_text(errors="replace")
-    wait_until(lambda: not any(alive(pid) for pid in pids) and not processes_mentioning(str(logs)), 10.0,
-               f"no process of the fleet left ({[p for p in pids if alive(p)]}, {processes_mentioning(str(logs))})")
+    wait_until(
+        lambda: not any(alive(pid) for pid in pids) and not processes_mentioning(str(logs)),
+        10.0,
+        f"no process of the fleet left ({[p for p in pids if alive(p)]}, {processes_mentioning(str(logs))})",
+    )

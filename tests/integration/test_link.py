@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.service.startup import StartupSettings, start_vehicle
-from companion.flight.reference import VehicleClock
 from companion.errors import LinkError
+from companion.flight.reference import VehicleClock
 from companion.link import COPTER_MODES, SetpointStreamer, VehicleLink, hold_position
+from companion.service.startup import StartupSettings, start_vehicle
 from heli_common.ports import free_port
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -65,16 +65,18 @@ def test_guided_takeoff_and_setpoints_move_the_vehicle():
         streamer = SetpointStreamer(link.direct.send_setpoint)
         try:
             with pytest.raises(LinkError, match="refused"):
-                await link.commands.takeoff(10.0)             # disarmed: the vehicle refuses
+                await link.commands.takeoff(10.0)  # disarmed: the vehicle refuses
             # a helicopter: interlock low, arm, interlock after the arming delay, run-up, takeoff
-            await start_vehicle(link, StartupSettings(), 10.0, VehicleClock(4.0).now_s, time_scale=4.0,
-                                climb_speed_m_s=2.5)
+            await start_vehicle(
+                link, StartupSettings(), 10.0, VehicleClock(4.0).now_s, time_scale=4.0, climb_speed_m_s=2.5
+            )
             await link.waits.wait_for(lambda t: t.pos_ned_m[2] < -8.0, 60, "takeoff to 10 m")
             target = np.array([15.0, 10.0, -12.0])
             streamer.set_source(hold_position(target, 0.0))
             streamer.start()
-            t = await link.waits.wait_for(lambda t: np.linalg.norm(t.pos_ned_m - target) < 1.5, 90,
-                                    "the vehicle to reach the GUIDED setpoint")
+            t = await link.waits.wait_for(
+                lambda t: np.linalg.norm(t.pos_ned_m - target) < 1.5, 90, "the vehicle to reach the GUIDED setpoint"
+            )
             assert t.mode == COPTER_MODES["GUIDED"] and t.armed and t.in_air is not False
             assert streamer.sent > 10 and streamer.send_errors == 0
         finally:

@@ -17,15 +17,15 @@ import time
 
 import numpy as np
 import pytest
+from flight_support import DEMO_HOME, TrackListener, run_companion, spawn, wait_until
+from foxglove_client import collect
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from support import MavlinkPeer
 
 from companion.geo import LocalFrame
 from companion.link.streams import StreamSettings
 from companion.view import channels as ch
-from flight_support import DEMO_HOME, TrackListener, run_companion, spawn, wait_until
-from foxglove_client import collect
 from heli_common.ports import free_port
-from support import MavlinkPeer
 
 pytestmark = pytest.mark.integration
 
@@ -44,8 +44,20 @@ STEP_MS = 1000.0 / StreamSettings().local_position_ned_hz
 
 
 def sim_vehicle(tmp_path, vehicle_port: int, companion_port: int, track: TrackListener):
-    return spawn(["sim_vehicle.cli", "--port", str(vehicle_port), "--out", f"127.0.0.1:{companion_port}",
-                  "--out", track.address, "--speedup", str(SPEEDUP)], tmp_path / "sim_vehicle.log")
+    return spawn(
+        [
+            "sim_vehicle.cli",
+            "--port",
+            str(vehicle_port),
+            "--out",
+            f"127.0.0.1:{companion_port}",
+            "--out",
+            track.address,
+            "--speedup",
+            str(SPEEDUP),
+        ],
+        tmp_path / "sim_vehicle.log",
+    )
 
 
 def watch(port: int, seconds: float, until=None) -> list[dict]:
@@ -60,7 +72,7 @@ def assert_the_vehicles_own_states(states: list[dict], track: TrackListener, fra
     boot = np.array([s["time_boot_ms"] for s in states], dtype=float)
     assert (np.diff(seq) == 1).all(), f"states lost or out of order: {seq.tolist()}"
     assert (np.diff(boot) > 0).all()
-    mean_step_ms = (boot[-1] - boot[0]) / (len(boot) - 1)        # the vehicle's scheduler alternates 80 / 120
+    mean_step_ms = (boot[-1] - boot[0]) / (len(boot) - 1)  # the vehicle's scheduler alternates 80 / 120
     assert abs(mean_step_ms - STEP_MS) < 0.1 * STEP_MS, np.diff(boot)
     assert {s["frame"] for s in states} == frames
     t_s, pos = track.samples()
@@ -78,11 +90,22 @@ def test_run_shows_every_state_of_the_vehicle_with_its_own_stamp(tmp_path):
     companion_port, vehicle_port, fox_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
     with TrackListener() as track:
         vehicle = sim_vehicle(tmp_path, vehicle_port, companion_port, track)
-        companion = spawn(["companion.cli", "run", "--connect", f"udpin://127.0.0.1:{companion_port}", "--no-zenoh",
-                           "--foxglove", f"127.0.0.1:{fox_port}", "--mission", str(mission)],
-                          tmp_path / "companion.log")
+        companion = spawn(
+            [
+                "companion.cli",
+                "run",
+                "--connect",
+                f"udpin://127.0.0.1:{companion_port}",
+                "--no-zenoh",
+                "--foxglove",
+                f"127.0.0.1:{fox_port}",
+                "--mission",
+                str(mission),
+            ],
+            tmp_path / "companion.log",
+        )
         try:
-            states = watch(fox_port, 200.0)                       # until the flight ends (the server stops)
+            states = watch(fox_port, 200.0)  # until the flight ends (the server stops)
             companion.wait(30.0)
         finally:
             companion.stop()
@@ -91,17 +114,18 @@ def test_run_shows_every_state_of_the_vehicle_with_its_own_stamp(tmp_path):
     assert companion.returncode == 0, log_text[-3000:]
     assert len(states) > 100, f"{len(states)} states; log:\n{log_text[-2000:]}"
     assert_the_vehicles_own_states(states, track, {"vehicle_local", "home"})
-    shown = [s["frame"] for s in states]            # the vehicle's own frame until the planning home is set
+    shown = [s["frame"] for s in states]  # the vehicle's own frame until the planning home is set
     assert shown == sorted(shown, key=lambda frame: frame == "home"), "the frame went back"
-    assert max(s["pos_ned_m"][0] for s in states) > NORTH_M - 1.5        # the flight itself was shown
+    assert max(s["pos_ned_m"][0] for s in states) > NORTH_M - 1.5  # the flight itself was shown
 
 
 def mission_start(gcs: MavlinkPeer) -> None:
     """MISSION_START to the companion's component (191), as a ground station sends it."""
     companion = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
     gcs.send(gcs.mav.command_long_encode(1, companion, mavlink.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0))
-    ack = gcs.wait("COMMAND_ACK", 5.0, lambda m: m.command == mavlink.MAV_CMD_MISSION_START
-                   and m.get_srcComponent() == companion)
+    ack = gcs.wait(
+        "COMMAND_ACK", 5.0, lambda m: m.command == mavlink.MAV_CMD_MISSION_START and m.get_srcComponent() == companion
+    )
     assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED, ack
 
 
@@ -109,28 +133,39 @@ def test_serve_shows_the_vehicle_before_and_between_flights(tmp_path):
     mission = tmp_path / "north.waypoints"
     mission.write_text(MISSION)
     companion_port, vehicle_port, fox_port = free_port(), free_port(), free_port(socket.SOCK_STREAM)
-    log_text = lambda: (tmp_path / "serve.log").read_text(errors="replace")   # noqa: E731
+    log_text = lambda: (tmp_path / "serve.log").read_text(errors="replace")  # noqa: E731
     with TrackListener() as track:
         vehicle = sim_vehicle(tmp_path, vehicle_port, companion_port, track)
-        service = spawn(["companion.cli", "-v", "serve", "--connect", f"udpin://127.0.0.1:{companion_port}",
-                         "--no-zenoh", "--foxglove", f"127.0.0.1:{fox_port}"], tmp_path / "serve.log")
+        service = spawn(
+            [
+                "companion.cli",
+                "-v",
+                "serve",
+                "--connect",
+                f"udpin://127.0.0.1:{companion_port}",
+                "--no-zenoh",
+                "--foxglove",
+                f"127.0.0.1:{fox_port}",
+            ],
+            tmp_path / "serve.log",
+        )
         try:
             wait_until(lambda: "companion serve: ready" in log_text(), 60.0, "the service to be ready")
-            before = watch(fox_port, 6.0)                          # no flight yet
+            before = watch(fox_port, 6.0)  # no flight yet
             assert_the_vehicles_own_states(before, track, {"vehicle_local"})
-            assert np.linalg.norm(before[-1]["pos_ned_m"]) < 1.0, before[-1]    # on the ground at home
+            assert np.linalg.norm(before[-1]["pos_ned_m"]) < 1.0, before[-1]  # on the ground at home
             upload = run_companion("upload", str(mission), "--connect", f"udpout://127.0.0.1:{vehicle_port}")
             assert upload.returncode == 0, upload.stderr
             with MavlinkPeer(vehicle_port, source_system=255, source_component=190) as gcs:
                 mission_start(gcs)
             wait_until(lambda: log_text().count("companion serve: ready") >= 2, 150.0, "the flight to end")
             time.sleep(1.0)
-            after = watch(fox_port, 6.0)                           # no flight runs: the same server
+            after = watch(fox_port, 6.0)  # no flight runs: the same server
         finally:
             service.stop()
             vehicle.stop()
     assert '"outcome": "completed"' in log_text(), log_text()[-3000:]
     assert_the_vehicles_own_states(after, track, {"home"})
     landed = np.array(after[-1]["pos_ned_m"])
-    assert abs(landed[0] - NORTH_M) < 1.5 and abs(landed[2]) < 0.5, landed        # where it landed, north
-    assert after[0]["seq"] > before[-1]["seq"]                                     # the one feed, still counting
+    assert abs(landed[0] - NORTH_M) < 1.5 and abs(landed[2]) < 0.5, landed  # where it landed, north
+    assert after[0]["seq"] > before[-1]["seq"]  # the one feed, still counting

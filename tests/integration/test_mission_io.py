@@ -31,8 +31,13 @@ def sim():
 
 
 def companion(*args: str, timeout_s: float = 90.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion.cli", *args], cwd=str(REPO_ROOT),
-                          capture_output=True, text=True, timeout=timeout_s)
+    return subprocess.run(
+        [sys.executable, "-m", "companion.cli", *args],
+        cwd=str(REPO_ROOT),
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+    )
 
 
 def url(sim) -> str:
@@ -45,8 +50,7 @@ def assert_same_items(got, want):
         assert (a.command, a.frame, a.autocontinue) == (b.command, b.frame, b.autocontinue), k
         for name in ("param1", "param2", "param3", "param4", "alt_m"):
             va, vb = getattr(a, name), getattr(b, name)
-            assert (math.isnan(va) and math.isnan(vb)) or va == pytest.approx(vb, abs=1e-5), \
-                (k, name)
+            assert (math.isnan(va) and math.isnan(vb)) or va == pytest.approx(vb, abs=1e-5), (k, name)
         assert a.lat_deg == pytest.approx(b.lat_deg, abs=1.5e-7), k
         assert a.lon_deg == pytest.approx(b.lon_deg, abs=1.5e-7), k
 
@@ -63,8 +67,7 @@ def assert_same_fence_and_rally(got, want):
         assert ca.radius_m == pytest.approx(cb.radius_m) and ca.inclusion == cb.inclusion
     assert len(got.rally) == len(want.rally)
     for ra, rb in zip(got.rally, want.rally):
-        assert (ra.lat_deg, ra.lon_deg, ra.alt_m) == pytest.approx(
-            (rb.lat_deg, rb.lon_deg, rb.alt_m), abs=1.5e-7)
+        assert (ra.lat_deg, ra.lon_deg, ra.alt_m) == pytest.approx((rb.lat_deg, rb.lon_deg, rb.alt_m), abs=1.5e-7)
 
 
 def test_plan_round_trip_preserves_mission_fence_and_rally(tmp_path, sim):
@@ -80,13 +83,12 @@ def test_plan_round_trip_preserves_mission_fence_and_rally(tmp_path, sim):
     assert_same_items(got.items, want.items)
     assert_same_fence_and_rally(got, want)
     assert got.planned_home == pytest.approx(want.planned_home, abs=1e-6)
-    json.loads(out.read_text())          # QGroundControl-readable JSON
+    json.loads(out.read_text())  # QGroundControl-readable JSON
 
 
 def test_waypoints_round_trip_and_fence_cleared(tmp_path, sim):
     # a mission with a fence first, then a .waypoints file (no fence): the fence is cleared
-    assert companion("upload", str(SAMPLES / "exclusion_zones.plan"),
-                     "--connect", url(sim)).returncode == 0
+    assert companion("upload", str(SAMPLES / "exclusion_zones.plan"), "--connect", url(sim)).returncode == 0
     up = companion("upload", str(SAMPLES / "square.waypoints"), "--connect", url(sim))
     assert up.returncode == 0, up.stderr
     out_wpl = tmp_path / "onboard.waypoints"
@@ -100,13 +102,16 @@ def test_waypoints_round_trip_and_fence_cleared(tmp_path, sim):
     assert onboard.polygons == () and onboard.circles == () and onboard.rally == ()
 
 
-@pytest.mark.parametrize("breakage, message", [
-    ("json", "broken JSON at line"),
-    ("command", "unsupported command"),
-    ("latitude", "latitude"),
-    ("inside_zone", "inside exclusion zone"),
-    ("empty", "empty"),
-])
+@pytest.mark.parametrize(
+    "breakage, message",
+    [
+        ("json", "broken JSON at line"),
+        ("command", "unsupported command"),
+        ("latitude", "latitude"),
+        ("inside_zone", "inside exclusion zone"),
+        ("empty", "empty"),
+    ],
+)
 def test_broken_file_uploads_nothing(tmp_path, sim, breakage, message):
     good = SAMPLES / "exclusion_zones.plan"
     doc = json.loads(good.read_text())
@@ -138,8 +143,9 @@ def test_broken_file_uploads_nothing(tmp_path, sim, breakage, message):
 
 def test_no_vehicle_is_a_clear_error(tmp_path):
     port = free_port()
-    result = companion("upload", str(SAMPLES / "square.waypoints"),
-                       "--connect", f"udpout://127.0.0.1:{port}", "--timeout", "2")
+    result = companion(
+        "upload", str(SAMPLES / "square.waypoints"), "--connect", f"udpout://127.0.0.1:{port}", "--timeout", "2"
+    )
     assert result.returncode == 2
     assert "no autopilot" in result.stderr and "Traceback" not in result.stderr
 

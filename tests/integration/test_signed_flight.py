@@ -15,11 +15,11 @@ import re
 import threading
 
 import pytest
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
 from flight_support import run_companion
-from heli_common.ports import free_port
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from support import REPO_ROOT, MavlinkPeer, start_sim_vehicle
+
+from heli_common.ports import free_port
 
 pytestmark = pytest.mark.integration
 
@@ -36,7 +36,7 @@ class Intruder(threading.Thread):
 
     def __init__(self, port: int) -> None:
         super().__init__(daemon=True, name="intruder")
-        self.plain = MavlinkPeer(port, source_system=1, source_component=191)     # posing as the companion
+        self.plain = MavlinkPeer(port, source_system=1, source_component=191)  # posing as the companion
         self.forger = MavlinkPeer(port, source_system=255, source_component=190, signing_key=INTRUDER_KEY)
         self.stop_event = threading.Event()
         self.rounds = 0
@@ -45,10 +45,26 @@ class Intruder(threading.Thread):
         while not self.stop_event.wait(0.2):
             for peer in (self.plain, self.forger):
                 m = peer.mav
-                peer.send(m.command_long_encode(1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0,
-                                                mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, LAND, 0, 0, 0, 0, 0))
-                peer.send(m.set_position_target_local_ned_encode(0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b110111111000,
-                                                                 80.0, -80.0, -3.0, 0, 0, 0, 0, 0, 0, 0, 0))
+                peer.send(
+                    m.command_long_encode(
+                        1,
+                        1,
+                        mavlink.MAV_CMD_DO_SET_MODE,
+                        0,
+                        mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                        LAND,
+                        0,
+                        0,
+                        0,
+                        0,
+                        0,
+                    )
+                )
+                peer.send(
+                    m.set_position_target_local_ned_encode(
+                        0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b110111111000, 80.0, -80.0, -3.0, 0, 0, 0, 0, 0, 0, 0, 0
+                    )
+                )
                 peer.send(m.mission_clear_all_encode(1, 1, 0))
             self.rounds += 1
 
@@ -69,13 +85,24 @@ def key_file(tmp_path_factory):
 @pytest.fixture(scope="module")
 def flight(key_file):
     port = free_port()
-    with start_sim_vehicle(out=[f"127.0.0.1:{port}"], speedup=SPEEDUP, signing_key=KEY,
-                           extra_args=["--signing-key", str(key_file)]) as sim:
+    with start_sim_vehicle(
+        out=[f"127.0.0.1:{port}"], speedup=SPEEDUP, signing_key=KEY, extra_args=["--signing-key", str(key_file)]
+    ) as sim:
         intruder = Intruder(sim.port)
         intruder.start()
         try:
-            result = run_companion("run", "--connect", f"udpin://127.0.0.1:{port}", "--mission", str(MISSION),
-                                   "--time-scale", str(SPEEDUP), "--no-zenoh", "--signing-key", str(key_file))
+            result = run_companion(
+                "run",
+                "--connect",
+                f"udpin://127.0.0.1:{port}",
+                "--mission",
+                str(MISSION),
+                "--time-scale",
+                str(SPEEDUP),
+                "--no-zenoh",
+                "--signing-key",
+                str(key_file),
+            )
         finally:
             intruder.stop()
         with MavlinkPeer(sim.port, signing_key=KEY) as operator:
@@ -111,10 +138,22 @@ def test_a_companion_with_the_wrong_key_fails_with_one_line_naming_it(tmp_path):
     right = tmp_path / "right.key"
     right.write_text(PASSPHRASE)
     port = free_port()
-    with start_sim_vehicle(out=[f"127.0.0.1:{port}"], speedup=SPEEDUP, signing_key=KEY,
-                           extra_args=["--signing-key", str(right)]):
-        result = run_companion("run", "--connect", f"udpin://127.0.0.1:{port}", "--mission", str(MISSION),
-                               "--no-zenoh", "--config", str(config), "--signing-key", str(wrong), timeout_s=60)
+    with start_sim_vehicle(
+        out=[f"127.0.0.1:{port}"], speedup=SPEEDUP, signing_key=KEY, extra_args=["--signing-key", str(right)]
+    ):
+        result = run_companion(
+            "run",
+            "--connect",
+            f"udpin://127.0.0.1:{port}",
+            "--mission",
+            str(MISSION),
+            "--no-zenoh",
+            "--config",
+            str(config),
+            "--signing-key",
+            str(wrong),
+            timeout_s=60,
+        )
     assert result.returncode == 2, result.stderr[-2000:]
     errors = [line for line in result.stderr.splitlines() if line.startswith("companion: error:")]
     assert len(errors) == 1, result.stderr[-2000:]
@@ -130,6 +169,7 @@ def test_upload_and_download_sign_with_the_key_and_are_refused_without_it(key_fi
         down = run_companion("download", str(back), "--connect", url, "--signing-key", str(key_file), timeout_s=90)
         assert down.returncode == 0, down.stderr[-2000:]
         assert len(back.read_text().splitlines()) == len(MISSION.read_text().splitlines())
-        unsigned = run_companion("download", str(tmp_path / "x.waypoints"), "--connect", url, "--timeout", "3",
-                                 timeout_s=60)
+        unsigned = run_companion(
+            "download", str(tmp_path / "x.waypoints"), "--connect", url, "--timeout", "3", timeout_s=60
+        )
         assert unsigned.returncode == 2 and "no autopilot heard" in unsigned.stderr

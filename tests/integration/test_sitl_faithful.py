@@ -17,11 +17,11 @@ import time
 
 import pymap3d
 import pytest
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
 from flight_support import TrackListener, wait_until
-from heli_common.ports import free_port
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from support import MavlinkPeer, start_sim_vehicle
+
+from heli_common.ports import free_port
 
 pytestmark = pytest.mark.integration
 
@@ -50,7 +50,7 @@ class Listener:
         while time.monotonic() < deadline:
             try:
                 data = self.sock.recv(65535)
-            except (socket.timeout, OSError):
+            except (TimeoutError, OSError):
                 continue
             out += [m for m in self.mav.parse_buffer(data) or [] if m.get_type() != "BAD_DATA"]
         return out
@@ -78,9 +78,12 @@ def stamps(messages: list, kind: str) -> list[int]:
 def test_streams_only_as_requested_per_link_at_the_requested_rate():
     listener = Listener()
     try:
-        with TrackListener() as track, \
-                start_sim_vehicle(out=[listener.address, track.address], speedup=5.0) as sim, \
-                MavlinkPeer(sim.port, sim.sysid) as gcs, MavlinkPeer(sim.port, sim.sysid, 251) as other:
+        with (
+            TrackListener() as track,
+            start_sim_vehicle(out=[listener.address, track.address], speedup=5.0) as sim,
+            MavlinkPeer(sim.port, sim.sysid) as gcs,
+            MavlinkPeer(sim.port, sim.sysid, 251) as other,
+        ):
             # unasked: a peer gets HEARTBEAT only; an --out listener also the origin and home, once, at start
             heard = collect(gcs, 3.0)
             assert set(types(heard)) == {"HEARTBEAT"}
@@ -129,8 +132,11 @@ def test_streams_only_as_requested_per_link_at_the_requested_rate():
 
 
 def test_interlock_arming_delay_runup_and_takeoff():
-    with start_sim_vehicle(speedup=5.0) as sim, MavlinkPeer(sim.port, sim.sysid) as gcs, \
-            MavlinkPeer(sim.port, sim.sysid, source_system=255) as rc:
+    with (
+        start_sim_vehicle(speedup=5.0) as sim,
+        MavlinkPeer(sim.port, sim.sysid) as gcs,
+        MavlinkPeer(sim.port, sim.sysid, source_system=255) as rc,
+    ):
         gcs.request("EXTENDED_SYS_STATE", "GLOBAL_POSITION_INT", "RPM", rate_hz=10.0)
         assert gcs.set_mode(4).result == M.MAV_RESULT_ACCEPTED
         # the SITL's RC8 (1500 us) engages the interlock: arming refused, as ArduPilot words it
@@ -154,8 +160,9 @@ def test_interlock_arming_delay_runup_and_takeoff():
         assert gcs.set_interlock(False).result == M.MAV_RESULT_ACCEPTED
         assert gcs.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0).result == M.MAV_RESULT_ACCEPTED
         armed_ms = gcs.wait("GLOBAL_POSITION_INT", 2.0).time_boot_ms
-        assert "Arming motors" in [m.text for m in collect(gcs, 0.5) + [gcs.last["STATUSTEXT"]]
-                                   if m.get_type() == "STATUSTEXT"]
+        assert "Arming motors" in [
+            m.text for m in collect(gcs, 0.5) + [gcs.last["STATUSTEXT"]] if m.get_type() == "STATUSTEXT"
+        ]
         # takeoff refused while the interlock is off: FAILED and no STATUSTEXT
         gcs.last.pop("STATUSTEXT", None)
         assert gcs.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 10.0).result == M.MAV_RESULT_FAILED
@@ -183,8 +190,14 @@ def test_interlock_arming_delay_runup_and_takeoff():
                 if msg.get_type() == "GLOBAL_POSITION_INT":
                     state = gcs.last.get("EXTENDED_SYS_STATE")
                     rpm = gcs.last.get("RPM")
-                    samples.append((msg.time_boot_ms, msg.relative_alt / 1000.0,
-                                    state.landed_state if state else None, rpm.rpm1 if rpm else None))
+                    samples.append(
+                        (
+                            msg.time_boot_ms,
+                            msg.relative_alt / 1000.0,
+                            state.landed_state if state else None,
+                            rpm.rpm1 if rpm else None,
+                        )
+                    )
             if samples and samples[-1][1] > 9.8:
                 break
         lift_off_ms = next(t for t, alt, _, _ in samples if alt > 0.3)
@@ -202,8 +215,10 @@ def test_interlock_arming_delay_runup_and_takeoff():
 def test_origin_apart_from_home_and_do_set_home():
     origin = (round(HOME[0] - 30.0 / 111_132.95, 7), round(HOME[1] - 20.0 / 75_300.0, 7), 478.0)
     expected_home = pymap3d.geodetic2ned(*HOME, *origin)  # home from the origin, NED metres
-    with start_sim_vehicle(speedup=5.0, extra_args=["--origin", ",".join(f"{v:.7f}" for v in origin)]) as sim, \
-            MavlinkPeer(sim.port, sim.sysid) as gcs:
+    with (
+        start_sim_vehicle(speedup=5.0, extra_args=["--origin", ",".join(f"{v:.7f}" for v in origin)]) as sim,
+        MavlinkPeer(sim.port, sim.sysid) as gcs,
+    ):
         assert gcs.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN).result == 0
         got = gcs.last.get("GPS_GLOBAL_ORIGIN") or gcs.wait("GPS_GLOBAL_ORIGIN", 2.0)
         assert (got.latitude, got.longitude, got.altitude) == tuple(round(v * 1e7) for v in origin[:2]) + (478000,)
@@ -220,8 +235,11 @@ def test_origin_apart_from_home_and_do_set_home():
         reached = None
         deadline = time.monotonic() + 40.0
         while reached is None and time.monotonic() < deadline:
-            gcs.send(gcs.mav.set_position_target_local_ned_encode(0, sim.sysid, 1, M.MAV_FRAME_LOCAL_NED,
-                                                                  0b110111111000, *target, 0, 0, 0, 0, 0, 0, 0, 0))
+            gcs.send(
+                gcs.mav.set_position_target_local_ned_encode(
+                    0, sim.sysid, 1, M.MAV_FRAME_LOCAL_NED, 0b110111111000, *target, 0, 0, 0, 0, 0, 0, 0, 0
+                )
+            )
             reached = gcs.wait("LOCAL_POSITION_NED", 0.3, lambda m: math.dist((m.x, m.y, m.z), target) < 0.3)
         assert reached is not None, sim.log_tail()
         position = gcs.wait("GLOBAL_POSITION_INT", 2.0)
@@ -231,8 +249,18 @@ def test_origin_apart_from_home_and_do_set_home():
         lat, lon = HOME[0] + 10.0 / 111_132.95, HOME[1]
         gcs.last.pop("HOME_POSITION", None)
         gcs.last.pop("GPS_GLOBAL_ORIGIN", None)
-        ack = gcs.command(M.MAV_CMD_DO_SET_HOME, 0, 0, 0, 0, round(lat * 1e7), round(lon * 1e7), 2.0, use_int=True,
-                          frame=M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+        ack = gcs.command(
+            M.MAV_CMD_DO_SET_HOME,
+            0,
+            0,
+            0,
+            0,
+            round(lat * 1e7),
+            round(lon * 1e7),
+            2.0,
+            use_int=True,
+            frame=M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        )
         assert ack.result == M.MAV_RESULT_ACCEPTED
         announced = gcs.last.get("HOME_POSITION") or gcs.wait("HOME_POSITION", 2.0)
         assert gcs.last["GPS_GLOBAL_ORIGIN"].latitude == round(origin[0] * 1e7)  # announced too, unchanged
@@ -252,8 +280,10 @@ def test_origin_apart_from_home_and_do_set_home():
 
 
 def test_adsb_traffic_on_request():
-    with start_sim_vehicle(speedup=2.0, extra_args=["--adsb-traffic", "2", "--seed", "4"]) as sim, \
-            MavlinkPeer(sim.port, sim.sysid) as gcs:
+    with (
+        start_sim_vehicle(speedup=2.0, extra_args=["--adsb-traffic", "2", "--seed", "4"]) as sim,
+        MavlinkPeer(sim.port, sim.sysid) as gcs,
+    ):
         assert "ADSB_VEHICLE" not in types(collect(gcs, 1.5))  # not unasked
         assert gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ADSB_VEHICLE, 200_000).result == 0
         reports = [m for m in collect(gcs, 4.0) if m.get_type() == "ADSB_VEHICLE"]
@@ -267,8 +297,7 @@ def test_adsb_traffic_on_request():
             assert first.callsign == f"SIM{icao}" and first.squawk == 1200 and first.tslc == 1
             assert first.flags == 511 and first.emitter_type in (1, 2, 7, 14)
             assert 1000 <= first.hor_velocity <= 4000 and first.ver_velocity == 0 and 0 <= first.heading < 36000
-            north, east, down = pymap3d.geodetic2ned(first.lat * 1e-7, first.lon * 1e-7, first.altitude / 1000.0,
-                                                     *HOME)
+            north, east, down = pymap3d.geodetic2ned(first.lat * 1e-7, first.lon * 1e-7, first.altitude / 1000.0, *HOME)
             assert math.hypot(north, east) <= 520.0 and 5.0 - 0.1 <= -down <= 70.1
             moved = pymap3d.geodetic2ned(last.lat * 1e-7, last.lon * 1e-7, last.altitude / 1000.0, *HOME)
             assert math.hypot(moved[0] - north, moved[1] - east) > 10.0  # flying, not parked

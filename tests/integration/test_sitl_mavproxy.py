@@ -16,9 +16,9 @@ import time
 from pathlib import Path
 
 import pytest
+from support import MavlinkPeer, start_sim_vehicle
 
 from heli_common.mavlink_ids import COPTER_MODES
-from support import MavlinkPeer, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -45,11 +45,20 @@ def read_wpl(path: Path) -> list[list[str]]:
 
 def load_with_mavproxy(port: int, path: Path, state_dir: Path, timeout_s: float = 30.0) -> str:
     """Run MAVProxy non-interactively with ``wp load``; returns its output once the ACK is in."""
-    cmd = [mavproxy_executable(), f"--master=udpout:127.0.0.1:{port}", "--target-system=1",
-           "--target-component=1", "--non-interactive", "--nowait", "--default-modules=wp,mode",
-           f"--state-basedir={state_dir}", f"--cmd=wp load {path}"]
-    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, cwd=str(state_dir))
+    cmd = [
+        mavproxy_executable(),
+        f"--master=udpout:127.0.0.1:{port}",
+        "--target-system=1",
+        "--target-component=1",
+        "--non-interactive",
+        "--nowait",
+        "--default-modules=wp,mode",
+        f"--state-basedir={state_dir}",
+        f"--cmd=wp load {path}",
+    ]
+    proc = subprocess.Popen(
+        cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=str(state_dir)
+    )
     lines: list[str] = []
     acked = threading.Event()
 

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from support import start_sim_vehicle
 
 from heli_common.ports import free_port
-from support import start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -48,8 +48,21 @@ def five_items():
 
 
 def fields(item) -> tuple:
-    return (item.seq, item.frame, item.command, item.current, item.autocontinue, item.param1, item.param2,
-            item.param3, item.param4, item.x, item.y, round(item.z, 3), item.mission_type)
+    return (
+        item.seq,
+        item.frame,
+        item.command,
+        item.current,
+        item.autocontinue,
+        item.param1,
+        item.param2,
+        item.param3,
+        item.param4,
+        item.x,
+        item.y,
+        round(item.z, 3),
+        item.mission_type,
+    )
 
 
 async def connect(port: int):
@@ -101,8 +114,11 @@ class GuidedLink:
 
     def position_target(self, north: float, east: float, down: float) -> None:
         mask = 0b110111111000  # position only
-        self.send(self.mav.set_position_target_local_ned_encode(0, self.sysid, 1, mavlink.MAV_FRAME_LOCAL_NED, mask,
-                                                                north, east, down, 0, 0, 0, 0, 0, 0, 0, 0))
+        self.send(
+            self.mav.set_position_target_local_ned_encode(
+                0, self.sysid, 1, mavlink.MAV_FRAME_LOCAL_NED, mask, north, east, down, 0, 0, 0, 0, 0, 0, 0, 0
+            )
+        )
 
     def poll(self) -> None:
         while True:
@@ -173,8 +189,21 @@ async def _missions_and_guided_flight():
             await telemetry.set_rate_position(10.0)  # as ArduPilot, nothing is streamed unasked
             await action.set_takeoff_altitude(10.0)
             link = GuidedLink(sim.port, sim.sysid)
-            link.send(link.mav.command_long_encode(sim.sysid, 1, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
-                                                   mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 50_000, 0, 0, 0, 0, 0))
+            link.send(
+                link.mav.command_long_encode(
+                    sim.sysid,
+                    1,
+                    mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                    0,
+                    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+                    50_000,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                )
+            )
             with pytest.raises(ActionError):
                 await action.arm()  # the SITL's RC8 (1500 us) engages the interlock: "Arm: Motor Interlock Enabled"
             assert "Arm: Motor Interlock Enabled" in sim.log_text()

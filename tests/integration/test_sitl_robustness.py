@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from support import REPO_ROOT, MavlinkPeer, start_sim_vehicle
 
 from heli_common.ports import free_port
-from support import MavlinkPeer, REPO_ROOT, start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -66,10 +66,10 @@ def test_bad_input_is_refused_and_the_vehicle_keeps_flying():
         wrong_crc[-1] ^= 0xFF  # would disarm in flight if it were accepted
         for _ in range(20):
             gcs.send_raw(rng.integers(0, 256, int(rng.integers(1, 300)), dtype=np.uint8).tobytes())
-        gcs.send_raw(good[: len(good) // 2])            # truncated
-        gcs.send_raw(bytes(wrong_crc))                  # wrong CRC
+        gcs.send_raw(good[: len(good) // 2])  # truncated
+        gcs.send_raw(bytes(wrong_crc))  # wrong CRC
         gcs.send_raw(v2_frame(0xABCDE, b"\x01\x02\x03"))  # unknown message id
-        gcs.send_raw(b"")                               # empty datagram
+        gcs.send_raw(b"")  # empty datagram
 
         # ---- commands with NaN or out-of-range parameters, unknown commands
         M = mavlink
@@ -77,7 +77,7 @@ def test_bad_input_is_refused_and_the_vehicle_keeps_flying():
             (M.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, NAN), M.MAV_RESULT_DENIED, False),
             (M.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0, 0, 0, -50.0), M.MAV_RESULT_DENIED, False),
             (M.MAV_CMD_COMPONENT_ARM_DISARM, (NAN,), M.MAV_RESULT_DENIED, False),
-            (M.MAV_CMD_COMPONENT_ARM_DISARM, (0.0,), M.MAV_RESULT_FAILED, False),   # disarm in flight
+            (M.MAV_CMD_COMPONENT_ARM_DISARM, (0.0,), M.MAV_RESULT_FAILED, False),  # disarm in flight
             (M.MAV_CMD_DO_SET_MODE, (1, 99), M.MAV_RESULT_DENIED, False),
             (M.MAV_CMD_DO_SET_MODE, (1, NAN), M.MAV_RESULT_DENIED, False),
             (M.MAV_CMD_SET_MESSAGE_INTERVAL, (NAN, 1000), M.MAV_RESULT_DENIED, False),
@@ -107,8 +107,9 @@ def test_bad_input_is_refused_and_the_vehicle_keeps_flying():
         gcs.send(gcs.mav.mission_item_int_encode(sim.sysid, 1, 0, 3, 16, 0, 1, 0, 0, 0, 0, 1, 1, 5.0))
         ack = gcs.wait("MISSION_ACK", 3.0)
         assert ack is not None and ack.type == mavlink.MAV_MISSION_DENIED
-        assert stored_mission(gcs) == [tuple(float(v) if i < 6 or i == 8 else v for i, v in enumerate(row))
-                                       for row in MISSION]
+        assert stored_mission(gcs) == [
+            tuple(float(v) if i < 6 or i == 8 else v for i, v in enumerate(row)) for row in MISSION
+        ]
 
         # ---- absurd parameters: refused, PARAM_VALUE echoes the unchanged value
         for value in (NAN, 1e9, -3.0):
@@ -131,9 +132,12 @@ def test_bad_input_is_refused_and_the_vehicle_keeps_flying():
 
 def test_two_instances_side_by_side_and_tlog(tmp_path):
     tlog = tmp_path / "flight.tlog"
-    with start_sim_vehicle(instance=0, speedup=5.0, extra_args=["--tlog", str(tlog)]) as sim0, \
-            start_sim_vehicle(instance=1, speedup=5.0) as sim1, \
-            MavlinkPeer(sim0.port, sim0.sysid) as gcs0, MavlinkPeer(sim1.port, sim1.sysid) as gcs1:
+    with (
+        start_sim_vehicle(instance=0, speedup=5.0, extra_args=["--tlog", str(tlog)]) as sim0,
+        start_sim_vehicle(instance=1, speedup=5.0) as sim1,
+        MavlinkPeer(sim0.port, sim0.sysid) as gcs0,
+        MavlinkPeer(sim1.port, sim1.sysid) as gcs1,
+    ):
         assert (sim0.sysid, sim1.sysid) == (1, 2)
         assert gcs0.wait("HEARTBEAT", 3.0).get_srcSystem() == 1
         assert gcs1.wait("HEARTBEAT", 3.0).get_srcSystem() == 2
@@ -154,17 +158,25 @@ def test_two_instances_side_by_side_and_tlog(tmp_path):
     assert ("MISSION_COUNT", 250) in types  # received traffic is recorded too
 
 
-@pytest.mark.parametrize("args, fragment", [
-    (["--speedup", "-3"], "--speedup"),
-    (["--home", "95,8,400"], "--home"),
-    (["--out", "localhost"], "--out"),
-    (["--profile", "/no/such/profile.toml"], "--profile"),
-    (["--config", "/no/such/settings.toml"], "settings.toml"),
-])
+@pytest.mark.parametrize(
+    "args, fragment",
+    [
+        (["--speedup", "-3"], "--speedup"),
+        (["--home", "95,8,400"], "--home"),
+        (["--out", "localhost"], "--out"),
+        (["--profile", "/no/such/profile.toml"], "--profile"),
+        (["--config", "/no/such/settings.toml"], "settings.toml"),
+    ],
+)
 def test_cli_errors_are_one_line_without_traceback(args, fragment):
     port = free_port()
-    proc = subprocess.run([sys.executable, "-m", "sim_vehicle.cli", "--port", str(port), *args],
-                          capture_output=True, text=True, timeout=60, cwd=str(REPO_ROOT))
+    proc = subprocess.run(
+        [sys.executable, "-m", "sim_vehicle.cli", "--port", str(port), *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=str(REPO_ROOT),
+    )
     assert proc.returncode == 2
     lines = [line for line in proc.stderr.splitlines() if line.strip() and " INFO " not in line]
     assert len(lines) == 1 and lines[0].startswith("sim-vehicle: error:") and fragment in lines[0], proc.stderr
@@ -177,8 +189,13 @@ def test_port_in_use_is_a_clear_error():
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as busy:
         busy.bind(("0.0.0.0", 0))
         port = busy.getsockname()[1]
-        proc = subprocess.run([sys.executable, "-m", "sim_vehicle.cli", "--port", str(port), "--no-default-out"],
-                              capture_output=True, text=True, timeout=60, cwd=str(REPO_ROOT))
+        proc = subprocess.run(
+            [sys.executable, "-m", "sim_vehicle.cli", "--port", str(port), "--no-default-out"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            cwd=str(REPO_ROOT),
+        )
     assert proc.returncode == 2 and f"UDP port {port}" in proc.stderr and "Traceback" not in proc.stderr
 
 
@@ -192,9 +209,26 @@ def test_guided_global_int_velocity_and_yaw_setpoints():
         target = None
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline:
-            gcs.send(gcs.mav.set_position_target_global_int_encode(
-                0, sim.sysid, 1, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mask, lat, 85455940, 12.0,
-                0, 0, 0, 0, 0, 0, 1.5707963, 0))
+            gcs.send(
+                gcs.mav.set_position_target_global_int_encode(
+                    0,
+                    sim.sysid,
+                    1,
+                    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                    mask,
+                    lat,
+                    85455940,
+                    12.0,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                    1.5707963,
+                    0,
+                )
+            )
             local = gcs.wait("LOCAL_POSITION_NED", 0.2)
             if local is not None and abs(local.x - 15.0) < 0.3 and abs(local.z + 12.0) < 0.3 and abs(local.y) < 0.3:
                 target = local
@@ -207,13 +241,17 @@ def test_guided_global_int_velocity_and_yaw_setpoints():
         moving = None
         deadline = time.monotonic() + 10.0
         while time.monotonic() < deadline and moving is None:
-            gcs.send(gcs.mav.set_position_target_local_ned_encode(0, sim.sysid, 1, mavlink.MAV_FRAME_LOCAL_NED, mask,
-                                                                  0, 0, 0, 0.0, 2.0, 0.0, 0, 0, 0, 0, 0))
+            gcs.send(
+                gcs.mav.set_position_target_local_ned_encode(
+                    0, sim.sysid, 1, mavlink.MAV_FRAME_LOCAL_NED, mask, 0, 0, 0, 0.0, 2.0, 0.0, 0, 0, 0, 0, 0
+                )
+            )
             moving = gcs.wait("LOCAL_POSITION_NED", 0.2, lambda m: abs(m.vy - 2.0) < 0.1 and abs(m.vx) < 0.1)
         assert moving is not None
         # then silence: GUID_TIMEOUT brakes the vehicle to a hover
-        stopped = gcs.wait("LOCAL_POSITION_NED", 15.0,
-                           lambda m: abs(m.vx) < 0.05 and abs(m.vy) < 0.05 and m.y > moving.y + 1.0)
+        stopped = gcs.wait(
+            "LOCAL_POSITION_NED", 15.0, lambda m: abs(m.vx) < 0.05 and abs(m.vy) < 0.05 and m.y > moving.y + 1.0
+        )
         assert stopped is not None and abs(stopped.z + 12.0) < 0.5
         assert "GUID_TIMEOUT" in sim.log_text()
 
@@ -228,15 +266,22 @@ def test_requests_streams_timesync_and_wall_clock_heartbeats():
             unasked |= {m.get_type() for m in gcs.receive(0.1)}
         assert unasked <= {"HEARTBEAT"}, unasked
         # AUTOPILOT_VERSION on request, with the capabilities MAVSDK and QGC need
-        for command, params in ((M.MAV_CMD_REQUEST_MESSAGE, (M.MAVLINK_MSG_ID_AUTOPILOT_VERSION,)),
-                                (M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, (1,))):
+        for command, params in (
+            (M.MAV_CMD_REQUEST_MESSAGE, (M.MAVLINK_MSG_ID_AUTOPILOT_VERSION,)),
+            (M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, (1,)),
+        ):
             gcs.last.pop("AUTOPILOT_VERSION", None)
             assert gcs.command(command, *params).result == M.MAV_RESULT_ACCEPTED
             version = gcs.last.get("AUTOPILOT_VERSION") or gcs.wait("AUTOPILOT_VERSION", 3.0)
             assert version is not None
-            for bit in (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT, M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT,
-                        M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED, M.MAV_PROTOCOL_CAPABILITY_MAVLINK2,
-                        M.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE, M.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY):
+            for bit in (
+                M.MAV_PROTOCOL_CAPABILITY_MISSION_INT,
+                M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT,
+                M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED,
+                M.MAV_PROTOCOL_CAPABILITY_MAVLINK2,
+                M.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE,
+                M.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY,
+            ):
                 assert version.capabilities & bit
         # HOME_POSITION on request (both ways)
         assert gcs.command(M.MAV_CMD_GET_HOME_POSITION).result == M.MAV_RESULT_ACCEPTED
@@ -265,7 +310,7 @@ def test_requests_streams_timesync_and_wall_clock_heartbeats():
         start = gcs.wait("SYSTEM_TIME", 3.0)
         beats = 0
         while True:
-            msg = gcs.wait("HEARTBEAT", 3.0)
+            assert gcs.wait("HEARTBEAT", 3.0) is not None, "a heartbeat is missing"
             beats += 1
             now = gcs.last.get("SYSTEM_TIME", start)
             if now.time_boot_ms - start.time_boot_ms >= 15000:

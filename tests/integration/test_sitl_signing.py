@@ -18,7 +18,6 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
 from support import MavlinkPeer, start_sim_vehicle
 from test_sitl_mavproxy import mavproxy_executable
 
@@ -57,13 +56,18 @@ def mode_of(gcs: MavlinkPeer) -> int:
 
 def unanswered_set_mode(peer: MavlinkPeer, mode: int) -> bool:
     """DO_SET_MODE from ``peer``: True if no COMMAND_ACK comes back (a dropped sender is not a peer)."""
-    return peer.command(mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode,
-                        timeout_s=1.5) is None
+    return (
+        peer.command(mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode, timeout_s=1.5)
+        is None
+    )
 
 
 def set_mode_frame(mav, sysid: int, mode: int) -> bytes:
-    return bytes(mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_DO_SET_MODE, 0,
-                                         mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode, 0, 0, 0, 0, 0).pack(mav))
+    return bytes(
+        mav.command_long_encode(
+            sysid, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode, 0, 0, 0, 0, 0
+        ).pack(mav)
+    )
 
 
 @pytest.fixture
@@ -77,8 +81,9 @@ def mavutil_v2(monkeypatch):
 
 
 def test_mavutil_client_with_the_key_reads_params_changes_mode_and_arms(tmp_path, mavutil_v2):
-    with start_sim_vehicle(speedup=5.0, extra_args=["--signing-key", key_file(tmp_path, KEY.hex())],
-                           signing_key=KEY) as sim:
+    with start_sim_vehicle(
+        speedup=5.0, extra_args=["--signing-key", key_file(tmp_path, KEY.hex())], signing_key=KEY
+    ) as sim:
         conn = mavutil_v2.mavlink_connection(f"udpout:127.0.0.1:{sim.port}", source_system=250, source_component=190)
         try:
             conn.setup_signing(KEY, sign_outgoing=True)
@@ -90,8 +95,9 @@ def test_mavutil_client_with_the_key_reads_params_changes_mode_and_arms(tmp_path
             def command(cmd: int, *params: float):
                 p = list(params) + [0.0] * (7 - len(params))
                 m.command_long_send(sim.sysid, 1, cmd, 0, *p)
-                return conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=5.0,
-                                       condition=f"COMMAND_ACK.command=={cmd}")
+                return conn.recv_match(
+                    type="COMMAND_ACK", blocking=True, timeout=5.0, condition=f"COMMAND_ACK.command=={cmd}"
+                )
 
             ack = command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 200_000)
             assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED
@@ -108,8 +114,7 @@ def test_mavutil_client_with_the_key_reads_params_changes_mode_and_arms(tmp_path
             assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED
             ack = command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
             assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED
-            armed = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=5.0,
-                                    condition="HEARTBEAT.base_mode & 128")
+            armed = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=5.0, condition="HEARTBEAT.base_mode & 128")
             assert armed is not None and armed.custom_mode == GUIDED
             assert conn.mav.signing.badsig_count == 0  # everything the vehicle sent was signed with the key
         finally:
@@ -119,11 +124,14 @@ def test_mavutil_client_with_the_key_reads_params_changes_mode_and_arms(tmp_path
 
 
 def test_unsigned_wrong_and_replayed_frames_change_nothing_and_are_counted(tmp_path):
-    with start_sim_vehicle(speedup=5.0, extra_args=["--signing-key", key_file(tmp_path, PASSPHRASE)],
-                           signing_key=KEY) as sim:
-        with MavlinkPeer(sim.port, sim.sysid, signing_key=KEY) as gcs, \
-                MavlinkPeer(sim.port, sim.sysid, source_system=251) as unsigned, \
-                MavlinkPeer(sim.port, sim.sysid, source_system=252, signing_key=WRONG_KEY) as wrong:
+    with start_sim_vehicle(
+        speedup=5.0, extra_args=["--signing-key", key_file(tmp_path, PASSPHRASE)], signing_key=KEY
+    ) as sim:
+        with (
+            MavlinkPeer(sim.port, sim.sysid, signing_key=KEY) as gcs,
+            MavlinkPeer(sim.port, sim.sysid, source_system=251) as unsigned,
+            MavlinkPeer(sim.port, sim.sysid, source_system=252, signing_key=WRONG_KEY) as wrong,
+        ):
             assert gcs.upload(MISSION) == mavlink.MAV_MISSION_ACCEPTED
             gcs.request("LOCAL_POSITION_NED", rate_hz=5.0)
             gcs.heli_takeoff(5.0)
@@ -137,9 +145,26 @@ def test_unsigned_wrong_and_replayed_frames_change_nothing_and_are_counted(tmp_p
             deadline = time.monotonic() + 2.0
             while time.monotonic() < deadline:
                 for peer in (unsigned, wrong):
-                    peer.send(peer.mav.set_position_target_local_ned_encode(
-                        0, sim.sysid, 1, mavlink.MAV_FRAME_LOCAL_NED, POSITION_ONLY, 15.0, 0.0, -5.0,
-                        0, 0, 0, 0, 0, 0, 0, 0))
+                    peer.send(
+                        peer.mav.set_position_target_local_ned_encode(
+                            0,
+                            sim.sysid,
+                            1,
+                            mavlink.MAV_FRAME_LOCAL_NED,
+                            POSITION_ONLY,
+                            15.0,
+                            0.0,
+                            -5.0,
+                            0,
+                            0,
+                            0,
+                            0,
+                            0,
+                            0,
+                            0,
+                            0,
+                        )
+                    )
                 gcs.receive(0.1)
             assert mode_of(gcs) == GUIDED
             here = gcs.wait("LOCAL_POSITION_NED", 3.0)
@@ -149,8 +174,10 @@ def test_unsigned_wrong_and_replayed_frames_change_nothing_and_are_counted(tmp_p
 
             # ---- an unsigned STATUSTEXT of the companion is not routed; a signed one is
             companion_ids = dict(source_system=sim.sysid, source_component=191)
-            with MavlinkPeer(sim.port, sim.sysid, signing_key=KEY, **companion_ids) as companion, \
-                    MavlinkPeer(sim.port, sim.sysid, **companion_ids) as fake:
+            with (
+                MavlinkPeer(sim.port, sim.sysid, signing_key=KEY, **companion_ids) as companion,
+                MavlinkPeer(sim.port, sim.sysid, **companion_ids) as fake,
+            ):
                 fake.send(fake.mav.statustext_encode(mavlink.MAV_SEVERITY_ALERT, b"unsigned alert"))
                 companion.send(companion.mav.statustext_encode(mavlink.MAV_SEVERITY_INFO, b"signed note"))
                 texts = []
@@ -173,9 +200,26 @@ def test_unsigned_wrong_and_replayed_frames_change_nothing_and_are_counted(tmp_p
             followed = None
             deadline = time.monotonic() + 20.0
             while time.monotonic() < deadline and followed is None:
-                gcs.send(gcs.mav.set_position_target_local_ned_encode(
-                    0, sim.sysid, 1, mavlink.MAV_FRAME_LOCAL_NED, POSITION_ONLY, hover.x + 3.0, hover.y, -5.0,
-                    0, 0, 0, 0, 0, 0, 0, 0))
+                gcs.send(
+                    gcs.mav.set_position_target_local_ned_encode(
+                        0,
+                        sim.sysid,
+                        1,
+                        mavlink.MAV_FRAME_LOCAL_NED,
+                        POSITION_ONLY,
+                        hover.x + 3.0,
+                        hover.y,
+                        -5.0,
+                        0,
+                        0,
+                        0,
+                        0,
+                        0,
+                        0,
+                        0,
+                        0,
+                    )
+                )
                 followed = gcs.wait("LOCAL_POSITION_NED", 0.3, lambda p: p.x > hover.x + 1.5)
             assert followed is not None
             unsigned_port, wrong_port = unsigned.sock.getsockname()[1], wrong.sock.getsockname()[1]
@@ -195,12 +239,19 @@ class Mavproxy:
     does not read stdin), its output collected by a thread."""
 
     def __init__(self, port: int, state_dir: Path, startup: str = "") -> None:
-        cmd = [mavproxy_executable(), f"--master=udpout:127.0.0.1:{port}", "--target-system=1",
-               "--target-component=1", "--default-modules=signing,param,mode", f"--state-basedir={state_dir}"]
+        cmd = [
+            mavproxy_executable(),
+            f"--master=udpout:127.0.0.1:{port}",
+            "--target-system=1",
+            "--target-component=1",
+            "--default-modules=signing,param,mode",
+            f"--state-basedir={state_dir}",
+        ]
         if startup:
             cmd.append(f"--cmd={startup}")
-        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True, cwd=str(state_dir))
+        self.proc = subprocess.Popen(
+            cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=str(state_dir)
+        )
         self.lines: list[str] = []
         self.thread = threading.Thread(target=self._read, daemon=True)
         self.thread.start()
@@ -241,8 +292,12 @@ class Mavproxy:
 
 
 def test_mavproxy_with_the_passphrase_reads_params_and_changes_mode(tmp_path):
-    with start_sim_vehicle(speedup=5.0, extra_args=["--signing-key", key_file(tmp_path, PASSPHRASE)],
-                           signing_key=KEY) as sim, MavlinkPeer(sim.port, sim.sysid, signing_key=KEY) as watcher:
+    with (
+        start_sim_vehicle(
+            speedup=5.0, extra_args=["--signing-key", key_file(tmp_path, PASSPHRASE)], signing_key=KEY
+        ) as sim,
+        MavlinkPeer(sim.port, sim.sysid, signing_key=KEY) as watcher,
+    ):
         mavproxy = Mavproxy(sim.port, tmp_path, startup=f"signing key {PASSPHRASE}")
         try:
             assert mavproxy.wait_for(r"Detected vehicle 1:1", 30.0), mavproxy.output
@@ -258,8 +313,9 @@ def test_mavproxy_with_the_passphrase_reads_params_and_changes_mode(tmp_path):
 
 
 def test_mavproxy_with_a_wrong_passphrase_is_not_heard(tmp_path):
-    with start_sim_vehicle(speedup=5.0, extra_args=["--signing-key", key_file(tmp_path, PASSPHRASE)],
-                           signing_key=KEY) as sim:
+    with start_sim_vehicle(
+        speedup=5.0, extra_args=["--signing-key", key_file(tmp_path, PASSPHRASE)], signing_key=KEY
+    ) as sim:
         mavproxy = Mavproxy(sim.port, tmp_path, startup="signing key wrong-passphrase")
         try:
             mavproxy.send("mode LAND")
@@ -278,8 +334,9 @@ def setup_signing_frame(mav, sysid: int, key: bytes, timestamp: int = 0) -> byte
 
 def test_setup_signing_signed_with_the_current_key_changes_it_unsigned_is_refused(tmp_path):
     new_key = hashlib.sha256(b"the new key").digest()
-    with start_sim_vehicle(speedup=5.0, extra_args=["--signing-key", key_file(tmp_path, KEY.hex())],
-                           signing_key=KEY) as sim:
+    with start_sim_vehicle(
+        speedup=5.0, extra_args=["--signing-key", key_file(tmp_path, KEY.hex())], signing_key=KEY
+    ) as sim:
         with MavlinkPeer(sim.port, sim.sysid, source_system=251) as unsigned:
             unsigned.send_raw(setup_signing_frame(unsigned.mav, sim.sysid, new_key))
         with MavlinkPeer(sim.port, sim.sysid, signing_key=KEY) as gcs:
@@ -302,11 +359,15 @@ def test_without_a_key_setup_signing_needs_accept_signing_setup(tmp_path):
     with start_sim_vehicle(speedup=5.0) as sim, MavlinkPeer(sim.port, sim.sysid) as plain:
         plain.send_raw(setup_signing_frame(plain.mav, sim.sysid, KEY))
         assert plain.set_mode(GUIDED).result == mavlink.MAV_RESULT_ACCEPTED  # still unsigned
-    assert "SETUP_SIGNING from" in sim.log_text() and "refused: no signing key and no --accept-signing-setup" \
-        in sim.log_text()
+    assert (
+        "SETUP_SIGNING from" in sim.log_text()
+        and "refused: no signing key and no --accept-signing-setup" in sim.log_text()
+    )
 
-    with start_sim_vehicle(speedup=5.0, extra_args=["--accept-signing-setup"]) as sim, \
-            MavlinkPeer(sim.port, sim.sysid, signing_key=KEY) as watcher:
+    with (
+        start_sim_vehicle(speedup=5.0, extra_args=["--accept-signing-setup"]) as sim,
+        MavlinkPeer(sim.port, sim.sysid, signing_key=KEY) as watcher,
+    ):
         mavproxy = Mavproxy(sim.port, tmp_path)
         try:
             assert mavproxy.wait_for(r"Detected vehicle 1:1", 30.0), mavproxy.output

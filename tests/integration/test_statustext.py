@@ -14,11 +14,11 @@ import time
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+from support import start_sim_vehicle
 
 from companion.errors import LinkError
 from companion.link import VehicleLink
 from heli_common.ports import free_port
-from support import start_sim_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -81,8 +81,9 @@ def test_the_companions_statustext_reaches_the_ground_station():
             assert received, f"no STATUSTEXT {TEXT!r} at the ground station; got {texts}\n{sim.log_tail()}"
             msg = received[0]
             assert msg.severity == mavlink2.MAV_SEVERITY_WARNING
-            assert (msg.get_srcSystem(), msg.get_srcComponent()) != (sim.sysid, 1), \
+            assert (msg.get_srcSystem(), msg.get_srcComponent()) != (sim.sysid, 1), (
                 "forwarded with the companion's ids, not sent by the autopilot itself"
+            )
             assert "x" * 50 in texts, "a long text arrives cut to 50 characters"
     finally:
         gcs.close()

@@ -15,22 +15,31 @@ import socket
 
 import numpy as np
 import pytest
+from flight_support import (
+    DEMO_HOME,
+    FlightWatcher,
+    Injection,
+    TrackListener,
+    flight_processes,
+    inject,
+    place,
+    wait_until,
+)
+from support import REPO_ROOT
 
 from companion.geo import LocalFrame
 from companion.record.flight_record import load_record
 from companion.security.deployment import init_deployment
 from companion.threats.transport.bus import ThreatBus
-from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, inject, place,
-                            wait_until)
 from heli_common.ports import free_port
-from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration
 
 SPEEDUP = 3.0
 MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
-HEAD_ON = Injection("headon1", "moving", leg=1, after_s=3.0, ahead_s=6.0, radius_m=3.0, speed_m_s=3.0,
-                    heading="head_on")
+HEAD_ON = Injection(
+    "headon1", "moving", leg=1, after_s=3.0, ahead_s=6.0, radius_m=3.0, speed_m_s=3.0, heading="head_on"
+)
 INTRUSION = Injection("gcs1", "popup", leg=1, after_s=2.0, ahead_s=4.0, radius_m=4.0)
 
 
@@ -38,17 +47,25 @@ INTRUSION = Injection("gcs1", "popup", leg=1, after_s=2.0, ahead_s=4.0, radius_m
 def flight(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("threat_auth_flight")
     endpoint = f"tls/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
-    dep = init_deployment(tmp / "deploy", sources=["radar1"], observers=["gcs"], listen=[endpoint],
-                          connect=[endpoint])
+    dep = init_deployment(tmp / "deploy", sources=["radar1"], observers=["gcs"], listen=[endpoint], connect=[endpoint])
     seen: dict = {}
-    with TrackListener() as track, \
-            flight_processes(tmp, MISSION, speedup=SPEEDUP, gcs_out=track.address,
-                             extra_args=["--zenoh-config", str(dep.configs["companion"])]) as flight:
-        with ThreatBus(1, zenoh_config=dep.configs["radar1"]) as radar1, \
-                ThreatBus(1, zenoh_config=dep.configs["gcs"]) as gcs:
+    with (
+        TrackListener() as track,
+        flight_processes(
+            tmp,
+            MISSION,
+            speedup=SPEEDUP,
+            gcs_out=track.address,
+            extra_args=["--zenoh-config", str(dep.configs["companion"])],
+        ) as flight,
+    ):
+        with (
+            ThreatBus(1, zenoh_config=dep.configs["radar1"]) as radar1,
+            ThreatBus(1, zenoh_config=dep.configs["gcs"]) as gcs,
+        ):
             watcher = FlightWatcher(radar1)
             observer = FlightWatcher(gcs)
-            running = lambda: flight.companion.poll() is not None   # noqa: E731
+            running = lambda: flight.companion.poll() is not None  # noqa: E731
             wait_until(lambda: observer.due(INTRUSION) or running(), 240, "leg 1 (observer)")
             intrusion = place(INTRUSION, observer)
             gcs.client.put_threat(intrusion)
@@ -59,8 +76,14 @@ def flight(tmp_path_factory):
             seen["observer_events"] = list(observer.events)
             seen["listed"] = sorted(t.uid for t in radar1.client.list_threats(5.0))
         track_t, track_pos = track.samples()
-    yield {"seen": seen, "record": load_record(flight.record), "log": flight.log.read_text(),
-           "track_t_s": track_t, "track_ned_m": track_pos, "intrusion": intrusion}
+    yield {
+        "seen": seen,
+        "record": load_record(flight.record),
+        "log": flight.log.read_text(),
+        "track_t_s": track_t,
+        "track_ned_m": track_pos,
+        "intrusion": intrusion,
+    }
 
 
 def test_the_authorised_threat_is_decided_and_its_event_names_the_source(flight):
@@ -69,7 +92,7 @@ def test_the_authorised_threat_is_decided_and_its_event_names_the_source(flight)
     mine = [e for e in seen["events"] if e.get("threat_id") == "radar1/headon1"]
     assert mine, seen["events"]
     assert mine[0]["source"] == "radar1" and mine[0]["event"] in ("evade", "switch", "replan", "hold")
-    assert any(e == mine[0] for e in seen["observer_events"])        # the observer reads events
+    assert any(e == mine[0] for e in seen["observer_events"])  # the observer reads events
     assert "radar1/headon1" in seen["listed"]
     held = [th for th in flight["record"].threats if th.get("id") == "radar1/headon1"]
     assert held and held[0]["source"] == "radar1"

@@ -18,8 +18,8 @@ import time
 import pytest
 
 from companion.sitl.processes import spawn
-from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import ThreatTable
+from companion.threats.transport.bus import ThreatBus
 from heli_common.ports import free_port
 from tests.support import REPO_ROOT
 
@@ -29,8 +29,7 @@ COMPANION = [sys.executable, "-m", "companion.cli"]
 
 
 def companion(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
-    return subprocess.run([*COMPANION, *args], capture_output=True, text=True, timeout=timeout,
-                          cwd=REPO_ROOT)
+    return subprocess.run([*COMPANION, *args], capture_output=True, text=True, timeout=timeout, cwd=REPO_ROOT)
 
 
 def wait_for(predicate, timeout_s: float = 10.0) -> bool:
@@ -56,8 +55,24 @@ def listener():
 
 def test_add_remove_and_list_between_processes(listener):
     endpoint, bus, updates, table = listener
-    res = companion("threat", "add", "--id", "m1", "--pos", "44,30,-20", "--vel", "-1,1,0",
-                    "--radius", "3", "--ttl", "60", "--sysid", "7", "--zenoh-connect", endpoint)
+    res = companion(
+        "threat",
+        "add",
+        "--id",
+        "m1",
+        "--pos",
+        "44,30,-20",
+        "--vel",
+        "-1,1,0",
+        "--radius",
+        "3",
+        "--ttl",
+        "60",
+        "--sysid",
+        "7",
+        "--zenoh-connect",
+        endpoint,
+    )
     assert res.returncode == 0, res.stderr
     assert wait_for(lambda: len(updates) >= 1)
     put = updates[0]
@@ -70,8 +85,7 @@ def test_add_remove_and_list_between_processes(listener):
     assert res.returncode == 0, res.stderr
     assert "m1: moving r=3.0 m" in res.stdout
 
-    res = companion("threat", "move", "--id", "m1", "--vel", "0,2,0", "--sysid", "7",
-                    "--zenoh-connect", endpoint)
+    res = companion("threat", "move", "--id", "m1", "--vel", "0,2,0", "--sysid", "7", "--zenoh-connect", endpoint)
     assert res.returncode == 0, res.stderr
     assert wait_for(lambda: len(updates) >= 2)
     moved = updates[1].threat
@@ -96,19 +110,18 @@ def test_invalid_payload_from_another_process_is_rejected_naming_the_field(liste
             bus.client.put_raw("other", b'{{"v": 1, "id": "t1", "kind": "popup", "frame": "local_ned", '
                                  b'"position": [1, 2, 3], "radius_m": 4}}')
     """)
-    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
-                         cwd=REPO_ROOT)
+    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, cwd=REPO_ROOT)
     assert res.returncode == 0, res.stderr
     assert wait_for(lambda: len(updates) >= 3)
     fields = [(u.action, u.threat_id, getattr(u.error, "field", None)) for u in updates]
-    assert fields == [("rejected", "bad", "radius_m"), ("rejected", "junk", "payload"),
-                      ("rejected", "other", "id")]
+    assert fields == [("rejected", "bad", "radius_m"), ("rejected", "junk", "payload"), ("rejected", "other", "id")]
 
 
 def test_play_scenario_delivers_every_event_in_order(listener, tmp_path):
     endpoint, _, updates, _ = listener
     scenario = tmp_path / "s.toml"
-    scenario.write_text(textwrap.dedent("""
+    scenario.write_text(
+        textwrap.dedent("""
         [[event]]
         at_s = 0.5
         action = "add"
@@ -124,9 +137,9 @@ def test_play_scenario_delivers_every_event_in_order(listener, tmp_path):
         at_s = 2.0
         action = "remove"
         id = "p1"
-    """))
-    res = companion("threat", "play", str(scenario), "--time-scale", "4", "--sysid", "7",
-                    "--zenoh-connect", endpoint)
+    """)
+    )
+    res = companion("threat", "play", str(scenario), "--time-scale", "4", "--sysid", "7", "--zenoh-connect", endpoint)
     assert res.returncode == 0, res.stderr
     assert wait_for(lambda: len(updates) >= 3)
     assert [u.action for u in updates] == ["put", "put", "delete"]
@@ -163,8 +176,20 @@ def test_through_a_router_and_into_an_asyncio_loop(tmp_path):
             try:
                 bus.inbound.subscribe(on_update, loop=loop)
                 res = await asyncio.to_thread(
-                    companion, "threat", "add", "--id", "r1", "--pos", "1,2,-3", "--radius", "2",
-                    "--sysid", "3", "--zenoh-connect", router_ep)
+                    companion,
+                    "threat",
+                    "add",
+                    "--id",
+                    "r1",
+                    "--pos",
+                    "1,2,-3",
+                    "--radius",
+                    "2",
+                    "--sysid",
+                    "3",
+                    "--zenoh-connect",
+                    router_ep,
+                )
                 assert res.returncode == 0, res.stderr
                 await asyncio.wait_for(arrived.wait(), 10.0)
             finally:
@@ -174,7 +199,7 @@ def test_through_a_router_and_into_an_asyncio_loop(tmp_path):
         got = asyncio.run(main())
         update, thread_id = got[0]
         assert update.action == "put" and update.threat.position == (1.0, 2.0, -3.0)
-        assert thread_id == threading.get_ident()        # the handler ran on the loop's thread
+        assert thread_id == threading.get_ident()  # the handler ran on the loop's thread
     finally:
         router.stop()
 

@@ -28,32 +28,41 @@ import zlib
 
 import numpy as np
 import pytest
+from flight_support import (
+    DEMO_HOME,
+    FlightWatcher,
+    Injection,
+    TrackListener,
+    flight_processes,
+    inject,
+    last_json_line,
+    wait_until,
+)
+from foxglove_client import collect
 from mcap.reader import make_reader
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+from support import REPO_ROOT
 
 from companion.geo import LocalFrame
+from companion.threats.model import Threat
+from companion.threats.transport.bus import ThreatBus
 from companion.view import channels as ch
 from companion.view.mcap_record import load_flight
-from foxglove_client import collect
-from companion.threats.transport.bus import ThreatBus
-from companion.threats.model import Threat
-from flight_support import (DEMO_HOME, FlightWatcher, Injection, TrackListener, flight_processes, inject,
-                            last_json_line, wait_until)
 from heli_common.ports import free_port
-from support import REPO_ROOT
 
 pytestmark = pytest.mark.integration
 
 SPEEDUP = 2.0
 MISSION = REPO_ROOT / "mission_files" / "exclusion_zones.plan"
-HEAD_ON = Injection("headon1", "moving", leg=1, after_s=3.0, ahead_s=6.0, radius_m=3.0, speed_m_s=3.0,
-                    heading="head_on")
+HEAD_ON = Injection(
+    "headon1", "moving", leg=1, after_s=3.0, ahead_s=6.0, radius_m=3.0, speed_m_s=3.0, heading="head_on"
+)
 POPUP = Injection("popup2", "popup", leg=2, after_s=5.0, ahead_s=3.0, radius_m=3.0)
-CROSSING = Injection("cross3", "moving", leg=3, after_s=3.0, ahead_s=5.0, radius_m=3.0, speed_m_s=2.0,
-                     lateral_m=-10.0, frame="global")
-LIVE_TOPICS = {"/flight/decision", "/flight/threat", ch.SCENE_WORLD, ch.SCENE_THREATS, ch.SCENE_PATHS,
-               ch.TRANSFORMS}
+CROSSING = Injection(
+    "cross3", "moving", leg=3, after_s=3.0, ahead_s=5.0, radius_m=3.0, speed_m_s=2.0, lateral_m=-10.0, frame="global"
+)
+LIVE_TOPICS = {"/flight/decision", "/flight/threat", ch.SCENE_WORLD, ch.SCENE_THREATS, ch.SCENE_PATHS, ch.TRANSFORMS}
 HARMLESS = Threat("far1", "popup", "local_ned", (300.0, 300.0, -15.0), (0.0, 0.0, 0.0), 2.0, 60.0)
 
 
@@ -64,15 +73,24 @@ def flight(tmp_path_factory):
     live: dict = {}
     fox_port, tlog = free_port(socket.SOCK_STREAM), tmp / "companion.tlog"
     view_args = ["--foxglove", f"127.0.0.1:{fox_port}", "--tlog", str(tlog)]
-    with TrackListener() as track, \
-            flight_processes(tmp, MISSION, speedup=SPEEDUP, gcs_out=track.address, extra_args=view_args,
-                             record_name="flight.mcap") as flight:
-        watch = threading.Thread(target=lambda: live.update(got=asyncio.run(collect(
-            fox_port, LIVE_TOPICS, 600.0, until=lambda: flight.companion.poll() is not None))), daemon=True)
+    with (
+        TrackListener() as track,
+        flight_processes(
+            tmp, MISSION, speedup=SPEEDUP, gcs_out=track.address, extra_args=view_args, record_name="flight.mcap"
+        ) as flight,
+    ):
+        watch = threading.Thread(
+            target=lambda: live.update(
+                got=asyncio.run(
+                    collect(fox_port, LIVE_TOPICS, 600.0, until=lambda: flight.companion.poll() is not None)
+                )
+            ),
+            daemon=True,
+        )
         watch.start()
         with ThreatBus(1, listen=(), connect=(flight.endpoint,)) as bus:
             watcher = FlightWatcher(bus)
-            running = lambda: flight.companion.poll() is not None   # noqa: E731
+            running = lambda: flight.companion.poll() is not None  # noqa: E731
             seen["threats"] += inject(watcher, [HEAD_ON], 240, done=running)
             wait_until(lambda: watcher.status and watcher.status["leg"] == 2, 120, "leg 2")
             bus.client.put_raw("broken", b'{"v": 1, "id": "broken", "kind": "popup", "radius_m": -1}')
@@ -88,9 +106,18 @@ def flight(tmp_path_factory):
         track_t, track_pos = track.samples()
         watch.join(30)
     seen["collisions"], seen["texts"] = list(track.collisions), list(track.companion_texts)
-    yield {"rc": flight.companion.returncode, "summary": last_json_line(flight.log), "seen": seen,
-           "record": load_flight(flight.record), "mcap": flight.record, "tlog": tlog, "live": live.get("got"),
-           "log": flight.log.read_text(), "track_t_s": track_t, "track_ned_m": track_pos}
+    yield {
+        "rc": flight.companion.returncode,
+        "summary": last_json_line(flight.log),
+        "seen": seen,
+        "record": load_flight(flight.record),
+        "mcap": flight.record,
+        "tlog": tlog,
+        "live": live.get("got"),
+        "log": flight.log.read_text(),
+        "track_t_s": track_t,
+        "track_ned_m": track_pos,
+    }
 
 
 def first_decision(flight, threat_id):
@@ -113,7 +140,7 @@ def separation_m(flight, threat_id) -> float:
 
 def test_the_flight_completes_despite_the_threats(flight):
     assert flight["rc"] == 0, flight["log"][-3000:]
-    assert f"time scale {SPEEDUP:g} (the vehicle's SIM_SPEEDUP)" in flight["log"]     # no --time-scale given
+    assert f"time scale {SPEEDUP:g} (the vehicle's SIM_SPEEDUP)" in flight["log"]  # no --time-scale given
     assert flight["summary"]["outcome"] == "completed"
     assert flight["summary"]["landed"] is True
     assert flight["summary"]["legs_reached"] == flight["summary"]["legs_planned"]
@@ -162,8 +189,9 @@ def test_the_ground_station_is_alerted_before_the_decision_then_told_its_action(
     first = mine[0][1]
     assert first.action == mavlink2.MAV_COLLISION_ACTION_REPORT and first.threat_level >= 1
     assert first.time_to_minimum_delta > 0.0
-    acted = [m for _, m in mine if m.action not in (mavlink2.MAV_COLLISION_ACTION_NONE,
-                                                     mavlink2.MAV_COLLISION_ACTION_REPORT)]
+    acted = [
+        m for _, m in mine if m.action not in (mavlink2.MAV_COLLISION_ACTION_NONE, mavlink2.MAV_COLLISION_ACTION_REPORT)
+    ]
     assert acted, [(m.action, m.threat_level) for _, m in mine]
     assert mine[-1][1].threat_level == mavlink2.MAV_COLLISION_THREAT_LEVEL_NONE, "the alert was never cleared"
     texts = [(t, m.text) for t, m in flight["seen"]["texts"]]
@@ -203,8 +231,11 @@ def test_the_mcap_record_has_every_channel_with_its_schema_and_monotonic_times(f
         for _, channel, message in reader.iter_messages(log_time_order=False):
             times.setdefault(channel.topic, []).append(message.log_time)
     schemas = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
-    expected = {topic for topic, _ in ch.RECORD_TOPICS.values()} | set(ch.SAMPLE_TOPICS) | {
-        ch.SCENE_WORLD, ch.SCENE_PATHS, ch.SCENE_THREATS, ch.SCENE_VEHICLE, ch.TRANSFORMS, ch.LOCATION, ch.LOG}
+    expected = (
+        {topic for topic, _ in ch.RECORD_TOPICS.values()}
+        | set(ch.SAMPLE_TOPICS)
+        | {ch.SCENE_WORLD, ch.SCENE_PATHS, ch.SCENE_THREATS, ch.SCENE_VEHICLE, ch.TRANSFORMS, ch.LOCATION, ch.LOG}
+    )
     assert expected <= set(schemas) and expected <= set(times)
     assert all(schema.data and schema.name for schema in schemas.values())
     assert all(stamps == sorted(stamps) for stamps in times.values())
@@ -219,7 +250,7 @@ def test_the_tlog_holds_the_setpoints_sent_and_the_vehicles_telemetry(flight):
     while (msg := log.recv_match()) is not None:
         counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
         stamps.append(msg._timestamp)
-    assert counts.get("SET_POSITION_TARGET_LOCAL_NED", 0) > 1000         # 50 Hz for minutes
+    assert counts.get("SET_POSITION_TARGET_LOCAL_NED", 0) > 1000  # 50 Hz for minutes
     assert counts.get("LOCAL_POSITION_NED", 0) > 500 and counts.get("HEARTBEAT", 0) > 50
     assert counts.get("COMMAND_LONG", 0) and counts.get("COMMAND_ACK", 0)
     assert stamps == sorted(stamps)

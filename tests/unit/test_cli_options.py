@@ -11,7 +11,7 @@ from heli_common.cli_args import join_negative_values
 
 
 def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
-    for action in parser._actions:                      # argparse keeps no public list of them
+    for action in parser._actions:  # argparse keeps no public list of them
         if isinstance(action, argparse._SubParsersAction):
             return dict(action.choices)
     return {}
@@ -42,16 +42,26 @@ def _parse(argv: list[str]) -> dict:
     return args
 
 
-@pytest.mark.parametrize("before, action, after", [
-    (["threat", "--zenoh-config", "deploy/gcs.json5"], ["add", "--id", "p1", "--pos", "75,75,-20", "--radius", "5"], []),
-    (["threat", "--sysid", "2", "--wait", "0.5", "--source", "radar1"], ["remove", "--id", "p1"], []),
-    (["threat", "--zenoh-connect", "tcp/10.0.0.5:7447", "--zenoh-connect", "tcp/10.0.0.6:7447"], ["list"],
-     ["--zenoh-connect", "tcp/10.0.0.5:7447", "tcp/10.0.0.6:7447"]),
-    (["threat", "--zenoh-listen", "tcp/0.0.0.0:7450"], ["play", "mission_files/threats/demo.toml"], []),
-    (["keys", "--source", "radar1", "--observer", "gcs", "--sysid", "3", "--force"], ["init", "out/keys"], []),
-    (["fleet", "--json", "--logs", "out/fleet"], ["status"], []),
-    (["fleet", "--json"], ["up", "--vehicles", "2", "--mission-dir", "mission_files/fleet/headon2"], []),
-])
+@pytest.mark.parametrize(
+    "before, action, after",
+    [
+        (
+            ["threat", "--zenoh-config", "deploy/gcs.json5"],
+            ["add", "--id", "p1", "--pos", "75,75,-20", "--radius", "5"],
+            [],
+        ),
+        (["threat", "--sysid", "2", "--wait", "0.5", "--source", "radar1"], ["remove", "--id", "p1"], []),
+        (
+            ["threat", "--zenoh-connect", "tcp/10.0.0.5:7447", "--zenoh-connect", "tcp/10.0.0.6:7447"],
+            ["list"],
+            ["--zenoh-connect", "tcp/10.0.0.5:7447", "tcp/10.0.0.6:7447"],
+        ),
+        (["threat", "--zenoh-listen", "tcp/0.0.0.0:7450"], ["play", "mission_files/threats/demo.toml"], []),
+        (["keys", "--source", "radar1", "--observer", "gcs", "--sysid", "3", "--force"], ["init", "out/keys"], []),
+        (["fleet", "--json", "--logs", "out/fleet"], ["status"], []),
+        (["fleet", "--json"], ["up", "--vehicles", "2", "--mission-dir", "mission_files/fleet/headon2"], []),
+    ],
+)
 def test_a_shared_option_parses_the_same_before_and_after_the_action(before, action, after):
     command, options = before[0], before[1:]
     assert _parse([command, *options, *action]) == _parse([command, *action, *(after or options)])
@@ -79,21 +89,25 @@ def test_the_defaults_of_shared_options_hold_when_they_are_not_given():
 
 
 def test_threat_vectors_with_a_minus_sign_are_values():
-    args = build_parser().parse_args(["threat", "add", "--id", "m1", "--pos", "-5,3,-20", "--vel", "-.5,1,0",
-                                      "--radius", "3", "--lat", "-33.8688"])
+    args = build_parser().parse_args(
+        ["threat", "add", "--id", "m1", "--pos", "-5,3,-20", "--vel", "-.5,1,0", "--radius", "3", "--lat", "-33.8688"]
+    )
     assert (args.pos, args.vel, args.lat) == ("-5,3,-20", "-.5,1,0", -33.8688)
 
 
-@pytest.mark.parametrize("argv, joined", [
-    (["--home", "-33.8,151.2,20"], ["--home=-33.8,151.2,20"]),
-    (["--home", "-.5,1,2", "-v"], ["--home=-.5,1,2", "-v"]),
-    (["--home=-33.8,151.2,20"], ["--home=-33.8,151.2,20"]),
-    (["--home", "33.8,151.2,20"], ["--home", "33.8,151.2,20"]),
-    (["--home", "-v"], ["--home", "-v"]),                     # an option stays an option
-    (["--flag", "-3"], ["--flag", "-3"]),                     # not an option taking a value
-    (["--", "--home", "-3"], ["--", "--home", "-3"]),
-    (["--home"], ["--home"]),
-])
+@pytest.mark.parametrize(
+    "argv, joined",
+    [
+        (["--home", "-33.8,151.2,20"], ["--home=-33.8,151.2,20"]),
+        (["--home", "-.5,1,2", "-v"], ["--home=-.5,1,2", "-v"]),
+        (["--home=-33.8,151.2,20"], ["--home=-33.8,151.2,20"]),
+        (["--home", "33.8,151.2,20"], ["--home", "33.8,151.2,20"]),
+        (["--home", "-v"], ["--home", "-v"]),  # an option stays an option
+        (["--flag", "-3"], ["--flag", "-3"]),  # not an option taking a value
+        (["--", "--home", "-3"], ["--", "--home", "-3"]),
+        (["--home"], ["--home"]),
+    ],
+)
 def test_join_negative_values(argv, joined):
     assert join_negative_values(argv, ["--home", "-o"]) == joined
 

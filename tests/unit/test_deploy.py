@@ -10,10 +10,10 @@ import shlex
 from pathlib import Path
 
 import pytest
+from support import REPO_ROOT
 
 from companion.cli import build_parser
 from companion.config import load_settings
-from support import REPO_ROOT
 
 DEPLOY = REPO_ROOT / "deploy"
 
@@ -54,7 +54,7 @@ def test_the_unit_runs_companion_serve_with_arguments_it_accepts():
     args = serve_args("companion.service")
     assert args.config == "/etc/companion/companion.toml" and args.record_dir and args.state_dir
     service = unit()["Service"]
-    assert int(service["LimitRTPRIO"]) >= 10                                   # SCHED_FIFO priority 10
+    assert int(service["LimitRTPRIO"]) >= 10  # SCHED_FIFO priority 10
     assert service["KillSignal"] == "SIGTERM" and unit()["Install"]["WantedBy"] == "multi-user.target"
 
 
@@ -73,9 +73,11 @@ def test_resuming_is_one_explicit_start_of_the_resume_unit():
     resume = unit("companion-resume.service")
     args = serve_args("companion-resume.service")
     assert args.resume and args.flights == 1
-    assert (args.config, args.state_dir) == (serve_args("companion.service").config,
-                                             serve_args("companion.service").state_dir)
-    assert resume["Service"]["Restart"] == "no" and "Install" not in resume      # never enabled
+    assert (args.config, args.state_dir) == (
+        serve_args("companion.service").config,
+        serve_args("companion.service").state_dir,
+    )
+    assert resume["Service"]["Restart"] == "no" and "Install" not in resume  # never enabled
     assert "companion.service" in resume["Unit"]["Conflicts"].split()
     assert "companion.service" in resume["Unit"]["After"].split()
     assert resume["Unit"]["OnSuccess"] == resume["Unit"]["OnFailure"] == "companion.service"
@@ -105,7 +107,7 @@ def test_the_install_keys_are_the_files_the_settings_name(tmp_path):
     argv = next(a for a in companion_steps() if a[:2] == ["keys", "init"])
     etc = tmp_path / "etc-companion"
     etc.mkdir()
-    (etc / "companion.toml").write_text((DEPLOY / "companion.toml").read_text())     # other files are fine
+    (etc / "companion.toml").write_text((DEPLOY / "companion.toml").read_text())  # other files are fine
     assert main([arg.replace("/etc/companion", str(etc)) for arg in argv]) == 0
     settings = load_settings(DEPLOY / "companion.toml", {})
     key_file = Path(settings.link.signing_key_file)

@@ -14,9 +14,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 DESIGN = ROOT / "docs" / "DESIGN.md"
-CITING = ("companion", "sim_vehicle", "heli_model", "heli_common", "mavlink_signing", "benchmarks", "tools",
-          "tests")
-WORD = "DES" + "IGN"          # so that this file's own bad examples are not citations
+CITING = ("companion", "sim_vehicle", "heli_model", "heli_common", "mavlink_signing", "benchmarks", "tools", "tests")
+WORD = "DES" + "IGN"  # so that this file's own bad examples are not citations
 _NUMBER = r"\d+(?:\.\d+)?"
 CITATION_RE = re.compile(WORD + rf"(?:\.md)?\s+(?:sections?\s+)?({_NUMBER}(?:\s*(?:,|and|to)\s*{_NUMBER})*)")
 SECTION_RE = re.compile(r"^## (\d+)\. \S")
@@ -87,7 +86,7 @@ def test_every_citation_resolves():
         text = path.read_text(encoding="utf-8")
         cited += len(citations(text))
         bad += [f"{path.relative_to(ROOT).as_posix()}:{where}" for where in unresolved(text, numbers)]
-    assert cited > 50          # the citations are found at all
+    assert cited > 50  # the citations are found at all
     assert bad == []
 
 
@@ -115,16 +114,19 @@ def test_parser_reads_sections_and_items():
     assert design_numbers(SAMPLE) == {"1", "2", "2.1", "2.2", "2.3"}
 
 
-@pytest.mark.parametrize("text, expected", [
-    (f"({WORD} 2.3)", []),
-    (f"({WORD} 2.4)", ["1: " + WORD + " 2.4"]),
-    (f"{WORD} section 3", ["1: " + WORD + " 3"]),
-    (f"{WORD}.md sections 1 and 9", ["1: " + WORD + " 9"]),
-    (f"({WORD} 1, 2, 7)", ["1: " + WORD + " 7"]),
-    (f"x\n({WORD} 2.1 to 2.5)", ["2: " + WORD + " 2.5"]),
-    (f"{WORD} 1.1", ["1: " + WORD + " 1.1"]),            # section 1 has no numbered list
-    (f"({WORD} 2, paper section 3.3)", []),                # the paper's sections are not ours
-])
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        (f"({WORD} 2.3)", []),
+        (f"({WORD} 2.4)", ["1: " + WORD + " 2.4"]),
+        (f"{WORD} section 3", ["1: " + WORD + " 3"]),
+        (f"{WORD}.md sections 1 and 9", ["1: " + WORD + " 9"]),
+        (f"({WORD} 1, 2, 7)", ["1: " + WORD + " 7"]),
+        (f"x\n({WORD} 2.1 to 2.5)", ["2: " + WORD + " 2.5"]),
+        (f"{WORD} 1.1", ["1: " + WORD + " 1.1"]),  # section 1 has no numbered list
+        (f"({WORD} 2, paper section 3.3)", []),  # the paper's sections are not ours
+    ],
+)
 def test_a_bad_citation_is_found(text, expected):
     assert unresolved(text, design_numbers(SAMPLE)) == expected
 

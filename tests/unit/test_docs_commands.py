@@ -19,9 +19,9 @@ import shlex
 from pathlib import Path
 
 import pytest
+from docs_blocks import DOCS, ROOT, blocks
 
 from companion.cli import build_parser as companion_parser
-from docs_blocks import DOCS, ROOT, blocks
 from sim_vehicle.cli import build_parser as sim_vehicle_parser
 
 SHELL_LANGS = {"sh", "bash", "shell", "console", ""}
@@ -38,7 +38,7 @@ def _commands(lines: list[str], start: int):
         if line.rstrip().endswith("\\"):
             pending += line.rstrip()[:-1] + " "
             continue
-        text = re.sub(r"<[^<>]+>", "X", (pending + line).strip())     # <placeholder>
+        text = re.sub(r"<[^<>]+>", "X", (pending + line).strip())  # <placeholder>
         pending = ""
         try:
             words = shlex.split(text, comments=True)
@@ -74,7 +74,7 @@ def _tool(argv: list[str]) -> tuple[str, list[str]] | None:
     if not words:
         return None
     if words[0].endswith("/"):
-        return None                         # a folder of a layout tree
+        return None  # a folder of a layout tree
     name = Path(words[0]).name
     return (name, words[1:]) if name in TOOLS or name in ("make", "python", "python3") else None
 
@@ -89,7 +89,7 @@ def _documented():
     for path in DOCS:
         for lang, start, lines in blocks(path.read_text()):
             if lang not in SHELL_LANGS or (lang == "" and any(re.search(r"[\u2500-\u25ff]", ln) for ln in lines)):
-                continue                    # not shell, or a diagram
+                continue  # not shell, or a diagram
             for number, argv in _commands(lines, start):
                 found = _tool(argv)
                 if found is not None and not _synopsis(found[1]):

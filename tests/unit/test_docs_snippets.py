@@ -11,12 +11,12 @@ import subprocess
 import sys
 
 import pytest
-
 from docs_blocks import NEEDS_VEHICLE, NEEDS_ZENOH, ROOT, python_snippets
 
 SNIPPETS = python_snippets()
-STANDALONE = [pytest.param(code, id=where) for where, code in SNIPPETS
-              if NEEDS_VEHICLE not in code and NEEDS_ZENOH not in code]
+STANDALONE = [
+    pytest.param(code, id=where) for where, code in SNIPPETS if NEEDS_VEHICLE not in code and NEEDS_ZENOH not in code
+]
 
 
 def test_the_docs_have_runnable_snippets():

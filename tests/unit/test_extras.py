@@ -33,8 +33,15 @@ sys.exit(main(sys.argv[2:]))
 
 def companion_without(modules: str, *argv: str) -> subprocess.CompletedProcess:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    return subprocess.run([sys.executable, "-c", WITHOUT, modules, *argv], check=False, capture_output=True,
-                          text=True, env=env, cwd=ROOT, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-c", WITHOUT, modules, *argv],
+        check=False,
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=ROOT,
+        timeout=120,
+    )
 
 
 WORLD = str(ROOT / "mission_files" / "worlds" / "paper_2d.toml")
@@ -58,13 +65,14 @@ def test_a_command_without_its_extra_exits_2_naming_it(tmp_path, module, extra, 
     line = f"companion {command}: needs the '{extra}' extra: pip install '{DISTRIBUTION}[{extra}]'"
     assert out.returncode == 2, out.stderr
     assert out.stderr.strip().splitlines()[-1] == line and "Traceback" not in out.stderr, out.stderr
-    assert not (tmp_path / "keys").exists()             # refused before anything was written
+    assert not (tmp_path / "keys").exists()  # refused before anything was written
 
 
 def test_plan_flies_without_any_extra(tmp_path):
     """``companion plan`` (no plot) plans and smooths with every optional package absent."""
-    out = companion_without(",".join(OPTIONAL), "plan", "--world", WORLD, "--budget", "0.5",
-                            "--json", str(tmp_path / "plan.json"))
+    out = companion_without(
+        ",".join(OPTIONAL), "plan", "--world", WORLD, "--budget", "0.5", "--json", str(tmp_path / "plan.json")
+    )
     assert out.returncode == 0, out.stderr
     assert (tmp_path / "plan.json").is_file()
 
@@ -85,8 +93,15 @@ def test_flying_imports_no_optional_package():
     """What ``companion run`` / ``serve`` and their planning workers load (the CLI, the daemon,
     the service, the decision step, every kernel) and ``sim-vehicle``: no optional package."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    out = subprocess.run([sys.executable, "-c", IMPORTS, *OPTIONAL, "control"], capture_output=True, text=True,
-                         env=env, cwd=ROOT, timeout=180, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", IMPORTS, *OPTIONAL, "control"],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=ROOT,
+        timeout=180,
+        check=True,
+    )
     assert out.stdout.split() == []
 
 
@@ -95,8 +110,12 @@ def _required_pairs() -> set[tuple[str, str]]:
     pairs = set()
     for path in (ROOT / "companion").rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "require" and len(node.args) == 2 \
-                    and all(isinstance(a, ast.Constant) for a in node.args):
+            if (
+                isinstance(node, ast.Call)
+                and getattr(node.func, "id", None) == "require"
+                and len(node.args) == 2
+                and all(isinstance(a, ast.Constant) for a in node.args)
+            ):
                 pairs.add((node.args[0].value, node.args[1].value))
     return pairs
 
@@ -107,8 +126,10 @@ def test_every_extra_named_installs_the_package_asked_for():
     assert {extra for extra, _ in pairs} == {"view", "report", "keys", "campaign"}
     for extra, module in pairs:
         distribution = EXTRA_PACKAGES[module.split(".")[0]]
-        assert any(req.split(">")[0].split("=")[0].split("<")[0].strip() == distribution for req in extras[extra]), \
-            (extra, module)
+        assert any(req.split(">")[0].split("=")[0].split("<")[0].strip() == distribution for req in extras[extra]), (
+            extra,
+            module,
+        )
 
 
 def test_the_slim_dependencies_have_no_optional_package():

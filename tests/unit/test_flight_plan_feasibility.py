@@ -19,11 +19,11 @@ from heli_model.control import FlightController, Setpoint
 from heli_model.model import HeliModel
 
 WORLD = World([], np.array([-50.0, -50.0, -60.0]), np.array([150.0, 150.0, 0.0]), 3.0)
-GOAL = LocalWaypoint(seq=2, kind="waypoint", pos_ned_m=np.array([80.0, 30.0, -20.0]),
-                     acceptance_radius_m=2.0)
-START = np.array([0.0, 0.0, -15.0])            # a 5 m descent, then the level part
-AGGRESSIVE = SmoothingSettings(limits=TrajectoryLimits(speed_m_s=15.0, accel_m_s2=5.0,
-                                                       lat_accel_m_s2=6.0, jerk_m_s3=20.0))
+GOAL = LocalWaypoint(seq=2, kind="waypoint", pos_ned_m=np.array([80.0, 30.0, -20.0]), acceptance_radius_m=2.0)
+START = np.array([0.0, 0.0, -15.0])  # a 5 m descent, then the level part
+AGGRESSIVE = SmoothingSettings(
+    limits=TrajectoryLimits(speed_m_s=15.0, accel_m_s2=5.0, lat_accel_m_s2=6.0, jerk_m_s3=20.0)
+)
 CONTROL_DT, PHYSICS_DT = 1.0 / 100.0, 1.0 / 400.0
 
 
@@ -37,8 +37,15 @@ def pipeline(smoothing, checker=None):
 
 
 def leg(smoothing, checker=None, seed=3):
-    return plan_leg(0, GOAL, START, WORLD, pipeline=pipeline(smoothing, checker), settings=FlightPlanSettings(),
-                    rng=np.random.default_rng(seed))
+    return plan_leg(
+        0,
+        GOAL,
+        START,
+        WORLD,
+        pipeline=pipeline(smoothing, checker),
+        settings=FlightPlanSettings(),
+        rng=np.random.default_rng(seed),
+    )
 
 
 def fly(trajectory, hold_s=2.0):
@@ -71,7 +78,7 @@ def test_a_gentle_leg_is_checked_and_left_as_it_is(checker):
     assert plain.feasibility is None
     assert f["feasible"] and f["stretch"] == 1.0 and not f["saturated"] and not f["initial_saturated"]
     assert checked.trajectory.duration_s == pytest.approx(plain.trajectory.duration_s)
-    assert len(f["pieces"]) == 2                       # the descent and the level part
+    assert len(f["pieces"]) == 2  # the descent and the level part
     assert set(f["peak_abs_delta"]) == set(CHANNELS)
     assert f["max_abs_delta"] == pytest.approx(max(f["peak_abs_delta"].values()), abs=0.01)
     assert 0 < f["max_abs_delta"] < 0.8 and 0 < f["rms_tracking_error_m"] <= f["max_tracking_error_m"] < 2.0
@@ -80,7 +87,7 @@ def test_a_gentle_leg_is_checked_and_left_as_it_is(checker):
 
 
 def test_an_infeasible_first_timing_is_stretched_then_flown_without_saturation(checker):
-    first = leg(AGGRESSIVE)                            # the timing as the limits give it
+    first = leg(AGGRESSIVE)  # the timing as the limits give it
     checked = leg(AGGRESSIVE, checker)
     f = checked.feasibility
     assert f["initial_saturated"] and f["initial_max_abs_delta"] > 1.0
@@ -102,11 +109,15 @@ def test_an_infeasible_first_timing_is_stretched_then_flown_without_saturation(c
 def test_plan_mission_checks_every_leg(checker):
     from types import SimpleNamespace
 
-    back = LocalWaypoint(seq=3, kind="waypoint", pos_ned_m=np.array([0.0, 60.0, -20.0]),
-                         acceptance_radius_m=2.0)
+    back = LocalWaypoint(seq=3, kind="waypoint", pos_ned_m=np.array([0.0, 60.0, -20.0]), acceptance_radius_m=2.0)
     mission = SimpleNamespace(waypoints=(GOAL, back), world=WORLD)
-    legs = plan_mission(mission, START, pipeline=pipeline(AGGRESSIVE, checker), settings=FlightPlanSettings(),
-                        rng=np.random.default_rng(1))
+    legs = plan_mission(
+        mission,
+        START,
+        pipeline=pipeline(AGGRESSIVE, checker),
+        settings=FlightPlanSettings(),
+        rng=np.random.default_rng(1),
+    )
     assert len(legs) == 2 and all(lg.feasibility["feasible"] for lg in legs)
     assert all(lg.feasibility["stretch"] > 1.0 for lg in legs)
 
@@ -135,9 +146,10 @@ def test_the_flight_report_lists_each_legs_figures(checker, tmp_path):
     totals = feasibility_totals(legs)
     assert totals["legs_checked"] == 2 and totals["legs_stretched"] == 1 and totals["legs_infeasible"] == 0
     record = FlightRecord()
-    record.plans = [{"leg": 0, "seq": 2, "duration_s": legs[0].trajectory.duration_s,
-                     "feasibility": legs[0].feasibility},
-                    {"leg": 1, "seq": 3, "duration_s": 1.0, "feasibility": None}]
+    record.plans = [
+        {"leg": 0, "seq": 2, "duration_s": legs[0].trajectory.duration_s, "feasibility": legs[0].feasibility},
+        {"leg": 1, "seq": 3, "duration_s": 1.0, "feasibility": None},
+    ]
     rows = leg_feasibility(record)
     assert "pieces" not in rows[0]["feasibility"] and rows[1]["feasibility"] is None
     text = summary_text({"outcome": "completed", "legs_planned": 2, "legs_reached": 2}, rows)

@@ -10,10 +10,10 @@ import numpy as np
 
 from companion.flight.plan import TrajectoryChain
 from companion.flight.reference import ActiveReference, VehicleClock
+from companion.flight.trajectory import FlyableReference, Trajectory
 from companion.smoothing import smooth_g2, time_parameterize
 from companion.threats.decision.evasion import EscapeLimits, escape_library
 from companion.threats.decision.retime import RetimedTrajectory
-from companion.flight.trajectory import FlyableReference, Trajectory
 
 
 def _trajectory() -> Trajectory:
@@ -23,8 +23,9 @@ def _trajectory() -> Trajectory:
 
 def _flown() -> dict:
     traj = _trajectory()
-    escape = escape_library(np.array([0.0, 0.0, -20.0]), np.array([5.0, 0.0, 0.0]), EscapeLimits(),
-                            vertical=True).manoeuvre(0, 0.0)
+    escape = escape_library(
+        np.array([0.0, 0.0, -20.0]), np.array([5.0, 0.0, 0.0]), EscapeLimits(), vertical=True
+    ).manoeuvre(0, 0.0)
     return {
         "trajectory": traj,
         "chain": TrajectoryChain([traj, _trajectory()]),
@@ -66,7 +67,9 @@ def test_a_partial_reference_is_not_flyable():
 
 
 def test_trajectory_does_not_import_the_timing():
-    code = ("import sys, companion.flight.trajectory; "
-            "assert not any(m.startswith('companion.smoothing') for m in sys.modules), "
-            "sorted(m for m in sys.modules if m.startswith('companion'))")
+    code = (
+        "import sys, companion.flight.trajectory; "
+        "assert not any(m.startswith('companion.smoothing') for m in sys.modules), "
+        "sorted(m for m in sys.modules if m.startswith('companion'))"
+    )
     subprocess.run([sys.executable, "-c", code], check=True)

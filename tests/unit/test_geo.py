@@ -2,7 +2,8 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.geo import GeoError, LocalFrame, check_lat_lon
 
@@ -37,8 +38,7 @@ def test_vectorised_shapes():
 
 
 @settings(deadline=None, max_examples=40)
-@given(st.floats(-2000, 2000), st.floats(-2000, 2000), st.floats(-500, 100),
-       st.floats(-80, 80), st.floats(-179, 179))
+@given(st.floats(-2000, 2000), st.floats(-2000, 2000), st.floats(-500, 100), st.floats(-80, 80), st.floats(-179, 179))
 def test_round_trip_ned_lla_ned(n, e, d, lat0, lon0):
     frame = LocalFrame(lat0, lon0, 100.0)
     lat, lon, alt = frame.to_lla(n, e, d)
@@ -46,9 +46,10 @@ def test_round_trip_ned_lla_ned(n, e, d, lat0, lon0):
     assert np.allclose(back, [n, e, d], atol=1e-5)
 
 
-@pytest.mark.parametrize("lat, lon, word", [(91.0, 0.0, "latitude"), (-90.5, 0.0, "latitude"),
-                                            (0.0, 181.0, "longitude"),
-                                            (float("nan"), 0.0, "latitude")])
+@pytest.mark.parametrize(
+    "lat, lon, word",
+    [(91.0, 0.0, "latitude"), (-90.5, 0.0, "latitude"), (0.0, 181.0, "longitude"), (float("nan"), 0.0, "latitude")],
+)
 def test_out_of_range_is_named(lat, lon, word):
     with pytest.raises(GeoError, match=word):
         check_lat_lon(lat, lon, what="test point")

@@ -8,8 +8,8 @@ import pytest
 from companion.cli import build_parser as companion_parser
 from companion.commands.run import flight_settings
 from companion.errors import ConfigError
-from companion.threats.transport.bus import ThreatBus
 from companion.threats.settings import ZENOH_ROUTER_PORT, ZenohSettings, default_listen
+from companion.threats.transport.bus import ThreatBus
 from sim_vehicle.cli import _settings_from_args
 from sim_vehicle.cli import build_parser as sim_parser
 
@@ -45,13 +45,14 @@ def test_companion_instance_matches_the_sim_vehicle_instance():
         s = companion_settings("--instance", str(n))
         port = int(s.link.connect.rsplit(":", 1)[1])
         assert sim_outs("--instance", str(n))[1] == f"127.0.0.1:{port}" and port == 14540 + n
-        assert s.zenoh.sysid == n + 1 == 1 + n                      # sim-vehicle's sysid is 1 + N
+        assert s.zenoh.sysid == n + 1 == 1 + n  # sim-vehicle's sysid is 1 + N
         assert s.zenoh.listen_endpoints == (f"tcp/127.0.0.1:{7448 + n}",)
 
 
 def test_explicit_options_win_over_the_instance_shortcut():
-    s = companion_settings("--instance", "2", "--connect", "udpin://0.0.0.0:15000",
-                           "--zenoh-listen", "tcp/0.0.0.0:9100")
+    s = companion_settings(
+        "--instance", "2", "--connect", "udpin://0.0.0.0:15000", "--zenoh-listen", "tcp/0.0.0.0:9100"
+    )
     assert s.link.connect == "udpin://0.0.0.0:15000" and s.zenoh.listen_endpoints == ("tcp/0.0.0.0:9100",)
     assert s.zenoh.sysid == 3
     assert sim_outs("--instance", "2", "--out", "127.0.0.1:16000") == ("127.0.0.1:16000",)
@@ -70,4 +71,4 @@ def test_the_prefix_follows_the_vehicles_system_id_unless_set():
     assert unset.sysid is None and unset.prefix_sysid == 1
     got = unset.for_vehicle(3)
     assert got.sysid == 3 and got.listen_endpoints == ("tcp/127.0.0.1:7450",)
-    assert ZenohSettings(sysid=2).for_vehicle(3).sysid == 2                 # set: kept
+    assert ZenohSettings(sysid=2).for_vehicle(3).sysid == 2  # set: kept

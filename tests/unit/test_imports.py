@@ -12,8 +12,11 @@ import heli_model
 import mavlink_signing
 import sim_vehicle
 
-MODULES = sorted(m.name for pkg in (companion, sim_vehicle, heli_model, heli_common, mavlink_signing)
-                 for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + "."))
+MODULES = sorted(
+    m.name
+    for pkg in (companion, sim_vehicle, heli_model, heli_common, mavlink_signing)
+    for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + ".")
+)
 
 
 def test_the_packages_have_their_modules():

@@ -40,8 +40,9 @@ def first_call(cache_dir: Path) -> tuple[list[str], str]:
     """The first GART of a fresh process whose numba cache is ``cache_dir``: (its printed
     status, elapsed, path length) and its log."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir), PYTHONPATH=str(ROOT))
-    out = subprocess.run([sys.executable, "-c", FIRST_CALL], capture_output=True, text=True, env=env,
-                         cwd=ROOT, timeout=240, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", FIRST_CALL], capture_output=True, text=True, env=env, cwd=ROOT, timeout=240, check=True
+    )
     return out.stdout.split(), out.stderr
 
 
@@ -49,9 +50,9 @@ def test_the_first_gart_on_a_cold_cache_finds_its_path_within_budget(tmp_path):
     words, log = first_call(tmp_path)
     status, elapsed_s, points = words[0], float(words[1]), int(words[2])
     assert status == "exact" and points >= 2, log
-    assert elapsed_s <= 0.5                       # the compile was not in the budget
+    assert elapsed_s <= 0.5  # the compile was not in the budget
     assert "compiling the planners (once, about" in log
-    words, log = first_call(tmp_path)             # the cache is warm now: loaded, not announced
+    words, log = first_call(tmp_path)  # the cache is warm now: loaded, not announced
     assert words[0] == "exact" and "compiling the planners" not in log
 
 
@@ -63,8 +64,7 @@ def signatures() -> set[tuple[str, str, str]]:
             continue
         for value in list(vars(module).values()):
             if isinstance(value, CPUDispatcher):
-                found.update((value.py_func.__module__, value.py_func.__qualname__, str(s))
-                             for s in value.signatures)
+                found.update((value.py_func.__module__, value.py_func.__qualname__, str(s)) for s in value.signatures)
     return found
 
 
@@ -72,9 +72,14 @@ def worlds() -> list[World]:
     lo2, hi2, lo3, hi3 = np.zeros(2), np.full(2, 10.0), np.zeros(3), np.full(3, 10.0)
     square = [(3.0, 3.0), (6.0, 3.0), (6.0, 6.0), (3.0, 6.0)]
     many = [Disc((0.5 * (i % 20), 2.0 + 0.5 * (i // 20)), 0.05) for i in range(300)]
-    return [World([Disc((5.0, 5.0), 1.5)], lo2, hi2), World([Box((3.0, 3.0), (6.0, 6.0))], lo2, hi2),
-            World([Cylinder((5.0, 5.0), 1.5, 0.0, 10.0)], lo3, hi3), World([Prism(square)], lo2, hi2),
-            World([Sphere((5.0, 5.0, 5.0), 1.5)], lo3, hi3), World(many, lo2, hi2)]
+    return [
+        World([Disc((5.0, 5.0), 1.5)], lo2, hi2),
+        World([Box((3.0, 3.0), (6.0, 6.0))], lo2, hi2),
+        World([Cylinder((5.0, 5.0), 1.5, 0.0, 10.0)], lo3, hi3),
+        World([Prism(square)], lo2, hi2),
+        World([Sphere((5.0, 5.0, 5.0), 1.5)], lo3, hi3),
+        World(many, lo2, hi2),
+    ]
 
 
 def test_after_ensure_compiled_no_public_call_compiles():

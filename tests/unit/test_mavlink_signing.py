@@ -10,8 +10,15 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from mavlink_signing import (
-    SignatureCheck, SigningKeyError, Verdict, frame_timestamp, key_from_text, load_key, signature_matches,
-    signing_encoder, signing_timestamp_now,
+    SignatureCheck,
+    SigningKeyError,
+    Verdict,
+    frame_timestamp,
+    key_from_text,
+    load_key,
+    signature_matches,
+    signing_encoder,
+    signing_timestamp_now,
 )
 from mavlink_signing.verify import NEW_STREAM_WINDOW
 
@@ -30,8 +37,13 @@ def command_frame(mav, command: int = mavlink.MAV_CMD_DO_SET_MODE) -> bytes:
     return bytes(mav.command_long_encode(1, 1, command, 0, 1, 9, 0, 0, 0, 0, 0).pack(mav))
 
 
-def judge(check: SignatureCheck, buf: bytes, msg_id: int = mavlink.MAVLINK_MSG_ID_COMMAND_LONG,
-          sysid: int = 250, compid: int = 190) -> Verdict:
+def judge(
+    check: SignatureCheck,
+    buf: bytes,
+    msg_id: int = mavlink.MAVLINK_MSG_ID_COMMAND_LONG,
+    sysid: int = 250,
+    compid: int = 190,
+) -> Verdict:
     return check.check(buf, msg_id, sysid, compid)
 
 
@@ -42,8 +54,9 @@ def test_64_hex_digits_are_the_key_itself_in_either_case():
 
 
 def test_a_passphrase_gives_the_same_key_as_mavproxy():
-    assert key_from_text("correct-horse\n") == mavproxy_key("correct-horse") == \
-        hashlib.sha256(b"correct-horse").digest()
+    assert (
+        key_from_text("correct-horse\n") == mavproxy_key("correct-horse") == hashlib.sha256(b"correct-horse").digest()
+    )
 
 
 @settings(max_examples=200, deadline=None)

@@ -7,8 +7,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from companion.flight.phases import (RESUME_AFTER_S, RESUME_RETRY_S, ActionKind, LegAction, LegObservation, LegPhase,
-                              LegState, leg_step)
+from companion.flight.phases import (
+    RESUME_AFTER_S,
+    RESUME_RETRY_S,
+    ActionKind,
+    LegAction,
+    LegObservation,
+    LegPhase,
+    LegState,
+    leg_step,
+)
 
 RADIUS = 2.0
 MARGIN = 30.0
@@ -16,9 +24,21 @@ MARGIN = 30.0
 
 def obs(**changes) -> LegObservation:
     """A vehicle in GUIDED following a reference that ends at t = 100 s at the goal."""
-    base = LegObservation(t_s=50.0, seq=3, connected=True, armed=True, guided=True, mode_name="GUIDED",
-                          relink_pending=False, dist_to_goal_m=40.0, acceptance_radius_m=RADIUS,
-                          ref_end_t_s=100.0, ref_ends_short=False, ref_resume=False, timeout_margin_s=MARGIN)
+    base = LegObservation(
+        t_s=50.0,
+        seq=3,
+        connected=True,
+        armed=True,
+        guided=True,
+        mode_name="GUIDED",
+        relink_pending=False,
+        dist_to_goal_m=40.0,
+        acceptance_radius_m=RADIUS,
+        ref_end_t_s=100.0,
+        ref_ends_short=False,
+        ref_resume=False,
+        timeout_margin_s=MARGIN,
+    )
     return dataclasses.replace(base, **changes)
 
 
@@ -94,7 +114,7 @@ def test_a_reference_short_without_resume_waits_resume_after_s():
 
 def test_a_new_reference_after_resume_is_followed_and_keeps_the_retry_memory():
     state, _ = step(t_s=100.0, ref_ends_short=True, ref_resume=True)
-    state, action = step(state, t_s=100.5, ref_end_t_s=130.0)            # the way back is engaged
+    state, action = step(state, t_s=100.5, ref_end_t_s=130.0)  # the way back is engaged
     assert state.phase is LegPhase.FOLLOWING and action.kind is ActionKind.KEEP
     assert state.last_resume_t_s == 100.0
     state, action = step(state, t_s=130.0, ref_end_t_s=130.0, dist_to_goal_m=0.5)
@@ -107,8 +127,9 @@ def test_stopped_short_within_the_radius_is_reached():
 
 
 def test_stopped_short_never_times_out():
-    state, action = step(LegState(LegPhase.STOPPED_SHORT, last_resume_t_s=1000.0), t_s=1000.5,
-                         ref_ends_short=True, ref_resume=True)
+    state, action = step(
+        LegState(LegPhase.STOPPED_SHORT, last_resume_t_s=1000.0), t_s=1000.5, ref_ends_short=True, ref_resume=True
+    )
     assert state.phase is LegPhase.STOPPED_SHORT and action.kind is ActionKind.KEEP
 
 
@@ -145,9 +166,14 @@ def test_pilot_takeover_wins_over_a_pending_replan():
 
 
 # ---------------------------------------------------------------------------- terminal
-@pytest.mark.parametrize("phase, kind", [(LegPhase.REACHED, ActionKind.REACHED),
-                                         (LegPhase.TIMED_OUT, ActionKind.ABORT),
-                                         (LegPhase.ABORTED, ActionKind.ABORT)])
+@pytest.mark.parametrize(
+    "phase, kind",
+    [
+        (LegPhase.REACHED, ActionKind.REACHED),
+        (LegPhase.TIMED_OUT, ActionKind.ABORT),
+        (LegPhase.ABORTED, ActionKind.ABORT),
+    ],
+)
 def test_terminal_states_stay_and_repeat_their_action(phase, kind):
     start = LegState(phase, reason="why")
     state, action = step(start, t_s=50.0, armed=True, dist_to_goal_m=100.0)
@@ -157,14 +183,28 @@ def test_terminal_states_stay_and_repeat_their_action(phase, kind):
 
 
 @settings(max_examples=200, deadline=None)
-@given(t=st.floats(0.0, 300.0), dist=st.floats(0.0, 100.0), short=st.booleans(), resume=st.booleans(),
-       last=st.floats(-1.0, 300.0), connected=st.booleans(), relink=st.booleans())
+@given(
+    t=st.floats(0.0, 300.0),
+    dist=st.floats(0.0, 100.0),
+    short=st.booleans(),
+    resume=st.booleans(),
+    last=st.floats(-1.0, 300.0),
+    connected=st.booleans(),
+    relink=st.booleans(),
+)
 def test_invariants(t, dist, short, resume, last, connected, relink):
     """Reached only within the radius after the reference's end; resumes spaced by the retry period;
     no abort while the vehicle is in GUIDED and armed unless the goal was missed in time."""
     before = LegState(LegPhase.STOPPED_SHORT, last_resume_t_s=last)
-    state, action = step(before, t_s=t, dist_to_goal_m=dist, ref_ends_short=short, ref_resume=resume,
-                         connected=connected, relink_pending=relink)
+    state, action = step(
+        before,
+        t_s=t,
+        dist_to_goal_m=dist,
+        ref_ends_short=short,
+        ref_resume=resume,
+        connected=connected,
+        relink_pending=relink,
+    )
     if action.kind is ActionKind.REACHED:
         assert dist <= RADIUS and t >= 100.0
     if action.kind is ActionKind.RESUME:

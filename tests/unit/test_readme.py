@@ -47,7 +47,9 @@ def test_tables_are_parsed_with_the_heading_above_them():
     text = "# A\n\n| x | y |\n|---|---|\n| a | 1 |\n| b | 2 |\n\n## B (c)\n| x | z |\n|:-|-:|\n| a | 3 |\n"
     tables = headlines.parse_tables(text)
     assert [(t.heading, t.columns, t.rows) for t in tables] == [
-        ("A", ("x", "y"), (("a", "1"), ("b", "2"))), ("B (c)", ("x", "z"), (("a", "3"),))]
+        ("A", ("x", "y"), (("a", "1"), ("b", "2"))),
+        ("B (c)", ("x", "z"), (("a", "3"),)),
+    ]
 
 
 def test_a_missing_cell_names_the_file_the_column_and_the_row(tmp_path):

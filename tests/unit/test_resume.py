@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from companion.mission.model import LocalMission, LocalWaypoint
 from companion.flight.resume import remaining_waypoints, resume_mission, resume_refusal
+from companion.mission.model import LocalMission, LocalWaypoint
 
 
 def wp(seq, kind="waypoint"):
@@ -17,14 +17,17 @@ def wp(seq, kind="waypoint"):
 MISSION = (wp(1, "takeoff"), wp(2), wp(4), wp(5), wp(6), wp(7, "rtl"))
 
 
-@pytest.mark.parametrize("current, expected", [
-    (4, [4, 5, 6, 7]),          # the leg to item 4 was flown: fly it again from here
-    (3, [4, 5, 6, 7]),          # a command item: on at the next goal
-    (0, [2, 4, 5, 6, 7]),       # home: the whole mission, takeoff left out (it flies)
-    (1, [2, 4, 5, 6, 7]),       # the takeoff item
-    (7, [7]),                   # the way home
-    (8, []),                    # past the last item: only the mission's end is left
-])
+@pytest.mark.parametrize(
+    "current, expected",
+    [
+        (4, [4, 5, 6, 7]),  # the leg to item 4 was flown: fly it again from here
+        (3, [4, 5, 6, 7]),  # a command item: on at the next goal
+        (0, [2, 4, 5, 6, 7]),  # home: the whole mission, takeoff left out (it flies)
+        (1, [2, 4, 5, 6, 7]),  # the takeoff item
+        (7, [7]),  # the way home
+        (8, []),  # past the last item: only the mission's end is left
+    ],
+)
 def test_the_goals_left_start_at_the_current_item(current, expected):
     assert [w.seq for w in remaining_waypoints(MISSION, current)] == expected
 
@@ -37,11 +40,9 @@ def test_the_resumed_mission_keeps_the_world_and_the_end():
     assert len(mission.waypoints) == 6, "the original is unchanged"
 
 
-@pytest.mark.parametrize("items, airborne, words", [
-    (0, True, "no mission"),
-    (0, False, "no mission"),
-    (7, False, "not flying"),
-])
+@pytest.mark.parametrize(
+    "items, airborne, words", [(0, True, "no mission"), (0, False, "no mission"), (7, False, "not flying")]
+)
 def test_resume_is_refused_without_a_mission_or_on_the_ground(items, airborne, words):
     reason = resume_refusal(mission_items=items, airborne=airborne)
     assert reason.startswith("cannot resume") and words in reason

@@ -60,22 +60,42 @@ def test_grouped_and_wrapped_numpydoc_entries_are_read():
         d: int = 4
 
     text = field_descriptions(Example)
-    assert text == {"a_m": "Shared text, on two lines.", "b_s": "Shared text, on two lines.",
-                    "c_hz": "Shared text, on two lines.", "d": "Own text."}
+    assert text == {
+        "a_m": "Shared text, on two lines.",
+        "b_s": "Shared text, on two lines.",
+        "c_hz": "Shared text, on two lines.",
+        "d": "Own text.",
+    }
 
 
-@pytest.mark.parametrize("name, unit", [("speed_m_s", "m/s"), ("accel_m_s2", "m/s²"), ("dt_s", "s"),
-                                        ("radius_m", "m"), ("rate_hz", "Hz"), ("kappa_max_1_m", "1/m"),
-                                        ("turn_rate_rad_s", "rad/s"), ("mode", ""), ("retime_rates", "")])
+@pytest.mark.parametrize(
+    "name, unit",
+    [
+        ("speed_m_s", "m/s"),
+        ("accel_m_s2", "m/s²"),
+        ("dt_s", "s"),
+        ("radius_m", "m"),
+        ("rate_hz", "Hz"),
+        ("kappa_max_1_m", "1/m"),
+        ("turn_rate_rad_s", "rad/s"),
+        ("mode", ""),
+        ("retime_rates", ""),
+    ],
+)
 def test_units_come_from_the_name(name, unit):
     assert unit_of(name) == unit
 
 
 def test_printed_toml_reads_back_to_the_same_settings(tmp_path):
-    changed = settings_from_dict({
-        "seed": 7, "link": {"connect": 'udpin://0.0.0.0:14541', "signing_key_file": 'a "quoted" path'},
-        "planning": {"kappa_max_1_m": 0.2},                 # None by default: written when set
-        "threats": {"retime_waits_s": [0.0, 2.0]}, "zenoh": {"listen": [], "connect": ["tcp/10.0.0.1:7447"]}})
+    changed = settings_from_dict(
+        {
+            "seed": 7,
+            "link": {"connect": "udpin://0.0.0.0:14541", "signing_key_file": 'a "quoted" path'},
+            "planning": {"kappa_max_1_m": 0.2},  # None by default: written when set
+            "threats": {"retime_waits_s": [0.0, 2.0]},
+            "zenoh": {"listen": [], "connect": ["tcp/10.0.0.1:7447"]},
+        }
+    )
     for settings in (Settings(), changed):
         text = settings_to_toml(settings)
         assert settings_from_dict(tomllib.loads(text)) == settings

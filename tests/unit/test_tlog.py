@@ -9,8 +9,11 @@ from heli_common.tlog import TlogWriter
 def frames() -> list[bytes]:
     mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     mav.robust_parsing = True
-    out = [mav.heartbeat_encode(mavlink.MAV_TYPE_HELICOPTER, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                                0, 4, mavlink.MAV_STATE_ACTIVE).pack(mav)]
+    out = [
+        mav.heartbeat_encode(
+            mavlink.MAV_TYPE_HELICOPTER, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 4, mavlink.MAV_STATE_ACTIVE
+        ).pack(mav)
+    ]
     out.append(mav.local_position_ned_encode(1234, 1.0, -2.0, -10.0, 0.5, 0.0, 0.0).pack(mav))
     mav.signing.secret_key = bytes(range(32))
     mav.signing.sign_outgoing = True

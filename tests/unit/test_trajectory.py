@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from companion.errors import TrajectoryError
-from companion.smoothing import smooth_g2, time_parameterize
 from companion.flight.trajectory import RawProfile, Trajectory
+from companion.smoothing import smooth_g2, time_parameterize
 
 PATH = np.array([[0.0, 0.0], [40.0, 0.0], [40.0, 30.0]])
 
@@ -62,8 +62,15 @@ def test_bad_yaw_mode_and_time_scale(traj):
 
 def test_raw_profile_box_filter_closed_form():
     # one constant-acceleration interval: s = t^2 / 2 on [0, 2], then speed 2 forever
-    prof = RawProfile(tau_s=np.array([0.0, 2.0]), s_m=np.array([0.0, 2.0]), v_m_s=np.array([0.0, 2.0]),
-                      a_m_s2=np.array([1.0]), window_s=1.0, start_speed_m_s=0.0, end_speed_m_s=2.0)
+    prof = RawProfile(
+        tau_s=np.array([0.0, 2.0]),
+        s_m=np.array([0.0, 2.0]),
+        v_m_s=np.array([0.0, 2.0]),
+        a_m_s2=np.array([1.0]),
+        window_s=1.0,
+        start_speed_m_s=0.0,
+        end_speed_m_s=2.0,
+    )
     s, v, a = prof.filtered(np.array([1.0, 5.0]))
     # window [0.5, 1.5]: mean of t^2/2 is (1.5^3 - 0.5^3) / 6
     np.testing.assert_allclose(s, [(1.5**3 - 0.5**3) / 6.0, 2.0 + 2.0 * 3.0], atol=1e-12)

@@ -10,7 +10,6 @@ import sys
 import time
 
 import pytest
-
 from support import REPO_ROOT
 
 STARTS_WORKERS = """
@@ -48,7 +47,7 @@ def test_the_workers_end_when_the_companion_is_killed():
     try:
         pids = [int(pid) for pid in proc.stdout.readline().split()]
         assert len(pids) == 2 and all(map(running, pids))
-        pids.append(parent_of(pids[0]))                            # the forkserver
+        pids.append(parent_of(pids[0]))  # the forkserver
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()

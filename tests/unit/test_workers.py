@@ -24,6 +24,7 @@ def test_a_world_pickles_and_answers_the_same():
 
 def test_process_workers_return_what_threads_return():
     """Values in, values out: the same function on the same arguments gives the same result."""
+
     async def fly(kind: str):
         workers = PlanningWorkers(kind, workers=1)
         try:

@@ -28,7 +28,6 @@ __all__ = ["Alternative", "AlternativeError", "plan_alternatives", "switch_candi
 class AlternativeError(CompanionError, ValueError):
     """A malformed alternative path (naming it)."""
 
-
     limit_m: float
 
 
@@ -59,17 +58,18 @@ class Alternative:
     entry_remaining_m: np.ndarray
 
     @classmethod
-    def from_path(cls, path_id: str, path_ned_m, spacing_m: float = 2.0) -> "Alternative":
+    def from_path(cls, path_id: str, path_ned_m, spacing_m: float = 2.0) -> Alternative:
         """Build from a polyline (M, d), M >= 2, with entries at most ``spacing_m`` apart."""
         path = np.asarray(path_ned_m, dtype=float)
-        if path.ndim != 2 or path.shape[0] < 2 or path.shape[1] not in (2, 3) \
-                or not np.all(np.isfinite(path)):
-            raise AlternativeError(f"alternative {path_id!r}: path_ned_m must be a finite (M, 2|3) "
-                                     f"array with M >= 2, got shape {path.shape}")
+        if path.ndim != 2 or path.shape[0] < 2 or path.shape[1] not in (2, 3) or not np.all(np.isfinite(path)):
+            raise AlternativeError(
+                f"alternative {path_id!r}: path_ned_m must be a finite (M, 2|3) "
+                f"array with M >= 2, got shape {path.shape}"
+            )
         if not (math.isfinite(spacing_m) and spacing_m > 0):
             raise AlternativeError(f"spacing_m: must be a finite number > 0, got {spacing_m!r}")
         seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
-        tail = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])     # from node i to the end
+        tail = np.concatenate([np.cumsum(seg[::-1])[::-1], [0.0]])  # from node i to the end
         pos, nxt, rem = [], [], []
         for i, (a, b) in enumerate(zip(path[:-1], path[1:])):
             n = max(1, int(math.ceil(seg[i] / spacing_m)))
@@ -110,17 +110,35 @@ def vertical_variants(path: np.ndarray, world: World, offsets_m) -> list[np.ndar
     for dz in offsets_m:
         for sign in (-1.0, 1.0):
             shifted = path.copy()
-            shifted[1:-1, 2] += sign * dz             # the ends stay: start and goal are fixed
-            mid = np.vstack([path[:1], path[:1] + [0.0, 0.0, sign * dz], shifted[1:-1],
-                             path[-1:] + [0.0, 0.0, sign * dz], path[-1:]])
+            shifted[1:-1, 2] += sign * dz  # the ends stay: start and goal are fixed
+            mid = np.vstack(
+                [
+                    path[:1],
+                    path[:1] + [0.0, 0.0, sign * dz],
+                    shifted[1:-1],
+                    path[-1:] + [0.0, 0.0, sign * dz],
+                    path[-1:],
+                ]
+            )
             if world.path_free(mid):
                 out.append(mid)
     return out
 
 
-def plan_alternatives(world: World, start, goal, k: int, *, pipeline: TrajectoryPipeline,
-                      rng: np.random.Generator, max_time_s: float, spacing_m: float, vertical_offsets_m=(),
-                      airspace=None, tag: str = "") -> list:
+def plan_alternatives(
+    world: World,
+    start,
+    goal,
+    k: int,
+    *,
+    pipeline: TrajectoryPipeline,
+    rng: np.random.Generator,
+    max_time_s: float,
+    spacing_m: float,
+    vertical_offsets_m=(),
+    airspace=None,
+    tag: str = "",
+) -> list:
     """M-GART alternatives from ``start`` to ``goal`` (cheapest first) plus vertical variants.
 
     Parameters

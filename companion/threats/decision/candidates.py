@@ -32,18 +32,27 @@ import numpy as np
 from companion.flight.pipeline import PlanBudget, PlanningProblem, TrajectoryPipeline
 from companion.threats.decision.alternatives import airspace_for, switch_candidates
 from companion.threats.decision.choice import Candidate, ReferenceState, rank_key
-from companion.threats.decision.kinds import CandidateKind
 from companion.threats.decision.evasion import EscapeLimits, escape_library
 from companion.threats.decision.join import HOVER_SPEED_M_S, join_trajectory, lead_length_m, turn_rad
+from companion.threats.decision.kinds import CandidateKind
 from companion.threats.decision.prediction import horizon_for, is_manned
 from companion.threats.decision.retime import RetimedTrajectory, ramp_time_s
+from companion.threats.decision.spacetime import STATIC_ID, check_candidates, reference_accel_bound_m_s2, sample_times
 from companion.threats.settings import ThreatSettings
-from companion.threats.decision.spacetime import (STATIC_ID, check_candidates, reference_accel_bound_m_s2,
-                                                  sample_times)
 from companion.world import Disc, Sphere, World
 
-__all__ = ["Situation", "check", "judge", "evade_candidates", "retime_candidates", "switch_to_alternatives",
-           "replan_candidates", "positions_at", "meeting_obstacles", "check_candidates"]
+__all__ = [
+    "Situation",
+    "check",
+    "judge",
+    "evade_candidates",
+    "retime_candidates",
+    "switch_to_alternatives",
+    "replan_candidates",
+    "positions_at",
+    "meeting_obstacles",
+    "check_candidates",
+]
 
 log = logging.getLogger(__name__)
 
@@ -130,8 +139,14 @@ def positions_at(trajectory, start_t_s: float, t_s: np.ndarray, dim: int) -> np.
 def check(sit: Situation, t_s: np.ndarray, pos: np.ndarray, *, static: bool = True):
     """``check_candidates`` with the situation's tubes, airspace and settings; ``static=False``
     for candidates on paths whose static clearance is known (keep, retime, planned joins)."""
-    return check_candidates(t_s, pos, sit.tubes, sit.world if static else None,
-                            accel_bound_m_s2=sit.accel_bound_m_s2, static_slack_m=sit.settings.static_slack_m)
+    return check_candidates(
+        t_s,
+        pos,
+        sit.tubes,
+        sit.world if static else None,
+        accel_bound_m_s2=sit.accel_bound_m_s2,
+        static_slack_m=sit.settings.static_slack_m,
+    )
 
 
 def judge(sit: Situation, candidates: list[Candidate]) -> list[Candidate]:
@@ -178,12 +193,14 @@ def _judge_library(sit: Situation, lib, remaining_to_goal_s: float, rank) -> lis
     s = sit.settings
     t = sit.times(s.evade_step_s)
     pos, duration = lib.positions(t - sit.ref.t_s)
-    pos = pos[:, :, :sit.dim]
+    pos = pos[:, :, : sit.dim]
     tubes_only = check(sit, t, pos, static=False)
-    back_m = np.linalg.norm(pos[:, -1] - sit.ref.pos_ned_m[None, :sit.dim], axis=1)
+    back_m = np.linalg.norm(pos[:, -1] - sit.ref.pos_ned_m[None, : sit.dim], axis=1)
     to_goal = remaining_to_goal_s + duration + back_m / sit.cruise_m_s() + s.restart_s
-    cands = [Candidate("evade", f"evade {lib.labels[i]}", None, float(to_goal[i]), ends_short=True)
-             .judged(tubes_only, i) for i in range(len(lib))]
+    cands = [
+        Candidate("evade", f"evade {lib.labels[i]}", None, float(to_goal[i]), ends_short=True).judged(tubes_only, i)
+        for i in range(len(lib))
+    ]
     order = sorted(range(1, len(cands)), key=lambda i: rank(cands[i]))
     checked: list[int] = []
     best = None
@@ -209,11 +226,18 @@ def evade_candidates(sit: Situation, remaining_to_goal_s: float, *, brake_only: 
     """
     s = sit.settings
     coasts = s.evade_coasts_s + s.manned_coasts_s if sit.manned else s.evade_coasts_s
-    lim = EscapeLimits(sit.escape_speed_m_s(), s.evade_accel_m_s2, s.evade_climb_m_s, s.evade_descent_m_s,
-                       s.evade_vertical_accel_m_s2, coasts)
-    lib = escape_library(sit.ref.pos_ned_m, sit.ref.vel_ned_m_s, lim, vertical=sit.dim == 3,
-                         away_from=_nearest_threat(sit))
-    rank = lambda c: rank_key(c, s.clearance_weight_s_m, s.clearance_cap_m)   # noqa: E731
+    lim = EscapeLimits(
+        sit.escape_speed_m_s(),
+        s.evade_accel_m_s2,
+        s.evade_climb_m_s,
+        s.evade_descent_m_s,
+        s.evade_vertical_accel_m_s2,
+        coasts,
+    )
+    lib = escape_library(
+        sit.ref.pos_ned_m, sit.ref.vel_ned_m_s, lim, vertical=sit.dim == 3, away_from=_nearest_threat(sit)
+    )
+    rank = lambda c: rank_key(c, s.clearance_weight_s_m, s.clearance_cap_m)  # noqa: E731
     judged = _judge_library(sit, lib, remaining_to_goal_s, rank)
     brake = judged[0]
     brake[0].kind, brake[0].label = CandidateKind.HOLD, "hold (brake to a hover)"
@@ -222,20 +246,23 @@ def evade_candidates(sit: Situation, remaining_to_goal_s: float, *, brake_only: 
         escapes = sorted(judged[1:], key=lambda entry: rank(entry[0]))
         if not escapes[0][0].clear:
             least_bad = lib.refined([i for _, _, i in escapes[:4]])
-            escapes = sorted(escapes[:4] + _judge_library(sit, least_bad, remaining_to_goal_s, rank),
-                             key=lambda entry: rank(entry[0]))
+            escapes = sorted(
+                escapes[:4] + _judge_library(sit, least_bad, remaining_to_goal_s, rank),
+                key=lambda entry: rank(entry[0]),
+            )
         picks.append(escapes[0])
     out = []
     for cand, library, i in picks:
         cand.trajectory = library.manoeuvre(i, sit.ref.yaw_rad)
-        cand.path_ned_m = cand.trajectory.sample(np.linspace(0.0, cand.trajectory.duration_s, 12))[0][:, :sit.dim]
+        cand.path_ned_m = cand.trajectory.sample(np.linspace(0.0, cand.trajectory.duration_s, 12))[0][:, : sit.dim]
         out.append(cand)
     return out
 
 
 # ---------------------------------------------------------------------------- retime
-def retime_candidates(sit: Situation, active, active_start_t_s: float, remaining_to_goal_s: float,
-                      ends_short: bool) -> list[Candidate]:
+def retime_candidates(
+    sit: Situation, active, active_start_t_s: float, remaining_to_goal_s: float, ends_short: bool
+) -> list[Candidate]:
     """The active reference slowed (``retime_rates``) or paused for each of ``retime_waits_s``."""
     s = sit.settings
     tau0 = min(max(sit.ref.t_s - active_start_t_s, 0.0), active.duration_s)
@@ -248,17 +275,17 @@ def retime_candidates(sit: Situation, active, active_start_t_s: float, remaining
     for rate in s.retime_rates:
         ramp = ramp_time_s(rate, max(speed, 0.1), s.hold_decel_m_s2)
         for wait in s.retime_waits_s:
-            traj = RetimedTrajectory(active, tau0, rate, wait, ramp,
-                                     f"retime {'pause' if rate == 0 else f'x{rate:.1f}'} {wait:.1f} s")
-            out.append(Candidate("retime", traj.label, traj, remaining_to_goal_s + traj.delay_s,
-                                 ends_short=ends_short))
+            traj = RetimedTrajectory(
+                active, tau0, rate, wait, ramp, f"retime {'pause' if rate == 0 else f'x{rate:.1f}'} {wait:.1f} s"
+            )
+            out.append(Candidate("retime", traj.label, traj, remaining_to_goal_s + traj.delay_s, ends_short=ends_short))
     # one vectorised sampling of the base for every warp, over the horizon plus the longest
     # delay: a retime must not merely push a conflict beyond the horizon
     delay = max(c.trajectory.delay_s for c in out)
     t = sit.times(s.check_step_s, delay)
     taus = np.concatenate([c.trajectory.tau_at(t - sit.ref.t_s) for c in out])
-    pos = np.atleast_2d(active.sample(taus)[0])[:, :sit.dim].reshape(len(out), t.size, sit.dim)
-    res = check(sit, t, pos, static=False)                    # on the active, checked path
+    pos = np.atleast_2d(active.sample(taus)[0])[:, : sit.dim].reshape(len(out), t.size, sit.dim)
+    res = check(sit, t, pos, static=False)  # on the active, checked path
     for i, c in enumerate(out):
         c.judged(res, i)
     return out
@@ -275,18 +302,23 @@ def switch_to_alternatives(sit: Situation, alternatives) -> tuple[list[Candidate
     why: dict[str, int] = {}
     out = []
     entries = switch_candidates(alternatives, sit.ref.pos_ned_m[:d], s.switch_range_m, s.entry_spacing_m)
-    for tried, (cost, alt, i) in enumerate(entries):
+    for tried, (_cost, alt, i) in enumerate(entries):
         out_of_time = not sit.pipeline.reproducible and time.perf_counter() - t0 > s.switch_budget_s
         if tried >= s.max_candidates or out_of_time:
             break
-        traj, poly = join_trajectory(sit.ref.pos_ned_m[:d], sit.ref.vel_ned_m_s[:d], alt.nodes_from(i),
-                                     world=sit.world, pipeline=sit.pipeline, lift_down_m=sit.lift_down_m)
+        traj, poly = join_trajectory(
+            sit.ref.pos_ned_m[:d],
+            sit.ref.vel_ned_m_s[:d],
+            alt.nodes_from(i),
+            world=sit.world,
+            pipeline=sit.pipeline,
+            lift_down_m=sit.lift_down_m,
+        )
         if traj is None:
             key = poly.split(" (")[0]
             why[key] = why.get(key, 0) + 1
             continue
-        cand = judge(sit, [Candidate("switch", f"switch {alt.path_id}", traj, traj.duration_s,
-                                     alt.path_id, poly)])[0]
+        cand = judge(sit, [Candidate("switch", f"switch {alt.path_id}", traj, traj.duration_s, alt.path_id, poly)])[0]
         out.append(cand)
         if cand.clear:
             break
@@ -322,7 +354,7 @@ def meeting_spheres(sit: Situation, tube, t_meet_s: float, keep_free) -> list:
     """The stretch of a mover's track around the time ``t_meet_s`` a candidate would meet it."""
     times = t_meet_s + np.linspace(-MEETING_HALF_S, MEETING_HALF_S, 5)
     radius = float(tube.radius_at(np.array([t_meet_s + MEETING_HALF_S]))[0]) + 0.5
-    if not math.isfinite(radius):         # the tube has ended by then
+    if not math.isfinite(radius):  # the tube has ended by then
         return []
     return [ball(c, radius, sit.dim) for c in tube.center_at(times) if _keeps_free(c, radius, keep_free, sit.dim)]
 
@@ -336,7 +368,7 @@ def meeting_obstacles(sit: Situation, active, active_start_t_s: float, keep_free
     for tube in sit.tubes:
         if tube.speed_m_s <= 0.05 or is_manned(tube):
             continue
-        dist = np.linalg.norm(pos - tube.center_at(t)[:, :sit.dim], axis=1) - tube.radius_at(t)
+        dist = np.linalg.norm(pos - tube.center_at(t)[:, : sit.dim], axis=1) - tube.radius_at(t)
         k = int(np.argmin(dist))
         if dist[k] < sit.settings.switch_range_m / 4:
             out += meeting_spheres(sit, tube, float(t[k]), keep_free)
@@ -384,8 +416,9 @@ def replan_candidates(sit: Situation, *, rng: np.random.Generator, path_id: str)
             log.info("replan: GART %s", result.status)
             break
         nodes = result.path[1:] if lead is not None else result.path
-        traj, poly = join_trajectory(p, v, nodes, world=planning, pipeline=sit.pipeline,
-                                     lift_down_m=sit.lift_down_m, lead_m=lead)
+        traj, poly = join_trajectory(
+            p, v, nodes, world=planning, pipeline=sit.pipeline, lift_down_m=sit.lift_down_m, lead_m=lead
+        )
         if traj is None:
             log.info("replan: %s", poly)
             break
@@ -394,11 +427,11 @@ def replan_candidates(sit: Situation, *, rng: np.random.Generator, path_id: str)
         if cand.clear or cand.conflict.threat_id == STATIC_ID:
             break
         tube = next(t for t in sit.tubes if t.threat_id == cand.conflict.threat_id)
-        if is_manned(tube):                     # a volume to keep out of in time, not an obstacle
+        if is_manned(tube):  # a volume to keep out of in time, not an obstacle
             break
         obstacles = obstacles + meeting_spheres(sit, tube, cand.conflict.t_s, keep)
     if out and not any(c.clear for c in out) and lead is None:
-        out += retimed_starts(sit, out[-1])        # from a hover: wait for the mover, then go
+        out += retimed_starts(sit, out[-1])  # from a hover: wait for the mover, then go
     return out
 
 
@@ -416,6 +449,15 @@ def round_budget(s: ThreatSettings, left_s: float) -> PlanBudget | None:
 def retimed_starts(sit: Situation, cand: Candidate) -> list[Candidate]:
     """``cand`` (starting at rest) delayed by each wait of the settings: hover, then go."""
     waits = [w for w in sit.settings.retime_waits_s if w > 0]
-    out = [Candidate("replan", f"replan after {w:.1f} s", RetimedTrajectory(cand.trajectory, 0.0, 0.0, w, 1e-3),
-                     cand.time_to_goal_s + w, cand.path_id, cand.path_ned_m) for w in waits]
+    out = [
+        Candidate(
+            "replan",
+            f"replan after {w:.1f} s",
+            RetimedTrajectory(cand.trajectory, 0.0, 0.0, w, 1e-3),
+            cand.time_to_goal_s + w,
+            cand.path_id,
+            cand.path_ned_m,
+        )
+        for w in waits
+    ]
     return judge(sit, out)

@@ -87,7 +87,7 @@ class Candidate:
     def __post_init__(self) -> None:
         self.kind = CandidateKind(self.kind)
 
-    def judged(self, check, i: int) -> "Candidate":
+    def judged(self, check, i: int) -> Candidate:
         """Take candidate ``i``'s result from a ``BatchCheck``."""
         self.clear, self.min_clearance_m = bool(check.clear[i]), float(check.min_clearance_m[i])
         self.intrusion_m2s, self.conflict = float(check.intrusion_m2s[i]), check.conflicts[i]
@@ -180,12 +180,17 @@ class Decision:
         """The ``uav/<sysid>/events`` message of this decision (without the transport latency);
         kinds as plain strings."""
         kind = self.kind.value
-        out = {"event": kind, "reason": self.reason, "path_id": self.path_id,
-               "label": self.label or kind, "decide_ms": round(self.decide_ms, 3),
-               "plan_ms": round(self.plan_ms, 3), "branch": self.branch,
-               "candidates": {str(k): int(n) for k, n in self.candidates.items()},
-               "min_clearance_m": (round(self.min_clearance_m, 3)
-                                   if math.isfinite(self.min_clearance_m) else None)}
+        out = {
+            "event": kind,
+            "reason": self.reason,
+            "path_id": self.path_id,
+            "label": self.label or kind,
+            "decide_ms": round(self.decide_ms, 3),
+            "plan_ms": round(self.plan_ms, 3),
+            "branch": self.branch,
+            "candidates": {str(k): int(n) for k, n in self.candidates.items()},
+            "min_clearance_m": (round(self.min_clearance_m, 3) if math.isfinite(self.min_clearance_m) else None),
+        }
         if self.conflict is not None:
             out["threat_id"] = self.conflict.threat_id
             out["time_to_conflict_s"] = round(self.conflict.time_to_conflict_s, 3)

@@ -25,13 +25,12 @@ class RunningEstimate:
     dev_s: float = 0.0
     samples: int = 0
 
-    def updated(self, measured_s: float, gain: float) -> "RunningEstimate":
+    def updated(self, measured_s: float, gain: float) -> RunningEstimate:
         """This estimate with one more measurement (the first replaces the guess)."""
         if self.samples == 0:
             return RunningEstimate(measured_s, 0.25 * measured_s, 1)
         err = measured_s - self.mean_s
-        return RunningEstimate(self.mean_s + gain * err, self.dev_s + gain * (abs(err) - self.dev_s),
-                               self.samples + 1)
+        return RunningEstimate(self.mean_s + gain * err, self.dev_s + gain * (abs(err) - self.dev_s), self.samples + 1)
 
     @property
     def high_s(self) -> float:

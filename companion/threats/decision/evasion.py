@@ -58,8 +58,16 @@ class EscapeLimits:
 
 
 #: Horizontal directions (deg, clockwise from the heading: +90 is right) and their names.
-DIRECTIONS = ((0, "ahead"), (45, "ahead right"), (90, "right"), (135, "back right"), (180, "back"),
-              (-135, "back left"), (-90, "left"), (-45, "ahead left"))
+DIRECTIONS = (
+    (0, "ahead"),
+    (45, "ahead right"),
+    (90, "right"),
+    (135, "back right"),
+    (180, "back"),
+    (-135, "back left"),
+    (-90, "left"),
+    (-45, "ahead left"),
+)
 
 
 def _directions(heading: np.ndarray, lim: EscapeLimits) -> list:
@@ -88,11 +96,13 @@ def _swerves(vel_ne_m_s: np.ndarray, heading: np.ndarray, lim: EscapeLimits) -> 
 
 def _phase_times(v0: np.ndarray, v1: np.ndarray, lim: EscapeLimits) -> tuple[np.ndarray, np.ndarray]:
     """Durations (C,) of the velocity change v0 -> v1 and of the final stop from v1."""
+
     def duration(dv):
         t = np.linalg.norm(dv[:, :2], axis=1) / lim.accel_m_s2
         if dv.shape[1] == 3:
             t = np.maximum(t, np.abs(dv[:, 2]) / lim.vertical_accel_m_s2)
         return t
+
     return duration(v1 - v0[None, :]), duration(v1)
 
 
@@ -113,9 +123,9 @@ def _positions(p0, v0, v1, coast_s, t_rel, lim: EscapeLimits):
     ta = np.minimum(t, t1[:, None, None])
     tb = np.clip(t - t1[:, None, None], 0.0, coast_s[:, None, None])
     tc = np.clip(t - (t1 + coast_s)[:, None, None], 0.0, t3[:, None, None])
-    pos = p0 + v0 * ta + 0.5 * a1[:, None, :] * ta**2          # phase 1, then frozen at p1
-    pos += v1[:, None, :] * tb                                 # coast
-    pos += v1[:, None, :] * tc + 0.5 * a3[:, None, :] * tc**2   # brake, then hover
+    pos = p0 + v0 * ta + 0.5 * a1[:, None, :] * ta**2  # phase 1, then frozen at p1
+    pos += v1[:, None, :] * tb  # coast
+    pos += v1[:, None, :] * tc + 0.5 * a3[:, None, :] * tc**2  # brake, then hover
     return pos, t1 + coast_s + t3
 
 
@@ -129,8 +139,11 @@ def _kinematics(p0, v0, v1, coast_s, t_rel, lim: EscapeLimits):
     in3 = ~in1 & ~in2 & (t < duration[:, None, None])
     ta = np.minimum(t, t1[:, None, None])
     tc = np.clip(t - (t1 + coast_s)[:, None, None], 0.0, t3[:, None, None])
-    vel = np.where(in1, v0 + a1[:, None, :] * ta, np.where(in2, v1[:, None, :],
-                   np.where(in3, v1[:, None, :] + a3[:, None, :] * tc, 0.0)))
+    vel = np.where(
+        in1,
+        v0 + a1[:, None, :] * ta,
+        np.where(in2, v1[:, None, :], np.where(in3, v1[:, None, :] + a3[:, None, :] * tc, 0.0)),
+    )
     acc = np.where(in1, a1[:, None, :], np.where(in3, a3[:, None, :], 0.0))
     return pos, vel, acc, duration
 
@@ -162,15 +175,15 @@ class EscapeLibrary:
 
     def positions(self, t_rel_s: np.ndarray):
         """Positions (C, K, D) and durations (C,) at times (K,) since the manoeuvres start."""
-        return _positions(self.p0, self.v0, self.targets, self.coasts_s, np.asarray(t_rel_s, float),
-                          self.limits)
+        return _positions(self.p0, self.v0, self.targets, self.coasts_s, np.asarray(t_rel_s, float), self.limits)
 
-    def manoeuvre(self, i: int, yaw_rad: float) -> "EscapeManoeuvre":
+    def manoeuvre(self, i: int, yaw_rad: float) -> EscapeManoeuvre:
         """Manoeuvre ``i`` as a trajectory (holding ``yaw_rad``)."""
-        return EscapeManoeuvre(self.p0, self.v0, self.targets[i], float(self.coasts_s[i]),
-                               self.limits, yaw_rad, self.labels[i])
+        return EscapeManoeuvre(
+            self.p0, self.v0, self.targets[i], float(self.coasts_s[i]), self.limits, yaw_rad, self.labels[i]
+        )
 
-    def refined(self, indices) -> "EscapeLibrary":
+    def refined(self, indices) -> EscapeLibrary:
         """Variants around manoeuvres ``indices`` (a local search when none of them is clear):
         the target turned by +-15 and +-30 degrees, 25 % slower or faster (capped at the
         evasion speed), with each
@@ -181,8 +194,9 @@ class EscapeLibrary:
         targets, coasts, labels = [], [], []
         for i in indices:
             v1, coast, label = self.targets[i], float(self.coasts_s[i]), self.labels[i]
-            horizontal = [_turned(v1[:2], deg) for deg in (-30.0, -15.0, 15.0, 30.0)] + \
-                [_capped(v1[:2] * f, lim.speed_m_s) for f in (0.75, 1.25)]
+            horizontal = [_turned(v1[:2], deg) for deg in (-30.0, -15.0, 15.0, 30.0)] + [
+                _capped(v1[:2] * f, lim.speed_m_s) for f in (0.75, 1.25)
+            ]
             for v_h in horizontal + [v1[:2]]:
                 for vz in verticals:
                     for c in (0.6 * coast, coast, 1.6 * coast):
@@ -206,8 +220,7 @@ def _capped(v_ne: np.ndarray, cap_m_s: float) -> np.ndarray:
     return v_ne * min(1.0, cap_m_s / max(speed, 1e-9))
 
 
-def escape_library(pos_ned_m, vel_ned_m_s, limits: EscapeLimits, *, vertical: bool,
-                   away_from=None) -> EscapeLibrary:
+def escape_library(pos_ned_m, vel_ned_m_s, limits: EscapeLimits, *, vertical: bool, away_from=None) -> EscapeLibrary:
     """The library around the current heading (or, at a hover, facing away from ``away_from``,
     a horizontal point such as the nearest threat; north when none): candidate 0 is the hard
     brake; then every horizontal target (directions, swerves, a stop) with each vertical option
@@ -231,7 +244,7 @@ def escape_library(pos_ned_m, vel_ned_m_s, limits: EscapeLimits, *, vertical: bo
     for v_h, name in horizontals:
         for vz, vname in verticals:
             if name == "brake" and not vname:
-                continue                                  # the hard brake is candidate 0
+                continue  # the hard brake is candidate 0
             v1 = np.zeros(d)
             v1[:2] = v_h
             if d == 3:
@@ -256,8 +269,12 @@ class EscapeManoeuvre:
     """
 
     def __init__(self, p0, v0, v1, coast_s: float, limits: EscapeLimits, yaw_rad: float, label: str):
-        self._args = (np.asarray(p0, float), np.asarray(v0, float), np.atleast_2d(v1).astype(float),
-                      np.array([coast_s]))
+        self._args = (
+            np.asarray(p0, float),
+            np.asarray(v0, float),
+            np.atleast_2d(v1).astype(float),
+            np.array([coast_s]),
+        )
         self.limits = limits
         self.yaw = float(yaw_rad)
         self.label = label

@@ -34,8 +34,7 @@ HOVER_SPEED_M_S = 0.05
 JOIN_ATTEMPTS = 4
 
 
-def lead_length_m(speed_m_s: float, turn_rad: float, limits: TrajectoryLimits,
-                  kappa_max_1_m: float) -> float:
+def lead_length_m(speed_m_s: float, turn_rad: float, limits: TrajectoryLimits, kappa_max_1_m: float) -> float:
     """Straight lead along the current velocity before the first corner of a join (m).
 
     ``kappa_max_1_m``: the curvature of the smoother's corners (``TrajectoryPipeline.turn_kappa_1_m``;
@@ -88,8 +87,16 @@ def _deduplicated(nodes: np.ndarray, tol_m: float) -> np.ndarray:
     return np.asarray(keep)
 
 
-def join_trajectory(pos_ned_m, vel_ned_m_s, nodes, *, world: World | None, pipeline: TrajectoryPipeline,
-                    lift_down_m: float | None = None, lead_m: float | None = None):
+def join_trajectory(
+    pos_ned_m,
+    vel_ned_m_s,
+    nodes,
+    *,
+    world: World | None,
+    pipeline: TrajectoryPipeline,
+    lift_down_m: float | None = None,
+    lead_m: float | None = None,
+):
     """A trajectory from the reference state through ``nodes`` without a setpoint jump.
 
     The polyline is [current position, lead point, nodes...]: the lead leaves along the current
@@ -124,8 +131,9 @@ def join_trajectory(pos_ned_m, vel_ned_m_s, nodes, *, world: World | None, pipel
     limits, kappa = pipeline.limits, pipeline.turn_kappa_1_m
     speed = min(float(np.linalg.norm(v0)), limits.speed_m_s)
     if speed < HOVER_SPEED_M_S:
-        return _timed_join(np.vstack([p0[None, :], nodes]), 0.0, world=world, pipeline=pipeline,
-                           lift_down_m=lift_down_m)
+        return _timed_join(
+            np.vstack([p0[None, :], nodes]), 0.0, world=world, pipeline=pipeline, lift_down_m=lift_down_m
+        )
     u = v0 / np.linalg.norm(v0)
     fixed = lead_m is not None
     lead = float(lead_m) if fixed else lead_length_m(speed, turn_rad(u, nodes[0] - p0), limits, kappa)
@@ -136,12 +144,18 @@ def join_trajectory(pos_ned_m, vel_ned_m_s, nodes, *, world: World | None, pipel
         k = 0 if fixed else entry_index(p_lead, u, nodes, kappa)
         if k is None:
             return None, "no node far enough beyond the stopping distance"
-        traj, poly = _timed_join(np.vstack([p0, p_lead, nodes[k:]]), speed, world=world, pipeline=pipeline,
-                                 lift_down_m=lift_down_m, first_checked=1 if fixed else 0)
+        traj, poly = _timed_join(
+            np.vstack([p0, p_lead, nodes[k:]]),
+            speed,
+            world=world,
+            pipeline=pipeline,
+            lift_down_m=lift_down_m,
+            first_checked=1 if fixed else 0,
+        )
         if traj is None:
             if fixed or attempt == attempts - 1:
                 return traj, poly
-            lead *= 0.6          # blocked: a shorter lead with a gentler first corner may fit
+            lead *= 0.6  # blocked: a shorter lead with a gentler first corner may fit
             reason = poly
             continue
         start_speed = float(np.linalg.norm(traj.sample(np.array([0.0]))[1][0]))
@@ -181,14 +195,15 @@ def entry_index(p_lead: np.ndarray, u: np.ndarray, nodes: np.ndarray, kappa_max_
     return int(ok[0]) if ok.size else None
 
 
-def _timed_join(points: np.ndarray, speed_m_s: float, *, world, pipeline: TrajectoryPipeline, lift_down_m,
-                first_checked: int = 0):
+def _timed_join(
+    points: np.ndarray, speed_m_s: float, *, world, pipeline: TrajectoryPipeline, lift_down_m, first_checked: int = 0
+):
     """The cleaned polyline through the pipeline: (Trajectory, polyline) or (None, reason)."""
     poly = _clean_nodes(points)
     if poly.shape[0] < 2:
         return None, "nothing to fly"
     if world is not None:
-        for a, b in zip(poly[first_checked:-1], poly[first_checked + 1:]):
+        for a, b in zip(poly[first_checked:-1], poly[first_checked + 1 :]):
             if not world.segment_free(a, b):
                 return None, "the join crosses a static obstacle"
     checked = pipeline.trajectory(poly, world, start_speed_m_s=speed_m_s)

@@ -28,8 +28,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Tube", "TrajectoryTube", "along_samples", "predict_tubes", "tubes_for", "horizon_for", "range_for",
-           "is_manned", "STATIC_SPEED_M_S"]
+__all__ = [
+    "Tube",
+    "TrajectoryTube",
+    "along_samples",
+    "predict_tubes",
+    "tubes_for",
+    "horizon_for",
+    "range_for",
+    "is_manned",
+    "STATIC_SPEED_M_S",
+]
 
 #: A threat slower than this (m/s) counts as static: its tube does not grow.
 STATIC_SPEED_M_S = 0.05
@@ -173,13 +182,23 @@ def horizon_for(threats, settings) -> float:
 def tubes_for(threats, settings) -> list[Tube]:
     """``predict_tubes`` with the policy's inflation, growth and manned volume
     (``ThreatSettings``)."""
-    return predict_tubes(threats, inflation_m=settings.inflation_m, uncertainty_m_s=settings.uncertainty_m_s,
-                         uncertainty_max_m=settings.uncertainty_max_m,
-                         manned_axes_m=(settings.manned_h_m, settings.manned_v_m))
+    return predict_tubes(
+        threats,
+        inflation_m=settings.inflation_m,
+        uncertainty_m_s=settings.uncertainty_m_s,
+        uncertainty_max_m=settings.uncertainty_max_m,
+        manned_axes_m=(settings.manned_h_m, settings.manned_v_m),
+    )
 
 
-def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
-                  uncertainty_max_m: float = 0.0, manned_axes_m: tuple[float, float] | None = None) -> list[Tube]:
+def predict_tubes(
+    threats,
+    *,
+    inflation_m: float,
+    uncertainty_m_s: float = 0.0,
+    uncertainty_max_m: float = 0.0,
+    manned_axes_m: tuple[float, float] | None = None,
+) -> list[Tube]:
     """Tubes of ``threats`` (local-frame ``Threat`` records) for the space-time check.
 
     Parameters
@@ -207,7 +226,7 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
     """
     out = []
     for th in threats:
-        if hasattr(th, "tube"):                 # another vehicle: its own shape (companion.fleet)
+        if hasattr(th, "tube"):  # another vehicle: its own shape (companion.fleet)
             out.append(th.tube(inflation_m))
             continue
         vel = np.asarray(th.velocity_ned_m_s, dtype=float)
@@ -215,10 +234,21 @@ def predict_tubes(threats, *, inflation_m: float, uncertainty_m_s: float = 0.0,
         radius, half_height, ends = float(th.radius_m), math.inf, th.expires_t_s if moving else math.inf
         if manned_axes_m is not None and is_manned(th):
             radius, half_height = float(manned_axes_m[0]), float(manned_axes_m[1])
-            ends = math.inf                     # ADS-B's ttl drops a target not heard (the table's)
-        out.append(Tube(th.uid, th.pos_ned_m, vel, float(th.received_t_s),
-                        radius + inflation_m, float(th.radius_m),
-                        uncertainty_m_s if moving else 0.0, uncertainty_max_m if moving else 0.0,
-                        ends, half_height, radius / half_height if math.isfinite(half_height) else 1.0,
-                        th.traffic))
+            ends = math.inf  # ADS-B's ttl drops a target not heard (the table's)
+        out.append(
+            Tube(
+                th.uid,
+                th.pos_ned_m,
+                vel,
+                float(th.received_t_s),
+                radius + inflation_m,
+                float(th.radius_m),
+                uncertainty_m_s if moving else 0.0,
+                uncertainty_max_m if moving else 0.0,
+                ends,
+                half_height,
+                radius / half_height if math.isfinite(half_height) else 1.0,
+                th.traffic,
+            )
+        )
     return out

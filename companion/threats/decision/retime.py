@@ -22,9 +22,9 @@ import numpy as np
 
 # The ufunc that ``np.clip`` calls, without its Python wrappers (same results, NaN and signed
 # zeros included).
-try:                                        # numpy >= 2
+try:  # numpy >= 2
     from numpy._core.umath import clip as clip_ufunc
-except ImportError:                         # numpy 1.26
+except ImportError:  # numpy 1.26
     from numpy.core.umath import clip as clip_ufunc
 
 __all__ = ["RetimedTrajectory", "ramp_time_s"]
@@ -74,7 +74,7 @@ class RetimedTrajectory:
         tau_warp = self._integral(np.array([warp_end]))[0]
         if tau_warp <= remaining:
             self.duration_s = warp_end + remaining - tau_warp
-        else:                       # the base ends during the warp: find the time by bisection
+        else:  # the base ends during the warp: find the time by bisection
             lo, hi = 0.0, warp_end
             for _ in range(50):
                 mid = 0.5 * (lo + hi)
@@ -92,9 +92,9 @@ class RetimedTrajectory:
         self._drop = 1.0 - self.rate
         self._half_drop = self._drop * 0.5
         self._w = math.pi / self.ramp_s
-        self._dr_gain = self._drop * 0.5 * self._w              # |r'| = _dr_gain sin(w x)
-        self._t2 = self.ramp_s + self.wait_s                    # start of the way up
-        self._t3 = self._t2 + self.ramp_s                       # end of the warp
+        self._dr_gain = self._drop * 0.5 * self._w  # |r'| = _dr_gain sin(w x)
+        self._t2 = self.ramp_s + self.wait_s  # start of the way up
+        self._t3 = self._t2 + self.ramp_s  # end of the warp
 
     def _rate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Progress rate r (K,) and its derivative r' (K,)."""
@@ -125,18 +125,18 @@ class RetimedTrajectory:
         if t0 < self._t3:
             wx = self._w * (t - self._t2)
             return self.rate + self._half_drop * (1.0 - np.cos(wx)), self._dr_gain * np.sin(wx)
-        return np.ones(1), np.zeros(1)              # after the warp (or NaN, as ``_rate``)
+        return np.ones(1), np.zeros(1)  # after the warp (or NaN, as ``_rate``)
 
     def _integral(self, t: np.ndarray) -> np.ndarray:
         """Base time advanced since t = 0: the integral of r (K,)."""
         half_drop, w = self._half_drop, self._w
         t1 = np.minimum(t, self.ramp_s)
-        loss = half_drop * (t1 - np.sin(w * t1) / w)                 # int of 1 - r on the way down
+        loss = half_drop * (t1 - np.sin(w * t1) / w)  # int of 1 - r on the way down
         since_ramp = t - self.ramp_s
         t_hold = clip_ufunc(since_ramp, 0.0, self.wait_s)
         loss = loss + self._drop * t_hold
         x = clip_ufunc(since_ramp - self.wait_s, 0.0, self.ramp_s)
-        loss = loss + self._drop * x - half_drop * (x - np.sin(w * x) / w)     # and on the way up
+        loss = loss + self._drop * x - half_drop * (x - np.sin(w * x) / w)  # and on the way up
         return t - loss
 
     def _clipped(self, t_s) -> np.ndarray:
@@ -154,7 +154,7 @@ class RetimedTrajectory:
         """The first output of ``_tau`` (which does not depend on r)."""
         return np.minimum(self.tau0_s + self._integral(self._clipped(t_s)), self.base.duration_s)
 
-    def _innermost(self) -> tuple[list["RetimedTrajectory"], object]:
+    def _innermost(self) -> tuple[list[RetimedTrajectory], object]:
         """The retimes nested in this one, outermost first, and the reference under them all."""
         levels, ref = [], self
         while isinstance(ref, RetimedTrajectory):

@@ -81,8 +81,12 @@ class ReferenceTable:
 
     def describes(self, active: ActiveTrajectory, step_s: float, dim: int) -> bool:
         """True when this table is of ``active`` (the same trajectory engaged at the same time)."""
-        return (active.trajectory is self.trajectory and active.start_t_s == self.start_t_s
-                and step_s == self.step_s and dim == self.dim)
+        return (
+            active.trajectory is self.trajectory
+            and active.start_t_s == self.start_t_s
+            and step_s == self.step_s
+            and dim == self.dim
+        )
 
     def _cover(self, tau_lo_s: float, tau_hi_s: float) -> None:
         """Sample the chunk that holds [tau_lo_s, tau_hi_s] (clipped to the trajectory) if the
@@ -98,7 +102,7 @@ class ReferenceTable:
             tau = np.append(tau, duration)
         tau = np.unique(tau)
         self._tau_s = tau
-        self._pos = np.atleast_2d(self.trajectory.sample(tau)[0])[:, :self.dim]
+        self._pos = np.atleast_2d(self.trajectory.sample(tau)[0])[:, : self.dim]
 
     def positions_at(self, t_s: np.ndarray) -> np.ndarray:
         """Interpolated positions (K, dim) at clock times ``t_s`` (K,), increasing: held at the
@@ -116,7 +120,7 @@ class ReferenceTable:
     def end_speed_m_s(self) -> float:
         """Speed (m/s) at the reference's end, where it then holds still (a kink unless 0)."""
         vel = np.atleast_2d(self.trajectory.sample(np.array([float(self.trajectory.duration_s)]))[1])[0]
-        return float(np.linalg.norm(vel[:self.dim]))
+        return float(np.linalg.norm(vel[: self.dim]))
 
     def kink_m(self, t_lo_s: float, t_hi_s: float) -> float | None:
         """How far (m) the held reference leaves its chords at kinks within clock times
@@ -133,8 +137,13 @@ class ReferenceTable:
 def _near(threats, t_s: float, pos: np.ndarray, dim: int, settings, extra_m: float) -> list:
     """Unexpired threats within their range (``prediction.range_for``) plus ``extra_m`` of
     ``pos`` now (``step._relevant``'s test)."""
-    return [th for th in threats if th.expires_t_s > t_s and float(np.linalg.norm(
-        th.position_at(t_s)[:dim] - pos[:dim])) - th.radius_m <= range_for(th, settings) + extra_m]
+    return [
+        th
+        for th in threats
+        if th.expires_t_s > t_s
+        and float(np.linalg.norm(th.position_at(t_s)[:dim] - pos[:dim])) - th.radius_m
+        <= range_for(th, settings) + extra_m
+    ]
 
 
 def _radius_living_on(tube, t: np.ndarray, extra_s: float) -> np.ndarray:
@@ -155,10 +164,10 @@ def _clear_of_tubes(pos: np.ndarray, t: np.ndarray, threats, settings, margin_m:
     for tube in tubes:
         rel = pos - tube.center_at(t)[:, :dim]
         radius = tube.radius_at(t) if not ahead else _radius_living_on(tube, t, ahead * (t[1] - t[0]))
-        reach = np.maximum(radius[:n], radius[1:n + 1])
+        reach = np.maximum(radius[:n], radius[1 : n + 1])
         for k in range(2, ahead + 2):
-            reach = np.maximum(reach, radius[k:n + k])
-        clearance = segment_min_distance(rel[:n], rel[1:n + 1]) - reach
+            reach = np.maximum(reach, radius[k : n + k])
+        clearance = segment_min_distance(rel[:n], rel[1 : n + 1]) - reach
         if np.any(clearance - margin_m[:n] < ROUNDING_M):
             return False
     return True
@@ -183,7 +192,7 @@ def proves_clear(table: ReferenceTable, threats, t_s: float, settings, accel_bou
         The check's bound on the reference's acceleration (``Situation.accel_bound_m_s2``).
     """
     if any(th.frame != "local_ned" for th in threats):
-        return False                        # the check names the error
+        return False  # the check names the error
     dim = table.dim
     err_m = table.error_m(accel_bound_m_s2)
     near = _near(threats, t_s, table.positions_at(np.array([t_s]))[0], dim, settings, err_m)
@@ -214,7 +223,7 @@ class MonitorScreen:
         self.accel_bound_m_s2 = float(accel_bound_m_s2)
         self.lead_s = float(lead_s)
         self.table: ReferenceTable | None = None
-        self._proof: tuple[tuple, float] | None = None      # (threat reports, until t_s)
+        self._proof: tuple[tuple, float] | None = None  # (threat reports, until t_s)
         self.proofs = self.standing = 0
 
     def proves_clear(self, active: ActiveTrajectory, threats, t_s: float, dim: int) -> bool:
@@ -248,7 +257,7 @@ class MonitorScreen:
         if not _provable(live):
             return False
         pos = self.table.positions_at(t)
-        chord_err = self.accel_bound_m_s2 * s.check_step_s ** 2 / 8.0
+        chord_err = self.accel_bound_m_s2 * s.check_step_s**2 / 8.0
         margin = np.full(n - 1, 3.0 * chord_err + self.table.error_m(self.accel_bound_m_s2) + 2.0 * kink_m)
         return _clear_of_tubes(pos, t, live, s, margin, 1)
 

@@ -34,8 +34,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Conflict", "BatchCheck", "check_candidates", "segment_min_distance", "sample_times",
-           "STATIC_ID", "interval_clearance"]
+__all__ = [
+    "Conflict",
+    "BatchCheck",
+    "check_candidates",
+    "segment_min_distance",
+    "sample_times",
+    "STATIC_ID",
+    "interval_clearance",
+]
 
 #: ``Conflict.threat_id`` of a conflict with the static world (obstacle or bounds).
 STATIC_ID = "static"
@@ -151,10 +158,10 @@ def _obstacle_clearance(flat: np.ndarray, world) -> np.ndarray:
     dim = world.dim
     margin = world.margin_m
     boxes = [ob.aabb(dim) for ob in world.obstacles]
-    lo = np.array([b[0][:dim] for b in boxes], dtype=float)                  # (M, d)
+    lo = np.array([b[0][:dim] for b in boxes], dtype=float)  # (M, d)
     hi = np.array([b[1][:dim] for b in boxes], dtype=float)
     gap = np.maximum(np.maximum(lo[None] - flat[:, None], flat[:, None] - hi[None]), 0.0)
-    box = np.sqrt(np.einsum("kmi,kmi->km", gap, gap)) - margin              # (K, M)
+    box = np.sqrt(np.einsum("kmi,kmi->km", gap, gap)) - margin  # (K, M)
     near = box < STATIC_REACH_M
     for m in np.flatnonzero(near.any(axis=0)):
         rows = near[:, m]
@@ -182,7 +189,7 @@ def _static_clearance(pos, world, slack_m: float, substeps: int = STATIC_SUBSTEP
     bound = 0.5 * (point[:, :-1] + point[:, 1:] - chord)
     near = bound < STATIC_REFINE_M
     if near.any():
-        f = np.arange(substeps + 1)[:, None] / substeps                      # (n+1, 1)
+        f = np.arange(substeps + 1)[:, None] / substeps  # (n+1, 1)
         fine = pos[:, :-1][near][:, None, :] + f[None] * step[near][:, None, :]
         fine_point = _point_clearance(fine.reshape(-1, d), world, slack_m).reshape(-1, substeps + 1)
         piece = chord[near][:, None] / substeps
@@ -190,8 +197,9 @@ def _static_clearance(pos, world, slack_m: float, substeps: int = STATIC_SUBSTEP
     return bound
 
 
-def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: float = 3.0,
-                     static_slack_m: float = 0.0) -> BatchCheck:
+def check_candidates(
+    t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: float = 3.0, static_slack_m: float = 0.0
+) -> BatchCheck:
     """Check C candidates sampled at common times against every tube and the static world.
 
     Parameters
@@ -241,10 +249,11 @@ def check_candidates(t_s, pos_ned_m, tubes, world=None, *, accel_bound_m_s2: flo
     bad = clearance < 0.0
     clear = ~bad.any(axis=1)
     intrusion = (np.square(np.minimum(clearance, 0.0)) * dt[None, :]).sum(axis=1)
-    first = np.argmax(bad, axis=1)                                          # first bad interval
+    first = np.argmax(bad, axis=1)  # first bad interval
     first_clearance = clearance[np.arange(c_n), first]
     first_source = source[np.arange(c_n), first]
-    conflicts = [None if ok else Conflict(sources[first_source[c]], float(t[k]), float(t[k] - t[0]),
-                                          float(first_clearance[c]))
-                 for c, (ok, k) in enumerate(zip(clear.tolist(), first.tolist()))]
+    conflicts = [
+        None if ok else Conflict(sources[first_source[c]], float(t[k]), float(t[k] - t[0]), float(first_clearance[c]))
+        for c, (ok, k) in enumerate(zip(clear.tolist(), first.tolist()))
+    ]
     return BatchCheck(clear, clearance.min(axis=1), intrusion, conflicts, static)

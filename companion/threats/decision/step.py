@@ -50,13 +50,29 @@ from companion.threats.decision.choice import Candidate, Decision, ReferenceStat
 from companion.threats.decision.kinds import CandidateKind, DecisionKind, Strategy, Trigger
 from companion.threats.decision.prediction import is_manned, range_for, tubes_for
 from companion.threats.decision.spacetime import Conflict
-from companion.threats.decision.values import (ActiveTrajectory, DecisionError, DecisionPolicy, DecisionState,
-                                               LegContext, Observation)
+from companion.threats.decision.values import (
+    ActiveTrajectory,
+    DecisionError,
+    DecisionPolicy,
+    DecisionState,
+    LegContext,
+    Observation,
+)
 from companion.threats.decision.worlds import airspace, planning_slab
 
 #: The step's values (``values.py``) are part of its API: callers import them from here.
-__all__ = ["DecisionError", "ActiveTrajectory", "LegContext", "DecisionPolicy", "DecisionState", "Observation",
-           "decide", "active_conflict", "plan_alternatives_for", "reference_state"]
+__all__ = [
+    "DecisionError",
+    "ActiveTrajectory",
+    "LegContext",
+    "DecisionPolicy",
+    "DecisionState",
+    "Observation",
+    "decide",
+    "active_conflict",
+    "plan_alternatives_for",
+    "reference_state",
+]
 
 log = logging.getLogger(__name__)
 
@@ -91,8 +107,7 @@ def _relevant(threats, t_s: float, pos: np.ndarray, dim: int, settings) -> list:
     out = []
     for th in threats:
         if th.frame != "local_ned":
-            raise DecisionError(f"threat {th.id!r}: convert global threats to local NED first "
-                                f"(ThreatTable(home=...))")
+            raise DecisionError(f"threat {th.id!r}: convert global threats to local NED first (ThreatTable(home=...))")
         if th.expires_t_s <= t_s:
             continue
         if float(np.linalg.norm(th.position_at(t_s)[:dim] - pos[:dim])) - th.radius_m <= range_for(th, settings):
@@ -110,9 +125,16 @@ def _situation(t_s: float, obs: Observation, leg: LegContext, policy: DecisionPo
     room_m = s.manned_vertical_room_m if any(map(is_manned, relevant)) else s.vertical_room_m
     lift = float(ref.pos_ned_m[2]) if dim == 2 and ref.pos_ned_m.shape[0] == 3 else None
     here = [ref.pos_ned_m[:dim]]
-    return gen.Situation(ref, tubes_for(relevant, s), airspace(leg.world, leg.world_key, here, s, room_m),
-                         planning_slab(leg.world, leg.world_key, here), leg.goal_ned_m, s, policy.pipeline,
-                         lift)
+    return gen.Situation(
+        ref,
+        tubes_for(relevant, s),
+        airspace(leg.world, leg.world_key, here, s, room_m),
+        planning_slab(leg.world, leg.world_key, here),
+        leg.goal_ned_m,
+        s,
+        policy.pipeline,
+        lift,
+    )
 
 
 def _remaining_s(sit: gen.Situation, active: ActiveTrajectory) -> float:
@@ -122,11 +144,17 @@ def _remaining_s(sit: gen.Situation, active: ActiveTrajectory) -> float:
 
 def _keep_at(sit: gen.Situation, active: ActiveTrajectory) -> Candidate:
     """The active reference as the ``keep`` candidate, judged."""
-    keep = Candidate(CandidateKind.KEEP, "keep", active.trajectory, _remaining_s(sit, active), active.path_id,
-                     ends_short=active.ends_short)
+    keep = Candidate(
+        CandidateKind.KEEP,
+        "keep",
+        active.trajectory,
+        _remaining_s(sit, active),
+        active.path_id,
+        ends_short=active.ends_short,
+    )
     t = sit.times(sit.settings.check_step_s)
     pos = gen.positions_at(active.trajectory, active.start_t_s, t, sit.dim)
-    res = gen.check(sit, t, pos, static=False)          # the static world was checked before
+    res = gen.check(sit, t, pos, static=False)  # the static world was checked before
     return keep.judged(res, 0)
 
 
@@ -134,14 +162,15 @@ def active_conflict(obs: Observation, leg: LegContext, policy: DecisionPolicy) -
     """First conflict of the observation's active reference with its threats over the horizon
     (None: clear, or nothing active). The monitor's check: a millisecond of numpy."""
     sit = _situation(obs.t_s, obs, leg, policy)
-    if sit is None or not sit.tubes:        # no threat within the sensor range: nothing to meet
+    if sit is None or not sit.tubes:  # no threat within the sensor range: nothing to meet
         return None
     return _keep_at(sit, obs.active).conflict
 
 
 # ---------------------------------------------------------------------------- the decision
-def decide(state: DecisionState, obs: Observation, leg: LegContext,
-           policy: DecisionPolicy) -> tuple[Decision, DecisionState]:
+def decide(
+    state: DecisionState, obs: Observation, leg: LegContext, policy: DecisionPolicy
+) -> tuple[Decision, DecisionState]:
     """Decide what to do about ``obs`` (see the module docstring).
 
     New candidates start from the active reference's state at the time the decision is
@@ -185,19 +214,25 @@ def _on_threats(state: DecisionState, obs: Observation, leg: LegContext, policy:
     active, s = obs.active, policy.settings
     keep = _keep_at(sit, active)
     if keep.clear:
-        return Decision(DecisionKind.NONE, "the active reference stays clear", decide_ms=_ms_since(t0),
-                        resume=active.ends_short, min_clearance_m=keep.min_clearance_m), state
+        return Decision(
+            DecisionKind.NONE,
+            "the active reference stays clear",
+            decide_ms=_ms_since(t0),
+            resume=active.ends_short,
+            min_clearance_m=keep.min_clearance_m,
+        ), state
     ttc = keep.conflict.time_to_conflict_s
     what = f"{keep.conflict.threat_id} in {ttc:.1f} s"
     fast = _situation(obs.t_s + policy.fast_lead_s(state), obs, leg, policy)
     cands = _fast_candidates(fast, active, state.alternatives, policy.strategy)
-    continues = any(c.clear and not c.ends_short for c in cands)     # a clear way to the goal
+    continues = any(c.clear and not c.ends_short for c in cands)  # a clear way to the goal
     slow_lead = policy.fast_lead_s(state) + policy.replan_lead_s(state)
     stop_s = float(np.linalg.norm(fast.ref.vel_ned_m_s)) / s.evade_accel_m_s2
     urgent = ttc <= slow_lead + stop_s + s.urgency_margin_s
     hybrid = policy.strategy is Strategy.HYBRID
-    if policy.strategy is Strategy.REPLAN or (hybrid and not continues and not urgent
-                                              and not _meets_manned(sit, keep.conflict)):
+    if policy.strategy is Strategy.REPLAN or (
+        hybrid and not continues and not urgent and not _meets_manned(sit, keep.conflict)
+    ):
         # there is time to replan: plan from where the vehicle will be when it is done
         slow = _situation(obs.t_s + slow_lead, obs, leg, policy)
         cands, state = _replan(state, slow, policy)
@@ -230,13 +265,18 @@ def _resume(state: DecisionState, obs: Observation, leg: LegContext, policy: Dec
     s = policy.settings
     best = choose([c for c in _sane(cands) if c.clear], s.clearance_weight_s_m, s.clearance_cap_m)
     if best is None:
-        return Decision(DecisionKind.NONE, "no clear way back to the mission yet", decide_ms=_ms_since(t0),
-                        resume=True, candidates=_counts(cands), branch="resume"), state
+        return Decision(
+            DecisionKind.NONE,
+            "no clear way back to the mission yet",
+            decide_ms=_ms_since(t0),
+            resume=True,
+            candidates=_counts(cands),
+            branch="resume",
+        ), state
     return _engage(state, sit, best, "back to the mission", None, cands, t0, branch="resume")
 
 
-def _fast_candidates(sit: gen.Situation, active: ActiveTrajectory, alternatives,
-                     strategy: Strategy) -> list[Candidate]:
+def _fast_candidates(sit: gen.Situation, active: ActiveTrajectory, alternatives, strategy: Strategy) -> list[Candidate]:
     """The candidates of milliseconds: evade and hold, retime, switch (by strategy)."""
     remaining = _remaining_s(sit, active)
     out: list[Candidate] = []
@@ -244,8 +284,7 @@ def _fast_candidates(sit: gen.Situation, active: ActiveTrajectory, alternatives,
         out += gen.evade_candidates(sit, remaining, brake_only=strategy is Strategy.HOLD)
     if strategy in (Strategy.HYBRID, Strategy.RETIME):
         out += gen.retime_candidates(sit, active.trajectory, active.start_t_s, remaining, active.ends_short)
-    if strategy.switches and not any(
-            c.clear and c.kind == CandidateKind.RETIME for c in out):
+    if strategy.switches and not any(c.clear and c.kind == CandidateKind.RETIME for c in out):
         out += gen.switch_to_alternatives(sit, alternatives)[0]
     return out
 
@@ -270,34 +309,70 @@ def _replan(state: DecisionState, sit: gen.Situation, policy: DecisionPolicy):
     return out, replace(state, counter=counter, replan_estimate=estimate, replan_blocked_until_s=blocked)
 
 
-def _finish(state: DecisionState, sit: gen.Situation, keep: Candidate, cands: list[Candidate], what: str,
-            t0: float, active: ActiveTrajectory, policy: DecisionPolicy, branch: str = "fast"):
+def _finish(
+    state: DecisionState,
+    sit: gen.Situation,
+    keep: Candidate,
+    cands: list[Candidate],
+    what: str,
+    t0: float,
+    active: ActiveTrajectory,
+    policy: DecisionPolicy,
+    branch: str = "fast",
+):
     s = policy.settings
     best = choose(_sane(cands), s.clearance_weight_s_m, s.clearance_cap_m)
     # an intruding candidate is compared with the active reference over its own window (from the
     # situation's time): inside a receding tube, the reference is as good from then on
     if best is None or (not best.clear and best.min_clearance_m < _keep_at(sit, active).min_clearance_m + BETTER_BY_M):
-        return Decision(DecisionKind.NONE, f"{what}: no candidate better than the active reference",
-                        decide_ms=_ms_since(t0), resume=active.ends_short, conflict=keep.conflict,
-                        candidates=_counts(cands), min_clearance_m=keep.min_clearance_m, branch=branch), state
+        return Decision(
+            DecisionKind.NONE,
+            f"{what}: no candidate better than the active reference",
+            decide_ms=_ms_since(t0),
+            resume=active.ends_short,
+            conflict=keep.conflict,
+            candidates=_counts(cands),
+            min_clearance_m=keep.min_clearance_m,
+            branch=branch,
+        ), state
     return _engage(state, sit, best, what, keep.conflict, cands, t0, branch)
 
 
-def _engage(state: DecisionState, sit: gen.Situation, best: Candidate, what: str, conflict, cands,
-            t0: float, branch: str = "fast") -> tuple[Decision, DecisionState]:
+def _engage(
+    state: DecisionState,
+    sit: gen.Situation,
+    best: Candidate,
+    what: str,
+    conflict,
+    cands,
+    t0: float,
+    branch: str = "fast",
+) -> tuple[Decision, DecisionState]:
     """The decision to fly ``best`` from the situation's time, and the state after it."""
     state = replace(state, counter=state.counter + 1)
     kind = DecisionKind(best.kind)
     planned = kind in (DecisionKind.SWITCH, DecisionKind.REPLAN)
     path_id = best.path_id if planned else f"{kind.value}-{state.counter}"
     clear = "clear" if best.clear else f"least intrusion, {best.min_clearance_m:.1f} m"
-    decision = Decision(kind, f"{what}: {best.label} ({clear})", best.trajectory, sit.ref.t_s,
-                        path_id, best.path_ned_m, conflict, plan_ms=_ms_since(t0),
-                        resume=best.ends_short, label=best.label, candidates=_counts(cands),
-                        min_clearance_m=best.min_clearance_m, branch=branch)
+    decision = Decision(
+        kind,
+        f"{what}: {best.label} ({clear})",
+        best.trajectory,
+        sit.ref.t_s,
+        path_id,
+        best.path_ned_m,
+        conflict,
+        plan_ms=_ms_since(t0),
+        resume=best.ends_short,
+        label=best.label,
+        candidates=_counts(cands),
+        min_clearance_m=best.min_clearance_m,
+        branch=branch,
+    )
     decision = replace(decision, decide_ms=_ms_since(t0))
-    log.info("threat decision %s (%s) path %s: decide %.1f ms", kind.value, decision.reason,
-             path_id, decision.decide_ms)
+    log.info(
+        "threat decision %s (%s) path %s: decide %.1f ms", kind.value, decision.reason, path_id, decision.decide_ms
+    )
     return decision, state
 
 
@@ -326,8 +401,16 @@ def _ms_since(t0: float) -> float:
 
 
 # ---------------------------------------------------------------------------- alternatives
-def plan_alternatives_for(state: DecisionState, obs: Observation, leg: LegContext, policy: DecisionPolicy,
-                          k: int, *, max_time_s: float, start_ned_m=None) -> tuple[tuple[Alternative, ...], DecisionState]:
+def plan_alternatives_for(
+    state: DecisionState,
+    obs: Observation,
+    leg: LegContext,
+    policy: DecisionPolicy,
+    k: int,
+    *,
+    max_time_s: float,
+    start_ned_m=None,
+) -> tuple[tuple[Alternative, ...], DecisionState]:
     """M-GART alternatives from the active reference's state at ``obs.t_s`` (or ``start_ned_m``)
     to the leg's goal, and the state after the search (its counter advanced).
 
@@ -341,7 +424,7 @@ def plan_alternatives_for(state: DecisionState, obs: Observation, leg: LegContex
         Ids ``alt<i>-<counter>``; empty when M-GART found nothing.
     state : DecisionState
     """
-    ensure_compiled()                    # numba's compile never inside max_time_s
+    ensure_compiled()  # numba's compile never inside max_time_s
     if start_ned_m is None:
         if obs.active is None:
             raise DecisionError("start_ned_m: needed when no trajectory is active")
@@ -351,14 +434,26 @@ def plan_alternatives_for(state: DecisionState, obs: Observation, leg: LegContex
     if start.shape != (dim,) or not np.all(np.isfinite(start)):
         raise DecisionError(f"start_ned_m: expected at least {dim} finite numbers, got {start_ned_m!r}")
     sit = _situation(obs.t_s, obs, leg, policy)
-    obstacles = [] if sit is None else gen.meeting_obstacles(sit, obs.active.trajectory, obs.active.start_t_s,
-                                                             [start, leg.goal_ned_m])
+    obstacles = (
+        []
+        if sit is None
+        else gen.meeting_obstacles(sit, obs.active.trajectory, obs.active.start_t_s, [start, leg.goal_ned_m])
+    )
     world = airspace_for(leg.world, [start])
     world = world.with_threats(obstacles) if obstacles else world
     counter = state.counter + 1
     s = policy.settings
-    alts = plan_alternatives(world, start, leg.goal_ned_m, k, pipeline=policy.pipeline,
-                             rng=_rng(state.seed, counter, ALTERNATIVES_STREAM), max_time_s=max_time_s,
-                             spacing_m=s.entry_spacing_m, airspace=airspace(leg.world, leg.world_key, [start], s),
-                             vertical_offsets_m=s.vertical_offsets_m, tag=f"-{counter}")
+    alts = plan_alternatives(
+        world,
+        start,
+        leg.goal_ned_m,
+        k,
+        pipeline=policy.pipeline,
+        rng=_rng(state.seed, counter, ALTERNATIVES_STREAM),
+        max_time_s=max_time_s,
+        spacing_m=s.entry_spacing_m,
+        airspace=airspace(leg.world, leg.world_key, [start], s),
+        vertical_offsets_m=s.vertical_offsets_m,
+        tag=f"-{counter}",
+    )
     return tuple(alts), replace(state, counter=counter)

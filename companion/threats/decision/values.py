@@ -29,8 +29,15 @@ from companion.threats.decision.spacetime import reference_accel_bound_m_s2
 from companion.threats.settings import ThreatSettings
 from companion.world import World
 
-__all__ = ["DecisionError", "ActiveTrajectory", "LegContext", "DecisionPolicy", "DecisionState", "Observation",
-           "FAST_ESTIMATE_S"]
+__all__ = [
+    "DecisionError",
+    "ActiveTrajectory",
+    "LegContext",
+    "DecisionPolicy",
+    "DecisionState",
+    "Observation",
+    "FAST_ESTIMATE_S",
+]
 
 #: First estimate of the fast candidates' wall-clock time (s), before any was measured.
 FAST_ESTIMATE_S = 0.03
@@ -141,7 +148,7 @@ class DecisionPolicy:
         object.__setattr__(self, "time_scale", _finite_positive("time_scale", self.time_scale))
 
     @classmethod
-    def from_settings(cls, settings, strategy: Strategy | str = Strategy.HYBRID) -> "DecisionPolicy":
+    def from_settings(cls, settings, strategy: Strategy | str = Strategy.HYBRID) -> DecisionPolicy:
         """From the companion's ``Settings`` (``threats``; ``smoothing`` and ``planning``: the
         pipeline; ``link.time_scale``: None, not read from the vehicle yet, is real time as for
         the daemon's clock). No closed-loop check: a decision has milliseconds."""
@@ -157,7 +164,7 @@ class DecisionPolicy:
         """Clock seconds that a step of ``estimate`` is expected to take (mean + 1 deviation)."""
         return (estimate.mean_s + estimate.dev_s) * self.time_scale
 
-    def fast_lead_s(self, state: "DecisionState") -> float:
+    def fast_lead_s(self, state: DecisionState) -> float:
         """Clock seconds the fast step is expected to take: its running mean. Its candidates
         start then, so its latency is about its own duration; one that takes longer starts its
         reference a few milliseconds late, which the owner takes at its own time (a setpoint step
@@ -168,7 +175,7 @@ class DecisionPolicy:
             return self.modelled_lead_s[0]
         return state.fast_estimate.mean_s * self.time_scale
 
-    def replan_lead_s(self, state: "DecisionState") -> float:
+    def replan_lead_s(self, state: DecisionState) -> float:
         """Clock seconds a replan is expected to take."""
         return self.lead_s(state.replan_estimate) if self.modelled_lead_s is None else self.modelled_lead_s[1]
 
@@ -201,14 +208,20 @@ class DecisionState:
     alternatives: tuple[Alternative, ...] = ()
 
     @classmethod
-    def initial(cls, policy: DecisionPolicy, seed: int) -> "DecisionState":
+    def initial(cls, policy: DecisionPolicy, seed: int) -> DecisionState:
         """The state of a flight's first decision: the policy's first estimates, no alternatives."""
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise DecisionError(f"seed: expected an int >= 0, got {seed!r}")
-        return cls(int(seed), 0, RunningEstimate(policy.settings.replan_budget_s), RunningEstimate(FAST_ESTIMATE_S),
-                   -math.inf, ())
+        return cls(
+            int(seed),
+            0,
+            RunningEstimate(policy.settings.replan_budget_s),
+            RunningEstimate(FAST_ESTIMATE_S),
+            -math.inf,
+            (),
+        )
 
-    def with_alternatives(self, alternatives, *, dim: int | None = None, spacing_m: float = 2.0) -> "DecisionState":
+    def with_alternatives(self, alternatives, *, dim: int | None = None, spacing_m: float = 2.0) -> DecisionState:
         """This state with new switching targets (``Alternative`` or (M, d) paths, converted
         with entries ``spacing_m`` apart); every one of dimension ``dim`` (the leg's world's)."""
         alts = []
@@ -217,8 +230,9 @@ class DecisionState:
                 alt = Alternative.from_path(f"alt{i}", alt, spacing_m)
             want = alts[0].path_ned_m.shape[1] if dim is None and alts else dim
             if want is not None and alt.path_ned_m.shape[1] != want:
-                raise DecisionError(f"alternatives[{i}]: dimension {alt.path_ned_m.shape[1]} "
-                                    f"does not match the world's {want}")
+                raise DecisionError(
+                    f"alternatives[{i}]: dimension {alt.path_ned_m.shape[1]} does not match the world's {want}"
+                )
             alts.append(alt)
         return replace(self, alternatives=tuple(alts))
 

@@ -23,7 +23,7 @@ __all__ = ["airspace", "planning_slab", "MEMO_SIZE"]
 #: traffic's has more room).
 MEMO_SIZE = 12
 
-_memo: "OrderedDict[tuple[str, str], tuple[tuple, World]]" = OrderedDict()
+_memo: OrderedDict[tuple[str, str], tuple[tuple, World]] = OrderedDict()
 
 
 def airspace(world: World, world_key: str, points, settings, room_m: float | None = None) -> World:
@@ -31,8 +31,13 @@ def airspace(world: World, world_key: str, points, settings, room_m: float | Non
     ``settings.vertical_room_m``) above and below, never lower than ``settings.min_altitude_m``
     (``ThreatSettings``)."""
     room = settings.vertical_room_m if room_m is None else float(room_m)
-    return _widened(world, world_key, f"airspace {room:g}", points,
-                    lambda: airspace_for(world, points, room, -settings.min_altitude_m))
+    return _widened(
+        world,
+        world_key,
+        f"airspace {room:g}",
+        points,
+        lambda: airspace_for(world, points, room, -settings.min_altitude_m),
+    )
 
 
 def planning_slab(world: World, world_key: str, points) -> World:
@@ -50,8 +55,11 @@ def _widened(world: World, world_key: str, kind: str, points, build) -> World:
     key = (world_key, kind)
     entry = _memo.get(key)
     downs = np.atleast_2d(np.asarray(points, dtype=float))[:, -1]
-    if entry is not None and entry[0] == _signature(world) and (world.dim != 3 or (
-            np.all(downs >= entry[1].bounds_min[2]) and np.all(downs <= entry[1].bounds_max[2]))):
+    if (
+        entry is not None
+        and entry[0] == _signature(world)
+        and (world.dim != 3 or (np.all(downs >= entry[1].bounds_min[2]) and np.all(downs <= entry[1].bounds_max[2])))
+    ):
         _memo.move_to_end(key)
         return entry[1]
     widened = build()

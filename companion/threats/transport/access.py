@@ -25,8 +25,16 @@ from pathlib import Path
 
 from companion.errors import ConfigError
 
-__all__ = ["SecurityInfo", "access_control", "companion_config", "peer_config", "load_config",
-           "write_config", "TELEMETRY_LEAVES", "TLS_KEYS"]
+__all__ = [
+    "SecurityInfo",
+    "access_control",
+    "companion_config",
+    "peer_config",
+    "load_config",
+    "write_config",
+    "TELEMETRY_LEAVES",
+    "TLS_KEYS",
+]
 
 log = logging.getLogger(__name__)
 
@@ -34,13 +42,22 @@ log = logging.getLogger(__name__)
 #: match a wider subscription such as ``uav/<sysid>/**``).
 TELEMETRY_LEAVES = ("status", "events", "path")
 #: File entries of ``transport.link.tls`` that name a file.
-TLS_KEYS = ("root_ca_certificate", "listen_private_key", "listen_certificate",
-            "connect_private_key", "connect_certificate")
+TLS_KEYS = (
+    "root_ca_certificate",
+    "listen_private_key",
+    "listen_certificate",
+    "connect_private_key",
+    "connect_certificate",
+)
 
 
 def _base(mode: str, listen, connect) -> dict:
-    return {"mode": mode, "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
-            "listen": {"endpoints": list(listen)}, "connect": {"endpoints": list(connect)}}
+    return {
+        "mode": mode,
+        "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+        "listen": {"endpoints": list(listen)},
+        "connect": {"endpoints": list(connect)},
+    }
 
 
 def access_control(sysid: int, sources, observers=()) -> dict:
@@ -70,33 +87,66 @@ def access_control(sysid: int, sources, observers=()) -> dict:
     prefix = f"uav/{sysid}"
     telemetry = [f"{prefix}/{leaf}" for leaf in TELEMETRY_LEAVES]
     rules = [
-        {"id": "threats-declare", "permission": "allow", "flows": ["egress"],
-         "messages": ["declare_subscriber", "declare_queryable"], "key_exprs": [f"{prefix}/threats/**"]},
-        {"id": "threats-list", "permission": "allow", "flows": ["ingress"],
-         "messages": ["query"], "key_exprs": [f"{prefix}/threats/**"]},
-        {"id": "threats-list-reply", "permission": "allow", "flows": ["egress"],
-         "messages": ["reply"], "key_exprs": [f"{prefix}/threats/**"]},
-        {"id": "telemetry-subscribe", "permission": "allow", "flows": ["ingress"],
-         "messages": ["declare_subscriber"], "key_exprs": telemetry},
-        {"id": "telemetry-out", "permission": "allow", "flows": ["egress"],
-         "messages": ["put"], "key_exprs": telemetry},
+        {
+            "id": "threats-declare",
+            "permission": "allow",
+            "flows": ["egress"],
+            "messages": ["declare_subscriber", "declare_queryable"],
+            "key_exprs": [f"{prefix}/threats/**"],
+        },
+        {
+            "id": "threats-list",
+            "permission": "allow",
+            "flows": ["ingress"],
+            "messages": ["query"],
+            "key_exprs": [f"{prefix}/threats/**"],
+        },
+        {
+            "id": "threats-list-reply",
+            "permission": "allow",
+            "flows": ["egress"],
+            "messages": ["reply"],
+            "key_exprs": [f"{prefix}/threats/**"],
+        },
+        {
+            "id": "telemetry-subscribe",
+            "permission": "allow",
+            "flows": ["ingress"],
+            "messages": ["declare_subscriber"],
+            "key_exprs": telemetry,
+        },
+        {
+            "id": "telemetry-out",
+            "permission": "allow",
+            "flows": ["egress"],
+            "messages": ["put"],
+            "key_exprs": telemetry,
+        },
     ]
-    subjects = [{"id": "sources", "cert_common_names": sources},
-                {"id": "readers", "cert_common_names": sources + observers}]
-    policies = [{"id": "sources", "rules": ["threats-declare", "threats-list", "threats-list-reply"],
-                 "subjects": ["sources"]},
-                {"id": "readers", "rules": ["telemetry-subscribe", "telemetry-out"], "subjects": ["readers"]}]
+    subjects = [
+        {"id": "sources", "cert_common_names": sources},
+        {"id": "readers", "cert_common_names": sources + observers},
+    ]
+    policies = [
+        {"id": "sources", "rules": ["threats-declare", "threats-list", "threats-list-reply"], "subjects": ["sources"]},
+        {"id": "readers", "rules": ["telemetry-subscribe", "telemetry-out"], "subjects": ["readers"]},
+    ]
     for name in sources:
-        rules.append({"id": f"put-{name}", "permission": "allow", "flows": ["ingress"],
-                      "messages": ["put", "delete"], "key_exprs": [f"{prefix}/threats/{name}/*"]})
+        rules.append(
+            {
+                "id": f"put-{name}",
+                "permission": "allow",
+                "flows": ["ingress"],
+                "messages": ["put", "delete"],
+                "key_exprs": [f"{prefix}/threats/{name}/*"],
+            }
+        )
         subjects.append({"id": f"source-{name}", "cert_common_names": [name]})
         policies.append({"id": f"source-{name}", "rules": [f"put-{name}"], "subjects": [f"source-{name}"]})
-    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
-            "policies": policies}
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
 
 
-def companion_config(*, ca_cert, key, cert, listen, sysid: int, sources, observers=(),
-                     connect=()) -> dict:
+def companion_config(*, ca_cert, key, cert, listen, sysid: int, sources, observers=(), connect=()) -> dict:
     """The companion's zenoh configuration: ``tls/`` listen endpoints with mutual TLS and the ACL.
 
     Parameters
@@ -111,10 +161,19 @@ def companion_config(*, ca_cert, key, cert, listen, sysid: int, sources, observe
     _check_tls_endpoints(listen, "listen")
     _check_tls_endpoints(connect, "connect")
     cfg = _base("peer", listen, connect)
-    cfg["transport"] = {"link": {"tls": {
-        "root_ca_certificate": str(ca_cert), "listen_private_key": str(key),
-        "listen_certificate": str(cert), "connect_private_key": str(key),
-        "connect_certificate": str(cert), "enable_mtls": True, "verify_name_on_connect": True}}}
+    cfg["transport"] = {
+        "link": {
+            "tls": {
+                "root_ca_certificate": str(ca_cert),
+                "listen_private_key": str(key),
+                "listen_certificate": str(cert),
+                "connect_private_key": str(key),
+                "connect_certificate": str(cert),
+                "enable_mtls": True,
+                "verify_name_on_connect": True,
+            }
+        }
+    }
     cfg["access_control"] = access_control(sysid, sources, observers)
     return cfg
 
@@ -125,9 +184,17 @@ def peer_config(*, ca_cert, key, cert, connect) -> dict:
     if not connect:
         raise ConfigError("connect: a source or observer needs the companion's tls/ endpoint")
     cfg = _base("peer", (), connect)
-    cfg["transport"] = {"link": {"tls": {
-        "root_ca_certificate": str(ca_cert), "connect_private_key": str(key),
-        "connect_certificate": str(cert), "enable_mtls": True, "verify_name_on_connect": True}}}
+    cfg["transport"] = {
+        "link": {
+            "tls": {
+                "root_ca_certificate": str(ca_cert),
+                "connect_private_key": str(key),
+                "connect_certificate": str(cert),
+                "enable_mtls": True,
+                "verify_name_on_connect": True,
+            }
+        }
+    }
     return cfg
 
 
@@ -165,7 +232,7 @@ class SecurityInfo:
 def _get(cfg, key: str):
     try:
         text = cfg.get_json(key)
-    except Exception:       # an absent key: zenoh raises
+    except Exception:  # an absent key: zenoh raises
         return None
     return json.loads(text) if text else None
 
@@ -212,21 +279,30 @@ def load_config(path, *, listen=None, connect=None):
             cfg.insert_json5("connect/endpoints", json.dumps(list(connect)))
     except Exception as exc:
         raise ConfigError(f"--zenoh-config {p}: endpoints: {exc}") from None
-    cert_file = (_get(cfg, "transport/link/tls/connect_certificate")
-                 or _get(cfg, "transport/link/tls/listen_certificate"))
+    cert_file = _get(cfg, "transport/link/tls/connect_certificate") or _get(
+        cfg, "transport/link/tls/listen_certificate"
+    )
     identity = common_name(load_certificate(cert_file)) if cert_file else None
-    info = SecurityInfo(str(p), bool(_get(cfg, "access_control/enabled")),
-                        bool(_get(cfg, "transport/link/tls/enable_mtls")), identity,
-                        str(_get(cfg, "mode") or "peer"))
+    info = SecurityInfo(
+        str(p),
+        bool(_get(cfg, "access_control/enabled")),
+        bool(_get(cfg, "transport/link/tls/enable_mtls")),
+        identity,
+        str(_get(cfg, "mode") or "peer"),
+    )
     if info.acl_enabled and not info.mtls:
-        log.warning("%s: access control without mutual TLS: cert_common_names cannot match; "
-                    "only interface or username subjects apply", p)
+        log.warning(
+            "%s: access control without mutual TLS: cert_common_names cannot match; "
+            "only interface or username subjects apply",
+            p,
+        )
     return cfg, info
 
 
 def write_config(cfg: dict, path) -> Path:
     """Write ``cfg`` as indented JSON (valid JSON5) with a header comment."""
     path = Path(path)
-    path.write_text("// zenoh configuration written by `companion keys init` (JSON5)\n"
-                    + json.dumps(cfg, indent=2) + "\n")
+    path.write_text(
+        "// zenoh configuration written by `companion keys init` (JSON5)\n" + json.dumps(cfg, indent=2) + "\n"
+    )
     return path

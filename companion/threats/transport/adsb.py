@@ -31,8 +31,8 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import ConfigError
-from companion.threats.transport.codec import MAX_SPEED_M_S
 from companion.threats.model import Threat
+from companion.threats.transport.codec import MAX_SPEED_M_S
 from heli_common.typed_config import require_numbers
 
 __all__ = ["AdsbSettings", "threat_from_adsb", "adsb_threat_id", "emitter_radius_m", "emitter_traffic"]
@@ -45,17 +45,28 @@ FLAG_VERTICAL_VELOCITY = mavlink.ADSB_FLAGS_VERTICAL_VELOCITY_VALID
 
 #: Emitter types (ADSB_EMITTER_TYPE) by radius class.
 EMITTER_CLASSES = {
-    "light": (mavlink.ADSB_EMITTER_TYPE_LIGHT, mavlink.ADSB_EMITTER_TYPE_ULTRA_LIGHT,
-              mavlink.ADSB_EMITTER_TYPE_GLIDER, mavlink.ADSB_EMITTER_TYPE_PARACHUTE,
-              mavlink.ADSB_EMITTER_TYPE_LIGHTER_AIR),
+    "light": (
+        mavlink.ADSB_EMITTER_TYPE_LIGHT,
+        mavlink.ADSB_EMITTER_TYPE_ULTRA_LIGHT,
+        mavlink.ADSB_EMITTER_TYPE_GLIDER,
+        mavlink.ADSB_EMITTER_TYPE_PARACHUTE,
+        mavlink.ADSB_EMITTER_TYPE_LIGHTER_AIR,
+    ),
     "small": (mavlink.ADSB_EMITTER_TYPE_SMALL,),
-    "large": (mavlink.ADSB_EMITTER_TYPE_LARGE, mavlink.ADSB_EMITTER_TYPE_HIGH_VORTEX_LARGE,
-              mavlink.ADSB_EMITTER_TYPE_HEAVY, mavlink.ADSB_EMITTER_TYPE_HIGHLY_MANUV,
-              mavlink.ADSB_EMITTER_TYPE_SPACE),
+    "large": (
+        mavlink.ADSB_EMITTER_TYPE_LARGE,
+        mavlink.ADSB_EMITTER_TYPE_HIGH_VORTEX_LARGE,
+        mavlink.ADSB_EMITTER_TYPE_HEAVY,
+        mavlink.ADSB_EMITTER_TYPE_HIGHLY_MANUV,
+        mavlink.ADSB_EMITTER_TYPE_SPACE,
+    ),
     "rotorcraft": (mavlink.ADSB_EMITTER_TYPE_ROTOCRAFT,),
     "uav": (mavlink.ADSB_EMITTER_TYPE_UAV,),
-    "surface": (mavlink.ADSB_EMITTER_TYPE_EMERGENCY_SURFACE, mavlink.ADSB_EMITTER_TYPE_SERVICE_SURFACE,
-                mavlink.ADSB_EMITTER_TYPE_POINT_OBSTACLE),
+    "surface": (
+        mavlink.ADSB_EMITTER_TYPE_EMERGENCY_SURFACE,
+        mavlink.ADSB_EMITTER_TYPE_SERVICE_SURFACE,
+        mavlink.ADSB_EMITTER_TYPE_POINT_OBSTACLE,
+    ),
 }
 
 
@@ -94,9 +105,22 @@ class AdsbSettings:
     radius_surface_m: float = 10.0
 
     def __post_init__(self) -> None:
-        require_numbers(ConfigError, "adsb", self, positive=(
-            "ttl_s", "max_range_m", "radius_m", "radius_light_m", "radius_small_m", "radius_large_m",
-            "radius_rotorcraft_m", "radius_uav_m", "radius_surface_m"))
+        require_numbers(
+            ConfigError,
+            "adsb",
+            self,
+            positive=(
+                "ttl_s",
+                "max_range_m",
+                "radius_m",
+                "radius_light_m",
+                "radius_small_m",
+                "radius_large_m",
+                "radius_rotorcraft_m",
+                "radius_uav_m",
+                "radius_surface_m",
+            ),
+        )
 
 
 def adsb_threat_id(icao_address: int) -> str:
@@ -159,8 +183,14 @@ def threat_from_adsb(fields: dict, settings: AdsbSettings, now_t_s: float, home=
     if flags & FLAG_VERTICAL_VELOCITY:
         vd = float(np.clip(-float(fields.get("ver_velocity", 0)) / 100.0, -MAX_SPEED_M_S, MAX_SPEED_M_S))
     age_s = min(max(float(fields.get("tslc", 0)), 0.0), settings.ttl_s)
-    return Threat(id=adsb_threat_id(fields.get("ICAO_address", 0)), kind="moving", frame="global",
-                  position=(lat, lon, alt_m), velocity_ned_m_s=(vn, ve, vd),
-                  radius_m=emitter_radius_m(fields.get("emitter_type", 0), settings),
-                  ttl_s=settings.ttl_s, received_t_s=now_t_s - age_s,
-                  traffic=emitter_traffic(fields.get("emitter_type", 0)))
+    return Threat(
+        id=adsb_threat_id(fields.get("ICAO_address", 0)),
+        kind="moving",
+        frame="global",
+        position=(lat, lon, alt_m),
+        velocity_ned_m_s=(vn, ve, vd),
+        radius_m=emitter_radius_m(fields.get("emitter_type", 0), settings),
+        ttl_s=settings.ttl_s,
+        received_t_s=now_t_s - age_s,
+        traffic=emitter_traffic(fields.get("emitter_type", 0)),
+    )

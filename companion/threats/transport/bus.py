@@ -38,14 +38,14 @@ from __future__ import annotations
 import json
 import logging
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from companion.errors import ThreatBusError
+from companion.threats.settings import check_endpoint, default_listen
 from companion.threats.transport.bus_client import ThreatClient
 from companion.threats.transport.bus_declarations import BusCounters, undeclare_all
 from companion.threats.transport.bus_inbound import ThreatInbound, check_source
 from companion.threats.transport.bus_outbound import CompanionOutbound
-from companion.threats.settings import check_endpoint, default_listen
 from companion.threats.transport.update import ThreatUpdate
 
 __all__ = ["ThreatBus", "ThreatUpdate", "ThreatBusError", "session_config"]
@@ -135,9 +135,17 @@ class ThreatBus:
     >>> bus.close()
     """
 
-    def __init__(self, sysid: int = 1, *, listen=None, connect=None, mode: str = "peer",
-                 clock: Callable[[], float] | None = None, zenoh_config=None,
-                 source: str | None = None) -> None:
+    def __init__(
+        self,
+        sysid: int = 1,
+        *,
+        listen=None,
+        connect=None,
+        mode: str = "peer",
+        clock: Callable[[], float] | None = None,
+        zenoh_config=None,
+        source: str | None = None,
+    ) -> None:
         if isinstance(sysid, bool) or not isinstance(sysid, int) or not 1 <= sysid <= 255:
             raise ThreatBusError(f"sysid: must be an integer in 1..255, got {sysid!r}")
         self.sysid = sysid
@@ -149,10 +157,8 @@ class ThreatBus:
 
             self._config, self.security = access.load_config(zenoh_config, listen=listen, connect=connect)
             self.mode = self.security.mode
-            self.listen = tuple(json.loads(self._config.get_json("listen/endpoints"))
-                                if listen is None else listen)
-            self.connect = tuple(json.loads(self._config.get_json("connect/endpoints"))
-                                 if connect is None else connect)
+            self.listen = tuple(json.loads(self._config.get_json("listen/endpoints")) if listen is None else listen)
+            self.connect = tuple(json.loads(self._config.get_json("connect/endpoints")) if connect is None else connect)
         else:
             self.listen = default_listen(sysid) if listen is None else tuple(listen)
             self.connect = () if connect is None else tuple(connect)
@@ -173,17 +179,22 @@ class ThreatBus:
         self.client = ThreatClient(session, self.key, source)
 
     @classmethod
-    def from_settings(cls, settings, *, clock=None) -> "ThreatBus":
+    def from_settings(cls, settings, *, clock=None) -> ThreatBus:
         """Build from ``companion.threats.settings.ZenohSettings`` (not opened yet)."""
         if getattr(settings, "config", None):
             if settings.connect or settings.listen is not None:
                 log.warning("zenoh.listen/connect ignored: the endpoints of %s are used", settings.config)
             return cls(settings.prefix_sysid, clock=clock, zenoh_config=settings.config)
-        return cls(settings.prefix_sysid, listen=settings.listen_endpoints, connect=settings.connect,
-                   mode=settings.mode, clock=clock)
+        return cls(
+            settings.prefix_sysid,
+            listen=settings.listen_endpoints,
+            connect=settings.connect,
+            mode=settings.mode,
+            clock=clock,
+        )
 
     # ------------------------------------------------------------------ session
-    def open(self) -> "ThreatBus":
+    def open(self) -> ThreatBus:
         """Open the zenoh session (returns self). Raises ``ThreatBusError`` on failure."""
         import zenoh
 
@@ -191,15 +202,23 @@ class ThreatBus:
             return self
         try:
             self._session = zenoh.open(self._config)
-        except Exception as exc:       # zenoh.ZError: port in use, unreachable router ...
+        except Exception as exc:  # zenoh.ZError: port in use, unreachable router ...
             where = f", config {self.security.path}" if self.security is not None else ""
-            raise ThreatBusError(f"zenoh session ({self.mode}, listen {list(self.listen)}, connect "
-                                 f"{list(self.connect)}{where}): {exc}") from None
-        log.info("zenoh %s session %s: listen %s connect %s, prefix %s%s", self.mode,
-                 self._session.zid(), list(self.listen), list(self.connect), self.prefix,
-                 "" if self.security is None else
-                 f", config {self.security.path} (identity {self.security.identity}, access control "
-                 f"{'on: threats from authenticated sources only' if self.require_source else 'off'})")
+            raise ThreatBusError(
+                f"zenoh session ({self.mode}, listen {list(self.listen)}, connect {list(self.connect)}{where}): {exc}"
+            ) from None
+        log.info(
+            "zenoh %s session %s: listen %s connect %s, prefix %s%s",
+            self.mode,
+            self._session.zid(),
+            list(self.listen),
+            list(self.connect),
+            self.prefix,
+            ""
+            if self.security is None
+            else f", config {self.security.path} (identity {self.security.identity}, access control "
+            f"{'on: threats from authenticated sources only' if self.require_source else 'off'})",
+        )
         return self
 
     def close(self) -> None:
@@ -220,7 +239,7 @@ class ThreatBus:
         self.inbound.unsubscribe()
         self.outbound.stop_serving()
 
-    def __enter__(self) -> "ThreatBus":
+    def __enter__(self) -> ThreatBus:
         return self.open()
 
     def __exit__(self, *exc) -> None:
@@ -253,6 +272,7 @@ class ThreatBus:
         ``command``; ``message`` is None for a payload that is not JSON. Returns the zenoh
         subscriber (undeclared by ``close``).
         """
+
         def on_sample(sample) -> None:
             try:
                 msg = json.loads(sample.payload.to_bytes())

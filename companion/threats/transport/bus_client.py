@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import replace
-from typing import Callable
 
 from companion.errors import ThreatPayloadError
-from companion.threats.transport import codec
 from companion.threats.model import LOCAL_SOURCE, Threat, payload_error, threat_uid
+from companion.threats.transport import codec
 from companion.threats.transport.bus_declarations import Publishers
 
 log = logging.getLogger(__name__)
@@ -31,8 +31,7 @@ class ThreatClient:
         by the bus.
     """
 
-    def __init__(self, session: Callable[[], object], key: Callable[[str], str],
-                 source: str | None) -> None:
+    def __init__(self, session: Callable[[], object], key: Callable[[str], str], source: str | None) -> None:
         self._session = session
         self._key = key
         self.source = source

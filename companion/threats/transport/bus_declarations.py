@@ -6,13 +6,22 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 log = logging.getLogger(__name__)
 
 #: The counters of ``ThreatBus.stats``.
-COUNTER_NAMES = ("received", "put", "delete", "rejected", "delivered", "handler_errors",
-                 "undeliverable", "queries", "republished")
+COUNTER_NAMES = (
+    "received",
+    "put",
+    "delete",
+    "rejected",
+    "delivered",
+    "handler_errors",
+    "undeliverable",
+    "queries",
+    "republished",
+)
 
 
 def undeclare_all(entities: Iterable) -> None:
@@ -22,7 +31,7 @@ def undeclare_all(entities: Iterable) -> None:
         if ent is not None:
             try:
                 ent.undeclare()
-            except Exception as exc:   # already closed by the session: nothing to do
+            except Exception as exc:  # already closed by the session: nothing to do
                 log.debug("undeclare: %s", exc)
 
 

@@ -13,12 +13,12 @@ import logging
 import queue
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
-from typing import Callable
 
 from companion.errors import ThreatBusError, ThreatPayloadError
-from companion.threats.transport import codec
 from companion.threats.model import LOCAL_SOURCE, payload_error
+from companion.threats.transport import codec
 from companion.threats.transport.bus_declarations import BusCounters, undeclare_all
 from companion.threats.transport.update import ThreatUpdate
 
@@ -42,8 +42,14 @@ class ThreatInbound:
         Every sample is counted there.
     """
 
-    def __init__(self, session: Callable[[], object], key: Callable[[str], str],
-                 clock: Callable[[], float], require_source: bool, counters: BusCounters) -> None:
+    def __init__(
+        self,
+        session: Callable[[], object],
+        key: Callable[[str], str],
+        clock: Callable[[], float],
+        require_source: bool,
+        counters: BusCounters,
+    ) -> None:
         self._session = session
         self._key = key
         self._clock = clock
@@ -86,7 +92,7 @@ class ThreatInbound:
         try:
             update = self._decode_sample(sample)
             self._deliver(update)
-        except Exception:          # a bug here must not kill the zenoh callback thread
+        except Exception:  # a bug here must not kill the zenoh callback thread
             log.exception("threat sample handling failed")
             self._counters.count("handler_errors")
 
@@ -127,16 +133,20 @@ class ThreatInbound:
             With ``field`` ``"key"``.
         """
         head = self._key("threats/")
-        leaf = key[len(head):] if key.startswith(head) else ""
+        leaf = key[len(head) :] if key.startswith(head) else ""
         chunks = leaf.split("/")
         if len(chunks) == 2:
             return check_source(chunks[0], "key"), codec.check_id(chunks[1], "key")
         if len(chunks) == 1 and self._require_source:
-            raise payload_error("key", f"{key!r}: this companion takes threats from authenticated sources "
-                                f"only, on {self._key('threats/<source>/<id>')} (its zenoh access control is on)")
+            raise payload_error(
+                "key",
+                f"{key!r}: this companion takes threats from authenticated sources "
+                f"only, on {self._key('threats/<source>/<id>')} (its zenoh access control is on)",
+            )
         if len(chunks) > 2:
-            raise payload_error("key", f"{key!r}: expected {self._key('threats/<id>')} or "
-                                f"{self._key('threats/<source>/<id>')}")
+            raise payload_error(
+                "key", f"{key!r}: expected {self._key('threats/<id>')} or {self._key('threats/<source>/<id>')}"
+            )
         return LOCAL_SOURCE, codec.check_id(leaf, "key")
 
     def _deliver(self, update: ThreatUpdate) -> None:
@@ -148,7 +158,7 @@ class ThreatInbound:
         if self._loop is not None:
             try:
                 self._loop.call_soon_threadsafe(self._run_handler, handler, update)
-            except RuntimeError:       # the loop is closed: the service is shutting down
+            except RuntimeError:  # the loop is closed: the service is shutting down
                 self._counters.count("undeliverable")
             return
         self._run_handler(handler, update)

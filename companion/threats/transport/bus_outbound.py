@@ -7,13 +7,13 @@ from __future__ import annotations
 import json
 import logging
 import math
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
 from companion.errors import ThreatBusError
-from companion.threats.transport import codec
 from companion.threats.model import Threat
+from companion.threats.transport import codec
 from companion.threats.transport.bus_declarations import BusCounters, Publishers, undeclare_all
 
 log = logging.getLogger(__name__)
@@ -47,8 +47,7 @@ def _finite(value):
 
 def to_json_bytes(message: dict) -> bytes:
     """Compact JSON of ``message``; numpy arrays become lists, NaN/inf become null."""
-    return json.dumps(_finite(message), separators=(",", ":"), default=_json_default,
-                      allow_nan=False).encode("utf-8")
+    return json.dumps(_finite(message), separators=(",", ":"), default=_json_default, allow_nan=False).encode("utf-8")
 
 
 class CompanionOutbound:
@@ -66,8 +65,13 @@ class CompanionOutbound:
         Queries answered and threats republished are counted there.
     """
 
-    def __init__(self, session: Callable[[], object], key: Callable[[str], str],
-                 clock: Callable[[], float], counters: BusCounters) -> None:
+    def __init__(
+        self,
+        session: Callable[[], object],
+        key: Callable[[str], str],
+        clock: Callable[[], float],
+        counters: BusCounters,
+    ) -> None:
         self._session = session
         self._key = key
         self._clock = clock
@@ -85,6 +89,7 @@ class CompanionOutbound:
             Positions are predicted to now (the bus clock, or the ``now_t_s`` given with each
             threat) and the ttl shortened accordingly.
         """
+
         def on_query(query) -> None:
             self._counters.count("queries")
             try:
@@ -92,8 +97,16 @@ class CompanionOutbound:
                     threat, now_t_s = item if isinstance(item, tuple) else (item, float(self._clock()))
                     pos = threat.position_at(now_t_s) if threat.frame == "local_ned" else threat.position
                     ttl = None if threat.ttl_s is None else max(threat.expires_t_s - now_t_s, 1e-3)
-                    current = Threat(threat.id, threat.kind, threat.frame, tuple(float(x) for x in pos),
-                                     threat.velocity_ned_m_s, threat.radius_m, ttl, now_t_s)
+                    current = Threat(
+                        threat.id,
+                        threat.kind,
+                        threat.frame,
+                        tuple(float(x) for x in pos),
+                        threat.velocity_ned_m_s,
+                        threat.radius_m,
+                        ttl,
+                        now_t_s,
+                    )
                     query.reply(self._key(f"threats/{threat.uid}"), codec.encode(current))
             except Exception:
                 log.exception("answering a threat list query failed")
@@ -133,8 +146,11 @@ class CompanionOutbound:
             session = self._session()
         except ThreatBusError:
             return False
-        session.put(self._key(f"threats/{threat.id}"), codec.encode(threat),
-                    allowed_destination=zenoh.Locality.REMOTE,
-                    congestion_control=zenoh.CongestionControl.DROP)
+        session.put(
+            self._key(f"threats/{threat.id}"),
+            codec.encode(threat),
+            allowed_destination=zenoh.Locality.REMOTE,
+            congestion_control=zenoh.CongestionControl.DROP,
+        )
         self._counters.count("republished")
         return True

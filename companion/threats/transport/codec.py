@@ -57,8 +57,9 @@ def check_id(threat_id, field: str = "id") -> str:
     if not isinstance(threat_id, str):
         raise payload_error(field, f"expected a string, got {_type_name(threat_id)}")
     if not ID_PATTERN.match(threat_id):
-        raise payload_error(field, f"must be 1-64 characters of A-Z a-z 0-9 _ - . "
-                            f"(a zenoh key chunk), got {threat_id[:80]!r}")
+        raise payload_error(
+            field, f"must be 1-64 characters of A-Z a-z 0-9 _ - . (a zenoh key chunk), got {threat_id[:80]!r}"
+        )
     return threat_id
 
 
@@ -67,8 +68,14 @@ def _type_name(value) -> str:
         return value.text
     if value is None:
         return "null"
-    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
-            list: "a list", dict: "an object"}.get(type(value), type(value).__name__)
+    return {
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+        str: "a string",
+        list: "a list",
+        dict: "an object",
+    }.get(type(value), type(value).__name__)
 
 
 def _key_name(key: str) -> str:
@@ -103,8 +110,9 @@ def _vector3(value, field: str, limit: float) -> tuple:
 
 def _global_position(value) -> tuple:
     if not isinstance(value, dict):
-        raise payload_error("position", "expected an object {\"lat\", \"lon\", \"alt_m\"} for "
-                            f"frame 'global', got {_type_name(value)}")
+        raise payload_error(
+            "position", f'expected an object {{"lat", "lon", "alt_m"}} for frame \'global\', got {_type_name(value)}'
+        )
     for key in value:
         if key not in GLOBAL_KEYS:
             raise payload_error(f"position.{_key_name(key)}", "unknown field (expected lat, lon, alt_m)")
@@ -149,8 +157,7 @@ def parse_json(payload, max_bytes: int = MAX_PAYLOAD_BYTES) -> dict:
     try:
         data = json.loads(text, object_pairs_hook=_pairs_hook, parse_constant=_NonFinite)
     except json.JSONDecodeError as exc:
-        raise payload_error("payload", f"not valid JSON: {exc.msg} at line {exc.lineno} "
-                            f"column {exc.colno}") from None
+        raise payload_error("payload", f"not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
     except RecursionError:
         raise payload_error("payload", "not valid JSON: nested too deeply") from None
     if not isinstance(data, dict):
@@ -178,8 +185,7 @@ def _ttl(ttl) -> float | None:
         return None
     ttl = finite_number(ttl, "ttl_s")
     if not 0.0 < ttl <= MAX_TTL_S:
-        raise payload_error("ttl_s", f"must be > 0 and <= {MAX_TTL_S:g} (or null: until "
-                            f"deleted), got {ttl!r}")
+        raise payload_error("ttl_s", f"must be > 0 and <= {MAX_TTL_S:g} (or null: until deleted), got {ttl!r}")
     return ttl
 
 
@@ -226,8 +232,9 @@ def decode(payload, *, received_t_s: float | None = None, key_id: str | None = N
     if "velocity_ned_m_s" in data:
         velocity = _vector3(data["velocity_ned_m_s"], "velocity_ned_m_s", MAX_SPEED_M_S)
     if kind == "popup" and any(v != 0.0 for v in velocity):
-        raise payload_error("velocity_ned_m_s", "a popup threat is static (all zero); "
-                            "use kind 'moving' for a moving threat")
+        raise payload_error(
+            "velocity_ned_m_s", "a popup threat is static (all zero); use kind 'moving' for a moving threat"
+        )
     radius = finite_number(data["radius_m"], "radius_m")
     if not 0.0 < radius <= MAX_RADIUS_M:
         raise payload_error("radius_m", f"must be > 0 and <= {MAX_RADIUS_M:g}, got {radius!r}")
@@ -236,8 +243,17 @@ def decode(payload, *, received_t_s: float | None = None, key_id: str | None = N
     if not isinstance(traffic, str) or traffic not in TRAFFIC:
         raise payload_error("traffic", f"expected one of {', '.join(TRAFFIC)}, got {traffic!r}")
     stamp = time.monotonic() if received_t_s is None else float(received_t_s)
-    return Threat(id=threat_id, kind=kind, frame=frame, position=position,
-                  velocity_ned_m_s=velocity, radius_m=radius, ttl_s=ttl, received_t_s=stamp, traffic=traffic)
+    return Threat(
+        id=threat_id,
+        kind=kind,
+        frame=frame,
+        position=position,
+        velocity_ned_m_s=velocity,
+        radius_m=radius,
+        ttl_s=ttl,
+        received_t_s=stamp,
+        traffic=traffic,
+    )
 
 
 def to_dict(threat: Threat) -> dict:
@@ -247,10 +263,16 @@ def to_dict(threat: Threat) -> dict:
         position = {"lat": float(lat), "lon": float(lon), "alt_m": float(alt)}
     else:
         position = [float(x) for x in threat.position]
-    out = {"v": VERSION, "id": threat.id, "kind": threat.kind, "frame": threat.frame,
-           "position": position, "velocity_ned_m_s": [float(x) for x in threat.velocity_ned_m_s],
-           "radius_m": float(threat.radius_m),
-           "ttl_s": None if threat.ttl_s is None else float(threat.ttl_s)}
+    out = {
+        "v": VERSION,
+        "id": threat.id,
+        "kind": threat.kind,
+        "frame": threat.frame,
+        "position": position,
+        "velocity_ned_m_s": [float(x) for x in threat.velocity_ned_m_s],
+        "radius_m": float(threat.radius_m),
+        "ttl_s": None if threat.ttl_s is None else float(threat.ttl_s),
+    }
     if threat.traffic != "drone":
         out["traffic"] = threat.traffic
     return out

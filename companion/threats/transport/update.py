@@ -55,5 +55,12 @@ class ThreatUpdate:
 def rejected_event(update: ThreatUpdate) -> dict:
     """The ``rejected`` event the companion publishes for an invalid sample (DESIGN 6)."""
     err = update.error or payload_error("payload", "rejected")
-    return {"event": "rejected", "threat_id": update.uid, "source": update.source, "key": update.key,
-            "field": getattr(err, "field", "payload"), "reason": str(err), "t_s": update.received_t_s}
+    return {
+        "event": "rejected",
+        "threat_id": update.uid,
+        "source": update.source,
+        "key": update.key,
+        "field": getattr(err, "field", "payload"),
+        "reason": str(err),
+        "t_s": update.received_t_s,
+    }

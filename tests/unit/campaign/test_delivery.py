@@ -14,8 +14,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from companion.campaign.delivery import (DEFAULT_DELIVERY, MANNED_UPDATE_HZ, TTL_MIN_S, TTL_PERIODS, adsb_fields,
-                                         feed_updates, report_times)
+from companion.campaign.delivery import (
+    DEFAULT_DELIVERY,
+    MANNED_UPDATE_HZ,
+    TTL_MIN_S,
+    TTL_PERIODS,
+    adsb_fields,
+    feed_updates,
+    report_times,
+)
 from companion.campaign.tracks import IntruderTrack, straight_track
 from companion.threats.model import Threat, ThreatTable
 from companion.threats.transport.adsb import AdsbSettings, emitter_radius_m
@@ -39,20 +46,31 @@ def crossing(tid: str = "t0", start_s: float = 3.0, end_s: float = 23.0, *, popu
 
 
 def turning(tid: str = "t1") -> IntruderTrack:
-    return straight_track(tid, 1.0, 21.0, (10.0, -20.0, -20.0), (0.0, 5.0, 0.0), 4.0, turn_t_s=6.3,
-                          v_after_ned_m_s=(3.0, 4.0, -1.0))
+    return straight_track(
+        tid, 1.0, 21.0, (10.0, -20.0, -20.0), (0.0, 5.0, 0.0), 4.0, turn_t_s=6.3, v_after_ned_m_s=(3.0, 4.0, -1.0)
+    )
 
 
-def manned_track(p0=(800.0, -600.0, -150.0), v=(-35.0, 20.0, 1.2), start_s: float = 10.0,
-                 end_s: float = 80.0) -> IntruderTrack:
+def manned_track(
+    p0=(800.0, -600.0, -150.0), v=(-35.0, 20.0, 1.2), start_s: float = 10.0, end_s: float = 80.0
+) -> IntruderTrack:
     base = straight_track("x", start_s, end_s, p0, v, 25.0)
-    return IntruderTrack(f"adsb-{ICAO:06x}", base.t_s, base.pos_ned_m, emitter_radius_m(ROTORCRAFT, ADSB),
-                         start_s, end_s, icao_address=ICAO, emitter_type=int(ROTORCRAFT))
+    return IntruderTrack(
+        f"adsb-{ICAO:06x}",
+        base.t_s,
+        base.pos_ned_m,
+        emitter_radius_m(ROTORCRAFT, ADSB),
+        start_s,
+        end_s,
+        icao_address=ICAO,
+        emitter_type=int(ROTORCRAFT),
+    )
 
 
 def feed(tracks, traffic="drone", seed=0, **changes):
-    return feed_updates(tracks, traffic, delivery(**changes), np.random.default_rng(seed), home=HOME,
-                        adsb_settings=ADSB)
+    return feed_updates(
+        tracks, traffic, delivery(**changes), np.random.default_rng(seed), home=HOME, adsb_settings=ADSB
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -107,7 +125,7 @@ def test_latency_shifts_the_receive_times_not_the_positions(latency_s):
     for (t0, th0, _), (t1, th1, _) in zip(on_time, late):
         assert t1 == pytest.approx(t0 + latency_s, abs=1e-12)
         assert th1.received_t_s == t1
-        assert th1.position == th0.position          # measured when sent: that much old on receipt
+        assert th1.position == th0.position  # measured when sent: that much old on receipt
         np.testing.assert_allclose(th1.position, track.position_at(t1 - latency_s)[0], atol=1e-9)
 
 
@@ -196,7 +214,7 @@ def _to_local(threat: Threat) -> Threat:
 
 def test_manned_updates_are_adsb_threats_at_one_hertz():
     track = manned_track()
-    updates = feed([track], "rotorcraft", update_hz=5.0)         # manned traffic is 1 Hz whatever asked
+    updates = feed([track], "rotorcraft", update_hz=5.0)  # manned traffic is 1 Hz whatever asked
     t = np.array([u[0] for u in updates])
     np.testing.assert_allclose(np.diff(t), 1.0 / MANNED_UPDATE_HZ)
     assert t[0] == track.first_report_t_s and t.size == 71
@@ -213,10 +231,23 @@ def test_manned_updates_are_adsb_threats_at_one_hertz():
 
 
 def _fields(pos, vel, *, icao=ICAO, emitter=ROTORCRAFT) -> dict:
-    track = IntruderTrack(f"adsb-{icao:06x}", np.array([0.0, 1.0]), np.zeros((2, 3)), 25.0, 0.0, 1.0,
-                          icao_address=icao, emitter_type=int(emitter))
-    return adsb_fields(track, np.asarray(pos, dtype=float), np.asarray(vel, dtype=float), HOME,
-                       mavlink.MAVLink(None, srcSystem=1, srcComponent=1))
+    track = IntruderTrack(
+        f"adsb-{icao:06x}",
+        np.array([0.0, 1.0]),
+        np.zeros((2, 3)),
+        25.0,
+        0.0,
+        1.0,
+        icao_address=icao,
+        emitter_type=int(emitter),
+    )
+    return adsb_fields(
+        track,
+        np.asarray(pos, dtype=float),
+        np.asarray(vel, dtype=float),
+        HOME,
+        mavlink.MAVLink(None, srcSystem=1, srcComponent=1),
+    )
 
 
 position_m = st.tuples(st.floats(-3000.0, 3000.0), st.floats(-3000.0, 3000.0), st.floats(-2000.0, -10.0))  # in range
@@ -251,8 +282,9 @@ def test_adsb_fields_are_a_real_mavlink_message():
     assert fields["mavpackettype"] == "ADSB_VEHICLE"
     assert set(fields) - {"mavpackettype"} == set(mavlink.MAVLink_adsb_vehicle_message.fieldnames)
     # pack those fields again on another link and parse the bytes as a receiver would
-    msg = mavlink.MAVLink_adsb_vehicle_message(*[fields[k] if k != "callsign" else fields[k].encode()
-                                                 for k in mavlink.MAVLink_adsb_vehicle_message.fieldnames])
+    msg = mavlink.MAVLink_adsb_vehicle_message(
+        *[fields[k] if k != "callsign" else fields[k].encode() for k in mavlink.MAVLink_adsb_vehicle_message.fieldnames]
+    )
     sender = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     receiver = mavlink.MAVLink(None)
     parsed = receiver.parse_buffer(bytearray(msg.pack(sender)))
@@ -262,11 +294,16 @@ def test_adsb_fields_are_a_real_mavlink_message():
     assert fields["altitude"] == round(float(alt) * 1000.0)
     assert fields["ICAO_address"] == ICAO and fields["emitter_type"] == ROTORCRAFT
     assert fields["hor_velocity"] == round(math.hypot(12.0, -30.0) * 100)
-    assert fields["ver_velocity"] == -200                       # positive up: climbing at 2 m/s
+    assert fields["ver_velocity"] == -200  # positive up: climbing at 2 m/s
     assert fields["heading"] == round(math.degrees(math.atan2(-30.0, 12.0)) * 100) % 36000
     assert fields["altitude_type"] == mavlink.ADSB_ALTITUDE_TYPE_GEOMETRIC
-    needed = (mavlink.ADSB_FLAGS_VALID_COORDS | mavlink.ADSB_FLAGS_VALID_ALTITUDE | mavlink.ADSB_FLAGS_VALID_HEADING
-              | mavlink.ADSB_FLAGS_VALID_VELOCITY | mavlink.ADSB_FLAGS_VERTICAL_VELOCITY_VALID)
+    needed = (
+        mavlink.ADSB_FLAGS_VALID_COORDS
+        | mavlink.ADSB_FLAGS_VALID_ALTITUDE
+        | mavlink.ADSB_FLAGS_VALID_HEADING
+        | mavlink.ADSB_FLAGS_VALID_VELOCITY
+        | mavlink.ADSB_FLAGS_VERTICAL_VELOCITY_VALID
+    )
     assert fields["flags"] & needed == needed
     assert fields["tslc"] == 0 and fields["callsign"].startswith("N")
 

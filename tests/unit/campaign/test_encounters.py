@@ -19,20 +19,29 @@ from scipy import stats as sps
 
 from companion.campaign.delivery import DEFAULT_DELIVERY
 from companion.campaign.manned import EMITTERS, draw_miss, make_manned, miss_weight
-from companion.campaign.parametric import (CRUISE_M_S, GEOMETRIES, MISS_EXTRA_M, MOVER_CPA_S, POPUP_CPA_S,
-                                           RADIUS_M, START_MARGIN_M, OwnFlight, make_parametric)
+from companion.campaign.parametric import (
+    CRUISE_M_S,
+    GEOMETRIES,
+    MISS_EXTRA_M,
+    MOVER_CPA_S,
+    POPUP_CPA_S,
+    RADIUS_M,
+    START_MARGIN_M,
+    OwnFlight,
+    make_parametric,
+)
 from companion.campaign.spec import MannedSpec
 from companion.campaign.tracks import Encounter, IntruderTrack, straight_track
 
 OWN_SPEED_M_S = 6.0
 OWN_ALT_M = 20.0
-DT_S = 0.02                     # 50 Hz
+DT_S = 0.02  # 50 Hz
 END_S = 30.0
-CLIMB_END_S = 12.0              # the vertical part of the vertical-then-level flight
+CLIMB_END_S = 12.0  # the vertical part of the vertical-then-level flight
 CLIMB_RATE_M_S = 2.5
 CLIMB_START_DOWN_M = -15.0
 GOAL_LEVEL_NED_M = np.array([OWN_SPEED_M_S * END_S, 0.0, -OWN_ALT_M])
-FINE_DT_S = 0.002               # the grid the closest approaches are searched on here
+FINE_DT_S = 0.002  # the grid the closest approaches are searched on here
 
 # ---------------------------------------------------------------------------------------------
 # Independent own flights and intruder lines
@@ -50,8 +59,7 @@ def vertical_own_at(t_s: np.ndarray) -> np.ndarray:
     t = np.asarray(t_s, dtype=float)
     climb = np.minimum(t, CLIMB_END_S)
     level = np.maximum(t - CLIMB_END_S, 0.0)
-    return np.column_stack([OWN_SPEED_M_S * level, np.zeros_like(t),
-                            CLIMB_START_DOWN_M - CLIMB_RATE_M_S * climb])
+    return np.column_stack([OWN_SPEED_M_S * level, np.zeros_like(t), CLIMB_START_DOWN_M - CLIMB_RATE_M_S * climb])
 
 
 def own_flight(vertical: bool) -> OwnFlight:
@@ -92,9 +100,16 @@ def horizontal_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
 
 def draw(geometry: str, seed: int, *, goal=None) -> Encounter:
     vertical = geometry in ("above", "below")
-    return make_parametric(seed, f"{geometry}/test", geometry, "climb" if vertical else "open", own_flight(vertical),
-                           goal_of(vertical) if goal is None else goal, dict(DEFAULT_DELIVERY),
-                           np.random.default_rng([99, seed]))
+    return make_parametric(
+        seed,
+        f"{geometry}/test",
+        geometry,
+        "climb" if vertical else "open",
+        own_flight(vertical),
+        goal_of(vertical) if goal is None else goal,
+        dict(DEFAULT_DELIVERY),
+        np.random.default_rng([99, seed]),
+    )
 
 
 SEEDS = range(25)
@@ -158,7 +173,7 @@ def test_velocity_is_the_finite_difference_of_position(track, where):
     span = t[-1] - t[0]
     query = t[0] + where * span
     if np.min(np.abs(t - query)) < 2 * h:
-        query += 4 * h          # off a knot: the difference would straddle two segments
+        query += 4 * h  # off a knot: the difference would straddle two segments
     fd = (track.position_at(query + h)[0] - track.position_at(query - h)[0]) / (2 * h)
     scale = np.abs(track.pos_ned_m).max() + 1.0
     np.testing.assert_allclose(track.velocity_at(query)[0], fd, atol=1e-6 * scale / h)
@@ -171,8 +186,13 @@ def test_position_and_velocity_shapes_for_scalar_and_array_times():
     assert track.velocity_at(np.linspace(-1, 11, 7)).shape == (7, 3)
 
 
-@given(st.tuples(coordinate, coordinate, coordinate), st.tuples(*[st.floats(-30.0, 30.0)] * 3),
-       st.floats(0.0, 100.0), st.floats(0.5, 100.0), st.floats(-20.0, 140.0))
+@given(
+    st.tuples(coordinate, coordinate, coordinate),
+    st.tuples(*[st.floats(-30.0, 30.0)] * 3),
+    st.floats(0.0, 100.0),
+    st.floats(0.5, 100.0),
+    st.floats(-20.0, 140.0),
+)
 @settings(max_examples=100, deadline=None)
 def test_straight_track_without_turn(p0, v, start_s, length_s, query_s):
     p0, v = np.array(p0), np.array(v)
@@ -186,8 +206,13 @@ def test_straight_track_without_turn(p0, v, start_s, length_s, query_s):
     np.testing.assert_allclose(track.velocity_at(t)[0], v, atol=1e-9 * (1 + np.abs(v).max()))
 
 
-@given(st.tuples(coordinate, coordinate, coordinate), st.tuples(*[st.floats(-30.0, 30.0)] * 3),
-       st.tuples(*[st.floats(-30.0, 30.0)] * 3), st.floats(0.1, 0.9), st.floats(-0.5, 1.5))
+@given(
+    st.tuples(coordinate, coordinate, coordinate),
+    st.tuples(*[st.floats(-30.0, 30.0)] * 3),
+    st.tuples(*[st.floats(-30.0, 30.0)] * 3),
+    st.floats(0.1, 0.9),
+    st.floats(-0.5, 1.5),
+)
 @settings(max_examples=100, deadline=None)
 def test_straight_track_with_a_turn(p0, v, v_after, turn_fraction, where):
     """v until the turn, v_after from it; continuous at the turn; straight beyond the ends."""
@@ -207,8 +232,9 @@ def test_straight_track_with_a_turn(p0, v, v_after, turn_fraction, where):
 
 @pytest.mark.parametrize("turn_s", [None, 10.0, 40.0, 5.0, 50.0])
 def test_straight_track_ignores_a_turn_outside_its_span(turn_s):
-    track = straight_track("s3", 10.0, 40.0, (0.0, 0.0, -20.0), (1.0, 2.0, 0.0), 3.0, turn_t_s=turn_s,
-                           v_after_ned_m_s=(5.0, 5.0, 5.0))
+    track = straight_track(
+        "s3", 10.0, 40.0, (0.0, 0.0, -20.0), (1.0, 2.0, 0.0), 3.0, turn_t_s=turn_s, v_after_ned_m_s=(5.0, 5.0, 5.0)
+    )
     assert track.t_s.tolist() == [10.0, 40.0]
     np.testing.assert_allclose(track.pos_ned_m[1], [30.0, 60.0, -20.0])
 
@@ -249,7 +275,7 @@ def test_aimed_at_the_own_flight_at_the_drawn_time(geometry):
         d_drawn = float(np.linalg.norm(own_at(np.array([t_cpa]))[0] - line_at(line, np.array([t_cpa]))[0]))
         assert d_drawn <= bound + 0.05, (seed, d_drawn, bound)
         _, d_min = closest_approach(own_at, line, track.first_report_t_s, enc.end_t_s)
-        assert d_min <= d_drawn + 1e-3          # sampled: the aim is the closest approach
+        assert d_min <= d_drawn + 1e-3  # sampled: the aim is the closest approach
 
 
 @pytest.mark.parametrize("geometry", [g for g in SINGLE if g not in ("above", "below")])
@@ -308,7 +334,7 @@ def test_crossing_angles(geometry, top):
         assert 0.3 * CRUISE_M_S - 1e-9 <= np.linalg.norm(v) <= top * CRUISE_M_S + 1e-9
         assert not track.popup
         sides.add(bool(v[1] > 0))
-    assert sides == {True, False}       # either side
+    assert sides == {True, False}  # either side
 
 
 def test_overtaking_is_faster_than_own_and_along_the_track():
@@ -333,7 +359,7 @@ def test_popups_are_static(geometry):
 def test_above_descends_and_below_climbs(geometry, sign):
     for seed in SEEDS:
         v = draw(geometry, seed).intruders[0].velocity_at(0.0)[0]
-        assert 1.0 - 1e-9 <= sign * v[2] <= 3.0 + 1e-9, (seed, v)       # down positive
+        assert 1.0 - 1e-9 <= sign * v[2] <= 3.0 + 1e-9, (seed, v)  # down positive
         assert np.hypot(v[0], v[1]) <= CRUISE_M_S + 1e-9
 
 
@@ -363,8 +389,12 @@ def test_deterministic_for_the_same_seed(geometry):
     for ta, tb in zip(a.intruders, b.intruders):
         np.testing.assert_array_equal(ta.t_s, tb.t_s)
         np.testing.assert_array_equal(ta.pos_ned_m, tb.pos_ned_m)
-        assert (ta.id, ta.radius_m, ta.popup, ta.first_report_t_s) == (tb.id, tb.radius_m, tb.popup,
-                                                                        tb.first_report_t_s)
+        assert (ta.id, ta.radius_m, ta.popup, ta.first_report_t_s) == (
+            tb.id,
+            tb.radius_m,
+            tb.popup,
+            tb.first_report_t_s,
+        )
     assert a.params == b.params and a.end_t_s == b.end_t_s
     c = draw(geometry, 8)
     assert not np.array_equal(a.intruders[0].pos_ned_m, c.intruders[0].pos_ned_m)
@@ -408,16 +438,32 @@ def test_manoeuvre_one_to_three_seconds_after_the_first_report(geometry):
 
 def test_unknown_geometry_names_the_field():
     with pytest.raises(ValueError, match="geometry.*'sideways'"):
-        make_parametric(0, "x", "sideways", "open", own_flight(False), GOAL_LEVEL_NED_M, dict(DEFAULT_DELIVERY),
-                        np.random.default_rng(0))
+        make_parametric(
+            0,
+            "x",
+            "sideways",
+            "open",
+            own_flight(False),
+            GOAL_LEVEL_NED_M,
+            dict(DEFAULT_DELIVERY),
+            np.random.default_rng(0),
+        )
 
 
 def test_no_geometry_against_a_hover_raises():
     t = np.arange(0.0, END_S, DT_S)
     hover = OwnFlight(t, np.tile([0.0, 0.0, -20.0], (t.size, 1)))
     with pytest.raises(RuntimeError, match=r"encounter 3 \(crossing/open\)"):
-        make_parametric(3, "crossing/open", "crossing", "open", hover, GOAL_LEVEL_NED_M, dict(DEFAULT_DELIVERY),
-                        np.random.default_rng(0))
+        make_parametric(
+            3,
+            "crossing/open",
+            "crossing",
+            "open",
+            hover,
+            GOAL_LEVEL_NED_M,
+            dict(DEFAULT_DELIVERY),
+            np.random.default_rng(0),
+        )
 
 
 @pytest.mark.parametrize("geometry", ("crossing", "popup_far", "head_on"))
@@ -441,7 +487,7 @@ def test_fraction_of_aimed_misses_inside_the_radius(geometry):
     p = float(np.mean(expected))
     sigma = math.sqrt(p * (1 - p) / n)
     assert abs(np.mean(hits_drawn) - p) < 5 * sigma, (np.mean(hits_drawn), p)
-    assert abs(np.mean(hits_cpa) - p) < 5 * sigma, (np.mean(hits_cpa), p)      # the aim is the CPA
+    assert abs(np.mean(hits_cpa) - p) < 5 * sigma, (np.mean(hits_cpa), p)  # the aim is the CPA
 
 
 def test_aimed_miss_uniform_in_length_and_direction():
@@ -461,7 +507,7 @@ def test_aimed_miss_uniform_in_length_and_direction():
         angles.append(math.atan2(miss @ (across / np.linalg.norm(across)), miss[2]) % (2 * math.pi))
     assert sps.kstest(lengths, "uniform").pvalue > 1e-3
     assert sps.kstest(angles, "uniform", args=(0.0, 2 * math.pi)).pvalue > 1e-3
-    assert sps.kstest(np.square(lengths), "uniform").pvalue < 1e-6         # the test has power
+    assert sps.kstest(np.square(lengths), "uniform").pvalue < 1e-6  # the test has power
 
 
 # ---------------------------------------------------------------------------------------------
@@ -499,7 +545,7 @@ def test_draws_in_their_ranges_and_the_floor_respected(manned_draws):
     assert np.all((d[:, 0] >= 0) & (d[:, 0] <= SPEC.hmd_max_m))
     assert np.all(d[:, 1] <= SPEC.vmd_max_m)
     assert np.all(alt + d[:, 1] >= SPEC.min_agl_m - 1e-9)
-    assert d[:, 1].min() < _vmd_low(SPEC, alt) + 5.0          # the floor is reached, not far above it
+    assert d[:, 1].min() < _vmd_low(SPEC, alt) + 5.0  # the floor is reached, not far above it
 
 
 def _weighted_chi_square_p(values: np.ndarray, weights: np.ndarray, edges: np.ndarray, cdf) -> float:
@@ -508,7 +554,7 @@ def _weighted_chi_square_p(values: np.ndarray, weights: np.ndarray, edges: np.nd
     n = values.size
     which = np.digitize(values, edges) - 1
     observed = np.bincount(which, weights=weights, minlength=edges.size - 1)[: edges.size - 1]
-    variance = np.bincount(which, weights=weights ** 2, minlength=edges.size - 1)[: edges.size - 1]
+    variance = np.bincount(which, weights=weights**2, minlength=edges.size - 1)[: edges.size - 1]
     expected = n * np.diff(cdf(edges))
     stat = float(np.sum((observed - expected) ** 2 / variance))
     return float(sps.chi2.sf(stat, edges.size - 1))
@@ -523,7 +569,7 @@ def test_weighted_hmd_and_vmd_follow_the_nominal_densities(manned_draws):
     lo, hi = _vmd_low(SPEC, alt), SPEC.vmd_max_m
     hmd_edges = np.linspace(0.0, SPEC.hmd_max_m, 31)
     vmd_edges = np.linspace(lo, hi, 31)
-    vmd_cdf = lambda x: np.clip((x - lo) / (hi - lo), 0, 1)          # noqa: E731
+    vmd_cdf = lambda x: np.clip((x - lo) / (hi - lo), 0, 1)  # noqa: E731
     assert _weighted_chi_square_p(d[:, 0], d[:, 2], hmd_edges, _hmd_cdf) > 1e-3
     assert _weighted_chi_square_p(d[:, 1], d[:, 2], vmd_edges, vmd_cdf) > 1e-3
     # the same test has the power to see the proposal is not the nominal
@@ -552,7 +598,7 @@ def test_weight_is_the_density_ratio(hmd, vmd, alt):
         vmd = lo
     s, H, Hn, V, Vn = SPEC.near_share, SPEC.hmd_max_m, SPEC.hmd_near_m, SPEC.vmd_max_m, SPEC.vmd_near_m
     vn_lo = max(-Vn, lo)
-    p = 2 * hmd / H ** 2 / (V - lo)
+    p = 2 * hmd / H**2 / (V - lo)
     q = (s * (hmd <= Hn) / Hn + (1 - s) / H) * (s * (vn_lo <= vmd <= Vn) / (Vn - vn_lo) + (1 - s) / (V - lo))
     assert miss_weight(hmd, vmd, SPEC, alt) == pytest.approx(p / q, rel=1e-12)
     assert miss_weight(hmd, vmd, SPEC, alt) >= 0
@@ -589,23 +635,24 @@ def test_manned_intruder_passes_at_the_drawn_miss(kind):
     model = _manned_model(kind)
     own = _long_own()
     for index in range(6):
-        enc = make_manned(index, f"manned/{kind}", kind, model, own, SPEC, AdsbSettings(),
-                          np.random.default_rng([4, index]))
+        enc = make_manned(
+            index, f"manned/{kind}", kind, model, own, SPEC, AdsbSettings(), np.random.default_rng([4, index])
+        )
         (track,) = enc.intruders
         params = enc.params
         p_own = own.at(params["t_cpa_s"])[0]
         p_int = track.position_at(params["t_cpa_s"])[0]
         assert np.hypot(*(p_int - p_own)[:2]) == pytest.approx(params["hmd_target_m"], abs=1e-6)
-        if p_int[2] > -SPEC.min_agl_m - 1e-9:          # clamped at the floor
+        if p_int[2] > -SPEC.min_agl_m - 1e-9:  # clamped at the floor
             assert -p_int[2] == pytest.approx(SPEC.min_agl_m)
         else:
             assert -(p_int[2] - p_own[2]) == pytest.approx(params["vmd_target_m"], abs=1e-6)
         assert np.all(-track.pos_ned_m[:, 2] >= SPEC.min_agl_m - 1e-9)
-        assert enc.weight == pytest.approx(miss_weight(params["hmd_target_m"], params["vmd_target_m"], SPEC,
-                                                       100.0), rel=1e-9)
+        assert enc.weight == pytest.approx(
+            miss_weight(params["hmd_target_m"], params["vmd_target_m"], SPEC, 100.0), rel=1e-9
+        )
         assert track.id == f"adsb-{track.icao_address:06x}" and len(track.id) == 11
         assert track.emitter_type == EMITTERS[kind]
         assert track.radius_m == emitter_radius_m(EMITTERS[kind], AdsbSettings())
         assert track.t_s[0] == pytest.approx(params["t_cpa_s"] - SPEC.before_s)
         assert enc.traffic == kind and enc.delivery["update_hz"] == 1.0 and enc.weight > 0
-

@@ -49,8 +49,7 @@ def judge_one(track: IntruderTrack, manned: bool = False, volumes: Volumes = VOL
 # ---------------------------------------------------------------------------------------------
 
 
-@given(st.floats(-40.0, 40.0), st.floats(-30.0, 30.0), st.floats(-8.0, 8.0), st.floats(-8.0, 8.0),
-       st.floats(1.0, 10.0))
+@given(st.floats(-40.0, 40.0), st.floats(-30.0, 30.0), st.floats(-8.0, 8.0), st.floats(-8.0, 8.0), st.floats(1.0, 10.0))
 @settings(max_examples=150, deadline=None)
 def test_known_miss_vector(east_m, down_m, v_east, v_down, radius_m):
     """A moving intruder that passes the own position at T_CPA_S offset by a miss vector
@@ -58,7 +57,7 @@ def test_known_miss_vector(east_m, down_m, v_east, v_down, radius_m):
     v_int = np.array([0.0, v_east, v_down])
     v_rel = np.array([SPEED_M_S, 0.0, 0.0]) - v_int
     miss = np.array([0.0, east_m, down_m])
-    miss -= (miss @ v_rel) / (v_rel @ v_rel) * v_rel           # perpendicular to the relative motion
+    miss -= (miss @ v_rel) / (v_rel @ v_rel) * v_rel  # perpendicular to the relative motion
     p0 = own_at_cpa() + miss - v_int * T_CPA_S
     sep = judge_one(straight_track("m", 0.0, 30.0, p0, v_int, radius_m))
     assert sep.cpa_t_s[0] == pytest.approx(T_CPA_S, abs=1e-9)
@@ -89,15 +88,14 @@ DIRECTIONS = [(0.0, 1.0, 0.0), (0.0, 0.0, -1.0), (0.0, 0.6, 0.8)]
 def test_sphere_boundaries(direction, volumes):
     """Just inside / just outside each sphere (radius + extra), whatever the direction."""
     radius = 4.0
-    expected_at = {"collision": volumes.collision_extra_m, "nmac": volumes.nmac_extra_m,
-                   "lowc": volumes.lowc_extra_m}
+    expected_at = {"collision": volumes.collision_extra_m, "nmac": volumes.nmac_extra_m, "lowc": volumes.lowc_extra_m}
     for name, extra in expected_at.items():
         for delta, inside in ((-EPS_M, True), (EPS_M, False)):
             distance = radius + extra + delta
             sep = judge_one(static_at(distance * np.asarray(direction), radius), volumes=volumes)
             flags = {"collision": sep.collision, "nmac": sep.nmac, "lowc": sep.lowc}
             assert flags[name] is inside, (name, delta)
-            for other, other_extra in expected_at.items():      # the nested volumes agree
+            for other, other_extra in expected_at.items():  # the nested volumes agree
                 assert flags[other] is (distance < radius + other_extra)
             assert sep.min_sep_m == pytest.approx(distance - radius, abs=1e-9)
 
@@ -106,8 +104,11 @@ def test_sphere_boundaries(direction, volumes):
 def test_on_a_sphere_is_outside(volumes):
     """The volumes are open: at exactly radius + extra (exact in floating point) no flag."""
     radius = 4.0
-    for name, extra in (("collision", volumes.collision_extra_m), ("nmac", volumes.nmac_extra_m),
-                        ("lowc", volumes.lowc_extra_m)):
+    for name, extra in (
+        ("collision", volumes.collision_extra_m),
+        ("nmac", volumes.nmac_extra_m),
+        ("lowc", volumes.lowc_extra_m),
+    ):
         sep = judge_one(static_at((0.0, 0.0, -(radius + extra)), radius), volumes=volumes)
         assert sep.min_sep_m == extra
         assert getattr(sep, name) is False, name
@@ -117,7 +118,7 @@ def test_on_a_sphere_is_outside(volumes):
 @settings(max_examples=100, deadline=None)
 def test_sphere_flags_follow_the_distance(distance, radius):
     for extra in (VOLUMES.collision_extra_m, VOLUMES.nmac_extra_m, VOLUMES.lowc_extra_m):
-        assume(abs(distance - radius - extra) > 1e-9)          # off the boundary by more than rounding
+        assume(abs(distance - radius - extra) > 1e-9)  # off the boundary by more than rounding
     sep = judge_one(static_at((0.0, 0.0, -distance), radius))
     assert sep.collision == (distance < radius + VOLUMES.collision_extra_m)
     assert sep.nmac == (distance < radius + VOLUMES.nmac_extra_m)
@@ -134,16 +135,19 @@ WC_H, WC_V = VOLUMES.wc_h_ft * FT_M, VOLUMES.wc_v_ft * FT_M
 MANNED_RADIUS_M = 25.0
 
 
-@pytest.mark.parametrize("h_m, v_m, nmac, lowc", [
-    (NMAC_H - 0.01, NMAC_V - 0.01, True, True),
-    (NMAC_H + 0.01, NMAC_V - 0.01, False, True),
-    (NMAC_H - 0.01, NMAC_V + 0.01, False, True),
-    (WC_H - 0.01, WC_V - 0.01, False, True),
-    (WC_H + 0.01, 0.0, False, False),
-    (0.0, WC_V + 0.01, False, False),
-    (WC_H - 0.01, WC_V + 0.01, False, False),
-    (100.0, 0.0, True, True),
-])
+@pytest.mark.parametrize(
+    "h_m, v_m, nmac, lowc",
+    [
+        (NMAC_H - 0.01, NMAC_V - 0.01, True, True),
+        (NMAC_H + 0.01, NMAC_V - 0.01, False, True),
+        (NMAC_H - 0.01, NMAC_V + 0.01, False, True),
+        (WC_H - 0.01, WC_V - 0.01, False, True),
+        (WC_H + 0.01, 0.0, False, False),
+        (0.0, WC_V + 0.01, False, False),
+        (WC_H - 0.01, WC_V + 0.01, False, False),
+        (100.0, 0.0, True, True),
+    ],
+)
 def test_cylinder_boundaries(h_m, v_m, nmac, lowc):
     """The cylinders: horizontally within and vertically within at once (500 ft / 100 ft,
     2000 ft / 250 ft); collision inside the emitter's radius."""
@@ -155,8 +159,7 @@ def test_cylinder_boundaries(h_m, v_m, nmac, lowc):
 
 @pytest.mark.parametrize("delta, inside", [(-EPS_M, True), (EPS_M, False)])
 def test_manned_collision_inside_the_radius(delta, inside):
-    sep = judge_one(static_at(np.array([0.0, 0.6, 0.8]) * (MANNED_RADIUS_M + delta), MANNED_RADIUS_M),
-                    manned=True)
+    sep = judge_one(static_at(np.array([0.0, 0.6, 0.8]) * (MANNED_RADIUS_M + delta), MANNED_RADIUS_M), manned=True)
     assert sep.collision is inside
     assert sep.nmac and sep.lowc
 
@@ -172,9 +175,9 @@ def test_manned_nmac_needs_both_at_once():
     track = IntruderTrack("adsb-a00001", t, p, MANNED_RADIUS_M, 0.0, float(t[-1]))
     sep = separation(t, own, [track], True, VOLUMES)
     assert not sep.nmac
-    assert sep.lowc                                    # below: 0 m < 2000 ft and 60 m < 250 ft at once
+    assert sep.lowc  # below: 0 m < 2000 ft and 60 m < 250 ft at once
     sep_wide = separation(t, own, [track], True, Volumes(nmac_v_ft=250.0))
-    assert sep_wide.nmac                               # 60 m < 250 ft: the pass below is one
+    assert sep_wide.nmac  # 60 m < 250 ft: the pass below is one
 
 
 def test_manned_flags_from_any_time_not_only_the_closest_approach():
@@ -195,8 +198,8 @@ def test_manned_flags_from_any_time_not_only_the_closest_approach():
 
 
 def test_multiple_intruders():
-    near = static_at((0.0, 0.0, -4.5), 4.0, "near")        # 0.5 m beyond its radius: NMAC, no collision
-    far = straight_track("far", 0.0, 30.0, (0.0, 30.0, -20.0), (SPEED_M_S, 0.0, 0.0), 2.0)   # alongside, 30 m east
+    near = static_at((0.0, 0.0, -4.5), 4.0, "near")  # 0.5 m beyond its radius: NMAC, no collision
+    far = straight_track("far", 0.0, 30.0, (0.0, 30.0, -20.0), (SPEED_M_S, 0.0, 0.0), 2.0)  # alongside, 30 m east
     t, own = own_line()
     sep = separation(t, own, [far, near], False, VOLUMES)
     assert len(sep.hmd_m) == len(sep.vmd_m) == len(sep.cpa_t_s) == 2
@@ -220,7 +223,7 @@ LO, HI = np.array([-50.0, -50.0, -60.0]), np.array([250.0, 50.0, -1.0])
 
 
 def test_entries_counts_each_entry():
-    t, own = own_line(30.0)                        # 0 .. 180 m north
+    t, own = own_line(30.0)  # 0 .. 180 m north
     one = (Cylinder((60.0, 0.0), 3.0),)
     two = (Cylinder((60.0, 0.0), 3.0), Cylinder((120.0, 0.0), 3.0))
     assert entries(own, (), LO, HI) == 0
@@ -232,12 +235,12 @@ def test_entries_counts_each_entry():
 
 def test_entries_into_one_obstacle_twice_and_from_inside():
     t = np.linspace(0.0, 1.0, 2001)
-    north = 60.0 + 10.0 * np.sin(2 * np.pi * 2 * t)            # two periods about the obstacle's centre
+    north = 60.0 + 10.0 * np.sin(2 * np.pi * 2 * t)  # two periods about the obstacle's centre
     own = np.column_stack([north, np.zeros_like(t), np.full_like(t, -20.0)])
     obstacle = (Cylinder((60.0, 0.0), 3.0),)
     inside = np.abs(north - 60.0) < 3.0
     expected = int(inside[0]) + int(np.count_nonzero(inside[1:] & ~inside[:-1]))
-    assert entries(own, obstacle, LO, HI) == expected == 5         # starts inside, then 4 crossings
+    assert entries(own, obstacle, LO, HI) == expected == 5  # starts inside, then 4 crossings
     go_and_back = np.concatenate([np.linspace(0.0, 100.0, 501), np.linspace(100.0, 0.0, 501)])
     own2 = np.column_stack([go_and_back, np.zeros_like(go_and_back), np.full_like(go_and_back, -20.0)])
     assert entries(own2, obstacle, LO, HI) == 2
@@ -245,7 +248,7 @@ def test_entries_into_one_obstacle_twice_and_from_inside():
 
 def test_entries_respect_the_cylinder_height():
     t, own = own_line(30.0)
-    low = (Cylinder((60.0, 0.0), 3.0, -10.0, 0.0),)           # from 10 m down to the ground; we fly at 20 m
+    low = (Cylinder((60.0, 0.0), 3.0, -10.0, 0.0),)  # from 10 m down to the ground; we fly at 20 m
     assert entries(own, low, LO, HI) == 0
     tall = (Cylinder((60.0, 0.0), 3.0, -30.0, 0.0),)
     assert entries(own, tall, LO, HI) == 1
@@ -259,8 +262,7 @@ def test_path_length_is_the_sum_of_the_segments(points):
     assert path_length_m(p) == pytest.approx(expected, rel=1e-12, abs=1e-9)
 
 
-@given(st.tuples(*[st.floats(-100.0, 100.0)] * 3), st.tuples(*[st.floats(-100.0, 100.0)] * 3),
-       st.integers(2, 200))
+@given(st.tuples(*[st.floats(-100.0, 100.0)] * 3), st.tuples(*[st.floats(-100.0, 100.0)] * 3), st.integers(2, 200))
 @settings(max_examples=100, deadline=None)
 def test_path_length_of_a_subdivided_line(a, b, n):
     p = np.linspace(a, b, n)

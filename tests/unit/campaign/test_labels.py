@@ -25,8 +25,9 @@ OPEN = World([], [-100.0, -100.0, -60.0], [300.0, 100.0, -2.0], margin_m=0.0)
 
 
 def test_a_track_knows_its_fastest_segment():
-    track = straight_track("t", 0.0, 10.0, [0.0, 0.0, -20.0], [3.0, 4.0, 0.0], 2.0, turn_t_s=4.0,
-                           v_after_ned_m_s=[0.0, -12.0, 0.0])
+    track = straight_track(
+        "t", 0.0, 10.0, [0.0, 0.0, -20.0], [3.0, 4.0, 0.0], 2.0, turn_t_s=4.0, v_after_ned_m_s=[0.0, -12.0, 0.0]
+    )
     assert track.max_speed_m_s == pytest.approx(12.0)
 
 
@@ -41,8 +42,9 @@ def test_the_oracle_flies_against_the_true_track_not_its_first_report():
     """An intruder heading away at its first report turns onto the hovering vehicle a tenth of a
     second later, 12 m/s from 10 m off: its first report's constant velocity misses by far, its
     true track leaves no escape."""
-    turning = straight_track("t", 0.0, 30.0, [0.0, 10.0, -20.0], [0.0, 12.0, 0.0], 2.0, turn_t_s=0.1,
-                             v_after_ned_m_s=[0.0, -12.0, 0.0])
+    turning = straight_track(
+        "t", 0.0, 30.0, [0.0, 10.0, -20.0], [0.0, 12.0, 0.0], 2.0, turn_t_s=0.1, v_after_ned_m_s=[0.0, -12.0, 0.0]
+    )
     first_report = Threat("t", "moving", "local_ned", (0.0, 10.0, -20.0), (0.0, 12.0, 0.0), radius_m=2.0)
     assert label_encounter([0.0, 0.0, -20.0], [0.0, 0.0, 0.0], [first_report], 0.0, OPEN).avoidable
     assert not label_encounter([0.0, 0.0, -20.0], [0.0, 0.0, 0.0], [turning], 0.0, OPEN).avoidable
@@ -54,7 +56,7 @@ def _rows(worker, ids):
 
 def test_a_campaign_s_events_are_labelled_once(tmp_path, monkeypatch):
     worker = CampaignWorker(CampaignSpec(strata=("popup_near/open",)), Settings(), "h")
-    table = _rows(worker, range(5))             # encounter 0: an NMAC, 3: a collision and an NMAC
+    table = _rows(worker, range(5))  # encounter 0: an NMAC, 3: a collision and an NMAC
     labels = label_campaign(worker, table, tmp_path).to_pylist()
     rows = table.to_pylist()
     expected = sorted((r["id"], e) for r in rows for e in ("collision", "nmac") if r[f"m_{e}"])

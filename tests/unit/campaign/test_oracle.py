@@ -21,8 +21,7 @@ from companion.threats.model import Threat
 from companion.world import Box, Cylinder, World
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))
-from companion.campaign.oracle import (TRACKING_ALLOWANCE_M, OracleLimits, flight_margins,  # noqa: E402
-                                      label_encounter, manoeuvres)
+from companion.campaign.oracle import TRACKING_ALLOWANCE_M, OracleLimits, flight_margins, label_encounter, manoeuvres  # noqa: E402
 
 LIMITS = OracleLimits()
 DOWN_M = -20.0
@@ -33,8 +32,16 @@ A_MAX = math.hypot(LIMITS.accel_horizontal_m_s2, LIMITS.accel_vertical_m_s2)
 
 
 def threat(pos, vel=(0.0, 0.0, 0.0), radius_m=3.0, tid="t0", t_s=0.0) -> Threat:
-    return Threat(tid, "moving" if any(vel) else "popup", "local_ned", tuple(float(x) for x in pos),
-                  tuple(float(x) for x in vel), float(radius_m), None, float(t_s))
+    return Threat(
+        tid,
+        "moving" if any(vel) else "popup",
+        "local_ned",
+        tuple(float(x) for x in pos),
+        tuple(float(x) for x in vel),
+        float(radius_m),
+        None,
+        float(t_s),
+    )
 
 
 def assert_witness_clear(result, threats, world) -> None:
@@ -56,7 +63,7 @@ def test_a_static_threat_far_off_the_path_is_avoidable():
     far = [threat((40.0, 30.0, DOWN_M), radius_m=5.0)]
     res = label_encounter(pos0, vel0, far, 0.0, OPEN)
     assert res.avoidable
-    assert res.witness.manoeuvre.name == "keep going"        # the first manoeuvre tried is enough
+    assert res.witness.manoeuvre.name == "keep going"  # the first manoeuvre tried is enough
     assert res.tried < 100
     assert_witness_clear(res, far, OPEN)
 
@@ -74,8 +81,13 @@ def test_a_threat_that_already_contains_the_vehicle_is_unavoidable():
 
 
 @settings(max_examples=8, deadline=None)
-@given(v0=st.floats(3.0, 7.2), vt=st.floats(0.0, 9.0), radius=st.floats(2.0, 6.0),
-       fraction=st.floats(0.3, 0.95), heading=st.floats(-math.pi, math.pi))
+@given(
+    v0=st.floats(3.0, 7.2),
+    vt=st.floats(0.0, 9.0),
+    radius=st.floats(2.0, 6.0),
+    fraction=st.floats(0.3, 0.95),
+    heading=st.floats(-math.pi, math.pi),
+)
 def test_a_head_on_threat_inside_the_reachable_bound_is_unavoidable(v0, vt, radius, fraction, heading):
     # The threat comes straight at the vehicle; unaccelerated, the two centres meet at t_c.
     # Any manoeuvre within the limits is at most A_MAX t_c^2 / 2 away from that point then; with
@@ -91,7 +103,7 @@ def test_a_head_on_threat_inside_the_reachable_bound_is_unavoidable(v0, vt, radi
     # the same geometry with the threat starting three times farther away can be escaped
     if gap > limit:
         far = [threat(pos0 + 3.0 * gap * u, vel=-vt * u, radius_m=radius)]
-        assert 0.5 * A_MAX * (3.0 * t_c) ** 2 > limit          # not excluded by the bound
+        assert 0.5 * A_MAX * (3.0 * t_c) ** 2 > limit  # not excluded by the bound
         res_far = label_encounter(pos0, v0 * u, far, 0.0, OPEN)
         if res_far.avoidable:
             assert_witness_clear(res_far, far, OPEN)
@@ -104,7 +116,7 @@ def test_brake_and_reverse_cannot_escape_a_close_head_on_threat():
     threats = [threat((15.0, 0.0, DOWN_M), vel=(-6.0, 0.0, 0.0), radius_m=5.0)]
     res = label_encounter(pos0, np.array([6.0, 0.0, 0.0]), threats, 0.0, OPEN)
     assert not res.avoidable
-    assert res.tried == len(manoeuvres(np.array([6.0, 0.0, 0.0])))       # every one was flown
+    assert res.tried == len(manoeuvres(np.array([6.0, 0.0, 0.0])))  # every one was flown
     # 60 m ahead: a sidestep gets out of the way
     threats = [threat((60.0, 0.0, DOWN_M), vel=(-6.0, 0.0, 0.0), radius_m=5.0)]
     res = label_encounter(pos0, np.array([6.0, 0.0, 0.0]), threats, 0.0, OPEN)
@@ -115,15 +127,18 @@ def test_brake_and_reverse_cannot_escape_a_close_head_on_threat():
 def test_in_a_corridor_the_witness_keeps_off_the_walls():
     # walls 3 m left and right, a static threat (radius 2 + 1 m allowance) 9 m ahead at 6 m/s:
     # too close to stop in front of it, no room to pass it sideways; braking while climbing works
-    walls = World([Box((-50.0, 3.0, -40.0), (100.0, 10.0, -5.0)), Box((-50.0, -10.0, -40.0), (100.0, -3.0, -5.0))],
-                  [-50.0, -20.0, -40.0], [100.0, 20.0, -5.0])
+    walls = World(
+        [Box((-50.0, 3.0, -40.0), (100.0, 10.0, -5.0)), Box((-50.0, -10.0, -40.0), (100.0, -3.0, -5.0))],
+        [-50.0, -20.0, -40.0],
+        [100.0, 20.0, -5.0],
+    )
     pos0 = np.array([0.0, 0.0, DOWN_M])
     vel0 = np.array([6.0, 0.0, 0.0])
     threats = [threat((9.0, 0.0, DOWN_M), radius_m=2.0)]
     res = label_encounter(pos0, vel0, threats, 0.0, walls)
     assert res.avoidable
     assert_witness_clear(res, threats, walls)
-    assert res.witness.pos_ned_m[:, 2].min() < DOWN_M - 1.0           # it climbed
+    assert res.witness.pos_ned_m[:, 2].min() < DOWN_M - 1.0  # it climbed
     # without the walls, an earlier manoeuvre of the grid (through a wall) would have done
     in_open = label_encounter(pos0, vel0, threats, 0.0, World([], [-50.0, -20.0, -40.0], [100.0, 20.0, -5.0]))
     assert in_open.avoidable and in_open.tried <= res.tried
@@ -151,7 +166,7 @@ def test_the_witness_at_the_edge_of_avoidability_is_still_clear():
     assert res.avoidable
     assert_witness_clear(res, threats, OPEN)
     threat_m, _ = flight_margins(res.witness, threats, OPEN, step_s=0.005)
-    assert threat_m < 0.5                                       # it is a tight one
+    assert threat_m < 0.5  # it is a tight one
 
 
 @settings(max_examples=12, deadline=None)

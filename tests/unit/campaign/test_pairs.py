@@ -24,16 +24,49 @@ STRATA = ("popup_far/open", "crossing/open", "manned/rotorcraft")
 INDICES = (0, 1, 2)
 SPEC = CampaignSpec(strata=STRATA)
 
-pytestmark = pytest.mark.skipif(not (models_directory() / MODEL_FILES["rotorcraft"]).is_file(),
-                                reason=f"encounter models not in {models_directory()} (COMPANION_ENCOUNTER_MODELS)")
+pytestmark = pytest.mark.skipif(
+    not (models_directory() / MODEL_FILES["rotorcraft"]).is_file(),
+    reason=f"encounter models not in {models_directory()} (COMPANION_ENCOUNTER_MODELS)",
+)
 
-INT_COLUMNS = ("id", "seed", "n_threats", "u_obstacle_entries", "u_fence_entries", "m_obstacle_entries",
-               "m_fence_entries")
+INT_COLUMNS = (
+    "id",
+    "seed",
+    "n_threats",
+    "u_obstacle_entries",
+    "u_fence_entries",
+    "m_obstacle_entries",
+    "m_fence_entries",
+)
 STR_COLUMNS = ("stratum", "source", "traffic", "world", "mission", "spec_hash")
-BOOL_COLUMNS = ("u_collision", "u_nmac", "u_lowc", "u_completed", "m_collision", "m_nmac", "m_lowc", "m_completed",
-                "m_alerted", "m_manoeuvred")
-FLOAT_COLUMNS = ("weight", "u_min_sep_m", "u_path_m", "m_min_sep_m", "m_path_m", "m_alert_t_s", "m_extra_path_m",
-                 "noise_pos_m", "noise_vel_m_s", "update_hz", "latency_s", "dropout", "wall_ms", "cpu_ms")
+BOOL_COLUMNS = (
+    "u_collision",
+    "u_nmac",
+    "u_lowc",
+    "u_completed",
+    "m_collision",
+    "m_nmac",
+    "m_lowc",
+    "m_completed",
+    "m_alerted",
+    "m_manoeuvred",
+)
+FLOAT_COLUMNS = (
+    "weight",
+    "u_min_sep_m",
+    "u_path_m",
+    "m_min_sep_m",
+    "m_path_m",
+    "m_alert_t_s",
+    "m_extra_path_m",
+    "noise_pos_m",
+    "noise_vel_m_s",
+    "update_hz",
+    "latency_s",
+    "dropout",
+    "wall_ms",
+    "cpu_ms",
+)
 FLOAT_LIST_COLUMNS = ("u_hmd_m", "u_vmd_m", "m_hmd_m", "m_vmd_m", "m_latency_ms", "m_decide_wall_ms")
 STR_LIST_COLUMNS = ("m_decisions",)
 ALL_COLUMNS = INT_COLUMNS + STR_COLUMNS + BOOL_COLUMNS + FLOAT_COLUMNS + FLOAT_LIST_COLUMNS + STR_LIST_COLUMNS
@@ -83,7 +116,7 @@ def test_row_repeats_on_the_same_worker(worker, rows):
 
 def test_row_repeats_on_a_fresh_worker(rows):
     fresh = CampaignWorker(SPEC, Settings(), "h")
-    for i in reversed(INDICES):            # another order: nothing may depend on what was flown before
+    for i in reversed(INDICES):  # another order: nothing may depend on what was flown before
         assert_rows_equal(rows[i], fresh.row(i))
 
 
@@ -138,7 +171,7 @@ def test_column_values(rows):
         for prefix in ("u_", "m_"):
             assert len(row[f"{prefix}hmd_m"]) == len(row[f"{prefix}vmd_m"]) == row["n_threats"] >= 1
             assert row[f"{prefix}collision"] <= row[f"{prefix}nmac"] <= row[f"{prefix}lowc"]
-            assert row[f"{prefix}obstacle_entries"] == row[f"{prefix}fence_entries"] == 0     # open air
+            assert row[f"{prefix}obstacle_entries"] == row[f"{prefix}fence_entries"] == 0  # open air
             assert row[f"{prefix}path_m"] > 0
         assert row["m_extra_path_m"] == pytest.approx(row["m_path_m"] - row["u_path_m"])
         assert row["m_alerted"] == (not math.isnan(row["m_alert_t_s"]))
@@ -157,8 +190,9 @@ def test_weights(worker, rows):
             base = worker.unmitigated(enc.mission)
             own_alt = -float(np.interp(enc.params["t_cpa_s"], base.t_s, base.pos_ned_m[:, 2]))
             assert row["weight"] > 0
-            assert row["weight"] == pytest.approx(miss_weight(enc.params["hmd_target_m"], enc.params["vmd_target_m"],
-                                                              SPEC.manned, own_alt), rel=1e-6)
+            assert row["weight"] == pytest.approx(
+                miss_weight(enc.params["hmd_target_m"], enc.params["vmd_target_m"], SPEC.manned, own_alt), rel=1e-6
+            )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -204,7 +238,7 @@ def test_flags_agree_with_a_recomputation(rows, flights, prefix, track):
 
 def test_pair_grid_and_true_tracks(worker, flights):
     dt = 1.0 / Settings().link.setpoint_rate_hz
-    for i, pair in flights.items():
+    for pair in flights.values():
         enc = pair.encounter
         assert pair.t_s[0] == enc.first_report_t_s
         assert pair.t_s[-1] == pytest.approx(enc.end_t_s, abs=dt)

@@ -11,8 +11,15 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from companion.campaign.judge import Volumes
-from companion.campaign.spec import (CampaignSpec, MannedSpec, RobustnessSpec, SpecError, load_spec, spec_hash,
-                                     spec_to_toml)
+from companion.campaign.spec import (
+    CampaignSpec,
+    MannedSpec,
+    RobustnessSpec,
+    SpecError,
+    load_spec,
+    spec_hash,
+    spec_to_toml,
+)
 from companion.campaign.strata import stratum_names
 from companion.flight.fast_time import JobLatency
 
@@ -78,7 +85,7 @@ BAD = [
     ('seed = "one"\n', "seed"),
     ("max_pairs = 1.5\n", "max_pairs"),
     ("tolerance = true\n", "tolerance"),
-    ('name = 3\n', "name"),
+    ("name = 3\n", "name"),
     ('strata = "crossing/open"\n', "strata"),
     ("strata = [1]\n", "strata[0]"),
     ('strata = ["crossing/nowhere"]\n', "strata"),
@@ -145,13 +152,22 @@ def test_spec_error_is_a_value_error():
 # spec_to_toml and spec_hash
 # ---------------------------------------------------------------------------------------------
 
-NON_DEFAULT = CampaignSpec(name='odd "name" \\ here', seed=3, max_pairs=50, min_pairs=5, batch_pairs=3,
-                           tolerance=0.125, check_every=7, strata=("head_on/fenced", "robust/noise"),
-                           settings="../cfg/companion.toml", iterations_per_s=1234.5,
-                           latency=JobLatency(0.01, 0.2, 0.3),
-                           volumes=Volumes(0.5, 1.5, 2.5, 400.0, 90.0, 1800.0, 200.0),
-                           manned=MannedSpec(hmd_max_m=1000.0, before_s=40.0), robustness=RobustnessSpec(
-                               dropout=(0.05, 0.3), update_hz=(0.5, 4.0)))
+NON_DEFAULT = CampaignSpec(
+    name='odd "name" \\ here',
+    seed=3,
+    max_pairs=50,
+    min_pairs=5,
+    batch_pairs=3,
+    tolerance=0.125,
+    check_every=7,
+    strata=("head_on/fenced", "robust/noise"),
+    settings="../cfg/companion.toml",
+    iterations_per_s=1234.5,
+    latency=JobLatency(0.01, 0.2, 0.3),
+    volumes=Volumes(0.5, 1.5, 2.5, 400.0, 90.0, 1800.0, 200.0),
+    manned=MannedSpec(hmd_max_m=1000.0, before_s=40.0),
+    robustness=RobustnessSpec(dropout=(0.05, 0.3), update_hz=(0.5, 4.0)),
+)
 
 
 @pytest.mark.parametrize("spec", [CampaignSpec(), NON_DEFAULT], ids=["defaults", "non-default"])
@@ -169,18 +185,24 @@ floats_01 = st.floats(0.001, 0.9, allow_nan=False)
 def specs(draw):
     names = stratum_names()
     strata = tuple(draw(st.lists(st.sampled_from(names), max_size=5, unique=True)))
-    max_pairs = draw(st.integers(1, 10 ** 6))
+    max_pairs = draw(st.integers(1, 10**6))
     lo_drop = draw(st.floats(0.0, 0.5))
     return CampaignSpec(
         name=draw(st.text(st.characters(min_codepoint=32, max_codepoint=0x2FF), max_size=20)),
-        seed=draw(st.integers(0, 2 ** 40)), max_pairs=max_pairs, min_pairs=draw(st.integers(1, max_pairs)),
-        batch_pairs=draw(st.integers(1, 100)), tolerance=draw(floats_01), check_every=draw(st.integers(1, 5000)),
-        strata=strata, settings=draw(st.sampled_from(["", "a.toml", "dir/with space/ß.toml"])),
+        seed=draw(st.integers(0, 2**40)),
+        max_pairs=max_pairs,
+        min_pairs=draw(st.integers(1, max_pairs)),
+        batch_pairs=draw(st.integers(1, 100)),
+        tolerance=draw(floats_01),
+        check_every=draw(st.integers(1, 5000)),
+        strata=strata,
+        settings=draw(st.sampled_from(["", "a.toml", "dir/with space/ß.toml"])),
         iterations_per_s=draw(st.floats(1.0, 1e6)),
         latency=JobLatency(draw(st.floats(0.0, 1.0)), draw(st.floats(0.0, 1.0)), draw(st.floats(0.0, 1.0))),
         volumes=Volumes(nmac_extra_m=draw(st.floats(0.0, 2.0)), lowc_extra_m=draw(st.floats(2.0, 9.0))),
         manned=MannedSpec(hmd_max_m=draw(st.floats(300.0, 5000.0)), near_share=draw(st.floats(0.0, 0.99))),
-        robustness=RobustnessSpec(dropout=(lo_drop, draw(st.floats(lo_drop, 0.99)))))
+        robustness=RobustnessSpec(dropout=(lo_drop, draw(st.floats(lo_drop, 0.99)))),
+    )
 
 
 @given(specs())
@@ -201,17 +223,24 @@ def test_hash_of_an_int_valued_float_field_survives_the_round_trip(tmp_path):
 def _changed_specs():
     """One spec per field (top level and nested) with that field changed."""
     base = CampaignSpec()
-    out = {"name": dataclasses.replace(base, name="other"), "seed": dataclasses.replace(base, seed=2),
-           "max_pairs": dataclasses.replace(base, max_pairs=99_999),
-           "min_pairs": dataclasses.replace(base, min_pairs=1_999),
-           "batch_pairs": dataclasses.replace(base, batch_pairs=21),
-           "tolerance": dataclasses.replace(base, tolerance=0.051),
-           "check_every": dataclasses.replace(base, check_every=999),
-           "strata": dataclasses.replace(base, strata=("crossing/open",)),
-           "settings": dataclasses.replace(base, settings="x.toml"),
-           "iterations_per_s": dataclasses.replace(base, iterations_per_s=3001.0)}
-    for name, cls in (("latency", JobLatency), ("volumes", Volumes), ("manned", MannedSpec),
-                      ("robustness", RobustnessSpec)):
+    out = {
+        "name": dataclasses.replace(base, name="other"),
+        "seed": dataclasses.replace(base, seed=2),
+        "max_pairs": dataclasses.replace(base, max_pairs=99_999),
+        "min_pairs": dataclasses.replace(base, min_pairs=1_999),
+        "batch_pairs": dataclasses.replace(base, batch_pairs=21),
+        "tolerance": dataclasses.replace(base, tolerance=0.051),
+        "check_every": dataclasses.replace(base, check_every=999),
+        "strata": dataclasses.replace(base, strata=("crossing/open",)),
+        "settings": dataclasses.replace(base, settings="x.toml"),
+        "iterations_per_s": dataclasses.replace(base, iterations_per_s=3001.0),
+    }
+    for name, cls in (
+        ("latency", JobLatency),
+        ("volumes", Volumes),
+        ("manned", MannedSpec),
+        ("robustness", RobustnessSpec),
+    ):
         nested = getattr(base, name)
         for f in dataclasses.fields(cls):
             value = getattr(nested, f.name)
@@ -232,8 +261,11 @@ CHANGED = _changed_specs()
 
 def test_every_field_is_covered_by_the_change_list():
     top = {f.name for f in dataclasses.fields(CampaignSpec)}
-    nested = {f"{n}.{f.name}" for n in ("latency", "volumes", "manned", "robustness")
-              for f in dataclasses.fields(type(getattr(CampaignSpec(), n)))}
+    nested = {
+        f"{n}.{f.name}"
+        for n in ("latency", "volumes", "manned", "robustness")
+        for f in dataclasses.fields(type(getattr(CampaignSpec(), n)))
+    }
     assert set(CHANGED) == (top - {"latency", "volumes", "manned", "robustness"}) | nested
 
 

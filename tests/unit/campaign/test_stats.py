@@ -20,8 +20,17 @@ from scipy import stats as sps
 
 from companion.campaign.report import fmt_estimate, fmt_number, worst_encounters, write_report
 from companion.campaign.stats import (
-    MEASURED_COLUMNS, StatsError, convergence, default_checkpoints, induced_rate, is_converged,
-    percentiles, risk_ratio, unnecessary_rate, weighted_quantile, weighted_rate,
+    MEASURED_COLUMNS,
+    StatsError,
+    convergence,
+    default_checkpoints,
+    induced_rate,
+    is_converged,
+    percentiles,
+    risk_ratio,
+    unnecessary_rate,
+    weighted_quantile,
+    weighted_rate,
 )
 from companion.campaign.summary import campaign_columns, event_convergence, summarise
 
@@ -67,6 +76,7 @@ def coverage(draw, reps, **kwargs):
 
 # ---- the intervals cover a known ratio --------------------------------------------------------
 
+
 def test_delta_interval_covers_known_ratio_unweighted():
     cov = coverage(lambda rng: (*paired_events(rng, 600, P_WITHOUT, P_WITH, 0.08), None), 400)
     assert 0.92 <= cov <= 0.98
@@ -86,12 +96,13 @@ def test_importance_weighted_rates_recover_the_true_model():
     a, b, w = importance_campaign(np.random.default_rng(4), 20_000)
     assert weighted_rate(b, w).lo <= P_WITHOUT <= weighted_rate(b, w).hi
     assert abs(weighted_rate(a, w).value - P_WITH) < 0.005
-    assert abs(b.mean() - P_WITHOUT) > 0.1    # the unweighted rate is biased by the proposal
+    assert abs(b.mean() - P_WITHOUT) > 0.1  # the unweighted rate is biased by the proposal
 
 
 def test_bootstrap_interval_covers_known_ratio():
-    cov = coverage(lambda rng: (*paired_events(rng, 600, P_WITHOUT, P_WITH, 0.08), None), 150,
-                   method="bootstrap", n_boot=400)
+    cov = coverage(
+        lambda rng: (*paired_events(rng, 600, P_WITHOUT, P_WITH, 0.08), None), 150, method="bootstrap", n_boot=400
+    )
     assert 0.9 <= cov <= 0.99
 
 
@@ -106,13 +117,14 @@ def test_bootstrap_agrees_with_delta_on_a_large_campaign():
 def test_paired_covariance_narrows_the_interval():
     rng = np.random.default_rng(6)
     b = rng.random(2000) < 0.3
-    a_corr = b & (rng.random(2000) < 0.5)        # every event with the system also without
+    a_corr = b & (rng.random(2000) < 0.5)  # every event with the system also without
     a_indep = rng.random(2000) < a_corr.mean()
     width = lambda a: math.log(risk_ratio(a, b).hi / risk_ratio(a, b).lo)
     assert width(a_corr) < 0.7 * width(a_indep)
 
 
 # ---- rates, zero events, flags ----------------------------------------------------------------
+
 
 def test_unit_weight_rate_is_exact_clopper_pearson():
     e = np.zeros(50, bool)
@@ -128,7 +140,7 @@ def test_rate_with_no_event_is_the_weighted_rule_of_three():
     est = weighted_rate(np.zeros(300, bool), np.full(300, 2.0))
     assert est.value == 0 and est.lo == 0
     assert est.hi == pytest.approx(3 / 300, rel=0.01)
-    w = np.r_[np.full(150, 0.5), np.full(150, 1.5)]      # Kish n_eff = 240
+    w = np.r_[np.full(150, 0.5), np.full(150, 1.5)]  # Kish n_eff = 240
     assert weighted_rate(np.zeros(300, bool), w).hi == pytest.approx(1 - 0.05 ** (1 / 240))
 
 
@@ -212,6 +224,7 @@ def test_ratio_is_in_zero_to_infinity_and_inside_its_interval(rows):
 
 # ---- convergence --------------------------------------------------------------------------------
 
+
 def test_a_converging_sequence_is_converged():
     rng = np.random.default_rng(7)
     b = rng.random(20_000) < 0.3
@@ -227,7 +240,7 @@ def test_a_drifting_sequence_is_not_converged():
     rng = np.random.default_rng(8)
     n = 20_000
     b = rng.random(n) < 0.3
-    a = b & (rng.random(n) < np.linspace(0.1, 0.9, n))    # the system gets worse as ids grow
+    a = b & (rng.random(n) < np.linspace(0.1, 0.9, n))  # the system gets worse as ids grow
     verdict = is_converged(convergence(a, b))
     assert not verdict.converged and "moved" in verdict.reason
 
@@ -266,35 +279,66 @@ def synthetic_rows(n=300, seed=11):
     """Campaign rows in the flying code's schema, with separations that make sense."""
     rng = np.random.default_rng(seed)
     rows = []
-    for i in rng.permutation(n):                       # any order: summarise sorts by id
+    for i in rng.permutation(n):  # any order: summarise sorts by id
         stratum = STRATA[i % len(STRATA)]
         manned = stratum.startswith("manned")
         weight = float(rng.choice([0.4, 1.6])) if stratum == "crossing" else 1.0
         k = int(rng.integers(1, 3))
         u_hmd = rng.gamma(2.0, 40.0, k)
         u_vmd = rng.gamma(2.0, 10.0, k)
-        m_hmd = u_hmd + rng.gamma(2.0, 30.0, k) if rng.random() < 0.95 else 0.02 * u_hmd   # or worse
+        m_hmd = u_hmd + rng.gamma(2.0, 30.0, k) if rng.random() < 0.95 else 0.02 * u_hmd  # or worse
         m_vmd = u_vmd + rng.gamma(2.0, 5.0, k) if m_hmd[0] > u_hmd[0] else 0.02 * u_vmd
         u_sep = float(np.min(np.hypot(u_hmd, u_vmd))) - 5.0
         m_sep = float(np.min(np.hypot(m_hmd, m_vmd))) - 5.0
         decisions = [str(x) for x in rng.choice(KINDS, int(rng.integers(0, 4)))]
         u_path = float(rng.uniform(400, 600))
         m_path = u_path + float(rng.gamma(2.0, 15.0)) * bool(decisions)
-        row = {"id": int(i), "stratum": stratum, "source": "manned" if manned else "parametric",
-               "traffic": "fixedwing" if manned else ("drone", "rotorcraft")[i % 2],
-               "world": ("open", "cluttered", "fenced")[i % 3], "seed": int(1000 + i), "spec_hash": "abc123",
-               "weight": weight, "n_threats": k, "wall_ms": float(rng.uniform(50, 90)),
-               "m_decide_wall_ms": [float(x) for x in rng.uniform(1, 5, len(decisions))],
-               "noise_pos_m": 1.0, "noise_vel_m_s": 0.2, "update_hz": 1.0, "latency_s": 0.5, "dropout": 0.0}
-        for p, sep, hmd, vmd, path, done in (("u_", u_sep, u_hmd, u_vmd, u_path, u_sep > 0),
-                                              ("m_", m_sep, m_hmd, m_vmd, m_path, rng.random() < 0.95)):
-            row.update({f"{p}collision": sep < 0, f"{p}nmac": sep < 15.0, f"{p}lowc": sep < 60.0,
-                        f"{p}min_sep_m": sep, f"{p}hmd_m": hmd.tolist(), f"{p}vmd_m": vmd.tolist(),
-                        f"{p}obstacle_entries": 0, f"{p}fence_entries": 0, f"{p}completed": bool(done),
-                        f"{p}path_m": path})
-        row.update({"m_alerted": True, "m_alert_t_s": float(rng.uniform(0, 5)), "m_manoeuvred": bool(decisions),
-                    "m_decisions": decisions, "m_latency_ms": [float(x) for x in rng.lognormal(2.0, 0.5, len(decisions))],
-                    "m_extra_path_m": m_path - u_path})
+        row = {
+            "id": int(i),
+            "stratum": stratum,
+            "source": "manned" if manned else "parametric",
+            "traffic": "fixedwing" if manned else ("drone", "rotorcraft")[i % 2],
+            "world": ("open", "cluttered", "fenced")[i % 3],
+            "seed": int(1000 + i),
+            "spec_hash": "abc123",
+            "weight": weight,
+            "n_threats": k,
+            "wall_ms": float(rng.uniform(50, 90)),
+            "m_decide_wall_ms": [float(x) for x in rng.uniform(1, 5, len(decisions))],
+            "noise_pos_m": 1.0,
+            "noise_vel_m_s": 0.2,
+            "update_hz": 1.0,
+            "latency_s": 0.5,
+            "dropout": 0.0,
+        }
+        for p, sep, hmd, vmd, path, done in (
+            ("u_", u_sep, u_hmd, u_vmd, u_path, u_sep > 0),
+            ("m_", m_sep, m_hmd, m_vmd, m_path, rng.random() < 0.95),
+        ):
+            row.update(
+                {
+                    f"{p}collision": sep < 0,
+                    f"{p}nmac": sep < 15.0,
+                    f"{p}lowc": sep < 60.0,
+                    f"{p}min_sep_m": sep,
+                    f"{p}hmd_m": hmd.tolist(),
+                    f"{p}vmd_m": vmd.tolist(),
+                    f"{p}obstacle_entries": 0,
+                    f"{p}fence_entries": 0,
+                    f"{p}completed": bool(done),
+                    f"{p}path_m": path,
+                }
+            )
+        row.update(
+            {
+                "m_alerted": True,
+                "m_alert_t_s": float(rng.uniform(0, 5)),
+                "m_manoeuvred": bool(decisions),
+                "m_decisions": decisions,
+                "m_latency_ms": [float(x) for x in rng.lognormal(2.0, 0.5, len(decisions))],
+                "m_extra_path_m": m_path - u_path,
+            }
+        )
         rows.append(row)
     return rows
 
@@ -329,7 +373,7 @@ def test_summary_per_group_matches_the_estimators():
     lat = [x for r in rows for x in r["m_latency_ms"]]
     assert summary.overall.latency.p99_ms == pytest.approx(np.percentile(lat, 99))
     assert {s.kind for s in summary.overall.latency_by_kind} <= set(KINDS)
-    for by_kind in summary.overall.latency_by_kind:       # the measured compute, kind by kind
+    for by_kind in summary.overall.latency_by_kind:  # the measured compute, kind by kind
         measured = [ms for r in rows for k, ms in zip(r["m_decisions"], r["m_decide_wall_ms"]) if k == by_kind.kind]
         assert by_kind.compute_p99_ms == pytest.approx(np.percentile(measured, 99))
     assert summary.overall.m_collisions == sum(r["m_collision"] for r in rows)
@@ -339,8 +383,9 @@ def test_event_convergence_reads_the_rows_in_id_order():
     rows = synthetic_rows(200)
     ordered = sorted(rows, key=lambda r: r["id"])
     curve = event_convergence(rows, "lowc", checkpoints=[50, 200])
-    first = risk_ratio([r["m_lowc"] for r in ordered[:50]], [r["u_lowc"] for r in ordered[:50]],
-                       [r["weight"] for r in ordered[:50]])
+    first = risk_ratio(
+        [r["m_lowc"] for r in ordered[:50]], [r["u_lowc"] for r in ordered[:50]], [r["weight"] for r in ordered[:50]]
+    )
     assert list(curve.n) == [50, 200] and curve.ratio[0] == first.value and curve.hi[0] == first.hi
     with pytest.raises(StatsError, match="metric"):
         event_convergence(rows, "nmacs")
@@ -398,8 +443,13 @@ def test_report_writes_markdown_and_figures(tmp_path):
 
 def test_report_draws_the_worst_flights(tmp_path):
     asked = []
-    path = write_report(pa.Table.from_pylist(synthetic_rows()), tmp_path, spec_name="s", worst=3,
-                        flight_of=lambda i: asked.append(i) or synthetic_flight(i))
+    path = write_report(
+        pa.Table.from_pylist(synthetic_rows()),
+        tmp_path,
+        spec_name="s",
+        worst=3,
+        flight_of=lambda i: asked.append(i) or synthetic_flight(i),
+    )
     figures = sorted(p.name for p in tmp_path.glob("encounter_*.png"))
     assert len(asked) == 3 and figures == sorted(f"encounter_{i}.png" for i in asked)
     assert all(f"({f})" in path.read_text() for f in figures)
@@ -408,9 +458,9 @@ def test_report_draws_the_worst_flights(tmp_path):
 def test_report_flags_undefined_ratios(tmp_path):
     rows = synthetic_rows(200)
     for r in rows:
-        if r["stratum"] == "overtake":      # no NMAC with the system: RR 0, one-sided
+        if r["stratum"] == "overtake":  # no NMAC with the system: RR 0, one-sided
             r["m_nmac"] = r["m_collision"] = False
-        if r["stratum"] == "head-on":       # no NMAC either way: RR undefined
+        if r["stratum"] == "head-on":  # no NMAC either way: RR undefined
             r["m_nmac"] = r["u_nmac"] = r["m_collision"] = r["u_collision"] = False
     summary = summarise(rows)
     assert summary.stratum("overtake").nmac.risk_ratio.flag == "zero_with"
@@ -425,10 +475,20 @@ def test_report_sets_the_events_against_the_oracle(tmp_path):
     rows = synthetic_rows()
     drone = [r for r in rows if r["traffic"] == "drone" and r["m_collision"]]
     assert drone, "the synthetic rows need a mitigated drone-scale collision"
-    labels = [{"id": r["id"], "event": "collision", "avoidable": k % 2 == 0, "best_margin_m": 0.1, "witness": "",
-               "horizon_s": 12.0, "oracle_ms": 1.0} for k, r in enumerate(drone)]
+    labels = [
+        {
+            "id": r["id"],
+            "event": "collision",
+            "avoidable": k % 2 == 0,
+            "best_margin_m": 0.1,
+            "witness": "",
+            "horizon_s": 12.0,
+            "oracle_ms": 1.0,
+        }
+        for k, r in enumerate(drone)
+    ]
     text = write_report(rows, tmp_path, spec_name="s", labels=labels).read_text()
-    section = text[text.index("## What the oracle says"):]
+    section = text[text.index("## What the oracle says") :]
     n_avoidable = sum(lab["avoidable"] for lab in labels)
     assert f"| collision | {len(drone)} | {len(drone)} | {n_avoidable} | {len(drone) - n_avoidable} |" in section
     assert "## What the oracle says" not in write_report(rows, tmp_path / "none", spec_name="s").read_text()

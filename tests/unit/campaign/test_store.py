@@ -16,16 +16,53 @@ from companion.cli import main as cli_main
 
 def fake_row(i: int, *, u: bool, m: bool, traffic: str = "drone", weight: float = 1.0) -> dict:
     row = {name: None for name in SCHEMA.names}
-    row.update({"id": i, "stratum": "crossing/open", "source": "parametric", "traffic": traffic, "world": "open",
-                "mission": "open", "seed": 1, "spec_hash": "h", "weight": weight, "n_threats": 1})
+    row.update(
+        {
+            "id": i,
+            "stratum": "crossing/open",
+            "source": "parametric",
+            "traffic": traffic,
+            "world": "open",
+            "mission": "open",
+            "seed": 1,
+            "spec_hash": "h",
+            "weight": weight,
+            "n_threats": 1,
+        }
+    )
     for p, flag in (("u_", u), ("m_", m)):
-        row.update({f"{p}collision": flag, f"{p}nmac": flag, f"{p}lowc": flag, f"{p}min_sep_m": 1.0,
-                    f"{p}hmd_m": [1.0], f"{p}vmd_m": [0.5], f"{p}obstacle_entries": 0, f"{p}fence_entries": 0,
-                    f"{p}completed": True, f"{p}path_m": 100.0})
-    row.update({"m_alerted": m, "m_alert_t_s": math.nan, "m_manoeuvred": m, "m_decisions": ["evade"] if m else [],
-                "m_latency_ms": [60.0] if m else [], "m_decide_wall_ms": [5.0] if m else [], "m_extra_path_m": 0.0,
-                "noise_pos_m": 0.0, "noise_vel_m_s": 0.0, "update_hz": 2.0, "latency_s": 0.0, "dropout": 0.0,
-                "wall_ms": 100.0, "cpu_ms": 90.0})
+        row.update(
+            {
+                f"{p}collision": flag,
+                f"{p}nmac": flag,
+                f"{p}lowc": flag,
+                f"{p}min_sep_m": 1.0,
+                f"{p}hmd_m": [1.0],
+                f"{p}vmd_m": [0.5],
+                f"{p}obstacle_entries": 0,
+                f"{p}fence_entries": 0,
+                f"{p}completed": True,
+                f"{p}path_m": 100.0,
+            }
+        )
+    row.update(
+        {
+            "m_alerted": m,
+            "m_alert_t_s": math.nan,
+            "m_manoeuvred": m,
+            "m_decisions": ["evade"] if m else [],
+            "m_latency_ms": [60.0] if m else [],
+            "m_decide_wall_ms": [5.0] if m else [],
+            "m_extra_path_m": 0.0,
+            "noise_pos_m": 0.0,
+            "noise_vel_m_s": 0.0,
+            "update_hz": 2.0,
+            "latency_s": 0.0,
+            "dropout": 0.0,
+            "wall_ms": 100.0,
+            "cpu_ms": 90.0,
+        }
+    )
     return row
 
 
@@ -33,7 +70,7 @@ def test_open_writes_the_spec_and_refuses_another(tmp_path):
     store = CampaignStore(tmp_path / "c")
     digest = store.open(CampaignSpec(name="a"))
     assert (tmp_path / "c" / "spec.toml").exists()
-    assert store.open(CampaignSpec(name="a")) == digest          # reopening the same spec is fine
+    assert store.open(CampaignSpec(name="a")) == digest  # reopening the same spec is fine
     assert store.spec() == CampaignSpec(name="a")
     with pytest.raises(StoreError, match="another spec"):
         store.open(CampaignSpec(name="b"))
@@ -69,12 +106,12 @@ def test_a_pack_holds_the_same_rows_and_its_batches_stay_done(tmp_path):
     pack = store.pack()
     assert pack.name == "pack-0000000.parquet"
     assert not list(store.rows_dir.glob("part-*"))
-    assert repr(store.table().to_pylist()) == repr(before.to_pylist())   # (NaN equal to NaN)
+    assert repr(store.table().to_pylist()) == repr(before.to_pylist())  # (NaN equal to NaN)
     assert store.done_batches() == {0, 10, 30}
     assert CampaignRun(spec, store, workers=1).pending() == [(20, 10), (40, 10)]
     store.append(20, [fake_row(i, u=True, m=False) for i in range(20, 30)])
-    assert store.pack().name == "pack-0000020.parquet"          # a second pack beside the first
-    assert store.pack() is None                                  # nothing left to pack
+    assert store.pack().name == "pack-0000020.parquet"  # a second pack beside the first
+    assert store.pack() is None  # nothing left to pack
     assert store.table().column("id").to_pylist() == list(range(40))
     assert store.done_batches() == {0, 10, 20, 30}
 
@@ -94,7 +131,7 @@ def test_pending_batches_skip_the_stored_ones(tmp_path):
     assert run.pending() == [(0, 10), (10, 10), (20, 10), (30, 10), (40, 5)]
     store.append(10, [fake_row(i, u=True, m=False) for i in range(10, 20)])
     assert run.pending() == [(0, 10), (20, 10), (30, 10), (40, 5)]
-    assert run._contiguous(store.done_batches()) == 0           # a gap at 0: nothing contiguous
+    assert run._contiguous(store.done_batches()) == 0  # a gap at 0: nothing contiguous
     store.append(0, [fake_row(i, u=True, m=False) for i in range(10)])
     assert run._contiguous(store.done_batches()) == 20
     assert CampaignRun(spec, store, workers=1, max_pairs=25).pending() == [(20, 5)]
@@ -107,7 +144,8 @@ def test_a_killed_run_logs_its_start_and_why_it_stopped(tmp_path, monkeypatch):
     run = CampaignRun(spec, store, workers=1)
 
     def submit(first, n):
-        raise KeyboardInterrupt                                  # Ctrl-C while the batches go out
+        raise KeyboardInterrupt  # Ctrl-C while the batches go out
+
     monkeypatch.setattr(run, "_executor", lambda: (submit, lambda: None))
     with pytest.raises(KeyboardInterrupt):
         run.run()
@@ -119,19 +157,25 @@ def test_a_killed_run_logs_its_start_and_why_it_stopped(tmp_path, monkeypatch):
 def test_verdicts_per_traffic_kind(tmp_path):
     store = CampaignStore(tmp_path / "c")
     store.open(CampaignSpec())
-    store.append(0, [fake_row(i, u=True, m=i % 10 == 0) for i in range(400)]
-                 + [fake_row(i, u=i % 2 == 0, m=False, traffic="rotorcraft") for i in range(400, 420)])
+    store.append(
+        0,
+        [fake_row(i, u=True, m=i % 10 == 0) for i in range(400)]
+        + [fake_row(i, u=i % 2 == 0, m=False, traffic="rotorcraft") for i in range(400, 420)],
+    )
     verdicts = convergence_verdicts(store.table(), 0.05)
     assert set(verdicts) == {"drone nmac", "drone lowc", "rotorcraft nmac", "rotorcraft lowc"}
-    assert not verdicts["rotorcraft nmac"].converged            # 20 pairs are not enough
+    assert not verdicts["rotorcraft nmac"].converged  # 20 pairs are not enough
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["campaign", "run", "nope.toml", "--out", "x"], "nope.toml: no such file"),
-    (["campaign", "run", "SPEC", "--out", "x", "--workers", "0"], "--workers: must be >= 1"),
-    (["campaign", "status", "DIR"], "not a campaign directory"),
-    (["campaign", "pack", "DIR"], "not a campaign directory"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["campaign", "run", "nope.toml", "--out", "x"], "nope.toml: no such file"),
+        (["campaign", "run", "SPEC", "--out", "x", "--workers", "0"], "--workers: must be >= 1"),
+        (["campaign", "status", "DIR"], "not a campaign directory"),
+        (["campaign", "pack", "DIR"], "not a campaign directory"),
+    ],
+)
 def test_command_errors_name_what_is_wrong(tmp_path, capsys, argv, message):
     spec = tmp_path / "spec.toml"
     spec.write_text('name = "x"\n')
@@ -163,7 +207,6 @@ def test_a_part_written_before_cpu_ms_reads_with_nulls(tmp_path):
     assert cpu[:3] == [None] * 3 and cpu[3:] == [90.0] * 3
 
 
-
 def test_rows_of_other_code_are_not_resumed(tmp_path, monkeypatch):
     """A campaign is one version of the code: reopening its directory with other code is refused,
     naming both versions and the commit to pin; the same code resumes."""
@@ -173,11 +216,11 @@ def test_rows_of_other_code_are_not_resumed(tmp_path, monkeypatch):
     monkeypatch.setattr(store_module, "code_hash", lambda: "c0de00000001")
     monkeypatch.setattr(store_module, "code_version", lambda: "abc1234")
     store.open(CampaignSpec())
-    store.log_run({"event": "start"})                         # a run killed before its end record
+    store.log_run({"event": "start"})  # a run killed before its end record
     store.append(0, [fake_row(0, u=True, m=False)])
-    assert store.open(CampaignSpec())                          # the same code: resumed
+    assert store.open(CampaignSpec())  # the same code: resumed
     monkeypatch.setattr(store_module, "code_version", lambda: "fed4321")
-    assert store.open(CampaignSpec())                          # another commit, the same flight code
+    assert store.open(CampaignSpec())  # another commit, the same flight code
     monkeypatch.setattr(store_module, "code_hash", lambda: "c0de00000002")
     with pytest.raises(StoreError, match=r"code c0de00000001, at commit abc1234.*code c0de00000002"):
         store.open(CampaignSpec())
@@ -193,7 +236,7 @@ def test_the_code_hash_follows_the_flight_code_not_the_storage(tmp_path):
     before = code_hash(tmp_path)
     (tmp_path / "companion/campaign/store.py").write_text("a = 2\n")
     (tmp_path / "companion/commands/c.py").write_text("a = 2\n")
-    assert code_hash(tmp_path) == before                       # storage and commands make no row
+    assert code_hash(tmp_path) == before  # storage and commands make no row
     (tmp_path / "companion/flight/x.py").write_text("a = 2\n")
     assert code_hash(tmp_path) != before
 

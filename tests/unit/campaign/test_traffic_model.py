@@ -12,15 +12,32 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chisquare
 
-from companion.campaign.traffic_model import (MODEL_FILES, MODELS_ENV, EncounterModel, TrafficModelError,
-                                              load_model, models_directory, read_model, sample_dynamic,
-                                              sample_initial)
-from companion.campaign.traffic_track import (FT_TO_M, KT_TO_M_S, dediscretize, dynamic_values, integrate,
-                                              resample_mask, sample_track)
+from companion.campaign.traffic_model import (
+    MODEL_FILES,
+    MODELS_ENV,
+    EncounterModel,
+    TrafficModelError,
+    load_model,
+    models_directory,
+    read_model,
+    sample_dynamic,
+    sample_initial,
+)
+from companion.campaign.traffic_track import (
+    FT_TO_M,
+    KT_TO_M_S,
+    dediscretize,
+    dynamic_values,
+    integrate,
+    resample_mask,
+    sample_track,
+)
 
 DIRECTORY = models_directory()
-pytestmark = pytest.mark.skipif(not (DIRECTORY / MODEL_FILES["rotorcraft"]).is_file(),
-                                reason=f"encounter models not in {DIRECTORY} (set {MODELS_ENV})")
+pytestmark = pytest.mark.skipif(
+    not (DIRECTORY / MODEL_FILES["rotorcraft"]).is_file(),
+    reason=f"encounter models not in {DIRECTORY} (set {MODELS_ENV})",
+)
 KINDS = tuple(MODEL_FILES)
 
 
@@ -38,7 +55,7 @@ def _exact_marginals(model: EncounterModel) -> list[np.ndarray]:
     """Each initial variable's marginal, by enumerating the joint as the product of the
     conditionals (counts normalised per column), independent of the sampler."""
     net = model.initial
-    assert net.order == tuple(range(net.n))      # the chain G -> A -> ... -> psi-dot
+    assert net.order == tuple(range(net.n))  # the chain G -> A -> ... -> psi-dot
     joint = _configurations(net.bins)
     p = np.ones(joint.shape[0])
     for i in net.order:
@@ -52,7 +69,7 @@ def _exact_marginals(model: EncounterModel) -> list[np.ndarray]:
 def _chi_square_p(observed: np.ndarray, probabilities: np.ndarray) -> float:
     """Chi-square p value, the cells expecting fewer than 5 merged into one (then into the
     smallest other cell if still below 5)."""
-    assert observed[probabilities == 0].sum() == 0           # never a bin of probability 0
+    assert observed[probabilities == 0].sum() == 0  # never a bin of probability 0
     expected = probabilities / probabilities.sum() * observed.sum()
     small = expected < 5
     obs, exp = list(observed[~small]), list(expected[~small])
@@ -68,6 +85,7 @@ def _chi_square_p(observed: np.ndarray, probabilities: np.ndarray) -> float:
 
 # ---------------------------------------------------------------------------- reading
 
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_the_real_files_read_with_consistent_shapes(kind):
     model = load_model(kind)
@@ -79,7 +97,7 @@ def test_the_real_files_read_with_consistent_shapes(kind):
     for net in (initial, transition):
         position = {v: k for k, v in enumerate(net.order)}
         assert sorted(net.order) == list(range(net.n))
-        assert all(position[p] < position[i] for i in range(net.n) for p in net.parents[i])   # acyclic
+        assert all(position[p] < position[i] for i in range(net.n) for p in net.parents[i])  # acyclic
     for i, counts in enumerate(initial.counts):
         assert counts.shape == (initial.bins[i], np.prod(initial.bins[list(initial.parents[i])]))
     assert [c.shape[1] for c in transition.counts[:7]] == [0] * 7
@@ -89,7 +107,7 @@ def test_the_real_files_read_with_consistent_shapes(kind):
     assert model.boundaries[2].tolist() == [50, 500, 1200, 3000, 5000]
     assert model.boundaries[5][[0, -1]].tolist() == [-2000, 2000]
     assert model.resample_rates.shape == (7,) and model.resample_rates[:2].tolist() == [0, 0]
-    assert load_model(kind) is model                         # parsed once per process
+    assert load_model(kind) is model  # parsed once per process
 
 
 def test_the_initial_counts_form_one_joint_table(model):
@@ -97,7 +115,7 @@ def test_the_initial_counts_form_one_joint_table(model):
     and the parents' column convention of ``parent_index``."""
     net = model.initial
     for i in range(1, 5):
-        joint = _configurations(net.bins[:i])                    # every configuration of variables < i
+        joint = _configurations(net.bins[:i])  # every configuration of variables < i
         values = np.zeros((joint.shape[0], net.n), dtype=int)
         values[:, :i] = joint
         child = net.counts[i].sum(axis=0)[net.parent_index(i, values)]
@@ -107,6 +125,7 @@ def test_the_initial_counts_form_one_joint_table(model):
 
 
 # ---------------------------------------------------------------------------- sampling
+
 
 def test_the_initial_sampler_reproduces_the_models_marginals(model):
     samples = sample_initial(model, np.random.default_rng(20240601), size=20_000)
@@ -126,7 +145,7 @@ def test_a_single_initial_sample_is_one_row_of_bins(model):
 
 def test_one_transition_step_follows_the_transition_counts(model):
     rng = np.random.default_rng(11)
-    start = np.array([0, 3, 1, 2, 2, 3, 3])          # CONUS, other airspace, 500-1200 ft, steady
+    start = np.array([0, 3, 1, 2, 2, 3, 3])  # CONUS, other airspace, 500-1200 ft, steady
     steps = np.array([sample_dynamic(model, start, 2, rng)[1] for _ in range(3000)])
     net = model.transition
     state = np.concatenate([start, start[4:]])
@@ -163,7 +182,7 @@ def test_resampling_in_an_unchanged_bin_happens_at_the_resample_rate(model):
     draws, stays = np.zeros(3, int), np.zeros(3, int)
     for bins in _dynamics(model, 8, 60, 200):
         mask = resample_mask(bins, rates, rng)
-        assert mask[0].all() and mask[1:][bins[1:] != bins[:-1]].all()   # a new bin is a new value
+        assert mask[0].all() and mask[1:][bins[1:] != bins[:-1]].all()  # a new bin is a new value
         unchanged = bins[1:] == bins[:-1]
         draws += (mask[1:] & unchanged).sum(axis=0)
         stays += unchanged.sum(axis=0)
@@ -181,8 +200,8 @@ def test_values_are_held_between_draws_and_redrawn_at_the_rate(model):
         high = np.column_stack([model.boundaries[i][bins[:, k] + 1] for k, i in enumerate(model.dynamic)])
         assert np.all((values >= low) & (values <= high))
         zero = (low < 0) & (high > 0)
-        assert np.all(values[zero] == 0)                               # the zero bin is exactly 0
-        unchanged = (bins[1:] == bins[:-1]) & ~zero[1:]                # where only a resample changes it
+        assert np.all(values[zero] == 0)  # the zero bin is exactly 0
+        unchanged = (bins[1:] == bins[:-1]) & ~zero[1:]  # where only a resample changes it
         changes += ((values[1:] != values[:-1]) & unchanged).sum(axis=0)
         stays += unchanged.sum(axis=0)
     for k in range(3):
@@ -190,6 +209,7 @@ def test_values_are_held_between_draws_and_redrawn_at_the_rate(model):
 
 
 # ---------------------------------------------------------------------------- dediscretize
+
 
 @st.composite
 def _edges_and_bins(draw):
@@ -216,15 +236,16 @@ def test_dediscretize_gives_discrete_codes_and_rejects_bins_out_of_range():
     rng = np.random.default_rng(0)
     np.testing.assert_array_equal(dediscretize([0, 4], None, rng), [1.0, 5.0])
     values = dediscretize(np.full(2000, 6), np.array([-2000, -1250, -750, -250, 250, 750, 1250, 2000.0]), rng)
-    assert values.min() >= 1250 and values.max() <= 2000 and values.std() > 100   # the outer bin, uniform
+    assert values.min() >= 1250 and values.max() <= 2000 and values.std() > 100  # the outer bin, uniform
     with pytest.raises(TrafficModelError, match="bins outside"):
         dediscretize([5], np.arange(6.0), rng)
 
 
 # ---------------------------------------------------------------------------- tracks
 
+
 def test_integration_is_forward_euler_from_the_previous_point():
-    rates = np.tile([1.0, 600.0, 90.0], (5, 1))          # +1 kt/s, +600 ft/min, +90 deg/s
+    rates = np.tile([1.0, 600.0, 90.0], (5, 1))  # +1 kt/s, +600 ft/min, +90 deg/s
     speed_kt, heading_deg, altitude_ft, pos, vel = integrate(20.0, 1000.0, 0.0, rates, 1.0)
     np.testing.assert_allclose(speed_kt, [20, 21, 22, 23, 24])
     np.testing.assert_allclose(heading_deg, [0, 90, 180, 270, 360])
@@ -251,13 +272,14 @@ def test_tracks_stay_in_the_models_bounds_and_integrate_consistently(model, dt_s
         np.testing.assert_allclose(track.pos_neu_m[0], 0.0)
         np.testing.assert_allclose(np.diff(track.pos_neu_m, axis=0), track.vel_neu_m_s[:-1] * dt_s, atol=1e-9)
         np.testing.assert_allclose(np.hypot(*track.vel_neu_m_s[:, :2].T), track.speed_kt * KT_TO_M_S)
-        np.testing.assert_allclose(track.pos_neu_m[:, 2], (track.altitude_ft_agl - track.altitude_ft_agl[0]) * FT_TO_M,
-                                   atol=1e-9)
+        np.testing.assert_allclose(
+            track.pos_neu_m[:, 2], (track.altitude_ft_agl - track.altitude_ft_agl[0]) * FT_TO_M, atol=1e-9
+        )
         assert np.all((track.heading_deg >= 0) & (track.heading_deg < 360))
-        assert np.all(np.abs(np.diff(track.speed_kt)) <= 2.0 * dt_s + 1e-9)                # |v-dot| <= 2 kt/s
-        assert np.all(np.abs(np.diff(track.altitude_ft_agl)) <= 2000 / 60 * dt_s + 1e-9)   # |h-dot| <= 2000 ft/min
+        assert np.all(np.abs(np.diff(track.speed_kt)) <= 2.0 * dt_s + 1e-9)  # |v-dot| <= 2 kt/s
+        assert np.all(np.abs(np.diff(track.altitude_ft_agl)) <= 2000 / 60 * dt_s + 1e-9)  # |h-dot| <= 2000 ft/min
         turn = (np.diff(track.heading_deg) + 180) % 360 - 180
-        assert np.all(np.abs(turn) <= 8.0 * dt_s + 1e-9)                                   # |psi-dot| <= 8 deg/s
+        assert np.all(np.abs(turn) <= 8.0 * dt_s + 1e-9)  # |psi-dot| <= 8 deg/s
         heading = np.degrees(np.arctan2(track.vel_neu_m_s[:, 1], track.vel_neu_m_s[:, 0])) % 360
         np.testing.assert_allclose(np.cos(np.radians(heading - track.heading_deg)), 1.0, atol=1e-9)
 
@@ -274,7 +296,7 @@ def test_a_track_is_determined_by_its_seed_and_takes_its_initial_heading(model):
 
 def test_a_track_the_bounds_cannot_hold_gives_up_naming_the_model(model):
     backwards = list(model.boundaries)
-    backwards[3] = -model.boundaries[3][::-1]              # every speed negative: never inside
+    backwards[3] = -model.boundaries[3][::-1]  # every speed negative: never inside
     impossible = dataclasses.replace(model, boundaries=tuple(backwards))
     with pytest.raises(TrafficModelError, match=f"{model.name}.*in 5 samples"):
         sample_track(impossible, np.random.default_rng(0), max_attempts=5)
@@ -283,6 +305,7 @@ def test_a_track_the_bounds_cannot_hold_gives_up_naming_the_model(model):
 
 
 # ---------------------------------------------------------------------------- broken files
+
 
 @pytest.fixture(scope="module")
 def good_lines() -> list[str]:
@@ -302,15 +325,16 @@ def _replace(lines: list[str], section: str, offset: int, text: str) -> list[str
 
 
 def test_a_truncated_file_names_the_missing_sections(tmp_path, good_lines):
-    cut = good_lines[:good_lines.index("# N_transition") + 1]
-    with pytest.raises(TrafficModelError, match="bad_model.txt.*missing or empty section.*N_transition, boundaries, "
-                                                 "resample_rates"):
+    cut = good_lines[: good_lines.index("# N_transition") + 1]
+    with pytest.raises(
+        TrafficModelError, match="bad_model.txt.*missing or empty section.*N_transition, boundaries, resample_rates"
+    ):
         read_model(_write(tmp_path, cut))
 
 
 def test_a_file_cut_inside_the_counts_names_the_section_and_the_counts(tmp_path, good_lines):
     line = good_lines[good_lines.index("# N_initial") + 1]
-    short = _replace(good_lines, "N_initial", 0, line[:len(line) // 2].rsplit(" ", 1)[0])
+    short = _replace(good_lines, "N_initial", 0, line[: len(line) // 2].rsplit(" ", 1)[0])
     with pytest.raises(TrafficModelError, match=r"section 'N_initial': \d+ numbers, expected 183145"):
         read_model(_write(tmp_path, short))
 
@@ -330,14 +354,22 @@ def test_a_wrong_count_of_numbers_names_the_section(tmp_path, good_lines):
         read_model(_write(tmp_path, longer))
 
 
-@pytest.mark.parametrize("section, offset, text, message", [
-    ("G_initial", 6, "1 0 0 0 0 0 0", r"'G_initial': is not a DAG: a cycle among variables \[0, 1, 2, 3, 4, 5, 6\]"),
-    ("G_initial", 2, "0 0 0 1 1 1", r"'G_initial', line 6: is not square: 6 entries in a row, expected 7"),
-    ("r_initial", 0, "5 4 4 8 5 7", r"'r_initial', line 12: 6 entries, expected 7"),
-    ("G_transition", 0, "0 0 0 0 0 0 0 0 0 2", r"'G_transition', line 18: entries must be 0 or 1"),
-    ("boundaries", 3, "0 30 60 90 120 140 165 250", r"'boundaries', line 36: variable 'v': 8 edges, expected 9"),
-    ("resample_rates", 0, "0 0 0.01 0.01 0.05 0.04", r"'resample_rates', line 41: 6 entries, expected 7"),
-])
+@pytest.mark.parametrize(
+    "section, offset, text, message",
+    [
+        (
+            "G_initial",
+            6,
+            "1 0 0 0 0 0 0",
+            r"'G_initial': is not a DAG: a cycle among variables \[0, 1, 2, 3, 4, 5, 6\]",
+        ),
+        ("G_initial", 2, "0 0 0 1 1 1", r"'G_initial', line 6: is not square: 6 entries in a row, expected 7"),
+        ("r_initial", 0, "5 4 4 8 5 7", r"'r_initial', line 12: 6 entries, expected 7"),
+        ("G_transition", 0, "0 0 0 0 0 0 0 0 0 2", r"'G_transition', line 18: entries must be 0 or 1"),
+        ("boundaries", 3, "0 30 60 90 120 140 165 250", r"'boundaries', line 36: variable 'v': 8 edges, expected 9"),
+        ("resample_rates", 0, "0 0 0.01 0.01 0.05 0.04", r"'resample_rates', line 41: 6 entries, expected 7"),
+    ],
+)
 def test_structural_errors_name_the_section_and_what_is_wrong(tmp_path, good_lines, section, offset, text, message):
     with pytest.raises(TrafficModelError, match=message):
         read_model(_write(tmp_path, _replace(good_lines, section, offset, text)))
@@ -357,6 +389,8 @@ def test_the_models_directory_comes_from_the_argument_then_the_environment(tmp_p
     assert models_directory() == tmp_path.resolve()
     assert models_directory(tmp_path / "x") == (tmp_path / "x").resolve()
     monkeypatch.delenv(MODELS_ENV)
-    assert models_directory() == (Path(__file__).resolve().parents[3] / "companion" / "data"
-                                  / "encounter_models").resolve()
+    assert (
+        models_directory()
+        == (Path(__file__).resolve().parents[3] / "companion" / "data" / "encounter_models").resolve()
+    )
     assert os.environ.get(MODELS_ENV) is None

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.fleet.clock_sync import ClockOffset, exchange
 
@@ -14,7 +15,7 @@ delay = st.floats(0.0, 0.5)
 @settings(max_examples=300, deadline=None)
 @given(st.floats(-100.0, 100.0), delay, delay, st.floats(0.0, 1.0), st.floats(0.0, 1e6))
 def test_the_true_offset_lies_within_half_the_round_trip(offset, there, back, hold, t1):
-    t2 = t1 + there + offset                  # their clock = ours + offset
+    t2 = t1 + there + offset  # their clock = ours + offset
     t3 = t2 + hold
     t4 = t3 - offset + back
     est, rtt = exchange(t1, t2, t3, t4)
@@ -40,8 +41,8 @@ def test_before_any_exchange_the_offset_is_zero_and_unbounded():
 
 def test_contradictory_stamps_and_old_exchanges_are_dropped():
     clock = ClockOffset(window_s=30.0)
-    clock.observe(0.0, 5.0, 5.0, -1.0)                 # a negative round trip: ignored
+    clock.observe(0.0, 5.0, 5.0, -1.0)  # a negative round trip: ignored
     assert math.isinf(clock.bound_s)
-    clock.observe(0.0, 1.0, 1.1, 0.2)                  # rtt 0.1
-    clock.observe(100.0, 101.0, 101.1, 100.6)          # rtt 0.5, 100 s later: the first is forgotten
+    clock.observe(0.0, 1.0, 1.1, 0.2)  # rtt 0.1
+    clock.observe(100.0, 101.0, 101.1, 100.6)  # rtt 0.5, 100 s later: the first is forgotten
     assert math.isclose(clock.bound_s, 0.25)

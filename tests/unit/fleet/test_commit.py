@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.fleet.commit import fleet_check, refuses
 from companion.fleet.peers import VehicleThreat
@@ -16,13 +17,19 @@ step = st.floats(-4.0, 4.0, allow_nan=False)
 
 
 def vehicle(times, ned, radius=3.1, expires=math.inf) -> VehicleThreat:
-    return VehicleThreat("uav2", 2, np.asarray(times, float), np.asarray(ned, float), radius, float(times[0]),
-                         0.0, 0.0, expires)
+    return VehicleThreat(
+        "uav2", 2, np.asarray(times, float), np.asarray(ned, float), radius, float(times[0]), 0.0, 0.0, expires
+    )
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.tuples(coord, coord, coord), st.tuples(step, step, step), st.tuples(coord, coord, coord),
-       st.lists(st.tuples(step, step, step), min_size=1, max_size=12), st.sampled_from([0.05, 0.2, 0.5]))
+@given(
+    st.tuples(coord, coord, coord),
+    st.tuples(step, step, step),
+    st.tuples(coord, coord, coord),
+    st.lists(st.tuples(step, step, step), min_size=1, max_size=12),
+    st.sampled_from([0.05, 0.2, 0.5]),
+)
 def test_never_clear_where_the_exact_closest_approach_to_its_polyline_intrudes(p0, v, c0, moves, check_step_s):
     """The peer's samples every 0.5 s (a polyline); the candidate a straight line: the check at
     any step no longer than the samples' never says clear where a dense scan finds an intrusion."""
@@ -40,7 +47,7 @@ def test_never_clear_where_the_exact_closest_approach_to_its_polyline_intrudes(p
 
 
 def test_a_head_on_trajectory_conflicts_and_an_offset_one_is_clear():
-    class Line:                                   # a trajectory: north at 4 m/s from the origin
+    class Line:  # a trajectory: north at 4 m/s from the origin
         duration_s = 20.0
 
         def __init__(self, east):
@@ -55,7 +62,7 @@ def test_a_head_on_trajectory_conflicts_and_an_offset_one_is_clear():
     kwargs = dict(horizon_s=15.0, step_s=0.2, inflation_m=2.0)
     head_on = fleet_check(Line(0.0), 0.0, 0.0, [other], **kwargs)
     assert not head_on.clear[0] and head_on.conflicts[0].threat_id == "fleet/uav2"
-    assert 7.0 < head_on.conflicts[0].t_s < 10.0                 # they meet at 10 s, 5.1 m earlier
+    assert 7.0 < head_on.conflicts[0].t_s < 10.0  # they meet at 10 s, 5.1 m earlier
     assert fleet_check(Line(8.0), 0.0, 0.0, [other], **kwargs).clear[0]
     # a higher id seen only 4 s ahead: the meeting at 10 s is not ours to avoid yet
     assert fleet_check(Line(0.0), 0.0, 0.0, [vehicle(other.times_s, other.ned_m, expires=4.0)], **kwargs).clear[0]
@@ -67,8 +74,8 @@ def _result(clear: bool, clearance: float) -> BatchCheck:
 
 def test_the_delay_check_refuses_only_what_got_worse_during_the_wait():
     assert not refuses(_result(True, 5.0), _result(True, 3.0))
-    assert refuses(_result(True, 5.0), _result(False, -0.1))         # a new conflict appeared
-    assert not refuses(_result(False, -1.0), _result(False, -1.2))   # an accepted intrusion, no worse
+    assert refuses(_result(True, 5.0), _result(False, -0.1))  # a new conflict appeared
+    assert not refuses(_result(False, -1.0), _result(False, -1.2))  # an accepted intrusion, no worse
     assert refuses(_result(False, -1.0), _result(False, -2.0))
 
 

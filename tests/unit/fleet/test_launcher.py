@@ -11,15 +11,21 @@ import sys
 
 import numpy as np
 import pytest
+from support import REPO_ROOT
 
 from companion.errors import ConfigError, MissionError
 from companion.fleet.launcher import Fleet
-from companion.fleet.missions import (crossing_missions, head_on_missions, mission_home, planned_length_m,
-                                      select_missions, write_missions)
+from companion.fleet.missions import (
+    crossing_missions,
+    head_on_missions,
+    mission_home,
+    planned_length_m,
+    select_missions,
+    write_missions,
+)
 from companion.mission import load_mission_file, mission_to_local
 from companion.sitl.processes import spawn
 from heli_common.frames import LocalFrame
-from support import REPO_ROOT
 
 FLEET_MISSIONS = REPO_ROOT / "mission_files" / "fleet"
 CENTRE = (47.397742, 8.545594, 488.0)
@@ -27,19 +33,30 @@ CENTRE = (47.397742, 8.545594, 488.0)
 
 def companion_cli(*args: str) -> subprocess.CompletedProcess:
     env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
-    return subprocess.run([sys.executable, "-m", "companion.cli", *args], capture_output=True, text=True,
-                          timeout=60, env=env, cwd=str(REPO_ROOT))
+    return subprocess.run(
+        [sys.executable, "-m", "companion.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+        cwd=str(REPO_ROOT),
+    )
 
 
-@pytest.mark.parametrize("args, option", [
-    (["--vehicles", "0", "--mission-dir", "mission_files/fleet/crossing3"], "--vehicles"),
-    (["--vehicles", "2", "--mission-dir", "no/such/dir"], "--mission-dir"),
-    (["--vehicles", "4", "--mission-dir", "mission_files/fleet/crossing3"], "--mission-dir"),
-    (["--vehicles", "2", "--mission-dir", "mission_files/fleet/crossing3", "--speedup", "0"], "--speedup"),
-    (["--vehicles", "2", "--mission-dir", "mission_files/fleet/crossing3", "--speedup", "-2"], "--speedup"),
-    (["--vehicles", "2", "--mission-dir", "mission_files/fleet/crossing3", "--trajectory-delay-ms", "-5"],
-     "--trajectory-delay-ms"),
-])
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (["--vehicles", "0", "--mission-dir", "mission_files/fleet/crossing3"], "--vehicles"),
+        (["--vehicles", "2", "--mission-dir", "no/such/dir"], "--mission-dir"),
+        (["--vehicles", "4", "--mission-dir", "mission_files/fleet/crossing3"], "--mission-dir"),
+        (["--vehicles", "2", "--mission-dir", "mission_files/fleet/crossing3", "--speedup", "0"], "--speedup"),
+        (["--vehicles", "2", "--mission-dir", "mission_files/fleet/crossing3", "--speedup", "-2"], "--speedup"),
+        (
+            ["--vehicles", "2", "--mission-dir", "mission_files/fleet/crossing3", "--trajectory-delay-ms", "-5"],
+            "--trajectory-delay-ms",
+        ),
+    ],
+)
 def test_fleet_up_bad_arguments_are_one_line_naming_the_option(args, option, tmp_path):
     done = companion_cli("fleet", "up", "--logs", str(tmp_path / "logs"), *args)
     assert done.returncode == 2, done.stderr
@@ -47,7 +64,7 @@ def test_fleet_up_bad_arguments_are_one_line_naming_the_option(args, option, tmp
     assert len(lines) == 1, done.stderr
     assert lines[0].startswith("companion: error: ") and option in lines[0]
     assert "Traceback" not in done.stderr
-    assert not (tmp_path / "logs").exists()          # nothing started
+    assert not (tmp_path / "logs").exists()  # nothing started
 
 
 def test_too_few_missions_names_the_directory_and_the_count(tmp_path):
@@ -90,7 +107,7 @@ def test_the_fleet_missions_cross_at_one_point_at_one_altitude(directory, count)
         plan = load_mission_file(path)
         plan.validate()
         home = mission_home(path)
-        assert home[2] == CENTRE[2]                                   # one ground level, one altitude
+        assert home[2] == CENTRE[2]  # one ground level, one altitude
         local = mission_to_local(plan, home_lla=home)
         assert local.end_action == "rtl"
         kinds = [w.kind for w in local.waypoints]
@@ -133,12 +150,12 @@ def test_fleet_command_lines(tmp_path):
     sim = fleet.sim_command(v)
     assert sim[:3] == ["sim_vehicle.cli", "--instance", "1"]
     home = sim[sim.index("--home") + 1].split(",")
-    assert [float(x) for x in home] == pytest.approx([*mission_home(files[1]), 300.0])   # facing its first leg
+    assert [float(x) for x in home] == pytest.approx([*mission_home(files[1]), 300.0])  # facing its first leg
     assert sim[sim.index("--port") + 1] == "40001" and sim.count("--out") == 1
     assert sim[sim.index("--out") + 1] == "127.0.0.1:40002"
     assert sim[sim.index("--tlog") + 1] == str(tmp_path / "sim1.tlog")
     assert sim[sim.index("--speedup") + 1] == "2" and sim[sim.index("--seed") + 1] == "8"
-    assert sim[sim.index("--config") + 1] == str(tmp_path / "sim_hold_start.toml")      # the start gate
+    assert sim[sim.index("--config") + 1] == str(tmp_path / "sim_hold_start.toml")  # the start gate
     comp = fleet.companion_command(v)
     assert comp[:4] == ["companion.cli", "run", "--instance", "1"]
     assert comp[comp.index("--connect") + 1] == "udpin://127.0.0.1:40002"
@@ -147,7 +164,7 @@ def test_fleet_command_lines(tmp_path):
     assert comp[comp.index("--record") + 1] == str(tmp_path / "uav2.jsonl")
     assert comp[comp.index("--time-scale") + 1] == "2"
     assert "--no-fleet" in comp and not any("delay" in arg for arg in comp)
-    assert fleet.companion_env()["HELI_COMPANION_TEST_FLEET_DELAY_MS"] == "150"      # not an option of run
+    assert fleet.companion_env()["HELI_COMPANION_TEST_FLEET_DELAY_MS"] == "150"  # not an option of run
     assert v.sysid == 2 and fleet.paths["vehicles"][2]["tlog"] == tmp_path / "sim1.tlog"
     shared = Fleet(files, tmp_path, gcs_out="127.0.0.1:14550", sync_start=False, face_first_leg=False)
     assert "--config" not in shared.sim_command(shared.vehicles[0])
@@ -173,13 +190,15 @@ class FakeFleet(Fleet):
     """The fleet's process handling on stand-in processes: each "companion" runs until SIGINT
     (then prints a summary and exits 130), each "simulator" and the router until SIGTERM."""
 
-    COMPANION = ("import json, signal, sys, time\n"
-                 "def stop(*_):\n"
-                 "    print(json.dumps({'outcome': 'interrupted', 'legs_reached': 1, 'legs_planned': 2}), flush=True)\n"
-                 "    sys.exit(130)\n"
-                 "signal.signal(signal.SIGINT, stop)\n"
-                 "while True: time.sleep(0.05)\n")
-    DONE = ("import json\nprint(json.dumps({'outcome': 'completed', 'legs_reached': 2, 'legs_planned': 2}))\n")
+    COMPANION = (
+        "import json, signal, sys, time\n"
+        "def stop(*_):\n"
+        "    print(json.dumps({'outcome': 'interrupted', 'legs_reached': 1, 'legs_planned': 2}), flush=True)\n"
+        "    sys.exit(130)\n"
+        "signal.signal(signal.SIGINT, stop)\n"
+        "while True: time.sleep(0.05)\n"
+    )
+    DONE = "import json\nprint(json.dumps({'outcome': 'completed', 'legs_reached': 2, 'legs_planned': 2}))\n"
     ROUTER = "import time\nprint('zenoh router listening on x', flush=True)\nwhile True: time.sleep(0.05)\n"
 
     def __init__(self, *a, finish=False, **k):
@@ -206,7 +225,7 @@ def test_stop_interrupts_the_companions_then_ends_everything(tmp_path):
     assert not result.completed and "NOT all missions completed" in result.table()
     procs = [fleet.router] + [v.sim for v in fleet.vehicles] + [v.companion for v in fleet.vehicles]
     assert all(p.poll() is not None for p in procs)
-    assert fleet.stop() is result                     # idempotent
+    assert fleet.stop() is result  # idempotent
 
 
 def test_wait_returns_once_every_companion_has_exited(tmp_path):
@@ -238,7 +257,7 @@ class FakeVehicle:
         self.mav.robust_parsing = True
         self.waiting = False
         self.prearm_fail = 1.0
-        self.param_sets: list[tuple[float, bool]] = []     # (value, was waiting then)
+        self.param_sets: list[tuple[float, bool]] = []  # (value, was waiting then)
         self.peer = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -255,16 +274,19 @@ class FakeVehicle:
                     if msg.get_type() == "PARAM_SET" and msg.target_system == self.sysid:
                         self.prearm_fail = msg.param_value
                         self.param_sets.append((msg.param_value, self.waiting))
-                        self.sock.sendto(self.mav.param_value_encode(b"SIM_PREARM_FAIL", msg.param_value, 2, 1, 0)
-                                         .pack(self.mav), self.peer)
+                        self.sock.sendto(
+                            self.mav.param_value_encode(b"SIM_PREARM_FAIL", msg.param_value, 2, 1, 0).pack(self.mav),
+                            self.peer,
+                        )
             except OSError:
                 pass
             if self.peer is not None and time.monotonic() - last > 0.1:
                 last = time.monotonic()
                 mode = 4 if self.waiting else 0
                 self.sock.sendto(self.mav.heartbeat_encode(4, 3, 1, mode, 3).pack(self.mav), self.peer)
-                self.sock.sendto(self.mav.sys_status_encode(1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(self.mav),
-                                 self.peer)
+                self.sock.sendto(
+                    self.mav.sys_status_encode(1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0).pack(self.mav), self.peer
+                )
 
     def close(self) -> None:
         self._stop.set()
@@ -281,7 +303,7 @@ def test_the_start_gate_releases_every_vehicle_once_all_wait_to_arm():
     try:
         gate = StartGate([(v.sysid, v.port, lambda: True) for v in vehicles], speedup=1.0).start()
         vehicles[0].waiting = True
-        time.sleep(1.0)                                   # the other is not ready: held
+        time.sleep(1.0)  # the other is not ready: held
         assert all(not v.param_sets for v in vehicles)
         assert gate.waiting() == [1]
         vehicles[1].waiting = True
@@ -294,7 +316,7 @@ def test_the_start_gate_releases_every_vehicle_once_all_wait_to_arm():
         info = gate.describe()
         assert info["released"] and info["waiting_at_release"] == [1, 2] and info["confirmed"] == [1, 2]
         assert info["vehicles_report_prearm"] == {1: False, 2: False}
-        assert info["max_hold_s"] == pytest.approx(gate.retry_hold_s, abs=0.06)   # they do not report pre-arm
+        assert info["max_hold_s"] == pytest.approx(gate.retry_hold_s, abs=0.06)  # they do not report pre-arm
     finally:
         for v in vehicles:
             v.close()
@@ -310,7 +332,7 @@ def test_the_start_gate_never_holds_a_ready_companion_past_its_arm_retries():
         gate = StartGate([(v.sysid, v.port, lambda: True) for v in vehicles], speedup=100.0)
         assert gate.retry_hold_s < 1.0 < gate.prearm_hold_s * 100
         gate.start()
-        vehicles[0].waiting = True                          # vehicle 2 is never ready
+        vehicles[0].waiting = True  # vehicle 2 is never ready
         wait = time.monotonic() + 5.0
         while vehicles[0].prearm_fail != 0.0 and time.monotonic() < wait:
             time.sleep(0.05)

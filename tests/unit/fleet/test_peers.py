@@ -22,12 +22,33 @@ def east_of_home(east_m: float) -> tuple:
     return float(lat), float(lon), float(alt)
 
 
-def msg(sysid=2, seq=1, *, origin=HOME, mission_s=100.0, unix_s=5000.0, scale=1.0, ned=None, pending=None,
-        echo=None, sent_unix_s=None) -> TrajectoryMessage:
+def msg(
+    sysid=2,
+    seq=1,
+    *,
+    origin=HOME,
+    mission_s=100.0,
+    unix_s=5000.0,
+    scale=1.0,
+    ned=None,
+    pending=None,
+    echo=None,
+    sent_unix_s=None,
+) -> TrajectoryMessage:
     ned = np.array([[0.0, 0.0, -15.0], [0.0, 4.0, -15.0], [0.0, 8.0, -15.0]]) if ned is None else ned
-    return TrajectoryMessage(sysid, seq, 1.6, origin, mission_s, unix_s, scale,
-                             unix_s if sent_unix_s is None else sent_unix_s,
-                             SampledPath("leg0", mission_s, 0.5, ned), pending, echo or {})
+    return TrajectoryMessage(
+        sysid,
+        seq,
+        1.6,
+        origin,
+        mission_s,
+        unix_s,
+        scale,
+        unix_s if sent_unix_s is None else sent_unix_s,
+        SampledPath("leg0", mission_s, 0.5, ned),
+        pending,
+        echo or {},
+    )
 
 
 def test_another_origin_is_shifted_into_our_frame():
@@ -73,8 +94,9 @@ def test_a_silent_vehicle_grows_then_is_forgotten():
     table = PeerTable(1, S, HOME)
     table.receive(msg(mission_s=100.0, unix_s=5000.0), 5000.0)
     fresh = predict_tubes(table.threats(20.0, 5000.0, 1.0), inflation_m=2.0)[0]
-    stale = predict_tubes(table.threats(20.0 + 2 * S.stale_after_s, 5000.0 + 2 * S.stale_after_s, 1.0),
-                          inflation_m=2.0)[0]
+    stale = predict_tubes(
+        table.threats(20.0 + 2 * S.stale_after_s, 5000.0 + 2 * S.stale_after_s, 1.0), inflation_m=2.0
+    )[0]
     t = np.array([30.0])
     assert stale.radius_at(t)[0] == pytest.approx(fresh.radius_at(t)[0] - S.growth_max_m + S.stale_max_m)
     assert table.threats(0.0, 5000.0 + S.forget_after_s + 1.0, 1.0) == [] and len(table) == 0

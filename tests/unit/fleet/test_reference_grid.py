@@ -1,7 +1,8 @@
 """The published trajectory: sliced from a grid evaluated once per reference."""
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.fleet.link import ReferenceGrid, sample_reference
 from companion.fleet.settings import FleetSettings
@@ -38,8 +39,10 @@ def test_slices_are_the_trajectory_at_their_times(duration_s, t0_s, now_s):
     on_grid = np.minimum(k * fleet.sample_step_s, duration_s)
     np.testing.assert_allclose(path.ned_m[:, 0], 2.0 * on_grid, atol=1e-9)
     # the horizon is covered unless the trajectory ends first (then its end point is the last)
-    assert times[-1] >= min(now_s + fleet.horizon_s - fleet.sample_step_s, t0_s + duration_s) - 1e-9 \
+    assert (
+        times[-1] >= min(now_s + fleet.horizon_s - fleet.sample_step_s, t0_s + duration_s) - 1e-9
         or path.ned_m[-1, 0] == 2.0 * duration_s
+    )
     assert len(path.ned_m) <= fleet.horizon_s / fleet.sample_step_s + 1
 
 
@@ -49,5 +52,5 @@ def test_the_grid_is_evaluated_once_per_reference():
     for now in np.arange(0.0, 40.0, 0.5):
         sample_reference(Ref(line, 3.0), float(now), fleet, grid=grid)
     assert line.calls == 1
-    sample_reference(Ref(line, 4.0), 10.0, fleet, grid=grid)      # the same path started later
+    sample_reference(Ref(line, 4.0), 10.0, fleet, grid=grid)  # the same path started later
     assert line.calls == 2

@@ -11,8 +11,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from companion.errors import ConfigError
-from companion.fleet.tracks import (Track, common_grid, fleet_separation, path_length_m, read_tlog_track, resample,
-                                    separation, tracks_in_frame)
+from companion.fleet.tracks import (
+    Track,
+    common_grid,
+    fleet_separation,
+    path_length_m,
+    read_tlog_track,
+    resample,
+    separation,
+    tracks_in_frame,
+)
 
 
 def line(t, start, velocity):
@@ -35,11 +43,11 @@ def test_two_vehicles_crossing_at_right_angles_with_a_time_offset():
 
 def test_head_on_tracks_sampled_at_different_times_meet_between_samples():
     ta = np.arange(0.0, 10.0, 0.5)
-    tb = np.arange(0.25, 10.0, 0.5)               # never sampled at A's times
+    tb = np.arange(0.25, 10.0, 0.5)  # never sampled at A's times
     a = line(ta, [0.0, -35.0, -15.0], [0.0, 7.0, 0.0])
     b = line(tb, [0.0, 35.0 - 1.75, -15.0], [0.0, -7.0, 0.0])
     sep = separation([ta, tb], [a, b])
-    assert sep.min_m < 0.5                        # they pass through each other at t = 5
+    assert sep.min_m < 0.5  # they pass through each other at t = 5
     assert sep.common_s == pytest.approx(min(ta[-1], tb[-1]) - max(ta[0], tb[0]), abs=1e-9)
 
 
@@ -52,9 +60,11 @@ def test_tracks_that_do_not_overlap_in_time_have_no_common_time():
 
 def test_three_tracks_report_the_closest_pair_and_every_pair():
     t = np.linspace(0.0, 10.0, 101)
-    tracks = [np.column_stack([t * 0, t * 0, -15 + t * 0]),
-              np.column_stack([t * 0 + 10.0, t * 0, -15 + t * 0]),
-              np.column_stack([t * 0 + 3.0, t * 0, -15 + t * 0])]
+    tracks = [
+        np.column_stack([t * 0, t * 0, -15 + t * 0]),
+        np.column_stack([t * 0 + 10.0, t * 0, -15 + t * 0]),
+        np.column_stack([t * 0 + 3.0, t * 0, -15 + t * 0]),
+    ]
     sep = separation([t, t, t], tracks)
     assert sep.pair == (0, 2) and sep.min_m == pytest.approx(3.0)
     assert sep.pair_min_m == {(0, 1): pytest.approx(10.0), (0, 2): pytest.approx(3.0), (1, 2): pytest.approx(7.0)}
@@ -76,7 +86,8 @@ def test_mismatched_inputs_are_errors():
 
 
 tracks_strategy = st.integers(min_value=2, max_value=4).flatmap(
-    lambda n: st.tuples(st.just(n), st.integers(min_value=0, max_value=2**32 - 1)))
+    lambda n: st.tuples(st.just(n), st.integers(min_value=0, max_value=2**32 - 1))
+)
 
 
 def random_tracks(n: int, seed: int):
@@ -139,9 +150,17 @@ def write_tlog(path, rows, *, sysid=1, other=None):
         for sender, shift in [(sysid, 0.0)] + ([(other, 0.001)] if other else []):
             mav = mavlink2.MAVLink(None, srcSystem=sender, srcComponent=1)
             for t, lat, lon, alt in rows:
-                msg = mav.global_position_int_encode(int(t * 1000) % 2**32, int(round((lat + shift) * 1e7)),
-                                                     int(round(lon * 1e7)), int(round(alt * 1000)), 15000,
-                                                     0, 0, 0, 0)
+                msg = mav.global_position_int_encode(
+                    int(t * 1000) % 2**32,
+                    int(round((lat + shift) * 1e7)),
+                    int(round(lon * 1e7)),
+                    int(round(alt * 1000)),
+                    15000,
+                    0,
+                    0,
+                    0,
+                    0,
+                )
                 fh.write(struct.pack(">Q", int(t * 1e6)) + msg.pack(mav))
 
 
@@ -153,7 +172,7 @@ def test_a_track_is_read_back_from_a_tlog_with_its_wall_clock_stamps(tmp_path):
     np.testing.assert_allclose(track.t_s, [r[0] for r in rows], atol=1e-6)
     np.testing.assert_allclose(track.lla[:, 0], [r[1] for r in rows], atol=1e-7)
     np.testing.assert_allclose(track.lla[:, 2], 503.0)
-    assert read_tlog_track(tmp_path / "a.tlog").sysid == 2     # the first system heard
+    assert read_tlog_track(tmp_path / "a.tlog").sysid == 2  # the first system heard
     with pytest.raises(ConfigError, match="no GLOBAL_POSITION_INT from system 3"):
         read_tlog_track(tmp_path / "a.tlog", 3)
     with pytest.raises(ConfigError, match="does not exist"):
@@ -165,7 +184,7 @@ def test_fleet_separation_of_two_tlogs(tmp_path):
 
     frame = LocalFrame(47.397742, 8.545594, 488.0)
     t = 1796120000.0 + 0.1 * np.arange(101)
-    for sysid, sign in ((1, 1.0), (2, -1.0)):         # head-on along east, 2 m apart north
+    for sysid, sign in ((1, 1.0), (2, -1.0)):  # head-on along east, 2 m apart north
         east = sign * (35.0 - 7.0 * (t - t[0]))
         lat, lon, alt = frame.to_lla(np.full_like(t, sysid * 2.0), east, np.full_like(t, -15.0))
         write_tlog(tmp_path / f"sim{sysid - 1}.tlog", list(zip(t, lat, lon, alt)), sysid=sysid)
@@ -174,4 +193,4 @@ def test_fleet_separation_of_two_tlogs(tmp_path):
     assert out["closest_pair"] == [1, 2]
     assert out["path_length_m"][1] == pytest.approx(70.0, abs=0.2)
     times, ned, frame2 = tracks_in_frame([read_tlog_track(tmp_path / "sim0.tlog", 1)])
-    assert ned[0][0] == pytest.approx([0.0, 0.0, 0.0], abs=1e-6)     # the first sample's point
+    assert ned[0][0] == pytest.approx([0.0, 0.0, 0.0], abs=1e-6)  # the first sample's point

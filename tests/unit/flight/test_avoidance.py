@@ -104,8 +104,14 @@ class LabelledDecision(Decision):
 
 
 def trajectory_decision(kind, threat_id="p1", resume=False, label=None, t0=5.0):
-    fields = dict(trajectory=Line(), start_t_s=t0, path_id=f"{kind}-1", path_ned_m=np.zeros((2, 3)),
-                  conflict=Conflict(threat_id) if threat_id else None, resume=resume)
+    fields = dict(
+        trajectory=Line(),
+        start_t_s=t0,
+        path_id=f"{kind}-1",
+        path_ned_m=np.zeros((2, 3)),
+        conflict=Conflict(threat_id) if threat_id else None,
+        resume=resume,
+    )
     if label is not None:
         return LabelledDecision(kind, label=label, **fields)
     return Decision(kind, **fields)
@@ -217,9 +223,12 @@ class Harness:
     """The avoidance with the reactor, the reference owner, thread jobs and a driver."""
 
     def __init__(self, *, alternatives_k=0, monitor_period_s=0.01, statustext_error=None):
-        s = Settings()                   # the fleet needs a zenoh session: not this bus in memory
-        self.settings = dataclasses.replace(s, flight=dataclasses.replace(s.flight, alternatives_k=alternatives_k),
-                                            fleet=dataclasses.replace(s.fleet, enabled=False))
+        s = Settings()  # the fleet needs a zenoh session: not this bus in memory
+        self.settings = dataclasses.replace(
+            s,
+            flight=dataclasses.replace(s.flight, alternatives_k=alternatives_k),
+            fleet=dataclasses.replace(s.fleet, enabled=False),
+        )
         self.manager = ScriptedManager()
         self.bus = MemoryBus()
         self.records: list[tuple[str, dict]] = []
@@ -228,8 +237,9 @@ class Harness:
         self.monitor_period_s = monitor_period_s
         self.owner = ReferenceOwner(FixedClock(), turn_rate_rad_s=0.6, yaw_now_rad=lambda: 0.0)
         self.owner.engage(Line(), "leg0", t0_s=0.0)
-        self.reactor = ThreatReactor(self.settings, clock_now_s=lambda: 5.0, record=Sink(self).record,
-                                     statustext=self.statustext, bus=self.bus)
+        self.reactor = ThreatReactor(
+            self.settings, clock_now_s=lambda: 5.0, record=Sink(self).record, statustext=self.statustext, bus=self.bus
+        )
         self.leg = LegContext(1, World([], [-50.0, -50.0, -50.0], [50.0, 50.0, 0.0]), np.array([10.0, 0.0, -10.0]))
         self.workers = PlanningWorkers("thread")
         self.engaged: list[dict] = []
@@ -260,15 +270,28 @@ class Harness:
         policy = DecisionPolicy.from_settings(self.settings)
         f = self.settings.flight
         self.avoidance = Avoidance(
-            policy=policy, state=DecisionState.initial(policy, 1), owner=self.owner, threats=self.reactor,
-            jobs=WorkerJobs(self.workers, loop), sink=Sink(self), now_s=lambda: 5.0, monotonic_s=time.monotonic,
-            send_now=self.send_now, send_at=self.sent_at.append, position_ned_m=lambda: np.array([1.0, 2.0, -10.0]),
+            policy=policy,
+            state=DecisionState.initial(policy, 1),
+            owner=self.owner,
+            threats=self.reactor,
+            jobs=WorkerJobs(self.workers, loop),
+            sink=Sink(self),
+            now_s=lambda: 5.0,
+            monotonic_s=time.monotonic,
+            send_now=self.send_now,
+            send_at=self.sent_at.append,
+            position_ned_m=lambda: np.array([1.0, 2.0, -10.0]),
             alternatives=AlternativesPlan(f.alternatives_k, f.alternatives_budget_s, f.alternatives_lead_s),
-            steps=DecisionSteps(decide=self.manager.decide, plan_alternatives=self.manager.plan_alternatives))
+            steps=DecisionSteps(decide=self.manager.decide, plan_alternatives=self.manager.plan_alternatives),
+        )
         self.reactor.on_change = self.avoidance.on_threats_changed
         await self.reactor.start(HOME, reference=lambda: self.owner.current, position_ned_m=lambda: None)
-        schedule = Scheduler([Task("monitor", 1.0 / self.monitor_period_s, self.avoidance.monitor, 10.0),
-                              Task("tell", 200.0, self.avoidance.tell_engaged, 1.0)])
+        schedule = Scheduler(
+            [
+                Task("monitor", 1.0 / self.monitor_period_s, self.avoidance.monitor, 10.0),
+                Task("tell", 200.0, self.avoidance.tell_engaged, 1.0),
+            ]
+        )
         self.driver = PeriodicDriver(200.0, schedule.tick)
         self.driver.start()
         if leg:
@@ -288,8 +311,18 @@ class Harness:
     def put(self, tid, pos=(6.0, 0.0, -10.0), received_mono_s=None, traffic="drone"):
         """A pop-up on the reference (by default): the monitor's check finds a conflict."""
         threat = Threat(tid, "popup", "local_ned", pos, radius_m=3.0, received_t_s=5.0, traffic=traffic)
-        self.bus.handler(ThreatUpdate("put", tid, threat, None, f"uav/1/threats/{tid}", 5.0,
-                                      time.monotonic() if received_mono_s is None else received_mono_s, 1))
+        self.bus.handler(
+            ThreatUpdate(
+                "put",
+                tid,
+                threat,
+                None,
+                f"uav/1/threats/{tid}",
+                5.0,
+                time.monotonic() if received_mono_s is None else received_mono_s,
+                1,
+            )
+        )
 
 
 async def until(predicate, what, timeout_s=10.0):
@@ -305,6 +338,7 @@ def run(coro_fn, harness):
             await coro_fn(harness)
         finally:
             await harness.stop()
+
     asyncio.run(main())
 
 
@@ -321,7 +355,7 @@ def test_a_threat_decision_is_engaged_published_recorded_and_told():
         event = h.bus.events[0]
         assert event["event"] == "replan" and event["trigger"] == "threat" and event["label"] == "replan"
         assert event["latency_ms"] >= 0.0 and event["leg"] == 1 and event["threat_id"] == "p1"
-        parts = event["latency_parts_ms"]                    # where the latency went, summing to it
+        parts = event["latency_parts_ms"]  # where the latency went, summing to it
         assert set(parts) == {"queued", "compute", "transport", "gate", "start"}
         assert all(v >= -0.01 for k, v in parts.items() if k != "transport") and parts["transport"] > -1.0
         assert sum(parts.values()) == pytest.approx(event["latency_ms"], abs=0.1)
@@ -438,7 +472,7 @@ def test_a_decision_built_on_a_reference_the_daemon_replaced_meanwhile_is_droppe
         await h.start()
         h.put("p1")
         await until(h.manager.started.is_set, "the decision to start")
-        h.owner.engage(Line(), "leg1-resume", t0_s=6.0)      # what a replan after a link loss does
+        h.owner.engage(Line(), "leg1-resume", t0_s=6.0)  # what a replan after a link loss does
         h.manager.gate.set()
         await until(lambda: h.manager.calls, "the decision")
         await asyncio.sleep(0.05)
@@ -453,7 +487,7 @@ def test_nothing_is_decided_while_the_daemon_holds_without_a_reference():
 
     async def main(h):
         await h.start()
-        h.owner.hold([0.0, 0.0, -10.0])      # hold_here after a link loss
+        h.owner.hold([0.0, 0.0, -10.0])  # hold_here after a link loss
         h.put("p1")
         await asyncio.sleep(0.1)
         assert h.manager.calls == [] and await h.resume() is None
@@ -508,7 +542,7 @@ def test_the_monitor_skips_ticks_while_a_decision_is_under_way():
         await h.start()
         h.put("m1")
         await until(h.manager.started.is_set, "a decision")
-        await asyncio.sleep(0.1)                 # about 20 ticks while the decision blocks
+        await asyncio.sleep(0.1)  # about 20 ticks while the decision blocks
         h.manager.gate.set()
         await until(lambda: len(h.manager.calls) >= 3, "monitor checks after the decision")
         assert h.manager.max_running == 1
@@ -528,7 +562,7 @@ def test_a_manned_conflict_left_unanswered_is_decided_again_on_the_next_report_n
         h.manager.on_threats_script = [unanswered("adsb-a00001")] * 50
         h.put("adsb-a00001", traffic="manned")
         await until(lambda: len(h.manager.calls) >= 1, "the report's decision")
-        await asyncio.sleep(0.3)                 # 30 ticks on the same report
+        await asyncio.sleep(0.3)  # 30 ticks on the same report
         assert len(h.manager.calls) == 1
         h.put("adsb-a00001", pos=(7.0, 0.0, -10.0), traffic="manned")
         await until(lambda: len(h.manager.calls) >= 2, "the next report's decision")
@@ -544,8 +578,10 @@ def test_a_manned_conflict_left_unanswered_is_decided_again_on_the_next_report_n
 # ---------------------------------------------------------------------------- resume
 def test_resume_without_a_way_back_publishes_nothing_then_a_plan_back_is_published():
     h = Harness(monitor_period_s=60.0)
-    h.manager.resume_script = [Decision("none", "no clear way back", resume=True),
-                               trajectory_decision("replan", threat_id=None, label="replan to goal")]
+    h.manager.resume_script = [
+        Decision("none", "no clear way back", resume=True),
+        trajectory_decision("replan", threat_id=None, label="replan to goal"),
+    ]
 
     async def main(h):
         await h.start()
@@ -606,7 +642,7 @@ def test_a_failing_statustext_does_not_disturb_the_decision():
 
 def test_a_failing_manager_keeps_the_reference_and_later_decisions_run():
     h = Harness(monitor_period_s=60.0)
-    h.manager.on_threats_script = [None]          # .kind of None raises in apply
+    h.manager.on_threats_script = [None]  # .kind of None raises in apply
 
     async def main(h):
         await h.start()
@@ -636,14 +672,17 @@ def test_alternatives_are_refreshed_at_the_leg_start_and_after_a_decision():
 
 
 # ---------------------------------------------------------------------------- STATUSTEXT
-@pytest.mark.parametrize("kind, label, tid, latency, text, severity", [
-    ("evade", "evade left", "m1", 31.4, "AVOID m1: evade left, 31 ms", "WARNING"),
-    ("replan", "replan", "p1", 140.0, "AVOID p1: replan, 140 ms", "NOTICE"),
-    ("retime", "retime pause 3.0 s", "m2", None, "AVOID m2: retime pause 3.0 s", "NOTICE"),
-    ("hold", "hold", "m3", 12.0, "AVOID m3: hold, 12 ms", "WARNING"),
-    ("switch", "switch alt2-5", None, 8.0, "RESUME: switch alt2-5, 8 ms", "NOTICE"),
-    ("rejected", "radius_m", "bad", None, "THREAT bad rejected: radius_m", "WARNING"),
-])
+@pytest.mark.parametrize(
+    "kind, label, tid, latency, text, severity",
+    [
+        ("evade", "evade left", "m1", 31.4, "AVOID m1: evade left, 31 ms", "WARNING"),
+        ("replan", "replan", "p1", 140.0, "AVOID p1: replan, 140 ms", "NOTICE"),
+        ("retime", "retime pause 3.0 s", "m2", None, "AVOID m2: retime pause 3.0 s", "NOTICE"),
+        ("hold", "hold", "m3", 12.0, "AVOID m3: hold, 12 ms", "WARNING"),
+        ("switch", "switch alt2-5", None, 8.0, "RESUME: switch alt2-5, 8 ms", "NOTICE"),
+        ("rejected", "radius_m", "bad", None, "THREAT bad rejected: radius_m", "WARNING"),
+    ],
+)
 def test_statustext_for(kind, label, tid, latency, text, severity):
     assert statustext_for(kind, label, tid, latency) == (text, severity)
 
@@ -661,8 +700,16 @@ def test_a_local_threat_goes_the_way_of_a_zenoh_put_and_is_republished():
 
     async def main(h):
         await h.start()
-        threat = Threat("adsb-4b1805", "moving", "global", (47.397814, 8.545594, 498.0), (0.0, 20.0, 0.0),
-                        radius_m=20.0, ttl_s=5.0, received_t_s=4.0)
+        threat = Threat(
+            "adsb-4b1805",
+            "moving",
+            "global",
+            (47.397814, 8.545594, 498.0),
+            (0.0, 20.0, 0.0),
+            radius_m=20.0,
+            ttl_s=5.0,
+            received_t_s=4.0,
+        )
         receipt = time.monotonic()
         h.reactor.on_local_threat(threat, receipt)
         await until(lambda: h.bus.events, "the decision")
@@ -670,7 +717,7 @@ def test_a_local_threat_goes_the_way_of_a_zenoh_put_and_is_republished():
         assert h.manager.calls[0][:2] == ("on_threats", ("adsb-4b1805",))
         assert h.bus.events[0]["threat_id"] == "adsb-4b1805" and h.bus.events[0]["trigger"] == "threat"
         assert [t.id for t in h.bus.republished] == ["adsb-4b1805"]
-        assert h.bus.republished[0].frame == "global"               # as received, for other consumers
+        assert h.bus.republished[0].frame == "global"  # as received, for other consumers
         recorded = [f for kind, f in h.records if kind == "threat"]
         assert recorded[0]["id"] == "adsb-4b1805" and recorded[0]["t_s"] == 4.0
 
@@ -687,7 +734,7 @@ def test_a_quiet_refresh_on_the_same_reference_is_skipped():
         await until(lambda: not h.avoidance._alt_busy, "the refresh to end")
         h.avoidance.refresh_alternatives()
         assert h.avoidance.alternatives_skipped == 1 and h.manager.alternatives_planned == 1
-        h.owner.engage(Line(), "replan-9", t0_s=5.0)                 # a new reference: planned again
+        h.owner.engage(Line(), "replan-9", t0_s=5.0)  # a new reference: planned again
         h.avoidance.refresh_alternatives()
         await until(lambda: h.manager.alternatives_planned == 2, "the refresh on the new reference")
 

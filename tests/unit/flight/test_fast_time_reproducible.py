@@ -89,15 +89,22 @@ def test_a_flight_joined_in_the_air_flies_on_as_the_whole_flight():
     settings = Settings()
     world = World([], [-20, -20, -40], [120, 60, -5])
     pipeline = TrajectoryPipeline.from_settings(settings.smoothing, settings.planning, iterations_per_s=3000.0)
-    leg = plan_leg(0, LocalWaypoint(1, "waypoint", np.array([80.0, 0.0, -20.0]), 3.0, 0.0, None),
-                   np.array([0.0, 0.0, -20.0]), world, pipeline=pipeline, settings=settings.flight,
-                   rng=np.random.default_rng(0))
+    leg = plan_leg(
+        0,
+        LocalWaypoint(1, "waypoint", np.array([80.0, 0.0, -20.0]), 3.0, 0.0, None),
+        np.array([0.0, 0.0, -20.0]),
+        world,
+        pipeline=pipeline,
+        settings=settings.flight,
+        rng=np.random.default_rng(0),
+    )
     whole = FastTimeFlight([leg], settings, world=world, job_latency=JobLatency()).run(max_s=40.0)
     k = int(np.searchsorted(whole.t_s, 6.0))
     joined = FastTimeFlight([leg], settings, world=world, job_latency=JobLatency()).run(
-        max_s=40.0, from_s=float(whole.t_s[k]), from_state=whole.states[k])
+        max_s=40.0, from_s=float(whole.t_s[k]), from_state=whole.states[k]
+    )
     assert joined.t_s[0] == pytest.approx(whole.t_s[k])
     n = min(len(joined.t_s), len(whole.t_s) - k)
-    error = np.linalg.norm(joined.pos_ned_m[:n] - whole.pos_ned_m[k:k + n], axis=1)
+    error = np.linalg.norm(joined.pos_ned_m[:n] - whole.pos_ned_m[k : k + n], axis=1)
     assert float(error.max()) < 0.05
     assert joined.outcome == whole.outcome

@@ -10,11 +10,17 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from companion.flight.pipeline import (PipelineError, PlanBudget, PlanningProblem, TrajectoryPipeline,
-                                       TrajectoryStatus)
-from companion.flight.plan import FlightPlanSettings, plan_leg
 from companion.flight.checker import TrajectoryChecker
-from companion.flight.stages import G1Smoother, G2Smoother, GartPlanner, MgartPlanner, PolylineSmoother, SpeedProfileTimer
+from companion.flight.pipeline import PipelineError, PlanBudget, PlanningProblem, TrajectoryPipeline, TrajectoryStatus
+from companion.flight.plan import FlightPlanSettings, plan_leg
+from companion.flight.stages import (
+    G1Smoother,
+    G2Smoother,
+    GartPlanner,
+    MgartPlanner,
+    PolylineSmoother,
+    SpeedProfileTimer,
+)
 from companion.mission.model import LocalWaypoint
 from companion.planning import GartSettings, MgartSettings
 from companion.smoothing import FeasibilitySettings, SmoothingSettings, TrajectoryLimits
@@ -43,27 +49,32 @@ def degrees(trajectory) -> set:
 def test_gart_planner_finds_a_path_in_the_problem_world():
     world = World([Disc((20.0, 0.0), 5.0)], [-10.0, -30.0], [50.0, 30.0], 1.0)
     result = GartPlanner(GartSettings(kappa_max_1_m=0.1)).plan(
-        PlanningProblem(world, [0.0, 0.0], [40.0, 0.0]), PlanBudget(0.5, first_path_s=60.0),  # a cold numba
-        rng=np.random.default_rng(0))                                   # cache compiles in the first search
+        PlanningProblem(world, [0.0, 0.0], [40.0, 0.0]),
+        PlanBudget(0.5, first_path_s=60.0),  # a cold numba
+        rng=np.random.default_rng(0),
+    )  # cache compiles in the first search
     assert result.status == "exact" and world.path_free(result.path)
 
 
 def test_gart_planner_reports_an_invalid_goal_as_a_status():
     world = World([Disc((40.0, 0.0), 5.0)], [-10.0, -30.0], [50.0, 30.0])
-    result = GartPlanner().plan(PlanningProblem(world, [0.0, 0.0], [40.0, 0.0]), PlanBudget(0.2, attempts=3),
-                                rng=np.random.default_rng(0))
+    result = GartPlanner().plan(
+        PlanningProblem(world, [0.0, 0.0], [40.0, 0.0]), PlanBudget(0.2, attempts=3), rng=np.random.default_rng(0)
+    )
     assert result.status == "invalid_goal" and result.path is None
 
 
 def test_mgart_planner_gives_several_paths():
     world = World([Disc((20.0, 0.0), 5.0)], [-10.0, -30.0], [50.0, 30.0], 1.0)
-    results = MgartPlanner(MgartSettings()).plan(PlanningProblem(world, [0.0, 0.0], [40.0, 0.0]), PlanBudget(1.0),
-                                                 2, rng=np.random.default_rng(0))
+    results = MgartPlanner(MgartSettings()).plan(
+        PlanningProblem(world, [0.0, 0.0], [40.0, 0.0]), PlanBudget(1.0), 2, rng=np.random.default_rng(0)
+    )
     assert 1 <= len(results) <= 2 and all(r.status == "exact" for r in results)
 
 
-@pytest.mark.parametrize("smoother, expected", [(G2Smoother(0.1), {1, 3}), (G1Smoother(0.1), {1, 4}),
-                                                (PolylineSmoother(), None)])
+@pytest.mark.parametrize(
+    "smoother, expected", [(G2Smoother(0.1), {1, 3}), (G1Smoother(0.1), {1, 4}), (PolylineSmoother(), None)]
+)
 def test_smoothers_give_their_kind_of_curve(smoother, expected):
     curve = smoother.smooth(CORNER, OPEN)
     if expected is None:
@@ -130,7 +141,7 @@ def test_from_settings_picks_the_smoother_and_pickles():
         p = pipeline(method)
         assert isinstance(p.smoother, cls)
         assert pickle.loads(pickle.dumps(p)) == p
-    assert pipeline("g2").planner.settings.kappa_max_1_m == 0.1         # corners fit G2
+    assert pipeline("g2").planner.settings.kappa_max_1_m == 0.1  # corners fit G2
     assert pipeline("g1").planner.settings.kappa_max_1_m is None
     with pytest.raises(PipelineError, match="smoothing"):
         TrajectoryPipeline.from_settings(LIMITS)
@@ -152,7 +163,7 @@ def test_a_join_is_smoothed_by_the_configured_method(method, kinds):
     traj, poly = join_trajectory(np.zeros(2), np.array([4.0, 0.0]), nodes, world=OPEN, pipeline=pipeline(method))
     assert traj is not None, poly
     assert degrees(traj) == kinds
-    assert np.linalg.norm(traj.sample(np.array([0.0]))[1][0] - [4.0, 0.0]) < 0.1       # no setpoint jump
+    assert np.linalg.norm(traj.sample(np.array([0.0]))[1][0] - [4.0, 0.0]) < 0.1  # no setpoint jump
 
 
 @pytest.mark.parametrize("method, kinds", [("g2", {1, 3}), ("g1", {1, 4}), ("none", {1})])
@@ -177,26 +188,53 @@ def test_limits_change_every_trajectory():
         replan = gen.replan_candidates(situation(pipe, speed=2.0), rng=np.random.default_rng(0), path_id="r")[0]
         assert top_speed(join) == pytest.approx(limits.speed_m_s, rel=0.02)
         assert top_speed(replan.trajectory) == pytest.approx(limits.speed_m_s, rel=0.02)
-        assert situation(pipe).escape_speed_m_s() == pytest.approx(min(ThreatSettings().evade_speed_m_s, 1.2 * limits.speed_m_s))
+        assert situation(pipe).escape_speed_m_s() == pytest.approx(
+            min(ThreatSettings().evade_speed_m_s, 1.2 * limits.speed_m_s)
+        )
     leg_world = World([], [-50.0, -50.0, -60.0], [150.0, 150.0, 0.0])
     goal = LocalWaypoint(seq=1, kind="waypoint", pos_ned_m=np.array([100.0, 20.0, -20.0]), acceptance_radius_m=2.0)
-    legs = [plan_leg(0, goal, [0.0, 0.0, -20.0], leg_world, pipeline=pipeline(limits=lim),
-                     settings=FlightPlanSettings(), rng=np.random.default_rng(0)) for lim in (slow, fast)]
+    legs = [
+        plan_leg(
+            0,
+            goal,
+            [0.0, 0.0, -20.0],
+            leg_world,
+            pipeline=pipeline(limits=lim),
+            settings=FlightPlanSettings(),
+            rng=np.random.default_rng(0),
+        )
+        for lim in (slow, fast)
+    ]
     assert legs[0].trajectory.duration_s > 1.5 * legs[1].trajectory.duration_s
 
 
 def test_a_mission_leg_honours_the_method():
     leg_world = World([], [-50.0, -50.0, -60.0], [150.0, 150.0, 0.0])
     goal = LocalWaypoint(seq=1, kind="waypoint", pos_ned_m=np.array([100.0, 20.0, -20.0]), acceptance_radius_m=2.0)
-    leg = plan_leg(0, goal, [0.0, 0.0, -20.0], leg_world, pipeline=pipeline("none"), settings=FlightPlanSettings(),
-                   rng=np.random.default_rng(0))
+    leg = plan_leg(
+        0,
+        goal,
+        [0.0, 0.0, -20.0],
+        leg_world,
+        pipeline=pipeline("none"),
+        settings=FlightPlanSettings(),
+        rng=np.random.default_rng(0),
+    )
     assert all(degrees(piece) == {1} for piece in leg.trajectory.pieces)
 
 
 def test_alternatives_come_from_the_pipelines_planner():
     world = World([Disc((60.0, 0.0), 10.0)], [-20.0, -60.0], [140.0, 60.0], 1.0)
-    alts = plan_alternatives(world, [0.0, 0.0], [120.0, 0.0], 2, pipeline=pipeline(), rng=np.random.default_rng(0),
-                             max_time_s=1.0, spacing_m=2.0)
+    alts = plan_alternatives(
+        world,
+        [0.0, 0.0],
+        [120.0, 0.0],
+        2,
+        pipeline=pipeline(),
+        rng=np.random.default_rng(0),
+        max_time_s=1.0,
+        spacing_m=2.0,
+    )
     assert alts and all(world.path_free(a.path_ned_m) for a in alts)
 
 
@@ -205,11 +243,14 @@ def test_alternatives_come_from_the_pipelines_planner():
 def worlds_and_paths(draw):
     """A random disc world and a random polyline that is collision-free in it."""
     margin = draw(st.floats(0.0, 2.0))
-    discs = [Disc((draw(st.floats(-60.0, 60.0)), draw(st.floats(-60.0, 60.0))), draw(st.floats(1.0, 8.0)))
-             for _ in range(draw(st.integers(1, 6)))]
+    discs = [
+        Disc((draw(st.floats(-60.0, 60.0)), draw(st.floats(-60.0, 60.0))), draw(st.floats(1.0, 8.0)))
+        for _ in range(draw(st.integers(1, 6)))
+    ]
     world = World(discs, [-100.0, -100.0], [100.0, 100.0], margin)
-    nodes = np.array([[draw(st.floats(-90.0, 90.0)), draw(st.floats(-90.0, 90.0))]
-                      for _ in range(draw(st.integers(2, 6)))])
+    nodes = np.array(
+        [[draw(st.floats(-90.0, 90.0)), draw(st.floats(-90.0, 90.0))] for _ in range(draw(st.integers(2, 6)))]
+    )
     seg = np.linalg.norm(np.diff(nodes, axis=0), axis=1)
     assume(np.all(seg >= 2.0) and world.path_free(nodes))
     return world, nodes

@@ -15,7 +15,8 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.flight.plan import TrajectoryChain
 from companion.flight.trajectory import Trajectory
@@ -24,10 +25,10 @@ from companion.smoothing.bezier_arclength import TABLE_INTERVALS, arc_derivative
 from companion.smoothing.bezier_maths import bernstein
 from companion.threats.decision.retime import RetimedTrajectory
 
-
 # ---------------------------------------------------------------------------- frozen reference
 # A verbatim copy of the sampling code before it was sped up (numerical operations in their
 # original order); only the attribute access is adapted to free functions.
+
 
 def _ref_bernstein(n: int, u: np.ndarray) -> np.ndarray:
     u = np.asarray(u, dtype=float).reshape(-1)
@@ -47,11 +48,13 @@ def _ref_hermite_quintic(x, m0, m1, c0, c1):
     x3 = x2 * x
     x4 = x3 * x
     x5 = x4 * x
-    return ((x - 6 * x3 + 8 * x4 - 3 * x5) * m0
-            + (0.5 * x2 - 1.5 * x3 + 1.5 * x4 - 0.5 * x5) * c0
-            + (0.5 * x3 - x4 + 0.5 * x5) * c1
-            + (-4 * x3 + 7 * x4 - 3 * x5) * m1
-            + (10 * x3 - 15 * x4 + 6 * x5))
+    return (
+        (x - 6 * x3 + 8 * x4 - 3 * x5) * m0
+        + (0.5 * x2 - 1.5 * x3 + 1.5 * x4 - 0.5 * x5) * c0
+        + (0.5 * x3 - x4 + 0.5 * x5) * c1
+        + (-4 * x3 + 7 * x4 - 3 * x5) * m1
+        + (10 * x3 - 15 * x4 + 6 * x5)
+    )
 
 
 def _ref_hermite_args(table, j):
@@ -304,7 +307,7 @@ class _RefRetimed:
     def _integral(self, t):
         drop = 1.0 - self.rate
         w = math.pi / self.ramp_s
-        ramp_loss = lambda x: drop * 0.5 * (x - np.sin(w * x) / w)   # noqa: E731
+        ramp_loss = lambda x: drop * 0.5 * (x - np.sin(w * x) / w)  # noqa: E731
         t1 = np.minimum(t, self.ramp_s)
         loss = ramp_loss(t1)
         t_hold = np.clip(t - self.ramp_s, 0.0, self.wait_s)
@@ -356,12 +359,16 @@ def _g2(path, down_m=-20.0, **kw) -> Trajectory:
 
 
 def _trajectories() -> dict[str, Trajectory]:
-    climb = time_parameterize(np.array([[0.0, 0.0, -20.0], [0.0, 0.0, -35.0]]),
-                              TrajectoryLimits(speed_m_s=2.5, accel_m_s2=1.5, lat_accel_m_s2=1.5, jerk_m_s3=6.0),
-                              yaw_mode="hold", yaw_hold_rad=0.7)
+    climb = time_parameterize(
+        np.array([[0.0, 0.0, -20.0], [0.0, 0.0, -35.0]]),
+        TrajectoryLimits(speed_m_s=2.5, accel_m_s2=1.5, lat_accel_m_s2=1.5, jerk_m_s3=6.0),
+        yaw_mode="hold",
+        yaw_hold_rad=0.7,
+    )
     vertical_tangent = time_parameterize(np.array([[3.0, 1.0, -20.0], [3.0, 1.0, -5.0]]), yaw_mode="tangent")
-    g1_3d = time_parameterize(smooth_g1(np.array([[0.0, 0.0, -20.0], [30.0, 5.0, -25.0], [40.0, 40.0, -25.0],
-                                                  [10.0, 60.0, -30.0]])))
+    g1_3d = time_parameterize(
+        smooth_g1(np.array([[0.0, 0.0, -20.0], [30.0, 5.0, -25.0], [40.0, 40.0, -25.0], [10.0, 60.0, -30.0]]))
+    )
     return {
         "g2 lifted": _g2([[0, 0], [50, 0], [90, 40], [60, 90]]),
         "g2 second": _g2([[60, 90], [20, 100], [0, 140]]),
@@ -393,11 +400,14 @@ def _nested(base, depth: int) -> RetimedTrajectory:
     return out
 
 
-RETIMED = {f"retime {d} deep of {name}": _nested(base, d)
-           for name, base in [("g2 lifted", TRAJ["g2 lifted"]), ("chain 3", CHAINS["chain 3"]),
-                              ("g1 3d", TRAJ["g1 3d"])] for d in (1, 2, 3, 4)}
-RETIMED["retime ending in its warp"] = RetimedTrajectory(TRAJ["g2 second"], TRAJ["g2 second"].duration_s - 1.0,
-                                                         0.0, 5.0, 2.0)
+RETIMED = {
+    f"retime {d} deep of {name}": _nested(base, d)
+    for name, base in [("g2 lifted", TRAJ["g2 lifted"]), ("chain 3", CHAINS["chain 3"]), ("g1 3d", TRAJ["g1 3d"])]
+    for d in (1, 2, 3, 4)
+}
+RETIMED["retime ending in its warp"] = RetimedTrajectory(
+    TRAJ["g2 second"], TRAJ["g2 second"].duration_s - 1.0, 0.0, 5.0, 2.0
+)
 RETIMED["pause, ramp 1e-3"] = RetimedTrajectory(CHAINS["chain 2"], 0.0, 0.0, 4.0, 1e-3)
 ALL = {**TRAJ, **CHAINS, **RETIMED}
 REFS = {name: reference(ref) for name, ref in ALL.items()}
@@ -408,8 +418,9 @@ def _same(a, b, what: str) -> None:
     a, b = np.asarray(a), np.asarray(b)
     assert a.shape == b.shape and a.dtype == b.dtype, f"{what}: {a.shape} {a.dtype} != {b.shape} {b.dtype}"
     # bit for bit: == plus the sign of zeros (NaN never appears)
-    assert np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b)), \
+    assert np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b)), (
         f"{what}: max difference {np.max(np.abs(a - b))}"
+    )
 
 
 def _assert_identical(name: str, t) -> None:
@@ -425,8 +436,20 @@ def _assert_identical(name: str, t) -> None:
 def _times(ref) -> list:
     d = ref.duration_s
     horizon = 0.3 * d + 0.2 * np.arange(76)
-    return [0.0, d, 0.41 * d, -1.0, d + 3.0, np.array([0.0]), np.array([0.63 * d]), np.array([d + 0.5]),
-            horizon, horizon[::-1].copy(), np.linspace(-2.0, d + 2.0, 76), np.linspace(0.0, d, 301)]
+    return [
+        0.0,
+        d,
+        0.41 * d,
+        -1.0,
+        d + 3.0,
+        np.array([0.0]),
+        np.array([0.63 * d]),
+        np.array([d + 0.5]),
+        horizon,
+        horizon[::-1].copy(),
+        np.linspace(-2.0, d + 2.0, 76),
+        np.linspace(0.0, d, 301),
+    ]
 
 
 @pytest.mark.parametrize("name", sorted(ALL))
@@ -455,8 +478,13 @@ fraction = st.floats(-0.2, 1.2, allow_nan=False)
 
 
 @settings(max_examples=60, deadline=None)
-@given(name=st.sampled_from(sorted(ALL)), where=fraction, step=st.sampled_from([0.0, 0.05, 0.2, 1.0]),
-       n=st.sampled_from([1, 2, 7, 76]), scalar=st.booleans())
+@given(
+    name=st.sampled_from(sorted(ALL)),
+    where=fraction,
+    step=st.sampled_from([0.0, 0.05, 0.2, 1.0]),
+    n=st.sampled_from([1, 2, 7, 76]),
+    scalar=st.booleans(),
+)
 def test_sampling_is_bit_identical_anywhere(name, where, step, n, scalar):
     d = ALL[name].duration_s
     t = where * d + step * np.arange(n)
@@ -506,8 +534,9 @@ def test_the_references_cover_the_branches():
     # times before and after the raw profile, flat tangents, hold yaw, 2D, mixed degrees
     assert any(TRAJ[n].yaw_mode == "hold" for n in TRAJ)
     assert TRAJ["g2 2d"].d == 2
-    assert np.any(np.linalg.norm(TRAJ["vertical (tangent yaw)"].curve.derivative(np.array([1.0]), 1)[:, :2],
-                                 axis=1) <= 1e-6)
+    assert np.any(
+        np.linalg.norm(TRAJ["vertical (tangent yaw)"].curve.derivative(np.array([1.0]), 1)[:, :2], axis=1) <= 1e-6
+    )
     assert RETIMED["retime ending in its warp"].duration_s < 2 * 2.0 + 5.0
     assert len(CHAINS["chain 3"].pieces) == 3
 

@@ -36,10 +36,18 @@ from companion.link.watchers import TelemetryWatchers
 VEHICLE = 1
 
 #: MavlinkDirect watchers: message name -> the watcher coroutine's name.
-DIRECT = {"HEARTBEAT": "_watch_heartbeat", "LOCAL_POSITION_NED": "_watch_local_position",
-          "EXTENDED_SYS_STATE": "_watch_landed_state", "GPS_GLOBAL_ORIGIN": "_watch_origin",
-          "HOME_POSITION": "_watch_home", "STATUSTEXT": "_watch_statustext", "SYS_STATUS": "_watch_sys_status",
-          "RPM": "_watch_rpm", "ATTITUDE": "_watch_attitude", "GLOBAL_POSITION_INT": "_watch_global_position"}
+DIRECT = {
+    "HEARTBEAT": "_watch_heartbeat",
+    "LOCAL_POSITION_NED": "_watch_local_position",
+    "EXTENDED_SYS_STATE": "_watch_landed_state",
+    "GPS_GLOBAL_ORIGIN": "_watch_origin",
+    "HOME_POSITION": "_watch_home",
+    "STATUSTEXT": "_watch_statustext",
+    "SYS_STATUS": "_watch_sys_status",
+    "RPM": "_watch_rpm",
+    "ATTITUDE": "_watch_attitude",
+    "GLOBAL_POSITION_INT": "_watch_global_position",
+}
 
 
 class Failures(logging.Handler):
@@ -86,7 +94,7 @@ async def drive(inputs: list[tuple[str, object]]) -> tuple[TelemetryWatchers, li
     watchers = TelemetryWatchers(LinkSession(), subs, lambda: None)
     names = list(DIRECT.values())
     failures = Failures()
-    logger = logging.getLogger("companion.link")   # the watchers and every other part of the link
+    logger = logging.getLogger("companion.link")  # the watchers and every other part of the link
     logger.addHandler(failures)
     tasks = [asyncio.get_running_loop().create_task(getattr(watchers, name)()) for name in names]
     try:
@@ -117,10 +125,18 @@ def field_values(ftype: str, nullable: bool):
         return st.text(max_size=60)
     if ftype in ("float", "double"):
         return NUMBER_OR_NAN_AS_NULL if nullable else F32
-    bits = {"int8_t": 8, "uint8_t": 8, "int16_t": 16, "uint16_t": 16, "int32_t": 32, "uint32_t": 32,
-            "int64_t": 64, "uint64_t": 64}[ftype.replace("_mavlink_version", "")]
+    bits = {
+        "int8_t": 8,
+        "uint8_t": 8,
+        "int16_t": 16,
+        "uint16_t": 16,
+        "int32_t": 32,
+        "uint32_t": 32,
+        "int64_t": 64,
+        "uint64_t": 64,
+    }[ftype.replace("_mavlink_version", "")]
     signed = not ftype.startswith("u")
-    lo, hi = (-2 ** (bits - 1), 2 ** (bits - 1) - 1) if signed else (0, 2 ** bits - 1)
+    lo, hi = (-(2 ** (bits - 1)), 2 ** (bits - 1) - 1) if signed else (0, 2**bits - 1)
     return st.integers(lo, hi)
 
 
@@ -136,22 +152,37 @@ def fields_dicts(name: str, nullable: bool = False):
         if field in cls.array_lengths and ftype != "char":
             strategy = st.lists(strategy, min_size=cls.array_lengths[field], max_size=cls.array_lengths[field])
         values[field] = strategy
-    header = {"_sysid": st.sampled_from([VEHICLE] * 4 + [2, 255]), "_compid": st.sampled_from([1] * 4 + [0, 190]),
-              "_t_s": st.floats(0, 1e6)}
+    header = {
+        "_sysid": st.sampled_from([VEHICLE] * 4 + [2, 255]),
+        "_compid": st.sampled_from([1] * 4 + [0, 190]),
+        "_t_s": st.floats(0, 1e6),
+    }
     return st.fixed_dictionaries(header, optional=values)
 
 
 def inputs(nullable: bool = False):
-    return st.lists(st.one_of(
-        *[st.tuples(st.just(name), fields_dicts(name, nullable)) for name in DIRECT]), min_size=1, max_size=15)
+    return st.lists(
+        st.one_of(*[st.tuples(st.just(name), fields_dicts(name, nullable)) for name in DIRECT]), min_size=1, max_size=15
+    )
 
 
 def finite_telemetry(watchers: TelemetryWatchers) -> list[str]:
     """Names of the telemetry values that are not finite."""
     t = watchers.state.snapshot(0.0)
     bad = []
-    for name in ("pos_ned_m", "vel_ned_m_s", "attitude_rad", "lat_deg", "lon_deg", "alt_amsl_m", "rel_alt_m",
-                 "home_lla", "origin_lla", "boot_s", "rotor_rpm"):
+    for name in (
+        "pos_ned_m",
+        "vel_ned_m_s",
+        "attitude_rad",
+        "lat_deg",
+        "lon_deg",
+        "alt_amsl_m",
+        "rel_alt_m",
+        "home_lla",
+        "origin_lla",
+        "boot_s",
+        "rotor_rpm",
+    ):
         value = getattr(t, name)
         if value is not None and not np.all(np.isfinite(np.asarray(value, dtype=float))):
             bad.append(f"{name}={value!r}")
@@ -175,29 +206,80 @@ def test_telemetry_stays_finite(received):
     assert not finite_telemetry(watchers)
 
 
-@pytest.mark.parametrize("sub, value", [
-    ("LOCAL_POSITION_NED", {"_sysid": VEHICLE, "_compid": 1, "x": math.nan, "y": 0.0, "z": -10.0,
-                            "vx": 0.0, "vy": 0.0, "vz": 0.0, "time_boot_ms": 1000}),
-    ("LOCAL_POSITION_NED", {"_sysid": VEHICLE, "_compid": 1, "x": 0.0, "y": 0.0, "z": -10.0,
-                            "vx": math.inf, "vy": 0.0, "vz": 0.0, "time_boot_ms": 1000}),
-    ("ATTITUDE", {"_sysid": VEHICLE, "_compid": 1, "roll": 0.0, "pitch": 0.0, "yaw": math.nan}),
-    ("GLOBAL_POSITION_INT", {"_sysid": VEHICLE, "_compid": 1, "lat": 473977420, "lon": 85455940,
-                             "alt": math.inf, "relative_alt": 10000}),
-    ("RPM", {"_sysid": VEHICLE, "_compid": 1, "rpm1": math.inf, "rpm2": 0.0}),
-])
+@pytest.mark.parametrize(
+    "sub, value",
+    [
+        (
+            "LOCAL_POSITION_NED",
+            {
+                "_sysid": VEHICLE,
+                "_compid": 1,
+                "x": math.nan,
+                "y": 0.0,
+                "z": -10.0,
+                "vx": 0.0,
+                "vy": 0.0,
+                "vz": 0.0,
+                "time_boot_ms": 1000,
+            },
+        ),
+        (
+            "LOCAL_POSITION_NED",
+            {
+                "_sysid": VEHICLE,
+                "_compid": 1,
+                "x": 0.0,
+                "y": 0.0,
+                "z": -10.0,
+                "vx": math.inf,
+                "vy": 0.0,
+                "vz": 0.0,
+                "time_boot_ms": 1000,
+            },
+        ),
+        ("ATTITUDE", {"_sysid": VEHICLE, "_compid": 1, "roll": 0.0, "pitch": 0.0, "yaw": math.nan}),
+        (
+            "GLOBAL_POSITION_INT",
+            {
+                "_sysid": VEHICLE,
+                "_compid": 1,
+                "lat": 473977420,
+                "lon": 85455940,
+                "alt": math.inf,
+                "relative_alt": 10000,
+            },
+        ),
+        ("RPM", {"_sysid": VEHICLE, "_compid": 1, "rpm1": math.inf, "rpm2": 0.0}),
+    ],
+)
 def test_reproducers_non_finite_telemetry(sub, value):
     watchers, failures = asyncio.run(drive([(sub, value)]))
     assert not failures
     assert not finite_telemetry(watchers)
 
 
-@pytest.mark.parametrize("sub, value", [
-    ("EXTENDED_SYS_STATE", {"_sysid": VEHICLE, "_compid": 1, "landed_state": None, "vtol_state": 0}),
-    ("LOCAL_POSITION_NED", {"_sysid": VEHICLE, "_compid": 1, "x": 0.0, "y": 0.0, "z": -10.0,
-                            "vx": 0.0, "vy": 0.0, "vz": 0.0, "time_boot_ms": None}),
-    ("HEARTBEAT", {"_sysid": VEHICLE, "_compid": 1, "base_mode": None, "custom_mode": 4}),
-    ("RPM", {"_sysid": VEHICLE, "_compid": 1, "rpm1": None, "rpm2": 0.0}),
-])
+@pytest.mark.parametrize(
+    "sub, value",
+    [
+        ("EXTENDED_SYS_STATE", {"_sysid": VEHICLE, "_compid": 1, "landed_state": None, "vtol_state": 0}),
+        (
+            "LOCAL_POSITION_NED",
+            {
+                "_sysid": VEHICLE,
+                "_compid": 1,
+                "x": 0.0,
+                "y": 0.0,
+                "z": -10.0,
+                "vx": 0.0,
+                "vy": 0.0,
+                "vz": 0.0,
+                "time_boot_ms": None,
+            },
+        ),
+        ("HEARTBEAT", {"_sysid": VEHICLE, "_compid": 1, "base_mode": None, "custom_mode": 4}),
+        ("RPM", {"_sysid": VEHICLE, "_compid": 1, "rpm1": None, "rpm2": 0.0}),
+    ],
+)
 def test_reproducers_null_fields_raise(sub, value):
     """Found by hypothesis with ``inputs(nullable=True)``; kept as fixed cases (each costs a 0.5 s restart)."""
     watchers, failures = asyncio.run(drive([(sub, value)]))
@@ -206,11 +288,25 @@ def test_reproducers_null_fields_raise(sub, value):
 
 def test_foreign_systems_do_not_touch_the_telemetry():
     """Frames from another system id (MAVSDK passes them on) leave the vehicle's telemetry alone."""
-    foreign = [("LOCAL_POSITION_NED", {"_sysid": 42, "_compid": 1, "x": math.nan, "y": 1.0, "z": 2.0,
-                                       "vx": 0.0, "vy": 0.0, "vz": 0.0, "time_boot_ms": 5}),
-               ("HEARTBEAT", {"_sysid": 42, "_compid": 1, "base_mode": 129, "custom_mode": 9}),
-               ("HOME_POSITION", {"_sysid": 42, "_compid": 1, "latitude": 10, "longitude": 10, "altitude": 0}),
-               ("EXTENDED_SYS_STATE", {"_sysid": 42, "_compid": 1, "landed_state": 2})]
+    foreign = [
+        (
+            "LOCAL_POSITION_NED",
+            {
+                "_sysid": 42,
+                "_compid": 1,
+                "x": math.nan,
+                "y": 1.0,
+                "z": 2.0,
+                "vx": 0.0,
+                "vy": 0.0,
+                "vz": 0.0,
+                "time_boot_ms": 5,
+            },
+        ),
+        ("HEARTBEAT", {"_sysid": 42, "_compid": 1, "base_mode": 129, "custom_mode": 9}),
+        ("HOME_POSITION", {"_sysid": 42, "_compid": 1, "latitude": 10, "longitude": 10, "altitude": 0}),
+        ("EXTENDED_SYS_STATE", {"_sysid": 42, "_compid": 1, "landed_state": 2}),
+    ]
     watchers, failures = asyncio.run(drive(foreign))
     assert not failures
     assert watchers.state.pos_origin is None and watchers.state.values == {}

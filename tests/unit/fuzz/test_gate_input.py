@@ -33,16 +33,22 @@ def targeted(draw, target_system: int, target_component: int):
     """A message with a target (a command, a setpoint, a mission or parameter message)."""
     kind = draw(st.integers(0, 3))
     if kind == 0:
-        return mavlink.MAVLink_command_ack_message(draw(st.integers(0, 65535)), draw(st.integers(0, 255)), 0, 0,
-                                                   target_system, target_component)
+        return mavlink.MAVLink_command_ack_message(
+            draw(st.integers(0, 65535)), draw(st.integers(0, 255)), 0, 0, target_system, target_component
+        )
     if kind == 1:
-        return mavlink.MAVLink_mission_request_int_message(target_system, target_component,
-                                                           draw(st.integers(0, 65535)), 0)
+        return mavlink.MAVLink_mission_request_int_message(
+            target_system, target_component, draw(st.integers(0, 65535)), 0
+        )
     if kind == 2:
-        return mavlink.MAVLink_param_value_message(b"WPNAV_SPEED", draw(F32), 9, 10, 1) \
-            if target_system == 0 else mavlink.MAVLink_mission_ack_message(target_system, target_component, 0, 0)
-    return mavlink.MAVLink_command_long_message(target_system, target_component, draw(st.integers(0, 65535)), 0,
-                                                *[draw(F32) for _ in range(7)])
+        return (
+            mavlink.MAVLink_param_value_message(b"WPNAV_SPEED", draw(F32), 9, 10, 1)
+            if target_system == 0
+            else mavlink.MAVLink_mission_ack_message(target_system, target_component, 0, 0)
+        )
+    return mavlink.MAVLink_command_long_message(
+        target_system, target_component, draw(st.integers(0, 65535)), 0, *[draw(F32) for _ in range(7)]
+    )
 
 
 @st.composite
@@ -50,15 +56,26 @@ def frames(draw, addressed: str | None = None) -> tuple[bytes, str]:
     """(one packed frame, how it is addressed: ``broadcast``, ``us``, ``other_system``, ``other_component``)."""
     addressed = addressed or draw(st.sampled_from(["broadcast", "us", "other_system", "other_component"]))
     if addressed == "broadcast":
-        msg = draw(st.sampled_from([
-            mavlink.MAVLink_heartbeat_message(2, 3, 0x81, 4, 4, 3),
-            mavlink.MAVLink_statustext_message(4, b"PreArm: fuzz", 0, 0),
-            mavlink.MAVLink_attitude_message(1000, 0.1, 0.2, 0.3, 0.0, 0.0, 0.0)]))
+        msg = draw(
+            st.sampled_from(
+                [
+                    mavlink.MAVLink_heartbeat_message(2, 3, 0x81, 4, 4, 3),
+                    mavlink.MAVLink_statustext_message(4, b"PreArm: fuzz", 0, 0),
+                    mavlink.MAVLink_attitude_message(1000, 0.1, 0.2, 0.3, 0.0, 0.0, 0.0),
+                ]
+            )
+        )
     else:
-        system = {"us": US[0], "other_component": US[0],
-                  "other_system": draw(st.integers(1, 255).filter(lambda s: s != US[0]))}[addressed]
-        component = {"us": draw(st.sampled_from([0, US[1]])), "other_system": draw(st.integers(0, 255)),
-                     "other_component": draw(st.integers(1, 255).filter(lambda c: c != US[1]))}[addressed]
+        system = {
+            "us": US[0],
+            "other_component": US[0],
+            "other_system": draw(st.integers(1, 255).filter(lambda s: s != US[0])),
+        }[addressed]
+        component = {
+            "us": draw(st.sampled_from([0, US[1]])),
+            "other_system": draw(st.integers(0, 255)),
+            "other_component": draw(st.integers(1, 255).filter(lambda c: c != US[1])),
+        }[addressed]
         msg = targeted(draw, system, component)
     mav = mavlink.MAVLink(None, draw(st.sampled_from([VEHICLE, VEHICLE, 77])), 1)
     mav.seq = draw(st.integers(0, 255))
@@ -75,11 +92,14 @@ def junk(draw) -> bytes:
         i = draw(st.integers(0, len(data) - 1))
         data[i] ^= draw(st.integers(1, 255))
         return bytes(data)
-    return bytes(data[:draw(st.integers(1, len(data) - 1))])
+    return bytes(data[: draw(st.integers(1, len(data) - 1))])
 
 
-DATAGRAMS = st.one_of(frames().map(lambda f: f[0]), junk(),
-                      st.lists(st.one_of(frames().map(lambda f: f[0]), junk()), min_size=2, max_size=4).map(b"".join))
+DATAGRAMS = st.one_of(
+    frames().map(lambda f: f[0]),
+    junk(),
+    st.lists(st.one_of(frames().map(lambda f: f[0]), junk()), min_size=2, max_size=4).map(b"".join),
+)
 
 
 def learned_filter(check=None) -> InboundFilter:

@@ -85,25 +85,34 @@ def check_update(update, key_id: str | None) -> None:
             assert -90.0 <= th.position[0] <= 90.0 and -180.0 <= th.position[1] <= 180.0
         else:
             assert all(abs(v) <= codec.MAX_LOCAL_M for v in th.position)
-        assert codec.decode(codec.encode(th), received_t_s=th.received_t_s) == th   # it round-trips
+        assert codec.decode(codec.encode(th), received_t_s=th.received_t_s) == th  # it round-trips
     else:
         err = update.error
         assert update.threat is None and isinstance(err, ThreatPayloadError)
         assert isinstance(err.field, str) and err.field and str(err).startswith(f"{err.field}: ")
-        assert len(str(err)) > len(err.field) + 2                          # a reason follows the field
+        assert len(str(err)) > len(err.field) + 2  # a reason follows the field
 
 
 # ================================================================ strategies
-JSON_SCALARS = st.one_of(st.none(), st.booleans(), st.integers(-2**70, 2**70),
-                         st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=20))
-JSON = st.recursive(JSON_SCALARS, lambda inner: st.one_of(
-    st.lists(inner, max_size=5), st.dictionaries(st.one_of(st.sampled_from(FIELDS), st.text(max_size=8)), inner,
-                                                 max_size=6)), max_leaves=25)
+JSON_SCALARS = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(2**70), 2**70),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=20),
+)
+JSON = st.recursive(
+    JSON_SCALARS,
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=5),
+        st.dictionaries(st.one_of(st.sampled_from(FIELDS), st.text(max_size=8)), inner, max_size=6),
+    ),
+    max_leaves=25,
+)
 IDS = st.from_regex(codec.ID_PATTERN, fullmatch=True)
 FINITE = st.floats(allow_nan=False, allow_infinity=False)
 LOCAL = st.lists(st.floats(-1e6, 1e6), min_size=3, max_size=3)
-GLOBAL = st.fixed_dictionaries({"lat": st.floats(-90, 90), "lon": st.floats(-180, 180),
-                                "alt_m": st.floats(-1e5, 1e5)})
+GLOBAL = st.fixed_dictionaries({"lat": st.floats(-90, 90), "lon": st.floats(-180, 180), "alt_m": st.floats(-1e5, 1e5)})
 SPEED = st.lists(st.floats(-300, 300), min_size=3, max_size=3)
 
 
@@ -112,9 +121,14 @@ def valid_threats(draw) -> dict:
     """A valid version-1 threat object."""
     frame = draw(st.sampled_from(["local_ned", "global"]))
     kind = draw(st.sampled_from(["popup", "moving"]))
-    data = {"v": 1, "id": draw(IDS), "kind": kind, "frame": frame,
-            "position": draw(LOCAL if frame == "local_ned" else GLOBAL),
-            "radius_m": draw(st.floats(0.0, 1e4, exclude_min=True))}
+    data = {
+        "v": 1,
+        "id": draw(IDS),
+        "kind": kind,
+        "frame": frame,
+        "position": draw(LOCAL if frame == "local_ned" else GLOBAL),
+        "radius_m": draw(st.floats(0.0, 1e4, exclude_min=True)),
+    }
     if kind == "moving" or draw(st.booleans()):
         data["velocity_ned_m_s"] = draw(SPEED) if kind == "moving" else [0.0, 0.0, 0.0]
     if draw(st.booleans()):
@@ -127,24 +141,58 @@ def valid_threats(draw) -> dict:
 #: Values that are never valid for the field (a sub-field name is reported for nested ones).
 BAD_VALUES = {
     "v": st.one_of(st.integers().filter(lambda v: v != 1), st.just(True), st.just(1.0), st.text(max_size=3)),
-    "id": st.one_of(st.just(""), st.text(min_size=65, max_size=70), st.text(max_size=8).filter(
-        lambda s: not codec.ID_PATTERN.match(s)), st.integers(), st.none()),
-    "kind": st.one_of(st.text(max_size=8).filter(lambda s: s not in ("popup", "moving")), st.integers(), st.none(),
-                      st.just(["popup"])),
-    "frame": st.one_of(st.text(max_size=10).filter(lambda s: s not in ("local_ned", "global")), st.none(),
-                       st.just({"frame": "global"})),
-    "position": st.one_of(st.none(), st.text(max_size=5), st.lists(FINITE, max_size=2),
-                          st.lists(FINITE, min_size=4, max_size=5), st.just([1.0, math.nan, 2.0]),
-                          st.just({"lat": 91.0, "lon": 0.0, "alt_m": 0.0}), st.just([1e7, 0.0, 0.0]),
-                          st.just({"lat": 1.0, "lon": 2.0}), st.just([1.0, "2", 3.0])),
-    "radius_m": st.one_of(st.floats(max_value=0.0), st.floats(min_value=1e4, exclude_min=True), st.none(),
-                          st.just(True), st.text(max_size=4), st.just(math.inf)),
-    "velocity_ned_m_s": st.one_of(st.none(), st.lists(FINITE, max_size=2), st.just([301.0, 0.0, 0.0]),
-                                  st.just([0.0, -math.inf, 0.0]), st.just([0.0, 0.0, False])),
-    "ttl_s": st.one_of(st.floats(max_value=0.0), st.floats(min_value=1e6, exclude_min=True), st.text(max_size=3),
-                       st.just(math.nan), st.just([1.0])),
-    "traffic": st.one_of(st.text(max_size=8).filter(lambda s: s not in ("drone", "manned")), st.none(),
-                         st.integers(), st.just(["manned"])),
+    "id": st.one_of(
+        st.just(""),
+        st.text(min_size=65, max_size=70),
+        st.text(max_size=8).filter(lambda s: not codec.ID_PATTERN.match(s)),
+        st.integers(),
+        st.none(),
+    ),
+    "kind": st.one_of(
+        st.text(max_size=8).filter(lambda s: s not in ("popup", "moving")), st.integers(), st.none(), st.just(["popup"])
+    ),
+    "frame": st.one_of(
+        st.text(max_size=10).filter(lambda s: s not in ("local_ned", "global")), st.none(), st.just({"frame": "global"})
+    ),
+    "position": st.one_of(
+        st.none(),
+        st.text(max_size=5),
+        st.lists(FINITE, max_size=2),
+        st.lists(FINITE, min_size=4, max_size=5),
+        st.just([1.0, math.nan, 2.0]),
+        st.just({"lat": 91.0, "lon": 0.0, "alt_m": 0.0}),
+        st.just([1e7, 0.0, 0.0]),
+        st.just({"lat": 1.0, "lon": 2.0}),
+        st.just([1.0, "2", 3.0]),
+    ),
+    "radius_m": st.one_of(
+        st.floats(max_value=0.0),
+        st.floats(min_value=1e4, exclude_min=True),
+        st.none(),
+        st.just(True),
+        st.text(max_size=4),
+        st.just(math.inf),
+    ),
+    "velocity_ned_m_s": st.one_of(
+        st.none(),
+        st.lists(FINITE, max_size=2),
+        st.just([301.0, 0.0, 0.0]),
+        st.just([0.0, -math.inf, 0.0]),
+        st.just([0.0, 0.0, False]),
+    ),
+    "ttl_s": st.one_of(
+        st.floats(max_value=0.0),
+        st.floats(min_value=1e6, exclude_min=True),
+        st.text(max_size=3),
+        st.just(math.nan),
+        st.just([1.0]),
+    ),
+    "traffic": st.one_of(
+        st.text(max_size=8).filter(lambda s: s not in ("drone", "manned")),
+        st.none(),
+        st.integers(),
+        st.just(["manned"]),
+    ),
 }
 
 
@@ -162,7 +210,7 @@ def near_valid(draw) -> tuple[bytes, str, str]:
     else:
         field = draw(st.sampled_from(FIELDS))
         data[field] = draw(BAD_VALUES[field]) if how == "value" else data.get(field, 1.0)
-    text = json.dumps(data, allow_nan=True)           # NaN / Infinity literals stay in the text
+    text = json.dumps(data, allow_nan=True)  # NaN / Infinity literals stay in the text
     if how == "duplicate":
         text = text[:-1] + f", {json.dumps(field)}: {json.dumps(data[field], allow_nan=True)}}}"
     key_id = data["id"] if isinstance(data.get("id"), str) and codec.ID_PATTERN.match(data["id"]) else "t1"
@@ -218,8 +266,11 @@ def test_valid_threats_are_put(bus, data):
 def test_non_finite_literals_are_named():
     """NaN, Infinity and -Infinity literals (valid for Python's json, not for JSON) name their field."""
     for literal in ("NaN", "Infinity", "-Infinity"):
-        text = ('{"v": 1, "id": "t1", "kind": "popup", "frame": "local_ned", "position": [1, %s, 2], '
-                '"radius_m": 5}' % literal)
+        text = (
+            '{"v": 1, "id": "t1", "kind": "popup", "frame": "local_ned", "position": [1, '
+            + literal
+            + ', 2], "radius_m": 5}'
+        )
         with pytest.raises(ThreatPayloadError) as exc:
             codec.decode(text.encode(), key_id="t1")
         assert exc.value.field == "position[1]" and literal in str(exc.value)

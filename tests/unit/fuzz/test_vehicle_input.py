@@ -35,11 +35,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from heli_model.model import HeliModel
 from sim_vehicle import autopilot as ap
 from sim_vehicle import rsc
 from sim_vehicle.autopilot import Autopilot
 from sim_vehicle.config import VehicleSettings, replace_path
-from heli_model.model import HeliModel
 
 HOME = (47.397742, 8.545594, 488.0, 0.0)
 GCS = ("127.0.0.1", 40001)
@@ -48,8 +48,17 @@ MISSION_TYPES = (mavlink.MAV_MISSION_TYPE_MISSION, mavlink.MAV_MISSION_TYPE_FENC
 MISSION = [  # frame, command, p1..p4, x, y, z (as tests/integration/test_sitl_robustness.py)
     (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_CMD_NAV_WAYPOINT, 0.0, 0.0, 0.0, 0.0, 473977420, 85455940, 488.0),
     (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 0.0, 0.0, 0, 0, 10.0),
-    (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_CMD_NAV_WAYPOINT, 0.0, 2.0, 0.0, 0.0, 473978320, 85455940,
-     10.0),
+    (
+        mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+        mavlink.MAV_CMD_NAV_WAYPOINT,
+        0.0,
+        2.0,
+        0.0,
+        0.0,
+        473978320,
+        85455940,
+        10.0,
+    ),
 ]
 #: Counters that are not a per-datagram verdict (``ignored`` and ``commands`` count messages
 #: already in ``messages_in``).
@@ -87,7 +96,7 @@ class Errors(logging.Handler):
     def emit(self, record: logging.LogRecord) -> None:
         self.records.append(record)
 
-    def __enter__(self) -> "Errors":
+    def __enter__(self) -> Errors:
         self.logger.addHandler(self)
         return self
 
@@ -131,8 +140,12 @@ def upload(server, rows, mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION) -
     start = len(server.sock.sent)
     feed(server, gcs.mission_count_encode(SYSID, 1, len(rows), mission_type).pack(gcs))
     for seq, (frame, cmd, p1, p2, p3, p4, x, y, z) in enumerate(rows):
-        feed(server, gcs.mission_item_int_encode(SYSID, 1, seq, frame, cmd, 0, 1, p1, p2, p3, p4, x, y, z,
-                                                 mission_type).pack(gcs))
+        feed(
+            server,
+            gcs.mission_item_int_encode(SYSID, 1, seq, frame, cmd, 0, 1, p1, p2, p3, p4, x, y, z, mission_type).pack(
+                gcs
+            ),
+        )
     acks = [m for m in decode(server.sock.sent[start:]) if m.get_type() == "MISSION_ACK"]
     return acks[-1].type if acks else -1
 
@@ -165,22 +178,53 @@ def flying():
 # ================================================================ strategies
 U8, U16 = st.integers(0, 0xFF), st.integers(0, 0xFFFF)
 U32 = st.integers(0, 0xFFFFFFFF)
-I32 = st.integers(-2**31, 2**31 - 1)
+I32 = st.integers(-(2**31), 2**31 - 1)
 #: Float32 values, with NaN, infinities, the extremes and values near the interesting bounds.
-F32 = st.one_of(st.floats(width=32), st.sampled_from([math.nan, math.inf, -math.inf, 3.4e38, -3.4e38, 0.0, -1.0, 1.0,
-                                                      2.0, 21196.0, 1e9]))
+F32 = st.one_of(
+    st.floats(width=32),
+    st.sampled_from([math.nan, math.inf, -math.inf, 3.4e38, -3.4e38, 0.0, -1.0, 1.0, 2.0, 21196.0, 1e9]),
+)
 TARGET_SYSTEM = st.sampled_from([SYSID] * 5 + [0, 2, 255])
 TARGET_COMPONENT = st.sampled_from([1] * 5 + [0, 190, 255])
 MISSION_TYPE = st.one_of(st.sampled_from([0, 0, 1, 2, 255]), U8)
 COMMANDS = st.one_of(st.sampled_from(sorted(mavlink.enums["MAV_CMD"])), U16)
-PARAM_NAMES = st.one_of(st.sampled_from(["WPNAV_SPEED", "SIM_SPEEDUP", "GUID_TIMEOUT", "H_RSC_RUNUP_TIME",
-                                         "SIM_WIND_SPD", "MAV_GCS_SYSID", "LQI_Q_U", "POS_KP_XY"]),
-                        st.binary(max_size=16))
-LOCAL_FRAMES = st.one_of(st.sampled_from([mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_OFFSET_NED,
-                                          mavlink.MAV_FRAME_BODY_NED, mavlink.MAV_FRAME_BODY_OFFSET_NED]), U8)
-GLOBAL_FRAMES = st.one_of(st.sampled_from([mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT,
-                                           mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
-                                           mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT]), U8)
+PARAM_NAMES = st.one_of(
+    st.sampled_from(
+        [
+            "WPNAV_SPEED",
+            "SIM_SPEEDUP",
+            "GUID_TIMEOUT",
+            "H_RSC_RUNUP_TIME",
+            "SIM_WIND_SPD",
+            "MAV_GCS_SYSID",
+            "LQI_Q_U",
+            "POS_KP_XY",
+        ]
+    ),
+    st.binary(max_size=16),
+)
+LOCAL_FRAMES = st.one_of(
+    st.sampled_from(
+        [
+            mavlink.MAV_FRAME_LOCAL_NED,
+            mavlink.MAV_FRAME_LOCAL_OFFSET_NED,
+            mavlink.MAV_FRAME_BODY_NED,
+            mavlink.MAV_FRAME_BODY_OFFSET_NED,
+        ]
+    ),
+    U8,
+)
+GLOBAL_FRAMES = st.one_of(
+    st.sampled_from(
+        [
+            mavlink.MAV_FRAME_GLOBAL,
+            mavlink.MAV_FRAME_GLOBAL_INT,
+            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+            mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        ]
+    ),
+    U8,
+)
 
 
 def f32s(n: int):
@@ -188,39 +232,117 @@ def f32s(n: int):
 
 
 MESSAGES = st.one_of(
-    st.builds(lambda ts, tc, cmd, conf, p: mavlink.MAVLink_command_long_message(ts, tc, cmd, conf, *p),
-              TARGET_SYSTEM, TARGET_COMPONENT, COMMANDS, U8, f32s(7)),
-    st.builds(lambda ts, tc, frame, cmd, p, x, y, z: mavlink.MAVLink_command_int_message(
-        ts, tc, frame, cmd, 0, 0, *p, x, y, z), TARGET_SYSTEM, TARGET_COMPONENT, U8, COMMANDS, f32s(4), I32, I32, F32),
-    st.builds(lambda ts, tc, frame, mask, p: mavlink.MAVLink_set_position_target_local_ned_message(
-        0, ts, tc, frame, mask, *p), TARGET_SYSTEM, TARGET_COMPONENT, LOCAL_FRAMES, U16, f32s(11)),
-    st.builds(lambda ts, tc, frame, mask, lat, lon, p: mavlink.MAVLink_set_position_target_global_int_message(
-        0, ts, tc, frame, mask, lat, lon, *p), TARGET_SYSTEM, TARGET_COMPONENT, GLOBAL_FRAMES, U16, I32, I32,
-        f32s(9)),
-    st.builds(lambda ts, tc, count, mt: mavlink.MAVLink_mission_count_message(ts, tc, count, mt),
-              TARGET_SYSTEM, TARGET_COMPONENT, st.one_of(st.integers(1, 4), U16), MISSION_TYPE),
-    st.builds(lambda ts, tc, seq, frame, cmd, cur, auto, p, x, y, z, mt: mavlink.MAVLink_mission_item_int_message(
-        ts, tc, seq, frame, cmd, cur, auto, *p, x, y, z, mt),
-        TARGET_SYSTEM, TARGET_COMPONENT, st.one_of(st.integers(0, 4), U16), U8, COMMANDS, U8, U8, f32s(4), I32, I32,
-        F32, MISSION_TYPE),
-    st.builds(lambda ts, tc, seq, frame, cmd, cur, auto, p, mt: mavlink.MAVLink_mission_item_message(
-        ts, tc, seq, frame, cmd, cur, auto, *p, mt),
-        TARGET_SYSTEM, TARGET_COMPONENT, st.one_of(st.integers(0, 4), U16), U8, COMMANDS, U8, U8, f32s(7),
-        MISSION_TYPE),
+    st.builds(
+        lambda ts, tc, cmd, conf, p: mavlink.MAVLink_command_long_message(ts, tc, cmd, conf, *p),
+        TARGET_SYSTEM,
+        TARGET_COMPONENT,
+        COMMANDS,
+        U8,
+        f32s(7),
+    ),
+    st.builds(
+        lambda ts, tc, frame, cmd, p, x, y, z: mavlink.MAVLink_command_int_message(
+            ts, tc, frame, cmd, 0, 0, *p, x, y, z
+        ),
+        TARGET_SYSTEM,
+        TARGET_COMPONENT,
+        U8,
+        COMMANDS,
+        f32s(4),
+        I32,
+        I32,
+        F32,
+    ),
+    st.builds(
+        lambda ts, tc, frame, mask, p: mavlink.MAVLink_set_position_target_local_ned_message(
+            0, ts, tc, frame, mask, *p
+        ),
+        TARGET_SYSTEM,
+        TARGET_COMPONENT,
+        LOCAL_FRAMES,
+        U16,
+        f32s(11),
+    ),
+    st.builds(
+        lambda ts, tc, frame, mask, lat, lon, p: mavlink.MAVLink_set_position_target_global_int_message(
+            0, ts, tc, frame, mask, lat, lon, *p
+        ),
+        TARGET_SYSTEM,
+        TARGET_COMPONENT,
+        GLOBAL_FRAMES,
+        U16,
+        I32,
+        I32,
+        f32s(9),
+    ),
+    st.builds(
+        lambda ts, tc, count, mt: mavlink.MAVLink_mission_count_message(ts, tc, count, mt),
+        TARGET_SYSTEM,
+        TARGET_COMPONENT,
+        st.one_of(st.integers(1, 4), U16),
+        MISSION_TYPE,
+    ),
+    st.builds(
+        lambda ts, tc, seq, frame, cmd, cur, auto, p, x, y, z, mt: mavlink.MAVLink_mission_item_int_message(
+            ts, tc, seq, frame, cmd, cur, auto, *p, x, y, z, mt
+        ),
+        TARGET_SYSTEM,
+        TARGET_COMPONENT,
+        st.one_of(st.integers(0, 4), U16),
+        U8,
+        COMMANDS,
+        U8,
+        U8,
+        f32s(4),
+        I32,
+        I32,
+        F32,
+        MISSION_TYPE,
+    ),
+    st.builds(
+        lambda ts, tc, seq, frame, cmd, cur, auto, p, mt: mavlink.MAVLink_mission_item_message(
+            ts, tc, seq, frame, cmd, cur, auto, *p, mt
+        ),
+        TARGET_SYSTEM,
+        TARGET_COMPONENT,
+        st.one_of(st.integers(0, 4), U16),
+        U8,
+        COMMANDS,
+        U8,
+        U8,
+        f32s(7),
+        MISSION_TYPE,
+    ),
     st.builds(mavlink.MAVLink_mission_request_list_message, TARGET_SYSTEM, TARGET_COMPONENT, MISSION_TYPE),
     st.builds(mavlink.MAVLink_mission_request_int_message, TARGET_SYSTEM, TARGET_COMPONENT, U16, MISSION_TYPE),
     st.builds(mavlink.MAVLink_mission_set_current_message, TARGET_SYSTEM, TARGET_COMPONENT, U16),
     st.builds(mavlink.MAVLink_mission_ack_message, TARGET_SYSTEM, TARGET_COMPONENT, U8, MISSION_TYPE),
-    st.builds(lambda ts, tc, name, value, ptype: mavlink.MAVLink_param_set_message(
-        ts, tc, name if isinstance(name, bytes) else name.encode(), value, ptype),
-        TARGET_SYSTEM, TARGET_COMPONENT, PARAM_NAMES, F32, U8),
-    st.builds(mavlink.MAVLink_param_request_read_message, TARGET_SYSTEM, TARGET_COMPONENT,
-              PARAM_NAMES.map(lambda n: n if isinstance(n, bytes) else n.encode()), st.integers(-32768, 32767)),
+    st.builds(
+        lambda ts, tc, name, value, ptype: mavlink.MAVLink_param_set_message(
+            ts, tc, name if isinstance(name, bytes) else name.encode(), value, ptype
+        ),
+        TARGET_SYSTEM,
+        TARGET_COMPONENT,
+        PARAM_NAMES,
+        F32,
+        U8,
+    ),
+    st.builds(
+        mavlink.MAVLink_param_request_read_message,
+        TARGET_SYSTEM,
+        TARGET_COMPONENT,
+        PARAM_NAMES.map(lambda n: n if isinstance(n, bytes) else n.encode()),
+        st.integers(-32768, 32767),
+    ),
     st.builds(mavlink.MAVLink_set_mode_message, TARGET_SYSTEM, U8, U32),
     st.builds(mavlink.MAVLink_request_data_stream_message, TARGET_SYSTEM, TARGET_COMPONENT, U8, U16, U8),
-    st.builds(lambda ts, tc, ch: mavlink.MAVLink_rc_channels_override_message(ts, tc, *ch),
-              TARGET_SYSTEM, TARGET_COMPONENT, st.tuples(*[U16] * 8)),
-    st.builds(mavlink.MAVLink_timesync_message, st.integers(-2**63, 2**63 - 1), st.integers(-2**63, 2**63 - 1)),
+    st.builds(
+        lambda ts, tc, ch: mavlink.MAVLink_rc_channels_override_message(ts, tc, *ch),
+        TARGET_SYSTEM,
+        TARGET_COMPONENT,
+        st.tuples(*[U16] * 8),
+    ),
+    st.builds(mavlink.MAVLink_timesync_message, st.integers(-(2**63), 2**63 - 1), st.integers(-(2**63), 2**63 - 1)),
     st.builds(mavlink.MAVLink_heartbeat_message, U8, U8, U8, U32, U8, st.just(3)),
     st.builds(mavlink.MAVLink_statustext_message, U8, st.binary(max_size=50), U16, U8),
 )
@@ -250,7 +372,7 @@ def mutated(draw) -> bytes:
 @st.composite
 def truncated(draw) -> bytes:
     data = draw(frames())
-    return data[:draw(st.integers(1, len(data) - 1))]
+    return data[: draw(st.integers(1, len(data) - 1))]
 
 
 @st.composite
@@ -266,16 +388,21 @@ DATAGRAMS = st.one_of(frames(), frames(), mutated(), truncated(), concatenated()
 # ================================================================ the properties
 def check_stored_lists(server, before: dict, sent_from: int) -> bool:
     """Stored lists unchanged unless an upload was acknowledged; True if one was (then restored)."""
-    acked = {m.mission_type for m in decode(server.sock.sent[sent_from:])
-             if m.get_type() == "MISSION_ACK" and m.type == mavlink.MAV_MISSION_ACCEPTED}
+    acked = {
+        m.mission_type
+        for m in decode(server.sock.sent[sent_from:])
+        if m.get_type() == "MISSION_ACK" and m.type == mavlink.MAV_MISSION_ACCEPTED
+    }
     changed = False
     for mission_type in MISSION_TYPES:
         generation, items = before[mission_type]
         if server.store.generation(mission_type) == generation:
             assert server.store.items(mission_type) == items, f"list {mission_type} changed in place"
             continue
-        assert mission_type in acked, (f"list {mission_type} replaced without an accepted upload "
-                                       f"(MISSION_ACK ACCEPTED); now {server.store.items(mission_type)}")
+        assert mission_type in acked, (
+            f"list {mission_type} replaced without an accepted upload "
+            f"(MISSION_ACK ACCEPTED); now {server.store.items(mission_type)}"
+        )
         changed = True
     return changed
 
@@ -312,8 +439,9 @@ def test_junk_is_counted_and_changes_nothing_stored(flying, datagrams):
         for mission_type in MISSION_TYPES:  # a legitimate upload happened: start again from the reference
             rows = MISSION if mission_type == mavlink.MAV_MISSION_TYPE_MISSION else []
             assert upload(server, rows, mission_type) == mavlink.MAV_MISSION_ACCEPTED
-    assert [(i.frame, i.command, i.x, i.y, i.z) for i in server.store.items()] == \
-        [(r[0], r[1], r[6], r[7], r[8]) for r in MISSION]
+    assert [(i.frame, i.command, i.x, i.y, i.z) for i in server.store.items()] == [
+        (r[0], r[1], r[6], r[7], r[8]) for r in MISSION
+    ]
     check_parameters(server)
     check_vehicle(server)
     del server.sock.sent[:]
@@ -327,8 +455,10 @@ def test_abandoned_and_out_of_order_uploads_keep_the_mission(flying):
     feed(server, gcs.mission_count_encode(SYSID, 1, 65535, 0).pack(gcs))
     feed(server, gcs.mission_count_encode(SYSID, 1, 3, 0).pack(gcs))
     for seq in (2, 0, 7):
-        feed(server, gcs.mission_item_int_encode(SYSID, 1, seq, 3, 16, 0, 1, math.nan, 0, 0, 0, 1, 1,
-                                                 math.inf, 0).pack(gcs))
+        feed(
+            server,
+            gcs.mission_item_int_encode(SYSID, 1, seq, 3, 16, 0, 1, math.nan, 0, 0, 0, 1, 1, math.inf, 0).pack(gcs),
+        )
     assert server.store.generation() == generation
     assert len(server.store.items()) == len(MISSION)
     feed(server, gcs.mission_ack_encode(SYSID, 1, mavlink.MAV_MISSION_OPERATION_CANCELLED, 0).pack(gcs))

@@ -20,11 +20,10 @@ from hypothesis import strategies as st
 
 from heli_model import control_kernel as kernel
 from heli_model import dynamics
-from heli_model.control import ControlError, ControllerSettings, ControllerState, ControlLaw, Setpoint
+from heli_model.control import ControlError, ControlLaw, ControllerSettings, ControllerState, Setpoint
 from heli_model.control import law as law_module
 from heli_model.model import HeliModel
 from heli_model.vehicle_update import VehicleCommand, VehicleState, VehicleUpdate, integrate_compiled
-
 
 # ============================================================================ frozen reference
 # Verbatim from main at 6a38544 (heli_model/control/outer_loop.py, settings.py, law.py), names
@@ -174,8 +173,31 @@ def ref_heading_reference(st_, yaw_ref_rad, sp, dt_s):
     return yaw_ref_rad, rate, limited
 
 
-def ref_law_output(L, x, c, s, cmd0, cmd1, cmd2, vf0, vf1, a0, a1, a2, rate_ref, psi_err, z0, z1, z2, z3, dt_s,
-                   integrate_vel, integrate_yaw, delta, raw):
+def ref_law_output(
+    L,
+    x,
+    c,
+    s,
+    cmd0,
+    cmd1,
+    cmd2,
+    vf0,
+    vf1,
+    a0,
+    a1,
+    a2,
+    rate_ref,
+    psi_err,
+    z0,
+    z1,
+    z2,
+    z3,
+    dt_s,
+    integrate_vel,
+    integrate_yaw,
+    delta,
+    raw,
+):
     ub = c * cmd0 + s * cmd1
     vb = -s * cmd0 + c * cmd1
     wb = cmd2
@@ -185,9 +207,9 @@ def ref_law_output(L, x, c, s, cmd0, cmd1, cmd2, vf0, vf1, a0, a1, a2, rate_ref,
     ayb = -s * a0 + c * a1 - rate_ref * vfx
     vec = np.empty(L.shape[1])
     vec[0:8] = (axb, ayb, a2, rate_ref, ub, vb, wb, 0.0)
-    vec[8:8 + 13] = x[:13]
+    vec[8 : 8 + 13] = x[:13]
     vec[8 + 13] = psi_err
-    vec[8 + 14:] = (z0, z1, z2, z3)
+    vec[8 + 14 :] = (z0, z1, z2, z3)
     raw[:] = L @ vec
     unclipped = raw.tolist()
     delta[:] = [(-1.0 if d < -1.0 else (1.0 if d > 1.0 else d)) for d in unclipped]
@@ -219,9 +241,30 @@ def ref_step(matrix, st_, state, x, setpoint, dt_s):
     z0, z1, z2, z3 = state.z
     delta, raw = np.empty(4), np.empty(4)
     saturated, z = ref_law_output(
-        matrix, x, c, s, cmd0, cmd1, cmd2, vel_ff[0], vel_ff[1], acc_ff[0], acc_ff[1], acc_ff[2], rate_ref,
-        psi_err, z0, z1, z2, z3, float(dt_s), not (limited[0] or limited[1] or limited[2]), not yaw_limited,
-        delta, raw)
+        matrix,
+        x,
+        c,
+        s,
+        cmd0,
+        cmd1,
+        cmd2,
+        vel_ff[0],
+        vel_ff[1],
+        acc_ff[0],
+        acc_ff[1],
+        acc_ff[2],
+        rate_ref,
+        psi_err,
+        z0,
+        z1,
+        z2,
+        z3,
+        float(dt_s),
+        not (limited[0] or limited[1] or limited[2]),
+        not yaw_limited,
+        delta,
+        raw,
+    )
     if saturated:
         z = state.z
     else:
@@ -280,8 +323,27 @@ def test_the_comparison_sees_one_ulp_the_sign_of_zero_and_the_type():
 
 
 # ============================================================================ the ported functions
-SPECIAL = [0.0, -0.0, math.nan, -math.nan, math.inf, -math.inf, 5e-324, -5e-324, 2.2250738585072014e-308, 1e-310,
-           1.7976931348623157e308, 1e154, 1e-154, 1.0, -1.0, 3.0, 4.0, math.pi, -math.pi]
+SPECIAL = [
+    0.0,
+    -0.0,
+    math.nan,
+    -math.nan,
+    math.inf,
+    -math.inf,
+    5e-324,
+    -5e-324,
+    2.2250738585072014e-308,
+    1e-310,
+    1.7976931348623157e308,
+    1e154,
+    1e-154,
+    1.0,
+    -1.0,
+    3.0,
+    4.0,
+    math.pi,
+    -math.pi,
+]
 
 
 def wide_floats(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -304,8 +366,12 @@ def test_hypot_is_cpythons():
 
 def test_remainder_is_cpythons():
     rng = np.random.default_rng(2)
-    values = wide_floats(rng, 40000).tolist() + [k * math.pi for k in range(-40, 41)] + \
-        [k * math.pi + d for k in range(-9, 10) for d in (-1e-15, 1e-15)] + [v for v in SPECIAL if not math.isinf(v)]
+    values = (
+        wide_floats(rng, 40000).tolist()
+        + [k * math.pi for k in range(-40, 41)]
+        + [k * math.pi + d for k in range(-9, 10) for d in (-1e-15, 1e-15)]
+        + [v for v in SPECIAL if not math.isinf(v)]
+    )
     for a in values:
         assert bits(kernel.py_remainder(a, 2.0 * math.pi)) == bits(math.remainder(a, 2.0 * math.pi)), a
 
@@ -314,7 +380,7 @@ def test_square_is_pythons():
     rng = np.random.default_rng(3)
     for a in wide_floats(rng, 40000).tolist() + [v for v in SPECIAL if math.isfinite(v)]:
         try:
-            want = a ** 2
+            want = a**2
         except OverflowError:
             assert math.isinf(kernel.py_square(a, 2.0)), a
             continue
@@ -332,9 +398,19 @@ def test_hypothesis_hypot_and_remainder(a, b):
 # ============================================================================ set-up
 MODEL = HeliModel.default()
 PID = ControllerSettings(ki_xy_1_s2=0.3, kd_xy=0.2, ki_z_1_s2=0.4, kd_z=0.1, pos_integral_max_m_s=0.5)
-HARSH = ControllerSettings(kp_xy_1_s=3.0, kp_z_1_s=3.0, max_speed_xy_m_s=40.0, max_climb_m_s=15.0,
-                           max_descent_m_s=15.0, max_accel_m_s2=30.0, cmd_accel_xy_m_s2=60.0, cmd_accel_z_m_s2=40.0,
-                           max_yaw_rate_rad_s=4.0, ki_xy_1_s2=0.5, ki_z_1_s2=0.5)
+HARSH = ControllerSettings(
+    kp_xy_1_s=3.0,
+    kp_z_1_s=3.0,
+    max_speed_xy_m_s=40.0,
+    max_climb_m_s=15.0,
+    max_descent_m_s=15.0,
+    max_accel_m_s2=30.0,
+    cmd_accel_xy_m_s2=60.0,
+    cmd_accel_z_m_s2=40.0,
+    max_yaw_rate_rad_s=4.0,
+    ki_xy_1_s2=0.5,
+    ki_z_1_s2=0.5,
+)
 """Gains and limits that drive the rotor inputs into saturation on steps."""
 VEHICLES = {
     "default": VehicleUpdate.build(MODEL),
@@ -346,6 +422,7 @@ VEHICLES = {
 
 def random_setpoint(rng: np.random.Generator) -> Setpoint:
     """Any mix of vectors (None, arrays, tuples, lists; NaN axes) and heading commands (heading, rate, both, neither)."""
+
     def maybe(scale: float):
         kind = rng.integers(5)
         if kind == 0:
@@ -353,6 +430,7 @@ def random_setpoint(rng: np.random.Generator) -> Setpoint:
         v = rng.normal(0.0, scale, 3)
         v[rng.random(3) < 0.2] = np.nan
         return (v, v, tuple(v.tolist()), v.tolist())[kind - 1]
+
     yaw = float(rng.uniform(-7.0, 7.0)) if rng.random() < 0.6 else None
     rate = float(rng.normal(0.0, 2.0)) if rng.random() < 0.4 else None
     return Setpoint(maybe(40.0), maybe(8.0), maybe(6.0), yaw, rate)
@@ -360,9 +438,15 @@ def random_setpoint(rng: np.random.Generator) -> Setpoint:
 
 def random_controller(rng: np.random.Generator, x: np.ndarray) -> ControllerState:
     return ControllerState(
-        z=tuple(rng.normal(0.0, 0.3, 4).tolist()), pos_integral_m=tuple(rng.normal(0.0, 2.0, 3).tolist()),
-        yaw_ref_rad=float(rng.uniform(-4.0, 4.0)), cmd_prev_ned_m_s=tuple(rng.normal(0.0, 8.0, 3).tolist()),
-        delta=np.zeros(4), delta_unclipped=np.zeros(4), saturated=False, vel_cmd_ned_m_s=np.zeros(3))
+        z=tuple(rng.normal(0.0, 0.3, 4).tolist()),
+        pos_integral_m=tuple(rng.normal(0.0, 2.0, 3).tolist()),
+        yaw_ref_rad=float(rng.uniform(-4.0, 4.0)),
+        cmd_prev_ned_m_s=tuple(rng.normal(0.0, 8.0, 3).tolist()),
+        delta=np.zeros(4),
+        delta_unclipped=np.zeros(4),
+        saturated=False,
+        vel_cmd_ned_m_s=np.zeros(3),
+    )
 
 
 def random_x(rng: np.random.Generator, vehicle: VehicleUpdate) -> np.ndarray:
@@ -382,7 +466,9 @@ def test_random_steps_are_identical(name):
     for _ in range(1500):
         x = random_x(rng, VEHICLES[name])
         state = random_controller(rng, x)
-        setpoint = random_setpoint(rng) if rng.random() < 0.7 else Setpoint(pos_ned_m=x[14:17] + rng.normal(0.0, 0.1, 3))
+        setpoint = (
+            random_setpoint(rng) if rng.random() < 0.7 else Setpoint(pos_ned_m=x[14:17] + rng.normal(0.0, 0.1, 3))
+        )
         if rng.random() < 0.5:
             state = state._replace(z=(0.0, 0.0, 0.0, 0.0), cmd_prev_ned_m_s=(0.0, 0.0, 0.0), yaw_ref_rad=float(x[13]))
         dt_s = float(rng.choice([0.01, rng.uniform(1e-3, 0.05)]))
@@ -460,8 +546,10 @@ def test_non_finite_states_are_identical():
         state = random_controller(rng, x)
         x[rng.integers(17)] = rng.choice([np.nan, np.inf, -np.inf, 1e308])
         if rng.random() < 0.3:
-            state = state._replace(yaw_ref_rad=float(rng.choice([np.nan, 1e308])),
-                                   cmd_prev_ned_m_s=(float(rng.choice([np.nan, 1e308, 0.0])), 0.0, 0.0))
+            state = state._replace(
+                yaw_ref_rad=float(rng.choice([np.nan, 1e308])),
+                cmd_prev_ned_m_s=(float(rng.choice([np.nan, 1e308, 0.0])), 0.0, 0.0),
+            )
         setpoint = random_setpoint(rng)
         got = outcome(law.step, state, x, setpoint, 0.01)
         want = outcome(ref_step, law.matrix, law.settings, state, x, setpoint, 0.01)
@@ -478,8 +566,9 @@ def test_settings_given_as_ints_run_the_python_step():
     for _ in range(50):
         x = random_x(rng, VEHICLES["default"])
         state, setpoint = random_controller(rng, x), random_setpoint(rng)
-        assert_same_controller(law.step(state, x, setpoint, 0.01),
-                               ref_step(law.matrix, law.settings, state, x, setpoint, 0.01))
+        assert_same_controller(
+            law.step(state, x, setpoint, 0.01), ref_step(law.matrix, law.settings, state, x, setpoint, 0.01)
+        )
 
 
 def test_replaced_settings_are_read_again():
@@ -500,8 +589,9 @@ def test_the_numpy_path_is_identical_too(monkeypatch):
         cases.append((random_controller(rng, x), x, random_setpoint(rng)))
     monkeypatch.setattr(dynamics, "_EXACT_SHAPES", {(4, 26): False})
     for state, x, setpoint in cases:
-        assert_same_controller(law.step(state, x, setpoint, 0.01),
-                               ref_step(law.matrix, law.settings, state, x, setpoint, 0.01))
+        assert_same_controller(
+            law.step(state, x, setpoint, 0.01), ref_step(law.matrix, law.settings, state, x, setpoint, 0.01)
+        )
     assert law_module._KERNEL  # and the kernel was loaded beforehand (the compiled path ran)
 
 
@@ -514,10 +604,13 @@ def flight_setpoints(rng: np.random.Generator, k: int, t_s: float) -> Setpoint:
         return Setpoint(pos_ned_m=np.array([30.0, -10.0, -25.0]), yaw_rad=1.0)
     if phase == 1:
         w = 5.0 / 30.0
-        return Setpoint(np.array([30.0 * math.cos(w * t_s), 30.0 * math.sin(w * t_s), -20.0]),
-                        np.array([-5.0 * math.sin(w * t_s), 5.0 * math.cos(w * t_s), 0.0]),
-                        np.array([-5.0 * w * math.cos(w * t_s), -5.0 * w * math.sin(w * t_s), 0.0]),
-                        w * t_s + math.pi / 2.0, w)
+        return Setpoint(
+            np.array([30.0 * math.cos(w * t_s), 30.0 * math.sin(w * t_s), -20.0]),
+            np.array([-5.0 * math.sin(w * t_s), 5.0 * math.cos(w * t_s), 0.0]),
+            np.array([-5.0 * w * math.cos(w * t_s), -5.0 * w * math.sin(w * t_s), 0.0]),
+            w * t_s + math.pi / 2.0,
+            w,
+        )
     if phase == 2:
         return Setpoint(vel_ned_m_s=np.array([4.0, -2.0, 0.5]), yaw_rate_rad_s=0.8)
     if phase == 3:

@@ -8,7 +8,7 @@ from heli_model.control import ControllerSettings
 from heli_model.control.lqi import dlqr_integral, model_14, tracked_output_matrix, zoh
 from heli_model.model import HeliModel
 
-control = pytest.importorskip("control")     # the test extra has it: the reference implementation
+control = pytest.importorskip("control")  # the test extra has it: the reference implementation
 
 
 @pytest.mark.parametrize("dt_s", [0.01, 0.02])

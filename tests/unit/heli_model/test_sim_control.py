@@ -17,8 +17,8 @@ from heli_model.control import (
     simulate_closed_loop,
     wrap_pi,
 )
-from sim_vehicle import references
 from heli_model.model import HeliModel
+from sim_vehicle import references
 
 MODEL = HeliModel.default()
 SETTINGS = ControllerSettings()
@@ -106,7 +106,7 @@ def test_position_step_settles_without_saturating(step_m):
     assert not saturated and max_raw < 1.0, fc_states[1]
     assert settle_s < 6.0
     assert err[-1] < 0.01 * size
-    assert np.max(np.abs(states[:, 13])) < 0.05          # heading held
+    assert np.max(np.abs(states[:, 13])) < 0.05  # heading held
 
 
 @pytest.mark.parametrize("heading", ["path", "fixed"])
@@ -132,7 +132,8 @@ def test_fast_prediction_agrees_with_the_step_loop(use_rate):
     x = D.hover_state(MODEL, pos[0], yaw[0])
     fc.reset(x)
     states, max_raw, _ = fly(
-        fc, x, lambda k: Setpoint(pos[k], vel[k], acc[k], yaw[k], None if rate is None else rate[k]), 40.0)
+        fc, x, lambda k: Setpoint(pos[k], vel[k], acc[k], yaw[k], None if rate is None else rate[k]), 40.0
+    )
     pred = simulate_closed_loop(MODEL, t, pos, vel, acc, yaw, SETTINGS, yaw_rate_rad_s=rate)
     assert pred.pos_ned_m.shape == (t.size, 3) and pred.delta.shape == (t.size, 4)
     assert np.max(np.linalg.norm(pred.pos_ned_m - states[:, 14:17], axis=1)) < 0.03
@@ -143,7 +144,7 @@ def test_fast_prediction_agrees_with_the_step_loop(use_rate):
 
 
 def test_fast_prediction_flags_saturation_and_resamples():
-    t = np.linspace(0.0, 20.0, 801)                     # 40 Hz samples, not the control rate
+    t = np.linspace(0.0, 20.0, 801)  # 40 Hz samples, not the control rate
     pos, vel, acc, yaw = circle_reference(t, radius_m=8.0, speed_m_s=12.0, ramp_s=1.0)
     pred = simulate_closed_loop(MODEL, t, pos, vel, acc, yaw)
     assert pred.t_s.shape == (801,) and pred.tracking_error_m.shape == (801,)
@@ -169,8 +170,13 @@ def test_fast_prediction_from_a_given_state_closes_the_gap():
     ],
 )
 def test_fast_prediction_rejects_bad_input_naming_it(kwargs, name):
-    args = {"t_s": np.arange(5.0), "pos_ned_m": np.zeros((5, 3)), "vel_ned_m_s": np.zeros((5, 3)),
-            "acc_ned_m_s2": np.zeros((5, 3)), "yaw_rad": np.zeros(5)}
+    args = {
+        "t_s": np.arange(5.0),
+        "pos_ned_m": np.zeros((5, 3)),
+        "vel_ned_m_s": np.zeros((5, 3)),
+        "acc_ned_m_s2": np.zeros((5, 3)),
+        "yaw_rad": np.zeros(5),
+    }
     args.update(kwargs)
     with pytest.raises(ControlError, match=name):
         simulate_closed_loop(MODEL, **args)
@@ -201,7 +207,7 @@ def test_yaw_turns_the_short_way_across_pi():
     fc.reset(x)
     states, _, _ = fly(fc, x, lambda k: Setpoint(pos_ned_m=(0.0, 0.0, -10.0), yaw_rad=-3.0), 6.0)
     psi = states[:, 13]
-    assert np.all(psi >= 2.95)                        # went up through pi, never back down through 0
+    assert np.all(psi >= 2.95)  # went up through pi, never back down through 0
     assert math.remainder(psi[-1] - (-3.0), 2 * math.pi) == pytest.approx(0.0, abs=0.01)
 
 
@@ -234,7 +240,7 @@ def test_speed_is_limited_and_far_targets_are_reached_without_windup():
     speeds = np.hypot(*np.array([D.vel_ned_m_s(s)[:2] for s in states]).T)
     assert np.max(speeds) <= 12.0 * 1.02
     assert np.max(speeds) > 11.0
-    assert np.max(states[:, 14]) < 121.0                # arrives without a large overshoot
+    assert np.max(states[:, 14]) < 121.0  # arrives without a large overshoot
     assert abs(states[-1][14] - 120.0) < 0.1
 
 
@@ -302,8 +308,7 @@ def test_modal_solution_equals_the_stepped_recursion(heading):
     fast = simulate_closed_loop(MODEL, t, pos, vel, acc, yaw)
     cl = MODEL.cached(("closed_loop", SETTINGS), lambda: None)
     assert cl is not None and cl.modal is not None
-    stepped = simulate_closed_loop(MODEL, t, pos, vel, acc, yaw,
-                                   ControllerSettings(ki_xy_1_s2=1e-12, ki_z_1_s2=1e-12))
+    stepped = simulate_closed_loop(MODEL, t, pos, vel, acc, yaw, ControllerSettings(ki_xy_1_s2=1e-12, ki_z_1_s2=1e-12))
     assert np.max(np.abs(fast.pos_ned_m - stepped.pos_ned_m)) < 1e-5
     assert np.max(np.abs(fast.delta - stepped.delta)) < 1e-5
 

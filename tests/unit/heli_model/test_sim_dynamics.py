@@ -52,8 +52,7 @@ def test_step_equals_textbook_rk4_of_the_full_nonlinear_system(model):
     wind = np.array([4.0, -2.0, 0.5])
     for h in (0.0025, 0.02):
         got = D.step_rk4(model, x, delta, h, wind)
-        want = _textbook_rk4(
-            lambda y: D.derivative(model, y, delta, wind, wind_heading_rad=x[D.IDX_PSI]), x, h)
+        want = _textbook_rk4(lambda y: D.derivative(model, y, delta, wind, wind_heading_rad=x[D.IDX_PSI]), x, h)
         assert np.max(np.abs(got - want)) < 1e-12
 
 
@@ -63,7 +62,7 @@ def test_rk4_converges_at_order_four(part):
     rng = np.random.default_rng(7)
     x0 = D.hover_state(MODEL)
     x0[:13] = rng.normal(0.0, 0.2, 13)
-    x0[5] = 1.5                                   # fast yaw rate: the heading rotation matters
+    x0[5] = 1.5  # fast yaw rate: the heading rotation matters
     delta = np.array([0.3, -0.2, 0.4, -0.3])
     t_end = 0.8
     ref = _simulate(MODEL, x0, delta, 0.005 / 32, t_end)
@@ -82,7 +81,7 @@ def test_inputs_saturate_at_full_travel():
 
 def test_collective_climbs_and_yaw_integrates_to_heading():
     x = _simulate(MODEL, D.hover_state(MODEL), np.array([0.0, 0.0, 0.0, 0.2]), 0.0025, 1.0)
-    assert D.vel_ned_m_s(x)[2] < -0.5               # more collective (Zcol < 0): climb (down < 0)
+    assert D.vel_ned_m_s(x)[2] < -0.5  # more collective (Zcol < 0): climb (down < 0)
     x = D.hover_state(MODEL)
     x[5] = 0.5
     y = D.step_rk4(MODEL, x, np.zeros(4), 0.01)
@@ -138,11 +137,7 @@ def test_bad_arguments_name_the_argument(args, name):
 
 
 @settings(deadline=None, max_examples=40)
-@given(
-    yaw=st.floats(-10.0, 10.0),
-    u=st.floats(-10.0, 10.0),
-    v=st.floats(-10.0, 10.0),
-)
+@given(yaw=st.floats(-10.0, 10.0), u=st.floats(-10.0, 10.0), v=st.floats(-10.0, 10.0))
 def test_ned_velocity_is_the_body_velocity_turned_by_heading(yaw, u, v):
     x = D.hover_state(MODEL, yaw_rad=yaw)
     x[0], x[1], x[2] = u, v, 0.5

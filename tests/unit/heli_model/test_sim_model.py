@@ -118,11 +118,7 @@ def test_bad_parameters_are_rejected_naming_the_key(tmp_path, override, key):
 
 @pytest.mark.parametrize(
     ("top", "key"),
-    [
-        ("servo_tau_s = -0.1", "servo_tau_s"),
-        ("gravity_m_s2 = 0.0", "gravity_m_s2"),
-        ("colour = 1", "colour"),
-    ],
+    [("servo_tau_s = -0.1", "servo_tau_s"), ("gravity_m_s2 = 0.0", "gravity_m_s2"), ("colour = 1", "colour")],
 )
 def test_bad_profile_options_are_rejected_naming_the_key(tmp_path, top, key):
     text = _profile_text()

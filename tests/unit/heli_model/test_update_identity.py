@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from heli_model import dynamics
-from heli_model.control import ControllerSettings, ControllerState, ControlLaw, Setpoint
+from heli_model.control import ControlLaw, ControllerSettings, ControllerState, Setpoint
 from heli_model.model import HeliModel
 from heli_model.vehicle_update import VehicleCommand, VehicleState, VehicleUpdate
 
@@ -98,7 +98,7 @@ def ref_step_rk4(M, x, delta, dt_s, wind_ned_m_s=None):
     vec[n_core + 2] = d2
     vec[n_core + 3] = d3
     if wind_ned_m_s is None:
-        vec[n_core + 4:] = 0.0
+        vec[n_core + 4 :] = 0.0
     else:
         if type(wind_ned_m_s) is np.ndarray and wind_ned_m_s.shape == (3,):
             wn, we, wd = wind_ned_m_s.tolist()
@@ -296,9 +296,9 @@ def ref_law_step(matrix, st, state, x, setpoint, dt_s):
 
     vec = np.empty(matrix.shape[1])
     vec[0:8] = (axb, ayb, azb, rate_ref, ub, vb, wb, 0.0)
-    vec[8:8 + 13] = x[:13]
+    vec[8 : 8 + 13] = x[:13]
     vec[8 + 13] = psi_err
-    vec[8 + 14:] = state.z
+    vec[8 + 14 :] = state.z
     raw = (matrix @ vec).tolist()
     delta = [(-1.0 if d < -1.0 else (1.0 if d > 1.0 else d)) for d in raw]
     saturated = any(abs(d) > 1.0 for d in raw)
@@ -322,8 +322,9 @@ def ref_law_step(matrix, st, state, x, setpoint, dt_s):
                 cap = st.pos_integral_max_m_s / ki
                 new = max(-cap, min(cap, new))
             pos_integral[i] = new
-    return ControllerState(z, tuple(pos_integral), yaw_ref, tuple(cmd), np.array(delta), np.array(raw),
-                           saturated, vel_cmd)
+    return ControllerState(
+        z, tuple(pos_integral), yaw_ref, tuple(cmd), np.array(delta), np.array(raw), saturated, vel_cmd
+    )
 
 
 def ref_stop_on_ground(x):
@@ -440,6 +441,7 @@ def random_vector(rng: np.random.Generator, n: int, nan_chance: float) -> np.nda
 
 def random_setpoint(rng: np.random.Generator) -> Setpoint:
     """Any mix of position, velocity, acceleration (None, all axes, or NaN axes) and heading commands."""
+
     def maybe(scale: float, nan_chance: float):
         kind = rng.integers(4)
         if kind == 0:
@@ -447,6 +449,7 @@ def random_setpoint(rng: np.random.Generator) -> Setpoint:
         v = rng.normal(0.0, scale, 3)
         v[rng.random(3) < nan_chance] = np.nan
         return tuple(v.tolist()) if kind == 1 else v
+
     yaw = float(rng.uniform(-7.0, 7.0)) if rng.random() < 0.6 else None
     rate = float(rng.normal(0.0, 1.5)) if rng.random() < 0.4 else None
     return Setpoint(maybe(30.0, 0.2), maybe(6.0, 0.2), maybe(3.0, 0.2), yaw, rate)
@@ -463,9 +466,15 @@ def random_state(rng: np.random.Generator, vehicle: VehicleUpdate) -> VehicleSta
         x[16] = -abs(rng.normal(0.0, 0.01))
         x[2] = abs(x[2])
     controller = ControllerState(
-        z=tuple(rng.normal(0.0, 0.3, 4).tolist()), pos_integral_m=tuple(rng.normal(0.0, 0.5, 3).tolist()),
-        yaw_ref_rad=float(rng.uniform(-4.0, 4.0)), cmd_prev_ned_m_s=tuple(rng.normal(0.0, 5.0, 3).tolist()),
-        delta=np.zeros(4), delta_unclipped=np.zeros(4), saturated=False, vel_cmd_ned_m_s=np.zeros(3))
+        z=tuple(rng.normal(0.0, 0.3, 4).tolist()),
+        pos_integral_m=tuple(rng.normal(0.0, 0.5, 3).tolist()),
+        yaw_ref_rad=float(rng.uniform(-4.0, 4.0)),
+        cmd_prev_ned_m_s=tuple(rng.normal(0.0, 5.0, 3).tolist()),
+        delta=np.zeros(4),
+        delta_unclipped=np.zeros(4),
+        saturated=False,
+        vel_cmd_ned_m_s=np.zeros(3),
+    )
     return VehicleState(x, rng.uniform(-1.3, 1.3, 4), controller)
 
 
@@ -493,7 +502,7 @@ def test_random_single_updates_are_identical(name):
         command = VehicleCommand(setpoint, random_wind(rng, 4))
         x_before = state.x.copy()
         assert_same_state(vehicle.update(state, command, dt_s), reference.update(state, command, dt_s))
-        assert bits(state.x) == bits(x_before)          # pure: the state given is not modified
+        assert bits(state.x) == bits(x_before)  # pure: the state given is not modified
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

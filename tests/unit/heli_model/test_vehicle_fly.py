@@ -25,8 +25,11 @@ def _loop(update, state, command, dt_s, periods):
 
 def _same(a, b) -> bool:
     fields = zip(a.controller, b.controller)
-    return (np.array_equal(a.x, b.x) and np.array_equal(a.delta, b.delta)
-            and all(np.array_equal(f, g) if isinstance(f, np.ndarray) else f == g for f, g in fields))
+    return (
+        np.array_equal(a.x, b.x)
+        and np.array_equal(a.delta, b.delta)
+        and all(np.array_equal(f, g) if isinstance(f, np.ndarray) else f == g for f, g in fields)
+    )
 
 
 coord = st.floats(-80.0, 80.0)
@@ -35,10 +38,16 @@ maybe = lambda s: st.one_of(st.none(), s)  # noqa: E731
 
 
 @settings(max_examples=120, deadline=None)
-@given(start=st.tuples(coord, coord, st.floats(-40.0, -2.0)), warm=st.integers(0, 20), pos=maybe(vec),
-       vel=maybe(st.tuples(*[st.floats(-8, 8)] * 3).map(np.array)),
-       acc=maybe(st.tuples(*[st.floats(-3, 3)] * 3).map(np.array)), yaw=maybe(st.floats(-4, 4)),
-       rate=maybe(st.floats(-1, 1)), periods=st.integers(1, 4))
+@given(
+    start=st.tuples(coord, coord, st.floats(-40.0, -2.0)),
+    warm=st.integers(0, 20),
+    pos=maybe(vec),
+    vel=maybe(st.tuples(*[st.floats(-8, 8)] * 3).map(np.array)),
+    acc=maybe(st.tuples(*[st.floats(-3, 3)] * 3).map(np.array)),
+    yaw=maybe(st.floats(-4, 4)),
+    rate=maybe(st.floats(-1, 1)),
+    periods=st.integers(1, 4),
+)
 def test_fly_is_the_loop_of_updates_to_the_bit(update, start, warm, pos, vel, acc, yaw, rate, periods):
     state = update.hover_state(start, 0.3)
     for _ in range(warm):
@@ -47,12 +56,15 @@ def test_fly_is_the_loop_of_updates_to_the_bit(update, start, warm, pos, vel, ac
     assert _same(update.fly(state, command, 0.01, periods), _loop(update, state, command, 0.01, periods))
 
 
-@pytest.mark.parametrize("command, dt_s", [
-    (VehicleCommand(Setpoint(np.array([5.0, 0.0, -10.0])), wind_ned_m_s=np.array([3.0, 1.0, 0.0])), 0.01),
-    (VehicleCommand(None), 0.01),
-    (VehicleCommand(Setpoint(np.array([5.0, 0.0, -10.0]))), 0.005),
-    (VehicleCommand(Setpoint([5.0, 0.0, -10.0])), 0.01),
-])
+@pytest.mark.parametrize(
+    "command, dt_s",
+    [
+        (VehicleCommand(Setpoint(np.array([5.0, 0.0, -10.0])), wind_ned_m_s=np.array([3.0, 1.0, 0.0])), 0.01),
+        (VehicleCommand(None), 0.01),
+        (VehicleCommand(Setpoint(np.array([5.0, 0.0, -10.0]))), 0.005),
+        (VehicleCommand(Setpoint([5.0, 0.0, -10.0])), 0.01),
+    ],
+)
 def test_fly_falls_back_to_the_loop_where_the_kernel_does_not_apply(update, command, dt_s):
     state = update.hover_state((0.0, 0.0, -10.0), 0.0)
     assert _same(update.fly(state, command, dt_s, 3), _loop(update, state, command, dt_s, 3))

@@ -47,9 +47,9 @@ def test_step_setpoint_is_tracked_without_saturation(vehicle):
         flown.append(dynamics.pos_ned_m(state.x))
     flown = np.array(flown)
     error_m = np.linalg.norm(flown - target, axis=1)
-    assert error_m[100] > 1.5                          # a ramp, not a jump (command slew limits)
+    assert error_m[100] > 1.5  # a ramp, not a jump (command slew limits)
     assert error_m[800] < 0.02 and error_m[-1] < 0.001  # arrived after 8 s, and stays
-    assert np.max(flown[:, 0]) - target[0] < 0.05       # no overshoot
+    assert np.max(flown[:, 0]) - target[0] < 0.05  # no overshoot
     assert np.min(flown[:, 2]) - target[2] > -0.05
     assert abs(dynamics.euler_rad(state.x)[2] - 0.5) < 0.01
     assert peak_delta < 1.0

@@ -30,8 +30,12 @@ def test_a_moved_home_is_a_translation_of_its_position_in_the_origin_frame():
 
 
 @settings(max_examples=50, deadline=None)
-@given(st.floats(-200, 200), st.floats(-200, 200), st.floats(-20, 20),
-       st.lists(st.floats(-500, 500), min_size=3, max_size=3))
+@given(
+    st.floats(-200, 200),
+    st.floats(-200, 200),
+    st.floats(-20, 20),
+    st.lists(st.floats(-500, 500), min_size=3, max_size=3),
+)
 def test_to_home_and_to_origin_are_inverse(n, e, up, point):
     home = tuple(float(v) for v in LocalFrame(*ORIGIN).to_lla(n, e, -up))
     frames = LinkFrames.build(home, ORIGIN)

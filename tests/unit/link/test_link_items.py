@@ -1,11 +1,11 @@
 """RawItem <-> MAVSDK MissionRaw.MissionItem conversion (no vehicle needed)."""
 
 import math
+from pathlib import Path
 
 from companion.link.mission_transfer import from_mavsdk_item, to_mavsdk_item
 from companion.mission import load_mission_file
 from companion.mission.raw import fence_to_raw, mission_to_raw, rally_to_raw
-from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[3]
 
@@ -15,8 +15,7 @@ def test_items_survive_the_mavsdk_struct():
     for raw_list in (mission_to_raw(plan), fence_to_raw(plan), rally_to_raw(plan)):
         for raw in raw_list:
             back = from_mavsdk_item(to_mavsdk_item(raw))
-            for name in ("seq", "frame", "command", "current", "autocontinue", "x", "y",
-                         "mission_type"):
+            for name in ("seq", "frame", "command", "current", "autocontinue", "x", "y", "mission_type"):
                 assert getattr(back, name) == getattr(raw, name), name
             for name in ("param1", "param2", "param3", "param4", "z"):
                 a, b = getattr(back, name), getattr(raw, name)

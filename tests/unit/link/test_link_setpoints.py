@@ -7,13 +7,20 @@ import numpy as np
 import pytest
 
 from companion.errors import LinkError
-from companion.link import (Setpoint, SetpointStreamer, check_url, hold_position, jitter_stats,
-                            setpoint_fields, setpoint_type_mask)
+from companion.link import (
+    Setpoint,
+    SetpointStreamer,
+    check_url,
+    hold_position,
+    jitter_stats,
+    setpoint_fields,
+    setpoint_type_mask,
+)
 from companion.link.vehicle_commands import mode_number
 
 
 def test_type_mask_bits():
-    assert setpoint_type_mask([0, 0, 0], [0, 0, 0], [0, 0, 0], 0.0) == 2048   # yaw rate ignored
+    assert setpoint_type_mask([0, 0, 0], [0, 0, 0], [0, 0, 0], 0.0) == 2048  # yaw rate ignored
     assert setpoint_type_mask([0, 0, 0], None, None, None) == 0b111111000 | 1024 | 2048
     assert setpoint_type_mask(None, [0, 0, 0], None, 0.5, 0.1) == 0b111000111
 
@@ -25,16 +32,23 @@ def test_setpoint_fields_values():
     assert f["coordinate_frame"] == 1 and f["type_mask"] == 2048 and f["time_boot_ms"] == 1234
 
 
-@pytest.mark.parametrize("kwargs, name", [({"pos_ned_m": [0, 0]}, "pos_ned_m"),
-                                          ({"vel_ned_m_s": [0, math.nan, 0]}, "vel_ned_m_s"),
-                                          ({"yaw_rad": math.inf}, "yaw_rad")])
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        ({"pos_ned_m": [0, 0]}, "pos_ned_m"),
+        ({"vel_ned_m_s": [0, math.nan, 0]}, "vel_ned_m_s"),
+        ({"yaw_rad": math.inf}, "yaw_rad"),
+    ],
+)
 def test_bad_setpoints_are_named(kwargs, name):
     with pytest.raises(LinkError, match=name):
         setpoint_fields(0, 1, 1, **kwargs)
 
 
-@pytest.mark.parametrize("url", ["udpin://0.0.0.0:14540", "udpout://127.0.0.1:14555",
-                                 "tcpout://127.0.0.1:5760", "serial:///dev/ttyUSB0:57600"])
+@pytest.mark.parametrize(
+    "url",
+    ["udpin://0.0.0.0:14540", "udpout://127.0.0.1:14555", "tcpout://127.0.0.1:5760", "serial:///dev/ttyUSB0:57600"],
+)
 def test_good_urls(url):
     assert check_url(url) == url
 
@@ -66,16 +80,16 @@ def run_streamer(streamer, duration_s):
         streamer.start()
         await asyncio.sleep(duration_s)
         await streamer.stop()
+
     asyncio.run(main())
 
 
 def test_streamer_sends_at_the_rate_without_drift():
     sent = []
-    streamer = SetpointStreamer(lambda **kw: sent.append(kw), hold_position([1, 2, -3], 0.5),
-                                rate_hz=50.0)
+    streamer = SetpointStreamer(lambda **kw: sent.append(kw), hold_position([1, 2, -3], 0.5), rate_hz=50.0)
     run_streamer(streamer, 0.5)
     times = streamer.send_times_s
-    assert 3 <= len(sent) <= 27          # never more than one send per period
+    assert 3 <= len(sent) <= 27  # never more than one send per period
     assert len(times) == len(sent) == streamer.sent
     # absolute deadlines: the k-th send is never early relative to t0 + k * period
     k = np.arange(len(times))
@@ -132,15 +146,17 @@ def test_send_errors_do_not_stop_the_stream():
 def test_priority_helpers_report_what_they_got():
     import os
     import sys
+
     from companion.link import raise_stream_priority, restore_normal_priority
     from companion.link.setpoints import STREAM_SWITCH_INTERVAL_S
+
     interval = sys.getswitchinterval()
     got = raise_stream_priority()
     try:
         assert got in ("fifo", "nice", "normal")
         if got == "fifo":
             assert os.sched_getscheduler(0) == os.SCHED_FIFO
-        assert sys.getswitchinterval() == pytest.approx(STREAM_SWITCH_INTERVAL_S)   # GIL waits bounded
+        assert sys.getswitchinterval() == pytest.approx(STREAM_SWITCH_INTERVAL_S)  # GIL waits bounded
     finally:
         restore_normal_priority()
         sys.setswitchinterval(interval)
@@ -154,8 +170,7 @@ def test_send_now_goes_out_at_once_without_touching_the_jitter_statistics():
     sent = []
 
     async def scenario():
-        streamer = SetpointStreamer(lambda **kw: sent.append(kw), hold_position([1.0, 2.0, -3.0]),
-                                    rate_hz=50.0)
+        streamer = SetpointStreamer(lambda **kw: sent.append(kw), hold_position([1.0, 2.0, -3.0]), rate_hz=50.0)
         streamer.start()
         await asyncio.sleep(0.11)
         scheduled = len(streamer.send_times_s)

@@ -22,18 +22,23 @@ def test_commands_for_the_companion_are_answered_to_their_sender():
     msg = gcs_command(COMPONENT_ID)
     assert onboard.addressed_to_us(msg)
     ack = parse(onboard.handle(msg))
-    assert (ack.get_type(), ack.command, ack.result) == ("COMMAND_ACK", mavlink.MAV_CMD_MISSION_START,
-                                                          mavlink.MAV_RESULT_ACCEPTED)
+    assert (ack.get_type(), ack.command, ack.result) == (
+        "COMMAND_ACK",
+        mavlink.MAV_CMD_MISSION_START,
+        mavlink.MAV_RESULT_ACCEPTED,
+    )
     assert (ack.target_system, ack.target_component) == (255, 190)
     assert (ack.get_srcSystem(), ack.get_srcComponent()) == (3, COMPONENT_ID)
-    assert [(c.command, c.sender_system, c.sender_component) for c in seen] == [(mavlink.MAV_CMD_MISSION_START, 255, 190)]
+    assert [(c.command, c.sender_system, c.sender_component) for c in seen] == [
+        (mavlink.MAV_CMD_MISSION_START, 255, 190)
+    ]
 
 
 def test_commands_for_the_autopilot_or_another_system_are_not_ours():
     onboard = OnboardComponent(3, lambda cmd: mavlink.MAV_RESULT_ACCEPTED)
-    assert not onboard.addressed_to_us(gcs_command(1))                       # the autopilot
-    assert not onboard.addressed_to_us(gcs_command(COMPONENT_ID, sysid=4))   # another vehicle
-    assert not onboard.addressed_to_us(gcs_command(0))                       # a broadcast
+    assert not onboard.addressed_to_us(gcs_command(1))  # the autopilot
+    assert not onboard.addressed_to_us(gcs_command(COMPONENT_ID, sysid=4))  # another vehicle
+    assert not onboard.addressed_to_us(gcs_command(0))  # a broadcast
 
 
 def test_a_failing_owner_still_answers_failed():
@@ -44,8 +49,11 @@ def test_a_failing_owner_still_answers_failed():
 def test_heartbeat_and_status_text_come_from_the_companion_component():
     onboard = OnboardComponent(3, lambda cmd: 0)
     hb = parse(onboard.heartbeat())
-    assert (hb.type, hb.autopilot, hb.system_status) == (mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
-                                                         mavlink.MAV_AUTOPILOT_INVALID, mavlink.MAV_STATE_STANDBY)
+    assert (hb.type, hb.autopilot, hb.system_status) == (
+        mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+        mavlink.MAV_AUTOPILOT_INVALID,
+        mavlink.MAV_STATE_STANDBY,
+    )
     onboard.active = True
     assert parse(onboard.heartbeat()).system_status == mavlink.MAV_STATE_ACTIVE
     text = parse(onboard.statustext(mavlink.MAV_SEVERITY_INFO, "companion ready: " + "x" * 80))
@@ -58,7 +66,7 @@ def test_the_gate_answers_commands_for_the_companion_signed_and_keeps_them_from_
     from mavlink_signing import SignatureCheck, Verdict
 
     key = bytes(range(32))
-    identity = Identity(system=1, component=195)                 # MAVSDK's own address
+    identity = Identity(system=1, component=195)  # MAVSDK's own address
     onboard = OnboardComponent(3, lambda cmd: mavlink.MAV_RESULT_ACCEPTED)
     inbound = InboundFilter(identity, onboard=onboard)
     command = gcs_command(COMPONENT_ID)
@@ -68,10 +76,12 @@ def test_the_gate_answers_commands_for_the_companion_signed_and_keeps_them_from_
     signed = signer.sign(inbound.replies.pop())
     ack = parse(signed)
     check = SignatureCheck(key)
-    assert check.check(ack.get_msgbuf(), ack.get_msgId(), ack.get_srcSystem(), ack.get_srcComponent()) is Verdict.ACCEPTED
+    assert (
+        check.check(ack.get_msgbuf(), ack.get_msgId(), ack.get_srcSystem(), ack.get_srcComponent()) is Verdict.ACCEPTED
+    )
     assert (ack.get_srcSystem(), ack.get_srcComponent()) == (3, COMPONENT_ID)
-    assert identity == Identity(system=1, component=195)         # our own frames teach nothing
-    assert OutboundSigner(Identity()).sign(onboard.heartbeat()) == onboard.heartbeat()   # no key: as is
+    assert identity == Identity(system=1, component=195)  # our own frames teach nothing
+    assert OutboundSigner(Identity()).sign(onboard.heartbeat()) == onboard.heartbeat()  # no key: as is
 
 
 def test_the_component_learns_its_system_and_is_silent_before():

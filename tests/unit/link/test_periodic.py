@@ -18,7 +18,7 @@ def test_ticks_come_on_absolute_deadlines_and_until_returns_after_the_tick_that_
         driver = PeriodicDriver(100.0, ticks.append)
         driver.start()
         assert await driver.until(lambda: len(ticks) >= 20)
-        assert len(ticks) == 20                                # woken by the tick that made it true
+        assert len(ticks) == 20  # woken by the tick that made it true
         periods = [b - a for a, b in zip(ticks, ticks[1:])]
         assert sum(periods) / len(periods) == pytest.approx(0.01, abs=0.002)
         await driver.stop()
@@ -43,7 +43,7 @@ def test_stop_wakes_the_waiters_and_a_failing_tick_does_not_stop_the_driver():
         assert driver.failures == 1 and len(calls) >= 5
         await driver.stop()
         assert await asyncio.wait_for(waiting, 1.0) is False
-        assert await driver.until(lambda: False) is False      # not running: at once
+        assert await driver.until(lambda: False) is False  # not running: at once
 
     asyncio.run(main())
 
@@ -55,14 +55,14 @@ def test_a_late_tick_skips_the_deadlines_it_missed():
         def tick(now):
             calls.append(now)
             if len(calls) == 3:
-                time.sleep(0.055)                               # five periods late
+                time.sleep(0.055)  # five periods late
 
         driver = PeriodicDriver(100.0, tick)
         driver.start()
         await driver.until(lambda: len(calls) >= 6)
         await driver.stop()
         assert driver.missed >= 4
-        assert all(b - a < 0.07 for a, b in zip(calls, calls[1:]))   # no burst after the late one
+        assert all(b - a < 0.07 for a, b in zip(calls, calls[1:]))  # no burst after the late one
 
     asyncio.run(main())
 
@@ -90,20 +90,22 @@ def test_paced_record_lines_are_written_right_after_a_setpoint_and_flushed_at_cl
         streamer = SetpointStreamer(lambda **kw: sent.append(time.monotonic()), hold_position([0, 0, -10], 0.0))
         sink = Sink(sent)
         sinks = RecordSinks([sink])
-        schedule = Scheduler([Task("setpoints", 50.0, streamer.tick, 2.0),
-                              Task("record_write", 10.0, lambda now: sinks.flush(), 3.0)], slack_s=0.01)
+        schedule = Scheduler(
+            [Task("setpoints", 50.0, streamer.tick, 2.0), Task("record_write", 10.0, lambda now: sinks.flush(), 3.0)],
+            slack_s=0.01,
+        )
         driver = PeriodicDriver(50.0, schedule.tick)
-        sinks.write("header")                                       # not paced: at once
+        sinks.write("header")  # not paced: at once
         driver.start()
         sinks.pace(True)
         await asyncio.sleep(0.005)
         before = len(sent)
         sinks.write("sample")
         sinks.write("event")
-        assert [line for line, _ in sink.lines] == ["header"]       # waiting for the schedule's row
+        assert [line for line, _ in sink.lines] == ["header"]  # waiting for the schedule's row
         await asyncio.sleep(0.15)
         assert [line for line, _ in sink.lines] == ["header", "sample", "event"]
-        assert before + 1 <= sink.lines[1][1] <= before + 6         # right after a send, within 0.1 s
+        assert before + 1 <= sink.lines[1][1] <= before + 6  # right after a send, within 0.1 s
         sinks.write("summary")
         await driver.stop()
         sinks.close()

@@ -3,11 +3,12 @@
 import math
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from companion.link.setpoint_frame import SETPOINT_MESSAGE, SetpointFrame, setpoint_values
 from companion.errors import LinkError
+from companion.link.setpoint_frame import SETPOINT_MESSAGE, SetpointFrame, setpoint_values
 from mavlink_signing import signing_encoder
 
 floats = st.floats(allow_nan=False, allow_infinity=False, width=32)
@@ -24,8 +25,18 @@ def encoder(signed: bool, link_id: int, seq: int, timestamp: int) -> mavlink.MAV
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.integers(0, 2**32 - 1), vector, vector, vector, scalar, scalar, st.booleans(),
-       st.integers(0, 255), st.integers(0, 255), st.integers(0, 2**48 - 2))
+@given(
+    st.integers(0, 2**32 - 1),
+    vector,
+    vector,
+    vector,
+    scalar,
+    scalar,
+    st.booleans(),
+    st.integers(0, 255),
+    st.integers(0, 255),
+    st.integers(0, 2**48 - 2),
+)
 def test_frame_is_pymavlinks(time_boot_ms, pos, vel, acc, yaw, yaw_rate, signed, link_id, seq, timestamp):
     values = setpoint_values(time_boot_ms, 1, 1, pos, vel, acc, yaw, yaw_rate)
     ours, theirs = encoder(signed, link_id, seq, timestamp), encoder(signed, link_id, seq, timestamp)
@@ -36,9 +47,9 @@ def test_frame_is_pymavlinks(time_boot_ms, pos, vel, acc, yaw, yaw_rate, signed,
 
 def test_all_zero_payload_keeps_one_byte_and_parses():
     values = setpoint_values(0, 0, 0, None, None, None, None, None)
-    values = values[:12] + (0, 0, 0, 0)              # type_mask, targets and frame 0 as well
+    values = values[:12] + (0, 0, 0, 0)  # type_mask, targets and frame 0 as well
     frame = SetpointFrame(values).pack(mavlink.MAVLink(None, 1, 1))
-    assert frame[1] == 1                              # payload length after truncation
+    assert frame[1] == 1  # payload length after truncation
     msg = mavlink.MAVLink(None).parse_char(frame)
     assert msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and msg.x == 0.0
 
@@ -46,7 +57,8 @@ def test_all_zero_payload_keeps_one_byte_and_parses():
 def test_signed_frame_passes_the_receivers_check():
     key = bytes(range(32))
     frame = SetpointFrame(setpoint_values(1234, 1, 1, [1.0, 2.0, -3.0], None, None, 0.5)).pack(
-        signing_encoder(key, 3, 255, 190))
+        signing_encoder(key, 3, 255, 190)
+    )
     receiver = mavlink.MAVLink(None)
     receiver.signing.secret_key, receiver.signing.sign_outgoing = key, False
     msg = receiver.parse_char(frame)

@@ -17,8 +17,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.errors import ConfigError, VehicleRefused
-from companion.service.startup import (RotorPlan, StartupSettings, is_airborne, rotor_plan, rpm_settled,
-                                    start_vehicle)
+from companion.service.startup import RotorPlan, StartupSettings, is_airborne, rotor_plan, rpm_settled, start_vehicle
 
 ACCEPTED, FAILED = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_FAILED
 TEMPORARILY_REJECTED, UNSUPPORTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED, mavlink.MAV_RESULT_UNSUPPORTED
@@ -29,8 +28,18 @@ HELI_PARAMS = {"H_RSC_MODE": 2.0, "H_RSC_RUNUP_TIME": 10.0}
 class FakeHeli:
     """An ArduCopter helicopter as the link sees it (commands, telemetry, vehicle time)."""
 
-    def __init__(self, params=None, *, aux_supported=True, arm_failures=0, prearm_text=None,
-                 takeoff_refused=False, climbs=True, pilot_engages_after_s=None, interlock_engaged=True):
+    def __init__(
+        self,
+        params=None,
+        *,
+        aux_supported=True,
+        arm_failures=0,
+        prearm_text=None,
+        takeoff_refused=False,
+        climbs=True,
+        pilot_engages_after_s=None,
+        interlock_engaged=True,
+    ):
         self.params = dict(HELI_PARAMS if params is None else params)
         self.aux_supported = aux_supported
         self.arm_failures = arm_failures
@@ -42,13 +51,13 @@ class FakeHeli:
         self.log: list[tuple[float, str]] = []
         self.armed = False
         self.armed_at = None
-        self.interlock = interlock_engaged   # the SITL's RC8 at 1500 counts as engaged
+        self.interlock = interlock_engaged  # the SITL's RC8 at 1500 counts as engaged
         self.interlock_at = None
         self.mode = 0
         self.height = 0.0
         self.texts: list[str] = []
         self.streams = None
-        self.commands = self.waits = self    # the link's parts the start-up uses, in one double
+        self.commands = self.waits = self  # the link's parts the start-up uses, in one double
 
     # vehicle time
     def now_s(self) -> float:
@@ -59,9 +68,16 @@ class FakeHeli:
 
     @property
     def telemetry(self):
-        return SimpleNamespace(armed=self.armed, in_air=self.height > 0.5, height_m=self.height,
-                               pos_ned_m=[0.0, 0.0, -self.height], connected=True, prearm_ok=None,
-                               rotor_rpm=None, mode=self.mode)
+        return SimpleNamespace(
+            armed=self.armed,
+            in_air=self.height > 0.5,
+            height_m=self.height,
+            pos_ned_m=[0.0, 0.0, -self.height],
+            connected=True,
+            prearm_ok=None,
+            rotor_rpm=None,
+            mode=self.mode,
+        )
 
     # the link's API used by the start-up
     async def read_params(self, names, timeout_s=2.0):
@@ -105,8 +121,9 @@ class FakeHeli:
         if command == mavlink.MAV_CMD_NAV_TAKEOFF:
             self._note("takeoff")
             needs_rotor = "H_RSC_MODE" in self.params and self.aux_supported
-            ready = not needs_rotor or (self.interlock and self.interlock_at is not None
-                                        and self.now_s() - self.interlock_at >= 10.0)
+            ready = not needs_rotor or (
+                self.interlock and self.interlock_at is not None and self.now_s() - self.interlock_at >= 10.0
+            )
             if self.takeoff_refused or not self.armed or not ready:
                 return FAILED
             if self.climbs:
@@ -125,6 +142,7 @@ class FakeHeli:
         while not predicate(self.telemetry):
             if time.monotonic() > deadline:
                 from companion.errors import LinkError
+
                 raise LinkError(f"timed out after {timeout_s:g} s waiting for {what}")
             await asyncio.sleep(0.005)
         return self.telemetry
@@ -205,7 +223,7 @@ def test_a_refused_takeoff_disarms_the_helicopter_and_puts_the_interlock_low():
 
 
 def test_with_the_pilots_interlock_the_takeoff_waits_for_the_switch():
-    heli = FakeHeli(pilot_engages_after_s=4.0, interlock_engaged=False)     # the pilot's switch is low
+    heli = FakeHeli(pilot_engages_after_s=4.0, interlock_engaged=False)  # the pilot's switch is low
     plan = start(heli, StartupSettings(interlock="pilot", retry_interval_s=0.5))
     assert plan.interlock == "pilot"
     assert not [s for s in heli.steps() if s.startswith("aux")], "the companion leaves the switch alone"
@@ -221,7 +239,7 @@ def test_with_the_pilots_interlock_left_on_arming_is_refused_with_the_reason():
 
 def test_a_helicopter_armed_on_the_ground_is_not_armed_again_nor_its_interlock_dropped():
     heli = FakeHeli()
-    heli.armed, heli.armed_at = True, -30.0            # armed long ago, rotor turning
+    heli.armed, heli.armed_at = True, -30.0  # armed long ago, rotor turning
     start(heli)
     steps = heli.steps()
     assert "arm" not in steps and "aux 32 0" not in steps
@@ -230,18 +248,19 @@ def test_a_helicopter_armed_on_the_ground_is_not_armed_again_nor_its_interlock_d
 
 def test_rotor_plan_decisions():
     s = StartupSettings()
-    assert rotor_plan(s, {"H_RSC_MODE": 1.0}).interlock == "pilot"           # RC passthrough
+    assert rotor_plan(s, {"H_RSC_MODE": 1.0}).interlock == "pilot"  # RC passthrough
     assert rotor_plan(s, {"H_RSC_MODE": 2.0, "ARMING_DELAY_SEC": 3.0}).arming_delay_s == 3.0
     assert rotor_plan(s, {"H_RSC_MODE": 4.0}).runup_time_s == s.runup_time_s
-    assert rotor_plan(StartupSettings(vehicle="multirotor"), HELI_PARAMS) == \
-        RotorPlan("none", 2.0, 0.0, "vehicle profile multirotor")
+    assert rotor_plan(StartupSettings(vehicle="multirotor"), HELI_PARAMS) == RotorPlan(
+        "none", 2.0, 0.0, "vehicle profile multirotor"
+    )
 
 
 def test_airborne_means_armed_and_in_the_air():
     t = SimpleNamespace
     assert is_airborne(t(armed=True, in_air=True, height_m=0.2))
-    assert not is_airborne(t(armed=True, in_air=False, height_m=30.0))        # EXTENDED_SYS_STATE rules
-    assert is_airborne(t(armed=True, in_air=None, height_m=1.5))              # fallback: height
+    assert not is_airborne(t(armed=True, in_air=False, height_m=30.0))  # EXTENDED_SYS_STATE rules
+    assert is_airborne(t(armed=True, in_air=None, height_m=1.5))  # fallback: height
     assert not is_airborne(t(armed=True, in_air=None, height_m=0.5))
     assert not is_airborne(t(armed=False, in_air=True, height_m=20.0))
     assert not is_airborne(t(armed=True, in_air=None, height_m=None))

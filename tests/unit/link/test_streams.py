@@ -14,8 +14,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from companion.config import load_settings
 from companion.errors import ConfigError
-from companion.link.streams import (DATA_STREAM_OF, StreamKeeper, StreamSettings, data_stream_rates,
-                                    stream_requests)
+from companion.link.streams import DATA_STREAM_OF, StreamKeeper, StreamSettings, data_stream_rates, stream_requests
 
 ACCEPTED, DENIED, UNSUPPORTED = mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_DENIED, mavlink.MAV_RESULT_UNSUPPORTED
 
@@ -49,8 +48,17 @@ def keeper_of(link: FakeLink, settings: StreamSettings, **kw) -> StreamKeeper:
 
 def test_every_message_the_companion_uses_is_requested_with_pymavlink_ids():
     names = [r.name for r in stream_requests(StreamSettings())]
-    assert names == ["LOCAL_POSITION_NED", "ATTITUDE", "GLOBAL_POSITION_INT", "EXTENDED_SYS_STATE",
-                     "HOME_POSITION", "GPS_GLOBAL_ORIGIN", "SYS_STATUS", "SERVO_OUTPUT_RAW", "RPM"]
+    assert names == [
+        "LOCAL_POSITION_NED",
+        "ATTITUDE",
+        "GLOBAL_POSITION_INT",
+        "EXTENDED_SYS_STATE",
+        "HOME_POSITION",
+        "GPS_GLOBAL_ORIGIN",
+        "SYS_STATUS",
+        "SERVO_OUTPUT_RAW",
+        "RPM",
+    ]
     with_adsb = stream_requests(StreamSettings(), adsb=True)
     assert with_adsb[-1].name == "ADSB_VEHICLE" and with_adsb[-1].msg_id == mavlink.MAVLINK_MSG_ID_ADSB_VEHICLE
     local = with_adsb[0]
@@ -83,7 +91,11 @@ def test_an_ardupilot_like_vehicle_accepts_every_interval():
 
 def test_a_message_the_vehicle_cannot_stream_falls_back_then_is_left_out():
     """``sim-vehicle`` today: no GPS_GLOBAL_ORIGIN, no RPM, no ADSB_VEHICLE."""
-    missing = {mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, mavlink.MAVLINK_MSG_ID_RPM, mavlink.MAVLINK_MSG_ID_ADSB_VEHICLE}
+    missing = {
+        mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,
+        mavlink.MAVLINK_MSG_ID_RPM,
+        mavlink.MAVLINK_MSG_ID_ADSB_VEHICLE,
+    }
 
     def answer(command, params):
         if int(params[0]) in missing:
@@ -95,10 +107,17 @@ def test_a_message_the_vehicle_cannot_stream_falls_back_then_is_left_out():
     status = asyncio.run(keeper.request_all())
     assert status["GPS_GLOBAL_ORIGIN"] == "unavailable" and keeper.unavailable("GPS_GLOBAL_ORIGIN")
     assert status["ADSB_VEHICLE"] == "unavailable"
-    assert status["RPM"] == "data_stream"                      # EXTRA3 carries RPM on ArduPilot
-    assert ("REQUEST_DATA_STREAM", {"target_system": 1, "target_component": 1,
-                                    "req_stream_id": mavlink.MAV_DATA_STREAM_EXTRA3, "req_message_rate": 2,
-                                    "start_stop": 1}) in link.messages
+    assert status["RPM"] == "data_stream"  # EXTRA3 carries RPM on ArduPilot
+    assert (
+        "REQUEST_DATA_STREAM",
+        {
+            "target_system": 1,
+            "target_component": 1,
+            "req_stream_id": mavlink.MAV_DATA_STREAM_EXTRA3,
+            "req_message_rate": 2,
+            "start_stop": 1,
+        },
+    ) in link.messages
     asked_once = [p[0] for c, p in link.commands if c == mavlink.MAV_CMD_REQUEST_MESSAGE]
     assert asked_once == [mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN]
     assert status["LOCAL_POSITION_NED"] == "interval"
@@ -108,7 +127,7 @@ def test_a_vehicle_without_set_message_interval_gets_request_data_stream():
     link = FakeLink(lambda c, p: UNSUPPORTED if c == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL else ACCEPTED)
     keeper = keeper_of(link, StreamSettings())
     status = asyncio.run(keeper.request_all())
-    assert len(link.intervals()) == 1                         # asked once, then not again
+    assert len(link.intervals()) == 1  # asked once, then not again
     groups = sorted(m[1]["req_stream_id"] for m in link.messages)
     assert groups == sorted(set(DATA_STREAM_OF.values()))
     assert status["HOME_POSITION"] == status["GPS_GLOBAL_ORIGIN"] == "requested"
@@ -128,6 +147,7 @@ def run_keeper(keeper, scenario):
         finally:
             task.cancel()
             await asyncio.gather(task, return_exceptions=True)
+
     asyncio.run(main())
 
 
@@ -148,13 +168,13 @@ def test_a_reboot_link_back_or_silence_requests_everything_again():
             keeper.note(name, 100.0)
         await asyncio.sleep(0.1)
         assert keeper.rounds == 1
-        keeper.note("LOCAL_POSITION_NED", 3.0)                # boot time went back: a reboot
+        keeper.note("LOCAL_POSITION_NED", 3.0)  # boot time went back: a reboot
         await until(lambda: keeper.rounds == 2, "the round after the reboot")
         keeper.request_again("link back")
         await until(lambda: keeper.rounds == 3, "the round after the link came back")
         # no position for longer than stale_after_s while heartbeats arrive: ask again
         await until(lambda: keeper.rounds == 4, "the round after silence", timeout_s=3.0)
-        link.connected = False                                  # but never while the link is down
+        link.connected = False  # but never while the link is down
         rounds = keeper.rounds
         await asyncio.sleep(1.0)
         assert keeper.rounds == rounds

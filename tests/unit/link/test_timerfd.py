@@ -14,12 +14,12 @@ def test_the_timer_expires_on_its_absolute_deadlines():
     if timer is None:
         pytest.skip("no timerfd on this platform")
     try:
-        assert select.select([timer], [], [], 0.0)[0] == []          # not before its first deadline
+        assert select.select([timer], [], [], 0.0)[0] == []  # not before its first deadline
         assert select.select([timer], [], [], 1.0)[0] == [timer]
         assert time.monotonic() - start >= 0.1995
         time.sleep(0.035)
-        assert timer.expirations() >= 3                             # the first one and those missed
-        assert timer.expirations() == 0                             # read: nothing pending
+        assert timer.expirations() >= 3  # the first one and those missed
+        assert timer.expirations() == 0  # read: nothing pending
     finally:
         timer.close()
 

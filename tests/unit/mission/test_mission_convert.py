@@ -5,12 +5,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.errors import MissionError
 from companion.geo import LocalFrame
-from companion.mission import (ConversionSettings, FenceCircle, FencePolygon, MissionItem,
-                               MissionPlan, RallyPoint, load_mission_file, mission_to_local)
+from companion.mission import (
+    ConversionSettings,
+    FenceCircle,
+    FencePolygon,
+    MissionItem,
+    MissionPlan,
+    RallyPoint,
+    load_mission_file,
+    mission_to_local,
+)
 from companion.mission.convert import point_in_polygon
 from companion.world import Cylinder
 
@@ -37,9 +46,16 @@ def polygon(points, inclusion=False):
 
 
 def test_waypoints_in_ned_with_radius_hold_speed():
-    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=12.0), wp(40, 10, 15, hold=2, radius=1.5),
-                              MissionItem(178, 2, 1, 3.5, -1, 0), wp(0, 50, 20),
-                              MissionItem(20, 2)), planned_home=HOME)
+    plan = MissionPlan(
+        items=(
+            MissionItem(22, 3, alt_m=12.0),
+            wp(40, 10, 15, hold=2, radius=1.5),
+            MissionItem(178, 2, 1, 3.5, -1, 0),
+            wp(0, 50, 20),
+            MissionItem(20, 2),
+        ),
+        planned_home=HOME,
+    )
     local = mission_to_local(plan)
     kinds = [w.kind for w in local.waypoints]
     assert kinds == ["takeoff", "waypoint", "waypoint", "rtl"]
@@ -54,8 +70,7 @@ def test_waypoints_in_ned_with_radius_hold_speed():
 
 
 def test_amsl_frame_and_land_here():
-    plan = MissionPlan(items=(wp(20, 0, HOME[2] + 30.0, frame=0), MissionItem(21, 3)),
-                       planned_home=HOME)
+    plan = MissionPlan(items=(wp(20, 0, HOME[2] + 30.0, frame=0), MissionItem(21, 3)), planned_home=HOME)
     local = mission_to_local(plan)
     # no NAV_TAKEOFF: an implied takeoff (seq 0) climbs to the first waypoint's altitude
     assert local.waypoints[0].seq == 0 and local.waypoints[0].kind == "takeoff"
@@ -67,16 +82,20 @@ def test_amsl_frame_and_land_here():
 
 
 def test_items_after_land_are_not_flown():
-    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), MissionItem(21, 3), wp(5, 5, 10)),
-                       planned_home=HOME)
+    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), MissionItem(21, 3), wp(5, 5, 10)), planned_home=HOME)
     assert [w.kind for w in mission_to_local(plan).waypoints] == ["takeoff", "land"]
 
 
 def test_exclusion_zones_become_obstacles_and_inclusion_bounds():
-    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), wp(60, 0, 10)),
-                       polygons=(polygon([(-20, -20), (80, -20), (80, 40), (-20, 40)], True),
-                                 polygon([(25, -10), (35, -10), (35, 10), (25, 10)])),
-                       circles=(circle(45, 20, 5.0),), planned_home=HOME)
+    plan = MissionPlan(
+        items=(MissionItem(22, 3, alt_m=10), wp(60, 0, 10)),
+        polygons=(
+            polygon([(-20, -20), (80, -20), (80, 40), (-20, 40)], True),
+            polygon([(25, -10), (35, -10), (35, 10), (25, 10)]),
+        ),
+        circles=(circle(45, 20, 5.0),),
+        planned_home=HOME,
+    )
     local = mission_to_local(plan, settings=ConversionSettings(margin_m=2.0))
     world = local.world
     kinds = sorted(type(ob).__name__ for ob in world.obstacles)
@@ -87,7 +106,7 @@ def test_exclusion_zones_become_obstacles_and_inclusion_bounds():
     # the straight leg crosses the exclusion polygon
     assert not world.segment_free(np.array([0.0, 0.0, -10.0]), np.array([60.0, 0.0, -10.0]))
     assert world.is_free(np.array([[45.0, 28.0, -10.0]]))[0]
-    assert not world.is_free(np.array([[45.0, 26.0, -10.0]]))[0]   # within 5 m + 2 m margin
+    assert not world.is_free(np.array([[45.0, 26.0, -10.0]]))[0]  # within 5 m + 2 m margin
 
 
 def test_bounds_from_extent_with_padding_and_2d():
@@ -100,31 +119,43 @@ def test_bounds_from_extent_with_padding_and_2d():
 
 
 def test_waypoint_inside_exclusion_zone_is_unreachable():
-    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10), wp(60, 0, 10)),
-                       circles=(circle(-50, -50, 5.0), circle(60, 2, 6.0)), planned_home=HOME)
-    with pytest.raises(MissionError, match=r"item 3 \(waypoint\) is inside exclusion zone 2 "
-                                           r"\(geofence circle 1\): unreachable"):
+    plan = MissionPlan(
+        items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10), wp(60, 0, 10)),
+        circles=(circle(-50, -50, 5.0), circle(60, 2, 6.0)),
+        planned_home=HOME,
+    )
+    with pytest.raises(
+        MissionError,
+        match=r"item 3 \(waypoint\) is inside exclusion zone 2 "
+        r"\(geofence circle 1\): unreachable",
+    ):
         mission_to_local(plan)
 
 
 def test_waypoint_within_margin_is_unreachable():
-    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10)),
-                       polygons=(polygon([(31, -5), (40, -5), (40, 5), (31, 5)]),), planned_home=HOME)
+    plan = MissionPlan(
+        items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10)),
+        polygons=(polygon([(31, -5), (40, -5), (40, 5), (31, 5)]),),
+        planned_home=HOME,
+    )
     with pytest.raises(MissionError, match=r"item 2 \(waypoint\) is 1.0 m from exclusion zone 1"):
         mission_to_local(plan, settings=ConversionSettings(margin_m=3.0))
 
 
 def test_home_inside_exclusion_zone():
-    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10)),
-                       circles=(circle(0, 0, 4.0),), planned_home=HOME)
+    plan = MissionPlan(
+        items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10)), circles=(circle(0, 0, 4.0),), planned_home=HOME
+    )
     with pytest.raises(MissionError, match=r"item 1 \(takeoff\) is inside exclusion zone 1"):
         mission_to_local(plan)
 
 
 def test_outside_inclusion_fence():
-    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10)),
-                       polygons=(polygon([(-10, -10), (20, -10), (20, 10), (-10, 10)], True),),
-                       planned_home=HOME)
+    plan = MissionPlan(
+        items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10)),
+        polygons=(polygon([(-10, -10), (20, -10), (20, 10), (-10, 10)], True),),
+        planned_home=HOME,
+    )
     with pytest.raises(MissionError, match=r"item 2 \(waypoint\) is outside the inclusion"):
         mission_to_local(plan)
 
@@ -142,13 +173,14 @@ def test_no_home():
     plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10)))
     with pytest.raises(MissionError, match="no home position"):
         mission_to_local(plan)
-    local = mission_to_local(plan, home_lla=HOME)     # the vehicle's home is enough
+    local = mission_to_local(plan, home_lla=HOME)  # the vehicle's home is enough
     assert local.frame.lat0_deg == HOME[0]
 
 
 def test_rally_points_in_ned():
-    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10)),
-                       rally=(RallyPoint(*ll(5, 6), 20.0),), planned_home=HOME)
+    plan = MissionPlan(
+        items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10)), rally=(RallyPoint(*ll(5, 6), 20.0),), planned_home=HOME
+    )
     local = mission_to_local(plan)
     assert local.rally_ned_m.shape == (1, 3)
     assert np.allclose(local.rally_ned_m[0], [5, 6, -20], atol=1e-3)
@@ -157,8 +189,9 @@ def test_rally_points_in_ned():
 def test_world_file_adds_obstacles(tmp_path):
     world_file = tmp_path / "w.toml"
     world_file.write_text(
-        '[world]\nbounds_min = [-100.0, -100.0, -120.0]\nbounds_max = [100.0, 100.0, 0.0]\n'
-        '[[obstacles]]\ntype = "sphere"\ncenter = [15.0, 0.0, -10.0]\nradius = 4.0\n')
+        "[world]\nbounds_min = [-100.0, -100.0, -120.0]\nbounds_max = [100.0, 100.0, 0.0]\n"
+        '[[obstacles]]\ntype = "sphere"\ncenter = [15.0, 0.0, -10.0]\nradius = 4.0\n'
+    )
     plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), wp(30, 0, 10)), planned_home=HOME)
     local = mission_to_local(plan, world_file=world_file)
     assert len(local.world.obstacles) == 1
@@ -197,8 +230,9 @@ def test_point_in_square_polygon_property(n, e):
 @settings(deadline=None, max_examples=25)
 @given(st.floats(-80, 80), st.floats(-80, 80), st.floats(2, 15))
 def test_circle_zone_clearance_matches_ned_distance(n, e, r):
-    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10), wp(90, 90, 10)),
-                       circles=(circle(n, e, r),), planned_home=HOME)
+    plan = MissionPlan(
+        items=(MissionItem(22, 3, alt_m=10), wp(90, 90, 10)), circles=(circle(n, e, r),), planned_home=HOME
+    )
     try:
         local = mission_to_local(plan, settings=ConversionSettings(margin_m=0.0, padding_m=5))
     except MissionError:

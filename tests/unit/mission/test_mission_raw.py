@@ -6,18 +6,24 @@ import pytest
 
 from companion.errors import MissionError
 from companion.mission import FenceCircle, FencePolygon, MissionItem, MissionPlan, RallyPoint
-from companion.mission.raw import (RawItem, fence_to_raw, mission_to_raw, rally_to_raw,
-                                   raw_to_fence, raw_to_plan)
+from companion.mission.raw import RawItem, fence_to_raw, mission_to_raw, rally_to_raw, raw_to_fence, raw_to_plan
 
 HOME = (47.397742, 8.545594, 488.0)
 PLAN = MissionPlan(
-    items=(MissionItem(22, 3, alt_m=15.0),
-           MissionItem(16, 3, 2.0, 1.5, 0.0, math.nan, 47.3981234, 8.5459876, 20.0),
-           MissionItem(178, 2, 1.0, 4.0, -1.0, 0.0), MissionItem(20, 2)),
-    polygons=(FencePolygon(((47.0, 8.0), (47.1, 8.0), (47.1, 8.1), (47.0, 8.1)), True),
-              FencePolygon(((47.05, 8.05), (47.06, 8.05), (47.06, 8.06)), False)),
+    items=(
+        MissionItem(22, 3, alt_m=15.0),
+        MissionItem(16, 3, 2.0, 1.5, 0.0, math.nan, 47.3981234, 8.5459876, 20.0),
+        MissionItem(178, 2, 1.0, 4.0, -1.0, 0.0),
+        MissionItem(20, 2),
+    ),
+    polygons=(
+        FencePolygon(((47.0, 8.0), (47.1, 8.0), (47.1, 8.1), (47.0, 8.1)), True),
+        FencePolygon(((47.05, 8.05), (47.06, 8.05), (47.06, 8.06)), False),
+    ),
     circles=(FenceCircle(47.02, 8.02, 12.5, False),),
-    rally=(RallyPoint(47.01, 8.01, 25.0),), planned_home=HOME)
+    rally=(RallyPoint(47.01, 8.01, 25.0),),
+    planned_home=HOME,
+)
 
 
 def test_mission_list_has_home_at_seq0():

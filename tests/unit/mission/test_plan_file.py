@@ -8,8 +8,16 @@ from pathlib import Path
 import pytest
 
 from companion.errors import MissionError
-from companion.mission import (FenceCircle, FencePolygon, MissionItem, MissionPlan, RallyPoint,
-                               load_mission_file, read_plan_text, save_mission_file)
+from companion.mission import (
+    FenceCircle,
+    FencePolygon,
+    MissionItem,
+    MissionPlan,
+    RallyPoint,
+    load_mission_file,
+    read_plan_text,
+    save_mission_file,
+)
 from companion.mission.plan_file import plan_to_document
 
 REPO = Path(__file__).resolve().parents[3]
@@ -18,26 +26,43 @@ HOME = (47.397742, 8.545594, 488.0)
 
 def sample_plan() -> MissionPlan:
     return MissionPlan(
-        items=(MissionItem(22, 3, alt_m=15.0),
-               MissionItem(16, 3, 2.0, 1.5, 0.0, math.nan, 47.3981, 8.5459, 20.0),
-               MissionItem(178, 2, 1.0, 4.0, -1.0, 0.0),
-               MissionItem(16, 0, 0.0, 0.0, 0.0, math.nan, 47.3983, 8.5452, 510.0),
-               MissionItem(20, 2)),
-        polygons=(FencePolygon(((47.3970, 8.5440), (47.3990, 8.5440), (47.3990, 8.5470),
-                                (47.3970, 8.5470)), True),
-                  FencePolygon(((47.3979, 8.5456), (47.3980, 8.5456), (47.3980, 8.5458)),
-                               False)),
+        items=(
+            MissionItem(22, 3, alt_m=15.0),
+            MissionItem(16, 3, 2.0, 1.5, 0.0, math.nan, 47.3981, 8.5459, 20.0),
+            MissionItem(178, 2, 1.0, 4.0, -1.0, 0.0),
+            MissionItem(16, 0, 0.0, 0.0, 0.0, math.nan, 47.3983, 8.5452, 510.0),
+            MissionItem(20, 2),
+        ),
+        polygons=(
+            FencePolygon(((47.3970, 8.5440), (47.3990, 8.5440), (47.3990, 8.5470), (47.3970, 8.5470)), True),
+            FencePolygon(((47.3979, 8.5456), (47.3980, 8.5456), (47.3980, 8.5458)), False),
+        ),
         circles=(FenceCircle(47.3985, 8.5460, 7.5, False),),
         rally=(RallyPoint(47.3976, 8.5450, 20.0),),
-        planned_home=HOME, cruise_speed_m_s=8.0, hover_speed_m_s=5.0)
+        planned_home=HOME,
+        cruise_speed_m_s=8.0,
+        hover_speed_m_s=5.0,
+    )
 
 
 def same_items(a, b) -> bool:
     def key(item):
-        return tuple("nan" if isinstance(v, float) and math.isnan(v) else v
-                     for v in (item.command, item.frame, item.param1, item.param2, item.param3,
-                               item.param4, item.lat_deg, item.lon_deg, item.alt_m,
-                               item.autocontinue))
+        return tuple(
+            "nan" if isinstance(v, float) and math.isnan(v) else v
+            for v in (
+                item.command,
+                item.frame,
+                item.param1,
+                item.param2,
+                item.param3,
+                item.param4,
+                item.lat_deg,
+                item.lon_deg,
+                item.alt_m,
+                item.autocontinue,
+            )
+        )
+
     return [key(i) for i in a] == [key(i) for i in b]
 
 
@@ -60,9 +85,9 @@ def test_written_file_has_qgc_structure(tmp_path):
     assert doc["mission"]["version"] == 2 and doc["geoFence"]["version"] == 2
     first = doc["mission"]["items"][0]
     assert first["type"] == "SimpleItem" and len(first["params"]) == 7
-    assert doc["mission"]["items"][1]["params"][3] is None       # NaN -> null
+    assert doc["mission"]["items"][1]["params"][3] is None  # NaN -> null
     assert doc["geoFence"]["circles"][0]["circle"]["radius"] == 7.5
-    json.dumps(doc, allow_nan=False)                               # valid strict JSON
+    json.dumps(doc, allow_nan=False)  # valid strict JSON
 
 
 @pytest.mark.parametrize("name", ["exclusion_zones.plan", "paper_cluttered_100m.plan"])
@@ -100,14 +125,17 @@ def test_not_a_plan_file():
         read_plan_text("[1, 2]", "test.plan")
 
 
-@pytest.mark.parametrize("path, message", [
-    (("mission",), "missing field mission"),
-    (("mission", "items"), "missing field mission.items"),
-    (("mission", "items", 1, "command"), r"missing field mission.items\[1\] \(item 2\).command"),
-    (("mission", "items", 0, "params"), r"missing field mission.items\[0\] \(item 1\).params"),
-    (("mission", "items", 2, "frame"), r"mission.items\[2\] \(item 3\).frame"),
-    (("geoFence", "circles", 0, "circle", "radius"), r"geoFence.circles\[0\].circle.radius"),
-])
+@pytest.mark.parametrize(
+    "path, message",
+    [
+        (("mission",), "missing field mission"),
+        (("mission", "items"), "missing field mission.items"),
+        (("mission", "items", 1, "command"), r"missing field mission.items\[1\] \(item 2\).command"),
+        (("mission", "items", 0, "params"), r"missing field mission.items\[0\] \(item 1\).params"),
+        (("mission", "items", 2, "frame"), r"mission.items\[2\] \(item 3\).frame"),
+        (("geoFence", "circles", 0, "circle", "radius"), r"geoFence.circles\[0\].circle.radius"),
+    ],
+)
 def test_missing_fields_are_named(path, message):
     doc = base_doc()
     parent = doc
@@ -130,7 +158,7 @@ def test_unknown_command_names_item_and_command():
     doc["mission"]["items"][3]["command"] = 31000
     with pytest.raises(MissionError, match=r"item 4: unsupported command .*31000"):
         read(doc)
-    doc["mission"]["items"][3]["command"] = 183    # DO_SET_SERVO: known to MAVLink, unsupported
+    doc["mission"]["items"][3]["command"] = 183  # DO_SET_SERVO: known to MAVLink, unsupported
     with pytest.raises(MissionError, match=r"item 4: unsupported command DO_SET_SERVO \(183\)"):
         read(doc)
 
@@ -181,7 +209,7 @@ def test_wrong_types_are_named():
 
 def test_unsupported_frame():
     doc = base_doc()
-    doc["mission"]["items"][1]["frame"] = 1   # LOCAL_NED
+    doc["mission"]["items"][1]["frame"] = 1  # LOCAL_NED
     with pytest.raises(MissionError, match=r"item 2 \(NAV_WAYPOINT\): unsupported frame 1"):
         read(doc)
 

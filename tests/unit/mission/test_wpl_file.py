@@ -6,8 +6,7 @@ from pathlib import Path
 import pytest
 
 from companion.errors import MissionError
-from companion.mission import (MissionItem, MissionPlan, load_mission_file, read_wpl_text,
-                               save_mission_file)
+from companion.mission import MissionItem, MissionPlan, load_mission_file, read_wpl_text, save_mission_file
 from companion.mission.wpl_file import plan_to_wpl_text
 
 REPO = Path(__file__).resolve().parents[3]
@@ -39,9 +38,10 @@ def test_round_trip(tmp_path):
 
 
 def test_nan_params_survive(tmp_path):
-    plan = MissionPlan(items=(MissionItem(22, 3, alt_m=10.0),
-                              MissionItem(16, 3, 0, 0, 0, math.nan, 47.39, 8.54, 10.0)),
-                       planned_home=HOME)
+    plan = MissionPlan(
+        items=(MissionItem(22, 3, alt_m=10.0), MissionItem(16, 3, 0, 0, 0, math.nan, 47.39, 8.54, 10.0)),
+        planned_home=HOME,
+    )
     text = plan_to_wpl_text(plan)
     assert "\tnan\t" in text
     back = read_wpl_text(text)
@@ -53,7 +53,7 @@ def test_mavproxy_reads_our_file(tmp_path):
     path = tmp_path / "m.waypoints"
     save_mission_file(read_wpl_text(GOOD), path)
     loader = mavwp.MAVWPLoader()
-    assert loader.load(str(path)) == 5          # home + 4 items
+    assert loader.load(str(path)) == 5  # home + 4 items
     assert loader.wp(2).command == 16 and loader.wp(2).x == pytest.approx(47.398)
 
 
@@ -70,8 +70,9 @@ def test_bad_header():
 
 
 def test_wrong_column_count_names_line():
-    text = GOOD.replace("2\t0\t3\t16\t2\t1.5\t0\t0\t47.3980\t8.5460\t20\t1",
-                        "2\t0\t3\t16\t2\t1.5\t0\t47.3980\t8.5460\t20\t1")
+    text = GOOD.replace(
+        "2\t0\t3\t16\t2\t1.5\t0\t0\t47.3980\t8.5460\t20\t1", "2\t0\t3\t16\t2\t1.5\t0\t47.3980\t8.5460\t20\t1"
+    )
     with pytest.raises(MissionError, match=r"t.waypoints: line 4: 11 columns, expected 12"):
         read_wpl_text(text, "t.waypoints")
 

@@ -30,27 +30,32 @@ SETTINGS = settings(deadline=None, max_examples=25)
 LENGTH = CostWeights.length_only()
 
 
-def random_world(dim: int, seed: int, n_cyl: int = 5, n_prism: int = 3, n_ball: int = 4,
-                 size_m: float = 100.0) -> World:
+def random_world(
+    dim: int, seed: int, n_cyl: int = 5, n_prism: int = 3, n_ball: int = 4, size_m: float = 100.0
+) -> World:
     """Cylinders and prisms (half of them finite in *down*) and balls, shuffled, in a cube."""
     rs = np.random.default_rng(seed)
     obs = []
     for _ in range(n_cyl):
         c, r = tuple(rs.uniform(0.1, 0.9, 2) * size_m), float(rs.uniform(0.02, 0.08) * size_m)
         top = float(rs.uniform(0.0, 0.6) * size_m)
-        obs.append(Cylinder(c, r, top, top + float(rs.uniform(0.05, 0.4) * size_m)) if rs.random() < 0.5
-                   else Cylinder(c, r))
+        obs.append(
+            Cylinder(c, r, top, top + float(rs.uniform(0.05, 0.4) * size_m)) if rs.random() < 0.5 else Cylinder(c, r)
+        )
     for _ in range(n_prism):
         centre, n = rs.uniform(0.15, 0.85, 2) * size_m, int(rs.integers(3, 7))
         angles, radii = np.sort(rs.uniform(0.0, 2.0 * math.pi, n)), rs.uniform(0.04, 0.12, n) * size_m
-        verts = [(float(centre[0] + q * math.cos(a)), float(centre[1] + q * math.sin(a)))
-                 for a, q in zip(angles, radii)]
+        verts = [
+            (float(centre[0] + q * math.cos(a)), float(centre[1] + q * math.sin(a))) for a, q in zip(angles, radii)
+        ]
         top = float(rs.uniform(0.0, 0.6) * size_m)
-        obs.append(Prism(verts, top, top + float(rs.uniform(0.05, 0.4) * size_m)) if rs.random() < 0.5
-                   else Prism(verts))
+        obs.append(
+            Prism(verts, top, top + float(rs.uniform(0.05, 0.4) * size_m)) if rs.random() < 0.5 else Prism(verts)
+        )
     for _ in range(n_ball):
-        obs.append((Disc if dim == 2 else Sphere)(tuple(rs.uniform(0.0, size_m, dim)),
-                                                  float(rs.uniform(0.02, 0.07) * size_m)))
+        obs.append(
+            (Disc if dim == 2 else Sphere)(tuple(rs.uniform(0.0, size_m, dim)), float(rs.uniform(0.02, 0.07) * size_m))
+        )
     rs.shuffle(obs)
     return World(obs, (0.0,) * dim, (size_m,) * dim, margin_m=1.0)
 
@@ -58,9 +63,14 @@ def random_world(dim: int, seed: int, n_cyl: int = 5, n_prism: int = 3, n_ball: 
 @contextlib.contextmanager
 def python_only():
     """GART, M-GART, guidance and the segment tests all through their Python code."""
-    patches = [("companion.planning.gart", "compiled_case"), ("companion.planning.gart", "shortcut_case"),
-               ("companion.planning.mgart", "compiled_case"), ("companion.planning.search", "compiled_for"),
-               ("companion.planning.guidance", "compiled_for"), ("companion.world.segments", "compiled_for")]
+    patches = [
+        ("companion.planning.gart", "compiled_case"),
+        ("companion.planning.gart", "shortcut_case"),
+        ("companion.planning.mgart", "compiled_case"),
+        ("companion.planning.search", "compiled_for"),
+        ("companion.planning.guidance", "compiled_for"),
+        ("companion.world.segments", "compiled_for"),
+    ]
     saved = []
     try:
         for module_name, name in patches:
@@ -75,7 +85,7 @@ def python_only():
 
 # ---------------------------------------------------------------------------- segment and point tests
 @SETTINGS
-@given(dim=st.sampled_from([2, 3]), seed=st.integers(0, 10 ** 6), spread=st.sampled_from([3.0, 25.0, 80.0]))
+@given(dim=st.sampled_from([2, 3]), seed=st.integers(0, 10**6), spread=st.sampled_from([3.0, 25.0, 80.0]))
 def test_compiled_segment_test_is_world_segment_free(dim, seed, spread):
     world = random_world(dim, seed)
     assert compiled_for(world)
@@ -83,17 +93,18 @@ def test_compiled_segment_test_is_world_segment_free(dim, seed, spread):
     rs = np.random.default_rng(seed + 1)
     a = rs.uniform(-2.0, 102.0, (200, dim))
     b = a + rs.normal(0.0, spread, (200, dim))
-    b[:5] = a[:5]                                   # zero-length segments
+    b[:5] = a[:5]  # zero-length segments
     expected = [world.segment_free(tuple(p), tuple(q)) for p, q in zip(a.tolist(), b.tolist())]
     assert [free(tuple(p), tuple(q)) for p, q in zip(a.tolist(), b.tolist())] == expected
-    assert segments_free_from(world, tuple(a[0].tolist()), [tuple(q) for q in b.tolist()]) == \
-        [world.segment_free(tuple(a[0].tolist()), tuple(q)) for q in b.tolist()]
+    assert segments_free_from(world, tuple(a[0].tolist()), [tuple(q) for q in b.tolist()]) == [
+        world.segment_free(tuple(a[0].tolist()), tuple(q)) for q in b.tolist()
+    ]
     space = okern.space_of(world)
     assert [okern.point_clear(p, space) for p in a] == [world.point_free(tuple(p)) for p in a.tolist()]
 
 
 @SETTINGS
-@given(dim=st.sampled_from([2, 3]), seed=st.integers(0, 10 ** 6))
+@given(dim=st.sampled_from([2, 3]), seed=st.integers(0, 10**6))
 def test_each_obstacle_distance_is_its_own_method_to_the_bit(dim, seed):
     world = random_world(dim, seed, n_ball=0)
     space = okern.space_of(world)
@@ -111,7 +122,7 @@ def test_segments_leaving_a_finite_cylinder_are_measured_by_the_same_search():
     world = World([cyl], (0.0,) * 3, (100.0,) * 3, margin_m=0.5)
     space = okern.space_of(world)
     rs = np.random.default_rng(3)
-    for _ in range(300):   # from above or below the cylinder to across it: golden-section pieces
+    for _ in range(300):  # from above or below the cylinder to across it: golden-section pieces
         a = np.array([*rs.uniform(40.0, 60.0, 2), rs.uniform(0.0, 20.0)])
         b = np.array([*rs.uniform(40.0, 60.0, 2), rs.uniform(10.0, 60.0)])
         assert okern._other_segment_distance(0, a, b, space) == cyl.segment_distance(tuple(a), tuple(b))
@@ -127,7 +138,7 @@ def test_boxes_keep_the_python_tests():
 
 # ---------------------------------------------------------------------------- guidance
 @SETTINGS
-@given(dim=st.sampled_from([2, 3]), seed=st.integers(0, 10 ** 6))
+@given(dim=st.sampled_from([2, 3]), seed=st.integers(0, 10**6))
 def test_compiled_guidance_is_the_python_scan(dim, seed):
     world = random_world(dim, seed)
     gs = GartSettings(influence_m=8.0, max_guidance_m=9.0, goal_gain_m=1.5)
@@ -151,7 +162,10 @@ def _same(a, b) -> None:
 
 
 CASES = [  # dim, guidance, K_max, climb penalty
-    (2, True, None, 0.0), (2, False, 0.15, 0.0), (3, True, None, 1.0), (3, False, None, 0.0),
+    (2, True, None, 0.0),
+    (2, False, 0.15, 0.0),
+    (3, True, None, 1.0),
+    (3, False, None, 0.0),
     (3, True, 0.1, 1.0),
 ]
 
@@ -163,8 +177,12 @@ def blocked_world(dim: int, seed: int) -> World:
 
 
 def _settings(guidance: bool, kappa: float | None, climb: float) -> GartSettings:
-    return GartSettings(step_m=12.0, guidance=guidance, kappa_max_1_m=kappa,
-                        cost=CostWeights(energy=1.0, climb_penalty=climb, threat=0.0, tracking_m_per_rad=0.0))
+    return GartSettings(
+        step_m=12.0,
+        guidance=guidance,
+        kappa_max_1_m=kappa,
+        cost=CostWeights(energy=1.0, climb_penalty=climb, threat=0.0, tracking_m_per_rad=0.0),
+    )
 
 
 @contextlib.contextmanager
@@ -180,6 +198,7 @@ def corner_tests_counted(counts: list):
             ok = free(a, b)
             counts.append(ok)
             return ok
+
         return test
 
     simplify.segment_test = counting
@@ -205,7 +224,7 @@ def test_compiled_gart_is_the_python_gart(dim, guidance, kappa, climb):
         _same(compiled, python)
         assert compiled.status == "exact" and compiled.iterations > 0
         assert rng_c.random() == rng_p.random()
-    if kappa is not None:      # K_max's corner clearance refused some corners
+    if kappa is not None:  # K_max's corner clearance refused some corners
         assert not all(corner_tests)
 
 
@@ -232,7 +251,7 @@ def test_compiled_mgart_is_the_python_mgart(dim, guidance, kappa, climb):
 def test_a_free_straight_line_with_a_climb_costs_the_same():
     world = random_world(3, 7, n_cyl=0, n_prism=1, n_ball=0)
     gs = GartSettings(cost=CostWeights(energy=2.0, climb_penalty=1.5, threat=0.0, tracking_m_per_rad=0.0))
-    start, goal = (1.0, 1.0, 90.0), (3.0, 2.0, 60.0)     # climbing 30 m
+    start, goal = (1.0, 1.0, 90.0), (3.0, 2.0, 60.0)  # climbing 30 m
     assert world.segment_free(start, goal) and compiled_case(world, gs)
     compiled = gart(world, start, goal, rng=np.random.default_rng(0), settings=gs, max_iterations=50)
     with python_only():

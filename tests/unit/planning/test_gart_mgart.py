@@ -10,8 +10,17 @@ import numpy as np
 import pytest
 
 from companion.errors import PlanningError
-from companion.planning import (CostWeights, GartSettings, MgartSettings, gart, hausdorff_m, mgart,
-                                path_cost, path_length_m, shortcut_path)
+from companion.planning import (
+    CostWeights,
+    GartSettings,
+    MgartSettings,
+    gart,
+    hausdorff_m,
+    mgart,
+    path_cost,
+    path_length_m,
+    shortcut_path,
+)
 from companion.planning.simplify import CornerRule
 from companion.world import Box, Cylinder, Disc, Prism, Sphere, World
 
@@ -72,9 +81,17 @@ def test_fixed_seed_gives_the_same_path():
 
 
 def test_mixed_obstacles_with_margin_and_default_cost():
-    world = World([Box((20, 0, -40), (30, 60, 0)), Cylinder((60, 40), 8, -50, 0),
-                   Prism([(40, 70), (80, 70), (60, 95)], -45, -5), Sphere((80, 20, -20), 10)],
-                  (0, 0, -50), (100, 100, -2), margin_m=1.5)
+    world = World(
+        [
+            Box((20, 0, -40), (30, 60, 0)),
+            Cylinder((60, 40), 8, -50, 0),
+            Prism([(40, 70), (80, 70), (60, 95)], -45, -5),
+            Sphere((80, 20, -20), 10),
+        ],
+        (0, 0, -50),
+        (100, 100, -2),
+        margin_m=1.5,
+    )
     start, goal = (5, 5, -10), (95, 95, -20)
     r = gart(world, start, goal, rng=np.random.default_rng(0), max_time_s=2.0, max_iterations=1500)
     assert r.solved and exact_path_free(world, r.path)
@@ -130,19 +147,22 @@ def test_straight_line_when_nothing_is_in_the_way():
     assert r.length_m == pytest.approx(math.hypot(100, 10))
 
 
-@pytest.mark.parametrize("kwargs, key", [
-    (dict(start=(0, math.nan)), "start"),
-    (dict(goal=(0, math.inf)), "goal"),
-    (dict(goal=(101, 50)), "goal"),
-    (dict(start=(-1, 0)), "start"),
-    (dict(start=(0, 0, 0)), "start"),
-    (dict(goal=[[1, 2]]), "goal"),
-    (dict(rng=np.random.RandomState(0)), "rng"),
-    (dict(max_time_s=0), "max_time_s"),
-    (dict(max_iterations=-5), "max_iterations"),
-    (dict(world="paper_2d.toml"), "world"),
-    (dict(settings=MgartSettings()), "settings"),
-])
+@pytest.mark.parametrize(
+    "kwargs, key",
+    [
+        (dict(start=(0, math.nan)), "start"),
+        (dict(goal=(0, math.inf)), "goal"),
+        (dict(goal=(101, 50)), "goal"),
+        (dict(start=(-1, 0)), "start"),
+        (dict(start=(0, 0, 0)), "start"),
+        (dict(goal=[[1, 2]]), "goal"),
+        (dict(rng=np.random.RandomState(0)), "rng"),
+        (dict(max_time_s=0), "max_time_s"),
+        (dict(max_iterations=-5), "max_iterations"),
+        (dict(world="paper_2d.toml"), "world"),
+        (dict(settings=MgartSettings()), "settings"),
+    ],
+)
 def test_bad_arguments_raise_planning_error_naming_them(kwargs, key):
     args = dict(world=World([], (0, 0), (100, 100)), start=(0, 0), goal=(99, 99), rng=np.random.default_rng(0))
     args.update(kwargs)
@@ -151,11 +171,17 @@ def test_bad_arguments_raise_planning_error_naming_them(kwargs, key):
         gart(world, start, goal, **args)
 
 
-@pytest.mark.parametrize("kwargs, key", [
-    (dict(step_m=0), "step_m"), (dict(step_m=-3), "step_m"), (dict(goal_bias=1.5), "goal_bias"),
-    (dict(kappa_max_1_m=0.0), "kappa_max_1_m"), (dict(max_rewire_radius_m=-1), "max_rewire_radius_m"),
-    (dict(max_heading_change_rad=4.0), "max_heading_change_rad"),
-])
+@pytest.mark.parametrize(
+    "kwargs, key",
+    [
+        (dict(step_m=0), "step_m"),
+        (dict(step_m=-3), "step_m"),
+        (dict(goal_bias=1.5), "goal_bias"),
+        (dict(kappa_max_1_m=0.0), "kappa_max_1_m"),
+        (dict(max_rewire_radius_m=-1), "max_rewire_radius_m"),
+        (dict(max_heading_change_rad=4.0), "max_heading_change_rad"),
+    ],
+)
 def test_bad_settings_raise_planning_error_naming_the_field(kwargs, key):
     with pytest.raises(PlanningError, match=key):
         GartSettings(**kwargs)
@@ -191,7 +217,9 @@ def test_mgart_rejects_bad_k():
 
 def test_shortcut_never_costs_more_and_stays_free():
     b = make_world("2d", 6)
-    raw_settings = GartSettings(cost=CostWeights.length_only(), simplify=GartSettings().simplify.__class__(enabled=False))
+    raw_settings = GartSettings(
+        cost=CostWeights.length_only(), simplify=GartSettings().simplify.__class__(enabled=False)
+    )
     r = gart(b.world, b.start, b.goal, rng=np.random.default_rng(6), stop_at_first=True, settings=raw_settings)
     short = shortcut_path(b.world, r.path, LENGTH)
     assert exact_path_free(b.world, short)
@@ -208,8 +236,12 @@ def test_hausdorff_of_offset_lines():
 @pytest.mark.parametrize("seed", [0, 4])
 def test_g2_smoother_honours_kappa_max_on_paths_planned_with_it(seed):
     smoothing = pytest.importorskip("companion.smoothing")
-    world = World([Disc(c, r) for c, r in [((30, 30), 8), ((60, 55), 10), ((35, 75), 7), ((75, 20), 6)]],
-                  (0, 0), (100, 100), margin_m=1.0)
+    world = World(
+        [Disc(c, r) for c, r in [((30, 30), 8), ((60, 55), 10), ((35, 75), 7), ((75, 20), 6)]],
+        (0, 0),
+        (100, 100),
+        margin_m=1.0,
+    )
     settings = GartSettings(kappa_max_1_m=0.15)
     r = gart(world, (2, 2), (98, 98), rng=np.random.default_rng(seed), max_iterations=800, settings=settings)
     assert r.solved
@@ -228,13 +260,13 @@ def test_attract_repels_from_inside_attracts_outside_and_pulls_to_goal(n_extra):
     world = World([Disc((50, 50), 10)] + extra, (0, 0), (100, 100), margin_m=1.0)
     s = GartSettings(goal_gain_m=0.0, repel_offset_m=0.5, obstacle_gain_m2=4.0, influence_m=6.0, max_guidance_m=20.0)
     search = GartSearch(world, (90.0, 90.0), (95.0, 95.0), s, np.random.default_rng(0))
-    inside = search.attract((50.0, 55.0))           # 5 m from the centre: clearance -6 m
+    inside = search.attract((50.0, 55.0))  # 5 m from the centre: clearance -6 m
     assert inside == pytest.approx((50.0, 50.0 + 11.5))
-    near = search.attract((50.0, 65.0))             # clearance 4 m: moves 4/4 = 1 m towards it
+    near = search.attract((50.0, 65.0))  # clearance 4 m: moves 4/4 = 1 m towards it
     assert near == pytest.approx((50.0, 64.0))
-    close = search.attract((50.0, 62.0))            # clearance 1 m: k/c = 4 capped at c/2
+    close = search.attract((50.0, 62.0))  # clearance 1 m: k/c = 4 capped at c/2
     assert close == pytest.approx((50.0, 61.5))
-    far = search.attract((80.0, 50.0))              # beyond the influence distance
+    far = search.attract((80.0, 50.0))  # beyond the influence distance
     assert far == pytest.approx((80.0, 50.0))
     s_goal = GartSettings(goal_gain_m=2.0)
     pulled = GartSearch(world, (90.0, 90.0), (80.0, 90.0), s_goal, np.random.default_rng(0)).attract((80.0, 80.0))

@@ -55,9 +55,31 @@ def test_gart_writes_json_with_a_free_path(world_file, tmp_path, capsys):
 
 def test_mgart_with_smoothing_and_plot(world_file, tmp_path):
     out, png = tmp_path / "m.json", tmp_path / "m.png"
-    rc = main(["plan", "--world", str(world_file), "--planner", "mgart", "-k", "3", "--smooth", "g2",
-               "--kappa-max", "0.3", "--budget", "2", "--start", "2,2", "--goal", "38,38",
-               "--json", str(out), "--plot", str(png)])
+    rc = main(
+        [
+            "plan",
+            "--world",
+            str(world_file),
+            "--planner",
+            "mgart",
+            "-k",
+            "3",
+            "--smooth",
+            "g2",
+            "--kappa-max",
+            "0.3",
+            "--budget",
+            "2",
+            "--start",
+            "2,2",
+            "--goal",
+            "38,38",
+            "--json",
+            str(out),
+            "--plot",
+            str(png),
+        ]
+    )
     assert rc == 0
     data = json.loads(out.read_text())
     costs = [p["cost"] for p in data["paths"]]
@@ -67,13 +89,16 @@ def test_mgart_with_smoothing_and_plot(world_file, tmp_path):
     assert png.stat().st_size > 10_000
 
 
-@pytest.mark.parametrize("argv, text", [
-    (["--start", "1,2,3"], "--start"),
-    (["--goal", "a,b"], "--goal"),
-    (["--goal", "100,100"], "goal"),
-    (["--budget", "-1"], "--budget"),
-    (["--kappa-max", "0"], "--kappa-max"),
-])
+@pytest.mark.parametrize(
+    "argv, text",
+    [
+        (["--start", "1,2,3"], "--start"),
+        (["--goal", "a,b"], "--goal"),
+        (["--goal", "100,100"], "goal"),
+        (["--budget", "-1"], "--budget"),
+        (["--kappa-max", "0"], "--kappa-max"),
+    ],
+)
 def test_wrong_arguments_exit_2_with_one_line(world_file, capsys, argv, text):
     rc = main(["plan", "--world", str(world_file)] + argv)
     err = capsys.readouterr().err.strip()
@@ -83,7 +108,9 @@ def test_wrong_arguments_exit_2_with_one_line(world_file, capsys, argv, text):
 
 def test_bad_world_file_exit_2_names_the_key(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
-    bad.write_text("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'disc'\ncenter = [1, 1]\n")
+    bad.write_text(
+        "[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'disc'\ncenter = [1, 1]\n"
+    )
     assert main(["plan", "--world", str(bad)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "obstacles[0].radius" in err
@@ -93,8 +120,29 @@ def test_smoothed_paths_are_timed_and_checked_on_the_closed_loop(world_file, tmp
     """Issue 12: ``companion plan --json`` carries the feasibility figures; a timing too
     aggressive for the helicopter is stretched until it is feasible."""
     out = tmp_path / "f.json"
-    rc = main(["plan", "--world", str(world_file), "--smooth", "g2", "--kappa-max", "0.3", "--seed", "3",
-               "--budget", "0.2", "--speed", "15", "--accel", "5", "--jerk", "20", "--json", str(out)])
+    rc = main(
+        [
+            "plan",
+            "--world",
+            str(world_file),
+            "--smooth",
+            "g2",
+            "--kappa-max",
+            "0.3",
+            "--seed",
+            "3",
+            "--budget",
+            "0.2",
+            "--speed",
+            "15",
+            "--accel",
+            "5",
+            "--jerk",
+            "20",
+            "--json",
+            str(out),
+        ]
+    )
     assert rc == 0
     assert "closed loop: feasible, stretch x" in capsys.readouterr().out
     smoothed = json.loads(out.read_text())["paths"][0]["smoothed"]
@@ -103,8 +151,28 @@ def test_smoothed_paths_are_timed_and_checked_on_the_closed_loop(world_file, tmp
     assert f["initial_saturated"] and f["stretch"] > 1.0 and f["feasible"] and not f["saturated"]
     assert f["duration_s"] == pytest.approx(f["stretch"] * smoothed["duration_s"])
     assert f["max_abs_delta"] <= 0.8 and set(f["peak_abs_delta"]) == {
-        "lateral_cyclic", "longitudinal_cyclic", "pedal", "collective"}
+        "lateral_cyclic",
+        "longitudinal_cyclic",
+        "pedal",
+        "collective",
+    }
     assert 0 <= f["rms_tracking_error_m"] <= f["max_tracking_error_m"] <= 2.0 and f["check_s"] > 0
-    rc = main(["plan", "--world", str(world_file), "--smooth", "g2", "--kappa-max", "0.3", "--seed", "3",
-               "--budget", "0.2", "--no-feasibility", "--json", str(out)])
+    rc = main(
+        [
+            "plan",
+            "--world",
+            str(world_file),
+            "--smooth",
+            "g2",
+            "--kappa-max",
+            "0.3",
+            "--seed",
+            "3",
+            "--budget",
+            "0.2",
+            "--no-feasibility",
+            "--json",
+            str(out),
+        ]
+    )
     assert rc == 0 and json.loads(out.read_text())["paths"][0]["smoothed"]["feasibility"] is None

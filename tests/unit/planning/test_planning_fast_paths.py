@@ -29,7 +29,7 @@ def test_node_arrays_answer_as_the_bucket_grid_in_the_same_order(dim):
     grid = NodeGrid((0.0,) * dim, (100.0,) * dim, 40.0, pts)
     for i in range(len(pts)):
         grid.add(i)
-        assert grid.arrays.keys[i] == grid._flat(grid._index(pts[i]))   # compiled bucket key
+        assert grid.arrays.keys[i] == grid._flat(grid._index(pts[i]))  # compiled bucket key
     for i in range(0, 600, 7):
         grid.remove(i)
     queries = [tuple(q) for q in rs.uniform(-5, 105, (60, dim)).tolist()]
@@ -47,7 +47,7 @@ def _scalar_within(grid: NodeGrid, q: tuple, r: float) -> list:
     import companion.planning.nearest as nearest_module
 
     saved = nearest_module._VECTOR_FROM
-    nearest_module._VECTOR_FROM = 10 ** 9
+    nearest_module._VECTOR_FROM = 10**9
     try:
         return grid.within(q, r)
     finally:
@@ -59,8 +59,10 @@ def test_batched_segment_test_equals_the_scalar_one(dim):
     rs = np.random.RandomState(10 + dim)
     balls = [(Disc if dim == 2 else Sphere)(c, r) for c, r in zip(rs.uniform(0, 100, (40, dim)), rs.uniform(2, 9, 40))]
     others = [Box((40.0,) * dim, (55.0,) * dim)] + ([Cylinder((70.0, 20.0), 6.0)] if dim == 2 else [])
-    for world in (World(balls, (0,) * dim, (100,) * dim, margin_m=0.7),
-                  World(balls + others, (0,) * dim, (100,) * dim, margin_m=0.7)):
+    for world in (
+        World(balls, (0,) * dim, (100,) * dim, margin_m=0.7),
+        World(balls + others, (0,) * dim, (100,) * dim, margin_m=0.7),
+    ):
         for _ in range(40):
             a = tuple(rs.uniform(-2, 102, dim).tolist())
             ends = [tuple(b) for b in rs.uniform(-2, 102, (25, dim)).tolist()] + [a]
@@ -80,7 +82,7 @@ def test_mgart_reaches_a_goal_in_a_pocket_eight_times_quickly():
     res = mgart(b.world, b.start, b.goal, 8, rng=np.random.default_rng(8), max_time_s=60.0, settings=ms)
     assert len(res) == 8 and res[0].iterations < 1500
     assert all(b.world.path_free(r.path) for r in res)
-    assert all(hausdorff_m(p.path, q.path) >= ms.min_separation_m for i, p in enumerate(res) for q in res[i + 1:])
+    assert all(hausdorff_m(p.path, q.path) >= ms.min_separation_m for i, p in enumerate(res) for q in res[i + 1 :])
     assert [r.cost for r in res] == sorted(r.cost for r in res)
 
 
@@ -93,8 +95,10 @@ def test_mgart_without_portals_is_the_papers_rule_and_still_finds_distinct_paths
 
 def test_large_tree_runs_are_deterministic():
     b = make_world("3d_dense", 2)
-    runs = [gart(b.world, b.start, b.goal, rng=np.random.default_rng(1), max_iterations=900, settings=LENGTH)
-            for _ in range(2)]
+    runs = [
+        gart(b.world, b.start, b.goal, rng=np.random.default_rng(1), max_iterations=900, settings=LENGTH)
+        for _ in range(2)
+    ]
     assert runs[0].tree.nodes.shape[0] > 300  # the numpy queries were used
     assert np.array_equal(runs[0].path, runs[1].path) and np.array_equal(runs[0].tree.nodes, runs[1].tree.nodes)
 
@@ -115,7 +119,7 @@ def test_python_dist_is_math_dist_to_the_bit():
 
 def _python_gart(monkeypatch, *args, **kwargs):
     """gart() through GartSearch's Python iteration and the Python shortcut."""
-    gart_module = importlib.import_module("companion.planning.gart")   # (the package exports the function)
+    gart_module = importlib.import_module("companion.planning.gart")  # (the package exports the function)
     with monkeypatch.context() as m:
         m.setattr(gart_module, "compiled_case", lambda world, settings: False)
         m.setattr(gart_module, "shortcut_case", lambda world, settings: False)
@@ -149,9 +153,11 @@ def test_compiled_iteration_gives_the_python_iteration_result(monkeypatch, world
 def test_compiled_iteration_handles_a_straight_line_and_other_settings(monkeypatch):
     world = World([Disc((50.0, 80.0), 5.0)], (0, 0), (100, 100), margin_m=0.5)
     settings = GartSettings(cost=CostWeights.length_only(), informed=False, step_m=7.0, goal_bias=0.3)
-    for goal in ((90.0, 10.0), (50.0, 95.0)):   # free straight line; behind the disc
-        runs = [f(world, (10.0, 10.0), goal, rng=np.random.default_rng(4), max_iterations=300, settings=settings)
-                for f in (gart, lambda *a, **k: _python_gart(monkeypatch, *a, **k))]
+    for goal in ((90.0, 10.0), (50.0, 95.0)):  # free straight line; behind the disc
+        runs = [
+            f(world, (10.0, 10.0), goal, rng=np.random.default_rng(4), max_iterations=300, settings=settings)
+            for f in (gart, lambda *a, **k: _python_gart(monkeypatch, *a, **k))
+        ]
         _same_result(*runs)
 
 
@@ -168,9 +174,9 @@ def test_compiled_shortcut_gives_the_python_shortcut_and_cost():
         settings = GartSettings(cost=CostWeights.length_only(), max_heading_change_rad=0.6 * math.pi)
         free = [tuple(p) for p in rs.uniform(0, 100, (400, dim)).tolist() if world.point_free(tuple(p))]
         for k in range(60):
-            path = np.array(free[k:k + 3 + k % 9])
+            path = np.array(free[k : k + 3 + k % 9])
             if k % 5 == 0:
-                path = np.vstack([path[:2], path[1:2], path[2:]])   # a repeated waypoint
+                path = np.vstack([path[:2], path[1:2], path[2:]])  # a repeated waypoint
             out, cost = shortcut_and_cost(world, path, settings)
             expected = shortcut_path(world, path, settings)
             assert np.array_equal(out, expected) and cost == path_cost(world, expected, settings.cost)
@@ -221,9 +227,9 @@ def test_compiled_resampling_and_separation_test_answer_as_numpy():
             d = np.linalg.norm(ra[:, None, :] - rb[None, :, :], axis=2)
             h = max(d.min(axis=1).max(), d.min(axis=0).max())
             assert hausdorff_m(a, b, 1.0) == h
-            for threshold in (h, np.nextafter(h, 0.0), np.nextafter(h, np.inf)):   # numpy decides these
+            for threshold in (h, np.nextafter(h, 0.0), np.nextafter(h, np.inf)):  # numpy decides these
                 assert separated(ra, rb, threshold) == (h >= threshold)
             for threshold in (4.0, 0.5 * h, 2.0 * h):
                 assert separated(ra, rb, threshold) == (h >= threshold)
                 unsure += separated_kernel(ra, rb, threshold) == UNSURE
-    assert unsure <= 0.02 * 2 * 150 * 3   # away from the threshold the compiled test decides
+    assert unsure <= 0.02 * 2 * 150 * 3  # away from the threshold the compiled test decides

@@ -16,8 +16,15 @@ from companion.security.deployment import init_deployment
 @pytest.fixture(scope="module")
 def deployment(tmp_path_factory):
     d = tmp_path_factory.mktemp("deploy")
-    return init_deployment(d, sysid=3, sources=["radar1", "radar2"], observers=["gcs"],
-                           listen=["tls/0.0.0.0:7447"], connect=["tls/10.1.2.3:7447"], hosts=["heli.local"])
+    return init_deployment(
+        d,
+        sysid=3,
+        sources=["radar1", "radar2"],
+        observers=["gcs"],
+        listen=["tls/0.0.0.0:7447"],
+        connect=["tls/10.1.2.3:7447"],
+        hosts=["heli.local"],
+    )
 
 
 def _load_json5(path):
@@ -45,7 +52,7 @@ def test_a_certificate_of_another_ca_does_not_verify(deployment):
     stranger = keys.issue_identity(keys.create_ca("other-ca"), "radar1")
     with pytest.raises(keys.KeyMaterialError, match="not by the CA"):
         keys.verify_signed_by(stranger.cert, keys.load_certificate(deployment.ca_cert))
-    ca = keys.create_ca("companion-ca")          # same name, other key: the signature fails
+    ca = keys.create_ca("companion-ca")  # same name, other key: the signature fails
     forged = keys.issue_identity(ca, "radar1")
     with pytest.raises(keys.KeyMaterialError, match="signature"):
         keys.verify_signed_by(forged.cert, keys.load_certificate(deployment.ca_cert))
@@ -58,7 +65,8 @@ def test_the_companion_certificate_names_the_hosts_sources_connect_to(deployment
     san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
     assert {"companion", "localhost", "heli.local"} <= set(san.get_values_for_type(x509.DNSName))
     assert {ipaddress.ip_address("127.0.0.1"), ipaddress.ip_address("10.1.2.3")} <= set(
-        san.get_values_for_type(x509.IPAddress))
+        san.get_values_for_type(x509.IPAddress)
+    )
     assert "0.0.0.0" not in str(san)
 
 
@@ -115,11 +123,13 @@ def test_a_directory_with_other_files_is_taken(tmp_path):
 def test_existing_key_files_are_named_and_kept_unless_forced(tmp_path):
     init_deployment(tmp_path, sources=["radar1"])
     first = (tmp_path / "ca.pem").read_text()
-    with pytest.raises(keys.KeyMaterialError, match="ca.key, ca.pem, companion.key.*radar1.json5, mavlink.key exist already.*--force"):
+    with pytest.raises(
+        keys.KeyMaterialError, match="ca.key, ca.pem, companion.key.*radar1.json5, mavlink.key exist already.*--force"
+    ):
         init_deployment(tmp_path, sources=["radar1"])
     assert (tmp_path / "ca.pem").read_text() == first
     init_deployment(tmp_path, sources=["radar1"], force=True)
-    assert (tmp_path / "ca.pem").read_text() != first      # a new CA
+    assert (tmp_path / "ca.pem").read_text() != first  # a new CA
 
 
 def test_the_mavlink_key_is_a_passphrase_for_mavproxy_readable_by_the_owner_only(tmp_path, deployment):
@@ -149,15 +159,18 @@ def test_one_existing_file_of_the_deployment_is_enough_to_refuse(tmp_path):
     assert not (tmp_path / "ca.key").exists()
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"sources": ["radar 1"]}, "--source"),
-    ({"sources": ["local"]}, "reserved"),
-    ({"sources": []}, "at least one"),
-    ({"sources": ["a"], "observers": ["a"]}, "distinct"),
-    ({"companion": "radar1", "sources": ["radar1"]}, "distinct"),
-    ({"sysid": 0}, "--sysid"),
-    ({"listen": ["tcp/0.0.0.0:7447"]}, "listen\\[0\\]: expected a tls/"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"sources": ["radar 1"]}, "--source"),
+        ({"sources": ["local"]}, "reserved"),
+        ({"sources": []}, "at least one"),
+        ({"sources": ["a"], "observers": ["a"]}, "distinct"),
+        ({"companion": "radar1", "sources": ["radar1"]}, "distinct"),
+        ({"sysid": 0}, "--sysid"),
+        ({"listen": ["tcp/0.0.0.0:7447"]}, "listen\\[0\\]: expected a tls/"),
+    ],
+)
 def test_bad_arguments_name_what_is_wrong(tmp_path, kwargs, message):
     with pytest.raises(Exception, match=message):
         init_deployment(tmp_path / "d", **kwargs)
@@ -181,20 +194,33 @@ def test_keys_init_writes_to_the_user_config_directory_by_default(tmp_path, monk
     assert stat.S_IMODE(d.stat().st_mode) == 0o700
 
 
-@pytest.mark.parametrize("env, expected", [
-    ({"XDG_CONFIG_HOME": "/x/cfg", "HOME": "/home/u"}, "/x/cfg/heli-companion/keys"),
-    ({"XDG_CONFIG_HOME": "", "HOME": "/home/u"}, "/home/u/.config/heli-companion/keys"),
-    ({"XDG_CONFIG_HOME": "rel/cfg", "HOME": "/home/u"}, "/home/u/.config/heli-companion/keys"),
-    ({"HOME": "/home/u"}, "/home/u/.config/heli-companion/keys"),
-])
+@pytest.mark.parametrize(
+    "env, expected",
+    [
+        ({"XDG_CONFIG_HOME": "/x/cfg", "HOME": "/home/u"}, "/x/cfg/heli-companion/keys"),
+        ({"XDG_CONFIG_HOME": "", "HOME": "/home/u"}, "/home/u/.config/heli-companion/keys"),
+        ({"XDG_CONFIG_HOME": "rel/cfg", "HOME": "/home/u"}, "/home/u/.config/heli-companion/keys"),
+        ({"HOME": "/home/u"}, "/home/u/.config/heli-companion/keys"),
+    ],
+)
 def test_the_default_keys_directory_follows_xdg(env, expected):
     from companion.security.paths import default_keys_dir
 
     assert str(default_keys_dir(env)) == expected
 
 
-@pytest.mark.parametrize("path", ["deploy/ca.key", "deploy/radar1.key", "deploy/radar1.pem", "deploy/gcs.json5",
-                                  "deploy/mavlink.key", "keys/companion.key", "heli.key"])
+@pytest.mark.parametrize(
+    "path",
+    [
+        "deploy/ca.key",
+        "deploy/radar1.key",
+        "deploy/radar1.pem",
+        "deploy/gcs.json5",
+        "deploy/mavlink.key",
+        "keys/companion.key",
+        "heli.key",
+    ],
+)
 def test_key_files_in_the_tree_are_ignored_by_git(path):
     import shutil
     import subprocess

@@ -9,14 +9,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from heli_model.control import Setpoint
+from heli_model.model import HeliModel
 from sim_vehicle import autopilot as ap
 from sim_vehicle import rsc
 from sim_vehicle.autopilot import Autopilot, Leg
 from sim_vehicle.clock import SimClock, WallTimer
 from sim_vehicle.config import VehicleSettings, replace_path
-from heli_model.control import Setpoint
 from sim_vehicle.mission_store import MissionItem
-from heli_model.model import HeliModel
 
 HOME = (47.397742, 8.545594, 488.0, 0.0)
 
@@ -62,10 +62,17 @@ def airborne_at_10m(model: HeliModel) -> Autopilot:
     return vehicle
 
 
-def item(seq: int, command: int, lat: float = 0.0, lon: float = 0.0, z: float = 0.0, p1: float = 0.0,
-         p2: float = 0.0, frame: int = 3) -> MissionItem:
-    return MissionItem(seq, frame, command, 0, 1, p1, p2, 0.0, 0.0, int(round(lat * 1e7)), int(round(lon * 1e7)),
-                       z)
+def item(
+    seq: int,
+    command: int,
+    lat: float = 0.0,
+    lon: float = 0.0,
+    z: float = 0.0,
+    p1: float = 0.0,
+    p2: float = 0.0,
+    frame: int = 3,
+) -> MissionItem:
+    return MissionItem(seq, frame, command, 0, 1, p1, p2, 0.0, 0.0, int(round(lat * 1e7)), int(round(lon * 1e7)), z)
 
 
 def north_east_deg(north_m: float, east_m: float) -> tuple[float, float]:
@@ -329,8 +336,14 @@ def test_rtl_goes_to_the_nearest_rally_point(model):
 
 # ---------------------------------------------------------------- geofence
 @settings(deadline=None, max_examples=60)
-@given(st.floats(-50, 50), st.floats(-50, 50), st.floats(1, 40), st.floats(1, 40), st.floats(-100, 100),
-       st.floats(-100, 100))
+@given(
+    st.floats(-50, 50),
+    st.floats(-50, 50),
+    st.floats(1, 40),
+    st.floats(1, 40),
+    st.floats(-100, 100),
+    st.floats(-100, 100),
+)
 def test_point_in_rectangle_polygon_matches_the_box(cn, ce, hn, he, pn, pe):
     poly = np.array([[cn - hn, ce - he], [cn + hn, ce - he], [cn + hn, ce + he], [cn - hn, ce + he]])
     inside = abs(pn - cn) < hn and abs(pe - ce) < he
@@ -365,8 +378,9 @@ def test_fence_breach_switches_to_rtl_when_enabled(model):
 def test_fence_is_not_enforced_by_default(model):
     vehicle = airborne_at_10m(model)
     corners = [north_east_deg(n, e) for n, e in ((-5, -5), (5, -5), (5, 5), (-5, 5))]
-    vehicle.fence.set_items([item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0)
-                             for i, (lat, lon) in enumerate(corners)])
+    vehicle.fence.set_items(
+        [item(i, ap.CMD_FENCE_POLYGON_INCLUSION, lat, lon, p1=4.0) for i, (lat, lon) in enumerate(corners)]
+    )
     vehicle.set_guided_setpoint(Setpoint(pos_ned_m=(20.0, 0.0, -10.0)))
     fly(vehicle, 10.0)
     assert vehicle.mode == ap.GUIDED and vehicle.fence.breached is None
@@ -390,8 +404,12 @@ def test_completed_mission_restarts_from_item_1(model):
 
 def test_leaving_auto_mid_item_reports_nothing_and_resumes_later(model):
     lat, lon = north_east_deg(40.0, 0.0)
-    mission = [item(0, 16, HOME[0], HOME[1], HOME[2], frame=0), item(1, 22, z=5.0), item(2, 16, lat, lon, 5.0),
-               item(3, 21)]
+    mission = [
+        item(0, 16, HOME[0], HOME[1], HOME[2], frame=0),
+        item(1, 22, z=5.0),
+        item(2, 16, lat, lon, 5.0),
+        item(3, 21),
+    ]
     vehicle = make_vehicle(model)
     vehicle.mission.set_items(mission)
     vehicle.set_mode(ap.AUTO)
@@ -412,13 +430,61 @@ def test_leaving_auto_mid_item_reports_nothing_and_resumes_later(model):
 
 
 # ---------------------------------------------------------------- MAVLink server fed with fuzzed messages
-FUZZ_TYPES = ("COMMAND_LONG", "COMMAND_INT", "SET_MODE", "REQUEST_DATA_STREAM", "TIMESYNC", "RC_CHANNELS_OVERRIDE",
-              "SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT", "MISSION_COUNT", "MISSION_ITEM_INT",
-              "MISSION_ITEM", "MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_CLEAR_ALL",
-              "MISSION_SET_CURRENT", "MISSION_ACK", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET")
+FUZZ_TYPES = (
+    "COMMAND_LONG",
+    "COMMAND_INT",
+    "SET_MODE",
+    "REQUEST_DATA_STREAM",
+    "TIMESYNC",
+    "RC_CHANNELS_OVERRIDE",
+    "SET_POSITION_TARGET_LOCAL_NED",
+    "SET_POSITION_TARGET_GLOBAL_INT",
+    "MISSION_COUNT",
+    "MISSION_ITEM_INT",
+    "MISSION_ITEM",
+    "MISSION_REQUEST_LIST",
+    "MISSION_REQUEST_INT",
+    "MISSION_REQUEST",
+    "MISSION_CLEAR_ALL",
+    "MISSION_SET_CURRENT",
+    "MISSION_ACK",
+    "PARAM_REQUEST_LIST",
+    "PARAM_REQUEST_READ",
+    "PARAM_SET",
+)
 FUZZ_FLOATS = (0.0, 1.0, -1.0, 4.0, 10.0, float("nan"), float("inf"), -float("inf"), 1e30, -1e30, 0.5, 1e9)
-FUZZ_INTS = (0, 1, 1, 2, 3, 4, 5, 6, 9, 16, 17, 20, 21, 22, 176, 178, 179, 192, 218, 300, 400, 410, 511, 512, 520,
-             1000, 2000, 5001, 5100, 255)
+FUZZ_INTS = (
+    0,
+    1,
+    1,
+    2,
+    3,
+    4,
+    5,
+    6,
+    9,
+    16,
+    17,
+    20,
+    21,
+    22,
+    176,
+    178,
+    179,
+    192,
+    218,
+    300,
+    400,
+    410,
+    511,
+    512,
+    520,
+    1000,
+    2000,
+    5001,
+    5100,
+    255,
+)
 
 
 def fuzz_message(mavlink, rng: np.random.Generator, gcs) -> bytes | None:
@@ -427,7 +493,9 @@ def fuzz_message(mavlink, rng: np.random.Generator, gcs) -> bytes | None:
     args = []
     for name, ftype, length in zip(cls.fieldnames, cls.fieldtypes, cls.array_lengths):
         if ftype == "char":
-            args.append([b"WPNAV_SPEED", b"SIM_SPEEDUP", b"LQI_R_COL", b"FENCE_ENABLE", b"X", b""][int(rng.integers(6))])
+            args.append(
+                [b"WPNAV_SPEED", b"SIM_SPEEDUP", b"LQI_R_COL", b"FENCE_ENABLE", b"X", b""][int(rng.integers(6))]
+            )
         elif length:
             args.append([int(v) for v in rng.integers(0, 2, length)])
         elif ftype in ("float", "double"):

@@ -97,8 +97,13 @@ def test_mission_sequencer_flies_items_on_the_navigation_it_is_given():
     settings = VehicleSettings()
     nav = Navigation(Body(host.pos_ned_m), frames, lambda: settings, events.append, 0.0)
     mission = Mission(host, nav, frames, lambda: settings, events.append)
-    mission.set_items([item(0, ap.CMD_NAV_WAYPOINT), item(1, ap.CMD_DO_CHANGE_SPEED, p2=7.0),
-                       item(2, ap.CMD_NAV_LOITER_TIME, z=12.0, p1=3.0)])
+    mission.set_items(
+        [
+            item(0, ap.CMD_NAV_WAYPOINT),
+            item(1, ap.CMD_DO_CHANGE_SPEED, p2=7.0),
+            item(2, ap.CMD_NAV_LOITER_TIME, z=12.0, p1=3.0),
+        ]
+    )
     assert mission.has_mission and events == [("mission_current", 1)]
     mission.advance(0.0)
     assert nav.speed_m_s == 7.0 and mission.current == 2

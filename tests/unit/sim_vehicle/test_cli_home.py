@@ -9,11 +9,14 @@ from sim_vehicle.cli import build_parser
 CANBERRA = (-35.363261, 149.16523, 584.0, 353.0)
 
 
-@pytest.mark.parametrize("argv", [
-    ["--home", "-35.363261,149.165230,584,353"],
-    ["--home=-35.363261,149.165230,584,353"],
-    ["--speedup", "2", "--home", "-35.363261,149.165230,584,353", "-q"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--home", "-35.363261,149.165230,584,353"],
+        ["--home=-35.363261,149.165230,584,353"],
+        ["--speedup", "2", "--home", "-35.363261,149.165230,584,353", "-q"],
+    ],
+)
 def test_a_southern_home_parses_in_both_forms(argv):
     assert build_parser().parse_args(argv).home == pytest.approx(CANBERRA)
 
@@ -28,11 +31,14 @@ def test_a_negative_wind_direction_is_a_value():
     assert build_parser().parse_args(["--wind-dir", "-90"]).wind_dir == -90.0
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--home", "-95,0,10"], "latitude must be -90..90"),
-    (["--home", "-33.8,151.2"], "expected LAT,LON,ALT"),
-    (["--home", "-q"], "expected one argument"),             # an option is not taken for a value
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--home", "-95,0,10"], "latitude must be -90..90"),
+        (["--home", "-33.8,151.2"], "expected LAT,LON,ALT"),
+        (["--home", "-q"], "expected one argument"),  # an option is not taken for a value
+    ],
+)
 def test_a_bad_home_is_one_line_and_exit_2(argv, message, capsys):
     with pytest.raises(SystemExit) as exc:
         build_parser().parse_args(argv)

@@ -15,14 +15,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from heli_model.control import Setpoint
+from heli_model.model import HeliModel
 from sim_vehicle import autopilot as ap
 from sim_vehicle import rsc
 from sim_vehicle.adsb import AdsbSettings, RoundRobin, TrafficModel
 from sim_vehicle.autopilot import Autopilot, QuietRefusal
 from sim_vehicle.config import VehicleSettings, replace_path
-from heli_model.control import Setpoint
 from sim_vehicle.frames import Frames
-from heli_model.model import HeliModel
 from sim_vehicle.streams import GROUPS, LinkStreams, StreamTable, decode_interval
 
 HOME = (47.397742, 8.545594, 488.0, 0.0)
@@ -48,8 +48,18 @@ def texts(events: list[tuple]) -> list[str]:
 
 
 # ================================================================ rotor speed controller (pure)
-def run(state: rsc.RotorState, seconds: float, armed_at_s: float = 0.0, t0_s: float = 0.0, armed: bool = True,
-        settings_: rsc.RscSettings = rsc.RscSettings(), dt_s: float = 0.01) -> tuple[rsc.RotorState, list]:
+DEFAULT_RSC = rsc.RscSettings()
+
+
+def run(
+    state: rsc.RotorState,
+    seconds: float,
+    armed_at_s: float = 0.0,
+    t0_s: float = 0.0,
+    armed: bool = True,
+    settings_: rsc.RscSettings = DEFAULT_RSC,
+    dt_s: float = 0.01,
+) -> tuple[rsc.RotorState, list]:
     history = []
     for k in range(int(round(seconds / dt_s))):
         t = t0_s + (k + 1) * dt_s
@@ -63,10 +73,10 @@ def test_interlock_waits_for_the_arming_delay_then_the_rotor_runs_up_in_runup_ti
     state, history = run(state, 14.0)
     effective = [t for t, s in history if s.interlock]
     complete = [t for t, s in history if s.runup_complete]
-    assert effective[0] == pytest.approx(2.0, abs=0.011)                 # ARMING_DELAY_SEC
-    assert complete[0] == pytest.approx(2.0 + 10.0, abs=0.02)            # + H_RSC_RUNUP_TIME
+    assert effective[0] == pytest.approx(2.0, abs=0.011)  # ARMING_DELAY_SEC
+    assert complete[0] == pytest.approx(2.0 + 10.0, abs=0.02)  # + H_RSC_RUNUP_TIME
     ramped = [t for t, s in history if rsc.output_pwm_us(s, rsc.RscSettings()) == 1660]
-    assert ramped[0] == pytest.approx(2.0 + 1.0, abs=0.02)               # servo 8 at H_RSC_SETPOINT after 1 s
+    assert ramped[0] == pytest.approx(2.0 + 1.0, abs=0.02)  # servo 8 at H_RSC_SETPOINT after 1 s
     assert state.speed == 1.0 and state.above_critical(rsc.RscSettings())
 
 
@@ -77,13 +87,12 @@ def test_switch_off_or_disarm_runs_the_rotor_down_and_the_runup_is_lost_below_cr
     state, history = run(state, 6.0, t0_s=13.0)
     assert not state.interlock and state.speed == pytest.approx(0.4, abs=0.05)
     lost = [t for t, s in history if not s.runup_complete][0]
-    assert lost == pytest.approx(13.0 + 5.0, abs=0.02)                   # 50 % (H_RSC_CRITICAL) after 5 s
+    assert lost == pytest.approx(13.0 + 5.0, abs=0.02)  # 50 % (H_RSC_CRITICAL) after 5 s
     state, _ = run(rsc.with_switch(state, True), 2.0, armed=False)
-    assert state.speed < 0.3 and not state.interlock                     # disarmed: never engaged
+    assert state.speed < 0.3 and not state.interlock  # disarmed: never engaged
 
 
-@pytest.mark.parametrize("pwm, position", [(900, 0), (1199, 0), (1200, 1), (1500, 1), (1800, 1), (1801, 2),
-                                           (2000, 2)])
+@pytest.mark.parametrize("pwm, position", [(900, 0), (1199, 0), (1200, 1), (1500, 1), (1800, 1), (1801, 2), (2000, 2)])
 def test_aux_switch_positions_as_ardupilot(pwm, position):
     assert rsc.switch_position(pwm) == position
     assert rsc.engages(position) == (position != rsc.SWITCH_LOW)
@@ -103,8 +112,9 @@ def test_rotor_speed_stays_in_range_and_never_complete_without_full_speed_first(
     t = 0.0
     reached_full = False
     for switch, armed, dt in steps:
-        state = rsc.update(rsc.with_switch(state, switch), armed=armed, armed_for_s=t, dt_s=dt,
-                           settings=rsc.RscSettings())
+        state = rsc.update(
+            rsc.with_switch(state, switch), armed=armed, armed_for_s=t, dt_s=dt, settings=rsc.RscSettings()
+        )
         t += dt
         reached_full |= state.speed >= 1.0
         assert 0.0 <= state.speed <= 1.0
@@ -251,8 +261,10 @@ def test_rc8_override_sets_the_switch_and_expires_back_to_engaged(model):
 def test_auto_mission_takeoff_waits_for_interlock_and_runup(model):
     from sim_vehicle.mission_store import MissionItem
 
-    items = [MissionItem(0, 0, 16, 0, 1, 0, 0, 0, 0, 473977420, 85455940, 488.0),
-             MissionItem(1, 3, 22, 0, 1, 0, 0, 0, 0, 0, 0, 5.0)]
+    items = [
+        MissionItem(0, 0, 16, 0, 1, 0, 0, 0, 0, 473977420, 85455940, 488.0),
+        MissionItem(1, 3, 22, 0, 1, 0, 0, 0, 0, 0, 0, 5.0),
+    ]
     vehicle = make_vehicle(model)
     vehicle.mission.set_items(items)
     vehicle.set_mode(ap.AUTO)
@@ -369,7 +381,9 @@ def test_nothing_but_heartbeat_unasked_then_streams_per_link(server):
     assert "LOCAL_POSITION_NED" not in [m.get_type() for m in decode(server.sock.sent, OTHER)]
     assert "LOCAL_POSITION_NED" not in [m.get_type() for m in decode(server.sock.sent, OUT)]
     replies = command(server, mavlink.MAV_CMD_GET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
-    assert [m.get_type() for m in replies][:2] == ["MESSAGE_INTERVAL", "COMMAND_ACK"] and replies[0].interval_us == 100000
+    assert [m.get_type() for m in replies][:2] == ["MESSAGE_INTERVAL", "COMMAND_ACK"] and replies[
+        0
+    ].interval_us == 100000
     command(server, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, -1)
     server.sock.sent.clear()
     advance(server, 1.0)
@@ -436,17 +450,30 @@ def test_settings_and_parameters_of_the_new_behaviour():
     from sim_vehicle.config import SimConfigError, settings_from_dict
     from sim_vehicle.params import ParameterTable
 
-    tree = settings_from_dict({"link": {"mav1": {"position": 4}}, "rsc": {"runup_time_s": 5.0},
-                               "adsb": {"count": 2, "radius_m": 300.0}})
+    tree = settings_from_dict(
+        {"link": {"mav1": {"position": 4}}, "rsc": {"runup_time_s": 5.0}, "adsb": {"count": 2, "radius_m": 300.0}}
+    )
     assert tree.link.mav1.as_groups()["POSITION"] == 4 and tree.link.mav2.position == 0
     assert tree.rsc.runup_time_s == 5.0 and tree.adsb.count == 2
-    for bad, key in (({"adsb": {"count": -1}}, "adsb"), ({"rsc": {"mode": 7}}, "rsc"),
-                     ({"link": {"mav1": {"extra1": -2}}}, "link.mav1"), ({"link": {"mav4": {}}}, "mav4")):
+    for bad, key in (
+        ({"adsb": {"count": -1}}, "adsb"),
+        ({"rsc": {"mode": 7}}, "rsc"),
+        ({"link": {"mav1": {"extra1": -2}}}, "link.mav1"),
+        ({"link": {"mav4": {}}}, "mav4"),
+    ):
         with pytest.raises(SimConfigError, match=key):
             settings_from_dict(bad)
     table = ParameterTable(VehicleSettings())
-    defaults = {"H_RSC_MODE": 2, "H_RSC_RUNUP_TIME": 10, "H_RSC_RAMP_TIME": 1, "H_RSC_CRITICAL": 50,
-                "MAV1_POSITION": 0, "MAV3_ADSB": 0, "MAV_GCS_SYSID": 255, "SIM_ADSB_COUNT": 0}
+    defaults = {
+        "H_RSC_MODE": 2,
+        "H_RSC_RUNUP_TIME": 10,
+        "H_RSC_RAMP_TIME": 1,
+        "H_RSC_CRITICAL": 50,
+        "MAV1_POSITION": 0,
+        "MAV3_ADSB": 0,
+        "MAV_GCS_SYSID": 255,
+        "SIM_ADSB_COUNT": 0,
+    }
     assert {name: table.value(table.lookup(name)) for name in defaults} == defaults  # ArduPilot's defaults
     assert table.set("H_RSC_RUNUP_TIME", 6.0)[0] and table.settings.rsc.runup_time_s == 6.0
     assert table.set("MAV2_EXTRA1", 3.0)[0] and table.settings.link.mav2.extra1 == 3

@@ -7,11 +7,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from heli_model.control import Setpoint
+from heli_model.model import HeliModel
 from sim_vehicle import autopilot as ap
 from sim_vehicle.autopilot import TARGET_INTEGRATION_MAX_S, Autopilot, integrate_target
 from sim_vehicle.config import VehicleSettings, replace_path
-from heli_model.control import Setpoint
-from heli_model.model import HeliModel
 
 HOME = (47.397742, 8.545594, 488.0, 0.0)
 finite = st.floats(-20, 20)
@@ -20,7 +20,7 @@ finite = st.floats(-20, 20)
 @settings(deadline=None, max_examples=60)
 @given(st.lists(finite, min_size=9, max_size=9), st.floats(0.0, 2.0))
 def test_target_moves_by_velocity_and_acceleration(values, age_s):
-    pos, vel, acc = (np.array(values[i:i + 3]) for i in (0, 3, 6))
+    pos, vel, acc = (np.array(values[i : i + 3]) for i in (0, 3, 6))
     out = integrate_target(Setpoint(pos_ned_m=pos, vel_ned_m_s=vel, acc_ned_m_s2=acc), age_s)
     dt = min(age_s, TARGET_INTEGRATION_MAX_S)
     assert np.allclose(out.pos_ned_m, pos + vel * dt + 0.5 * acc * dt**2)

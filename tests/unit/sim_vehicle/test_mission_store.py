@@ -5,16 +5,34 @@ from __future__ import annotations
 import dataclasses
 
 from sim_vehicle.mission_store import (
-    MISSION_TYPE_ALL, MISSION_TYPE_FENCE, MISSION_TYPE_MISSION, MISSION_TYPE_RALLY, MissionItem,
-    MissionResult, MissionStore,
+    MISSION_TYPE_ALL,
+    MISSION_TYPE_FENCE,
+    MISSION_TYPE_MISSION,
+    MISSION_TYPE_RALLY,
+    MissionItem,
+    MissionResult,
+    MissionStore,
 )
 
 
-def make_item(seq: int, mission_type: int = MISSION_TYPE_MISSION, z: float = 20.0, frame: int = 6,
-              command: int = 16) -> MissionItem:
-    return MissionItem(seq=seq, frame=frame, command=command, current=0, autocontinue=1, param1=0.0,
-                       param2=2.0, param3=0.0, param4=float("nan"), x=473977420 + 100 * seq,
-                       y=85455940 + 100 * seq, z=z, mission_type=mission_type)
+def make_item(
+    seq: int, mission_type: int = MISSION_TYPE_MISSION, z: float = 20.0, frame: int = 6, command: int = 16
+) -> MissionItem:
+    return MissionItem(
+        seq=seq,
+        frame=frame,
+        command=command,
+        current=0,
+        autocontinue=1,
+        param1=0.0,
+        param2=2.0,
+        param3=0.0,
+        param4=float("nan"),
+        x=473977420 + 100 * seq,
+        y=85455940 + 100 * seq,
+        z=z,
+        mission_type=mission_type,
+    )
 
 
 def upload(store: MissionStore, items: list[MissionItem], now_s: float = 0.0) -> bool:
@@ -42,12 +60,12 @@ def test_interrupted_upload_keeps_old_mission():
     assert store.begin_upload(MISSION_TYPE_MISSION, 4, 10.0) == MissionResult.ACCEPTED
     store.receive_item(new[0], 10.0)
     store.receive_item(new[1], 10.5)
-    assert store.items() == tuple(old)           # nothing replaced mid-upload
-    expired = store.expire_uploads(16.0)          # the sender went silent
+    assert store.items() == tuple(old)  # nothing replaced mid-upload
+    expired = store.expire_uploads(16.0)  # the sender went silent
     assert [u.count for u in expired] == [4]
     assert store.items() == tuple(old)
     assert store.upload_in_progress(MISSION_TYPE_MISSION) is None
-    result, complete = store.receive_item(new[2], 16.1)   # a late item is refused
+    result, complete = store.receive_item(new[2], 16.1)  # a late item is refused
     assert result == MissionResult.DENIED and not complete
     assert store.items() == tuple(old)
 

@@ -7,11 +7,17 @@ import math
 import numpy as np
 import pytest
 
+from heli_model.model import HeliModel
 from sim_vehicle.autopilot import Autopilot
 from sim_vehicle.config import (
-    SimConfigError, VehicleSettings, get_path, load_settings, parse_host_port, replace_path, settings_from_dict,
+    SimConfigError,
+    VehicleSettings,
+    get_path,
+    load_settings,
+    parse_host_port,
+    replace_path,
+    settings_from_dict,
 )
-from heli_model.model import HeliModel
 from sim_vehicle.params import MAV_PARAM_TYPE_INT8, MAV_PARAM_TYPE_REAL32, ParameterTable
 
 
@@ -43,16 +49,19 @@ def test_set_changes_the_settings_tree_in_setting_units():
     assert table.settings.controller.r_weights[3] == 9.0
 
 
-@pytest.mark.parametrize("name, value", [
-    ("WPNAV_SPEED", float("nan")),
-    ("WPNAV_SPEED", float("inf")),
-    ("WPNAV_SPEED", -5.0),
-    ("WPNAV_SPEED", 1e9),
-    ("SIM_SPEEDUP", 0.0),
-    ("GUID_TIMEOUT", 1e6),
-    ("LQI_QI_U", 0.0),
-    ("SIM_WIND_SPD", 400.0),
-])
+@pytest.mark.parametrize(
+    "name, value",
+    [
+        ("WPNAV_SPEED", float("nan")),
+        ("WPNAV_SPEED", float("inf")),
+        ("WPNAV_SPEED", -5.0),
+        ("WPNAV_SPEED", 1e9),
+        ("SIM_SPEEDUP", 0.0),
+        ("GUID_TIMEOUT", 1e6),
+        ("LQI_QI_U", 0.0),
+        ("SIM_WIND_SPD", 400.0),
+    ],
+)
 def test_absurd_values_are_refused_and_nothing_changes(name, value, caplog):
     table = ParameterTable(VehicleSettings())
     before = table.settings

@@ -69,12 +69,16 @@ def test_a_child_is_started_in_its_own_group_waited_for_and_stopped_with_sigint(
         assert proc.name == "sleeper"
     assert proc.returncode == -signal.SIGINT or "KeyboardInterrupt" in proc.log_text()
     assert proc.log_text().startswith("ready")
-    assert proc.stop() == proc.returncode                     # idempotent
+    assert proc.stop() == proc.returncode  # idempotent
 
 
 def test_the_environment_and_working_directory_are_the_childs(tmp_path):
-    proc = spawn(script("import os; print(os.environ['SITL_TEST'], os.getcwd())"), tmp_path / "env.log",
-                 env=dict(os.environ, SITL_TEST="hello"), cwd=tmp_path)
+    proc = spawn(
+        script("import os; print(os.environ['SITL_TEST'], os.getcwd())"),
+        tmp_path / "env.log",
+        env=dict(os.environ, SITL_TEST="hello"),
+        cwd=tmp_path,
+    )
     assert proc.wait(30.0) == 0
     assert proc.log_text().split() == ["hello", str(tmp_path)]
 
@@ -153,9 +157,9 @@ def test_descendants_are_found_and_none_is_left_running_after_stop(tmp_path):
     assert start_time(keep) is not None and running(keep) and running(away)
     proc.note_descendants()
     assert sorted(proc.leftovers()) == sorted([keep, away])
-    assert proc.stop() == 0                                    # it left on SIGINT ...
+    assert proc.stop() == 0  # it left on SIGINT ...
     late = int(proc.log_text().split()[2])
-    assert wait_gone([keep, away, late]) == []                 # ... and nothing of it is left
+    assert wait_gone([keep, away, late]) == []  # ... and nothing of it is left
     assert proc.leftovers() == [] and proc.descendants() == []
 
 
@@ -184,16 +188,26 @@ ORPHANED = """
 
 
 def test_a_child_ends_with_its_launcher(tmp_path):
-    launcher = subprocess.run(script(ORPHANED) + [str(tmp_path / "orphan.log")], capture_output=True, text=True,
-                              timeout=60, env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
+    launcher = subprocess.run(
+        script(ORPHANED) + [str(tmp_path / "orphan.log")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)),
+    )
     assert launcher.returncode == -signal.SIGKILL, launcher.stderr
     child = int(launcher.stdout.split()[0])
     assert wait_gone([child]) == [], "the child outlived its launcher"
 
 
 def test_python_command_and_bad_escalations():
-    assert python_command(["sim_vehicle.cli", "--port", "1"]) == [sys.executable, "-m", "sim_vehicle.cli",
-                                                                   "--port", "1"]
+    assert python_command(["sim_vehicle.cli", "--port", "1"]) == [
+        sys.executable,
+        "-m",
+        "sim_vehicle.cli",
+        "--port",
+        "1",
+    ]
     with pytest.raises(ConfigError, match="SIGKILL"):
         Escalation(((signal.SIGKILL, 1.0),))
     with pytest.raises(ConfigError, match="wait_s"):

@@ -46,8 +46,7 @@ def test_split_reproduces_both_halves(ctrl, u_split):
     left, right = bezier.split(ctrl, u_split)
     u = np.linspace(0, 1, 9)
     np.testing.assert_allclose(bezier.evaluate(left, u), bezier.evaluate(ctrl, u * u_split), atol=1e-9)
-    np.testing.assert_allclose(bezier.evaluate(right, u), bezier.evaluate(ctrl, u_split + u * (1 - u_split)),
-                               atol=1e-9)
+    np.testing.assert_allclose(bezier.evaluate(right, u), bezier.evaluate(ctrl, u_split + u * (1 - u_split)), atol=1e-9)
 
 
 @settings(deadline=None, max_examples=40)
@@ -56,8 +55,11 @@ def test_elevation_keeps_curve_and_derivatives(ctrl, extra):
     high = bezier.elevate(ctrl, ctrl.shape[0] - 1 + extra)
     u = np.linspace(0, 1, 7)
     for order in range(3):
-        np.testing.assert_allclose(bezier.derivative(high, u, order), bezier.derivative(ctrl, u, order),
-                                   atol=1e-8 * max(1.0, np.abs(ctrl).max()))
+        np.testing.assert_allclose(
+            bezier.derivative(high, u, order),
+            bezier.derivative(ctrl, u, order),
+            atol=1e-8 * max(1.0, np.abs(ctrl).max()),
+        )
 
 
 @settings(deadline=None, max_examples=40)
@@ -113,12 +115,15 @@ def test_path_detects_stops_at_kinks():
     assert straight.stop_s.size == 0
 
 
-@pytest.mark.parametrize("bad, name", [
-    ([np.array([[0.0, 0.0]])], "pieces[0]"),
-    ([np.array([[0.0, np.nan], [1.0, 1.0]])], "pieces[0]"),
-    ([], "pieces"),
-    ([np.array([[1.0, 1.0], [1.0, 1.0]])], "pieces"),
-])
+@pytest.mark.parametrize(
+    "bad, name",
+    [
+        ([np.array([[0.0, 0.0]])], "pieces[0]"),
+        ([np.array([[0.0, np.nan], [1.0, 1.0]])], "pieces[0]"),
+        ([], "pieces"),
+        ([np.array([[1.0, 1.0], [1.0, 1.0]])], "pieces"),
+    ],
+)
 def test_bad_pieces_raise_naming_argument(bad, name):
     with pytest.raises(SmoothingError, match=name.replace("[", r"\[").replace("]", r"\]")):
         BezierPath(bad)

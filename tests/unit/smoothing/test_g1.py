@@ -52,11 +52,14 @@ def test_reversal_kept_as_stop():
     assert not curve.kappa_ok
 
 
-@pytest.mark.parametrize("path, match", [
-    (np.array([[0.0, 0.0]]), "path: needs at least 2 nodes"),
-    (np.array([[0.0, np.inf], [1.0, 1.0]]), "path: node 0"),
-    (np.ones((3,)), "path: expected shape"),
-])
+@pytest.mark.parametrize(
+    "path, match",
+    [
+        (np.array([[0.0, 0.0]]), "path: needs at least 2 nodes"),
+        (np.array([[0.0, np.inf], [1.0, 1.0]]), "path: node 0"),
+        (np.ones((3,)), "path: expected shape"),
+    ],
+)
 def test_bad_input(path, match):
     with pytest.raises(SmoothingError, match=match):
         smooth_g1(path)

@@ -12,7 +12,7 @@ from companion.errors import SmoothingError
 from companion.smoothing import bezier, smooth_g2
 from companion.smoothing.g2 import C4, spiral_distance_m
 
-KAPPA_ZERO_1_M = 1e-6      # both sides below this (a radius over 1000 km): a numerically flat joint
+KAPPA_ZERO_1_M = 1e-6  # both sides below this (a radius over 1000 km): a numerically flat joint
 
 
 def joint_curvatures(pieces):
@@ -54,8 +54,8 @@ def test_d_follows_eq_19_and_bound_is_met_with_room():
     beta = math.pi / 4
     d = C4 * math.sin(beta) / (kappa * math.cos(beta) ** 2)
     assert spiral_distance_m(math.pi / 2, kappa) == pytest.approx(d)
-    np.testing.assert_allclose(curve.pieces[1][0], [100.0 - d, 0.0], atol=1e-12)   # B0
-    np.testing.assert_allclose(curve.pieces[2][-1], [100.0, d], atol=1e-12)        # E0
+    np.testing.assert_allclose(curve.pieces[1][0], [100.0 - d, 0.0], atol=1e-12)  # B0
+    np.testing.assert_allclose(curve.pieces[2][-1], [100.0, d], atol=1e-12)  # E0
     assert curve.kappa_ok
     assert 0.999 * kappa < curve.max_curvature_1_m <= kappa
 
@@ -99,7 +99,7 @@ def test_short_segments_shrink_d_and_report_the_corner():
     assert curve.tight_corners == [1, 2]
     assert any(note.startswith("corner 1") and "1/m > K_max" in note for note in curve.notes)
     assert curve.max_curvature_1_m > 0.1
-    ends, starts = joint_curvatures(curve.pieces)           # still G2 where it is tight
+    ends, starts = joint_curvatures(curve.pieces)  # still G2 where it is tight
     scale = np.maximum(ends, starts)
     assert np.all((np.abs(ends - starts) <= 1e-6 * scale) | (scale < KAPPA_ZERO_1_M))
 
@@ -111,17 +111,20 @@ def test_reversal_is_a_stop():
     assert "reverses" in curve.notes[0]
 
 
-@pytest.mark.parametrize("path, kappa, match", [
-    (np.array([[0.0, 0.0]]), 0.1, "path: needs at least 2 nodes"),
-    (np.zeros((0, 2)), 0.1, "path"),
-    (np.array([[0.0, 0.0], [np.nan, 1.0]]), 0.1, "path: node 1 is not finite"),
-    (np.array([[0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0]]), 0.1, "path: expected shape"),
-    (np.array([[1.0, 1.0], [1.0, 1.0]]), 0.1, "path: all 2 nodes"),
-    (np.array([[0.0, 0.0], [1.0, 1.0]]), 0.0, "kappa_max_1_m"),
-    (np.array([[0.0, 0.0], [1.0, 1.0]]), -1.0, "kappa_max_1_m"),
-    (np.array([[0.0, 0.0], [1.0, 1.0]]), float("nan"), "kappa_max_1_m"),
-    ("abc", 0.1, "path"),
-])
+@pytest.mark.parametrize(
+    "path, kappa, match",
+    [
+        (np.array([[0.0, 0.0]]), 0.1, "path: needs at least 2 nodes"),
+        (np.zeros((0, 2)), 0.1, "path"),
+        (np.array([[0.0, 0.0], [np.nan, 1.0]]), 0.1, "path: node 1 is not finite"),
+        (np.array([[0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0]]), 0.1, "path: expected shape"),
+        (np.array([[1.0, 1.0], [1.0, 1.0]]), 0.1, "path: all 2 nodes"),
+        (np.array([[0.0, 0.0], [1.0, 1.0]]), 0.0, "kappa_max_1_m"),
+        (np.array([[0.0, 0.0], [1.0, 1.0]]), -1.0, "kappa_max_1_m"),
+        (np.array([[0.0, 0.0], [1.0, 1.0]]), float("nan"), "kappa_max_1_m"),
+        ("abc", 0.1, "path"),
+    ],
+)
 def test_bad_input_raises_naming_argument(path, kappa, match):
     with pytest.raises(SmoothingError, match=match):
         smooth_g2(path, kappa)

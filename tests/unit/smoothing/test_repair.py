@@ -27,7 +27,7 @@ def corner_obstacles(path: np.ndarray, depth: np.ndarray, size: np.ndarray):
         half = 0.5 * np.arccos(np.clip(np.dot(a, b), -1, 1))
         t = depth[i - 1] * min(la, lb)
         centers.append(path[i] + t * bis)
-        radii.append(size[i - 1] * t * np.sin(half))       # < distance to the two lines
+        radii.append(size[i - 1] * t * np.sin(half))  # < distance to the two lines
     return np.array(centers), np.array(radii)
 
 
@@ -38,9 +38,13 @@ def sampled_free(world: World, curve) -> bool:
 
 
 @settings(deadline=None, max_examples=30)
-@given(polylines(max_nodes=6), st.lists(st.floats(0.05, 0.6), min_size=5, max_size=5),
-       st.lists(st.floats(0.2, 0.9), min_size=5, max_size=5), st.floats(0.0, 1.0),
-       st.sampled_from(["g1", "g2"]))
+@given(
+    polylines(max_nodes=6),
+    st.lists(st.floats(0.05, 0.6), min_size=5, max_size=5),
+    st.lists(st.floats(0.2, 0.9), min_size=5, max_size=5),
+    st.floats(0.0, 1.0),
+    st.sampled_from(["g1", "g2"]),
+)
 def test_smoothed_curve_free_whenever_polyline_is(path, depth, size, margin, method):
     centers, radii = corner_obstacles(path, np.array(depth), np.array(size))
     assume(centers.shape[0] > 0)
@@ -93,6 +97,6 @@ def test_free_corners_untouched():
 
 def test_corners_clear_detects_a_touching_curve():
     world = World.from_spheres(np.array([[0.5, 0.3]]), np.array([0.2]), [-5, -5], [5, 5])
-    ctrl = np.array([[0.0, 0.0], [0.5, 1.0], [1.0, 0.0]])        # passes through (0.5, 0.5)
+    ctrl = np.array([[0.0, 0.0], [0.5, 1.0], [1.0, 0.0]])  # passes through (0.5, 0.5)
     assert not corners_clear(world, ctrl[None, None])[0]
     assert corners_clear(world, (ctrl + [0.0, 1.0])[None, None])[0]

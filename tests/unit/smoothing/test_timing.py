@@ -80,7 +80,7 @@ def test_corner_speed_respects_lateral_acceleration():
     path = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 200.0]])
     curve = smooth_g2(path, 0.1)
     traj = time_parameterize(curve)
-    s_joint = curve.piece_start_s[2]                            # peak curvature 0.1
+    s_joint = curve.piece_start_s[2]  # peak curvature 0.1
     _, v, _ = traj.progress(traj.time_at_s([s_joint]))
     assert v[0] <= np.sqrt(2.5 / curve.max_curvature_1_m) * 1.001
     assert v[0] >= 0.9 * np.sqrt(2.5 / 0.1)
@@ -143,12 +143,15 @@ def test_stretched_limits_scale_time_exactly():
     assert scaled.limits == base.limits.stretched(2.0)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"speed_m_s": 0.0}, "limits.speed_m_s"),
-    ({"accel_m_s2": -1.0}, "limits.accel_m_s2"),
-    ({"lat_accel_m_s2": float("nan")}, "limits.lat_accel_m_s2"),
-    ({"jerk_m_s3": 0.0}, "limits.jerk_m_s3"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"speed_m_s": 0.0}, "limits.speed_m_s"),
+        ({"accel_m_s2": -1.0}, "limits.accel_m_s2"),
+        ({"lat_accel_m_s2": float("nan")}, "limits.lat_accel_m_s2"),
+        ({"jerk_m_s3": 0.0}, "limits.jerk_m_s3"),
+    ],
+)
 def test_bad_limits(kwargs, match):
     with pytest.raises(SmoothingError, match=match):
         TrajectoryLimits(**kwargs)

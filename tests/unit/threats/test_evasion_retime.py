@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
 from companion.threats.decision.evasion import EscapeLimits, escape_library
@@ -103,6 +104,7 @@ def test_refined_variants_stay_within_the_limits_and_around_their_parents():
         pos, v, acc = m.sample(t)
         np.testing.assert_allclose(v[0], [6.0, 1.0, 0.0], atol=1e-9)
         assert np.all(np.linalg.norm(acc[:, :2], axis=1) <= LIM.accel_m_s2 + 1e-6)
-        assert np.linalg.norm(refined.targets[i][:2]) <= LIM.speed_m_s + 1e-9 or \
-            any(np.allclose(refined.targets[i][:2], lib.targets[p][:2]) for p in parents)
+        assert np.linalg.norm(refined.targets[i][:2]) <= LIM.speed_m_s + 1e-9 or any(
+            np.allclose(refined.targets[i][:2], lib.targets[p][:2]) for p in parents
+        )
     assert all(label.endswith("(refined)") for label in refined.labels)

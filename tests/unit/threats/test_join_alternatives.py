@@ -11,9 +11,15 @@ from companion.flight.pipeline import TrajectoryPipeline
 from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
 from companion.threats.decision.alternatives import Alternative, switch_candidates
 from companion.threats.decision.join import HOVER_SPEED_M_S, join_trajectory
+from companion.threats.decision.step import (
+    ActiveTrajectory,
+    DecisionPolicy,
+    DecisionState,
+    LegContext,
+    Observation,
+    decide,
+)
 from companion.threats.model import Threat
-from companion.threats.decision.step import (ActiveTrajectory, DecisionPolicy, DecisionState, LegContext,
-                                             Observation, decide)
 from companion.threats.settings import ThreatSettings
 from companion.world import World
 
@@ -37,8 +43,12 @@ def test_replan_estimate_follows_measurements():
     world, traj = straight_leg()
     policy = DecisionPolicy(ThreatSettings(replan_budget_s=5.0), TrajectoryPipeline.for_limits(LIMITS))
     far = Threat("p1", "popup", "local_ned", (90.0, 0.0, 0.0), radius_m=6.0, received_t_s=5.0)
-    _, state = decide(DecisionState.initial(policy, 0), Observation(5.0, (far,), ActiveTrajectory(traj, 0.0, "leg0")),
-                      LegContext(0, world, GOAL), policy)
+    _, state = decide(
+        DecisionState.initial(policy, 0),
+        Observation(5.0, (far,), ActiveTrajectory(traj, 0.0, "leg0")),
+        LegContext(0, world, GOAL),
+        policy,
+    )
     assert state.replan_estimate_s < 5.0
 
 
@@ -57,8 +67,8 @@ def test_switch_candidates_are_in_range_cheapest_first_and_diverse():
     near = Alternative.from_path("near", DETOUR, spacing_m=2.0)
     other = Alternative.from_path("other", DETOUR * [1.0, -1.0], spacing_m=2.0)
     picked = switch_candidates([near, other], np.array([10.0, 0.0]), 20.0, 2.0)
-    assert {c[1].path_id for c in picked[:2]} == {"near", "other"}      # one of each first
-    for cost, alt, i in picked:
+    assert {c[1].path_id for c in picked[:2]} == {"near", "other"}  # one of each first
+    for _cost, alt, i in picked:
         assert np.linalg.norm(alt.entry_pos_ned_m[i] - [10.0, 0.0]) <= 20.0
     costs = [c[0] for c in picked if c[1].path_id == "near"]
     assert costs == sorted(costs)
@@ -72,8 +82,9 @@ def test_join_starts_at_the_reference_state(speed, heading, turn):
     u = np.array([math.cos(heading), math.sin(heading)])
     w = np.array([math.cos(heading + turn), math.sin(heading + turn)])
     nodes = np.array([60.0 * w, 60.0 * w + 80.0 * u])
-    traj, poly = join_trajectory(np.zeros(2), speed * u, nodes, world=world,
-                                 pipeline=TrajectoryPipeline.for_limits(LIMITS, 0.1))
+    traj, poly = join_trajectory(
+        np.zeros(2), speed * u, nodes, world=world, pipeline=TrajectoryPipeline.for_limits(LIMITS, 0.1)
+    )
     assert traj is not None, poly
     p, v = state(traj, 0.0)
     assert np.linalg.norm(p) < 1e-9
@@ -82,11 +93,14 @@ def test_join_starts_at_the_reference_state(speed, heading, turn):
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.lists(st.tuples(st.integers(-5, 5), st.integers(-5, 5)), min_size=1, max_size=12),
-       st.lists(st.integers(0, 3), min_size=12, max_size=12))
+@given(
+    st.lists(st.tuples(st.integers(-5, 5), st.integers(-5, 5)), min_size=1, max_size=12),
+    st.lists(st.integers(0, 3), min_size=12, max_size=12),
+)
 def test_clean_nodes_keeps_the_path_and_its_corners(steps, repeats):
     """Repeated and collinear nodes go; the ends, every corner and so the polyline itself stay."""
     from companion.threats.decision.join import _clean_nodes
+
     nodes = [np.zeros(2)]
     for (dx, dy), rep in zip(steps, repeats):
         nodes.extend([nodes[-1] + (dx, dy)] + [nodes[-1] + (dx, dy)] * rep)

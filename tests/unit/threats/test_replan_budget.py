@@ -29,8 +29,9 @@ def test_a_plan_reports_the_time_of_all_its_searches():
     walled = World([Disc((50.0, y), 4.0) for y in np.arange(-48.0, 49.0, 6.0)], [0.0, -50.0], [100.0, 50.0])
     pipeline = TrajectoryPipeline.for_limits().with_iteration_budgets(3000.0)
     budget = PlanBudget(0.01, first_path_s=0.02)
-    result = pipeline.plan(PlanningProblem(walled, np.array([5.0, 0.0]), np.array([95.0, 0.0])), budget,
-                           rng=np.random.default_rng(0))
+    result = pipeline.plan(
+        PlanningProblem(walled, np.array([5.0, 0.0]), np.array([95.0, 0.0])), budget, rng=np.random.default_rng(0)
+    )
     assert result.status == "timeout"
     assert result.iterations == 30 + 60
     assert abs(pipeline.search_time_s(result) - 0.03) < 1e-12

@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
-
 import math
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from companion.threats.model import Threat
 from companion.threats.decision.prediction import predict_tubes
 from companion.threats.decision.spacetime import STATIC_ID, check_candidates, sample_times, segment_min_distance
+from companion.threats.model import Threat
 from companion.world import Disc, Sphere, World
 
 coord = st.floats(-50.0, 50.0, allow_nan=False)
@@ -27,8 +27,14 @@ def analytic_min_distance(p0, v, c0, w, t_end):
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.tuples(coord, coord, coord), st.tuples(speed, speed, speed), st.tuples(coord, coord, coord),
-       st.tuples(speed, speed, speed), st.floats(0.5, 10.0), st.sampled_from([0.05, 0.3, 1.0, 2.5]))
+@given(
+    st.tuples(coord, coord, coord),
+    st.tuples(speed, speed, speed),
+    st.tuples(coord, coord, coord),
+    st.tuples(speed, speed, speed),
+    st.floats(0.5, 10.0),
+    st.sampled_from([0.05, 0.3, 1.0, 2.5]),
+)
 def test_never_clear_when_the_closest_approach_intrudes(p0, v, c0, w, radius, step_s):
     horizon = 12.0
     threat = Threat("t", "moving", "local_ned", c0, w, radius, None, 0.0)
@@ -56,12 +62,19 @@ def test_curved_candidates_are_never_falsely_clear(speed_m_s, radius, offset):
     # a static threat placed near the arc between two samples
     mid = 0.5 * (t[3] + t[4])
     center = (r_circle + offset) * np.array([math.cos(omega * mid), math.sin(omega * mid)])
-    tubes = predict_tubes([Threat("s", "popup", "local_ned", (center[0], center[1], 0.0), (0, 0, 0), radius)],
-                          inflation_m=0.0)
+    tubes = predict_tubes(
+        [Threat("s", "popup", "local_ned", (center[0], center[1], 0.0), (0, 0, 0), radius)], inflation_m=0.0
+    )
     res = check_candidates(t, pos, tubes, accel_bound_m_s2=accel)
     fine = np.linspace(0.0, 10.0, 20001)
-    true = np.min(np.linalg.norm(r_circle * np.stack([np.cos(omega * fine), np.sin(omega * fine)], 1)
-                                 - center[None, :], axis=1)) - radius
+    true = (
+        np.min(
+            np.linalg.norm(
+                r_circle * np.stack([np.cos(omega * fine), np.sin(omega * fine)], 1) - center[None, :], axis=1
+            )
+        )
+        - radius
+    )
     assert res.min_clearance_m[0] <= true + 1e-9
     if true < 0:
         assert not res.clear[0]
@@ -76,9 +89,9 @@ def test_segment_min_distance_endpoints_and_interior():
 def test_static_world_and_bounds_conflicts():
     world = World([Disc((10.0, 0.0), 2.0)], [-20.0, -20.0], [20.0, 20.0])
     t = sample_times(0.0, 10.0, 0.5)
-    through = np.stack([t * 2.0 - 5.0, np.zeros_like(t)], axis=1)          # crosses the sphere
-    beside = np.stack([t * 2.0 - 5.0, np.full_like(t, 5.0)], axis=1)        # 3 m from it
-    out = np.stack([np.zeros_like(t), t * 3.0], axis=1)                      # leaves the bounds
+    through = np.stack([t * 2.0 - 5.0, np.zeros_like(t)], axis=1)  # crosses the sphere
+    beside = np.stack([t * 2.0 - 5.0, np.full_like(t, 5.0)], axis=1)  # 3 m from it
+    out = np.stack([np.zeros_like(t), t * 3.0], axis=1)  # leaves the bounds
     res = check_candidates(t, np.stack([through, beside, out]), [], world, accel_bound_m_s2=0.0)
     assert list(res.clear) == [False, True, False]
     assert res.conflicts[0].threat_id == STATIC_ID and res.conflicts[2].threat_id == STATIC_ID
@@ -113,9 +126,11 @@ def test_static_clearance_is_exact_near_obstacles_and_a_lower_bound_far(seed):
     from companion.world import Cylinder, Prism
 
     rng = np.random.default_rng(seed)
-    obstacles = [Prism(((0.0, 0.0), (10.0, 0.0), (5.0, 8.0)), -30.0, 0.0),
-                 Cylinder((30.0, 5.0), float(rng.uniform(1.0, 5.0)), -25.0, -5.0),
-                 Sphere((10.0, 30.0, -15.0), 4.0)]
+    obstacles = [
+        Prism(((0.0, 0.0), (10.0, 0.0), (5.0, 8.0)), -30.0, 0.0),
+        Cylinder((30.0, 5.0), float(rng.uniform(1.0, 5.0)), -25.0, -5.0),
+        Sphere((10.0, 30.0, -15.0), 4.0),
+    ]
     world = World(obstacles, [-20.0, -20.0, -40.0], [60.0, 60.0, 0.0], margin_m=float(rng.uniform(0.0, 3.0)))
     pts = rng.uniform([-20.0, -20.0, -40.0], [60.0, 60.0, 0.0], size=(500, 3))
     exact = world.clearance_m(pts)
@@ -134,15 +149,16 @@ def _cylinder_clearance(rel: np.ndarray, radius_m: float, half_height_m: float, 
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.tuples(st.floats(-2000, 2000), st.floats(-2000, 2000), st.floats(-200, 200)),
-       st.tuples(st.floats(-60, 60), st.floats(-60, 60), st.floats(-8, 8)),
-       st.sampled_from([0.1, 0.25, 1.0, 3.0]))
+@given(
+    st.tuples(st.floats(-2000, 2000), st.floats(-2000, 2000), st.floats(-200, 200)),
+    st.tuples(st.floats(-60, 60), st.floats(-60, 60), st.floats(-8, 8)),
+    st.sampled_from([0.1, 0.25, 1.0, 3.0]),
+)
 def test_a_manned_aircraft_is_never_falsely_clear_of_its_well_clear_cylinder(p0, v_rel, step_s):
     """A manned aircraft's tube is the well-clear cylinder (2000 ft / 250 ft): the check's
     clearance is a lower bound of the cylinder's own, sampled every millisecond, and a path that
     enters the cylinder is never clear."""
-    threat = Threat("m", "moving", "local_ned", (0.0, 0.0, -100.0), (0.0, 0.0, 0.0), 25.0, None, 0.0,
-                    traffic="manned")
+    threat = Threat("m", "moving", "local_ned", (0.0, 0.0, -100.0), (0.0, 0.0, 0.0), 25.0, None, 0.0, traffic="manned")
     tube = predict_tubes([threat], inflation_m=0.0, manned_axes_m=MANNED_AXES)[0]
     assert (tube.radius_m, tube.half_height_m, tube.bare_radius_m) == (609.6, 76.2, 25.0)
     t = sample_times(0.0, 20.0, step_s)
@@ -158,8 +174,7 @@ def test_a_manned_aircraft_is_never_falsely_clear_of_its_well_clear_cylinder(p0,
 
 
 def test_a_manned_tube_spans_the_horizon_and_a_drone_tube_is_unchanged():
-    manned = Threat("m", "moving", "local_ned", (0.0, 0.0, -100.0), (50.0, 0.0, 0.0), 25.0, 5.0, 0.0,
-                    traffic="manned")
+    manned = Threat("m", "moving", "local_ned", (0.0, 0.0, -100.0), (50.0, 0.0, 0.0), 25.0, 5.0, 0.0, traffic="manned")
     drone = dataclasses.replace(manned, id="d", traffic="drone")
     m, d = predict_tubes([manned, drone], inflation_m=2.0, manned_axes_m=MANNED_AXES)
     assert m.expires_t_s == math.inf and m.radius_m == 611.6 and m.vertical_scale == 609.6 / 76.2

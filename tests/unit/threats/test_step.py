@@ -17,13 +17,21 @@ import numpy as np
 import pytest
 
 from companion.flight.pipeline import TrajectoryPipeline
-
 from companion.smoothing import TrajectoryLimits, smooth_g2, time_parameterize
 from companion.threats.decision.choice import Decision
 from companion.threats.decision.kinds import CandidateKind, DecisionKind, Strategy, Trigger
-from companion.threats.decision.step import (ActiveTrajectory, DecisionError, DecisionPolicy, DecisionState,
-                                             LegContext, Observation, active_conflict, decide,
-                                             plan_alternatives_for, reference_state)
+from companion.threats.decision.step import (
+    ActiveTrajectory,
+    DecisionError,
+    DecisionPolicy,
+    DecisionState,
+    LegContext,
+    Observation,
+    active_conflict,
+    decide,
+    plan_alternatives_for,
+    reference_state,
+)
 from companion.threats.model import Threat
 from companion.threats.settings import ThreatSettings
 from companion.workers import PlanningWorkers
@@ -61,8 +69,7 @@ class Flight:
     def decide(self, threats, t_s, trigger=Trigger.THREAT) -> Decision:
         decision, self.state = decide(self.state, self.obs(threats, t_s, trigger), self.leg, self.policy)
         if decision.trajectory is not None:
-            self.active = ActiveTrajectory(decision.trajectory, decision.start_t_s, decision.path_id,
-                                           decision.resume)
+            self.active = ActiveTrajectory(decision.trajectory, decision.start_t_s, decision.path_id, decision.resume)
         return decision
 
 
@@ -80,8 +87,7 @@ def ahead(f, t_s, seconds):
 
 def head_on(f, t):
     ref, _ = ahead(f, t, 0.0)
-    return Threat("h", "moving", "local_ned", tuple(ref.pos_ned_m + [35.0, 0.0, 0.0]), (-4.0, 0.0, 0.0),
-                  3.0, None, t)
+    return Threat("h", "moving", "local_ned", tuple(ref.pos_ned_m + [35.0, 0.0, 0.0]), (-4.0, 0.0, 0.0), 3.0, None, t)
 
 
 def crossing(f, t):
@@ -107,7 +113,7 @@ def test_head_on_mover_is_evaded_in_space_time_and_not_decided_twice(nominal):
     d = f.decide([threat], t)
     assert d.kind in ("evade", "switch", "replan", "retime")
     assert d.min_clearance_m >= 0.0
-    assert true_separation_m(d, threat, t) >= threat.radius_m + 2.0 - 0.05   # inflated radius kept
+    assert true_separation_m(d, threat, t) >= threat.radius_m + 2.0 - 0.05  # inflated radius kept
     again = f.decide([threat], t + 0.1)
     assert again.kind == "none"
 
@@ -129,7 +135,7 @@ def test_crossing_mover_is_avoided_by_retiming_when_that_is_cheapest(nominal):
     d = f.decide([threat], t)
     assert d.kind == "retime", d.reason
     assert true_separation_m(d, threat, t, 30.0) >= threat.radius_m + 2.0 - 0.05
-    np.testing.assert_allclose(d.trajectory.end_pos_ned_m, GOAL, atol=1e-6)    # still to the goal
+    np.testing.assert_allclose(d.trajectory.end_pos_ned_m, GOAL, atol=1e-6)  # still to the goal
 
 
 def test_after_an_evasion_the_way_back_is_planned_without_a_long_detour(nominal):
@@ -140,7 +146,7 @@ def test_after_an_evasion_the_way_back_is_planned_without_a_long_detour(nominal)
     assert d.kind == "evade" and d.resume and f.active.ends_short
     t_end = d.start_t_s + d.trajectory.duration_s
     back = f.decide([threat], t_end, Trigger.RESUME)
-    if back.kind == "none":              # the mover is still in the way: later
+    if back.kind == "none":  # the mover is still in the way: later
         back = f.decide([threat], t_end + 5.0, Trigger.RESUME)
         t_end += 5.0
     assert back.kind in ("replan", "switch")
@@ -151,9 +157,16 @@ def test_after_an_evasion_the_way_back_is_planned_without_a_long_detour(nominal)
     assert true_separation_m(back, threat, t_end, 40.0) >= threat.radius_m
 
 
-@pytest.mark.parametrize("strategy,kinds", [("hold", {"hold", "none"}), ("retime", {"retime", "none"}),
-                                            ("evade", {"evade", "hold", "none"}), ("switch", {"switch", "none"}),
-                                            ("replan", {"replan", "none"})])
+@pytest.mark.parametrize(
+    "strategy,kinds",
+    [
+        ("hold", {"hold", "none"}),
+        ("retime", {"retime", "none"}),
+        ("evade", {"evade", "hold", "none"}),
+        ("switch", {"switch", "none"}),
+        ("replan", {"replan", "none"}),
+    ],
+)
 def test_single_strategies_only_use_their_own_candidates(nominal, strategy, kinds):
     f = Flight(nominal, strategy)
     t = 6.0
@@ -185,8 +198,9 @@ def test_alternatives_exist_on_a_climbing_leg():
     """The leg's slab is thinner than the climb: the alternatives' airspace includes the start."""
     slab = LegContext(0, World([], [-60.0, -60.0, -22.0], [160.0, 60.0, -18.0]), GOAL)
     state = DecisionState.initial(policy(), 1)
-    alts, after = plan_alternatives_for(state, Observation(0.0), slab, policy(), 3, max_time_s=0.5,
-                                        start_ned_m=[10.0, 0.0, -15.4])
+    alts, after = plan_alternatives_for(
+        state, Observation(0.0), slab, policy(), 3, max_time_s=0.5, start_ned_m=[10.0, 0.0, -15.4]
+    )
     assert alts and after.counter == state.counter + 1
     assert all(a.path_ned_m[0, 2] == pytest.approx(-15.4) for a in alts)
 
@@ -194,8 +208,8 @@ def test_alternatives_exist_on_a_climbing_leg():
 def test_alternatives_include_above_and_below(nominal):
     f = Flight(nominal)
     alts, _ = plan_alternatives_for(f.state, f.obs([], 2.0), LEG, f.policy, 2, max_time_s=0.5)
-    assert min(float(a.path_ned_m[:, 2].min()) for a in alts) <= -26.0 + 1e-6   # 6 m above
-    assert max(float(a.path_ned_m[:, 2].max()) for a in alts) >= -14.0 - 1e-6   # 6 m below
+    assert min(float(a.path_ned_m[:, 2].min()) for a in alts) <= -26.0 + 1e-6  # 6 m above
+    assert max(float(a.path_ned_m[:, 2].max()) for a in alts) >= -14.0 - 1e-6  # 6 m below
 
 
 # ---------------------------------------------------------------------------- the step as a value
@@ -220,8 +234,13 @@ def test_the_state_pickles_and_a_worker_process_decides_as_this_process(nominal)
     alts, state = plan_alternatives_for(f.state, f.obs([], 2.0), LEG, f.policy, 2, max_time_s=0.5)
     state = state.with_alternatives(alts, dim=3)
     copy = pickle.loads(pickle.dumps(state))
-    assert (copy.seed, copy.counter, copy.replan_estimate, copy.fast_estimate, copy.replan_blocked_until_s) == \
-        (state.seed, state.counter, state.replan_estimate, state.fast_estimate, state.replan_blocked_until_s)
+    assert (copy.seed, copy.counter, copy.replan_estimate, copy.fast_estimate, copy.replan_blocked_until_s) == (
+        state.seed,
+        state.counter,
+        state.replan_estimate,
+        state.fast_estimate,
+        state.replan_blocked_until_s,
+    )
     assert [a.path_id for a in copy.alternatives] == [a.path_id for a in state.alternatives]
     for a, b in zip(copy.alternatives, state.alternatives):
         np.testing.assert_array_equal(a.path_ned_m, b.path_ned_m)
@@ -286,14 +305,17 @@ def test_a_manned_aircraft_head_on_40_s_away_is_met_with_a_climb_out_of_its_nmac
     one is seen over 45 s and met at once with a climb. Judged on the true track every 10 ms:
     never inside the NMAC cylinder (500 ft / 100 ft), and nearly out of well clear (2000 ft /
     250 ft; the leg's airspace lets it climb 80 m)."""
-    manned = Threat("adsb-a00001", "moving", "local_ned", (2000.0, 0.0, -20.0), (-50.0, 0.0, 0.0), 25.0, 5.0, 0.0,
-                    traffic="manned")
+    manned = Threat(
+        "adsb-a00001", "moving", "local_ned", (2000.0, 0.0, -20.0), (-50.0, 0.0, 0.0), 25.0, 5.0, 0.0, traffic="manned"
+    )
     drone = Flight(nominal).decide([dataclasses.replace(manned, traffic="drone")], 0.0)
     assert drone.kind is DecisionKind.NONE
     decision = Flight(nominal).decide([manned], 0.0)
     assert decision.kind is DecisionKind.EVADE and "climb" in decision.label
     t = np.arange(0.0, 60.0, 0.01)
-    rel = np.atleast_2d(decision.trajectory.sample(np.clip(t - decision.start_t_s, 0.0, None))[0]) - manned.position_at(t)
+    rel = np.atleast_2d(decision.trajectory.sample(np.clip(t - decision.start_t_s, 0.0, None))[0]) - manned.position_at(
+        t
+    )
     dh, dv = np.linalg.norm(rel[:, :2], axis=1), np.abs(rel[:, 2])
     assert not np.any((dh < 152.4) & (dv < 30.48))
-    assert dv[np.argmin(dh)] > 0.9 * 76.2                          # ~70 m above as it passes
+    assert dv[np.argmin(dh)] > 0.9 * 76.2  # ~70 m above as it passes

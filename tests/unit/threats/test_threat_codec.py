@@ -7,12 +7,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from companion.errors import ThreatPayloadError
-from companion.threats.transport.codec import MAX_PAYLOAD_BYTES, decode, encode
 from companion.threats.model import Threat
+from companion.threats.transport.codec import MAX_PAYLOAD_BYTES, decode, encode
 
-EXAMPLE = {"v": 1, "id": "t1", "kind": "popup", "frame": "local_ned",
-           "position": [40.0, 42.0, -20.0], "velocity_ned_m_s": [0.0, 0.0, 0.0],
-           "radius_m": 6.0, "ttl_s": 120}
+EXAMPLE = {
+    "v": 1,
+    "id": "t1",
+    "kind": "popup",
+    "frame": "local_ned",
+    "position": [40.0, 42.0, -20.0],
+    "velocity_ned_m_s": [0.0, 0.0, 0.0],
+    "radius_m": 6.0,
+    "ttl_s": 120,
+}
 
 
 def payload(**changes) -> bytes:
@@ -34,8 +41,7 @@ def field_of(raw: bytes) -> str:
 
 def test_design_example_decodes():
     threat = decode(json.dumps(EXAMPLE).encode(), received_t_s=5.0)
-    assert threat == Threat("t1", "popup", "local_ned", (40.0, 42.0, -20.0), (0.0, 0.0, 0.0),
-                            6.0, 120.0, 5.0)
+    assert threat == Threat("t1", "popup", "local_ned", (40.0, 42.0, -20.0), (0.0, 0.0, 0.0), 6.0, 120.0, 5.0)
 
 
 def test_global_frame_decodes():
@@ -49,53 +55,59 @@ def test_optional_fields_default():
     assert threat.velocity_ned_m_s == (0.0, 0.0, 0.0) and threat.ttl_s is None
 
 
-@pytest.mark.parametrize("changes, field", [
-    ({"v": 2}, "v"),
-    ({"v": True}, "v"),
-    ({"v": ...}, "v"),
-    ({"id": ...}, "id"),
-    ({"id": "a/b"}, "id"),
-    ({"id": "a*"}, "id"),
-    ({"id": ""}, "id"),
-    ({"id": "x" * 65}, "id"),
-    ({"id": 3}, "id"),
-    ({"kind": "ufo"}, "kind"),
-    ({"kind": ["popup"]}, "kind"),
-    ({"frame": "enu"}, "frame"),
-    ({"position": [1.0, 2.0]}, "position"),
-    ({"position": "1,2,3"}, "position"),
-    ({"position": [1.0, "2", 3.0]}, "position[1]"),
-    ({"position": [1.0, 2.0, 1e9]}, "position[2]"),
-    ({"velocity_ned_m_s": [1.0, 0.0, 0.0]}, "velocity_ned_m_s"),
-    ({"kind": "moving", "velocity_ned_m_s": [0.0, True, 0.0]}, "velocity_ned_m_s[1]"),
-    ({"kind": "moving", "velocity_ned_m_s": [0.0, 0.0, 1000.0]}, "velocity_ned_m_s[2]"),
-    ({"radius_m": 0}, "radius_m"),
-    ({"radius_m": -1.0}, "radius_m"),
-    ({"radius_m": "6"}, "radius_m"),
-    ({"radius_m": ...}, "radius_m"),
-    ({"ttl_s": 0}, "ttl_s"),
-    ({"ttl_s": -5}, "ttl_s"),
-    ({"ttl_s": "long"}, "ttl_s"),
-    ({"colour": "red"}, "colour"),
-    ({"frame": "global"}, "position"),
-    ({"frame": "global", "position": {"lat": 91.0, "lon": 0.0, "alt_m": 0.0}}, "position.lat"),
-    ({"frame": "global", "position": {"lat": 0.0, "lon": 181.0, "alt_m": 0.0}}, "position.lon"),
-    ({"frame": "global", "position": {"lat": 0.0, "lon": 0.0}}, "position.alt_m"),
-    ({"frame": "global", "position": {"lat": 0.0, "lon": 0.0, "alt_m": 1.0, "h": 2}}, "position.h"),
-])
+@pytest.mark.parametrize(
+    "changes, field",
+    [
+        ({"v": 2}, "v"),
+        ({"v": True}, "v"),
+        ({"v": ...}, "v"),
+        ({"id": ...}, "id"),
+        ({"id": "a/b"}, "id"),
+        ({"id": "a*"}, "id"),
+        ({"id": ""}, "id"),
+        ({"id": "x" * 65}, "id"),
+        ({"id": 3}, "id"),
+        ({"kind": "ufo"}, "kind"),
+        ({"kind": ["popup"]}, "kind"),
+        ({"frame": "enu"}, "frame"),
+        ({"position": [1.0, 2.0]}, "position"),
+        ({"position": "1,2,3"}, "position"),
+        ({"position": [1.0, "2", 3.0]}, "position[1]"),
+        ({"position": [1.0, 2.0, 1e9]}, "position[2]"),
+        ({"velocity_ned_m_s": [1.0, 0.0, 0.0]}, "velocity_ned_m_s"),
+        ({"kind": "moving", "velocity_ned_m_s": [0.0, True, 0.0]}, "velocity_ned_m_s[1]"),
+        ({"kind": "moving", "velocity_ned_m_s": [0.0, 0.0, 1000.0]}, "velocity_ned_m_s[2]"),
+        ({"radius_m": 0}, "radius_m"),
+        ({"radius_m": -1.0}, "radius_m"),
+        ({"radius_m": "6"}, "radius_m"),
+        ({"radius_m": ...}, "radius_m"),
+        ({"ttl_s": 0}, "ttl_s"),
+        ({"ttl_s": -5}, "ttl_s"),
+        ({"ttl_s": "long"}, "ttl_s"),
+        ({"colour": "red"}, "colour"),
+        ({"frame": "global"}, "position"),
+        ({"frame": "global", "position": {"lat": 91.0, "lon": 0.0, "alt_m": 0.0}}, "position.lat"),
+        ({"frame": "global", "position": {"lat": 0.0, "lon": 181.0, "alt_m": 0.0}}, "position.lon"),
+        ({"frame": "global", "position": {"lat": 0.0, "lon": 0.0}}, "position.alt_m"),
+        ({"frame": "global", "position": {"lat": 0.0, "lon": 0.0, "alt_m": 1.0, "h": 2}}, "position.h"),
+    ],
+)
 def test_each_bad_field_is_named(changes, field):
     assert field_of(payload(**changes)) == field
 
 
-@pytest.mark.parametrize("raw, field", [
-    (b"{not json", "payload"),
-    (b"[1, 2]", "payload"),
-    (b"\xff\xfe", "payload"),
-    (b" " * (MAX_PAYLOAD_BYTES + 1), "payload"),
-    (json.dumps(EXAMPLE).replace("6.0", "NaN").encode(), "radius_m"),
-    (json.dumps(EXAMPLE).replace("-20.0", "-Infinity").encode(), "position[2]"),
-    (json.dumps(EXAMPLE).replace('"ttl_s": 120', '"ttl_s": 120, "ttl_s": 5').encode(), "ttl_s"),
-])
+@pytest.mark.parametrize(
+    "raw, field",
+    [
+        (b"{not json", "payload"),
+        (b"[1, 2]", "payload"),
+        (b"\xff\xfe", "payload"),
+        (b" " * (MAX_PAYLOAD_BYTES + 1), "payload"),
+        (json.dumps(EXAMPLE).replace("6.0", "NaN").encode(), "radius_m"),
+        (json.dumps(EXAMPLE).replace("-20.0", "-Infinity").encode(), "position[2]"),
+        (json.dumps(EXAMPLE).replace('"ttl_s": 120', '"ttl_s": 120, "ttl_s": 5').encode(), "ttl_s"),
+    ],
+)
 def test_malformed_payloads_are_named(raw, field):
     assert field_of(raw) == field
 

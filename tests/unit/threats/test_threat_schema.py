@@ -49,13 +49,23 @@ finite = st.floats(-1e3, 1e3, allow_nan=False)
 @st.composite
 def valid_payloads(draw):
     kind, frame = draw(st.sampled_from(["popup", "moving"])), draw(st.sampled_from(["local_ned", "global"]))
-    position = (draw(st.lists(finite, min_size=3, max_size=3)) if frame == "local_ned" else
-                {"lat": draw(st.floats(-90, 90)), "lon": draw(st.floats(-180, 180)), "alt_m": draw(finite)})
-    data = {"v": 1, "id": draw(st.from_regex(r"\A[A-Za-z0-9_.\-]{1,64}\Z")), "kind": kind, "frame": frame,
-            "position": position, "radius_m": draw(st.floats(0.1, 1e4))}
+    position = (
+        draw(st.lists(finite, min_size=3, max_size=3))
+        if frame == "local_ned"
+        else {"lat": draw(st.floats(-90, 90)), "lon": draw(st.floats(-180, 180)), "alt_m": draw(finite)}
+    )
+    data = {
+        "v": 1,
+        "id": draw(st.from_regex(r"\A[A-Za-z0-9_.\-]{1,64}\Z")),
+        "kind": kind,
+        "frame": frame,
+        "position": position,
+        "radius_m": draw(st.floats(0.1, 1e4)),
+    }
     if kind == "moving" or draw(st.booleans()):
-        data["velocity_ned_m_s"] = ([0.0, 0.0, 0.0] if kind == "popup" else
-                                    draw(st.lists(st.floats(-300, 300), min_size=3, max_size=3)))
+        data["velocity_ned_m_s"] = (
+            [0.0, 0.0, 0.0] if kind == "popup" else draw(st.lists(st.floats(-300, 300), min_size=3, max_size=3))
+        )
     if draw(st.booleans()):
         data["ttl_s"] = draw(st.one_of(st.none(), st.floats(0.5, 1e6)))
     if draw(st.booleans()):
@@ -94,6 +104,8 @@ def test_the_codec_accepts_exactly_what_the_schema_allows(data):
 def test_an_encoded_threat_is_valid_against_the_schema():
     from companion.threats.model import Threat
 
-    for threat in (Threat("m1", "moving", "local_ned", (44.0, 30.0, -20.0), (-1.0, 1.0, 0.0), 3.0, 120.0),
-                   Threat("g1", "popup", "global", (47.39, 8.54, 520.0), (0.0, 0.0, 0.0), 6.0, None)):
+    for threat in (
+        Threat("m1", "moving", "local_ned", (44.0, 30.0, -20.0), (-1.0, 1.0, 0.0), 3.0, 120.0),
+        Threat("g1", "popup", "global", (47.39, 8.54, 520.0), (0.0, 0.0, 0.0), 6.0, None),
+    ):
         VALIDATOR.validate(json.loads(codec.encode(threat)))

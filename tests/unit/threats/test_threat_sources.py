@@ -9,24 +9,33 @@ import pytest
 
 from companion.errors import ConfigError, ThreatPayloadError
 from companion.security.deployment import init_deployment
-from companion.threats.transport.bus import ThreatBus
 from companion.threats.model import Threat, ThreatTable
+from companion.threats.transport.bus import ThreatBus
 from companion.threats.transport.update import ThreatUpdate, rejected_event
 from tests.unit.flight.test_avoidance import Harness, run, trajectory_decision, until
 
 
 @pytest.fixture(scope="module")
 def deploy(tmp_path_factory):
-    return init_deployment(tmp_path_factory.mktemp("deploy"), sources=["radar1", "radar2"], observers=["gcs"],
-                           listen=["tls/127.0.0.1:17447"], connect=["tls/127.0.0.1:17447"])
+    return init_deployment(
+        tmp_path_factory.mktemp("deploy"),
+        sources=["radar1", "radar2"],
+        observers=["gcs"],
+        listen=["tls/127.0.0.1:17447"],
+        connect=["tls/127.0.0.1:17447"],
+    )
 
 
 def test_plain_bus_takes_both_layouts_with_the_source_from_the_key():
     bus = ThreatBus(1)
     assert bus.inbound.parse_key("uav/1/threats/t1") == ("local", "t1")
     assert bus.inbound.parse_key("uav/1/threats/radar1/t1") == ("radar1", "t1")
-    for key in ("uav/1/threats/local/t1", "uav/1/threats/a/b/c", "uav/1/threats/bad source/t1",
-                "uav/1/threats/radar1/bad id"):
+    for key in (
+        "uav/1/threats/local/t1",
+        "uav/1/threats/a/b/c",
+        "uav/1/threats/bad source/t1",
+        "uav/1/threats/radar1/bad id",
+    ):
         with pytest.raises(ThreatPayloadError) as err:
             bus.inbound.parse_key(key)
         assert err.value.field == "key"
@@ -46,7 +55,10 @@ def test_a_source_config_puts_under_its_certificate_name(deploy):
     bus = ThreatBus(1, zenoh_config=deploy.configs["radar1"])
     assert not bus.require_source and bus.client.source == "radar1"
     assert bus.client.threat_leaf("p1") == "threats/radar1/p1"
-    assert ThreatBus(1, zenoh_config=deploy.configs["radar1"], source="radar2").client.threat_leaf("p1") == "threats/radar2/p1"
+    assert (
+        ThreatBus(1, zenoh_config=deploy.configs["radar1"], source="radar2").client.threat_leaf("p1")
+        == "threats/radar2/p1"
+    )
     assert ThreatBus(1).client.threat_leaf("p1") == "threats/p1"
     assert ThreatBus(1, source="radar9").client.threat_leaf("p1") == "threats/radar9/p1"
     overridden = ThreatBus(1, zenoh_config=deploy.configs["radar1"], connect=["tls/127.0.0.1:1"])
@@ -103,19 +115,20 @@ def test_the_decision_event_names_the_source_of_its_threat():
 
     async def main(h):
         await h.start()
-        threat = Threat("p1", "popup", "local_ned", (8.0, 0.0, -10.0), radius_m=3.0, received_t_s=5.0,
-                        source="radar1")
-        h.bus.handler(ThreatUpdate("put", "p1", threat, None, "uav/1/threats/radar1/p1", 5.0,
-                                   time.monotonic(), 1, "radar1"))
+        threat = Threat("p1", "popup", "local_ned", (8.0, 0.0, -10.0), radius_m=3.0, received_t_s=5.0, source="radar1")
+        h.bus.handler(
+            ThreatUpdate("put", "p1", threat, None, "uav/1/threats/radar1/p1", 5.0, time.monotonic(), 1, "radar1")
+        )
         await until(lambda: h.bus.events, "the event")
         event = h.bus.events[0]
         assert event["threat_id"] == "radar1/p1" and event["source"] == "radar1"
         assert h.texts[0][0].startswith("AVOID radar1/p1: replan")
         threat_lines = [f for kind, f in h.records if kind == "threat"]
         assert threat_lines[0]["id"] == "radar1/p1" and threat_lines[0]["source"] == "radar1"
-        h.bus.handler(ThreatUpdate("delete", "p1", None, None, "uav/1/threats/radar2/p1", 6.0,
-                                   time.monotonic(), 2, "radar2"))
+        h.bus.handler(
+            ThreatUpdate("delete", "p1", None, None, "uav/1/threats/radar2/p1", 6.0, time.monotonic(), 2, "radar2")
+        )
         await until(lambda: len([r for r in h.records if r[0] == "threat"]) == 2, "the delete")
-        assert "radar1/p1" in h.reactor.table            # radar2 cannot delete radar1's p1
+        assert "radar1/p1" in h.reactor.table  # radar2 cannot delete radar1's p1
 
     run(main, h)

@@ -55,9 +55,12 @@ def test_prediction_is_constant_velocity():
 
 
 @settings(deadline=None, max_examples=60)
-@given(st.lists(st.floats(-100, 100), min_size=3, max_size=3),
-       st.lists(st.floats(-30, 30), min_size=3, max_size=3),
-       st.floats(-50, 50), st.floats(0, 100))
+@given(
+    st.lists(st.floats(-100, 100), min_size=3, max_size=3),
+    st.lists(st.floats(-30, 30), min_size=3, max_size=3),
+    st.floats(-50, 50),
+    st.floats(0, 100),
+)
 def test_prediction_property(pos, vel, t0, dt):
     th = threat(pos=tuple(pos), vel=tuple(vel), t=t0, kind="moving")
     later = th.position_at(t0 + dt)

@@ -30,11 +30,16 @@ def test_the_body_forward_axis_points_where_the_attitude_says(roll, pitch, yaw):
     up_enu = Rotation.from_quat([x, y, z, w]).apply([0.0, 0.0, 1.0])
     assert abs(float(np.dot(up_enu, forward_enu))) < 1e-9
     if abs(roll) < 1.0 and abs(pitch) < 1.0:
-        assert up_enu[2] > 0                       # the rotor points up when nearly level
+        assert up_enu[2] > 0  # the rotor points up when nearly level
 
 
-@given(st.tuples(finite, finite, finite), st.tuples(*[st.floats(-20, 20)] * 3), st.floats(0.5, 10),
-       st.floats(0, 30), st.floats(0, 1))
+@given(
+    st.tuples(finite, finite, finite),
+    st.tuples(*[st.floats(-20, 20)] * 3),
+    st.floats(0.5, 10),
+    st.floats(0, 30),
+    st.floats(0, 1),
+)
 def test_a_tube_follows_the_constant_velocity_prediction(pos, vel, radius, age, growth):
     pos, vel = np.array(pos), np.array(vel)
     centres, radii = scene.threat_tube(pos, vel, radius, age, 10.0, 2.5, growth)

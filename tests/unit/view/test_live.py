@@ -19,7 +19,7 @@ from companion.view.publisher import FlightView
 from tests.foxglove_client import collect
 
 HOME = (47.397742, 8.545594, 488.0)
-ORIGIN = (47.3977, 8.5456, 486.0)              # the EKF origin a few metres from home
+ORIGIN = (47.3977, 8.5456, 486.0)  # the EKF origin a few metres from home
 STATES = 40
 STEP_MS = 100
 
@@ -33,10 +33,16 @@ def telemetry(k: int, sysid: int = 1, x: float | None = None) -> list[dict]:
     """ATTITUDE, LOCAL_POSITION_NED and GLOBAL_POSITION_INT at ``time_boot_ms`` 1000 + k steps."""
     mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=1)
     boot_ms = 1000 + STEP_MS * k
-    return [as_read(mav, mav.attitude_encode(boot_ms, 0.01 * k, -0.02, 0.5, 0, 0, 0)),
-            as_read(mav, mav.local_position_ned_encode(boot_ms, 0.5 * k if x is None else x, 1.0, -10.0, 5.0, 0, 0)),
-            as_read(mav, mav.global_position_int_encode(boot_ms, int(HOME[0] * 1e7), int(HOME[1] * 1e7),
-                                                        498_000, 10_000, 0, 0, 0, 0))]
+    return [
+        as_read(mav, mav.attitude_encode(boot_ms, 0.01 * k, -0.02, 0.5, 0, 0, 0)),
+        as_read(mav, mav.local_position_ned_encode(boot_ms, 0.5 * k if x is None else x, 1.0, -10.0, 5.0, 0, 0)),
+        as_read(
+            mav,
+            mav.global_position_int_encode(
+                boot_ms, int(HOME[0] * 1e7), int(HOME[1] * 1e7), 498_000, 10_000, 0, 0, 0, 0
+            ),
+        ),
+    ]
 
 
 def feed_one(feed: VehicleFeed, fields: list[dict]) -> None:
@@ -47,11 +53,13 @@ def feed_one(feed: VehicleFeed, fields: list[dict]) -> None:
 
 def watch_while(port: int, topics: set[str], publish) -> dict:
     """Subscribe to ``topics``, run ``publish()`` once subscribed, collect for a while."""
+
     async def run():
         watch = asyncio.create_task(collect(port, topics, seconds=2.5))
-        await asyncio.sleep(0.5)                                     # the client subscribes first
+        await asyncio.sleep(0.5)  # the client subscribes first
         await publish()
         return await watch
+
     return asyncio.run(run()).messages
 
 
@@ -63,16 +71,16 @@ def test_each_state_reaches_the_viewer_with_the_vehicles_own_time_stamp_and_in_s
     async def publish():
         for k in range(STATES):
             feed_one(feed, telemetry(k))
-            feed_one(feed, telemetry(k, sysid=2))                   # another system on the link: left out
+            feed_one(feed, telemetry(k, sysid=2))  # another system on the link: left out
             await asyncio.sleep(0.002)
-        feed.on_local_position(telemetry(STATES, x=float("nan"))[1])   # not finite: dropped
+        feed.on_local_position(telemetry(STATES, x=float("nan"))[1])  # not finite: dropped
 
     try:
         got = watch_while(server.port, {ch.TELEMETRY, ch.TRANSFORMS, ch.LOCATION, ch.SCENE_VEHICLE}, publish)
     finally:
         server.close()
     states = got[ch.TELEMETRY]
-    assert [s["seq"] for s in states] == list(range(1, STATES + 1))       # every one, in order, none lost
+    assert [s["seq"] for s in states] == list(range(1, STATES + 1))  # every one, in order, none lost
     assert [s["time_boot_ms"] for s in states] == [1000 + STEP_MS * k for k in range(STATES)]
     assert feed.published == STATES
     sent = np.array([[0.5 * k, 1.0, -10.0] for k in range(STATES)])
@@ -83,8 +91,8 @@ def test_each_state_reaches_the_viewer_with_the_vehicles_own_time_stamp_and_in_s
     assert states[0]["vel_ned_m_s"] == [5.0, 0.0, 0.0]
     assert len(got[ch.TRANSFORMS]) == STATES
     span_s = (STATES - 1) * STEP_MS / 1000
-    assert len(got[ch.LOCATION]) == int(span_s / FIX_PERIOD_S) + 1         # the map's fix, 2 Hz of vehicle time
-    assert len(got[ch.SCENE_VEHICLE]) == 1                                 # the shape, every 2 s of wall clock
+    assert len(got[ch.LOCATION]) == int(span_s / FIX_PERIOD_S) + 1  # the map's fix, 2 Hz of vehicle time
+    assert len(got[ch.SCENE_VEHICLE]) == 1  # the shape, every 2 s of wall clock
 
 
 def test_a_vehicle_without_a_planning_home_is_shown_in_its_own_local_frame():
@@ -113,10 +121,18 @@ def test_a_flights_view_on_a_live_server_leaves_the_helicopter_to_the_feed_and_t
     async def fly():
         view.write("header", home_lla=list(HOME), seed=0)
         for k in range(10):
-            view.write("sample", t_s=1.0 + 0.1 * k, pos_ned_m=[k, 0, -10], ref_pos_ned_m=[k, 0, -10],
-                       vel_ned_m_s=[1, 0, 0], euler_rad=[0, 0, 0], path_id="leg0", leg=0)
+            view.write(
+                "sample",
+                t_s=1.0 + 0.1 * k,
+                pos_ned_m=[k, 0, -10],
+                ref_pos_ned_m=[k, 0, -10],
+                vel_ned_m_s=[1, 0, 0],
+                euler_rad=[0, 0, 0],
+                path_id="leg0",
+                leg=0,
+            )
             await asyncio.sleep(0.01)
-        view.close()                                                  # the flight ends
+        view.close()  # the flight ends
         for k in range(5):
             feed_one(feed, telemetry(k))
             await asyncio.sleep(0.01)
@@ -125,6 +141,6 @@ def test_a_flights_view_on_a_live_server_leaves_the_helicopter_to_the_feed_and_t
         got = watch_while(server.port, {"/vehicle/state", ch.TRANSFORMS, ch.TELEMETRY}, fly)
     finally:
         server.close()
-    assert len(got["/vehicle/state"]) == 10                            # the record's samples, for the report
-    assert len(got[ch.TRANSFORMS]) == 5                                 # /tf only from the telemetry
-    assert len(got[ch.TELEMETRY]) == 5                                  # after the flight's view closed
+    assert len(got["/vehicle/state"]) == 10  # the record's samples, for the report
+    assert len(got[ch.TRANSFORMS]) == 5  # /tf only from the telemetry
+    assert len(got[ch.TELEMETRY]) == 5  # after the flight's view closed

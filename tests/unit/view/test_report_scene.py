@@ -16,10 +16,10 @@ def test_the_instant_is_the_first_threat_decision_and_shows_what_was_known_then(
     t = scene_instant(record)
     assert t == record.decisions[0]["t_s"]
     assert set(threats_known_at(record, t)) == {"mover1"}
-    assert threats_known_at(record, record.threats[0]["t_s"] - 0.01) == {}       # not yet reported
-    assert threats_known_at(record, 9.5) == {}                                    # removed at 9 s
+    assert threats_known_at(record, record.threats[0]["t_s"] - 0.01) == {}  # not yet reported
+    assert threats_known_at(record, 9.5) == {}  # removed at 9 s
     assert path_at(record, t) == record.decisions[0]["path_ned_m"]
-    assert path_at(record, t - 0.01) is None                                      # still on its leg
+    assert path_at(record, t - 0.01) is None  # still on its leg
 
 
 def test_without_decisions_the_instant_is_mid_flight_and_without_samples_there_is_none(tmp_path):

@@ -48,7 +48,7 @@ TOLERANCE_M = 0.01
 class Solid:
     """A source obstacle: a north-east footprint (m) between two altitudes above home (m)."""
 
-    footprint_ne_m: object        # shapely geometry: Polygon, or a Point with radius_m
+    footprint_ne_m: object  # shapely geometry: Polygon, or a Point with radius_m
     bottom_m: float
     top_m: float
     radius_m: float = 0.0
@@ -76,6 +76,7 @@ def lon_lat(geometry_ne_m):
 
 
 # ----------------------------------------------------------------------------- random sites
+
 
 @st.composite
 def star_polygon_ne(draw, max_radius_m: float = 12.0) -> Polygon:
@@ -131,15 +132,29 @@ def blocker_and_feature(draw):
     shape = shapely.affinity.translate(shape, c - shape.centroid.x, c - shape.centroid.y)
     top_m = draw(st.floats(23.0, 30.0))
     coords = [[list(p) for p in lon_lat(LineString(r.coords)).coords] for r in [shape.exterior, *shape.interiors]]
-    return Solid(shape, 0.0, top_m), {"type": "Feature", "properties": {"building:levels": top_m / 3.0},
-                                      "geometry": {"type": "Polygon", "coordinates": coords}}
+    return Solid(shape, 0.0, top_m), {
+        "type": "Feature",
+        "properties": {"building:levels": top_m / 3.0},
+        "geometry": {"type": "Polygon", "coordinates": coords},
+    }
 
 
 def write_site(tmp_path: Path, features: list[dict]) -> Path:
     path = tmp_path / "random.geojson"
-    path.write_text(json.dumps({"type": "FeatureCollection", "features": features,
-                                "companion": {"home": [HOME[1], HOME[0], HOME[2]], "margin_m": MARGIN_M,
-                                              "ceiling_m": 40.0, "bounds": BOUNDS_DEG}}))
+    path.write_text(
+        json.dumps(
+            {
+                "type": "FeatureCollection",
+                "features": features,
+                "companion": {
+                    "home": [HOME[1], HOME[0], HOME[2]],
+                    "margin_m": MARGIN_M,
+                    "ceiling_m": 40.0,
+                    "bounds": BOUNDS_DEG,
+                },
+            }
+        )
+    )
     return path
 
 
@@ -149,22 +164,40 @@ def assert_clear(points_ned_m: np.ndarray, solids: list[Solid], what: str) -> No
         assert worst >= MARGIN_M - TOLERANCE_M, f"{what}: {worst:.4f} m from obstacle {k}"
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                                 HealthCheck.filter_too_much])
-@given(site=st.lists(solid_and_feature(), min_size=0, max_size=4), blocker=blocker_and_feature(),
-       start_alt_m=st.floats(3.0, 20.0), goal_alt_m=st.floats(3.0, 20.0), seed=st.integers(0, 2**16))
-def test_planned_and_smoothed_paths_keep_the_margin_from_the_source_shapes(tmp_path, site, blocker, start_alt_m,
-                                                                           goal_alt_m, seed):
+@settings(
+    max_examples=40,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.filter_too_much],
+)
+@given(
+    site=st.lists(solid_and_feature(), min_size=0, max_size=4),
+    blocker=blocker_and_feature(),
+    start_alt_m=st.floats(3.0, 20.0),
+    goal_alt_m=st.floats(3.0, 20.0),
+    seed=st.integers(0, 2**16),
+)
+def test_planned_and_smoothed_paths_keep_the_margin_from_the_source_shapes(
+    tmp_path, site, blocker, start_alt_m, goal_alt_m, seed
+):
     site = [blocker, *site]
     solids = [s for s, _ in site]
     world = read_world_file(write_site(tmp_path, [f for _, f in site])).world
     start, goal = (0.0, 0.0, -start_alt_m), (100.0, 100.0, -goal_alt_m)
-    result = gart(world, start, goal, rng=np.random.default_rng(seed), max_iterations=1500, max_time_s=10.0,
-                  settings=GartSettings(kappa_max_1_m=KAPPA_MAX_1_M))      # refined: paths that hug obstacles
+    result = gart(
+        world,
+        start,
+        goal,
+        rng=np.random.default_rng(seed),
+        max_iterations=1500,
+        max_time_s=10.0,
+        settings=GartSettings(kappa_max_1_m=KAPPA_MAX_1_M),
+    )  # refined: paths that hug obstacles
     assume(result.solved)
     assert_clear(sample_polyline(result.path), solids, "GART path")
-    for name, curve in (("G1", smooth_g1(result.path, world=world, kappa_max_1_m=KAPPA_MAX_1_M)),
-                        ("G2", smooth_g2(result.path, KAPPA_MAX_1_M, world=world))):
+    for name, curve in (
+        ("G1", smooth_g1(result.path, world=world, kappa_max_1_m=KAPPA_MAX_1_M)),
+        ("G2", smooth_g2(result.path, KAPPA_MAX_1_M, world=world)),
+    ):
         assert_clear(curve.polyline(SAMPLE_STEP_M), solids, f"{name}-smoothed path")
 
 
@@ -174,13 +207,15 @@ homes = st.tuples(st.floats(-80.0, 80.0), st.floats(-180.0, 180.0), st.floats(-1
 
 
 @settings(max_examples=200, deadline=None)
-@given(home=homes, offsets=st.lists(st.tuples(st.floats(-0.02, 0.02), st.floats(-0.02, 0.02)), min_size=1,
-                                    max_size=8),
-       hill_m=st.floats(-50.0, 300.0))
+@given(
+    home=homes,
+    offsets=st.lists(st.tuples(st.floats(-0.02, 0.02), st.floats(-0.02, 0.02)), min_size=1, max_size=8),
+    hill_m=st.floats(-50.0, 300.0),
+)
 def test_lon_lat_to_local_and_back_round_trips(home, offsets, hill_m):
     frame = LocalFrame(*home)
 
-    def ground(lat, lon):             # a slope: the ground is not the home's level everywhere
+    def ground(lat, lon):  # a slope: the ground is not the home's level everywhere
         return frame.alt0_m + hill_m * (np.asarray(lat) - frame.lat0_deg) / 0.02
 
     lon = np.clip(np.array([home[1] + d for _, d in offsets]), -180.0, 180.0)
@@ -194,8 +229,10 @@ def test_lon_lat_to_local_and_back_round_trips(home, offsets, hill_m):
 
 
 @settings(max_examples=100, deadline=None)
-@given(poly=star_polygon_ne(max_radius_m=20.0), extra_holes=st.lists(st.tuples(st.floats(-6, 6), st.floats(-6, 6)),
-                                                                         max_size=3))
+@given(
+    poly=star_polygon_ne(max_radius_m=20.0),
+    extra_holes=st.lists(st.tuples(st.floats(-6, 6), st.floats(-6, 6)), max_size=3),
+)
 def test_holes_are_cut_into_simple_pieces_that_tile_the_polygon(poly, extra_holes):
     centre = poly.centroid
     holes = [Point(centre.x + dn, centre.y + de).buffer(0.8, quad_segs=2) for dn, de in extra_holes]
@@ -212,6 +249,7 @@ def test_holes_are_cut_into_simple_pieces_that_tile_the_polygon(poly, extra_hole
 
 # ----------------------------------------------------------------------------- the example site
 
+
 def metres(value) -> float:
     return float(str(value).removesuffix(" m"))
 
@@ -219,6 +257,7 @@ def metres(value) -> float:
 def site_solids() -> list[Solid]:
     """The site's obstacles straight from buildings.geojson (height, levels x 3, min_height),
     projected by the test itself (pymap3d through LocalFrame, at the home's level)."""
+
     def to_ne(lon_lat_deg: np.ndarray) -> np.ndarray:
         north_m, east_m, _ = FRAME.to_ned(lon_lat_deg[:, 1], lon_lat_deg[:, 0], HOME[2])
         return np.column_stack([north_m, east_m])
@@ -234,14 +273,30 @@ def site_solids() -> list[Solid]:
     return out
 
 
-@pytest.mark.parametrize("smooth, extra", [
-    ("none", [f"--home={HOME[0]},{HOME[1]},{HOME[2]}", "--start", "0,0,-10", "--goal", "200,0,-10"]),
-    ("g2", []),                                       # the file's home, start and goal: the same ones
-])
+@pytest.mark.parametrize(
+    "smooth, extra",
+    [
+        ("none", [f"--home={HOME[0]},{HOME[1]},{HOME[2]}", "--start", "0,0,-10", "--goal", "200,0,-10"]),
+        ("g2", []),  # the file's home, start and goal: the same ones
+    ],
+)
 def test_companion_plan_on_the_site_avoids_the_buildings(tmp_path, smooth, extra):
     out = tmp_path / "plan.json"
-    rc = main(["plan", "--world", str(SITE / "buildings.geojson"), "--smooth", smooth, "--no-feasibility",
-               "--seed", "1", "--json", str(out), *extra])
+    rc = main(
+        [
+            "plan",
+            "--world",
+            str(SITE / "buildings.geojson"),
+            "--smooth",
+            smooth,
+            "--no-feasibility",
+            "--seed",
+            "1",
+            "--json",
+            str(out),
+            *extra,
+        ]
+    )
     assert rc == 0
     data = json.loads(out.read_text())
     assert data["home_lla"] == list(HOME)
@@ -250,11 +305,11 @@ def test_companion_plan_on_the_site_avoids_the_buildings(tmp_path, smooth, extra
     solids = site_solids()
     margin_m = json.loads((SITE / "buildings.geojson").read_text())["companion"]["margin_m"]
     straight = sample_polyline(np.array([data["start"], data["goal"]]))
-    assert sum(clearance_m(straight, s).min() == 0.0 for s in solids) == 2      # through hangar and office,
+    assert sum(clearance_m(straight, s).min() == 0.0 for s in solids) == 2  # through hangar and office,
     assert sum(clearance_m(straight, s).min() < margin_m for s in solids) == 3  # 1 m over the workshop
     (entry,) = data["paths"]
     path = sample_polyline(np.array(entry["path"]))
     assert min(clearance_m(path, s).min() for s in solids) >= margin_m - TOLERANCE_M
     if smooth == "g2":
-        curve = sample_polyline(np.array(entry["smoothed"]["polyline"]))    # the JSON's 1 m polyline, resampled
+        curve = sample_polyline(np.array(entry["smoothed"]["polyline"]))  # the JSON's 1 m polyline, resampled
         assert min(clearance_m(curve, s).min() for s in solids) >= margin_m - TOLERANCE_M

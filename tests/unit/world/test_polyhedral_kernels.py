@@ -29,6 +29,7 @@ _EPS = 1e-12
 
 # --- reference: the plain-Python code, as it was -------------------------------------------
 
+
 def ref_point_in_polygon(point, polygon) -> bool:
     x, y = float(point[0]), float(point[1])
     inside = False
@@ -189,9 +190,11 @@ def ref_prism_segment_distance(ob: Prism, a, b) -> float:
     prev = verts[n - 1]
     for i in range(n):
         cur = verts[i]
-        for e0, e1 in (((prev[0], prev[1], z_lo), (cur[0], cur[1], z_lo)),
-                       ((prev[0], prev[1], z_hi), (cur[0], cur[1], z_hi)),
-                       ((cur[0], cur[1], z_lo), (cur[0], cur[1], z_hi))):
+        for e0, e1 in (
+            ((prev[0], prev[1], z_lo), (cur[0], cur[1], z_lo)),
+            ((prev[0], prev[1], z_hi), (cur[0], cur[1], z_hi)),
+            ((cur[0], cur[1], z_lo), (cur[0], cur[1], z_hi)),
+        ):
             d2 = ref_segment_segment_dist2(a, b, e0, e1)
             if d2 < best2:
                 best2 = d2
@@ -204,6 +207,7 @@ def bits(x: float) -> bytes:
 
 
 # --- strategies ----------------------------------------------------------------------------
+
 
 @st.composite
 def convex_polygon(draw):
@@ -226,8 +230,10 @@ def star_polygon(draw):
     cx, cy = draw(coord), draw(coord)
     radii = draw(st.lists(st.floats(1.0, 15.0), min_size=n, max_size=n))
     phase = draw(st.floats(0.0, 1.0))
-    return [(cx + r * math.cos(2 * math.pi * (k + phase) / n), cy + r * math.sin(2 * math.pi * (k + phase) / n))
-            for k, r in enumerate(radii)]
+    return [
+        (cx + r * math.cos(2 * math.pi * (k + phase) / n), cy + r * math.sin(2 * math.pi * (k + phase) / n))
+        for k, r in enumerate(radii)
+    ]
 
 
 @st.composite
@@ -235,8 +241,12 @@ def rectangle(draw):
     """An axis-aligned rectangle with integer corners (the campaign's fences)."""
     x0, y0 = draw(st.integers(-30, 30)), draw(st.integers(-30, 30))
     w, h = draw(st.integers(1, 40)), draw(st.integers(1, 40))
-    return [(float(x0), float(y0)), (float(x0 + w), float(y0)), (float(x0 + w), float(y0 + h)),
-            (float(x0), float(y0 + h))]
+    return [
+        (float(x0), float(y0)),
+        (float(x0 + w), float(y0)),
+        (float(x0 + w), float(y0 + h)),
+        (float(x0), float(y0 + h)),
+    ]
 
 
 @st.composite
@@ -244,8 +254,12 @@ def down_limits(draw):
     lo = draw(st.floats(-30.0, 10.0))
     hi = lo + draw(st.floats(0.5, 30.0))
     kind = draw(st.sampled_from(["finite", "no floor", "no ceiling", "infinite"]))
-    return {"finite": (lo, hi), "no floor": (lo, math.inf), "no ceiling": (-math.inf, hi),
-            "infinite": (-math.inf, math.inf)}[kind]
+    return {
+        "finite": (lo, hi),
+        "no floor": (lo, math.inf),
+        "no ceiling": (-math.inf, hi),
+        "infinite": (-math.inf, math.inf),
+    }[kind]
 
 
 @st.composite
@@ -282,11 +296,12 @@ def point_near(draw, ob: Prism, d: int):
 def segment_case(draw, d: int):
     ob = draw(prism())
     a = draw(point_near(ob, d))
-    b = a if draw(st.integers(0, 5)) == 0 else draw(point_near(ob, d))   # degenerate a == b
+    b = a if draw(st.integers(0, 5)) == 0 else draw(point_near(ob, d))  # degenerate a == b
     return ob, a, b
 
 
 # --- the kernels against the reference -----------------------------------------------------
+
 
 @given(case=segment_case(3))
 @SETTINGS
@@ -330,8 +345,10 @@ def test_world_segment_free_gives_the_former_booleans(case, margin):
 
 def test_the_fences_world_matches_on_random_segments():
     """The campaign's two fences (infinite prisms), 2000 random segments, short and long."""
-    fences = [Prism(((60.0, 8.0), (120.0, 8.0), (120.0, 45.0), (60.0, 45.0))),
-              Prism(((95.0, -10.0), (150.0, -10.0), (150.0, -50.0), (95.0, -50.0)))]
+    fences = [
+        Prism(((60.0, 8.0), (120.0, 8.0), (120.0, 45.0), (60.0, 45.0))),
+        Prism(((95.0, -10.0), (150.0, -10.0), (150.0, -50.0), (95.0, -50.0))),
+    ]
     rng = np.random.default_rng(3)
     lo, hi = np.array([-60.0, -80.0, -60.0]), np.array([240.0, 80.0, -5.0])
     a = rng.uniform(lo, hi, (2000, 3))
@@ -344,13 +361,14 @@ def test_the_fences_world_matches_on_random_segments():
 
 # --- the two places where a naive compiled version would differ ----------------------------
 
+
 def test_square_is_the_c_librarys_pow_not_a_product():
     """Python's ``x ** 2`` is ``pow(x, 2.0)``, which differs from ``x * x`` now and then."""
     rng = random.Random(5)
     xs = [rng.uniform(0.0, 100.0) for _ in range(20000)]
-    differing = [x for x in xs if x ** 2 != x * x]
-    assert differing     # otherwise this test would prove nothing on this platform
-    assert all(kern._py_square(x) == x ** 2 for x in differing + xs[:2000] + [0.0, -0.0, 1.0])
+    differing = [x for x in xs if x**2 != x * x]
+    assert differing  # otherwise this test would prove nothing on this platform
+    assert all(kern._py_square(x) == x**2 for x in differing + xs[:2000] + [0.0, -0.0, 1.0])
     with pytest.raises(OverflowError):
         kern._py_square(1e200)
 
@@ -367,6 +385,7 @@ def test_hypot_of_infinities_and_zeros():
 
 
 # --- the Prism value -----------------------------------------------------------------------
+
 
 def test_the_vertex_array_follows_replace_and_pickle():
     ob = Prism([(0.0, 0.0), (4.0, 0.0), (4.0, 3.0), (0.0, 3.0), (0.0, 0.0)], -2.0, 2.0)
@@ -397,7 +416,7 @@ def test_many_random_segments_near_finite_prisms_match():
         verts = np.c_[r * np.cos(ang), r * np.sin(ang)] + rng.uniform(-20, 20, 2)
         try:
             ob = Prism(verts, float(rng.uniform(-10, 0)), float(rng.uniform(1, 10)))
-        except Exception:      # a degenerate draw (zero area)
+        except Exception:  # a degenerate draw (zero area)
             continue
         centre = verts.mean(axis=0)
         for _ in range(100):

@@ -34,30 +34,48 @@ def test_toml_json_round_trip(tmp_path):
 
 
 def test_altitudes_map_to_down_limits():
-    data = {"world": {"bounds_min": [0, 0, -50], "bounds_max": [50, 50, 0]},
-            "obstacles": [{"type": "cylinder", "center": [10, 10], "radius": 2, "alt_min": 5, "alt_max": 30},
-                          {"type": "prism", "vertices": [[0, 0], [5, 0], [0, 5]], "down_min": -20}]}
+    data = {
+        "world": {"bounds_min": [0, 0, -50], "bounds_max": [50, 50, 0]},
+        "obstacles": [
+            {"type": "cylinder", "center": [10, 10], "radius": 2, "alt_min": 5, "alt_max": 30},
+            {"type": "prism", "vertices": [[0, 0], [5, 0], [0, 5]], "down_min": -20},
+        ],
+    }
     cyl, prism = world_from_dict(data).world.obstacles
     assert isinstance(cyl, Cylinder) and (cyl.down_min_m, cyl.down_max_m) == (-30.0, -5.0)
     assert isinstance(prism, Prism) and prism.down_min_m == -20.0 and prism.down_max_m == np.inf
 
 
-@pytest.mark.parametrize("text, key", [
-    ("[world]\nbounds_min = [0, 0]\n", "world.bounds_max"),
-    ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\ncolour = 1\n", "world.colour"),
-    ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 0]\n", "world.bounds_max"),
-    ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\nmargin_m = -1\n", "world.margin_m"),
-    ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'disc'\ncenter = [1, 1]\n",
-     r"obstacles\[0\].radius"),
-    ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'disc'\ncenter = [1, 1]\n"
-     "radius = 1\n[[obstacles]]\ntype = 'disc'\ncenter = [1, 1, 3]\nradius = 1\n", r"obstacles\[1\].center"),
-    ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'blob'\n", r"obstacles\[0\].type"),
-    ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'disc'\ncenter = [1, 1]\n"
-     "radius = 0\n", r"obstacles\[0\]"),
-    ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'sphere'\ncenter = [1, 1, 1]\n"
-     "radius = 1\n", r"obstacles\[0\]: Sphere"),
-    ("[world]\nbounds_min = = 3\n", "line 2"),
-])
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ("[world]\nbounds_min = [0, 0]\n", "world.bounds_max"),
+        ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\ncolour = 1\n", "world.colour"),
+        ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 0]\n", "world.bounds_max"),
+        ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\nmargin_m = -1\n", "world.margin_m"),
+        (
+            "[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'disc'\ncenter = [1, 1]\n",
+            r"obstacles\[0\].radius",
+        ),
+        (
+            "[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'disc'\ncenter = [1, 1]\n"
+            "radius = 1\n[[obstacles]]\ntype = 'disc'\ncenter = [1, 1, 3]\nradius = 1\n",
+            r"obstacles\[1\].center",
+        ),
+        ("[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'blob'\n", r"obstacles\[0\].type"),
+        (
+            "[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'disc'\ncenter = [1, 1]\n"
+            "radius = 0\n",
+            r"obstacles\[0\]",
+        ),
+        (
+            "[world]\nbounds_min = [0, 0]\nbounds_max = [10, 10]\n[[obstacles]]\ntype = 'sphere'\ncenter = [1, 1, 1]\n"
+            "radius = 1\n",
+            r"obstacles\[0\]: Sphere",
+        ),
+        ("[world]\nbounds_min = = 3\n", "line 2"),
+    ],
+)
 def test_mistakes_name_the_key_or_line(tmp_path, text, key):
     path = tmp_path / "bad.toml"
     path.write_text(text)

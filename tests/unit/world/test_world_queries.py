@@ -26,8 +26,7 @@ def star_polygon(draw):
     """A simple (star-shaped, possibly non-convex) polygon around a random centre."""
     n = draw(st.integers(3, 7))
     cx, cy = draw(coord), draw(coord)
-    angles = np.sort(np.array(draw(st.lists(st.floats(0, 2 * math.pi - 1e-3), min_size=n, max_size=n,
-                                            unique=True))))
+    angles = np.sort(np.array(draw(st.lists(st.floats(0, 2 * math.pi - 1e-3), min_size=n, max_size=n, unique=True))))
     if np.min(np.diff(np.concatenate([angles, [angles[0] + 2 * math.pi]]))) < 0.05:
         angles = np.linspace(0, 2 * math.pi, n, endpoint=False)
     radii = draw(st.lists(st.floats(1.0, 12.0), min_size=n, max_size=n))
@@ -83,7 +82,7 @@ def surface_samples(ob, d, step=0.05):
         if d == 2:
             a = np.arange(0, 2 * math.pi, step / ob.radius_m)
             return c + ob.radius_m * np.c_[np.cos(a), np.sin(a)]
-        n = int(4 * math.pi * ob.radius_m ** 2 / step ** 2 / 4)
+        n = int(4 * math.pi * ob.radius_m**2 / step**2 / 4)
         g = np.random.default_rng(0).normal(size=(max(n, 2000), 3))
         return c + ob.radius_m * g / np.linalg.norm(g, axis=1, keepdims=True)
     raise NotImplementedError
@@ -219,23 +218,26 @@ def test_with_threats_returns_a_new_world_and_leaves_the_old_one():
     assert isinstance(flat.obstacles[-1], Disc) and not flat.is_free([[30, 30]])[0]
 
 
-@pytest.mark.parametrize("call, key", [
-    (lambda: World([], (0, 0), (0, 10)), "bounds_max"),
-    (lambda: World([], (0, math.nan), (10, 10)), "bounds_min"),
-    (lambda: World([], (0, 0, 0, 0), (1, 1, 1, 1)), "bounds_min"),
-    (lambda: World([], (0, 0), (1, 1, 1)), "bounds_max"),
-    (lambda: World([], (0, 0), (1, 1), margin_m=-1), "margin_m"),
-    (lambda: World([Disc((1, 1), 1)], (0, 0, 0), (1, 1, 1)), "obstacles[0]"),
-    (lambda: World([Sphere((1, 1, 1), 1)], (0, 0), (1, 1)), "obstacles[0]"),
-    (lambda: World([Box((0, 0), (1, 1))], (0, 0, 0), (1, 1, 1)), "obstacles[0]"),
-    (lambda: Disc((1, math.inf), 1), "Disc.center_m"),
-    (lambda: Sphere((1, 1, 1), 0), "Sphere.radius_m"),
-    (lambda: Cylinder((1, 1), 2, 5, 1), "Cylinder.down_min_m"),
-    (lambda: Box((0, 0), (0, 1)), "Box.max_m"),
-    (lambda: Prism([(0, 0), (1, 1)]), "Prism.vertices_ne_m"),
-    (lambda: World.from_spheres([[1, 1]], [-1], (0, 0), (5, 5)), "radii[0]"),
-    (lambda: World([], (0, 0), (5, 5)).is_free([[1, 2, 3]]), "points"),
-])
+@pytest.mark.parametrize(
+    "call, key",
+    [
+        (lambda: World([], (0, 0), (0, 10)), "bounds_max"),
+        (lambda: World([], (0, math.nan), (10, 10)), "bounds_min"),
+        (lambda: World([], (0, 0, 0, 0), (1, 1, 1, 1)), "bounds_min"),
+        (lambda: World([], (0, 0), (1, 1, 1)), "bounds_max"),
+        (lambda: World([], (0, 0), (1, 1), margin_m=-1), "margin_m"),
+        (lambda: World([Disc((1, 1), 1)], (0, 0, 0), (1, 1, 1)), "obstacles[0]"),
+        (lambda: World([Sphere((1, 1, 1), 1)], (0, 0), (1, 1)), "obstacles[0]"),
+        (lambda: World([Box((0, 0), (1, 1))], (0, 0, 0), (1, 1, 1)), "obstacles[0]"),
+        (lambda: Disc((1, math.inf), 1), "Disc.center_m"),
+        (lambda: Sphere((1, 1, 1), 0), "Sphere.radius_m"),
+        (lambda: Cylinder((1, 1), 2, 5, 1), "Cylinder.down_min_m"),
+        (lambda: Box((0, 0), (0, 1)), "Box.max_m"),
+        (lambda: Prism([(0, 0), (1, 1)]), "Prism.vertices_ne_m"),
+        (lambda: World.from_spheres([[1, 1]], [-1], (0, 0), (5, 5)), "radii[0]"),
+        (lambda: World([], (0, 0), (5, 5)).is_free([[1, 2, 3]]), "points"),
+    ],
+)
 def test_bad_arguments_raise_world_error_naming_them(call, key):
     with pytest.raises(WorldError, match=key.replace("[", r"\[").replace("]", r"\]")):
         call()
