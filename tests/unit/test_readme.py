@@ -24,18 +24,21 @@ def test_the_readme_figures_are_what_the_generated_files_say():
     assert text[start:end] == headlines.render()
 
 
-def test_every_local_link_of_the_readme_resolves():
-    text = README.read_text()
-    for target in re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", text):
-        if "://" not in target:
-            assert (ROOT / target).exists(), target
+def _anchors(path: Path) -> set[str]:
+    return {_slug(line.lstrip("#").strip()) for line in path.read_text().splitlines() if line.startswith("#")}
 
 
-def test_every_readme_anchor_into_the_guide_is_a_heading():
-    guide = (ROOT / "docs" / "GUIDE.md").read_text()
-    slugs = {_slug(line.lstrip("#").strip()) for line in guide.splitlines() if line.startswith("#")}
-    for anchor in re.findall(r"docs/GUIDE\.md#([\w-]+)", README.read_text()):
-        assert anchor in slugs, anchor
+@pytest.mark.parametrize("page", [README, *sorted((ROOT / "docs").glob("*.md"))], ids=lambda p: p.name)
+def test_every_link_between_the_pages_finds_its_file_and_heading(page):
+    """Links of README.md and docs/*.md to a page (and its heading) of the repository resolve."""
+    prose = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)       # not inside code blocks
+    for target, anchor in re.findall(r"\]\(([^)#\s]*)(?:#([\w-]+))?\)", prose):
+        if "://" in target or target.startswith("mailto:"):
+            continue
+        path = (page.parent / target).resolve() if target else page
+        assert path.exists(), f"{page.name}: {target}"
+        if anchor and path.suffix == ".md":
+            assert anchor in _anchors(path), f"{page.name}: {target}#{anchor}"
 
 
 def _slug(heading: str) -> str:
