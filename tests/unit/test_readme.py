@@ -31,7 +31,7 @@ def _anchors(path: Path) -> set[str]:
 @pytest.mark.parametrize("page", [README, *sorted((ROOT / "docs").glob("*.md"))], ids=lambda p: p.name)
 def test_every_link_between_the_pages_finds_its_file_and_heading(page):
     """Links of README.md and docs/*.md to a page (and its heading) of the repository resolve."""
-    prose = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)       # not inside code blocks
+    prose = re.sub(r"```.*?```", "", page.read_text(), flags=re.S)  # not inside code blocks
     for target, anchor in re.findall(r"\]\(([^)#\s]*)(?:#([\w-]+))?\)", prose):
         if "://" in target or target.startswith("mailto:"):
             continue
