@@ -62,7 +62,11 @@ def run(args: argparse.Namespace) -> int:
         f"legs reached {summary['legs_reached']}/{summary['legs_planned']}, landed {summary['landed']}, "
         f"RMS tracking error {summary['rms_tracking_error_m']:.2f} m "
         f"(max {summary['max_tracking_error_m']:.2f} m), "
-        f"minimum threat separation {summary['min_threat_separation_m']} m"
+        + (
+            "no threat met"
+            if summary["min_threat_separation_m"] is None
+            else f"minimum threat separation {summary['min_threat_separation_m']:.2f} m"
+        )
     )
     for path in render_report(record, out / "report"):
         print(f"  wrote {path}")

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 from pathlib import Path
 
 import numpy as np
@@ -285,7 +286,12 @@ def render_report(record: FlightRecord, out_dir: str | Path) -> list[Path]:
         written.append(out / "scene.png")
         plot_scene(plt, record, written[-1], instant)
     summary = dict(record.summary or {})
-    summary.update(tracking_statistics(record))
+    for key, value in tracking_statistics(record).items():
+        # the companion's own figures (over every LOCAL_POSITION_NED it read) stay: the record's
+        # 10 Hz samples fill in only what a record without a summary (a flight cut short) lacks,
+        # so the console and the report give one figure
+        if summary.get(key) is None or (isinstance(summary.get(key), float) and math.isnan(summary[key])):
+            summary[key] = value
     summary["decisions"] = [{k: d.get(k) for k in ("kind", "reason", "latency_ms", "t_s")} for d in record.decisions]
     summary["legs"] = leg_feasibility(record)
     written.append(out / "summary.json")

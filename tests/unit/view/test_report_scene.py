@@ -33,3 +33,19 @@ def test_without_decisions_the_instant_is_mid_flight_and_without_samples_there_i
 def test_the_report_draws_the_scene(tmp_path):
     written = {p.name for p in render_report(recorded(tmp_path), tmp_path / "report")}
     assert "scene.png" in written and (tmp_path / "report" / "scene.png").stat().st_size > 20_000
+
+
+def test_the_report_gives_the_companion_s_tracking_figures_not_a_second_set(tmp_path):
+    """The console (the companion's summary, over every LOCAL_POSITION_NED) and the report give
+    one figure; the record's 10 Hz samples fill in only a record without a summary."""
+    import json
+
+    record = recorded(tmp_path)
+    record.summary = {"outcome": "completed", "rms_tracking_error_m": 0.14, "max_tracking_error_m": 1.71}
+    render_report(record, tmp_path / "with")
+    got = json.loads((tmp_path / "with" / "summary.json").read_text())
+    assert (got["rms_tracking_error_m"], got["max_tracking_error_m"]) == (0.14, 1.71)
+    record.summary = {"outcome": "completed"}
+    render_report(record, tmp_path / "without")
+    got = json.loads((tmp_path / "without" / "summary.json").read_text())
+    assert got["rms_tracking_error_m"] != 0.14 and got["max_tracking_error_m"] >= got["rms_tracking_error_m"] > 0
