@@ -22,8 +22,10 @@ $(VENV)/.bench: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/companion demo
 
+# every test, four files at a time (pytest-xdist: the real-process flights mostly wait, so four
+# share the two cores; each file's tests stay together, on free ports)
 test: $(STAMP)
-	$(VPY) -m pytest -q
+	$(VPY) -m pytest -q -n 4 --dist loadfile
 
 # the unit and property tests alone (about 2 minutes on two cores)
 test-unit: $(STAMP)

@@ -1,7 +1,7 @@
 """Docs that cannot go stale: every Python snippet of the README and docs/ runs as a script.
 
 The snippets that need a vehicle or a zenoh subscriber run against real processes in
-``tests/integration/test_docs_snippets.py``; the others run here, each in a fresh interpreter
+``tests/integration/test_docs_snippets_live.py``; the others run here, each in a fresh interpreter
 from the repository's root, as a reader would paste them into a file.
 """
 
