@@ -301,7 +301,10 @@ def test_requests_streams_timesync_and_wall_clock_heartbeats():
         stamps = [first.time_boot_ms]
         while stamps[-1] - stamps[0] < 4000:
             stamps.append(gcs.wait("ATTITUDE", 3.0).time_boot_ms)
-        assert 19 <= len(stamps) <= 23  # 5 Hz over 4 s, plus the end points
+        # 5 Hz of simulated time: 200 ms between stamps (a period the vehicle's loop skips when
+        # the machine is loaded, as ArduPilot's scheduler does, shows as one gap of 400 ms)
+        gaps = np.diff(stamps)
+        assert len(stamps) >= 15 and float(np.median(gaps)) == pytest.approx(200.0, abs=10.0), gaps
         assert gcs.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE, -1).result == 0
         gcs.request("SYSTEM_TIME", rate_hz=1.0)
         gcs.wait("SYSTEM_TIME", 2.0)
