@@ -43,12 +43,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from threats_sitl import decision_kind  # noqa: E402  (a sibling script: benchmarks/ is sys.path[0])
+
 from companion.campaign.flying import CampaignWorker  # noqa: E402
 from companion.campaign.replay import judge_track, judged, replay  # noqa: E402
 from companion.campaign.runner import _settings_from_text  # noqa: E402
 from companion.campaign.spec import spec_hash  # noqa: E402
 from companion.campaign.stats import risk_ratio  # noqa: E402
 from companion.campaign.store import CampaignStore  # noqa: E402
+from companion.record.flight_record import load_record  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 FLAGS = ("collision", "nmac", "lowc")
@@ -90,6 +93,35 @@ def _unmitigated(worker, index: int, out: Path, speedup: float):
     return flown(worker, index, out, speedup, mitigated=False)
 
 
+#: Decisions that change the reference because of a threat (their latency is the issue's goal).
+MANOEUVRES = ("evade", "hold", "retime", "switch", "replan")
+
+
+def decision_latencies(enc_dir: Path) -> list[tuple[str, float]]:
+    """(kind, ms from the threat's receipt to the new reference's first setpoint on the wire) of
+    every manoeuvre of the replay's record (none when only its track was kept)."""
+    path = enc_dir / "flight.jsonl"
+    if not path.exists():
+        return []
+    return [
+        (decision_kind({**d, "event": d.get("kind")}), float(d["latency_ms"]))
+        for d in load_record(path).decisions
+        if d.get("kind") in MANOEUVRES and d.get("latency_ms") is not None
+    ]
+
+
+def latency_summary(results: list[dict]) -> dict:
+    """p50 / p99 / max (ms) per decision kind over the series."""
+    by: dict[str, list[float]] = {}
+    for r in results:
+        for kind, ms in r.get("latency_ms", []):
+            by.setdefault(kind, []).append(ms)
+    return {
+        k: {"n": len(v), "p50": float(np.percentile(v, 50)), "p99": float(np.percentile(v, 99)), "max": float(max(v))}
+        for k, v in sorted(by.items())
+    }
+
+
 def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float, fly: bool = True) -> list[dict]:
     """The series' entries; with ``fly`` False only the encounters whose tracks are there (and
     whose mission's unmitigated track is)."""
@@ -117,6 +149,7 @@ def fly_series(store: CampaignStore, ids: list[int], out: Path, speedup: float, 
             "sitl_m": {f: getattr(m, f) for f in FLAGS},
             "sitl_u": {f: getattr(u, f) for f in FLAGS},
             "sitl_m_min_sep_m": m.min_sep_m,
+            "latency_ms": decision_latencies(enc_dir),
         }
         if row is not None:
             entry["fast_m"] = {f: row[f"m_{f}"] for f in FLAGS}
@@ -159,6 +192,19 @@ def write_docs(summary: dict, path: Path) -> None:
             f"| {flag.upper()} | {s['value']:.3g} | {f['value']:.3g} [{f['lo']:.3g}, {f['hi']:.3g}] | "
             f"{'yes' if inside else 'no'} |"
         )
+    lines += [
+        "",
+        "Threat receipt -> the new reference's first setpoint on the wire (the companion's own "
+        "measure, `latency_ms` of each decision in the replay's record; goals: 50 ms, 250 ms for a "
+        "decision that replans):",
+        "",
+        "| decision | n | p50 (ms) | p99 (ms) | max (ms) |",
+        "|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {k} | {v['n']} | {v['p50']:.1f} | {v['p99']:.1f} | {v['max']:.1f} |"
+        for k, v in summary.get("latency_ms", {}).items()
+    ] or ["| (no decision recorded) | | | | |"]
     lines += ["", "Disagreements:", ""]
     lines += [
         f"- {r['id']} ({r['stratum']}): SITL {r['sitl_m']}, min sep {r['sitl_m_min_sep_m']:.2f} m; fast "
@@ -233,6 +279,7 @@ def main(argv=None) -> int:
         "agreement": float(np.mean([r["agree"] for r in compared])) if compared else float("nan"),
         "sitl_ratios": ratios(results, "sitl"),
         "fast_ratios": ratios(compared, "fast") if compared else {},
+        "latency_ms": latency_summary(results),
         "results": results,
     }
     out_json = ROOT / "out" / "bench" / "campaign_sitl.json"

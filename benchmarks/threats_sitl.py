@@ -209,14 +209,15 @@ def judge(flight: dict) -> list[dict]:
                 "intrusion": sep < 0.0,
                 "avoidable": bool(oracle.avoidable),
                 "decisions": [
-                    (_kind(e), e["latency_ms"], e.get("latency_parts_ms") or {}, e.get("trigger")) for e in decisions
+                    (decision_kind(e), e["latency_ms"], e.get("latency_parts_ms") or {}, e.get("trigger"))
+                    for e in decisions
                 ],
             }
         )
     return rows
 
 
-def _kind(event: dict) -> str:
+def decision_kind(event: dict) -> str:
     """The decision's kind, and for an evasion or a hold chosen once a replan had been tried
     (the conflict was far enough to replan first: its candidates start after the fast step and
     the replan, DESIGN 7.4), ``<kind> after a replan``."""
