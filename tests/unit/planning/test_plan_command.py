@@ -40,7 +40,9 @@ def world_file(tmp_path):
 
 def test_gart_writes_json_with_a_free_path(world_file, tmp_path, capsys):
     out = tmp_path / "plan.json"
-    rc = main(["plan", "--world", str(world_file), "--seed", "3", "--budget", "0.2", "--json", str(out)])
+    rc = main(
+        ["plan", "--world", str(world_file), "--seed", "3", "--budget", "1.0", "--json", str(out)]
+    )  # a loaded machine too
     assert rc == 0
     assert "status: exact" in capsys.readouterr().out
     data = json.loads(out.read_text())
